@@ -1,0 +1,33 @@
+# Two commands set everything up on a fresh machine: `make demo` and `make test`.
+PYTHON ?= python3.11
+VENV   ?= .venv
+PY     := $(VENV)/bin/python
+STAMP  := $(VENV)/.installed
+# ament_index_python looks packages up here; the ROS wheels live in the venv.
+export AMENT_PREFIX_PATH := $(abspath $(VENV))
+# Never inherit the ROS wheels' re-exec guard from another virtualenv.
+unexport _ROS_WHEELS_BOOTSTRAP_COMPLETE
+PIP_QUIET := --quiet --disable-pip-version-check
+
+.PHONY: venv demo test bench clean
+
+venv: $(STAMP)
+
+$(STAMP): setup.py setup.cfg package.xml
+	$(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install $(PIP_QUIET) --upgrade pip 2>&1 | grep -v '^WARNING: Location' || true
+	$(PY) -m pip install $(PIP_QUIET) -e '.[ros,test]' 2>&1 | grep -v '^WARNING: Location' || true
+	$(PY) -c 'import haptic_anfis, numba, rclpy, trimesh, rosbags' # fail here if the install did not
+	touch $@
+
+demo: venv
+	$(VENV)/bin/haptic-anfis demo
+
+test: venv
+	$(PY) -m pytest test
+
+bench: venv
+	$(PY) bench/bench_model.py
+
+clean:
+	rm -rf $(VENV) build install log *.egg-info

@@ -1,0 +1,50 @@
+"""The ``haptic-anfis`` command: one entry point, one sub-command per module in
+:mod:`haptic_anfis.commands`.
+
+A sub-command module defines ``NAME`` (the word typed after ``haptic-anfis``), ``HELP`` (one line),
+``add_arguments(parser)`` and ``run(args) -> int``. Modules are discovered, so adding a sub-command
+touches no other file.
+"""
+from __future__ import annotations
+
+import argparse
+import importlib
+import pkgutil
+import sys
+
+from . import __version__, commands
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog='haptic-anfis',
+        description='ANFIS soft-tissue force rendering for a breast-palpation haptic simulator.')
+    parser.add_argument('--version', action='version', version=f'%(prog)s {__version__}')
+    sub = parser.add_subparsers(dest='command', metavar='COMMAND')
+    mods = [importlib.import_module(f'{commands.__name__}.{m.name}')
+            for m in pkgutil.iter_modules(commands.__path__) if not m.name.startswith('_')]
+    for mod in sorted(mods, key=lambda m: m.NAME):
+        p = sub.add_parser(mod.NAME, help=mod.HELP, description=mod.HELP)
+        mod.add_arguments(p)
+        p.set_defaults(_run=mod.run)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if not getattr(args, '_run', None):
+        parser.print_help()
+        return 2
+    try:
+        return int(args._run(args) or 0)
+    except KeyboardInterrupt:
+        print('interrupted', file=sys.stderr)
+        return 130
+    except (ValueError, OSError) as exc:  # bad input: say what, no traceback
+        print(f'haptic-anfis {args.command}: error: {exc}', file=sys.stderr)
+        return 1
+
+
+if __name__ == '__main__':
+    sys.exit(main())

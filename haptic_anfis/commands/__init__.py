@@ -1,0 +1,1 @@
+"""Sub-commands of ``haptic-anfis`` (one module each; see :mod:`haptic_anfis.cli`)."""
