@@ -16,7 +16,7 @@ venv: $(STAMP)
 $(STAMP): setup.py setup.cfg package.xml
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install $(PIP_QUIET) --upgrade pip 2>&1 | grep -v '^WARNING: Location' || true
-	$(PY) -m pip install $(PIP_QUIET) -e '.[ros,test]' 2>&1 | grep -v '^WARNING: Location' || true
+	$(PY) -m pip install $(PIP_QUIET) -e '.[ros,fe,test]' 2>&1 | grep -v '^WARNING: Location' || true
 	$(PY) -c 'import haptic_anfis, numba, rclpy, trimesh, rosbags' # fail here if the install did not
 	touch $@
 
@@ -26,8 +26,9 @@ demo: venv
 test: venv
 	$(PY) -m pytest test
 
+# Every bench/bench_*.py script prints its own table (ratios and percentiles, never asserted).
 bench: venv
-	$(PY) bench/bench_model.py
+	@set -e; for f in bench/bench_*.py; do echo "== $$f"; $(PY) $$f; done
 
 clean:
 	rm -rf $(VENV) build install log *.egg-info

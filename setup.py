@@ -43,6 +43,10 @@ setup(
             'ros-jazzy-std-srvs==5.3.6',
             'ros-jazzy-visualization-msgs==5.3.6',
         ],
+        # Finite-element data generation (haptic_anfis.tissue). Optional for running the simulator.
+        'fe': [
+            'felupe==11.3.0',
+        ],
         'test': [
             'pytest>=8',
             'pytest-timeout>=2.3',
