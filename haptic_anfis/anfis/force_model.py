@@ -1,0 +1,304 @@
+"""``ForceModel``: three single-output ANFIS models (Fx, Fy, Fz) over (x, y, z, depth).
+
+Scikit-learn conventions without the dependency: hyper-parameters in ``__init__``, ``fit`` returns
+``self``, learned attributes end in ``_``. Inputs in metres, forces in newtons.
+
+    model = ForceModel().fit(X, Y, groups=point_ids)  # structure search per output, then retrain
+    F = model.predict(X)                              # (n, 3) numpy batch path
+    fx, fy, fz = model.predict_one(x, y, z, depth)    # compiled real-time path (~1 µs)
+    model.save('model.json'); model = ForceModel.load('model.json')
+"""
+from __future__ import annotations
+
+import datetime as _dt
+import os
+import time
+from pathlib import Path
+from typing import Any, Sequence
+
+import numpy as np
+
+from .. import __version__
+from ..dataset import INPUT_NAMES, OUTPUT_NAMES, DatasetError, ForceDataset, split_indices
+from . import compiled
+from .model_file import (FORMAT, FORMAT_VERSION, ModelFileError, model_from_dict, model_to_dict,
+                         read_model_doc, write_json_atomic)
+from .structure import Candidate, SearchResult, search_structure
+from .sugeno import DEFAULT_EXTRAPOLATION, SugenoModel, check_finite_inputs
+from .training import DEFAULT_RIDGE, train
+
+INPUT_UNITS = ('m', 'm', 'm', 'm')
+OUTPUT_UNITS = ('N', 'N', 'N')
+
+Structure = tuple[int, ...]
+
+
+class ForceModel:
+    """Soft-tissue force model: (x, y, z, depth) [m] -> (Fx, Fy, Fz) [N].
+
+    Args:
+        structure: ``None`` to choose MF counts per output by validation (see
+            :func:`~.structure.search_structure`); one tuple (e.g. ``(3, 3, 3, 2)``) for all three
+            outputs; or a sequence of three tuples, one per output.
+        epochs: maximum hybrid-learning epochs when training the final models.
+        search_epochs: maximum epochs per candidate during the structure search.
+        search_start, max_mfs, candidates, tol: structure search settings.
+        ridge: relative ridge weight of the consequent least squares.
+        step: initial gradient step (fraction of an input's range).
+        val_fraction: part of the training data held out to choose structure and epoch.
+        split: ``'point'`` (hold out whole surface points, when ``groups`` are given) or ``'sample'``.
+        extrapolation: out-of-range band, fraction of each input's range (see :mod:`.sugeno`).
+        seed: seeds the validation split.
+    """
+
+    def __init__(self, structure: Structure | Sequence[Structure] | None = None, epochs: int = 60,
+                 search_epochs: int = 40, search_start: Structure = (2, 2, 2, 2),
+                 max_mfs: Structure = (5, 5, 5, 3), candidates: list[Structure] | None = None,
+                 tol: float = 0.05, ridge: float = DEFAULT_RIDGE, step: float = 0.01,
+                 val_fraction: float = 0.2, split: str = 'point',
+                 extrapolation: float = DEFAULT_EXTRAPOLATION, seed: int = 0) -> None:
+        self.structure = structure
+        self.epochs = epochs
+        self.search_epochs = search_epochs
+        self.search_start = search_start
+        self.max_mfs = max_mfs
+        self.candidates = candidates
+        self.tol = tol
+        self.ridge = ridge
+        self.step = step
+        self.val_fraction = val_fraction
+        self.split = split
+        self.extrapolation = extrapolation
+        self.seed = seed
+        self.metadata_: dict[str, Any] = {}
+
+    # ---- training ---------------------------------------------------------------------------
+    def _structures(self) -> list[Structure | None]:
+        s = self.structure
+        if s is None:
+            return [None, None, None]
+        if len(s) and all(isinstance(v, (int, np.integer)) for v in s):
+            return [tuple(int(v) for v in s)] * 3
+        if len(s) != 3:
+            raise ValueError(f'structure must be None, one tuple, or three tuples; got {s!r}')
+        return [tuple(int(v) for v in st) for st in s]
+
+    def fit(self, X: np.ndarray, Y: np.ndarray, groups: np.ndarray | None = None,
+            verbose: bool = False) -> 'ForceModel':
+        """Train the three models on (X (n, 4) [m], Y (n, 3) [N]).
+
+        ``val_fraction`` of the data (whole surface points if ``groups`` is given and
+        ``split='point'``) is held out to choose each output's structure and epoch count; the chosen
+        structure is then retrained on all of ``X`` for that many epochs.
+        """
+        X = check_finite_inputs(X, INPUT_NAMES)
+        Y = np.asarray(Y, dtype=np.float64)
+        if X.shape[1] != 4 or Y.shape != (len(X), 3):
+            raise ValueError(f'fit needs X (n, 4) and Y (n, 3); got {X.shape} and {Y.shape}')
+        if not np.all(np.isfinite(Y)):
+            raise ValueError('fit: Y holds non-finite forces')
+        by = self.split if groups is not None else 'sample'
+        groups = np.arange(len(X)) if groups is None else np.asarray(groups)
+        ds = ForceDataset(X, Y, groups)
+        fit_idx, val_idx = split_indices(ds, self.val_fraction, self.seed, by=by)
+        lo, hi = X.min(axis=0), X.max(axis=0)
+        kw = dict(ridge=self.ridge, step=self.step)
+        t_start = time.perf_counter()
+        self.models_: list[SugenoModel] = []
+        self.search_: list[SearchResult | None] = []
+        self.best_epoch_: list[int] = []
+        self.val_rmse_: list[float] = []
+        self.train_rmse_: list[float] = []
+        self.train_curves_: list[dict[str, list[float]]] = []
+        for o, fixed in enumerate(self._structures()):
+            t0 = time.perf_counter()
+            Xf, tf, Xv, tv = X[fit_idx], Y[fit_idx, o], X[val_idx], Y[val_idx, o]
+            if fixed is None:
+                sr = search_structure(Xf, tf, Xv, tv, start=self.search_start, max_mfs=self.max_mfs,
+                                      candidates=self.candidates, tol=self.tol,
+                                      epochs=self.search_epochs, lo=lo, hi=hi, **kw)
+                structure = sr.chosen.structure
+            else:
+                sr = None
+                structure = fixed
+            # Choose the epoch with the full epoch budget on the held-out part ...
+            chk = train(Xf, tf, structure, self.epochs, X_check=Xv, t_check=tv, lo=lo, hi=hi, **kw)
+            # ... then retrain on all the training data for exactly that many epochs.
+            final = train(X, Y[:, o], structure, chk.best_epoch, lo=lo, hi=hi, **kw)
+            final.model.extrapolation = float(self.extrapolation)
+            self.models_.append(final.model)
+            self.search_.append(sr)
+            self.best_epoch_.append(chk.best_epoch)
+            self.val_rmse_.append(chk.check_rmse[chk.best_epoch - 1])
+            self.train_rmse_.append(float(np.sqrt(np.mean((final.model.predict(X) - Y[:, o]) ** 2))))
+            self.train_curves_.append({'train': chk.train_rmse, 'check': chk.check_rmse})
+            if verbose:
+                _print_output_summary(OUTPUT_NAMES[o], sr, structure, chk.best_epoch,
+                                      self.train_rmse_[-1], self.val_rmse_[-1], time.perf_counter() - t0)
+        self.fit_seconds_ = time.perf_counter() - t_start
+        self.metadata_ = {'training': {
+            'epochs': self.epochs, 'search_epochs': self.search_epochs, 'tol': self.tol,
+            'ridge': self.ridge, 'val_fraction': self.val_fraction, 'split': by,
+            'seed': self.seed, 'seconds': round(self.fit_seconds_, 3),
+            'n_samples': int(len(X)),
+            'candidates': [[_candidate_dict(c) for c in sr.candidates] if sr else []
+                           for sr in self.search_],
+        }}
+        self._compile()
+        return self
+
+    # ---- prediction -------------------------------------------------------------------------
+    def _check_fitted(self) -> None:
+        if not getattr(self, 'models_', None):
+            raise RuntimeError('ForceModel is not trained: call fit() or ForceModel.load()')
+
+    def _compile(self) -> None:
+        self._fp, self._ip = compiled.pack(self.models_)
+        compiled.warm_up(self._fp, self._ip)
+
+    def predict(self, X: np.ndarray) -> np.ndarray:
+        """Numpy batch path: X (n, 4) [m] -> (n, 3) [N]. Raises ValueError on NaN/Inf input."""
+        self._check_fitted()
+        X = check_finite_inputs(X, INPUT_NAMES)
+        if X.shape[1] != 4:
+            raise ValueError(f'predict needs X of shape (n, 4); got {X.shape}')
+        return np.column_stack([m.predict(X) for m in self.models_])
+
+    def predict_compiled(self, X: np.ndarray) -> np.ndarray:
+        """Compiled batch path: X (n, 4) [m] -> (n, 3) [N]. Raises ValueError on NaN/Inf input."""
+        self._check_fitted()
+        X = np.ascontiguousarray(check_finite_inputs(X, INPUT_NAMES))
+        if X.shape[1] != 4:
+            raise ValueError(f'predict_compiled needs X of shape (n, 4); got {X.shape}')
+        return compiled.eval_batch(X, self._fp, self._ip)
+
+    def predict_one(self, x: float, y: float, z: float, depth: float) -> tuple[float, float, float]:
+        """Compiled real-time path for one contact: metres in, (Fx, Fy, Fz) newtons out.
+
+        Raises:
+            ValueError: if any input is NaN or Inf (the caller decides the safe output, e.g. 0 N).
+        """
+        fx, fy, fz, ok = compiled.eval_xyzd(x, y, z, depth, self._fp, self._ip)
+        if not ok:
+            raise ValueError(f'non-finite input to predict_one: x={x!r}, y={y!r}, z={z!r}, '
+                             f'depth={depth!r}')
+        return fx, fy, fz
+
+    @property
+    def kernel_params(self) -> tuple[np.ndarray, np.ndarray]:
+        """(fp, ip) packed parameters for calling :mod:`.compiled` kernels from other njit code."""
+        self._check_fitted()
+        return self._fp, self._ip
+
+    @property
+    def input_range_(self) -> tuple[np.ndarray, np.ndarray]:
+        """(min, max) (4,) arrays of the trained input domain [m]."""
+        self._check_fitted()
+        return self.models_[0].lo.copy(), self.models_[0].hi.copy()
+
+    @property
+    def structures_(self) -> list[Structure]:
+        self._check_fitted()
+        return [m.structure for m in self.models_]
+
+    # ---- persistence ------------------------------------------------------------------------
+    def to_dict(self) -> dict[str, Any]:
+        self._check_fitted()
+        lo, hi = self.input_range_
+        outputs = []
+        rmse = self.metadata_.get('rmse', {})
+        for o, m in enumerate(self.models_):
+            entry = {'name': OUTPUT_NAMES[o], 'unit': OUTPUT_UNITS[o], **model_to_dict(m)}
+            entry['best_epoch'] = self.best_epoch_[o] if hasattr(self, 'best_epoch_') else None
+            entry['rmse'] = {k: v[o] for k, v in rmse.items()}
+            outputs.append(entry)
+        return {
+            'format': FORMAT, 'format_version': FORMAT_VERSION, 'software_version': __version__,
+            'created_utc': _dt.datetime.now(_dt.timezone.utc).isoformat(timespec='seconds'),
+            'inputs': [{'name': n, 'unit': u, 'min': float(a), 'max': float(b)}
+                       for n, u, a, b in zip(INPUT_NAMES, INPUT_UNITS, lo, hi)],
+            'outputs': outputs,
+            **{k: v for k, v in self.metadata_.items() if k != 'rmse'},
+        }
+
+    def save(self, path: str | os.PathLike) -> Path:
+        """Write the versioned model file atomically (see :mod:`.model_file`)."""
+        return write_json_atomic(path, self.to_dict())
+
+    @classmethod
+    def load(cls, path: str | os.PathLike) -> 'ForceModel':
+        """Read a model file; any format, version, shape or finiteness problem -> ModelFileError."""
+        doc = read_model_doc(path)
+        names = [i.get('name') for i in doc['inputs']]
+        if names != list(INPUT_NAMES):
+            raise ModelFileError(f'model file {str(path)!r} has inputs {names}; expected '
+                                 f'{list(INPUT_NAMES)}')
+        outs = [o.get('name') for o in doc['outputs']]
+        if outs != list(OUTPUT_NAMES):
+            raise ModelFileError(f'model file {str(path)!r} has outputs {outs}; expected '
+                                 f'{list(OUTPUT_NAMES)}')
+        lo = np.array([i['min'] for i in doc['inputs']], dtype=np.float64)
+        hi = np.array([i['max'] for i in doc['inputs']], dtype=np.float64)
+        self = cls()
+        self.models_ = [model_from_dict(o, lo, hi, o['name']) for o in doc['outputs']]
+        self.best_epoch_ = [o.get('best_epoch') for o in doc['outputs']]
+        rmse_keys = set().union(*(o.get('rmse', {}).keys() for o in doc['outputs']))
+        self.metadata_ = {k: v for k, v in doc.items()
+                          if k not in ('format', 'format_version', 'inputs', 'outputs',
+                                       'software_version', 'created_utc')}
+        self.metadata_['rmse'] = {k: [o.get('rmse', {}).get(k) for o in doc['outputs']]
+                                  for k in sorted(rmse_keys)}
+        self.source_ = {'path': str(path), 'software_version': doc.get('software_version'),
+                        'created_utc': doc.get('created_utc')}
+        self._compile()
+        return self
+
+
+def _candidate_dict(c: Candidate) -> dict[str, Any]:
+    return {'structure': list(c.structure), 'rules': c.n_rules, 'params': c.n_params,
+            'train_rmse': c.train_rmse, 'val_rmse': c.val_rmse, 'best_epoch': c.best_epoch,
+            'seconds': round(c.seconds, 3)}
+
+
+def _print_output_summary(name: str, sr: SearchResult | None, structure: Structure, epoch: int,
+                          train_rmse: float, val_rmse: float, seconds: float) -> None:
+    if sr is not None:
+        print(f'{name}: structure search ({len(sr.candidates)} candidates)')
+        print(f'  {"structure":<12} {"rules":>5} {"params":>6} {"train N":>9} {"val N":>9} '
+              f'{"epoch":>5} {"s":>6}')
+        for c in sr.candidates:
+            mark = ' <- chosen' if c.structure == structure else ''
+            print(f'  {"-".join(map(str, c.structure)):<12} {c.n_rules:>5} {c.n_params:>6} '
+                  f'{c.train_rmse:>9.5f} {c.val_rmse:>9.5f} {c.best_epoch:>5} {c.seconds:>6.2f}{mark}')
+    print(f'{name}: structure {"-".join(map(str, structure))}, best epoch {epoch}, '
+          f'train RMSE {train_rmse:.5f} N, validation RMSE {val_rmse:.5f} N ({seconds:.1f} s)')
+
+
+def rmse(pred: np.ndarray, Y: np.ndarray) -> list[float]:
+    """Per-output root-mean-square error [N] of (n, 3) predictions."""
+    return [float(v) for v in np.sqrt(np.mean((pred - Y) ** 2, axis=0))]
+
+
+def train_on_dataset(ds: ForceDataset, test_fraction: float = 0.2, seed: int = 0,
+                     verbose: bool = False, dataset_path: str | None = None,
+                     **params: Any) -> tuple[ForceModel, ForceDataset]:
+    """The paper's protocol: hold out ``test_fraction`` (whole surface points) for the test, fit
+    on the rest (which itself holds out 20 % for structure/epoch selection), record RMSEs and the
+    dataset hash in the model. Returns (model, test set).
+    """
+    if len(np.unique(ds.point)) < 5:
+        raise DatasetError('training needs at least 5 surface points (train/validation/test split)')
+    train_idx, test_idx = split_indices(ds, test_fraction, seed, by=params.get('split', 'point'))
+    tr, te = ds.subset(train_idx), ds.subset(test_idx)
+    model = ForceModel(seed=seed, **params).fit(tr.X, tr.Y, groups=tr.point, verbose=verbose)
+    model.metadata_['rmse'] = {
+        'train': model.train_rmse_,
+        'validation': model.val_rmse_,
+        'test': rmse(model.predict(te.X), te.Y),
+    }
+    model.metadata_['dataset'] = {
+        'sha256': ds.sha256(), 'path': dataset_path, 'n_samples': len(ds),
+        'n_points': int(len(np.unique(ds.point))), 'test_fraction': test_fraction,
+        'n_test_samples': len(te), 'kind': ds.provenance.get('kind'),
+    }
+    return model, te

@@ -1,0 +1,113 @@
+"""The versioned force-model file (JSON): read, validate, write atomically.
+
+JSON keeps the file readable and diffable, and Python's float repr round-trips every float64 bit
+for bit, so save -> load is exact. Layout (``format_version`` 1)::
+
+    {"format": "haptic_anfis.force_model", "format_version": 1,
+     "software_version": "...", "created_utc": "...",
+     "inputs":  [{"name": "x", "unit": "m", "min": .., "max": ..}, ...],
+     "outputs": [{"name": "Fx", "unit": "N", "structure": [3, 3, 3, 2],
+                  "membership": [[[a, b, c], ...] per input],   # metres
+                  "consequents": [[p_x, p_y, p_z, p_depth, q] per rule],  # N/m and N
+                  "extrapolation": 0.25, "best_epoch": .., "rmse": {"train": .., ...}}, ...],
+     "dataset": {"sha256": "...", "path": "...", "n_samples": ..},
+     "training": {...}}
+"""
+from __future__ import annotations
+
+import json
+import math
+import os
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .sugeno import SugenoModel
+
+FORMAT = 'haptic_anfis.force_model'
+FORMAT_VERSION = 1
+
+
+class ModelFileError(ValueError):
+    """A model file is missing, of another format or version, malformed, or non-finite."""
+
+
+def _no_constants(name: str) -> float:
+    raise ValueError(f'non-finite number {name!r}')
+
+
+def model_to_dict(model: SugenoModel) -> dict[str, Any]:
+    return {
+        'structure': list(model.structure),
+        'membership': [P.tolist() for P in model.mfs],
+        'consequents': model.coef.tolist(),
+        'extrapolation': float(model.extrapolation),
+    }
+
+
+def model_from_dict(entry: dict[str, Any], lo: np.ndarray, hi: np.ndarray, name: str) -> SugenoModel:
+    try:
+        mfs = [np.array(P, dtype=np.float64) for P in entry['membership']]
+        coef = np.array(entry['consequents'], dtype=np.float64)
+        extrapolation = float(entry.get('extrapolation', 0.25))
+        structure = tuple(int(m) for m in entry['structure'])
+    except (KeyError, TypeError, ValueError) as exc:
+        raise ModelFileError(f'output {name}: malformed entry ({exc})') from None
+    if len(mfs) != len(lo):
+        raise ModelFileError(f'output {name}: {len(mfs)} membership lists for {len(lo)} inputs')
+    model = SugenoModel(mfs=mfs, coef=coef, lo=lo, hi=hi, extrapolation=extrapolation)
+    if model.structure != structure:
+        raise ModelFileError(f'output {name}: structure {structure} does not match its membership '
+                             f'functions {model.structure}')
+    try:
+        model.validate(name=f'output {name}')
+    except ValueError as exc:
+        raise ModelFileError(str(exc)) from None
+    return model
+
+
+def write_json_atomic(path: str | os.PathLike, doc: dict[str, Any]) -> Path:
+    """Write ``doc`` to ``path`` via a temporary file and rename: readers never see half a file."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f'.{path.name}.{os.getpid()}.tmp')
+    text = json.dumps(doc, indent=1, allow_nan=False)
+    with tmp.open('w') as fh:
+        fh.write(text + '\n')
+        fh.flush()
+        os.fsync(fh.fileno())
+    os.replace(tmp, path)
+    return path
+
+
+def read_model_doc(path: str | os.PathLike) -> dict[str, Any]:
+    """Read and check the envelope of a model file (format, version, inputs, outputs)."""
+    path = Path(path)
+    if not path.is_file():
+        raise ModelFileError(f'model file {str(path)!r} does not exist')
+    try:
+        doc = json.loads(path.read_text(), parse_constant=_no_constants)
+    except (json.JSONDecodeError, UnicodeDecodeError, ValueError) as exc:
+        raise ModelFileError(f'model file {str(path)!r} is not a valid model file: {exc}') from None
+    if not isinstance(doc, dict) or doc.get('format') != FORMAT:
+        raise ModelFileError(f'{str(path)!r} is not a haptic_anfis force-model file '
+                             f'(expected "format": "{FORMAT}")')
+    version = doc.get('format_version')
+    if version != FORMAT_VERSION:
+        raise ModelFileError(f'model file {str(path)!r} has format_version {version!r}; this '
+                             f'software reads version {FORMAT_VERSION} only (retrain with '
+                             '"haptic-anfis train")')
+    for key in ('inputs', 'outputs'):
+        if not isinstance(doc.get(key), list) or not doc[key]:
+            raise ModelFileError(f'model file {str(path)!r}: "{key}" must be a non-empty list')
+    for inp in doc['inputs']:
+        try:
+            lo, hi = float(inp['min']), float(inp['max'])
+        except (KeyError, TypeError, ValueError):
+            raise ModelFileError(f'model file {str(path)!r}: every input needs numeric '
+                                 '"min" and "max"') from None
+        if not (math.isfinite(lo) and math.isfinite(hi) and hi > lo):
+            raise ModelFileError(f'model file {str(path)!r}: input {inp.get("name")!r} has '
+                                 f'range [{lo}, {hi}]; expected finite min < max')
+    return doc

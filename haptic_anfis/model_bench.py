@@ -1,0 +1,92 @@
+"""Speed against error for the ANFIS force model (``haptic-anfis bench model``, ``make bench``).
+
+For each structure: test RMSE per output, single-query latency percentiles of the compiled path
+(``predict_one``) and of the numpy path (``predict`` on one row), and batch throughput of both.
+Timings are printed, never asserted: the machines are shared and noisy.
+"""
+from __future__ import annotations
+
+import time
+from typing import Sequence
+
+import numpy as np
+
+from .anfis import ForceModel, rmse
+from .dataset import ForceDataset, split_indices
+
+
+def _percentiles_us(samples: np.ndarray) -> tuple[float, float]:
+    return float(np.percentile(samples, 50) * 1e6), float(np.percentile(samples, 99) * 1e6)
+
+
+def time_single(fn, queries: np.ndarray, repeats: int) -> np.ndarray:
+    """Per-call wall times [s] of ``fn(x, y, z, depth)`` over ``repeats`` calls cycling ``queries``."""
+    out = np.empty(repeats)
+    clock = time.perf_counter
+    n = len(queries)
+    rows = [tuple(float(v) for v in q) for q in queries]
+    for k in range(repeats):
+        q = rows[k % n]
+        t0 = clock()
+        fn(*q)
+        out[k] = clock() - t0
+    return out
+
+
+def throughput(fn, X: np.ndarray, min_seconds: float = 0.3) -> float:
+    """Evaluations per second of batch ``fn(X)``."""
+    fn(X[:10])
+    n_calls, t0 = 0, time.perf_counter()
+    while True:
+        fn(X)
+        n_calls += 1
+        dt = time.perf_counter() - t0
+        if dt >= min_seconds:
+            return n_calls * len(X) / dt
+
+
+def bench_structures(ds: ForceDataset, structures: Sequence[tuple[int, ...] | None], seed: int = 0,
+                     repeats: int = 20000, batch: int = 100_000) -> list[dict]:
+    """Train one ForceModel per structure (``None`` = structure search) and measure it."""
+    tr_idx, te_idx = split_indices(ds, 0.2, seed)
+    tr, te = ds.subset(tr_idx), ds.subset(te_idx)
+    rng = np.random.default_rng(seed)
+    lo, hi = tr.X.min(0), tr.X.max(0)
+    Xb = lo + (hi - lo) * rng.random((batch, 4))
+    rows = []
+    for st in structures:
+        t0 = time.perf_counter()
+        model = ForceModel(structure=st, seed=seed).fit(tr.X, tr.Y, groups=tr.point)
+        fit_s = time.perf_counter() - t0
+        numpy_one = lambda x, y, z, d: model.predict(np.array([[x, y, z, d]]))  # noqa: E731
+        c50, c99 = _percentiles_us(time_single(model.predict_one, te.X, repeats))
+        n50, n99 = _percentiles_us(time_single(numpy_one, te.X, max(repeats // 10, 200)))
+        rows.append({
+            'label': 'search' if st is None else '-'.join(map(str, st)),
+            'structures': ['-'.join(map(str, s)) for s in model.structures_],
+            'rules': [m.n_rules for m in model.models_],
+            'test_rmse': rmse(model.predict(te.X), te.Y),
+            'fit_s': fit_s,
+            'compiled_p50_us': c50, 'compiled_p99_us': c99,
+            'numpy_p50_us': n50, 'numpy_p99_us': n99,
+            'compiled_batch_per_s': throughput(model.predict_compiled, Xb),
+            'numpy_batch_per_s': throughput(model.predict, Xb[:20000]),
+        })
+    return rows
+
+
+def format_table(rows: list[dict]) -> str:
+    head = (f'{"model":<8} {"structures (Fx/Fy/Fz)":<28} {"RMSE Fx":>8} {"Fy":>8} {"Fz":>8} '
+            f'{"fit s":>6} {"jit p50":>8} {"p99 µs":>7} {"np p50":>7} {"p99 µs":>7} '
+            f'{"jit eval/s":>11} {"np eval/s":>10}')
+    lines = [head, '-' * len(head)]
+    for r in rows:
+        e = r['test_rmse']
+        lines.append(
+            f'{r["label"]:<8} {"/".join(r["structures"]):<28} {e[0]:>8.4f} {e[1]:>8.4f} {e[2]:>8.4f} '
+            f'{r["fit_s"]:>6.1f} {r["compiled_p50_us"]:>8.2f} {r["compiled_p99_us"]:>7.2f} '
+            f'{r["numpy_p50_us"]:>7.1f} {r["numpy_p99_us"]:>7.1f} '
+            f'{r["compiled_batch_per_s"]:>11.3g} {r["numpy_batch_per_s"]:>10.3g}')
+    lines.append('paper (MATLAB, its own data): RMSE 0.0791 / 0.0063 / 0.0181 N, ~1e5 evaluations/s; '
+                 'haptic budget: 1000 µs per loop at 1 kHz')
+    return '\n'.join(lines)
