@@ -47,7 +47,8 @@ class ForceModel:
         step: initial gradient step (fraction of an input's range).
         val_fraction: part of the training data held out to choose structure and epoch.
         split: ``'point'`` (hold out whole surface points, when ``groups`` are given) or ``'sample'``.
-        extrapolation: out-of-range band, fraction of each input's range (see :mod:`.sugeno`).
+        extrapolation: out-of-range band per input (x, y, z, depth), fraction of its range (see
+            :mod:`.sugeno`): by default positions saturate and depth extrapolates by 25 %.
         seed: seeds the validation split.
     """
 
@@ -56,7 +57,7 @@ class ForceModel:
                  max_mfs: Structure = (5, 5, 5, 3), candidates: list[Structure] | None = None,
                  tol: float = 0.05, ridge: float = DEFAULT_RIDGE, step: float = 0.01,
                  val_fraction: float = 0.2, split: str = 'point',
-                 extrapolation: float = DEFAULT_EXTRAPOLATION, seed: int = 0) -> None:
+                 extrapolation: Sequence[float] = DEFAULT_EXTRAPOLATION, seed: int = 0) -> None:
         self.structure = structure
         self.epochs = epochs
         self.search_epochs = search_epochs
@@ -125,7 +126,8 @@ class ForceModel:
             chk = train(Xf, tf, structure, self.epochs, X_check=Xv, t_check=tv, lo=lo, hi=hi, **kw)
             # ... then retrain on all the training data for exactly that many epochs.
             final = train(X, Y[:, o], structure, chk.best_epoch, lo=lo, hi=hi, **kw)
-            final.model.extrapolation = float(self.extrapolation)
+            final.model.extrapolation = np.broadcast_to(
+                np.asarray(self.extrapolation, dtype=np.float64), (4,)).copy()
             self.models_.append(final.model)
             self.search_.append(sr)
             self.best_epoch_.append(chk.best_epoch)

@@ -38,9 +38,8 @@ def grid_partition(lo: float, hi: float, m: int) -> np.ndarray:
         w = hi - lo
         return np.array([[lo - w, 0.5 * (lo + hi), hi + w]])
     b = np.linspace(lo, hi, m)
-    step = b[1] - b[0]
-    a = np.concatenate([[lo - step], b[:-1]])
-    c = np.concatenate([b[1:], [hi + step]])
+    a = np.concatenate([[lo - (b[1] - lo)], b[:-1]])  # outer feet: same formula as project()
+    c = np.concatenate([b[1:], [hi + (hi - b[-2])]])
     return np.column_stack([a, b, c])
 
 

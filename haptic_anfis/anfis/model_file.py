@@ -9,7 +9,7 @@ for bit, so save -> load is exact. Layout (``format_version`` 1)::
      "outputs": [{"name": "Fx", "unit": "N", "structure": [3, 3, 3, 2],
                   "membership": [[[a, b, c], ...] per input],   # metres
                   "consequents": [[p_x, p_y, p_z, p_depth, q] per rule],  # N/m and N
-                  "extrapolation": 0.25, "best_epoch": .., "rmse": {"train": .., ...}}, ...],
+                  "extrapolation": [0, 0, 0, 0.25], "best_epoch": .., "rmse": {"train": .., ...}}, ...],
      "dataset": {"sha256": "...", "path": "...", "n_samples": ..},
      "training": {...}}
 """
@@ -42,7 +42,7 @@ def model_to_dict(model: SugenoModel) -> dict[str, Any]:
         'structure': list(model.structure),
         'membership': [P.tolist() for P in model.mfs],
         'consequents': model.coef.tolist(),
-        'extrapolation': float(model.extrapolation),
+        'extrapolation': [float(v) for v in model.extrapolation],
     }
 
 
@@ -50,10 +50,12 @@ def model_from_dict(entry: dict[str, Any], lo: np.ndarray, hi: np.ndarray, name:
     try:
         mfs = [np.array(P, dtype=np.float64) for P in entry['membership']]
         coef = np.array(entry['consequents'], dtype=np.float64)
-        extrapolation = float(entry.get('extrapolation', 0.25))
+        extrapolation = np.array(entry['extrapolation'], dtype=np.float64)
         structure = tuple(int(m) for m in entry['structure'])
     except (KeyError, TypeError, ValueError) as exc:
-        raise ModelFileError(f'output {name}: malformed entry ({exc})') from None
+        raise ModelFileError(f'output {name}: malformed entry ({exc!r})') from None
+    if extrapolation.shape != (len(lo),):
+        raise ModelFileError(f'output {name}: "extrapolation" needs {len(lo)} numbers')
     if len(mfs) != len(lo):
         raise ModelFileError(f'output {name}: {len(mfs)} membership lists for {len(lo)} inputs')
     model = SugenoModel(mfs=mfs, coef=coef, lo=lo, hi=hi, extrapolation=extrapolation)

@@ -16,9 +16,12 @@ Out-of-range policy (inputs outside the trained domain [lo, hi]):
 - memberships are computed at the input clamped to [lo, hi], so the rules of the nearest domain edge
   fire — never no rule, never a silent 0 N or NaN;
 - consequents are evaluated at the input clamped to the *extrapolation box*
-  [lo - e (hi - lo), hi + e (hi - lo)] (``extrapolation`` = e, default 0.25): close outside the data
-  the edge rules extrapolate linearly (force keeps growing with depth past the deepest sample), far
-  outside the output saturates at the box edge rather than growing without bound.
+  [lo - e_i (hi - lo), hi + e_i (hi - lo)], with a per-input fraction e_i (``extrapolation``).
+  The force model's default is e = (0, 0, 0, 0.25): positions outside the palpated region saturate
+  (the force of the nearest trained point: contact points off the data carry no information, and a
+  first-order rule extrapolated sideways can change sign), while depth extrapolates linearly up to a
+  quarter of its range past the data (force keeps growing past the deepest sample, and falls toward
+  zero below the shallowest) and saturates beyond.
 Non-finite inputs raise ``ValueError``.
 """
 from __future__ import annotations
@@ -29,7 +32,8 @@ import numpy as np
 
 from . import membership as mfun
 
-DEFAULT_EXTRAPOLATION = 0.25
+#: Per-input extrapolation fractions of the force model's inputs (x, y, z, depth).
+DEFAULT_EXTRAPOLATION = (0.0, 0.0, 0.0, 0.25)
 
 
 def check_finite_inputs(X: np.ndarray, names: tuple[str, ...] | None = None) -> np.ndarray:
@@ -54,14 +58,19 @@ class SugenoModel:
         mfs: per input, an (m_i, 3) array of triangle parameters (a, b, c), input units.
         coef: (R, d + 1) consequent coefficients per rule: (p_1 .. p_d, q); R = Π m_i.
         lo, hi: (d,) trained input domain.
-        extrapolation: width of the extrapolation band outside [lo, hi], as a fraction of hi - lo.
+        extrapolation: per input (d,) (or one number for all), width of the extrapolation band
+            outside [lo, hi] as a fraction of hi - lo.
     """
 
     mfs: list[np.ndarray]
     coef: np.ndarray
     lo: np.ndarray
     hi: np.ndarray
-    extrapolation: float = DEFAULT_EXTRAPOLATION
+    extrapolation: np.ndarray | float = 0.0
+
+    def __post_init__(self) -> None:
+        self.extrapolation = np.broadcast_to(
+            np.asarray(self.extrapolation, dtype=np.float64), (len(self.mfs),)).copy()
 
     @property
     def n_inputs(self) -> int:
@@ -191,5 +200,6 @@ class SugenoModel:
                              f'{self.structure}, got {np.shape(self.coef)}')
         if not np.all(np.isfinite(self.coef)):
             raise ValueError(f'{name}: consequents hold non-finite numbers')
-        if not (np.isfinite(self.extrapolation) and self.extrapolation >= 0):
-            raise ValueError(f'{name}: extrapolation must be a finite number >= 0')
+        e = np.asarray(self.extrapolation, dtype=np.float64)
+        if e.shape != (d,) or not (np.all(np.isfinite(e)) and np.all(e >= 0)):
+            raise ValueError(f'{name}: extrapolation must be {d} finite numbers >= 0')

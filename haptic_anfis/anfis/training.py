@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import membership as mfun
-from .sugeno import DEFAULT_EXTRAPOLATION, SugenoModel
+from .sugeno import SugenoModel
 
 #: Ridge weight relative to the largest squared singular value of the (column-scaled) design matrix.
 DEFAULT_RIDGE = 1e-7
@@ -109,8 +109,7 @@ def fit_normalized(U: np.ndarray, t: np.ndarray, structure: tuple[int, ...], epo
     else:
         mfs = [mfun.project(P, 0.0, 1.0) for P in initial_mfs]
     R = int(np.prod(structure))
-    model = SugenoModel(mfs=mfs, coef=np.zeros((R, d + 1)), lo=lo, hi=hi,
-                        extrapolation=DEFAULT_EXTRAPOLATION)
+    model = SugenoModel(mfs=mfs, coef=np.zeros((R, d + 1)), lo=lo, hi=hi, extrapolation=0.0)
     has_check = U_check is not None and t_check is not None and len(U_check) > 0
     result = TrainResult(model=copy.deepcopy(model), best_epoch=0)
     best = np.inf

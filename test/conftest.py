@@ -1,0 +1,34 @@
+"""Shared fixtures. Tests are seeded and isolated: ROS tests use their own domain, localhost only."""
+from __future__ import annotations
+
+import os
+
+import numpy as np
+import pytest
+from hypothesis import settings
+
+# Isolation for any test that touches ROS 2 (set before rclpy is imported anywhere).
+os.environ.setdefault('ROS_DOMAIN_ID', str(40 + os.getpid() % 50))
+os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+
+settings.register_profile('ci', derandomize=True, deadline=None, max_examples=60)
+settings.load_profile('ci')
+
+
+@pytest.fixture(scope='session')
+def synthetic():
+    from haptic_anfis.synthetic_data import make_synthetic_dataset
+    return make_synthetic_dataset(seed=0)
+
+
+@pytest.fixture(scope='session')
+def small_model(synthetic):
+    """A ForceModel with a fixed 3-2-2-2 / 3-3-3-2 / 2-2-2-2 structure (fast to train)."""
+    from haptic_anfis.anfis import ForceModel
+    return ForceModel(structure=[(3, 2, 2, 2), (3, 3, 3, 2), (2, 2, 2, 2)], epochs=15).fit(
+        synthetic.X, synthetic.Y, groups=synthetic.point)
+
+
+@pytest.fixture
+def rng():
+    return np.random.default_rng(1234)

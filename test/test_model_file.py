@@ -1,0 +1,82 @@
+"""Model files: bit-exact round trip, clear errors on anything else."""
+import json
+
+import numpy as np
+import pytest
+
+from haptic_anfis.anfis import FORMAT_VERSION, ForceModel, ModelFileError
+from haptic_anfis.dataset import DATA_DIR
+
+
+def test_save_load_round_trip_is_bit_exact(small_model, synthetic, tmp_path):
+    path = small_model.save(tmp_path / 'm.json')
+    loaded = ForceModel.load(path)
+    for a, b in zip(small_model.models_, loaded.models_):
+        assert a.structure == b.structure
+        for P, Q in zip(a.mfs, b.mfs):
+            assert np.array_equal(P, Q)
+        assert np.array_equal(a.coef, b.coef)
+        assert np.array_equal(a.lo, b.lo) and np.array_equal(a.hi, b.hi)
+        assert np.array_equal(a.extrapolation, b.extrapolation)
+    assert np.array_equal(loaded.predict(synthetic.X), small_model.predict(synthetic.X))
+    assert not list(tmp_path.glob('*.tmp'))  # atomic write leaves nothing behind
+
+
+def test_shipped_default_model_loads_and_records_provenance():
+    model = ForceModel.load(DATA_DIR / 'default_model.json')
+    doc = json.loads((DATA_DIR / 'default_model.json').read_text())
+    assert doc['format_version'] == FORMAT_VERSION
+    assert len(doc['dataset']['sha256']) == 64
+    assert all(0 < o['rmse']['test'] < 1 for o in doc['outputs'])
+    assert all(o['best_epoch'] >= 1 for o in doc['outputs'])
+    assert [i['unit'] for i in doc['inputs']] == ['m'] * 4
+    assert np.all(np.isfinite(model.predict_one(0.04, 0.0, 0.0, 0.008)))
+
+
+def _doc(small_model):
+    return json.loads(json.dumps(small_model.to_dict()))
+
+
+def _write(tmp_path, doc, name='bad.json'):
+    p = tmp_path / name
+    p.write_text(json.dumps(doc) if not isinstance(doc, str) else doc)
+    return p
+
+
+@pytest.mark.parametrize('mutate, message', [
+    (lambda d: d.update(format_version=FORMAT_VERSION + 1), 'format_version'),
+    (lambda d: d.update(format='something.else'), 'not a haptic_anfis force-model file'),
+    (lambda d: d['outputs'][0]['consequents'].pop(), 'consequents must have shape'),
+    (lambda d: d['outputs'][1]['membership'][0].pop(), 'structure'),
+    (lambda d: d['outputs'][0]['consequents'][0].__setitem__(0, 'NaN'), 'malformed|non-finite'),
+    (lambda d: d['outputs'][2]['membership'][3][0].reverse(), 'a < b < c|peaks'),
+    (lambda d: d['inputs'][0].update(min=1.0, max=0.0), 'range'),
+    (lambda d: d['inputs'].pop(), 'inputs'),
+    (lambda d: d['outputs'][0].update(name='Fq'), 'outputs'),
+    (lambda d: d['outputs'][0].pop('extrapolation'), 'malformed'),
+])
+def test_bad_model_files_fail_with_clear_errors(small_model, tmp_path, mutate, message):
+    doc = _doc(small_model)
+    mutate(doc)
+    with pytest.raises(ModelFileError, match=message):
+        ForceModel.load(_write(tmp_path, doc))
+
+
+def test_non_finite_numbers_in_json_are_rejected(small_model, tmp_path):
+    text = json.dumps(_doc(small_model))
+    first = json.dumps(small_model.models_[0].coef[0, 0])
+    p = _write(tmp_path, text.replace(first, 'Infinity', 1))
+    with pytest.raises(ModelFileError, match='non-finite|not a valid'):
+        ForceModel.load(p)
+
+
+def test_missing_and_garbage_files(tmp_path):
+    with pytest.raises(ModelFileError, match='does not exist'):
+        ForceModel.load(tmp_path / 'nope.json')
+    with pytest.raises(ModelFileError, match='not a valid model file'):
+        ForceModel.load(_write(tmp_path, '{"format": '))
+
+
+def test_unfitted_model_says_so():
+    with pytest.raises(RuntimeError, match='not trained'):
+        ForceModel().predict(np.zeros((1, 4)))
