@@ -19,7 +19,7 @@ from . import membership as mfun
 from .sugeno import SugenoModel
 
 #: Ridge weight relative to the largest squared singular value of the (column-scaled) design matrix.
-DEFAULT_RIDGE = 1e-7
+DEFAULT_RIDGE = 1e-6
 #: Singular values below this fraction of the largest are cut off outright.
 SVD_CUTOFF = 1e-12
 
