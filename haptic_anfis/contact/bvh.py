@@ -208,8 +208,9 @@ def closest_on_triangle(tri, k, px, py, pz):
     denom = 1.0 / (va + vb + vc)
     v = vb * denom
     w = vc * denom
+    # Rounding can leave u = 1 - v - w at -1e-17; report barycentrics that are never negative.
     return (ax + abx * v + acx * w, ay + aby * v + acy * w, az + abz * v + acz * w,
-            1.0 - v - w, v, w, FACE)
+            max(0.0, 1.0 - v - w), max(0.0, v), max(0.0, w), FACE)
 
 
 @_jit
