@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 import os
-import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -116,9 +115,7 @@ class ContactDetector:
     def from_file(cls, path: str | os.PathLike, unit: str = 'mm', transform=None,
                   direction=None) -> 'ContactDetector':
         """Load a mesh file (see :func:`haptic_anfis.contact.mesh_io.load_mesh`) and build on it."""
-        with warnings.catch_warnings():
-            warnings.simplefilter('ignore')  # load_mesh already warned, naming the file
-            mesh = load_mesh(path, unit=unit, transform=transform)
+        mesh = load_mesh(path, unit=unit, transform=transform)  # validates, warns naming the file
         return cls(mesh, direction=direction, _validated=True)
 
     @property
