@@ -282,8 +282,18 @@ def closest(tri, box, node, px, py, pz, hint, cx, cy, cz, r2):
             dr = np.inf
         else:
             dr = _box_d2(box, right, px, py, pz)
+        if dl == dr:  # typically both 0 (p inside both boxes): prefer the child whose centre is nearer
+            cl = ((box[left, 0] + box[left, 3] - 2.0 * px) ** 2
+                  + (box[left, 1] + box[left, 4] - 2.0 * py) ** 2
+                  + (box[left, 2] + box[left, 5] - 2.0 * pz) ** 2)
+            cr = ((box[right, 0] + box[right, 3] - 2.0 * px) ** 2
+                  + (box[right, 1] + box[right, 4] - 2.0 * py) ** 2
+                  + (box[right, 2] + box[right, 5] - 2.0 * pz) ** 2)
+            near_left = cl <= cr
+        else:
+            near_left = dl < dr
         # Push the far child first so the near one is popped (and tightens `best`) first.
-        if dl <= dr:
+        if near_left:
             if dr <= best:
                 st[top], sd[top] = right, dr
                 top += 1
@@ -425,64 +435,79 @@ def raycast(tri, box, node, ox, oy, oz, dx, dy, dz, tmin, tmax, facing, eps):
     return brow, bt, bu, bv, bw
 
 
-# Output columns of query_kernel, one row per probe point.
-OUT_POINT, OUT_ROW, OUT_BARY, OUT_SD, OUT_NORMAL = 0, 3, 4, 7, 8
-OUT_DEPTH, OUT_CPOINT, OUT_CROW, OUT_REGION, OUT_DIR = 11, 12, 15, 16, 17
+# Output columns of the query kernels (one row per probe point). Faces are caller's face indices.
+OUT_POINT, OUT_FACE, OUT_BARY, OUT_SD, OUT_NORMAL = 0, 3, 4, 7, 8
+OUT_DEPTH, OUT_CPOINT, OUT_CFACE, OUT_DIR, OUT_ROW = 11, 12, 15, 16, 19
 OUT_WIDTH = 20
+# Parameter vector `par`: fixed-direction flag, direction (3), pseudo-normal tol [m], ray eps.
+PAR_FIXED, PAR_DIR, PAR_TOL, PAR_EPS = 0, 1, 4, 5
 
 
 @_jit
-def query_kernel(tri, box, node, P, hints, coherent, fixed_dir, dx, dy, dz, tol, eps, out):
-    """Stateless contact query for each row of ``P`` (n, 3) [m]; writes ``out`` (n, OUT_WIDTH).
+def _query_point(tri, box, node, ids, par, px, py, pz, hint, out):
+    """Stateless contact query for one point; writes the row ``out`` (OUT_WIDTH,).
 
-    ``hints`` (n,) rows to try first (-1: none); with ``coherent`` a point without a hint uses
-    the previous point's answer. Rows are indices into ``tri`` (tree order); the caller maps them
-    back to face indices. See :meth:`haptic_anfis.contact.ContactDetector.query` for definitions.
+    ``ids`` (2, F): tree row -> face index, face index -> tree row. ``hint`` is a tree row or -1.
+    See :meth:`haptic_anfis.contact.ContactDetector.query` for the definitions.
     """
+    tol, eps = par[PAR_TOL], par[PAR_EPS]
+    dx, dy, dz = par[1], par[2], par[3]
+    row, d2, qx, qy, qz, u, v, w, reg = closest(tri, box, node, px, py, pz, hint,
+                                                0.0, 0.0, 0.0, np.inf)
+    nx, ny, nz = pseudo_normal(tri, box, node, px, py, pz, row, qx, qy, qz, reg, tol)
+    nn = math.sqrt(nx * nx + ny * ny + nz * nz)
+    dist = math.sqrt(d2)
+    if nn > 0.0:
+        nx, ny, nz = nx / nn, ny / nn, nz / nn
+        side = (px - qx) * nx + (py - qy) * ny + (pz - qz) * nz
+    elif dist > 0.0:  # faces cancel (a two-sided sheet): call it outside, normal towards p
+        nx, ny, nz = (px - qx) / dist, (py - qy) / dist, (pz - qz) / dist
+        side = 1.0
+    else:
+        side = 1.0
+    sdist = -dist if side < 0.0 else dist
+    depth = 0.0
+    cqx, cqy, cqz, crow = qx, qy, qz, row
+    if par[PAR_FIXED] != 0.0:
+        ux, uy, uz = dx, dy, dz
+        if sdist < 0.0:
+            # Walk back out along -direction to the first crossing: the surface point the probe
+            # entered at. It must face the probe (n . direction < 0); a back face means the
+            # probe is inside but came through the far side (e.g. the chest wall): no contact.
+            hrow, t, hu, hv, hw = raycast(tri, box, node, px, py, pz, -dx, -dy, -dz,
+                                          0.0, np.inf, 0, eps)
+            if hrow >= 0 and t > 0.0 and (tri[hrow, 9] * dx + tri[hrow, 10] * dy
+                                          + tri[hrow, 11] * dz) < 0.0:
+                depth = t
+                cqx, cqy, cqz, crow = px - t * dx, py - t * dy, pz - t * dz, hrow
+    else:
+        ux, uy, uz = -nx, -ny, -nz
+        if sdist < 0.0:
+            depth = -sdist
+    out[0], out[1], out[2] = qx, qy, qz
+    out[OUT_FACE] = ids[0, row]
+    out[4], out[5], out[6] = u, v, w
+    out[OUT_SD] = sdist
+    out[8], out[9], out[10] = nx, ny, nz
+    out[OUT_DEPTH] = depth
+    out[12], out[13], out[14] = cqx, cqy, cqz
+    out[OUT_CFACE] = ids[0, crow]
+    out[16], out[17], out[18] = ux, uy, uz
+    out[OUT_ROW] = row
+
+
+@_jit
+def query_one(tri, box, node, ids, par, px, py, pz, hint_face, out):
+    """One point (scalars, so the Python call stays cheap); ``hint_face`` a face index or -1."""
+    hint = ids[1, hint_face] if 0 <= hint_face < ids.shape[1] else -1
+    _query_point(tri, box, node, ids, par, px, py, pz, hint, out)
+
+
+@_jit
+def query_batch(tri, box, node, ids, par, P, out):
+    """Each row of ``P`` (n, 3) [m] into ``out`` (n, OUT_WIDTH); each point is first tested
+    against the previous point's face (ordered paths prune most of the tree that way)."""
+    hint = -1
     for i in range(P.shape[0]):
-        px, py, pz = P[i, 0], P[i, 1], P[i, 2]
-        hint = hints[i]
-        if hint < 0 and coherent and i > 0:
-            hint = np.int64(out[i - 1, OUT_ROW])
-        row, d2, qx, qy, qz, u, v, w, reg = closest(tri, box, node, px, py, pz, hint,
-                                                    0.0, 0.0, 0.0, np.inf)
-        nx, ny, nz = pseudo_normal(tri, box, node, px, py, pz, row, qx, qy, qz, reg, tol)
-        nn = math.sqrt(nx * nx + ny * ny + nz * nz)
-        dist = math.sqrt(d2)
-        if nn > 0.0:
-            nx, ny, nz = nx / nn, ny / nn, nz / nn
-            side = (px - qx) * nx + (py - qy) * ny + (pz - qz) * nz
-        elif dist > 0.0:  # faces cancel (a two-sided sheet): call it outside, normal towards p
-            nx, ny, nz = (px - qx) / dist, (py - qy) / dist, (pz - qz) / dist
-            side = 1.0
-        else:
-            side = 1.0
-        sdist = -dist if side < 0.0 else dist
-        depth = 0.0
-        cqx, cqy, cqz, crow = qx, qy, qz, row
-        if fixed_dir:
-            ux, uy, uz = dx, dy, dz
-            if sdist < 0.0:
-                # Walk back out along -direction to the first crossing: the surface point the probe
-                # entered at. It must face the probe (n . direction < 0); a back face means the
-                # probe is inside but came through the far side (e.g. the chest wall): no contact.
-                hrow, t, hu, hv, hw = raycast(tri, box, node, px, py, pz, -dx, -dy, -dz,
-                                              0.0, np.inf, 0, eps)
-                if hrow >= 0 and (tri[hrow, 9] * dx + tri[hrow, 10] * dy
-                                  + tri[hrow, 11] * dz) < 0.0 and t > 0.0:
-                    depth = t
-                    cqx, cqy, cqz, crow = px - t * dx, py - t * dy, pz - t * dz, hrow
-        else:
-            ux, uy, uz = -nx, -ny, -nz
-            if sdist < 0.0:
-                depth = -sdist
-        out[i, 0], out[i, 1], out[i, 2] = qx, qy, qz
-        out[i, OUT_ROW] = row
-        out[i, 4], out[i, 5], out[i, 6] = u, v, w
-        out[i, OUT_SD] = sdist
-        out[i, 8], out[i, 9], out[i, 10] = nx, ny, nz
-        out[i, OUT_DEPTH] = depth
-        out[i, 12], out[i, 13], out[i, 14] = cqx, cqy, cqz
-        out[i, OUT_CROW] = crow
-        out[i, OUT_REGION] = reg
-        out[i, 17], out[i, 18], out[i, 19] = ux, uy, uz
+        _query_point(tri, box, node, ids, par, P[i, 0], P[i, 1], P[i, 2], hint, out[i])
+        hint = np.int64(out[i, OUT_ROW])

@@ -1,6 +1,7 @@
 """The stateless contact query: closest surface point, inside/outside, penetration depth."""
 from __future__ import annotations
 
+import math
 import os
 from dataclasses import dataclass
 
@@ -63,6 +64,16 @@ class ContactBatch:
         return len(self.depth)
 
 
+def _new_result(*fields) -> ContactResult:
+    """ContactResult without the frozen-dataclass __init__ (~1 µs of setattr calls per query)."""
+    r = object.__new__(ContactResult)
+    r.__dict__.update(zip(_RESULT_FIELDS, fields))
+    return r
+
+
+_RESULT_FIELDS = tuple(ContactResult.__dataclass_fields__)
+
+
 def _unit_direction(direction) -> np.ndarray | None:
     if direction is None:
         return None
@@ -105,11 +116,12 @@ class ContactDetector:
         self._tol = 1e-9 * scale
         self._eps = 1e-9  # barycentric slack of ray casts, so rays through edges/vertices hit
         d = self.direction if self.direction is not None else np.zeros(3)
-        self._fixed = self.direction is not None
-        self._d = (float(d[0]), float(d[1]), float(d[2]))
+        self._par = np.array([float(self.direction is not None), *d, self._tol, self._eps])
         self._row_of = np.empty_like(self._order)
         self._row_of[self._order] = np.arange(len(self._order))
+        self._ids = np.ascontiguousarray(np.stack([self._order, self._row_of]))
         self.query(self._tri[0, 0:3])  # compile or load the kernels now, not in the 1 kHz loop
+        self.query_many(self._tri[:2, 0:3])
 
     @classmethod
     def from_file(cls, path: str | os.PathLike, unit: str = 'mm', transform=None,
@@ -135,12 +147,6 @@ class ContactDetector:
             raise ValueError(f'{name}: probe position must be finite, got NaN/Inf '
                              f'in {len(bad)} point(s), first row {bad[0]}: {P[bad[0]]}')
         return np.ascontiguousarray(P)
-
-    def _run(self, P: np.ndarray, hints: np.ndarray) -> np.ndarray:
-        out = np.empty((len(P), bvh.OUT_WIDTH))
-        bvh.query_kernel(self._tri, self._box, self._node, P, hints, False, self._fixed,
-                         *self._d, self._tol, self._eps, out)
-        return out
 
     def query(self, p, hint: int = -1) -> ContactResult:
         """Contact query for one probe point.
@@ -172,16 +178,23 @@ class ContactDetector:
         Raises:
             ValueError: ``p`` is not a finite 3-vector.
         """
-        P = self._check_points(p, 'p')
-        if P.shape[0] != 1:
-            raise ValueError(f'p: expected one point of shape (3,), got {np.shape(p)}')
-        h = self._row_of[hint] if 0 <= hint < len(self._row_of) else -1
-        o = self._run(P, np.array([h], dtype=np.int64))[0]
-        return ContactResult(
-            point=o[0:3], triangle=int(self._order[int(o[3])]), barycentric=o[4:7],
-            signed_distance=float(o[7]), normal=o[8:11], depth=float(o[11]), direction=o[17:20],
-            contact_point=o[12:15], contact_triangle=int(self._order[int(o[15])]),
-            in_contact=bool(o[11] > 0.0))
+        try:  # fast path for the 1 kHz loop: plain floats, one finiteness test
+            x, y, z = p.tolist() if type(p) is np.ndarray else p
+            x, y, z = float(x), float(y), float(z)
+            ok = math.isfinite(x + y + z)  # NaN or Inf in any coordinate makes the sum non-finite
+        except (TypeError, ValueError):
+            ok = False
+        if not ok:
+            P = self._check_points(p, 'p')  # raises the precise error
+            if P.shape[0] != 1:
+                raise ValueError(f'p: expected one point of shape (3,), got {np.shape(p)}')
+            x, y, z = (float(c) for c in P[0])  # finite, but x + y + z overflowed
+        o = np.empty(bvh.OUT_WIDTH)
+        bvh.query_one(self._tri, self._box, self._node, self._ids, self._par, x, y, z, hint, o)
+        v = o.tolist()
+        depth = v[bvh.OUT_DEPTH]
+        return _new_result(o[0:3], int(v[bvh.OUT_FACE]), o[4:7], v[bvh.OUT_SD], o[8:11], depth,
+                           o[16:19], o[12:15], int(v[bvh.OUT_CFACE]), depth > 0.0)
 
     def query_many(self, P) -> ContactBatch:
         """:meth:`query` for each row of ``P`` (n, 3) [m]; returns a :class:`ContactBatch`.
@@ -190,23 +203,14 @@ class ContactDetector:
         recorded trajectory) run faster than shuffled ones.
         """
         P = self._check_points(P, 'P')
-        if len(P) == 0:
-            o = np.empty((0, bvh.OUT_WIDTH))
-        else:
-            o = self._run_coherent(P)
-        rows = o[:, 3].astype(np.int64)
-        crows = o[:, 15].astype(np.int64)
+        o = np.empty((len(P), bvh.OUT_WIDTH))
+        bvh.query_batch(self._tri, self._box, self._node, self._ids, self._par, P, o)
         return ContactBatch(
-            point=o[:, 0:3], triangle=self._order[rows], barycentric=o[:, 4:7],
-            signed_distance=o[:, 7], normal=o[:, 8:11], depth=o[:, 11], direction=o[:, 17:20],
-            contact_point=o[:, 12:15], contact_triangle=self._order[crows],
-            in_contact=o[:, 11] > 0.0)
-
-    def _run_coherent(self, P: np.ndarray) -> np.ndarray:
-        out = np.empty((len(P), bvh.OUT_WIDTH))
-        bvh.query_kernel(self._tri, self._box, self._node, P, np.full(len(P), -1, np.int64),
-                         True, self._fixed, *self._d, self._tol, self._eps, out)
-        return out
+            point=o[:, 0:3], triangle=o[:, bvh.OUT_FACE].astype(np.int64),
+            barycentric=o[:, 4:7], signed_distance=o[:, bvh.OUT_SD], normal=o[:, 8:11],
+            depth=o[:, bvh.OUT_DEPTH], direction=o[:, 16:19], contact_point=o[:, 12:15],
+            contact_triangle=o[:, bvh.OUT_CFACE].astype(np.int64),
+            in_contact=o[:, bvh.OUT_DEPTH] > 0.0)
 
     # -- building blocks for ContactTracker (face indices in, face indices out) ---------------
 
