@@ -1,4 +1,4 @@
-"""Contact detection speed: ContactDetector vs trimesh.proximity.closest_point (printed, not asserted).
+"""Contact detection speed: ContactDetector vs trimesh.proximity.closest_point (printed only).
 
 Meshes: closed ellipsoid domes (the tissue shape) of ~5k, 20k and 80k faces. Probes: palpation-like
 points within 20 mm of the skin (inside and outside), random over the palpable disc.
@@ -18,7 +18,7 @@ from haptic_anfis.contact import ContactDetector, ContactTracker, ellipsoid_dome
 from haptic_anfis.synthetic_data import surface_x
 
 try:  # trimesh's proximity queries need rtree, which haptic_anfis itself does not
-    import rtree  # noqa: F401
+    import rtree  # noqa: F401  (only its presence matters)
     HAVE_RTREE = True
 except ImportError:
     HAVE_RTREE = False

@@ -1,4 +1,4 @@
-"""Brute-force references and test meshes for the contact tests (numpy only, deliberately simple)."""
+"""Brute-force references and test meshes for the contact tests (numpy, deliberately simple)."""
 from __future__ import annotations
 
 import numpy as np

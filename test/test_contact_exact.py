@@ -1,4 +1,4 @@
-"""ContactDetector against brute force over all faces: closest point to 1e-12 m and the same sign."""
+"""ContactDetector against brute force over all faces: closest point to 1e-12 m, same sign."""
 from __future__ import annotations
 
 import warnings

@@ -21,7 +21,7 @@ import numba as nb
 import numpy as np
 
 FACE, VA, VB, VC, EAB, EBC, ECA = 0, 1, 2, 3, 4, 5, 6
-LEAF_SIZE = 4
+LEAF_SIZE = 8  # measured: 8 beats 2 and 4 by ~10 % on the 80k dome; 16 is no better
 _STACK = 128  # a median-split tree over 2^40 faces is 40 deep; two pushes per level
 
 # error_model='numpy': a division by zero gives inf/nan instead of raising (used in ray slabs).
@@ -107,7 +107,7 @@ def build_tables(vertices: np.ndarray, faces: np.ndarray, degenerate_rtol: float
             its longest edge; such faces keep their points (as segments) but have no normal.
 
     Returns:
-        ``(tri, box, node, order)``; ``order[k]`` is the caller's face index of row ``k`` of ``tri``.
+        ``(tri, box, node, order)``; ``order[k]`` is the caller's face index of ``tri[k]``.
     """
     a, b, c = (vertices[faces[:, k]] for k in range(3))
     cr = np.cross(b - a, c - a)
@@ -282,7 +282,7 @@ def closest(tri, box, node, px, py, pz, hint, cx, cy, cz, r2):
             dr = np.inf
         else:
             dr = _box_d2(box, right, px, py, pz)
-        if dl == dr:  # typically both 0 (p inside both boxes): prefer the child whose centre is nearer
+        if dl == dr:  # usually both 0 (p inside both boxes): take the nearer centre first
             cl = ((box[left, 0] + box[left, 3] - 2.0 * px) ** 2
                   + (box[left, 1] + box[left, 4] - 2.0 * py) ** 2
                   + (box[left, 2] + box[left, 5] - 2.0 * pz) ** 2)
@@ -312,7 +312,7 @@ def closest(tri, box, node, px, py, pz, hint, cx, cy, cz, r2):
 
 @_jit
 def pseudo_normal(tri, box, node, px, py, pz, row, qx, qy, qz, region, tol):
-    """Angle-weighted pseudo-normal (Baerentzen & Aanaes 2005) at the closest point q (unnormalised).
+    """Angle-weighted pseudo-normal (Baerentzen & Aanaes 2005) at closest point q, unnormalised.
 
     In a face interior it is the face normal. On an edge or a vertex it sums, over every
     non-degenerate face whose own closest point to p is q (within ``tol`` [m]), the face normal

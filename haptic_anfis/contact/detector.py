@@ -79,7 +79,8 @@ def _unit_direction(direction) -> np.ndarray | None:
         return None
     d = np.asarray(direction, dtype=np.float64).reshape(-1)
     if d.shape != (3,) or not np.all(np.isfinite(d)) or np.linalg.norm(d) == 0.0:
-        raise ValueError(f'direction: expected None or a finite non-zero 3-vector, got {direction!r}')
+        raise ValueError('direction: expected None or a finite non-zero 3-vector, '
+                         f'got {direction!r}')
     return d / np.linalg.norm(d)
 
 
@@ -97,7 +98,7 @@ class ContactDetector:
             measures depth along the surface normal.
 
     Raises:
-        ValueError: a mesh :func:`haptic_anfis.contact.mesh_io.validate` rejects, or a bad direction.
+        ValueError: a mesh :func:`~haptic_anfis.contact.mesh_io.validate` rejects, a bad direction.
     """
 
     def __init__(self, mesh: trimesh.Trimesh, direction=None, *, _validated: bool = False):

@@ -58,7 +58,8 @@ def load_mesh(path: str | os.PathLike, unit: str = 'mm',
     if transform is not None:
         T = np.asarray(transform, dtype=np.float64)
         if T.shape != (4, 4) or not np.all(np.isfinite(T)):
-            raise ValueError(f'{path}: transform must be a finite (4, 4) matrix, got shape {T.shape}')
+            raise ValueError(f'{path}: transform must be a finite (4, 4) matrix, '
+                             f'got shape {T.shape}')
         if not np.allclose(T[3], [0.0, 0.0, 0.0, 1.0]):
             raise ValueError(f'{path}: transform must be affine (last row 0 0 0 1), got {T[3]}')
         if np.linalg.det(T[:3, :3]) <= 0.0:
@@ -66,7 +67,7 @@ def load_mesh(path: str | os.PathLike, unit: str = 'mm',
                              'turn the surface inside out')
         vertices = vertices @ T[:3, :3].T + T[:3, 3]
     faces = np.asarray(mesh.faces)
-    # STL stores every triangle's corners separately, so duplicates there are the format, not a defect.
+    # STL stores each triangle's corners separately: duplicates there are the format, not a defect.
     validate(vertices, faces, name=str(path), warn_duplicates=path.suffix.lower() != '.stl')
     return trimesh.Trimesh(vertices=vertices, faces=faces, process=False)
 

@@ -37,7 +37,8 @@ class TrackedContact:
         state: ``'free'``, ``'contact'`` or ``'rejected'`` (inside, but not entered through the
             front surface).
         in_contact: ``state == 'contact'`` and ``depth > 0``.
-        contact_point: (3,) proxy on the undeformed surface (the probe position when not in contact).
+        contact_point: (3,) proxy on the undeformed surface (the probe position when not in
+            contact).
         triangle: face index of the proxy, -1 when not in contact.
         depth: penetration along ``direction`` [m], >= 0, saturated (see module docstring).
         direction: (3,) unit indentation direction into the tissue.
