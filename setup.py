@@ -54,6 +54,7 @@ setup(
             'colcon-common-extensions==0.3.0',
             'mcap>=1.2',
             'mcap-ros2-support>=0.5',
+            'rtree>=1.2',  # trimesh.proximity, the reference the contact benchmark compares against
         ],
     },
     zip_safe=True,

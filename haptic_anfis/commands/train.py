@@ -24,22 +24,57 @@ def parse_structure(text: str) -> tuple[int, ...]:
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument('dataset', help='force dataset CSV (point,x_m,y_m,z_m,depth_m,fx_N,fy_N,fz_N)')
     p.add_argument('--out', required=True, help='model file to write (JSON)')
+    p.add_argument('--config', default=None,
+                   help='YAML with a "force_model" section of hyper-parameters '
+                        '(see config/force_model.yaml); command-line flags override it')
     p.add_argument('--structure', type=parse_structure, default=None,
                    help='fixed MF counts for all outputs, e.g. 3-3-3-2 (default: search per output)')
-    p.add_argument('--epochs', type=int, default=60, help='maximum epochs (default 60)')
-    p.add_argument('--test-fraction', type=float, default=0.2, help='held-out test part (default 0.2)')
-    p.add_argument('--split', choices=('point', 'sample'), default='point',
+    p.add_argument('--epochs', type=int, default=None, help='maximum epochs (default 60)')
+    p.add_argument('--test-fraction', type=float, default=None,
+                   help='held-out test part (default 0.2)')
+    p.add_argument('--split', choices=('point', 'sample'), default=None,
                    help='hold out whole surface points (default) or single samples')
-    p.add_argument('--seed', type=int, default=0, help='seed of the splits (default 0)')
+    p.add_argument('--seed', type=int, default=None, help='seed of the splits (default 0)')
+
+
+#: Keys of the config's "force_model" section: ForceModel arguments plus the test split.
+CONFIG_KEYS = {'structure', 'epochs', 'search_epochs', 'search_start', 'max_mfs', 'tol', 'ridge',
+               'step', 'val_fraction', 'split', 'extrapolation', 'seed', 'test_fraction'}
+
+
+def load_config(path: str | None) -> dict:
+    """The "force_model" section of a YAML file, checked for unknown keys."""
+    if path is None:
+        return {}
+    import yaml
+
+    with open(path) as fh:
+        doc = yaml.safe_load(fh) or {}
+    section = doc.get('force_model', {}) if isinstance(doc, dict) else None
+    if not isinstance(section, dict):
+        raise ValueError(f'{path}: expected a mapping under "force_model"')
+    unknown = sorted(set(section) - CONFIG_KEYS)
+    if unknown:
+        raise ValueError(f'{path}: unknown force_model key(s) {unknown}; known: {sorted(CONFIG_KEYS)}')
+    params = {k: v for k, v in section.items() if v is not None}
+    for key in ('structure', 'search_start', 'max_mfs', 'extrapolation'):
+        if key in params:
+            params[key] = tuple(params[key])
+    return params
 
 
 def run(args: argparse.Namespace) -> int:
     ds = load_dataset(args.dataset)
     print(f'dataset {args.dataset}: {len(ds)} samples at {len(set(ds.point.tolist()))} surface points'
           + (f' [{ds.provenance["kind"]}]' if ds.provenance.get('kind') else ''))
-    model, test = train_on_dataset(ds, test_fraction=args.test_fraction, seed=args.seed,
-                                   verbose=True, dataset_path=str(args.dataset),
-                                   structure=args.structure, epochs=args.epochs, split=args.split)
+    params = load_config(args.config)
+    for key in ('structure', 'epochs', 'split', 'seed', 'test_fraction'):
+        if getattr(args, key) is not None:
+            params[key] = getattr(args, key)
+    test_fraction = params.pop('test_fraction', 0.2)
+    seed = params.pop('seed', 0)
+    model, test = train_on_dataset(ds, test_fraction=test_fraction, seed=seed, verbose=True,
+                                   dataset_path=str(args.dataset), **params)
     r = model.metadata_['rmse']
     print(f'\n{"output":<6} {"structure":<10} {"train N":>9} {"val N":>9} {"test N":>9}')
     for o, name in enumerate(OUTPUT_NAMES):

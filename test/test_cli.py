@@ -1,0 +1,65 @@
+"""The haptic-anfis command: train, evaluate, errors."""
+import json
+
+import pytest
+
+from haptic_anfis.cli import main
+from haptic_anfis.dataset import save_dataset
+
+
+@pytest.fixture
+def dataset_csv(synthetic, tmp_path):
+    return str(save_dataset(synthetic, tmp_path / 'forces.csv'))
+
+
+def test_train_then_evaluate(dataset_csv, tmp_path, capsys):
+    out = tmp_path / 'model.json'
+    rc = main(['train', dataset_csv, '--out', str(out), '--structure', '2-2-2-2', '--epochs', '5'])
+    assert rc == 0
+    text = capsys.readouterr().out
+    assert 'Fx' in text and 'test N' in text and 'wrote' in text
+    doc = json.loads(out.read_text())
+    assert [o['structure'] for o in doc['outputs']] == [[2, 2, 2, 2]] * 3
+    assert main(['evaluate', str(out), dataset_csv]) == 0
+    text = capsys.readouterr().out
+    assert 'RMSE N' in text and 'the dataset the model was trained on' in text
+
+
+def test_train_prints_every_candidate_of_the_search(dataset_csv, tmp_path, capsys):
+    cfg = tmp_path / 'cfg.yaml'
+    cfg.write_text('force_model:\n  search_epochs: 3\n  epochs: 5\n  max_mfs: [3, 2, 2, 2]\n')
+    assert main(['train', dataset_csv, '--out', str(tmp_path / 'm.json'), '--config', str(cfg)]) == 0
+    text = capsys.readouterr().out
+    assert text.count('structure search (2 candidates)') == 3
+    assert '<- chosen' in text
+
+
+def test_config_with_unknown_key_is_rejected(dataset_csv, tmp_path, capsys):
+    cfg = tmp_path / 'cfg.yaml'
+    cfg.write_text('force_model:\n  epochz: 3\n')
+    assert main(['train', dataset_csv, '--out', str(tmp_path / 'm.json'), '--config', str(cfg)]) == 1
+    assert "unknown force_model key(s) ['epochz']" in capsys.readouterr().err
+
+
+def test_shipped_config_is_valid():
+    from pathlib import Path
+
+    from haptic_anfis.commands.train import load_config
+    params = load_config(str(Path(__file__).resolve().parents[1] / 'config' / 'force_model.yaml'))
+    assert params['extrapolation'] == (0.0, 0.0, 0.0, 0.25)
+
+
+def test_bad_inputs_give_one_line_errors(tmp_path, capsys):
+    assert main(['train', str(tmp_path / 'missing.csv'), '--out', str(tmp_path / 'm.json')]) == 1
+    assert 'does not exist' in capsys.readouterr().err
+    bad = tmp_path / 'bad.json'
+    bad.write_text('{}')
+    assert main(['evaluate', str(bad), str(tmp_path / 'x.csv')]) == 1
+    assert 'not a haptic_anfis force-model file' in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        main(['train', 'x.csv', '--out', 'm.json', '--structure', '3-3'])
+
+
+def test_no_command_prints_help(capsys):
+    assert main([]) == 2
+    assert 'train' in capsys.readouterr().out
