@@ -4,4 +4,12 @@ The core sub-packages (:mod:`haptic_anfis.anfis`, :mod:`haptic_anfis.dataset`, a
 ``contact``, ``tissue``, ``device``) are plain Python and import nothing from ROS. SI units inside:
 metres, newtons, seconds.
 """
+import os as _os
+
+# One BLAS/OpenMP thread unless the user says otherwise. Measured here: on a loaded 2-core machine
+# OpenBLAS's thread pool made a 470x120 SVD take 1.3 s instead of 7 ms, and a real-time loop must
+# not compete with spinning BLAS threads. Takes effect only if numpy is not imported yet.
+for _var in ('OPENBLAS_NUM_THREADS', 'OMP_NUM_THREADS', 'MKL_NUM_THREADS'):
+    _os.environ.setdefault(_var, '1')
+
 __version__ = '0.1.0'

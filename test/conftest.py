@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import os
 
+import haptic_anfis  # noqa: F401  (first: it pins BLAS to one thread before numpy loads)
 import numpy as np
 import pytest
 from hypothesis import settings
