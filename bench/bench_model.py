@@ -1,0 +1,10 @@
+"""Speed against error of the ANFIS force model on the shipped dataset (see haptic_anfis.model_bench).
+
+Run: ``make bench`` or ``.venv/bin/python bench/bench_model.py [--structures 3-3-3-2 ...]``.
+"""
+import sys
+
+from haptic_anfis.cli import main
+
+if __name__ == '__main__':
+    sys.exit(main(['bench', 'model', *sys.argv[1:]]))
