@@ -26,6 +26,13 @@ class LoopStats:
         self._lat: list[float] = []
         self._lock = threading.Lock()
 
+    def reset(self) -> None:
+        """Start a new measurement window (counters and latencies cleared)."""
+        self.ticks = self.deadline_misses = 0
+        self.t_first = self.t_last = None
+        self.max_force = 0.0
+        self._lat = []
+
     def tick(self, now: float) -> None:
         if self.t_first is None:
             self.t_first = now
