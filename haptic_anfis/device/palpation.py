@@ -105,7 +105,12 @@ class PalpationScript:
         b = _Builder(radii, _pos(doc, 'approach_height', 0.010, zero_ok=True),
                      _pos(doc, 'travel_speed', 0.10), _pos(doc, 'press_speed', 0.02))
         moves = doc['pattern']
-        first = _first_point(moves)
+        try:
+            first = _first_point(moves)
+            if len(first) != 2:
+                raise ValueError
+        except (TypeError, ValueError, IndexError):
+            first = (0.0, 0.0)  # malformed: the move itself reports the precise error below
         b.start(first, _pos(doc, 'start_delay', 0.5, zero_ok=True))
         for k, move in enumerate(moves):
             if not isinstance(move, dict) or len(move) != 1:
