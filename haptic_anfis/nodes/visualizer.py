@@ -14,7 +14,7 @@ from sensor_msgs.msg import JointState
 from visualization_msgs.msg import Marker, MarkerArray
 
 from . import interfaces as ifc
-from ._common import LOOP_QOS, Param, declare_parameters, non_negative, positive, run_node
+from ._common import LOOP_QOS, Param, declare_parameters, positive, run_node
 from .contact_detector import MESH_PARAMS, load_surface
 
 LATCHED = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
@@ -33,7 +33,8 @@ PARAMS = MESH_PARAMS + [
     Param('show_tumours', False, 'draw the tumours'),
     Param('tumours', [0.030, 0.015, -0.010, 0.005], 'tumours, flat x, y, z, radius [m] per '
           'tumour (tissue frame; default: the synthetic dataset\'s tumour)', _tumour_check),
-    Param('mesh_alpha', 0.5, 'tissue mesh opacity (0..1)', non_negative),
+    Param('mesh_alpha', 0.5, 'tissue mesh opacity (0..1)',
+          lambda v: None if 0 <= v <= 1 else 'expected 0 <= value <= 1'),
 ]
 
 
