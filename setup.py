@@ -11,7 +11,13 @@ from setuptools import find_packages, setup
 PACKAGE = 'haptic_anfis'
 
 # ROS 2 nodes: executable name -> module:function. Each is also ``ros2 run haptic_anfis <name>``.
-NODES: dict[str, str] = {}
+NODES: dict[str, str] = {
+    'falcon_driver': 'haptic_anfis.nodes.falcon_driver:main',
+    'contact_detector': 'haptic_anfis.nodes.contact_detector:main',
+    'force_server': 'haptic_anfis.nodes.force_server:main',
+    'trainer': 'haptic_anfis.nodes.trainer:main',
+    'visualizer': 'haptic_anfis.nodes.visualizer:main',
+}
 
 setup(
     name=PACKAGE,

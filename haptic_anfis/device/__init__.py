@@ -1,0 +1,17 @@
+"""The haptic device side, pure Python (no ROS): safety layer, device interface, simulated Falcon
+with a scripted virtual hand, servo-loop timing statistics.
+
+- :class:`SafetyLayer`: clamp, force-rate limit, watchdog, command validation.
+- :class:`SimulatedFalcon`: 10 cm workspace, 10 N, handle pulled by a mass-spring-damper hand.
+- :class:`PalpationScript`: the hand's scripted pattern (press, strips, circles) from YAML.
+- :class:`WorkspaceMapping`: device frame <-> tissue frame (scale, offset, force scale).
+- :class:`LoopStats`: rate, latency percentiles, deadline misses.
+"""
+from .falcon import Device, DeviceState, HandParams, SimulatedFalcon, WorkspaceMapping
+from .palpation import PalpationScript, dome_height
+from .safety import SafetyLayer, SafetyStats
+from .servo import ServoLoop
+from .stats import LoopStats
+
+__all__ = ['Device', 'DeviceState', 'HandParams', 'LoopStats', 'PalpationScript', 'SafetyLayer',
+           'SafetyStats', 'ServoLoop', 'SimulatedFalcon', 'WorkspaceMapping', 'dome_height']

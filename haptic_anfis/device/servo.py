@@ -1,0 +1,92 @@
+"""The servo loop: its own thread, fixed period, absolute deadlines (no ROS).
+
+Each tick: read the device, hand the reading to ``on_state`` (the driver publishes it), ask the
+safety layer for the force and write it to the device. Sleeping to absolute deadlines absorbs
+``time.sleep`` overshoot; a tick that starts more than a period late counts as a deadline miss and
+the schedule re-synchronises (no burst of catch-up ticks). On exit the safety layer is stopped and
+the device gets zero force.
+"""
+from __future__ import annotations
+
+import threading
+import time
+from typing import Callable
+
+from .falcon import Device, DeviceState
+from .safety import SafetyLayer
+from .stats import LoopStats
+
+
+class ServoLoop:
+    """Run ``device`` at ``rate`` Hz on a daemon thread through ``safety``.
+
+    ``on_state(state, force, now)`` runs on the servo thread after each read; ``force`` is the
+    force applied in the previous tick (device frame). Exceptions in it are counted and the loop
+    keeps running (``errors``; the last one in ``last_error``).
+    """
+
+    def __init__(self, device: Device, safety: SafetyLayer, rate: float = 1000.0,
+                 on_state: Callable[[DeviceState, tuple, float], None] | None = None,
+                 clock: Callable[[], float] = time.monotonic):
+        if not rate > 0:
+            raise ValueError(f'rate: expected > 0 Hz, got {rate!r}')
+        self.device, self.safety, self.on_state, self.clock = device, safety, on_state, clock
+        self.period = 1.0 / rate
+        self.stats = LoopStats(period=self.period)
+        self.errors = 0
+        self.last_error: BaseException | None = None
+        self.force = (0.0, 0.0, 0.0)
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+
+    def start(self) -> None:
+        now = self.clock()
+        self.device.open(now)
+        self.safety.start(now)
+        self._thread = threading.Thread(target=self._run, name='servo', daemon=True)
+        self._thread.start()
+
+    def stop(self, timeout: float = 2.0) -> None:
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout)
+        self.safety.stop()
+        self.device.write((0.0, 0.0, 0.0))
+        self.device.close()
+
+    @property
+    def running(self) -> bool:
+        return self._thread is not None and self._thread.is_alive()
+
+    def tick(self, now: float) -> None:
+        """One servo cycle at time ``now`` (also usable without the thread, e.g. in tests)."""
+        state = self.device.read(now)
+        if self.on_state is not None:
+            try:
+                self.on_state(state, self.force, now)
+            except Exception as exc:  # a publishing hiccup must not stop the servo
+                self.errors += 1
+                self.last_error = exc
+        f = self.safety.output(now)
+        self.device.write(f)
+        self.force = f
+        n = (f[0] * f[0] + f[1] * f[1] + f[2] * f[2]) ** 0.5
+        if n > self.stats.max_force:
+            self.stats.max_force = n
+        self.stats.tick(now)
+
+    def _run(self) -> None:
+        period, clock, stop = self.period, self.clock, self._stop
+        deadline = clock()
+        while not stop.is_set():
+            now = clock()
+            if now - deadline > period:
+                self.stats.deadline_misses += 1
+                deadline = now  # re-synchronise
+            self.tick(now)
+            deadline += period
+            delay = deadline - clock()
+            if delay > 0:
+                time.sleep(delay)
+        self.safety.stop()
+        self.device.write((0.0, 0.0, 0.0))

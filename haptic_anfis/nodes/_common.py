@@ -1,0 +1,152 @@
+"""What every node shares: typed, documented, validated parameters; stamps; the spin loop."""
+from __future__ import annotations
+
+import math
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Callable
+
+import rclpy
+from builtin_interfaces.msg import Time
+from rcl_interfaces.msg import ParameterDescriptor
+from rclpy.exceptions import ParameterException
+from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+
+#: QoS of the 1 kHz loop topics: reliable, keep only the newest sample (a late one is useless).
+LOOP_QOS = QoSProfile(depth=1, history=HistoryPolicy.KEEP_LAST,
+                      reliability=ReliabilityPolicy.RELIABLE)
+
+_TYPE_NAMES = {bool: 'a bool (true/false)', int: 'an integer', float: 'a double (write 500.0, not 500)',
+               str: 'a string'}
+
+
+class ParameterError(ValueError):
+    """One or more parameters have values the node cannot run with."""
+
+
+@dataclass(frozen=True)
+class Param:
+    """A parameter: name, default (its type is the parameter's type), description, and a check
+    returning an error message (or None) for a value."""
+    name: str
+    default: Any
+    description: str
+    check: Callable[[Any], str | None] | None = None
+
+
+def positive(v) -> str | None:
+    return None if math.isfinite(v) and v > 0 else 'expected a finite value > 0'
+
+
+def non_negative(v) -> str | None:
+    return None if math.isfinite(v) and v >= 0 else 'expected a finite value >= 0'
+
+
+def one_of(*choices) -> Callable[[Any], str | None]:
+    return lambda v: None if v in choices else f'expected one of {", ".join(map(repr, choices))}'
+
+
+def finite_vector(n: int, positive: bool = False, nonzero: bool = False):
+    """Check: ``n`` finite numbers; all > 0 if ``positive``; not all zero if ``nonzero``."""
+    def check(v):
+        if len(v) != n or not all(isinstance(c, (int, float)) and math.isfinite(c) for c in v):
+            return f'expected {n} finite numbers'
+        if positive and any(c <= 0 for c in v):
+            return 'expected values > 0'
+        if nonzero and all(c == 0 for c in v):
+            return 'expected a non-zero vector'
+        return None
+    return check
+
+
+def declare_parameters(node, params: list[Param]) -> dict[str, Any]:
+    """Declare ``params`` read-only with their descriptions; return {name: value}.
+
+    Raises:
+        ParameterError: naming every parameter with a wrong type or a value its check rejects.
+    """
+    values: dict[str, Any] = {}
+    errors: list[str] = []
+    for p in params:
+        desc = ParameterDescriptor(description=p.description, read_only=True)
+        try:
+            node.declare_parameter(p.name, p.default, desc)
+        except ParameterException as exc:
+            kind = type(p.default[0] if isinstance(p.default, list) else p.default)
+            what = _TYPE_NAMES.get(kind, kind.__name__)
+            if isinstance(p.default, list):
+                what = f'a list of {what.split(" ", 1)[1]}'
+            errors.append(f'parameter {p.name!r}: expected {what}: {exc}')
+            continue
+        v = node.get_parameter(p.name).value
+        if isinstance(v, (list, tuple)) or type(v).__name__ == 'array':
+            v = list(v)
+        msg = p.check(v) if p.check is not None else None
+        if msg:
+            errors.append(f'parameter {p.name!r} = {v!r}: {msg}')
+        values[p.name] = v
+    if errors:
+        raise ParameterError(f'{node.get_name()}: bad parameters: ' + '; '.join(errors))
+    return values
+
+
+def stamp_ns(stamp) -> int:
+    return stamp.sec * 1_000_000_000 + stamp.nanosec
+
+
+def set_stamp(stamp: Time, ns: int) -> None:
+    stamp.sec, stamp.nanosec = divmod(ns, 1_000_000_000)
+
+
+def config_file(name: str) -> Path:
+    """A file shipped in ``config/``: the installed share directory, else the source tree."""
+    try:
+        from ament_index_python.packages import get_package_share_directory
+        p = Path(get_package_share_directory('haptic_anfis')) / 'config' / name
+        if p.is_file():
+            return p
+    except Exception:  # not installed as an ament package (e.g. an editable venv install)
+        pass
+    return Path(__file__).resolve().parents[2] / 'config' / name
+
+
+def make_executor():
+    """The executor measured fastest here: rclpy's EventsExecutor (drive it with spin_once)."""
+    from rclpy.experimental import EventsExecutor
+    return EventsExecutor()
+
+
+def run_node(factory: Callable[[], Any], args=None) -> int:
+    """Init rclpy, build the node, spin it until shut down or ``node.finished``; 1 on bad params.
+
+    Uses EventsExecutor with a ``spin_once(timeout_sec=...)`` loop (its ``spin()`` runs no
+    callbacks with the rclpy wheels here, see DESIGN.md). Calls ``node.close()`` (if defined)
+    before destroying the node.
+    """
+    from rclpy.executors import ExternalShutdownException
+    rclpy.init(args=args)
+    node = None
+    code = 0
+    try:
+        try:
+            node = factory()
+        except (ParameterError, ValueError, OSError) as exc:
+            print(f'error: {exc}', file=sys.stderr, flush=True)
+            return 1
+        executor = make_executor()
+        executor.add_node(node)
+        try:
+            while rclpy.ok() and not getattr(node, 'finished', False):
+                executor.spin_once(timeout_sec=0.05)
+        except (KeyboardInterrupt, ExternalShutdownException):
+            pass
+        code = int(getattr(node, 'exit_code', 0) or 0)
+        executor.shutdown(timeout_sec=1.0)
+    finally:
+        if node is not None:
+            if hasattr(node, 'close'):
+                node.close()
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return code

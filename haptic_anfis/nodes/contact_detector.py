@@ -1,0 +1,117 @@
+"""``contact_detector``: probe pose in, contact out (:mod:`haptic_anfis.contact`).
+
+Subscribes to ``falcon/measured_cp`` (``geometry_msgs/PoseStamped``, tissue frame); for each pose
+advances a :class:`~haptic_anfis.contact.ContactTracker` on the tissue surface (loaded once at
+start) and publishes ``contact`` (``sensor_msgs/JointState``, layout in
+:mod:`haptic_anfis.nodes.interfaces`) stamped with the pose's stamp. A NaN/Inf pose or one in
+another frame is logged (throttled) and answered with "no contact"; the tracker is reset so the
+next good pose cannot start a contact from inside the tissue.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from geometry_msgs.msg import PoseStamped
+from rclpy.node import Node
+from sensor_msgs.msg import JointState
+
+from ..contact import ContactDetector, ContactTracker, ellipsoid_dome
+from . import interfaces as ifc
+from ._common import (LOOP_QOS, Param, declare_parameters, finite_vector, non_negative, one_of,
+                      positive, run_node)
+
+MESH_PARAMS = [
+    Param('mesh_path', '', "tissue surface mesh file (STL, OBJ, PLY...; '' = the built-in "
+          'semi-ellipsoid dome)'),
+    Param('mesh_unit', 'mm', "length unit of mesh_path: 'mm' or 'm'", one_of('mm', 'm')),
+    Param('dome_radii', [0.045, 0.070, 0.070], 'radii (x, y, z) [m] of the built-in dome',
+          finite_vector(3, positive=True)),
+    Param('frame_id', 'tissue', 'the tissue frame: poses in other frames are rejected; frame of '
+          'the published messages'),
+]
+
+PARAMS = MESH_PARAMS + [
+    Param('direction', [-1.0, 0.0, 0.0], 'indentation direction into the tissue (normalised; '
+          '[0.0, 0.0, 0.0] = along the surface normal at entry)', finite_vector(3)),
+    Param('max_step', 0.01, 'largest probe motion between two poses the tracker follows [m]',
+          positive),
+    Param('max_depth', 0.0, 'cap on the reported depth [m] (0 = only the tissue thickness caps it)',
+          non_negative),
+]
+
+
+def load_surface(node, p: dict):
+    """The tissue mesh named by the mesh parameters (metres, tissue frame)."""
+    if p['mesh_path']:
+        from ..contact import load_mesh
+        return load_mesh(p['mesh_path'], unit=p['mesh_unit'])
+    return ellipsoid_dome(tuple(p['dome_radii']))
+
+
+class ContactDetectorNode(Node):
+    def __init__(self, name: str = 'contact_detector', **kw):
+        super().__init__(name, **kw)
+        p = self.params = declare_parameters(self, PARAMS)
+        self.frame_id = p['frame_id']
+        mesh = load_surface(self, p)
+        d = p['direction']
+        self.detector = ContactDetector(mesh, direction=None if not any(d) else d)
+        self.tracker = ContactTracker(self.detector, max_step=p['max_step'],
+                                      max_depth=p['max_depth'] or None)
+        self.pub = self.create_publisher(JointState, ifc.TOPIC_CONTACT, LOOP_QOS)
+        self.sub = self.create_subscription(PoseStamped, ifc.TOPIC_POSE, self._on_pose, LOOP_QOS)
+        self._msg = JointState()
+        self._msg.name = list(ifc.CONTACT_FIELDS)
+        self._msg.header.frame_id = self.frame_id
+        self.n_poses = self.n_contact = self.n_bad = 0
+        self.max_depth_seen = 0.0
+        self.last = None
+        self.get_logger().info(
+            f"tissue mesh {p['mesh_path'] or 'built-in dome ' + str(p['dome_radii'])}: "
+            f'{self.detector.n_faces} faces; direction {d}')
+
+    def _on_pose(self, msg: PoseStamped) -> None:
+        self.n_poses += 1
+        q = msg.pose.position
+        out = self._msg
+        out.header.stamp = msg.header.stamp
+        if msg.header.frame_id != self.frame_id:
+            self._bad(f'pose in frame {msg.header.frame_id!r}, expected {self.frame_id!r}')
+            out.position = [0.0] * len(ifc.CONTACT_FIELDS)
+        else:
+            try:
+                c = self.tracker.update((q.x, q.y, q.z))
+            except ValueError as exc:  # NaN/Inf pose: tracker reset, no contact
+                self._bad(str(exc))
+                out.position = [0.0] * len(ifc.CONTACT_FIELDS)
+            else:
+                cp, dv = c.contact_point, c.direction
+                out.position = [float(cp[0]), float(cp[1]), float(cp[2]), float(c.depth),
+                                float(dv[0]), float(dv[1]), float(dv[2]),
+                                1.0 if c.in_contact else 0.0, 1.0 if c.saturated else 0.0]
+                if c.in_contact:
+                    self.n_contact += 1
+                    if c.depth > self.max_depth_seen:
+                        self.max_depth_seen = c.depth
+                self.last = c
+        self.pub.publish(out)
+
+    def _bad(self, why: str) -> None:
+        self.n_bad += 1
+        self.tracker.reset()
+        self.get_logger().warning(f'bad pose ({why}): publishing no contact',
+                                  throttle_duration_sec=1.0)
+
+    def summary(self) -> dict:
+        return {'poses': self.n_poses, 'in_contact': self.n_contact,
+                'contact_fraction': self.n_contact / self.n_poses if self.n_poses else 0.0,
+                'max_depth_mm': self.max_depth_seen * 1e3, 'bad_poses': self.n_bad}
+
+
+def main(args=None) -> None:
+    raise SystemExit(run_node(ContactDetectorNode, args))
+
+
+if __name__ == '__main__':
+    main()

@@ -1,0 +1,173 @@
+"""``falcon_driver``: owns the haptic device; a 1 kHz servo loop on its own thread.
+
+Publishes the tip pose (``falcon/measured_cp``), velocity (``falcon/measured_cv``), the force it
+applies (``falcon/measured_cf``, every ``measured_cf_every`` ticks) and the buttons
+(``falcon/buttons``, on change and every 100 ticks), all in the tissue frame; subscribes to the
+force command ``falcon/servo_cf`` (``geometry_msgs/WrenchStamped``, tissue frame) and applies the
+newest one through the safety layer (:class:`haptic_anfis.device.SafetyLayer`: clamp, rate limit,
+watchdog, NaN/wrong-frame rejection). The servo thread is not a ROS timer: it keeps its period
+whatever the executor is doing. Pose -> command latency (pose stamp to command arrival) and
+deadline misses are collected in :attr:`FalconDriver.servo` ``.stats``.
+"""
+from __future__ import annotations
+
+import json
+import math
+import time
+
+from geometry_msgs.msg import PoseStamped, TwistStamped, WrenchStamped
+from rclpy.node import Node
+from sensor_msgs.msg import Joy
+
+from ..device import (HandParams, PalpationScript, SafetyLayer, ServoLoop, SimulatedFalcon,
+                      WorkspaceMapping)
+from ..device.safety import OK
+from . import interfaces as ifc
+from ._common import (LOOP_QOS, Param, config_file, declare_parameters, finite_vector,
+                      non_negative, one_of, positive, run_node, set_stamp, stamp_ns)
+
+PARAMS = [
+    Param('backend', 'sim', "device backend: 'sim' (simulated Falcon with a scripted virtual hand; "
+          'the only one available here)', one_of('sim')),
+    Param('rate', 1000.0, 'servo loop rate [Hz]', positive),
+    Param('frame_id', 'tissue', 'frame of the published pose/velocity/force and of accepted '
+          'force commands (others are rejected)'),
+    Param('max_force', 10.0, 'device force limit [N]; commands are clamped to it', positive),
+    Param('max_force_rate', 1000.0, 'largest change of the applied force [N/s]', positive),
+    Param('watchdog_timeout', 0.010, 'no force command for this long [s] ramps the force to zero '
+          '(at max_force_rate)', positive),
+    Param('workspace_scale', 1.5, 'tissue position = workspace_offset + workspace_scale * device '
+          'position', positive),
+    Param('workspace_offset', [0.03, 0.0, 0.0], 'tissue-frame position of the device origin [m]',
+          finite_vector(3)),
+    Param('force_scale', 1.0, 'device force = force_scale * commanded (tissue) force', positive),
+    Param('palpation_script', '', "sim: YAML palpation pattern ('' = config/palpation.yaml)"),
+    Param('hand_mass', 0.2, 'sim: hand + handle mass [kg]', positive),
+    Param('hand_stiffness', 1000.0, 'sim: hand spring to the scripted target [N/m], device frame',
+          positive),
+    Param('hand_damping', 30.0, 'sim: hand damper [N s/m]', positive),
+    Param('measured_cf_every', 10, 'publish the applied force every N servo ticks (>= 1)',
+          lambda v: None if v >= 1 else 'expected an integer >= 1'),
+    Param('run_duration', 0.0, 'stop this long [s] after the first force command arrives, print '
+          'the loop statistics as one JSON line on stdout and exit (0 = run until shut down)',
+          non_negative),
+]
+
+
+class FalconDriver(Node):
+    def __init__(self, name: str = 'falcon_driver', **kw):
+        super().__init__(name, **kw)
+        p = self.params = declare_parameters(self, PARAMS)
+        self.frame_id = p['frame_id']
+        self.mapping = WorkspaceMapping(p['workspace_scale'], tuple(p['workspace_offset']),
+                                        p['force_scale'])
+        script_path = p['palpation_script'] or str(config_file('palpation.yaml'))
+        script = PalpationScript.from_yaml(script_path)  # ValueError naming the file -> exit 1
+        self.device = SimulatedFalcon(script, self.mapping,
+                                      HandParams(p['hand_mass'], p['hand_stiffness'],
+                                                 p['hand_damping']),
+                                      max_force=p['max_force'])
+        self.safety = SafetyLayer(p['max_force'], p['max_force_rate'], p['watchdog_timeout'],
+                                  frame_id=self.frame_id)
+        self.pub_pose = self.create_publisher(PoseStamped, ifc.TOPIC_POSE, LOOP_QOS)
+        self.pub_twist = self.create_publisher(TwistStamped, ifc.TOPIC_TWIST, LOOP_QOS)
+        self.pub_applied = self.create_publisher(WrenchStamped, ifc.TOPIC_APPLIED, LOOP_QOS)
+        self.pub_buttons = self.create_publisher(Joy, ifc.TOPIC_BUTTONS, 10)
+        self.sub_cmd = self.create_subscription(WrenchStamped, ifc.TOPIC_COMMAND, self._on_command,
+                                                LOOP_QOS)
+        self._pose, self._twist, self._applied = PoseStamped(), TwistStamped(), WrenchStamped()
+        for m in (self._pose, self._twist, self._applied):
+            m.header.frame_id = self.frame_id
+        self._pose.pose.orientation.w = 1.0
+        self._buttons = None
+        self._cf_every = p['measured_cf_every']
+        self._tick = 0
+        self.run_duration = p['run_duration']
+        self.first_command: float | None = None
+        self.finished = False
+        self.exit_code = 0
+        self.servo = ServoLoop(self.device, self.safety, p['rate'], on_state=self._publish_state)
+        self.servo.start()
+        self.get_logger().info(
+            f"backend {p['backend']}, {p['rate']:.0f} Hz servo thread, max force "
+            f"{p['max_force']} N, watchdog {p['watchdog_timeout'] * 1e3:.1f} ms, script "
+            f'{script_path} ({script.duration:.1f} s)')
+
+    # -- servo thread ---------------------------------------------------------------------------
+    def _publish_state(self, state, force, now) -> None:
+        ns = time.time_ns()
+        m = self.mapping
+        x, y, z = m.to_tissue(state.position)
+        pose = self._pose
+        set_stamp(pose.header.stamp, ns)
+        pos = pose.pose.position
+        pos.x, pos.y, pos.z = x, y, z
+        self.pub_pose.publish(pose)
+        tw = self._twist
+        tw.header.stamp = pose.header.stamp
+        vx, vy, vz = m.velocity_to_tissue(state.velocity)
+        lin = tw.twist.linear
+        lin.x, lin.y, lin.z = vx, vy, vz
+        self.pub_twist.publish(tw)
+        self._tick += 1
+        if self._tick % self._cf_every == 0:
+            ap = self._applied
+            ap.header.stamp = pose.header.stamp
+            k = 1.0 / m.force_scale
+            f = ap.wrench.force
+            f.x, f.y, f.z = force[0] * k, force[1] * k, force[2] * k
+            self.pub_applied.publish(ap)
+        if state.buttons != self._buttons or self._tick % 100 == 0:
+            self._buttons = state.buttons
+            joy = Joy()
+            joy.header.stamp = pose.header.stamp
+            joy.header.frame_id = self.frame_id
+            joy.buttons = list(state.buttons)
+            self.pub_buttons.publish(joy)
+        if self.first_command is not None and self.run_duration > 0 \
+                and now - self.first_command >= self.run_duration:
+            self.finished = True
+
+    # -- executor thread ------------------------------------------------------------------------
+    def _on_command(self, msg: WrenchStamped) -> None:
+        now = time.monotonic()
+        f = msg.wrench.force
+        fd = self.mapping.force_to_device((f.x, f.y, f.z))
+        why = self.safety.command(fd, now, msg.header.frame_id)
+        if why != OK:
+            self.get_logger().warning(f'force command {why}: ({f.x}, {f.y}, {f.z}) in frame '
+                                      f'{msg.header.frame_id!r}; applying zero force',
+                                      throttle_duration_sec=1.0)
+            return
+        if self.first_command is None:
+            self.first_command = now
+            if self.run_duration > 0:  # measure from the first command on
+                self.servo.stats.reset()
+        self.servo.stats.latency((time.time_ns() - stamp_ns(msg.header.stamp)) * 1e-9)
+
+    def summary(self) -> dict:
+        s = self.servo.stats.summary()
+        ss = self.safety.stats
+        s.update(commands=ss.commands, rejected_nonfinite=ss.rejected_nonfinite,
+                 rejected_frame=ss.rejected_frame, watchdog_trips=ss.watchdog_trips,
+                 clamped=ss.clamped, servo_errors=self.servo.errors)
+        return s
+
+    def close(self) -> None:
+        """Stop the servo thread; the device is left at zero force."""
+        if self.servo.running or self.safety.enabled:
+            self.servo.stop()
+        if self.run_duration > 0:
+            print(json.dumps({'falcon_driver_stats': _jsonable(self.summary())}), flush=True)
+
+
+def _jsonable(d: dict) -> dict:
+    return {k: (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in d.items()}
+
+
+def main(args=None) -> None:
+    raise SystemExit(run_node(FalconDriver, args))
+
+
+if __name__ == '__main__':
+    main()

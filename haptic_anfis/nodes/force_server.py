@@ -1,0 +1,115 @@
+"""``force_server``: contact in, force command out (:class:`haptic_anfis.anfis.ForceModel`).
+
+Subscribes to ``contact`` (``sensor_msgs/JointState``, see :mod:`haptic_anfis.nodes.interfaces`),
+evaluates the Fx, Fy, Fz ANFIS models on the compiled path (compiled and warmed when the model is
+loaded, before the first message) and publishes ``falcon/servo_cf`` (``geometry_msgs/
+WrenchStamped``, tissue frame) with the contact's stamp: zero when not in contact (or on a malformed
+contact / NaN input). The service ``~/reload`` (``std_srvs/Trigger``) re-reads ``model_path``: the
+new model replaces the old in one reference swap between two messages (a load takes ~1-2 ms); a
+bad file keeps the old model and the response says why.
+"""
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+from geometry_msgs.msg import WrenchStamped
+from rclpy.node import Node
+from sensor_msgs.msg import JointState
+from std_srvs.srv import Trigger
+
+from ..anfis import ForceModel
+from ..dataset import DATA_DIR
+from . import interfaces as ifc
+from ._common import LOOP_QOS, Param, declare_parameters, run_node
+
+DEFAULT_MODEL = DATA_DIR / 'default_model.json'
+
+PARAMS = [
+    Param('model_path', '', "ANFIS model file (JSON) ('' = the shipped default model); re-read "
+          'by ~/reload'),
+    Param('frame_id', 'tissue', 'frame of the published force (the tissue frame)'),
+]
+
+
+class ForceServer(Node):
+    def __init__(self, name: str = 'force_server', **kw):
+        super().__init__(name, **kw)
+        p = self.params = declare_parameters(self, PARAMS)
+        self.model_path = Path(p['model_path']) if p['model_path'] else DEFAULT_MODEL
+        self.model = ForceModel.load(self.model_path)  # ModelFileError (a ValueError) -> exit 1
+        self.model.predict_one(0.03, 0.0, 0.0, 0.005)  # warm (load already compiled it)
+        self.pub = self.create_publisher(WrenchStamped, ifc.TOPIC_COMMAND, LOOP_QOS)
+        self.sub = self.create_subscription(JointState, ifc.TOPIC_CONTACT, self._on_contact,
+                                            LOOP_QOS)
+        self.srv = self.create_service(Trigger, '~/reload', self._on_reload)
+        self._msg = WrenchStamped()
+        self._msg.header.frame_id = p['frame_id']
+        self.n_contacts = self.n_forces = self.n_bad = self.reloads = 0
+        self.max_force = 0.0
+        self.get_logger().info(f'model {self.model_path} ({self._describe()})')
+
+    def _describe(self) -> str:
+        st = '/'.join('-'.join(map(str, s)) for s in self.model.structures_)
+        return f'structures {st}'
+
+    def _on_contact(self, msg: JointState) -> None:
+        self.n_contacts += 1
+        out = self._msg
+        out.header.stamp = msg.header.stamp
+        f = out.wrench.force
+        v = msg.position
+        fx = fy = fz = 0.0
+        if len(v) != len(ifc.CONTACT_FIELDS):
+            self._bad(f'contact message with {len(v)} values, expected '
+                      f'{len(ifc.CONTACT_FIELDS)} ({", ".join(ifc.CONTACT_FIELDS)})')
+        elif v[ifc.I_IN_CONTACT] > 0.5 and v[ifc.I_DEPTH] > 0.0:
+            try:
+                fx, fy, fz = self.model.predict_one(v[0], v[1], v[2], v[ifc.I_DEPTH])
+            except ValueError as exc:  # NaN/Inf in the contact: zero force
+                self._bad(str(exc))
+                fx = fy = fz = 0.0
+            else:
+                self.n_forces += 1
+                n = (fx * fx + fy * fy + fz * fz) ** 0.5
+                if n > self.max_force:
+                    self.max_force = n
+        f.x, f.y, f.z = fx, fy, fz
+        self.pub.publish(out)
+
+    def _bad(self, why: str) -> None:
+        self.n_bad += 1
+        self.get_logger().warning(f'bad contact ({why}): zero force', throttle_duration_sec=1.0)
+
+    def reload(self) -> tuple[bool, str]:
+        """Load ``model_path`` again; keep the current model if that fails."""
+        t0 = time.perf_counter()
+        try:
+            model = ForceModel.load(self.model_path)
+            model.predict_one(0.03, 0.0, 0.0, 0.005)
+        except Exception as exc:  # any failure keeps the old model
+            msg = f'kept the previous model: cannot load {self.model_path}: {exc}'
+            self.get_logger().error(msg)
+            return False, msg
+        self.model = model  # one reference swap: the next contact uses the new model
+        self.reloads += 1
+        msg = (f'loaded {self.model_path} ({self._describe()}) in '
+               f'{(time.perf_counter() - t0) * 1e3:.1f} ms')
+        self.get_logger().info(msg)
+        return True, msg
+
+    def _on_reload(self, request, response):
+        response.success, response.message = self.reload()
+        return response
+
+    def summary(self) -> dict:
+        return {'contacts': self.n_contacts, 'forces': self.n_forces, 'bad': self.n_bad,
+                'max_model_force_N': self.max_force}
+
+
+def main(args=None) -> None:
+    raise SystemExit(run_node(ForceServer, args))
+
+
+if __name__ == '__main__':
+    main()

@@ -1,0 +1,102 @@
+"""The whole haptic graph in ONE process: falcon_driver, contact_detector, force_server and
+(optionally) visualizer on one EventsExecutor, driven by ``spin_once(timeout_sec=...)``.
+
+Used by ``haptic-anfis sim``, the in-process tests and ``bench/bench_loop.py``. The servo loop runs
+on the driver's own thread; the executor thread carries pose -> contact -> force -> driver.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import rclpy
+
+
+@dataclass
+class Graph:
+    context: object
+    executor: object
+    driver: object
+    contact: object
+    force: object
+    visualizer: object | None = None
+    extra: list = field(default_factory=list)
+
+    @property
+    def nodes(self):
+        return [n for n in (self.driver, self.contact, self.force, self.visualizer, *self.extra)
+                if n is not None]
+
+    def spin_for(self, seconds: float, until=None) -> bool:
+        """Spin for ``seconds`` or until ``until()`` is true (checked between callbacks)."""
+        end = time.monotonic() + seconds
+        while time.monotonic() < end:
+            self.executor.spin_once(timeout_sec=0.01)
+            if until is not None and until():
+                return True
+        return False
+
+    def summary(self) -> dict:
+        s = {'loop': self.driver.summary(), 'contact': self.contact.summary(),
+             'force': self.force.summary()}
+        if self.visualizer is not None:
+            s['visualizer'] = {'marker_arrays': self.visualizer.n_published}
+        return s
+
+    def shutdown(self) -> None:
+        """Stop the servo thread first (device to zero force), then the nodes and the context."""
+        self.driver.close()
+        self.executor.shutdown(timeout_sec=1.0)
+        for n in self.nodes:
+            n.destroy_node()
+        rclpy.try_shutdown(context=self.context)
+
+
+def build_graph(args: list[str] | None = None, visualizer: bool = True,
+                overrides: dict[str, list] | None = None) -> Graph:
+    """Init a fresh rclpy context with ``args`` (e.g. ``['--ros-args', '--params-file', f]``) and
+    build the nodes. ``overrides``: {node name: [rclpy.parameter.Parameter, ...]}.
+
+    Raises:
+        ParameterError / ValueError: a node rejected its parameters (nothing is left running).
+    """
+    from rclpy.context import Context
+
+    from ._common import make_executor
+    from .contact_detector import ContactDetectorNode
+    from .falcon_driver import FalconDriver
+    from .force_server import ForceServer
+    from .visualizer import Visualizer
+
+    ctx = Context()
+    rclpy.init(args=args, context=ctx)
+    ov = overrides or {}
+    made = []
+    try:
+        # Consumers first so that the driver's first poses find them.
+        force = ForceServer(context=ctx, parameter_overrides=ov.get('force_server', []))
+        made.append(force)
+        contact = ContactDetectorNode(context=ctx, parameter_overrides=ov.get('contact_detector', []))
+        made.append(contact)
+        vis = None
+        if visualizer:
+            vis = Visualizer(context=ctx, parameter_overrides=ov.get('visualizer', []))
+            made.append(vis)
+        driver = FalconDriver(context=ctx, parameter_overrides=ov.get('falcon_driver', []))
+        made.append(driver)
+    except BaseException:
+        for n in made:
+            if hasattr(n, 'servo'):
+                n.close()
+            n.destroy_node()
+        rclpy.try_shutdown(context=ctx)
+        raise
+    ex = make_executor_for(ctx)
+    for n in made:
+        ex.add_node(n)
+    return Graph(ctx, ex, driver, contact, force, vis)
+
+
+def make_executor_for(context):
+    from rclpy.experimental import EventsExecutor
+    return EventsExecutor(context=context)

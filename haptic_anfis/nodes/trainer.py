@@ -1,0 +1,129 @@
+"""``trainer``: trains the force model from a dataset file and hands it to the force server.
+
+On the service ``~/train`` (``std_srvs/Trigger``; or at start with ``train_at_start``) it trains
+:class:`~haptic_anfis.anfis.ForceModel` on ``dataset_path`` (the paper's protocol,
+:func:`~haptic_anfis.anfis.train_on_dataset`) on a worker thread, publishes progress lines on
+``~/progress`` (``std_msgs/String``), writes ``model_path`` atomically and calls the force server's
+reload service (``reload_service``). Point the force server's ``model_path`` at the same file.
+Training from recorded bags is a later issue; only dataset CSV files are read here.
+"""
+from __future__ import annotations
+
+import threading
+import time
+
+from rclpy.node import Node
+from std_msgs.msg import String
+from std_srvs.srv import Trigger
+
+from ..anfis import train_on_dataset
+from ..dataset import DEFAULT_DATASET, load_dataset
+from . import interfaces as ifc
+from ._common import Param, declare_parameters, positive, run_node
+
+
+def _structure_check(v: str):
+    if not v:
+        return None
+    try:
+        st = tuple(int(c) for c in v.split('-'))
+    except ValueError:
+        st = ()
+    return None if len(st) == 4 and min(st) >= 1 else "expected '' or 4 MF counts like '3-3-3-2'"
+
+
+PARAMS = [
+    Param('dataset_path', '', "force dataset CSV ('' = the shipped default dataset)"),
+    Param('model_path', 'haptic_anfis_model.json', 'model file to write (atomically)',
+          lambda v: None if v else 'expected a file path'),
+    Param('structure', '', "MF counts for all outputs, e.g. '3-3-3-2' ('' = structure search)",
+          _structure_check),
+    Param('epochs', 60, 'maximum training epochs', lambda v: None if v >= 1 else 'expected >= 1'),
+    Param('test_fraction', 0.2, 'held-out test part of the surface points',
+          lambda v: None if 0 < v < 1 else 'expected 0 < value < 1'),
+    Param('seed', 0, 'seed of the splits'),
+    Param('train_at_start', False, 'train once when the node starts'),
+    Param('reload_service', ifc.SERVICE_RELOAD, "the force server's reload service ('' = do not "
+          'call it)'),
+    Param('reload_timeout', 5.0, 'seconds to wait for the reload service to appear', positive),
+]
+
+
+class Trainer(Node):
+    def __init__(self, name: str = 'trainer', **kw):
+        super().__init__(name, **kw)
+        self.params = declare_parameters(self, PARAMS)
+        self.pub = self.create_publisher(String, '~/progress', 10)
+        self.srv = self.create_service(Trigger, '~/train', self._on_train)
+        rs = self.params['reload_service']
+        self.client = self.create_client(Trigger, rs) if rs else None
+        self._thread: threading.Thread | None = None
+        self.results: list[tuple[bool, str]] = []  # (success, message) per finished run
+        if self.params['train_at_start']:
+            self.start_training()
+
+    def say(self, text: str) -> None:
+        self.get_logger().info(text)
+        self.pub.publish(String(data=text))
+
+    @property
+    def busy(self) -> bool:
+        return self._thread is not None and self._thread.is_alive()
+
+    def start_training(self) -> tuple[bool, str]:
+        if self.busy:
+            return False, 'training already running'
+        self._thread = threading.Thread(target=self._train, name='trainer', daemon=True)
+        self._thread.start()
+        return True, f"training started on {self.params['dataset_path'] or DEFAULT_DATASET}"
+
+    def _on_train(self, request, response):
+        response.success, response.message = self.start_training()
+        return response
+
+    def _train(self) -> None:
+        p = self.params
+        path = p['dataset_path'] or str(DEFAULT_DATASET)
+        try:
+            ds = load_dataset(path)
+            self.say(f'dataset {path}: {len(ds)} samples')
+            st = tuple(int(c) for c in p['structure'].split('-')) if p['structure'] else None
+            self.say(f"training: structure {p['structure'] or 'search'}, up to {p['epochs']} epochs")
+            t0 = time.perf_counter()
+            model, _ = train_on_dataset(ds, test_fraction=p['test_fraction'], seed=p['seed'],
+                                        dataset_path=path, structure=st, epochs=p['epochs'])
+            r = model.metadata_['rmse']['test']
+            self.say(f'trained in {time.perf_counter() - t0:.1f} s; test RMSE Fx {r[0]:.4f}, '
+                     f'Fy {r[1]:.4f}, Fz {r[2]:.4f} N')
+            model.save(p['model_path'])
+            self.say(f"wrote {p['model_path']}")
+        except Exception as exc:
+            self.say(f'training failed: {exc}')
+            self.results.append((False, str(exc)))
+            return
+        self._request_reload()
+
+    def _request_reload(self) -> None:
+        if self.client is None:
+            self.results.append((True, 'model written; no reload requested'))
+            return
+        if not self.client.wait_for_service(timeout_sec=self.params['reload_timeout']):
+            msg = f"reload service {self.params['reload_service']} not available"
+            self.say(msg)
+            self.results.append((False, msg))
+            return
+        fut = self.client.call_async(Trigger.Request())
+
+        def done(f):
+            res = f.result()
+            self.say(f'force server reload: {"ok" if res.success else "FAILED"}: {res.message}')
+            self.results.append((res.success, res.message))
+        fut.add_done_callback(done)
+
+
+def main(args=None) -> None:
+    raise SystemExit(run_node(Trainer, args))
+
+
+if __name__ == '__main__':
+    main()
