@@ -20,8 +20,11 @@ $(STAMP): setup.py setup.cfg package.xml
 	$(PY) -c 'import haptic_anfis, numba, rclpy, trimesh, rosbags' # fail here if the install did not
 	touch $@
 
+# Train the force models on the shipped dataset (test RMSE, evaluation speed), then run the whole
+# node graph with the simulated Falcon for 10 s (loop rate, latency, forces).
 demo: venv
 	$(VENV)/bin/haptic-anfis demo
+	$(VENV)/bin/haptic-anfis sim --duration 10
 
 test: venv
 	$(PY) -m pytest test
