@@ -53,6 +53,11 @@ setup(
         'fe': [
             'felupe==11.3.0',
         ],
+        # A real Novint Falcon (falcon_driver backend 'falcon'): pure-Python FTDI access over
+        # pyusb/libusb. Imported only when that backend is chosen.
+        'falcon': [
+            'pyftdi>=0.55',
+        ],
         'test': [
             'pytest>=8',
             'pytest-timeout>=2.3',
