@@ -203,8 +203,19 @@ def forward_kinematics(theta, guess=WORKSPACE_CENTER, geo: FalconGeometry = GEOM
                 lam *= 0.5
         p = q
         if lam * max(abs(step[0]), abs(step[1]), abs(step[2])) < tol:
+            _check_branch(p, theta, geo)
             return p
     raise KinematicsError(f'angles {tuple(theta)}: forward kinematics did not converge')
+
+
+def _check_branch(p, theta, geo: FalconGeometry) -> None:
+    """g = 0 also holds for the mirrored (knee-in) assembly: accept p only if the physical
+    branch of the inverse kinematics gives back ``theta``."""
+    back = inverse_kinematics(p, geo)
+    for t, u in zip(theta, back):
+        if abs(math.remainder(t - u, 2.0 * math.pi)) > 1e-6:
+            raise KinematicsError(f'angles {tuple(theta)}: no physical assembly reaches them '
+                                  f'(Newton found the mirrored one at {p})')
 
 
 def jacobian(p, theta=None, geo: FalconGeometry = GEOMETRY):

@@ -26,9 +26,12 @@ from . import interfaces as ifc
 from ._common import (LOOP_QOS, Param, config_file, declare_parameters, finite_vector,
                       non_negative, one_of, positive, run_node, set_stamp, stamp_ns)
 
+BACKENDS = ('sim', 'falcon')
+
 PARAMS = [
-    Param('backend', 'sim', "device backend: 'sim' (simulated Falcon with a scripted virtual hand; "
-          'the only one available here)', one_of('sim')),
+    Param('backend', 'sim', "device backend: 'sim' (simulated Falcon with a scripted virtual hand) "
+          "or 'falcon' (a Novint Falcon over USB; needs pip install 'haptic_anfis[falcon]')",
+          one_of(*BACKENDS)),
     Param('rate', 1000.0, 'servo loop rate [Hz]', positive),
     Param('frame_id', 'tissue', 'frame of the published pose/velocity/force and of accepted '
           'force commands (others are rejected)'),
@@ -46,6 +49,22 @@ PARAMS = [
     Param('hand_stiffness', 1000.0, 'sim: hand spring to the scripted target [N/m], device frame',
           positive),
     Param('hand_damping', 30.0, 'sim: hand damper [N s/m]', positive),
+    Param('firmware_path', '', "falcon: Novint firmware file uploaded when the device runs none "
+          "(after every power-up); '' = expect it running (none is shipped)"),
+    Param('device_index', 0, 'falcon: which Falcon on the USB bus (0 = first)',
+          lambda v: None if v >= 0 else 'expected an integer >= 0'),
+    Param('device_serial', '', "falcon: USB serial number of the Falcon ('' = use device_index)"),
+    Param('firmware_attempts', 3, 'falcon: firmware upload attempts before giving up (>= 1)',
+          lambda v: None if v >= 1 else 'expected an integer >= 1'),
+    Param('homing', True, 'falcon: home the arms at start (the user moves the grip out, then in; '
+          'encoders are relative until homed)'),
+    Param('homing_timeout', 30.0, 'falcon: seconds to wait for homing', positive),
+    Param('gravity_compensation', False, 'falcon: add an upward force holding gravity_mass at '
+          'the tip'),
+    Param('gravity_mass', 0.1, 'falcon: grip + arm mass lumped at the tip [kg] (an estimate: tune '
+          'per device)', non_negative),
+    Param('stall_timeout', 0.005, 'falcon: no packet sent for this long [s] (servo loop stalled): '
+          'a guard thread sends zero force to the device', positive),
     Param('measured_cf_every', 10, 'publish the applied force every N servo ticks (>= 1)',
           lambda v: None if v >= 1 else 'expected an integer >= 1'),
     Param('run_duration', 0.0, 'stop this long [s] after the first force command arrives, print '
@@ -61,12 +80,19 @@ class FalconDriver(Node):
         self.frame_id = p['frame_id']
         self.mapping = WorkspaceMapping(p['workspace_scale'], tuple(p['workspace_offset']),
                                         p['force_scale'])
-        script_path = p['palpation_script'] or str(config_file('palpation.yaml'))
-        script = PalpationScript.from_yaml(script_path)  # ValueError naming the file -> exit 1
-        self.device = SimulatedFalcon(script, self.mapping,
-                                      HandParams(p['hand_mass'], p['hand_stiffness'],
-                                                 p['hand_damping']),
-                                      max_force=p['max_force'])
+        if p['backend'] == 'falcon':
+            self.device = self._make_falcon(p)
+            what = (f"Falcon {p['device_serial'] or 'index ' + str(p['device_index'])}, homing "
+                    f"{'on' if p['homing'] else 'off'}, gravity compensation "
+                    f"{p['gravity_mass'] if p['gravity_compensation'] else 'off'}")
+        else:
+            script_path = p['palpation_script'] or str(config_file('palpation.yaml'))
+            script = PalpationScript.from_yaml(script_path)  # ValueError naming the file -> exit 1
+            self.device = SimulatedFalcon(script, self.mapping,
+                                          HandParams(p['hand_mass'], p['hand_stiffness'],
+                                                     p['hand_damping']),
+                                          max_force=p['max_force'])
+            what = f'script {script_path} ({script.duration:.1f} s)'
         self.safety = SafetyLayer(p['max_force'], p['max_force_rate'], p['watchdog_timeout'],
                                   frame_id=self.frame_id)
         self.pub_pose = self.create_publisher(PoseStamped, ifc.TOPIC_POSE, LOOP_QOS)
@@ -90,8 +116,19 @@ class FalconDriver(Node):
         self.servo.start()
         self.get_logger().info(
             f"backend {p['backend']}, {p['rate']:.0f} Hz servo thread, max force "
-            f"{p['max_force']} N, watchdog {p['watchdog_timeout'] * 1e3:.1f} ms, script "
-            f'{script_path} ({script.duration:.1f} s)')
+            f"{p['max_force']} N, watchdog {p['watchdog_timeout'] * 1e3:.1f} ms, {what}")
+
+    def _make_falcon(self, p):
+        """The USB backend (imported here: its USB library is an optional extra). Connecting,
+        firmware upload and homing happen when the servo loop opens it; a FalconError (an
+        OSError) stops the node at start with its message."""
+        from ..device.falcon_usb import FalconUSB
+        return FalconUSB(firmware_path=p['firmware_path'], device_index=p['device_index'],
+                         serial=p['device_serial'], firmware_attempts=p['firmware_attempts'],
+                         homing=p['homing'], homing_timeout=p['homing_timeout'],
+                         gravity_compensation=p['gravity_compensation'],
+                         gravity_mass=p['gravity_mass'], max_force=p['max_force'],
+                         stall_timeout=p['stall_timeout'], log=self.get_logger().info)
 
     # -- servo thread ---------------------------------------------------------------------------
     def _publish_state(self, state, force, now) -> None:
