@@ -1,0 +1,83 @@
+"""falcon_driver with backend 'falcon' (ROS node, in process): parameters, the missing USB library,
+and a whole run against the fake FTDI device. No hardware."""
+from __future__ import annotations
+
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+from falcon_fake import FakeFalcon, ftdi_class
+
+rclpy = pytest.importorskip('rclpy')
+from rclpy.context import Context  # noqa: E402
+from rclpy.parameter import Parameter  # noqa: E402
+
+from haptic_anfis.device import falcon_kinematics as k  # noqa: E402
+from haptic_anfis.device import falcon_usb  # noqa: E402
+from haptic_anfis.nodes._common import ParameterError  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+@pytest.fixture
+def ctx():
+    c = Context()
+    rclpy.init(context=c)
+    yield c
+    rclpy.try_shutdown(context=c)
+
+
+def driver(ctx, **params):
+    from haptic_anfis.nodes.falcon_driver import FalconDriver
+    return FalconDriver(context=ctx, parameter_overrides=[
+        Parameter(n, value=v) for n, v in params.items()])
+
+
+def test_unknown_backend_is_rejected_naming_the_choices(ctx):
+    with pytest.raises(ParameterError, match=r"backend.*'sim', 'falcon'"):
+        driver(ctx, backend='usb')
+
+
+def test_falcon_parameters_are_checked(ctx):
+    with pytest.raises(ParameterError, match='firmware_attempts'):
+        driver(ctx, backend='falcon', firmware_attempts=0)
+
+
+def test_falcon_backend_without_usb_library_says_how_to_install(ctx, monkeypatch):
+    monkeypatch.setitem(sys.modules, 'pyftdi', None)
+    monkeypatch.setitem(sys.modules, 'pyftdi.ftdi', None)
+    with pytest.raises(falcon_usb.FalconUnavailableError, match=r"haptic_anfis\[falcon\]"):
+        driver(ctx, backend='falcon')
+
+
+def test_falcon_backend_runs_the_servo_loop_and_stops_at_zero(ctx, monkeypatch):
+    fake = FakeFalcon(firmware_running=True,
+                      encoders=k.angles_to_ticks(k.inverse_kinematics(k.WORKSPACE_CENTER)))
+    monkeypatch.setattr(falcon_usb, 'import_ftdi', lambda: ftdi_class(fake))
+    d = driver(ctx, backend='falcon', homing=False, gravity_compensation=True)
+    try:
+        assert isinstance(d.device, falcon_usb.FalconUSB) and d.device.gravity_compensation
+        deadline = time.monotonic() + 5.0
+        while d.device.replies < 50 and time.monotonic() < deadline:
+            time.sleep(0.01)
+        assert d.device.replies >= 50 and d.servo.errors == 0
+        # gravity compensation alone: a small non-zero command while running
+        assert fake.commands[-1].motors != (0, 0, 0)
+    finally:
+        d.close()
+        d.destroy_node()
+    assert fake.commands[-1].motors == (0, 0, 0) and fake.closed
+
+
+def test_node_process_exits_1_with_one_line_error_without_the_usb_library(tmp_path):
+    """The console script's path: run_node prints the FalconError and exits 1 (no traceback)."""
+    code = ("import sys; sys.modules['pyftdi'] = None; sys.modules['pyftdi.ftdi'] = None\n"
+            "from haptic_anfis.nodes.falcon_driver import main\n"
+            "main(['falcon_driver', '--ros-args', '-p', 'backend:=falcon'])\n")
+    r = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True, timeout=60,
+                       cwd=tmp_path)
+    assert r.returncode == 1, r.stderr
+    assert "error: backend 'falcon' needs the optional USB library pyftdi" in r.stderr
+    assert "pip install 'haptic_anfis[falcon]'" in r.stderr and 'Traceback' not in r.stderr
