@@ -123,7 +123,8 @@ def test_missing_firmware_file_fails_before_touching_usb(tmp_path):
 
 def test_absent_device_message_lists_what_was_found():
     dev = make(FakeFalcon(present=False))
-    with pytest.raises(FalconError, match=r'cannot open the Novint Falcon \(index 0.*found: 0.*udev'):
+    with pytest.raises(FalconError,
+                       match=r'cannot open the Novint Falcon \(index 0.*found: 0.*udev'):
         dev.connect()
     dev = make(FakeFalcon(), serial='OTHER')
     with pytest.raises(FalconError, match=r"serial 'OTHER'.*FAKE0001"):

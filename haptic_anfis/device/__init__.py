@@ -6,6 +6,10 @@ with a scripted virtual hand, servo-loop timing statistics.
 - :class:`PalpationScript`: the hand's scripted pattern (press, strips, circles) from YAML.
 - :class:`WorkspaceMapping`: device frame <-> tissue frame (scale, offset, force scale).
 - :class:`LoopStats`: rate, latency percentiles, deadline misses.
+
+A real Novint Falcon (not imported here; its USB library is the optional ``falcon`` extra):
+:mod:`.falcon_protocol` (packets), :mod:`.falcon_kinematics` (delta robot, SI units),
+:mod:`.falcon_usb` (``FalconUSB``: the same device interface over USB, with a stall guard).
 """
 from .falcon import Device, DeviceState, HandParams, SimulatedFalcon, WorkspaceMapping
 from .palpation import PalpationScript, dome_height

@@ -148,7 +148,7 @@ def constraint_derivatives(p, theta, geo: FalconGeometry = GEOMETRY):
     return rows, tuple(gt)
 
 
-# -- small dense helpers (pure Python: ~10x cheaper than numpy at 3x3 in a 1 kHz loop) -------------
+# -- small dense helpers (pure Python: no numpy call overhead per 3x3 in the 1 kHz loop) -----------
 def _det3(m) -> float:
     return (m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1])
             - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
@@ -248,7 +248,7 @@ def torque_to_force(p, torque, theta=None, geo: FalconGeometry = GEOMETRY):
     return tuple(sum(gp[j][i] * w[j] for j in range(3)) for i in range(3))
 
 
-# -- the packet edge: ticks and counts ---------------------------------------------------------------
+# -- the packet edge: ticks and counts -------------------------------------------------------------
 def ticks_to_angles(ticks, geo: FalconGeometry = GEOMETRY) -> tuple[float, float, float]:
     """Encoder ticks (3 ints) -> arm angles theta (3,) [rad]."""
     k = geo.rad_per_tick
