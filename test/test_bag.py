@@ -175,8 +175,6 @@ def test_bad_bags_give_clear_errors(tmp_path, capsys):
     (tmp_path / 'junk' / 'junk.mcap').write_bytes(b'not an mcap file at all' * 10)
     assert 'not an MCAP file' in _error(capsys, 'bag', 'recover', str(tmp_path / 'junk'))
     # wrong topic type for re-simulation
-    b = _small_bag(tmp_path / 'wrongtype', topic='/falcon/measured_cp',
-                   msgtype='geometry_msgs/msg/PoseStamped')
     w = _small_bag(tmp_path / 'joy', topic='/falcon/measured_cp', msgtype='sensor_msgs/msg/Joy')
     e = _error(capsys, 'bag', 'resim', str(w))
     assert 'joy: topic /falcon/measured_cp has type sensor_msgs/msg/Joy, expected ' \
