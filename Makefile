@@ -21,10 +21,14 @@ $(STAMP): setup.py setup.cfg package.xml
 	touch $@
 
 # Train the force models on the shipped dataset (test RMSE, evaluation speed), then run the whole
-# node graph with the simulated Falcon for 10 s (loop rate, latency, forces).
+# node graph with the simulated Falcon for 10 s (loop rate, latency, forces), recording the session
+# to a bag; then show the bag and re-simulate it with the current models (recomputed vs recorded force).
 demo: venv
 	$(VENV)/bin/haptic-anfis demo
-	$(VENV)/bin/haptic-anfis sim --duration 10
+	rm -rf out/demo_session
+	$(VENV)/bin/haptic-anfis sim --duration 10 --record out/demo_session
+	$(VENV)/bin/haptic-anfis bag info out/demo_session
+	$(VENV)/bin/haptic-anfis bag resim out/demo_session
 
 test: venv
 	$(PY) -m pytest test

@@ -17,6 +17,8 @@ NODES: dict[str, str] = {
     'force_server': 'haptic_anfis.nodes.force_server:main',
     'trainer': 'haptic_anfis.nodes.trainer:main',
     'visualizer': 'haptic_anfis.nodes.visualizer:main',
+    'recorder': 'haptic_anfis.nodes.recorder:main',
+    'player': 'haptic_anfis.nodes.player:main',
 }
 
 setup(
@@ -40,6 +42,7 @@ setup(
         'pyyaml>=6',
         'trimesh>=4',
         'rosbags>=0.11,<0.12',
+        'mcap>=1.2',  # bag recover: stream-reads the MCAP a killed recording left (no summary)
     ],
     extras_require={
         'ros': [

@@ -187,11 +187,14 @@ def test_trainer_trains_writes_and_reloads(tmp_path):
         rclpy.try_shutdown(context=ctx)
 
 
-def test_sim_command_prints_loop_statistics(capfd):
+def test_sim_command_prints_loop_statistics(capfd, tmp_path):
     from haptic_anfis.cli import main
-    assert main(['sim', '--duration', '3', '--no-viz']) == 0
+    bag = tmp_path / 'session'
+    assert main(['sim', '--duration', '3', '--no-viz', '--record', str(bag)]) == 0
     out = capfd.readouterr().out
-    for key in ('servo loop', 'Hz', 'deadline misses', 'p50', 'p99', 'max applied', 'poses in contact'):
+    for key in ('servo loop', 'Hz', 'deadline misses', 'p50', 'p99', 'max applied', 'poses in contact',
+                'recorded'):
         assert key in out, out
-    assert main(['sim', '--duration', '1', '--record', 'x.mcap']) == 1  # later issue: clear error
-    assert 'not implemented yet' in capfd.readouterr().err
+    assert (bag / 'metadata.yaml').is_file()
+    assert main(['sim', '--duration', '1', '--record', str(bag)]) == 1  # exists: clear error
+    assert 'exists already' in capfd.readouterr().err

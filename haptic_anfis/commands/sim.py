@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import math
+from pathlib import Path
 
 NAME = 'sim'
 HELP = 'run the haptic node graph in one process with the simulated Falcon and print loop statistics'
@@ -19,16 +20,16 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help='ROS 2 parameter file for the nodes (repeatable), e.g. config/sim.yaml')
     p.add_argument('--no-viz', action='store_true', help='leave the visualizer out')
     p.add_argument('--record', metavar='BAG', default=None,
-                   help='record all topics to a bag (NOT YET: the recorder is a later issue)')
+                   help='record every loop topic (pose, velocity, applied force, buttons, contact, '
+                        'force command) to this new bag directory (rosbag2, MCAP)')
     p.add_argument('ros_args', nargs=argparse.REMAINDER,
                    help='--ros-args ... passed to rclpy (e.g. --ros-args -p rate:=500.0)')
 
 
 def run(args: argparse.Namespace) -> int:
-    if args.record:
-        # Hook for the recorder issue: subscribe to every topic of Graph.nodes from a queue-fed
-        # writer thread (rosbags MCAP), never from the servo loop. Not implemented yet.
-        raise ValueError('--record: recording bags is not implemented yet (later issue)')
+    if args.record and Path(args.record).exists():
+        raise ValueError(f'--record {args.record}: exists already; a recording needs a new '
+                         'directory')
     if not (args.duration > 0 and math.isfinite(args.duration)):
         raise ValueError(f'--duration: expected > 0 s, got {args.duration}')
     from ..nodes._common import ParameterError
@@ -42,7 +43,14 @@ def run(args: argparse.Namespace) -> int:
         for f in args.params_file:
             ros_args += ['--params-file', f]
     try:
-        graph = build_graph(['haptic-anfis-sim', *ros_args], visualizer=not args.no_viz)
+        extra = []
+        if args.record:
+            from ..bag.topics import ALL_LOOP_TOPICS
+            from ..nodes.recorder import Recorder
+            extra.append(lambda ctx: Recorder(context=ctx, output=args.record,
+                                              topics=ALL_LOOP_TOPICS))
+        graph = build_graph(['haptic-anfis-sim', *ros_args], visualizer=not args.no_viz,
+                            extra=extra)
     except ParameterError as exc:
         raise ValueError(str(exc)) from None
     try:
@@ -54,6 +62,11 @@ def run(args: argparse.Namespace) -> int:
     finally:
         graph.shutdown()
     print_summary(graph.summary())
+    for n in graph.extra:
+        if hasattr(n, 'writer'):
+            r = n.summary()
+            print(f"recorded       {r['written']} messages on {len(r['topics'])} topics to "
+                  f"{r['output']} (dropped {r['dropped']})")
     return 0
 
 

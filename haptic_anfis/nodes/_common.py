@@ -150,3 +150,67 @@ def run_node(factory: Callable[[], Any], args=None) -> int:
             node.destroy_node()
         rclpy.try_shutdown()
     return code
+
+
+def resolve_parameters(params: list[Param], node_name: str, params_files=(),
+                       overrides: dict[str, Any] | None = None) -> dict[str, Any]:
+    """The values a node named ``node_name`` would get, without rclpy: defaults, then each YAML
+    ``params_files`` (sections ``node_name`` and ``/**``, key ``ros__parameters``), then
+    ``overrides``; typed and checked like :func:`declare_parameters`.
+
+    Raises:
+        ParameterError: unknown file, unknown parameter name, wrong type or a rejected value.
+    """
+    import yaml
+    known = {p.name: p for p in params}
+    values = {p.name: p.default for p in params}
+    given: dict[str, Any] = {}
+    for f in params_files:
+        try:
+            doc = yaml.safe_load(Path(f).read_text()) or {}
+        except (OSError, yaml.YAMLError) as exc:
+            raise ParameterError(f'{f}: cannot read the parameter file: {exc}') from None
+        for section in ('/**', node_name, '/' + node_name):
+            sec = doc.get(section) if isinstance(doc, dict) else None
+            if isinstance(sec, dict):
+                given.update(sec.get('ros__parameters') or {})
+    given.update(overrides or {})
+    errors = []
+    for name, v in given.items():
+        p = known.get(name)
+        if p is None:
+            continue  # like rclpy: parameters a node does not declare are ignored
+        want = type(p.default[0] if isinstance(p.default, list) and p.default else p.default)
+        items = v if isinstance(p.default, list) else [v]
+        if isinstance(p.default, list) != isinstance(v, list) or not all(
+                type(x) is want or (want is float and type(x) is float) for x in items):
+            errors.append(f'parameter {name!r}: expected {_TYPE_NAMES.get(want, want.__name__)}'
+                          f'{" list" if isinstance(p.default, list) else ""}, got {v!r}')
+            continue
+        msg = p.check(v) if p.check is not None else None
+        if msg:
+            errors.append(f'parameter {name!r} = {v!r}: {msg}')
+        values[name] = list(v) if isinstance(v, list) else v
+    if errors:
+        raise ParameterError(f'{node_name}: bad parameters: ' + '; '.join(errors))
+    return values
+
+
+def message_class(type_name: str):
+    """'geometry_msgs/msg/PoseStamped' (or 'geometry_msgs/PoseStamped') -> the rclpy message class.
+
+    Raises:
+        ValueError: malformed name, or no such installed message package / type.
+    """
+    import importlib
+    parts = type_name.strip('/').split('/')
+    if len(parts) == 2:
+        parts = [parts[0], 'msg', parts[1]]
+    if len(parts) != 3 or not all(parts):
+        raise ValueError(f'message type {type_name!r}: expected package/msg/Name')
+    try:
+        cls = getattr(importlib.import_module(f'{parts[0]}.{parts[1]}'), parts[2])
+    except (ImportError, AttributeError):
+        raise ValueError(f'message type {type_name!r}: not installed (no {parts[0]}.{parts[1]}.'
+                         f'{parts[2]} importable)') from None
+    return cls

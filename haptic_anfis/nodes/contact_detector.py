@@ -49,16 +49,42 @@ def load_surface(node, p: dict):
     return ellipsoid_dome(tuple(p['dome_radii']))
 
 
+def make_tracker(p: dict) -> ContactTracker:
+    """The node's contact tracker from its parameter values ``p`` (also used by the bag
+    re-simulation, so a replay is configured exactly like the node)."""
+    mesh = load_surface(None, p)
+    d = p['direction']
+    detector = ContactDetector(mesh, direction=None if not any(d) else d)
+    return ContactTracker(detector, max_step=p['max_step'], max_depth=p['max_depth'] or None)
+
+
+def contact_values(tracker: ContactTracker, frame_id: str, pose_frame: str, xyz):
+    """One pose through the tracker: ``(position list of the contact message, TrackedContact or
+    None, error or None)``. A pose in another frame or with NaN/Inf gives "no contact" (zeros)
+    and resets the tracker, so the next good pose cannot start a contact from inside."""
+    if pose_frame != frame_id:
+        tracker.reset()
+        return [0.0] * len(ifc.CONTACT_FIELDS), None, \
+            f'pose in frame {pose_frame!r}, expected {frame_id!r}'
+    try:
+        c = tracker.update(xyz)
+    except ValueError as exc:  # NaN/Inf pose: tracker reset, no contact
+        tracker.reset()
+        return [0.0] * len(ifc.CONTACT_FIELDS), None, str(exc)
+    cp, dv = c.contact_point, c.direction
+    return [float(cp[0]), float(cp[1]), float(cp[2]), float(c.depth),
+            float(dv[0]), float(dv[1]), float(dv[2]),
+            1.0 if c.in_contact else 0.0, 1.0 if c.saturated else 0.0], c, None
+
+
 class ContactDetectorNode(Node):
     def __init__(self, name: str = 'contact_detector', **kw):
         super().__init__(name, **kw)
         p = self.params = declare_parameters(self, PARAMS)
         self.frame_id = p['frame_id']
-        mesh = load_surface(self, p)
+        self.tracker = make_tracker(p)
+        self.detector = self.tracker.detector
         d = p['direction']
-        self.detector = ContactDetector(mesh, direction=None if not any(d) else d)
-        self.tracker = ContactTracker(self.detector, max_step=p['max_step'],
-                                      max_depth=p['max_depth'] or None)
         self.pub = self.create_publisher(JointState, ifc.TOPIC_CONTACT, LOOP_QOS)
         self.sub = self.create_subscription(PoseStamped, ifc.TOPIC_POSE, self._on_pose, LOOP_QOS)
         self._msg = JointState()
@@ -76,30 +102,20 @@ class ContactDetectorNode(Node):
         q = msg.pose.position
         out = self._msg
         out.header.stamp = msg.header.stamp
-        if msg.header.frame_id != self.frame_id:
-            self._bad(f'pose in frame {msg.header.frame_id!r}, expected {self.frame_id!r}')
-            out.position = [0.0] * len(ifc.CONTACT_FIELDS)
+        out.position, c, error = contact_values(self.tracker, self.frame_id, msg.header.frame_id,
+                                                (q.x, q.y, q.z))
+        if error is not None:
+            self._bad(error)
         else:
-            try:
-                c = self.tracker.update((q.x, q.y, q.z))
-            except ValueError as exc:  # NaN/Inf pose: tracker reset, no contact
-                self._bad(str(exc))
-                out.position = [0.0] * len(ifc.CONTACT_FIELDS)
-            else:
-                cp, dv = c.contact_point, c.direction
-                out.position = [float(cp[0]), float(cp[1]), float(cp[2]), float(c.depth),
-                                float(dv[0]), float(dv[1]), float(dv[2]),
-                                1.0 if c.in_contact else 0.0, 1.0 if c.saturated else 0.0]
-                if c.in_contact:
-                    self.n_contact += 1
-                    if c.depth > self.max_depth_seen:
-                        self.max_depth_seen = c.depth
-                self.last = c
+            if c.in_contact:
+                self.n_contact += 1
+                if c.depth > self.max_depth_seen:
+                    self.max_depth_seen = c.depth
+            self.last = c
         self.pub.publish(out)
 
     def _bad(self, why: str) -> None:
         self.n_bad += 1
-        self.tracker.reset()
         self.get_logger().warning(f'bad pose ({why}): publishing no contact',
                                   throttle_duration_sec=1.0)
 

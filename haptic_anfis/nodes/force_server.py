@@ -32,13 +32,35 @@ PARAMS = [
 ]
 
 
+def load_model(p: dict) -> tuple[Path, ForceModel]:
+    """(path, warmed model) from the node's parameter values ``p`` (also used by the bag
+    re-simulation). Raises ModelFileError (a ValueError) on a bad file."""
+    path = Path(p['model_path']) if p['model_path'] else DEFAULT_MODEL
+    model = ForceModel.load(path)
+    model.predict_one(0.03, 0.0, 0.0, 0.005)  # warm (load already compiled it)
+    return path, model
+
+
+def force_from_contact(model: ForceModel, v) -> tuple[float, float, float, str | None]:
+    """(fx, fy, fz, error or None) for the contact message values ``v``: the model's force in
+    contact, zero when not in contact or on a malformed / non-finite contact (with the reason)."""
+    if len(v) != len(ifc.CONTACT_FIELDS):
+        return 0.0, 0.0, 0.0, (f'contact message with {len(v)} values, expected '
+                               f'{len(ifc.CONTACT_FIELDS)} ({", ".join(ifc.CONTACT_FIELDS)})')
+    if v[ifc.I_IN_CONTACT] > 0.5 and v[ifc.I_DEPTH] > 0.0:
+        try:
+            fx, fy, fz = model.predict_one(v[0], v[1], v[2], v[ifc.I_DEPTH])
+        except ValueError as exc:  # NaN/Inf in the contact: zero force
+            return 0.0, 0.0, 0.0, str(exc)
+        return fx, fy, fz, None
+    return 0.0, 0.0, 0.0, None
+
+
 class ForceServer(Node):
     def __init__(self, name: str = 'force_server', **kw):
         super().__init__(name, **kw)
         p = self.params = declare_parameters(self, PARAMS)
-        self.model_path = Path(p['model_path']) if p['model_path'] else DEFAULT_MODEL
-        self.model = ForceModel.load(self.model_path)  # ModelFileError (a ValueError) -> exit 1
-        self.model.predict_one(0.03, 0.0, 0.0, 0.005)  # warm (load already compiled it)
+        self.model_path, self.model = load_model(p)  # ModelFileError (a ValueError) -> exit 1
         self.pub = self.create_publisher(WrenchStamped, ifc.TOPIC_COMMAND, LOOP_QOS)
         self.sub = self.create_subscription(JointState, ifc.TOPIC_CONTACT, self._on_contact,
                                             LOOP_QOS)
@@ -58,22 +80,14 @@ class ForceServer(Node):
         out = self._msg
         out.header.stamp = msg.header.stamp
         f = out.wrench.force
-        v = msg.position
-        fx = fy = fz = 0.0
-        if len(v) != len(ifc.CONTACT_FIELDS):
-            self._bad(f'contact message with {len(v)} values, expected '
-                      f'{len(ifc.CONTACT_FIELDS)} ({", ".join(ifc.CONTACT_FIELDS)})')
-        elif v[ifc.I_IN_CONTACT] > 0.5 and v[ifc.I_DEPTH] > 0.0:
-            try:
-                fx, fy, fz = self.model.predict_one(v[0], v[1], v[2], v[ifc.I_DEPTH])
-            except ValueError as exc:  # NaN/Inf in the contact: zero force
-                self._bad(str(exc))
-                fx = fy = fz = 0.0
-            else:
-                self.n_forces += 1
-                n = (fx * fx + fy * fy + fz * fz) ** 0.5
-                if n > self.max_force:
-                    self.max_force = n
+        fx, fy, fz, error = force_from_contact(self.model, msg.position)
+        if error is not None:
+            self._bad(error)
+        elif fx or fy or fz:
+            self.n_forces += 1
+            n = (fx * fx + fy * fy + fz * fz) ** 0.5
+            if n > self.max_force:
+                self.max_force = n
         f.x, f.y, f.z = fx, fy, fz
         self.pub.publish(out)
 

@@ -53,9 +53,11 @@ class Graph:
 
 
 def build_graph(args: list[str] | None = None, visualizer: bool = True,
-                overrides: dict[str, list] | None = None) -> Graph:
+                overrides: dict[str, list] | None = None, extra=()) -> Graph:
     """Init a fresh rclpy context with ``args`` (e.g. ``['--ros-args', '--params-file', f]``) and
-    build the nodes. ``overrides``: {node name: [rclpy.parameter.Parameter, ...]}.
+    build the nodes. ``overrides``: {node name: [rclpy.parameter.Parameter, ...]}. ``extra``:
+    factories ``f(context) -> Node`` (e.g. a recorder) built before the driver starts publishing;
+    they end up in ``Graph.extra``.
 
     Raises:
         ParameterError / ValueError: a node rejected its parameters (nothing is left running).
@@ -82,6 +84,10 @@ def build_graph(args: list[str] | None = None, visualizer: bool = True,
         if visualizer:
             vis = Visualizer(context=ctx, parameter_overrides=ov.get('visualizer', []))
             made.append(vis)
+        extra_nodes = []
+        for factory in extra:
+            extra_nodes.append(factory(ctx))
+            made.append(extra_nodes[-1])
         driver = FalconDriver(context=ctx, parameter_overrides=ov.get('falcon_driver', []))
         made.append(driver)
     except BaseException:
@@ -94,7 +100,7 @@ def build_graph(args: list[str] | None = None, visualizer: bool = True,
     ex = make_executor_for(ctx)
     for n in made:
         ex.add_node(n)
-    return Graph(ctx, ex, driver, contact, force, vis)
+    return Graph(ctx, ex, driver, contact, force, vis, extra=extra_nodes)
 
 
 def make_executor_for(context):

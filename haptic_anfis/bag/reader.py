@@ -1,0 +1,195 @@
+"""Open, check and read rosbag2 bags (any storage rosbags reads; this package writes MCAP)."""
+from __future__ import annotations
+
+import datetime as _dt
+from contextlib import contextmanager
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Iterator
+
+from .errors import BagError
+
+_EXPECTED = 'expected a rosbag2 bag: a directory with metadata.yaml and its .mcap (or .db3) file'
+
+
+def _recover_hint(path: Path) -> str:
+    return f'run "haptic-anfis bag recover {path}" to rebuild it from what is on disk'
+
+
+def check_bag_path(path: str | Path) -> Path:
+    """``path`` as a Path if it looks like a bag; BagError saying what is wrong otherwise."""
+    p = Path(path)
+    if not p.exists():
+        raise BagError(f'{p}: no such file or directory ({_EXPECTED})')
+    if p.is_file():
+        if p.suffix in ('.mcap', '.db3'):
+            return p
+        raise BagError(f'{p}: not a bag ({_EXPECTED})')
+    if not (p / 'metadata.yaml').is_file():
+        if any(p.glob('*.mcap')):
+            raise BagError(f'{p}: metadata.yaml is missing (an interrupted recording?); '
+                           + _recover_hint(p))
+        raise BagError(f'{p}: not a bag: no metadata.yaml ({_EXPECTED})')
+    return p
+
+
+@contextmanager
+def open_bag(path: str | Path):
+    """A rosbags ``Reader`` opened on the bag at ``path``; every failure is a BagError naming it."""
+    from rosbags.rosbag2 import Reader
+    p = check_bag_path(path)
+    try:
+        reader = Reader(p)
+        reader.open()
+    except BagError:
+        raise
+    except Exception as exc:  # ReaderError, yaml errors, truncated files, ...
+        hint = _recover_hint(p) if p.is_dir() else 'is the file complete?'
+        raise BagError(f'{p}: cannot open the bag: {exc}; {hint}') from None
+    try:
+        yield reader
+    finally:
+        try:
+            reader.close()
+        except Exception:
+            pass
+
+
+def bag_typestore(reader, path: Path):
+    """A Jazzy typestore that also knows any non-standard type the bag carries a definition of."""
+    from rosbags.typesys import Stores, get_types_from_idl, get_types_from_msg, get_typestore
+    from rosbags.interfaces import MessageDefinitionFormat
+    ts = get_typestore(Stores.ROS2_JAZZY)
+    for c in reader.connections:
+        if c.msgtype in ts.types:
+            continue
+        data = c.msgdef.data if c.msgdef else ''
+        try:
+            if not data:
+                raise ValueError('the bag carries no definition of it')
+            if c.msgdef.format == MessageDefinitionFormat.IDL:
+                ts.register(get_types_from_idl(data))
+            else:
+                ts.register(get_types_from_msg(data, c.msgtype))
+        except Exception as exc:
+            raise BagError(f'{path}: topic {c.topic}: unknown message type {c.msgtype!r} '
+                           f'(not a ROS 2 Jazzy type, and {exc})') from None
+    return ts
+
+
+def read_messages(path: str | Path, topics=None, *, deserialize: bool = True,
+                  expect_types: dict[str, str] | None = None) -> Iterator[tuple]:
+    """Yield ``(topic, msgtype, t_ns, msg)`` in receive-time order.
+
+    ``msg`` is a rosbags message object (``deserialize``) or the raw CDR bytes. ``topics`` limits
+    the topics read (each must be in the bag). ``expect_types``: {topic: type} checked first.
+    """
+    with open_bag(path) as reader:
+        p = Path(path)
+        by_topic = {c.topic: c for c in reader.connections}
+        if topics:
+            missing = [t for t in topics if t not in by_topic]
+            if missing:
+                raise BagError(f'{p}: no topic(s) {", ".join(missing)} in the bag '
+                               f'(it has {", ".join(sorted(by_topic)) or "none"})')
+        for topic, want in (expect_types or {}).items():
+            if topic in by_topic and by_topic[topic].msgtype != want:
+                raise BagError(f'{p}: topic {topic} has type {by_topic[topic].msgtype}, '
+                               f'expected {want}')
+        conns = [c for c in reader.connections if not topics or c.topic in topics]
+        ts = bag_typestore(reader, p) if deserialize else None
+        try:
+            for c, t, raw in reader.messages(connections=conns):
+                if deserialize:
+                    yield c.topic, c.msgtype, t, ts.deserialize_cdr(raw, c.msgtype)
+                else:
+                    yield c.topic, c.msgtype, t, raw
+        except BagError:
+            raise
+        except Exception as exc:
+            raise BagError(f'{p}: reading failed ({type(exc).__name__}: {exc}); the bag may be '
+                           'truncated or damaged: ' + _recover_hint(p)) from None
+
+
+@dataclass(frozen=True)
+class TopicStats:
+    topic: str
+    msgtype: str
+    count: int
+    rate_hz: float
+
+
+@dataclass(frozen=True)
+class BagInfo:
+    path: Path
+    files: list[str]
+    size_bytes: int
+    storage: str
+    start_ns: int
+    end_ns: int
+    message_count: int
+    topics: list[TopicStats]
+    custom_data: dict
+
+    @property
+    def duration_s(self) -> float:
+        return max(self.end_ns - self.start_ns, 0) * 1e-9
+
+
+def bag_info(path: str | Path) -> BagInfo:
+    """What ``ros2 bag info`` shows: files, size, duration, start/end, per-topic type/count/rate."""
+    with open_bag(path) as reader:
+        p = Path(path)
+        meta = _metadata_yaml(p)
+        files = [str(f) for f in meta.get('relative_file_paths', [])] or [p.name]
+        size = (sum(f.stat().st_size for f in p.iterdir() if f.is_file()) if p.is_dir()
+                else p.stat().st_size)
+        n = reader.message_count
+        start, end = (reader.start_time, reader.end_time) if n else (0, 0)
+        dur = max(end - start, 0) * 1e-9
+        counts: dict[tuple[str, str], int] = {}
+        for c in reader.connections:
+            counts[(c.topic, c.msgtype)] = counts.get((c.topic, c.msgtype), 0) + c.msgcount
+        topics = [TopicStats(t, ty, k, (k - 1) / dur if dur > 0 and k > 1 else 0.0)
+                  for (t, ty), k in sorted(counts.items())]
+        return BagInfo(p, files, size, meta.get('storage_identifier', p.suffix.lstrip('.')),
+                       start, end, n, topics, dict(meta.get('custom_data') or {}))
+
+
+def _metadata_yaml(p: Path) -> dict:
+    if not p.is_dir():
+        return {}
+    import yaml
+    try:
+        doc = yaml.safe_load((p / 'metadata.yaml').read_text()) or {}
+        return doc.get('rosbag2_bagfile_information', {}) or {}
+    except Exception:
+        return {}
+
+
+def _stamp(ns: int) -> str:
+    t = _dt.datetime.fromtimestamp(ns * 1e-9, tz=_dt.timezone.utc)
+    return f'{t:%Y-%m-%d %H:%M:%S.%f} UTC ({ns // 10**9}.{ns % 10**9:09d})'
+
+
+def format_info(info: BagInfo) -> str:
+    size = info.size_bytes
+    unit = next(((size / 1024 ** i, u) for i, u in ((3, 'GiB'), (2, 'MiB'), (1, 'KiB'))
+                 if size >= 1024 ** i), (size, 'B'))
+    lines = [f'Bag:           {info.path}',
+             f'Files:         {", ".join(info.files)}',
+             f'Bag size:      {unit[0]:.1f} {unit[1]}',
+             f'Storage id:    {info.storage}',
+             f'Duration:      {info.duration_s:.3f} s',
+             f'Start:         {_stamp(info.start_ns) if info.message_count else "-"}',
+             f'End:           {_stamp(info.end_ns) if info.message_count else "-"}',
+             f'Messages:      {info.message_count}']
+    w = max([len(t.topic) for t in info.topics] + [5])
+    wt = max([len(t.msgtype) for t in info.topics] + [4])
+    lines.append(f'Topics:        {len(info.topics)}')
+    lines.append(f'  {"topic":<{w}}  {"type":<{wt}}  {"count":>8}  {"rate Hz":>9}')
+    for t in info.topics:
+        lines.append(f'  {t.topic:<{w}}  {t.msgtype:<{wt}}  {t.count:>8}  {t.rate_hz:>9.1f}')
+    for k, v in sorted(info.custom_data.items()):
+        lines.append(f'custom_data:   {k} = {v}')
+    return '\n'.join(lines)

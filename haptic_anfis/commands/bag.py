@@ -1,0 +1,135 @@
+"""``haptic-anfis bag info|export|recover|resim|play|record``: what ``ros2 bag`` would do for this
+package's sessions (rosbag2 bags, MCAP storage; see :mod:`haptic_anfis.bag`)."""
+from __future__ import annotations
+
+import argparse
+import sys
+
+NAME = 'bag'
+HELP = 'record, play, inspect, export, recover and re-simulate rosbag2 session bags'
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    sub = p.add_subparsers(dest='bag_command', metavar='ACTION', required=True)
+    a = sub.add_parser('info', help='topics, types, counts, duration and rates of a bag')
+    a.add_argument('path', help='bag directory')
+    a = sub.add_parser('export', help='one CSV per topic with readable fields')
+    a.add_argument('path', help='bag directory')
+    a.add_argument('--csv', required=True, metavar='OUT_DIR', help='directory for the CSV files')
+    a.add_argument('--topics', nargs='*', default=None, help='topics to export (default: all)')
+    a = sub.add_parser('recover', help='rebuild metadata.yaml and a complete MCAP after a crash')
+    a.add_argument('path', help='bag directory left by an interrupted recording')
+    a = sub.add_parser('resim', help='recorded poses through the current contact tracker and '
+                       'force model; compare with the recorded force commands')
+    a.add_argument('path', help='bag directory')
+    a.add_argument('--params-file', action='append', default=[], metavar='YAML',
+                   help='parameter file for contact_detector / force_server (repeatable)')
+    a.add_argument('--model', default=None, help='force model file (overrides model_path)')
+    a.add_argument('--tolerance', type=float, default=None, metavar='N',
+                   help='exit 1 if the max force difference exceeds this many newtons')
+    a = sub.add_parser('play', help='publish a bag with its original timing')
+    a.add_argument('path', help='bag directory')
+    a.add_argument('--rate', type=float, default=1.0, help='speed factor (default 1.0)')
+    a.add_argument('--start-offset', type=float, default=0.0, metavar='S',
+                   help='start S seconds into the bag')
+    a.add_argument('--loop', action='store_true', help='play again and again')
+    a.add_argument('--topics', nargs='*', default=None, help='topics to play (default: all)')
+    a.add_argument('--clock', action='store_true', help='publish /clock with the recorded time')
+    a.add_argument('--resimulate', action='store_true',
+                   help='play the force commands recomputed by the current models; log the '
+                        'comparison')
+    a.add_argument('--params-file', action='append', default=[], metavar='YAML',
+                   help='parameter file for the re-simulated nodes (repeatable)')
+    a = sub.add_parser('record', help='record topics to a new bag (Ctrl-C stops and closes it)')
+    a.add_argument('-o', '--output', default='', help='bag directory to create '
+                   '(default: session_YYYYmmdd-HHMMSS)')
+    a.add_argument('topics', nargs='*', help='topics (default: pose, contact, force command, '
+                   'buttons)')
+    a.add_argument('-a', '--all', action='store_true', help='also every other topic in the graph')
+    a.add_argument('--duration', type=float, default=0.0, metavar='S',
+                   help='stop after S seconds (default: until Ctrl-C)')
+    a.add_argument('--flush-period', type=float, default=None, metavar='S',
+                   help='flush to disk at least this often (default 0.5 s)')
+
+
+def run(args: argparse.Namespace) -> int:
+    return globals()[f'_{args.bag_command}'](args)
+
+
+def _info(args) -> int:
+    from ..bag import bag_info, format_info
+    print(format_info(bag_info(args.path)))
+    return 0
+
+
+def _export(args) -> int:
+    from ..bag.export import export_csv
+    from ..bag.topics import absolute
+    topics = [absolute(t) for t in args.topics] if args.topics else None
+    for topic, (f, n) in sorted(export_csv(args.path, args.csv, topics).items()):
+        print(f'{topic}: {n} rows -> {f}')
+    return 0
+
+
+def _recover(args) -> int:
+    from ..bag import recover_bag
+    print(recover_bag(args.path).format())
+    return 0
+
+
+def _resim(args) -> int:
+    from ..bag.resim import resimulate
+    from ..nodes._common import ParameterError
+    try:
+        r = resimulate(args.path, params_files=args.params_file,
+                       force_overrides={'model_path': args.model} if args.model else None)
+    except ParameterError as exc:
+        raise ValueError(str(exc)) from None
+    print(r.format())
+    if args.tolerance is not None and r.max_diff_N > args.tolerance:
+        print(f'max force difference {r.max_diff_N:.3g} N exceeds --tolerance {args.tolerance:g} N',
+              file=sys.stderr)
+        return 1
+    return 0
+
+
+def _ros_node(cls, overrides: list, setup=None) -> int:
+    from ..nodes._common import run_node
+
+    def factory():
+        node = cls(parameter_overrides=overrides)
+        if setup is not None:
+            setup(node)
+        return node
+    return run_node(factory, ['haptic-anfis-bag'])
+
+
+def _play(args) -> int:
+    from rclpy.parameter import Parameter
+
+    from ..nodes.player import Player
+    ov = [Parameter('bag_path', value=str(args.path)), Parameter('rate', value=float(args.rate)),
+          Parameter('start_offset', value=float(args.start_offset)),
+          Parameter('loop', value=bool(args.loop)), Parameter('clock', value=bool(args.clock)),
+          Parameter('topics', value=','.join(args.topics or [])),
+          Parameter('resimulate', value=bool(args.resimulate))]
+    if args.params_file:
+        ov.append(Parameter('params_files', value=list(args.params_file)))
+    return _ros_node(Player, ov)
+
+
+def _record(args) -> int:
+    from rclpy.parameter import Parameter
+
+    from ..nodes.recorder import Recorder
+    ov = [Parameter('output', value=args.output), Parameter('all_topics', value=bool(args.all))]
+    if args.topics:
+        ov.append(Parameter('topics', value=list(args.topics)))
+    if args.flush_period is not None:
+        ov.append(Parameter('flush_period', value=float(args.flush_period)))
+
+    def stop_after(node):
+        if args.duration > 0:
+            node.create_timer(args.duration, lambda: setattr(node, 'finished', True))
+    code = _ros_node(Recorder, ov, stop_after)
+    return code

@@ -1,0 +1,121 @@
+"""``recorder``: record topics to a rosbag2 bag (MCAP storage, metadata version 9).
+
+Subscribes with ``raw=True`` (the serialized CDR bytes, no deserialisation) and hands each message
+with its receive time (system clock) to :class:`haptic_anfis.bag.BagWriter`, whose own thread
+writes the file: a callback costs a queue append, so a 1 kHz publisher is never held up.
+Types: the package's topics are known up front (subscribed at once, before their publishers
+appear); any other topic is subscribed once the graph shows its type (checked every
+``discovery_period``). Ctrl-C / SIGTERM write everything received, the MCAP summary and
+metadata.yaml; after a crash at most ``flush_period`` s (plus the queue) are lost, and
+``haptic-anfis bag recover PATH`` rebuilds the bag.
+"""
+from __future__ import annotations
+
+import time
+from functools import partial
+
+from rclpy.node import Node
+from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+
+from ..bag import BagWriter
+from ..bag.topics import DEFAULT_TOPICS, KNOWN_TYPES
+from ._common import Param, declare_parameters, message_class, positive, run_node
+
+#: Topics never recorded with ``all_topics`` (ROS infrastructure, as ``ros2 bag record -a``).
+IGNORED = ('/rosout', '/parameter_events')
+
+PARAMS = [
+    Param('output', '', "bag directory to create ('' = session_YYYYmmdd-HHMMSS in the working "
+          'directory); it must not exist yet'),
+    Param('topics', list(DEFAULT_TOPICS), 'topics to record (relative names resolve in the node '
+          'namespace); default: pose, contact, force command, buttons'),
+    Param('all_topics', False, 'also record every other topic that appears in the graph '
+          '(except /rosout and /parameter_events)'),
+    Param('flush_period', 0.5, 'close and flush the pending MCAP chunk at least this often [s]: '
+          'a crash loses at most this much', positive),
+    Param('chunk_size', 262144, 'close the pending MCAP chunk once it holds this many bytes',
+          positive),
+    Param('max_queue', 200000, 'messages allowed to wait for the writer thread; beyond that new '
+          'ones are dropped and counted', positive),
+    Param('qos_depth', 1000, 'history depth of the (reliable) recording subscriptions', positive),
+    Param('discovery_period', 0.5, 'how often the graph is checked for topics still to subscribe '
+          '[s]', positive),
+]
+
+
+def default_output() -> str:
+    return time.strftime('session_%Y%m%d-%H%M%S')
+
+
+class Recorder(Node):
+    """Parameters in :data:`PARAMS`; ``topics`` / ``output`` arguments override them (used by
+    ``haptic-anfis sim --record``)."""
+
+    def __init__(self, name: str = 'recorder', *, topics=None, output: str | None = None, **kw):
+        super().__init__(name, **kw)
+        p = self.params = declare_parameters(self, PARAMS)
+        self.output = output or p['output'] or default_output()
+        wanted = list(topics) if topics is not None else p['topics']
+        self.wanted = [self.resolve_topic_name(t) for t in wanted]
+        self.all_topics = p['all_topics']
+        self.qos = QoSProfile(depth=p['qos_depth'], history=HistoryPolicy.KEEP_LAST,
+                              reliability=ReliabilityPolicy.RELIABLE)
+        self.writer = BagWriter(self.output, flush_period=p['flush_period'],
+                                chunk_size=p['chunk_size'], max_queue=p['max_queue'],
+                                custom_data={'recorder': 'haptic_anfis recorder'})
+        self.subs: dict[str, object] = {}
+        self._closed = False
+        self._discover()
+        self.timer = self.create_timer(p['discovery_period'], self._discover)
+        self.get_logger().info(f'recording to {self.output}: {", ".join(self.wanted)}'
+                               + (' + every other topic' if self.all_topics else ''))
+
+    def _discover(self) -> None:
+        graph = dict(self.get_topic_names_and_types())
+        names = list(self.wanted)
+        if self.all_topics:
+            names += [t for t in graph if t not in IGNORED and t not in names]
+        for topic in names:
+            if topic in self.subs:
+                continue
+            types = graph.get(topic) or []
+            msgtype = types[0] if types else KNOWN_TYPES.get(topic)
+            if msgtype is None:
+                continue  # not seen yet; try again at the next discovery
+            if len(types) > 1:
+                self.get_logger().warning(f'{topic} has several types {types}: recording {msgtype}')
+            try:
+                cls = message_class(msgtype)
+                self.writer.add_topic(topic, msgtype)
+            except ValueError as exc:
+                self.get_logger().error(f'cannot record {topic}: {exc}', once=True)
+                continue
+            self.subs[topic] = self.create_subscription(
+                cls, topic, partial(self.writer.write, topic), self.qos, raw=True)
+
+    def summary(self) -> dict:
+        return {'output': str(self.output), 'topics': sorted(self.subs), **self.writer.stats()}
+
+    def close(self) -> None:
+        """Write everything received, the summary and metadata.yaml (idempotent)."""
+        if self._closed:
+            return
+        self._closed = True
+        for s in self.subs.values():
+            self.destroy_subscription(s)
+        self.writer.close()
+        s = self.writer.stats()
+        self.get_logger().info(f"recorded {s['written']} messages to {self.output}"
+                               + (f" ({s['dropped']} dropped: queue full)" if s['dropped'] else ''))
+
+    def destroy_node(self):
+        self.close()
+        return super().destroy_node()
+
+
+def main(args=None) -> None:
+    raise SystemExit(run_node(Recorder, args))
+
+
+if __name__ == '__main__':
+    main()

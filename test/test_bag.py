@@ -1,0 +1,282 @@
+"""Bags: record a session of the in-process graph, re-simulate it exactly, read it with an
+independent MCAP reader, export it, recover a recording killed with SIGKILL, and clear errors for
+bad bags. ROS tests use their own ROS_DOMAIN_ID and localhost discovery (see test_nodes_process)."""
+from __future__ import annotations
+
+import csv
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+import yaml
+
+rclpy = pytest.importorskip('rclpy')
+from geometry_msgs.msg import PoseStamped  # noqa: E402
+from rclpy.parameter import Parameter  # noqa: E402
+from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy  # noqa: E402
+
+from haptic_anfis.bag import BagError, BagWriter, bag_info, read_messages, recover_bag  # noqa: E402
+from haptic_anfis.bag.resim import resimulate  # noqa: E402
+from haptic_anfis.bag.topics import typestore  # noqa: E402
+from haptic_anfis.cli import main as cli  # noqa: E402
+from haptic_anfis.nodes.graph import build_graph  # noqa: E402
+from haptic_anfis.nodes.recorder import Recorder  # noqa: E402
+from test_nodes_process import BIN, ROOT, _domains, node_env  # noqa: E402
+
+pytestmark = pytest.mark.ros
+PRESS = {'loop': True, 'start_delay': 0.2, 'approach_height': 0.006, 'pattern': [
+    {'press': {'points': [[0.0, 0.0], [0.01, 0.005]], 'depth': 0.012, 'hold': 0.4}},
+    {'pause': {'duration': 0.3}}]}
+
+
+@pytest.fixture(scope='module')
+def session(tmp_path_factory):
+    """A ~3 s recording of the in-process graph pressing the tissue (all loop topics)."""
+    from haptic_anfis.bag.topics import ALL_LOOP_TOPICS
+    d = tmp_path_factory.mktemp('session')
+    script = d / 'press.yaml'
+    script.write_text(yaml.safe_dump(PRESS))
+    bag = d / 'bag'
+    g = build_graph(['test'], visualizer=False,
+                    overrides={'falcon_driver': [Parameter('palpation_script', value=str(script))]},
+                    extra=[lambda ctx: Recorder(context=ctx, output=str(bag),
+                                                topics=ALL_LOOP_TOPICS)])
+    rec = g.extra[0]
+    try:
+        assert g.spin_for(60.0, lambda: g.contact.n_contact > 300), 'no contact in the session'
+        g.spin_for(0.5)
+    finally:
+        g.shutdown()
+    return bag, rec.summary(), g.summary()
+
+
+def test_session_is_a_complete_bag(session):
+    bag, rec, _ = session
+    info = bag_info(bag)
+    assert rec['dropped'] == 0 and rec['written'] == rec['received'] == info.message_count
+    assert (bag / 'metadata.yaml').is_file() and (bag / 'bag.mcap').is_file()
+    meta = yaml.safe_load((bag / 'metadata.yaml').read_text())['rosbag2_bagfile_information']
+    assert meta['version'] == 9 and meta['storage_identifier'] == 'mcap'
+    topics = {t.topic: t for t in info.topics}
+    assert topics['/falcon/measured_cp'].msgtype == 'geometry_msgs/msg/PoseStamped'
+    assert topics['/contact'].msgtype == 'sensor_msgs/msg/JointState'
+    assert all(topics[t].count > 0 for t in ('/falcon/measured_cp', '/contact', '/falcon/servo_cf'))
+
+
+def test_resimulation_reproduces_recorded_wrenches(session):
+    bag, _, _ = session
+    r = resimulate(bag)
+    assert r.missing_poses == 0
+    assert r.wrenches > 300 and r.contacts > 300 and r.in_contact > 100
+    assert r.max_force_N > 0.5
+    assert r.max_diff_N <= 1e-9 and r.rms_diff_N <= 1e-9 and r.max_contact_diff <= 1e-12
+
+
+def test_resimulation_with_another_model_differs(session, tmp_path, small_model):
+    bag, _, _ = session
+    m = small_model.save(tmp_path / 'other.json')
+    r = resimulate(bag, force_overrides={'model_path': str(m)})
+    assert r.max_diff_N > 1e-3 and r.rms_diff_N > 0
+    assert cli(['bag', 'resim', str(bag), '--model', str(m), '--tolerance', '1e-9']) == 1
+    assert cli(['bag', 'resim', str(bag), '--tolerance', '1e-9']) == 0
+
+
+def test_independent_mcap_reader_decodes_every_message(session):
+    from mcap.reader import make_reader
+    from mcap_ros2.decoder import DecoderFactory
+    bag, _, _ = session
+    info = bag_info(bag)
+    ours = [(t, ty, ts) for t, ty, ts, _ in read_messages(bag, deserialize=False)]
+    theirs = []
+    first_pose = None
+    with (bag / 'bag.mcap').open('rb') as fh:
+        reader = make_reader(fh, decoder_factories=[DecoderFactory()])
+        summary = reader.get_summary()
+        assert summary is not None and summary.statistics.message_count == info.message_count
+        for schema, channel, message, decoded in reader.iter_decoded_messages():
+            theirs.append((channel.topic, schema.name, message.log_time))
+            if channel.topic == '/falcon/measured_cp' and first_pose is None:
+                first_pose = decoded
+    assert len(theirs) == info.message_count == len(ours)
+    assert sorted(theirs) == sorted(ours)
+    _, _, _, ours_pose = next(read_messages(bag, ['/falcon/measured_cp']))
+    assert first_pose.pose.position.x == ours_pose.pose.position.x
+    assert first_pose.header.frame_id == 'tissue'
+
+
+def test_info_and_csv_export(session, tmp_path, capsys):
+    bag, _, _ = session
+    assert cli(['bag', 'info', str(bag)]) == 0
+    out = capsys.readouterr().out
+    assert '/falcon/measured_cp' in out and 'geometry_msgs/msg/PoseStamped' in out
+    assert 'Duration' in out and 'rate Hz' in out
+    assert cli(['bag', 'export', str(bag), '--csv', str(tmp_path / 'csv')]) == 0
+    counts = {t.topic: t.count for t in bag_info(bag).topics}
+    with (tmp_path / 'csv' / 'contact.csv').open() as fh:
+        rows = list(csv.DictReader(fh))
+    assert len(rows) == counts['/contact']
+    assert {'t_recv', 'header.stamp', 'contact_x', 'depth', 'in_contact'} <= set(rows[0])
+    with (tmp_path / 'csv' / 'falcon__servo_cf.csv').open() as fh:
+        rows = list(csv.DictReader(fh))
+    assert len(rows) == counts['/falcon/servo_cf'] and 'wrench.force.x' in rows[0]
+    assert max(abs(float(r['wrench.force.x'])) for r in rows) > 0.5
+
+
+def _pose_bytes(i: int) -> bytes:
+    ts = typestore()
+    P = ts.types['geometry_msgs/msg/PoseStamped']
+    H, T = ts.types['std_msgs/msg/Header'], ts.types['builtin_interfaces/msg/Time']
+    Po, Pt, Q = (ts.types[f'geometry_msgs/msg/{n}'] for n in ('Pose', 'Point', 'Quaternion'))
+    return ts.serialize_cdr(P(H(T(i, 0), 'tissue'), Po(Pt(float(i), 0.0, 0.0),
+                                                       Q(0.0, 0.0, 0.0, 1.0))), P.__msgtype__)
+
+
+def _small_bag(path: Path, n: int = 50, topic='/falcon/measured_cp',
+               msgtype='geometry_msgs/msg/PoseStamped') -> Path:
+    with BagWriter(path) as w:
+        w.add_topic(topic, msgtype)
+        for i in range(n):
+            w.write(topic, _pose_bytes(i), 1_000_000_000 + i * 1_000_000)
+    return path
+
+
+def _error(capsys, *argv) -> str:
+    assert cli(list(argv)) == 1
+    err = capsys.readouterr().err
+    assert err.count('\n') == 1, err  # one line, no traceback
+    return err
+
+
+def test_bad_bags_give_clear_errors(tmp_path, capsys):
+    # not there / not a bag
+    assert 'no such file or directory' in _error(capsys, 'bag', 'info', str(tmp_path / 'nope'))
+    (tmp_path / 'file.txt').write_text('hello')
+    e = _error(capsys, 'bag', 'info', str(tmp_path / 'file.txt'))
+    assert 'file.txt: not a bag' in e and 'metadata.yaml' in e
+    (tmp_path / 'empty').mkdir()
+    assert 'empty: not a bag: no metadata.yaml' in _error(capsys, 'bag', 'info',
+                                                          str(tmp_path / 'empty'))
+    # missing metadata: points at recover
+    b = _small_bag(tmp_path / 'nometa')
+    (b / 'metadata.yaml').unlink()
+    e = _error(capsys, 'bag', 'info', str(b))
+    assert 'nometa: metadata.yaml is missing' in e and 'bag recover' in e
+    # truncated MCAP with its metadata
+    b = _small_bag(tmp_path / 'trunc')
+    data = (b / 'trunc.mcap').read_bytes()
+    (b / 'trunc.mcap').write_bytes(data[:len(data) - 40])
+    e = _error(capsys, 'bag', 'info', str(b))
+    assert 'trunc' in e and 'bag recover' in e
+    # a .mcap that is not MCAP
+    (tmp_path / 'junk').mkdir()
+    (tmp_path / 'junk' / 'junk.mcap').write_bytes(b'not an mcap file at all' * 10)
+    assert 'not an MCAP file' in _error(capsys, 'bag', 'recover', str(tmp_path / 'junk'))
+    # wrong topic type for re-simulation
+    w = _small_bag(tmp_path / 'joy', topic='/falcon/measured_cp', msgtype='sensor_msgs/msg/Joy')
+    e = _error(capsys, 'bag', 'resim', str(w))
+    assert 'joy: topic /falcon/measured_cp has type sensor_msgs/msg/Joy, expected ' \
+           'geometry_msgs/msg/PoseStamped' in e
+    # unknown type without a definition
+    from rosbags.rosbag2 import StoragePlugin, Writer
+    u = tmp_path / 'unknown'
+    with Writer(u, version=9, storage_plugin=StoragePlugin.MCAP) as wr:
+        c = wr.add_connection('/x', 'my_pkg/msg/Mystery', msgdef='', rihs01='RIHS01_' + '0' * 64)
+        wr.write(c, 1, b'\x00\x01\x00\x00')
+    with pytest.raises(BagError, match=r"unknown.*topic /x: unknown message type 'my_pkg/msg/"
+                                       r"Mystery'"):
+        list(read_messages(u))
+    # writer side: existing path, unknown type
+    with pytest.raises(BagError, match='exists already'):
+        BagWriter(b)
+    with BagWriter(tmp_path / 'new') as bw, pytest.raises(BagError, match='unknown message type'):
+        bw.add_topic('/y', 'my_pkg/msg/Mystery')
+
+
+def test_recorder_killed_with_sigkill_is_recovered(tmp_path):
+    """A recorder process is SIGKILLed while a 1 kHz publisher runs: recover keeps >= 95 %."""
+    domain = next(_domains)
+    bag = tmp_path / 'killed'
+    log = (tmp_path / 'recorder.log').open('w')
+    proc = subprocess.Popen([str(BIN / 'recorder'), '--ros-args', '-p', f'output:={bag}',
+                             '-p', 'topics:=[falcon/measured_cp]', '-p', 'flush_period:=0.2'],
+                            env=node_env(domain), cwd=ROOT, stdout=log, stderr=subprocess.STDOUT)
+    from rclpy.context import Context
+    ctx = Context()
+    rclpy.init(context=ctx, domain_id=domain)
+    node = rclpy.create_node('killer', context=ctx)
+    pub = node.create_publisher(PoseStamped, '/falcon/measured_cp', QoSProfile(
+        depth=1000, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE))
+    try:
+        end = time.monotonic() + 60
+        while pub.get_subscription_count() == 0:
+            assert time.monotonic() < end and proc.poll() is None, \
+                (tmp_path / 'recorder.log').read_text()
+            time.sleep(0.05)
+        time.sleep(0.5)  # let the match complete on the recorder's side too
+        msg = PoseStamped()
+        msg.header.frame_id = 'tissue'
+        published = 0
+        t0 = time.monotonic()
+        while time.monotonic() - t0 < 6.0:
+            msg.pose.position.x = float(published)
+            pub.publish(msg)
+            published += 1
+            time.sleep(0.001)
+        proc.send_signal(signal.SIGKILL)  # while "publishing": nothing closes the bag
+        proc.wait(10)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+        node.destroy_node()
+        rclpy.try_shutdown(context=ctx)
+    assert not (bag / 'metadata.yaml').exists()
+    with pytest.raises(BagError, match='metadata.yaml is missing'):
+        bag_info(bag)
+    report = recover_bag(bag)
+    got = [m.pose.position.x for _, _, _, m in read_messages(bag)]
+    assert report.messages == len(got) == bag_info(bag).message_count
+    assert len(got) >= 0.95 * published, (len(got), published)
+    assert got == sorted(got) and len(set(got)) == len(got)
+    assert (bag / 'killed.mcap.damaged').is_file()
+    assert recover_bag(bag).already_valid
+
+
+def test_record_command_closes_bag_on_sigint(tmp_path):
+    """``haptic-anfis bag record`` stopped by Ctrl-C writes a complete bag (metadata included)."""
+    domain = next(_domains)
+    bag = tmp_path / 'rec'
+    proc = subprocess.Popen([str(BIN / 'haptic-anfis'), 'bag', 'record', '-o', str(bag),
+                             'falcon/measured_cp'], env=node_env(domain), cwd=ROOT,
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    from rclpy.context import Context
+    ctx = Context()
+    rclpy.init(context=ctx, domain_id=domain)
+    node = rclpy.create_node('pub', context=ctx)
+    pub = node.create_publisher(PoseStamped, '/falcon/measured_cp', QoSProfile(
+        depth=1000, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE))
+    try:
+        end = time.monotonic() + 60
+        while pub.get_subscription_count() == 0:
+            assert time.monotonic() < end and proc.poll() is None
+            time.sleep(0.05)
+        time.sleep(0.5)
+        msg = PoseStamped()
+        msg.header.frame_id = 'tissue'
+        for i in range(300):
+            msg.pose.position.x = float(i)
+            pub.publish(msg)
+            time.sleep(0.001)
+        time.sleep(1.0)
+        proc.send_signal(signal.SIGINT)
+        out, _ = proc.communicate(timeout=30)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+        node.destroy_node()
+        rclpy.try_shutdown(context=ctx)
+    assert proc.returncode == 0, out
+    assert (bag / 'metadata.yaml').is_file(), out
+    assert bag_info(bag).message_count == 300, out
