@@ -255,7 +255,7 @@ def closest(tri, box, node, px, py, pz, hint, cx, cy, cz, r2):
     top = 1
     while top > 0:
         top -= 1
-        i = st[top]
+        i = st[top]  # count: node
         if sd[top] > best:
             continue
         if node[i, 1] < 0:  # leaf
@@ -263,7 +263,7 @@ def closest(tri, box, node, px, py, pz, hint, cx, cy, cz, r2):
             for k in range(s, s - node[i, 1]):
                 if k == hint:
                     continue
-                qx, qy, qz, u, v, w, reg = closest_on_triangle(tri, k, px, py, pz)
+                qx, qy, qz, u, v, w, reg = closest_on_triangle(tri, k, px, py, pz)  # count: tri
                 d2 = (qx - px) ** 2 + (qy - py) ** 2 + (qz - pz) ** 2
                 if d2 < best:
                     if restricted:
@@ -332,7 +332,7 @@ def pseudo_normal(tri, box, node, px, py, pz, row, qx, qy, qz, region, tol):
     top = 1
     while top > 0:
         top -= 1
-        i = st[top]
+        i = st[top]  # count: node
         if _box_d2(box, i, px, py, pz) > r2:
             continue
         if node[i, 1] >= 0:
@@ -344,7 +344,7 @@ def pseudo_normal(tri, box, node, px, py, pz, row, qx, qy, qz, region, tol):
         for k in range(s, s - node[i, 1]):
             if tri[k, 12] != 0.0:
                 continue
-            rx, ry, rz, u, v, w, reg = closest_on_triangle(tri, k, px, py, pz)
+            rx, ry, rz, u, v, w, reg = closest_on_triangle(tri, k, px, py, pz)  # count: tri
             if (rx - qx) ** 2 + (ry - qy) ** 2 + (rz - qz) ** 2 > tol2:
                 continue
             if reg == FACE:  # q is interior to a face: its normal decides
@@ -383,7 +383,7 @@ def raycast(tri, box, node, ox, oy, oz, dx, dy, dz, tmin, tmax, facing, eps):
     top = 1
     while top > 0:
         top -= 1
-        i = st[top]
+        i = st[top]  # count: node
         # Slab test; an axis the ray is parallel to only checks the origin lies in the slab.
         t0, t1 = tmin, bt
         for j in range(3):
@@ -410,7 +410,7 @@ def raycast(tri, box, node, ox, oy, oz, dx, dy, dz, tmin, tmax, facing, eps):
         for k in range(s, s - node[i, 1]):
             if tri[k, 12] != 0.0:
                 continue
-            ndot = tri[k, 9] * dx + tri[k, 10] * dy + tri[k, 11] * dz
+            ndot = tri[k, 9] * dx + tri[k, 10] * dy + tri[k, 11] * dz  # count: tri
             if (facing > 0 and ndot <= 0.0) or (facing < 0 and ndot >= 0.0):
                 continue
             e1x, e1y, e1z = tri[k, 3] - tri[k, 0], tri[k, 4] - tri[k, 1], tri[k, 5] - tri[k, 2]
