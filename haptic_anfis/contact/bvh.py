@@ -8,7 +8,11 @@ Tables (built by :func:`build_tables`, triangles stored in tree-leaf order):
 
 - ``tri`` (F, 16) float64: a(0:3) b(3:6) c(6:9) corners, unit normal n(9:12) (zeros if
   degenerate), degenerate flag (12), corner angles at a, b, c (13:16) [rad].
-- ``box`` (N, 6) float64: node bounds (min xyz, max xyz).
+- ``box`` (N, 11) float64: node bounds (min xyz 0:3, max xyz 3:6) and a slab along the node's
+  mean normal: unit n (6:9), min and max of n . x over its triangles (9, 10). The slab is what
+  prunes on a curved shell: an AABB of a tilted patch is as thick as the patch is wide, the slab
+  only as thick as the patch is curved, so a probe deep under the surface no longer sees the
+  boxes of every patch around its closest point as "maybe as close".
 - ``node`` (N, 2) int64: internal node -> (left, right); leaf -> (first, -count) into ``tri``.
 
 Region codes of a closest point on a triangle: FACE 0, vertex A/B/C 1/2/3, edge AB/BC/CA 4/5/6.
@@ -127,7 +131,52 @@ def build_tables(vertices: np.ndarray, faces: np.ndarray, degenerate_rtol: float
     lo = np.minimum(np.minimum(a, b), c) - pad
     hi = np.maximum(np.maximum(a, b), c) + pad
     box, node, order = _build_tree(np.ascontiguousarray(lo), np.ascontiguousarray(hi), LEAF_SIZE)
-    return np.ascontiguousarray(tri[order]), box, node, order
+    tri = np.ascontiguousarray(tri[order])
+    box = _add_slabs(tri, np.ascontiguousarray(cr[order]), box, node, pad)
+    return tri, box, node, order
+
+
+@_jit
+def _add_slabs(tri, cr, box, node, pad):
+    """Append the slab columns (6:11) to ``box`` (N, 6): normal = the node's area-weighted mean
+    face normal (``cr`` (F, 3): twice-area normals in tree order), extent over its corners."""
+    N = box.shape[0]
+    F = tri.shape[0]
+    out = np.empty((N, 11))
+    out[:, 0:6] = box
+    # Row ranges: a leaf is (first, -count); an internal node covers its children's ranges, which
+    # are adjacent, and children have larger indices than their parent.
+    start = np.empty(N, np.int64)
+    stop = np.empty(N, np.int64)
+    for i in range(N - 1, -1, -1):
+        if node[i, 1] < 0:
+            start[i], stop[i] = node[i, 0], node[i, 0] - node[i, 1]
+        else:
+            start[i], stop[i] = start[node[i, 0]], stop[node[i, 1]]
+    csum = np.zeros((F + 1, 3))
+    for k in range(F):
+        for j in range(3):
+            csum[k + 1, j] = csum[k, j] + cr[k, j]
+    for i in range(N):
+        s, e = start[i], stop[i]
+        nx = csum[e, 0] - csum[s, 0]
+        ny = csum[e, 1] - csum[s, 1]
+        nz = csum[e, 2] - csum[s, 2]
+        nn = math.sqrt(nx * nx + ny * ny + nz * nz)
+        if nn > 0.0:
+            nx, ny, nz = nx / nn, ny / nn, nz / nn
+        else:  # normals cancel (or all degenerate): any unit vector gives a valid, loose slab
+            nx, ny, nz = 1.0, 0.0, 0.0
+        hmin, hmax = np.inf, -np.inf
+        for k in range(s, e):
+            for c in range(3):
+                h = nx * tri[k, 3 * c] + ny * tri[k, 3 * c + 1] + nz * tri[k, 3 * c + 2]
+                hmin = min(hmin, h)
+                hmax = max(hmax, h)
+        out[i, 6], out[i, 7], out[i, 8] = nx, ny, nz
+        # The pad (1e-9 of the mesh size, as for the boxes) covers the rounding of n . x.
+        out[i, 9], out[i, 10] = hmin - pad, hmax + pad
+    return out
 
 
 # ---------------------------------------------------------------------------------------------
@@ -215,16 +264,76 @@ def closest_on_triangle(tri, k, px, py, pz):
 
 @_jit
 def _box_d2(box, i, px, py, pz):
-    """Squared distance from p to node box ``i`` (0 inside)."""
+    """Lower bound of the squared distance from p to the triangles of node ``i`` (0 inside): the
+    larger of the squared distances to its AABB and to its slab (both hold all its triangles)."""
     dx = max(box[i, 0] - px, 0.0, px - box[i, 3])
     dy = max(box[i, 1] - py, 0.0, py - box[i, 4])
     dz = max(box[i, 2] - pz, 0.0, pz - box[i, 5])
-    return dx * dx + dy * dy + dz * dz
+    h = box[i, 6] * px + box[i, 7] * py + box[i, 8] * pz
+    dh = max(box[i, 9] - h, 0.0, h - box[i, 10])
+    return max(dx * dx + dy * dy + dz * dz, dh * dh)
 
 
 # ---------------------------------------------------------------------------------------------
 # Queries
 # ---------------------------------------------------------------------------------------------
+
+_HEAP = 256  # best-first queue capacity; a full queue hands the extra subtree to a depth-first scan
+
+
+@_jit
+def _child_d2(box, c, px, py, pz, cx, cy, cz, r2):
+    """Bound of node ``c`` for :func:`closest`: inf when it lies outside the ball (c, sqrt(r2))."""
+    if r2 < np.inf and _box_d2(box, c, cx, cy, cz) > r2:
+        return np.inf
+    return _box_d2(box, c, px, py, pz)
+
+
+@_jit
+def _scan_leaf(tri, node, i, px, py, pz, hint, cx, cy, cz, r2, res):
+    """Test the rows of leaf ``i`` (all but ``hint``) against the best so far in ``res``."""
+    s = node[i, 0]
+    for k in range(s, s - node[i, 1]):
+        if k == hint:
+            continue
+        qx, qy, qz, u, v, w, reg = closest_on_triangle(tri, k, px, py, pz)  # count: tri
+        d2 = (qx - px) ** 2 + (qy - py) ** 2 + (qz - pz) ** 2
+        if d2 < res[0]:
+            if r2 < np.inf:
+                r = closest_on_triangle(tri, k, cx, cy, cz)
+                if (r[0] - cx) ** 2 + (r[1] - cy) ** 2 + (r[2] - cz) ** 2 > r2:
+                    continue
+            res[0], res[1], res[2], res[3], res[4] = d2, k, qx, qy, qz
+            res[5], res[6], res[7], res[8] = u, v, w, reg
+
+
+@_jit
+def _scan_depth_first(tri, box, node, root, droot, px, py, pz, hint, cx, cy, cz, r2, res):
+    """Depth-first, near child first, over the subtree ``root`` (bound ``droot``)."""
+    st = np.empty(_STACK, np.int64)
+    sd = np.empty(_STACK)
+    st[0], sd[0] = root, droot
+    top = 1
+    while top > 0:
+        top -= 1
+        i = st[top]  # count: node
+        if sd[top] > res[0]:
+            continue
+        if node[i, 1] < 0:
+            _scan_leaf(tri, node, i, px, py, pz, hint, cx, cy, cz, r2, res)
+            continue
+        left, right = node[i, 0], node[i, 1]
+        dl = _child_d2(box, left, px, py, pz, cx, cy, cz, r2)
+        dr = _child_d2(box, right, px, py, pz, cx, cy, cz, r2)
+        if dl < dr:  # push the far child first so the near one is popped first
+            left, right, dl, dr = right, left, dr, dl
+        if dl <= res[0]:
+            st[top], sd[top] = left, dl
+            top += 1
+        if dr <= res[0]:
+            st[top], sd[top] = right, dr
+            top += 1
+
 
 @_jit
 def closest(tri, box, node, px, py, pz, hint, cx, cy, cz, r2):
@@ -234,80 +343,70 @@ def closest(tri, box, node, px, py, pz, hint, cx, cy, cz, r2):
     (temporal coherence) tightens the bound so that most of the tree is pruned. Ties keep the first
     row found; the point is the same.
 
+    Best-first: nodes come off a min-queue in order of their distance bound, so the search stops
+    at the first node whose bound exceeds the best distance found, having opened only nodes that
+    could hold something nearer than the answer (a depth-first scan opens every node nearer than
+    the best found *so far*, which on a curved shell seen from inside is several times more).
+
     Returns ``(row, d2, qx, qy, qz, u, v, w, region)``; row = -1 if nothing lies within the ball.
     """
-    restricted = r2 < np.inf
-    best = np.inf
-    brow, bqx, bqy, bqz, bu, bv, bw, breg = -1, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0
+    res = np.empty(9)  # best d2, row, q (3), barycentrics (3), region
+    res[0], res[1], res[2], res[3], res[4] = np.inf, -1.0, 0.0, 0.0, 0.0
+    res[5], res[6], res[7], res[8] = 0.0, 0.0, 0.0, 0.0
     if hint >= 0:
         ok = True
-        if restricted:
+        if r2 < np.inf:
             r = closest_on_triangle(tri, hint, cx, cy, cz)
             ok = (r[0] - cx) ** 2 + (r[1] - cy) ** 2 + (r[2] - cz) ** 2 <= r2
         if ok:
             qx, qy, qz, u, v, w, reg = closest_on_triangle(tri, hint, px, py, pz)
-            best = (qx - px) ** 2 + (qy - py) ** 2 + (qz - pz) ** 2
-            brow, bqx, bqy, bqz, bu, bv, bw, breg = hint, qx, qy, qz, u, v, w, reg
-    st = np.empty(_STACK, np.int64)
-    sd = np.empty(_STACK)
-    st[0] = 0
-    sd[0] = _box_d2(box, 0, px, py, pz)
-    top = 1
-    while top > 0:
-        top -= 1
-        i = st[top]  # count: node
-        if sd[top] > best:
+            res[0] = (qx - px) ** 2 + (qy - py) ** 2 + (qz - pz) ** 2
+            res[1], res[2], res[3], res[4] = hint, qx, qy, qz
+            res[5], res[6], res[7], res[8] = u, v, w, reg
+    # Binary min-heap of (bound, node).
+    hd = np.empty(_HEAP)
+    hn = np.empty(_HEAP, np.int64)
+    hd[0], hn[0] = _child_d2(box, 0, px, py, pz, cx, cy, cz, r2), 0
+    n = 1
+    while n > 0:
+        d, i = hd[0], hn[0]  # count: node
+        if d > res[0]:
+            break  # every node left is at least this far
+        n -= 1  # pop: move the last entry to the root and sift it down
+        ld, ln = hd[n], hn[n]
+        j = 0
+        while True:
+            c = 2 * j + 1
+            if c >= n:
+                break
+            if c + 1 < n and hd[c + 1] < hd[c]:
+                c += 1
+            if hd[c] >= ld:
+                break
+            hd[j], hn[j] = hd[c], hn[c]
+            j = c
+        hd[j], hn[j] = ld, ln
+        if node[i, 1] < 0:
+            _scan_leaf(tri, node, i, px, py, pz, hint, cx, cy, cz, r2, res)
             continue
-        if node[i, 1] < 0:  # leaf
-            s = node[i, 0]
-            for k in range(s, s - node[i, 1]):
-                if k == hint:
-                    continue
-                qx, qy, qz, u, v, w, reg = closest_on_triangle(tri, k, px, py, pz)  # count: tri
-                d2 = (qx - px) ** 2 + (qy - py) ** 2 + (qz - pz) ** 2
-                if d2 < best:
-                    if restricted:
-                        r = closest_on_triangle(tri, k, cx, cy, cz)
-                        if (r[0] - cx) ** 2 + (r[1] - cy) ** 2 + (r[2] - cz) ** 2 > r2:
-                            continue
-                    best = d2
-                    brow, bqx, bqy, bqz, bu, bv, bw, breg = k, qx, qy, qz, u, v, w, reg
-            continue
-        left, right = node[i, 0], node[i, 1]
-        if restricted and _box_d2(box, left, cx, cy, cz) > r2:
-            dl = np.inf
-        else:
-            dl = _box_d2(box, left, px, py, pz)
-        if restricted and _box_d2(box, right, cx, cy, cz) > r2:
-            dr = np.inf
-        else:
-            dr = _box_d2(box, right, px, py, pz)
-        if dl == dr:  # usually both 0 (p inside both boxes): take the nearer centre first
-            cl = ((box[left, 0] + box[left, 3] - 2.0 * px) ** 2
-                  + (box[left, 1] + box[left, 4] - 2.0 * py) ** 2
-                  + (box[left, 2] + box[left, 5] - 2.0 * pz) ** 2)
-            cr = ((box[right, 0] + box[right, 3] - 2.0 * px) ** 2
-                  + (box[right, 1] + box[right, 4] - 2.0 * py) ** 2
-                  + (box[right, 2] + box[right, 5] - 2.0 * pz) ** 2)
-            near_left = cl <= cr
-        else:
-            near_left = dl < dr
-        # Push the far child first so the near one is popped (and tightens `best`) first.
-        if near_left:
-            if dr <= best:
-                st[top], sd[top] = right, dr
-                top += 1
-            if dl <= best:
-                st[top], sd[top] = left, dl
-                top += 1
-        else:
-            if dl <= best:
-                st[top], sd[top] = left, dl
-                top += 1
-            if dr <= best:
-                st[top], sd[top] = right, dr
-                top += 1
-    return brow, best, bqx, bqy, bqz, bu, bv, bw, breg
+        for c in (node[i, 0], node[i, 1]):
+            dc = _child_d2(box, c, px, py, pz, cx, cy, cz, r2)
+            if dc > res[0]:
+                continue
+            if n == _HEAP:  # full (not seen on real meshes): finish this subtree depth-first
+                _scan_depth_first(tri, box, node, c, dc, px, py, pz, hint, cx, cy, cz, r2, res)
+                continue
+            j = n  # push: sift up
+            n += 1
+            while j > 0:
+                up = (j - 1) // 2
+                if hd[up] <= dc:
+                    break
+                hd[j], hn[j] = hd[up], hn[up]
+                j = up
+            hd[j], hn[j] = dc, c
+    return (np.int64(res[1]), res[0], res[2], res[3], res[4], res[5], res[6], res[7],
+            np.int64(res[8]))
 
 
 @_jit
