@@ -463,47 +463,73 @@ def pseudo_normal(tri, box, node, px, py, pz, row, qx, qy, qz, region, tol):
 
 
 @_jit
+def _ray_enter(box, i, ox, oy, oz, dx, dy, dz, ix, iy, iz, tmin, tmax):
+    """Entry parameter of the ray o + t d, t in [tmin, tmax], into node ``i`` (its AABB and its
+    slab); inf when it misses. ``i*`` = 1 / d* (inf on an axis the ray is parallel to)."""
+    t0, t1 = tmin, tmax
+    for j in range(3):
+        oj = ox if j == 0 else (oy if j == 1 else oz)
+        ij = ix if j == 0 else (iy if j == 1 else iz)
+        if ij == np.inf or ij == -np.inf:  # parallel: the origin must lie in the slab
+            if oj < box[i, j] or oj > box[i, 3 + j]:
+                return np.inf
+            continue
+        ta = (box[i, j] - oj) * ij
+        tb = (box[i, 3 + j] - oj) * ij
+        if ta > tb:
+            ta, tb = tb, ta
+        t0 = max(t0, ta)
+        t1 = min(t1, tb)
+    s0 = box[i, 6] * ox + box[i, 7] * oy + box[i, 8] * oz
+    sd = box[i, 6] * dx + box[i, 7] * dy + box[i, 8] * dz
+    if sd != 0.0:
+        ta = (box[i, 9] - s0) / sd
+        tb = (box[i, 10] - s0) / sd
+        if ta > tb:
+            ta, tb = tb, ta
+        t0 = max(t0, ta)
+        t1 = min(t1, tb)
+    elif s0 < box[i, 9] or s0 > box[i, 10]:
+        return np.inf
+    # Boxes and slabs are padded (build_tables), so grazing rays are not lost here.
+    return t0 if t0 <= t1 else np.inf
+
+
+@_jit
 def raycast(tri, box, node, ox, oy, oz, dx, dy, dz, tmin, tmax, facing, eps):
     """Nearest crossing of the ray o + t d, tmin <= t <= tmax, with a non-degenerate face.
 
     ``facing``: 0 any face; +1 only faces the ray leaves through (n . d > 0); -1 only faces it
     enters through (n . d < 0). ``eps`` widens the barycentric bounds so a ray exactly through an
-    edge or vertex still hits (Moller & Trumbore 1997 test).
+    edge or vertex still hits (Moller & Trumbore 1997 test). Front to back: the child the ray
+    enters first is opened first, and a node entered beyond the nearest crossing so far is skipped.
 
     Returns ``(row, t, u, v, w)``; row = -1 when there is no crossing.
     """
-    inv = np.empty(3)
-    inv[0], inv[1], inv[2] = 1.0 / dx, 1.0 / dy, 1.0 / dz
-    o = np.empty(3)
-    o[0], o[1], o[2] = ox, oy, oz
+    ix, iy, iz = 1.0 / dx, 1.0 / dy, 1.0 / dz
     brow, bt, bu, bv, bw = -1, tmax, 0.0, 0.0, 0.0
     st = np.empty(_STACK, np.int64)
+    sd = np.empty(_STACK)
     st[0] = 0
-    top = 1
+    sd[0] = _ray_enter(box, 0, ox, oy, oz, dx, dy, dz, ix, iy, iz, tmin, bt)
+    top = 1 if sd[0] < np.inf else 0
     while top > 0:
         top -= 1
         i = st[top]  # count: node
-        # Slab test; an axis the ray is parallel to only checks the origin lies in the slab.
-        t0, t1 = tmin, bt
-        for j in range(3):
-            if inv[j] == np.inf or inv[j] == -np.inf:
-                if o[j] < box[i, j] or o[j] > box[i, 3 + j]:
-                    t0 = 1.0
-                    t1 = 0.0
-                    break
-                continue
-            ta = (box[i, j] - o[j]) * inv[j]
-            tb = (box[i, 3 + j] - o[j]) * inv[j]
-            if ta > tb:
-                ta, tb = tb, ta
-            t0 = max(t0, ta)
-            t1 = min(t1, tb)
-        if t0 > t1:  # boxes are padded (build_tables), so grazing rays are not lost here
+        if sd[top] > bt:
             continue
         if node[i, 1] >= 0:
-            st[top] = node[i, 0]
-            st[top + 1] = node[i, 1]
-            top += 2
+            a, b = node[i, 0], node[i, 1]
+            ta = _ray_enter(box, a, ox, oy, oz, dx, dy, dz, ix, iy, iz, tmin, bt)
+            tb = _ray_enter(box, b, ox, oy, oz, dx, dy, dz, ix, iy, iz, tmin, bt)
+            if ta < tb:  # push the far child first so the near one is popped first
+                a, b, ta, tb = b, a, tb, ta
+            if ta < np.inf:
+                st[top], sd[top] = a, ta
+                top += 1
+            if tb < np.inf:
+                st[top], sd[top] = b, tb
+                top += 1
             continue
         s = node[i, 0]
         for k in range(s, s - node[i, 1]):
