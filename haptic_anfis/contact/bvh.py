@@ -711,3 +711,28 @@ def query_batch(tri, box, node, ids, par, P, out):
     for i in range(P.shape[0]):
         _query_point(tri, box, node, ids, par, P[i, 0], P[i, 1], P[i, 2], hint, out[i])
         hint = np.int64(out[i, OUT_ROW])
+
+
+@_jit
+def follow_packed(buf, px, py, pz, dx, dy, dz, max_step, out):
+    """The tracker's proxy step in one call (see :class:`haptic_anfis.contact.ContactTracker`).
+
+    From the probe p walk back along -d (from ``-max_step``) to the first face the ray leaves
+    through (n . d < 0 seen along d): the proxy e = p - t d; then along +d from e to the next
+    crossing (the tissue thickness under the proxy). Writes e (0:3) and that face's normal (3:6)
+    into ``out`` and returns ``(face, t, thickness)``; face = -1 when there is no such crossing
+    (then only t is meaningful), thickness = inf when nothing lies behind the proxy.
+    """
+    tri, box, node, ids, par = unpack_tables(buf)
+    tol, eps = par[PAR_TOL], par[PAR_EPS]
+    row, t, u, v, w = raycast(tri, box, node, px, py, pz, -dx, -dy, -dz, -max_step, np.inf, 1,
+                              eps)
+    if row < 0:
+        return np.int64(-1), t, np.inf
+    ex, ey, ez = px - t * dx, py - t * dy, pz - t * dz
+    out[0], out[1], out[2] = ex, ey, ez
+    out[3], out[4], out[5] = tri[row, 9], tri[row, 10], tri[row, 11]
+    if t <= 0.0:
+        return ids[0, row], t, np.inf
+    trow, tt, u, v, w = raycast(tri, box, node, ex, ey, ez, dx, dy, dz, tol, np.inf, 0, eps)
+    return ids[0, row], t, (tt if trow >= 0 else np.inf)
