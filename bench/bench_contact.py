@@ -4,6 +4,8 @@ Meshes: closed ellipsoid domes (the tissue shape) of ~5k, 20k and 80k faces. Pro
 points within 20 mm of the skin (inside and outside), random over the palpable disc.
 Single-query latency is measured per call from Python (what a 1 kHz node pays), batch throughput
 with ``query_many``. Run: ``.venv/bin/python bench/bench_contact.py [--quick]``.
+``--counts`` instead prints the work per call (tree nodes opened, triangle tests; see
+:func:`counting_kernels`), which unlike the timings does not depend on the machine's load.
 """
 from __future__ import annotations
 
@@ -19,7 +21,7 @@ import numpy as np
 import trimesh
 
 from haptic_anfis.contact import ContactDetector, ContactTracker, bvh, ellipsoid_dome
-from haptic_anfis.contact import detector as detector_module
+from haptic_anfis.contact import detector as detector_module, proxy as proxy_module
 from haptic_anfis.synthetic_data import surface_x
 
 try:  # trimesh's proximity queries need rtree, which haptic_anfis itself does not
@@ -53,6 +55,13 @@ def time_each(fn, points) -> np.ndarray:
     return out
 
 
+def _float64_args(fn):
+    """Python floats in as numpy float64 (numba's float semantics: 1 / 0.0 is inf, not an error)."""
+    def call(*args):
+        return fn(*(np.float64(a) if type(a) is float else a for a in args))
+    return call
+
+
 @contextlib.contextmanager
 def counting_kernels(counts: Counter):
     """Run the bvh kernels as plain Python (their ``py_func``s) and count work while inside.
@@ -68,7 +77,8 @@ def counting_kernels(counts: Counter):
     for name, obj in vars(bvh).items():
         if isinstance(obj, numba.core.registry.CPUDispatcher):
             f = obj.py_func
-            ns[name] = types.FunctionType(f.__code__, ns, name, f.__defaults__, f.__closure__)
+            ns[name] = _float64_args(
+                types.FunctionType(f.__code__, ns, name, f.__defaults__, f.__closure__))
             lines, first = __import__('inspect').getsourcelines(f)
             for i, line in enumerate(lines):
                 if '# count:' in line:
@@ -85,15 +95,18 @@ def counting_kernels(counts: Counter):
     def tracer(frame, event, arg):
         return local if frame.f_code in marks else None
 
-    old_bvh = detector_module.bvh
-    detector_module.bvh = types.SimpleNamespace(**ns)
+    users = [m for m in (detector_module, proxy_module) if hasattr(m, 'bvh')]
+    mirror = types.SimpleNamespace(**ns)
+    for m in users:
+        m.bvh = mirror
     sys.settrace(tracer)
     try:
         with np.errstate(all='ignore'):  # numba's error_model='numpy': 1/0 -> inf
             yield
     finally:
         sys.settrace(None)
-        detector_module.bvh = old_bvh
+        for m in users:
+            m.bvh = bvh
 
 
 def work_counts(det: ContactDetector, P: np.ndarray, traj: np.ndarray) -> dict:

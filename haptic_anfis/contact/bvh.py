@@ -1,8 +1,15 @@
 """Numba kernels: an AABB tree over triangles, exact closest point, pseudo-normal sign, ray casts.
 
-Everything here works on plain arrays so that one compiled call answers one query (numba dispatch
-costs ~0.1 µs per argument, so the tables are packed). All kernels are ``cache=True``: the first
-compile takes seconds, later processes load it from ``__pycache__``.
+Everything here works on plain arrays so that one compiled call answers one query. Numba's
+dispatch types every argument on every call (~50 ns per array), so the per-sample entry points
+:func:`query_packed` and :func:`follow_packed` take all tables as one buffer (:func:`pack_tables`).
+All kernels are ``cache=True``: the first compile takes seconds, later processes load it from
+``__pycache__``.
+
+Searches: :func:`closest` is best-first (a min-queue on a lower bound of the distance to a node:
+the larger of the distances to its AABB and to its slab), so it opens only nodes that could hold
+something nearer than the answer; :func:`raycast` is front to back. Lines marked ``# count:``
+are what ``bench/bench_contact.py --counts`` counts (work per query, independent of load).
 
 Tables (built by :func:`build_tables`, triangles stored in tree-leaf order):
 

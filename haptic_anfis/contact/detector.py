@@ -82,7 +82,8 @@ class ContactDetector:
 
     Build once (the AABB tree is built and the numba kernels compiled or loaded from cache at
     construction: 0.1-0.4 s for 80k faces once cached, ~10 s on the very first compile), then
-    query at haptic rate: ~6-11 µs p50 per call from Python on 5k-80k faces (bench_contact.py).
+    query at haptic rate: ~5-7 µs p50, ~8-12 µs p99 per call from Python on 5k-80k faces
+    (bench_contact.py, a shared 2-core machine).
 
     Args:
         mesh: ``trimesh.Trimesh`` in metres, tissue frame; faces are used as given (no merging).
