@@ -728,7 +728,8 @@ def follow_packed(buf, px, py, pz, dx, dy, dz, max_step, out):
     through (n . d < 0 seen along d): the proxy e = p - t d; then along +d from e to the next
     crossing (the tissue thickness under the proxy). Writes e (0:3) and that face's normal (3:6)
     into ``out`` and returns ``(face, t, thickness)``; face = -1 when there is no such crossing
-    (then only t is meaningful), thickness = inf when nothing lies behind the proxy.
+    (then only t is meaningful); thickness = inf when nothing lies behind the proxy within t
+    (a thickness beyond t would not change the tracker's depth).
     """
     tri, box, node, ids, par = unpack_tables(buf)
     tol, eps = par[PAR_TOL], par[PAR_EPS]
@@ -741,5 +742,8 @@ def follow_packed(buf, px, py, pz, dx, dy, dz, max_step, out):
     out[3], out[4], out[5] = tri[row, 9], tri[row, 10], tri[row, 11]
     if t <= 0.0:
         return ids[0, row], t, np.inf
-    trow, tt, u, v, w = raycast(tri, box, node, ex, ey, ez, dx, dy, dz, tol, np.inf, 0, eps)
+    # Only a thickness below the depth t changes the answer (depth = min(t, thickness, cap)), so
+    # the ray stops at the probe: the far side (the chest wall's long fan) is not searched while
+    # the probe is above it. Returning inf for "no crossing up to t" gives the same depth.
+    trow, tt, u, v, w = raycast(tri, box, node, ex, ey, ez, dx, dy, dz, tol, t, 0, eps)
     return ids[0, row], t, (tt if trow >= 0 else np.inf)
