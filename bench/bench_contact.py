@@ -4,17 +4,24 @@ Meshes: closed ellipsoid domes (the tissue shape) of ~5k, 20k and 80k faces. Pro
 points within 20 mm of the skin (inside and outside), random over the palpable disc.
 Single-query latency is measured per call from Python (what a 1 kHz node pays), batch throughput
 with ``query_many``. Run: ``.venv/bin/python bench/bench_contact.py [--quick]``.
+``--counts`` instead prints the work per call (tree nodes opened, triangle tests; see
+:func:`counting_kernels`), which unlike the timings does not depend on the machine's load.
 """
 from __future__ import annotations
 
 import argparse
+import contextlib
 import platform
+import sys
 import time
+import types
+from collections import Counter
 
 import numpy as np
 import trimesh
 
-from haptic_anfis.contact import ContactDetector, ContactTracker, ellipsoid_dome
+from haptic_anfis.contact import ContactDetector, ContactTracker, bvh, ellipsoid_dome
+from haptic_anfis.contact import detector as detector_module, proxy as proxy_module
 from haptic_anfis.synthetic_data import surface_x
 
 try:  # trimesh's proximity queries need rtree, which haptic_anfis itself does not
@@ -48,10 +55,98 @@ def time_each(fn, points) -> np.ndarray:
     return out
 
 
+def _float64_args(fn):
+    """Python floats in as numpy float64 (numba's float semantics: 1 / 0.0 is inf, not an error)."""
+    def call(*args):
+        return fn(*(np.float64(a) if type(a) is float else a for a in args))
+    return call
+
+
+@contextlib.contextmanager
+def counting_kernels(counts: Counter):
+    """Run the bvh kernels as plain Python (their ``py_func``s) and count work while inside.
+
+    Every kernel line marked ``# count: LABEL`` in bvh.py adds one to ``counts['FUNC.LABEL']``
+    each time it runs (line tracing), e.g. ``closest.node`` (tree nodes popped) and
+    ``closest.tri`` (closest-point-on-triangle tests). The counts depend on the algorithm only,
+    not on the machine's load.
+    """
+    import numba
+    ns = dict(vars(bvh))
+    marks = {}
+    for name, obj in vars(bvh).items():
+        if isinstance(obj, numba.core.registry.CPUDispatcher):
+            f = obj.py_func
+            ns[name] = _float64_args(
+                types.FunctionType(f.__code__, ns, name, f.__defaults__, f.__closure__))
+            lines, first = __import__('inspect').getsourcelines(f)
+            for i, line in enumerate(lines):
+                if '# count:' in line:
+                    label = line.split('# count:')[1].split()[0]
+                    marks.setdefault(f.__code__, {})[first + i] = f'{name}.{label}'
+
+    def local(frame, event, arg):
+        if event == 'line':
+            label = marks[frame.f_code].get(frame.f_lineno)
+            if label is not None:
+                counts[label] += 1
+        return local
+
+    def tracer(frame, event, arg):
+        return local if frame.f_code in marks else None
+
+    users = [m for m in (detector_module, proxy_module) if hasattr(m, 'bvh')]
+    mirror = types.SimpleNamespace(**ns)
+    for m in users:
+        m.bvh = mirror
+    sys.settrace(tracer)
+    try:
+        with np.errstate(all='ignore'):  # numba's error_model='numpy': 1/0 -> inf
+            yield
+    finally:
+        sys.settrace(None)
+        for m in users:
+            m.bvh = bvh
+
+
+def work_counts(det: ContactDetector, P: np.ndarray, traj: np.ndarray) -> dict:
+    """Mean work per det.query(p) over P and per tracker.update over traj (see counting_kernels)."""
+    q, t = Counter(), Counter()
+    with counting_kernels(q):
+        for p in P:
+            det.query(p)
+    tr = ContactTracker(det)
+    with counting_kernels(t):
+        for p in traj:
+            tr.update(p)
+    return dict(query={k: v / len(P) for k, v in sorted(q.items())},
+                tracker={k: v / len(traj) for k, v in sorted(t.items())})
+
+
+def trajectory(n: int) -> np.ndarray:
+    """Hand-like path in and out of the dome (coherent hints, ray casts, saturation)."""
+    s = np.linspace(0, 1, n)
+    return np.column_stack([0.05 - 0.06 * np.abs(np.sin(7 * s)), 0.04 * np.sin(3 * s),
+                            0.04 * np.cos(5 * s)])
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument('--quick', action='store_true', help='fewer points (smoke run)')
+    ap.add_argument('--counts', action='store_true',
+                    help='only count work per query/update (kernels run as Python, traced)')
     args = ap.parse_args()
+    if args.counts:
+        n = 100 if args.quick else 500
+        for name, (nt, nphi) in SIZES.items():
+            det = ContactDetector(ellipsoid_dome(RADII, n_theta=nt, n_phi=nphi, closed=True),
+                                  direction=(-1.0, 0.0, 0.0))
+            w = work_counts(det, probes(n, seed=1), trajectory(n))
+            for what, c in w.items():
+                print(f'{name:>4} {what:<8} ' + '  '.join(f'{k} {v:.1f}' for k, v in c.items()))
+        print(f'mean work per call over {n} probes / {n} trajectory samples '
+              '(node = tree nodes popped, tri = triangle tests)')
+        return
     n_single, n_batch, n_tm_single, n_tm_batch = (
         (300, 5000, 5, 50) if args.quick else (5000, 100_000, 30, 500))
     print(f'contact detection bench  ({platform.processor() or platform.machine()}, '
@@ -66,10 +161,7 @@ def main() -> None:
         for p in P[:200]:  # warm caches
             det.query(p)
         single = time_each(det.query, P)
-        # Hand-like trajectory through the tracker (coherent hints, ray cast, saturation).
-        s = np.linspace(0, 1, n_single)
-        traj = np.column_stack([0.05 - 0.06 * np.abs(np.sin(7 * s)), 0.04 * np.sin(3 * s),
-                                0.04 * np.cos(5 * s)])
+        traj = trajectory(n_single)
         tr = ContactTracker(det)
         tracker = time_each(tr.update, traj)
         PB = probes(n_batch, seed=2)

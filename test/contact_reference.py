@@ -135,3 +135,34 @@ def feature_points(mesh: trimesh.Trimesh, n: int, seed: int, offset: float) -> n
 
 def dome(n_theta=25, n_phi=100, closed=True):
     return ellipsoid_dome((0.045, 0.070, 0.070), n_theta=n_theta, n_phi=n_phi, closed=closed)
+
+
+def brute_raycast(V: np.ndarray, F: np.ndarray, o: np.ndarray, d: np.ndarray, tmin: float,
+                  tmax: float, facing: int = 0, eps: float = 1e-9):
+    """Nearest crossing t of o + t d (tmin <= t <= tmax) over ALL non-degenerate faces, or None.
+
+    Moller & Trumbore with barycentrics widened by ``eps``; ``facing`` as in ``bvh.raycast``.
+    """
+    A, B, C = V[F[:, 0]], V[F[:, 1]], V[F[:, 2]]
+    e1, e2 = B - A, C - A
+    n = np.cross(e1, e2)
+    nn = np.linalg.norm(n, axis=1)
+    longest2 = np.max([np.einsum('ij,ij->i', e, e) for e in (e1, C - B, A - C)], axis=0)
+    good = nn > DEG_RTOL * longest2
+    ndot = n @ d
+    if facing > 0:
+        good &= ndot > 0
+    elif facing < 0:
+        good &= ndot < 0
+    h = np.cross(d, e2)
+    det = np.einsum('ij,ij->i', e1, h)
+    good &= det != 0
+    f = 1.0 / np.where(det != 0, det, 1.0)
+    s = o - A
+    v = f * np.einsum('ij,ij->i', s, h)
+    q = np.cross(s, e1)
+    w = f * (q @ d)
+    t = f * np.einsum('ij,ij->i', e2, q)
+    hit = good & (v >= -eps) & (v <= 1 + eps) & (w >= -eps) & (v + w <= 1 + eps)
+    hit &= (t >= tmin) & (t <= tmax)
+    return float(np.min(t[hit])) if hit.any() else None

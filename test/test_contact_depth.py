@@ -160,3 +160,34 @@ def test_tracker_nan_resets_and_raises(det_axis):
         tr.update([np.nan, 0.0, 0.0])
     assert tr.state == 'free'
     assert tr.update([0.04, 0.0, 0.0]).state == 'rejected'  # no history: must come from outside
+
+
+@pytest.mark.parametrize('direction,max_depth', [(X_AXIS, None), (X_AXIS, 0.016), (None, None)])
+def test_tracker_proxy_step_matches_two_separate_ray_casts(dome_mesh, direction, max_depth):
+    # The tracker's one-kernel proxy step (ray back out, then the thickness ray stopped at the
+    # probe) gives exactly what two full ray casts give, including saturation.
+    det = ContactDetector(dome_mesh, direction=direction)
+    tr = ContactTracker(det, max_depth=max_depth)
+    s = np.linspace(0, 1, 600)
+    path = np.column_stack([0.05 - 0.07 * np.abs(np.sin(5 * s)), 0.03 * np.sin(3 * s),
+                            0.03 * np.cos(4 * s)])  # in, through the chest wall, out, again
+    cap = np.inf if max_depth is None else max_depth
+    n_contact = n_sat = 0
+    for p in path:
+        d = tr._dir
+        r = tr.update(p)
+        if not r.in_contact:
+            continue
+        n_contact += 1
+        n_sat += r.saturated
+        if d is None or r.direction is not d:  # contact started here: direction just set
+            d = r.direction
+        face, t = det._raycast(p, -d, -tr.max_step, np.inf, +1)
+        proxy = p - t * d
+        thick = det._raycast(proxy, d, det._tol, np.inf, 0)
+        limit = min(thick[1] if thick is not None else np.inf, cap)
+        assert r.triangle == face
+        np.testing.assert_array_equal(r.contact_point, proxy)
+        assert r.depth == min(t, limit) and r.saturated == (t > limit)
+        np.testing.assert_array_equal(r.normal, det._tri[det._row_of[face], 9:12])
+    assert n_contact > 100 and n_sat > 10

@@ -182,3 +182,39 @@ def test_non_finite_probe_is_a_clear_error(bad):
         det.query_many(P)
     with pytest.raises(ValueError, match=r'p: expected shape'):
         det.query([0.0, 0.0])
+
+
+@pytest.mark.parametrize('facing', [0, 1, -1])
+def test_raycast_matches_brute_force(facing):
+    # The front-to-back ray traversal prunes by the nearest hit so far: same t as all faces.
+    from contact_reference import brute_raycast
+    for mesh in (dome(n_theta=20, n_phi=80), star_mesh(seed=9)):
+        det = detector(mesh)
+        V, F = np.asarray(mesh.vertices), np.asarray(mesh.faces)
+        rng = np.random.default_rng(20 + facing)
+        P = probe_points(mesh, 150, seed=21, near=5e-3)
+        D = rng.normal(size=(len(P), 3))
+        D[:50] = np.tile([[-1.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]], (17, 1))[:50]
+        D /= np.linalg.norm(D, axis=1, keepdims=True)
+        for p, d, tmin in zip(P, D, rng.choice([0.0, -0.01], len(P))):
+            ref = brute_raycast(V, F, p, d, tmin, np.inf, facing)
+            hit = det._raycast(p, d, tmin, np.inf, facing)
+            assert (hit is None) == (ref is None)
+            if ref is not None:
+                assert abs(hit[1] - ref) <= 1e-12
+
+
+def test_closest_falls_back_to_depth_first_when_the_queue_is_full(monkeypatch):
+    # The best-first queue holds _HEAP nodes; beyond that a subtree is scanned depth-first.
+    # Run closest() as Python with a 2-entry queue so that path runs, against brute force.
+    from haptic_anfis.contact import bvh
+    mesh = star_mesh(seed=10)
+    det = detector(mesh)
+    V, F = np.asarray(mesh.vertices), np.asarray(mesh.faces)
+    P = probe_points(mesh, 40, seed=22, near=2e-3)
+    ref_q, ref_d = brute_closest(V, F, P)
+    monkeypatch.setattr(bvh, '_HEAP', 2)
+    for p, d in zip(P, ref_d):
+        r = bvh.closest.py_func(det._tri, det._box, det._node, p[0], p[1], p[2], -1,
+                                0.0, 0.0, 0.0, np.inf)
+        assert abs(np.sqrt(r[1]) - d) <= ATOL

@@ -64,14 +64,7 @@ class ContactBatch:
         return len(self.depth)
 
 
-def _new_result(*fields) -> ContactResult:
-    """ContactResult without the frozen-dataclass __init__ (~1 µs of setattr calls per query)."""
-    r = object.__new__(ContactResult)
-    r.__dict__.update(zip(_RESULT_FIELDS, fields))
-    return r
-
-
-_RESULT_FIELDS = tuple(ContactResult.__dataclass_fields__)
+_object_new = object.__new__
 
 
 def _unit_direction(direction) -> np.ndarray | None:
@@ -89,7 +82,8 @@ class ContactDetector:
 
     Build once (the AABB tree is built and the numba kernels compiled or loaded from cache at
     construction: 0.1-0.4 s for 80k faces once cached, ~10 s on the very first compile), then
-    query at haptic rate: ~6-11 µs p50 per call from Python on 5k-80k faces (bench_contact.py).
+    query at haptic rate: ~5-7 µs p50, ~8-12 µs p99 per call from Python on 5k-80k faces
+    (bench_contact.py, a shared 2-core machine).
 
     Args:
         mesh: ``trimesh.Trimesh`` in metres, tissue frame; faces are used as given (no merging).
@@ -119,9 +113,12 @@ class ContactDetector:
         self._eps = 1e-9  # barycentric slack of ray casts, so rays through edges/vertices hit
         d = self.direction if self.direction is not None else np.zeros(3)
         self._par = np.array([float(self.direction is not None), *d, self._tol, self._eps])
-        self._row_of = np.empty_like(self._order)
-        self._row_of[self._order] = np.arange(len(self._order))
-        self._ids = np.ascontiguousarray(np.stack([self._order, self._row_of]))
+        row_of = np.empty_like(self._order)
+        row_of[self._order] = np.arange(len(self._order))
+        # One buffer for the single-query kernel; the tables are views into it.
+        self._buf, (self._tri, self._box, self._node, self._ids, self._par) = bvh.pack_tables(
+            self._tri, self._box, self._node, np.stack([self._order, row_of]), self._par)
+        self._order, self._row_of = self._ids[0], self._ids[1]
         self.query(self._tri[0, 0:3])  # compile or load the kernels now, not in the 1 kHz loop
         self.query_many(self._tri[:2, 0:3])
 
@@ -192,11 +189,20 @@ class ContactDetector:
                 raise ValueError(f'p: expected one point of shape (3,), got {np.shape(p)}')
             x, y, z = (float(c) for c in P[0])  # finite, but x + y + z overflowed
         o = np.empty(bvh.OUT_WIDTH)
-        bvh.query_one(self._tri, self._box, self._node, self._ids, self._par, x, y, z, hint, o)
-        v = o.tolist()
-        depth = v[bvh.OUT_DEPTH]
-        return _new_result(o[0:3], int(v[bvh.OUT_FACE]), o[4:7], v[bvh.OUT_SD], o[8:11], depth,
-                           o[16:19], o[12:15], int(v[bvh.OUT_CFACE]), depth > 0.0)
+        face, sd, depth, cface = bvh.query_packed(self._buf, x, y, z, hint, o)
+        r = _object_new(ContactResult)  # no frozen-dataclass __init__ (~1 us of setattr calls)
+        d = r.__dict__
+        d['point'] = o[0:3]
+        d['triangle'] = face
+        d['barycentric'] = o[4:7]
+        d['signed_distance'] = sd
+        d['normal'] = o[8:11]
+        d['depth'] = depth
+        d['direction'] = o[16:19]
+        d['contact_point'] = o[12:15]
+        d['contact_triangle'] = cface
+        d['in_contact'] = depth > 0.0
+        return r
 
     def query_many(self, P) -> ContactBatch:
         """:meth:`query` for each row of ``P`` (n, 3) [m]; returns a :class:`ContactBatch`.

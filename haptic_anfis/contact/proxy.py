@@ -20,13 +20,16 @@ smoothly, so the tracker keeps a proxy on the surface and moves it with the prob
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 
+from . import bvh
 from .detector import ContactDetector
 
 FREE, CONTACT, REJECTED = 'free', 'contact', 'rejected'
+_object_new = object.__new__
 
 
 @dataclass(frozen=True)
@@ -92,13 +95,17 @@ class ContactTracker:
             ValueError: ``p`` is not a finite 3-vector. The tracker is reset (a pose glitch must
             not teleport the proxy); the node outputs zero force.
         """
-        try:
-            p = self.detector._check_points(p, 'p').reshape(-1)
-            if p.shape != (3,):
-                raise ValueError(f'p: expected one point of shape (3,), got {p.shape}')
-        except ValueError:
-            self.reset()
-            raise
+        if not (type(p) is np.ndarray and p.shape == (3,) and p.dtype == np.float64
+                and math.isfinite(sum(p.tolist()))):
+            # Not the 1 kHz loop's plain finite float64 (3,) array (a sum with a NaN or Inf is
+            # not finite; an overflowing sum of finite values only takes this slower path).
+            try:
+                p = self.detector._check_points(p, 'p').reshape(-1)
+                if p.shape != (3,):
+                    raise ValueError(f'p: expected one point of shape (3,), got {p.shape}')
+            except ValueError:
+                self.reset()
+                raise
         if self.state == CONTACT:
             res = self._follow(p)
             if res is not None:
@@ -149,23 +156,39 @@ class ContactTracker:
     def _follow(self, p: np.ndarray) -> TrackedContact | None:
         """Move the proxy with the probe; None when the probe has come out."""
         det, d = self.detector, self._dir
-        hit = det._raycast(p, -d, -self.max_step, np.inf, +1)
-        if hit is None or hit[1] <= 0.0:
+        o = np.empty(6)
+        x, y, z = p.tolist()
+        dx, dy, dz = d.tolist()
+        # One kernel call: the ray back out along -d to the proxy, then the thickness behind it.
+        face, t, thick = bvh.follow_packed(det._buf, x, y, z, dx, dy, dz, self.max_step, o)
+        if face < 0 or t <= 0.0:
             self.state = FREE
             self._face = -1
             self._dir = det.direction
             return None
-        face, t = hit
-        proxy = p - t * d
-        thick = det._raycast(proxy, d, det._tol, np.inf, 0)
-        limit = min(thick[1] if thick is not None else np.inf, self.max_depth)
+        limit = min(thick, self.max_depth)
         self._face = face
-        return TrackedContact(state=CONTACT, in_contact=True, contact_point=proxy, triangle=face,
-                              depth=min(t, limit), direction=d,
-                              normal=det._tri[det._row_of[face], 9:12].copy(),
-                              saturated=bool(t > limit))
+        r = _object_new(TrackedContact)  # no frozen-dataclass __init__ (~1 us of setattr calls)
+        f = r.__dict__
+        f['state'] = CONTACT
+        f['in_contact'] = True
+        f['contact_point'] = o[0:3]
+        f['triangle'] = face
+        f['depth'] = min(t, limit)
+        f['direction'] = d
+        f['normal'] = o[3:6]
+        f['saturated'] = t > limit
+        return r
 
     def _idle(self, p: np.ndarray) -> TrackedContact:
-        d = self._dir if self._dir is not None else np.zeros(3)
-        return TrackedContact(state=self.state, in_contact=False, contact_point=p, triangle=-1,
-                              depth=0.0, direction=d, normal=np.zeros(3), saturated=False)
+        r = _object_new(TrackedContact)  # as in _follow
+        f = r.__dict__
+        f['state'] = self.state
+        f['in_contact'] = False
+        f['contact_point'] = p
+        f['triangle'] = -1
+        f['depth'] = 0.0
+        f['direction'] = self._dir if self._dir is not None else np.zeros(3)
+        f['normal'] = np.zeros(3)
+        f['saturated'] = False
+        return r
