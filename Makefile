@@ -3,6 +3,10 @@ PYTHON ?= python3.11
 VENV   ?= .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
+# The report's xanfis peer pins numpy<=1.26.0 (we run numpy 2): it gets its own virtualenv.
+# torch is pinned to 2.13.0 so pip takes the local CPU wheel, not several GB of CUDA.
+XVENV  := $(VENV)-xanfis
+XANFIS_REQS := torch==2.13.0 xanfis==1.1.0
 # ament_index_python looks packages up here; the ROS wheels live in the venv.
 export AMENT_PREFIX_PATH := $(abspath $(VENV))
 # Never inherit the ROS wheels' re-exec guard from another virtualenv.
@@ -16,8 +20,11 @@ venv: $(STAMP)
 $(STAMP): setup.py setup.cfg package.xml
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install $(PIP_QUIET) --upgrade pip 2>&1 | grep -v '^WARNING: Location' || true
-	$(PY) -m pip install $(PIP_QUIET) -e '.[ros,fe,test]' 2>&1 | grep -v '^WARNING: Location' || true
-	$(PY) -c 'import haptic_anfis, numba, rclpy, trimesh, rosbags' # fail here if the install did not
+	$(PY) -m pip install $(PIP_QUIET) -e '.[ros,fe,test,report]' 2>&1 | grep -v '^WARNING: Location' || true
+	$(PY) -c 'import haptic_anfis, numba, rclpy, trimesh, rosbags, matplotlib, sklearn' # fail here if the install did not
+	$(PYTHON) -m venv $(XVENV)
+	$(XVENV)/bin/python -m pip install $(PIP_QUIET) $(XANFIS_REQS) 2>&1 | grep -v '^WARNING: Location' || true
+	$(XVENV)/bin/python -c 'import xanfis, torch' || echo 'WARNING: xanfis peer not installed; the report lists it as failed'
 	touch $@
 
 # Train the force models on the shipped dataset (test RMSE, evaluation speed), then run the whole
@@ -38,4 +45,4 @@ bench: venv
 	@set -e; for f in bench/bench_*.py; do echo "== $$f"; $(PY) $$f; done
 
 clean:
-	rm -rf $(VENV) build install log *.egg-info
+	rm -rf $(VENV) $(XVENV) build install log *.egg-info

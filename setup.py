@@ -61,6 +61,20 @@ setup(
         'falcon': [
             'pyftdi>=0.55',
         ],
+        # The speed-against-error report (haptic-anfis report, make bench): figures and the
+        # scikit-learn peers. scipy's RBFInterpolator comes with scipy already.
+        'report': [
+            'matplotlib>=3.8',
+            'scikit-learn>=1.4',
+        ],
+        # The xanfis peer of the report. NOT installable beside the rest: xanfis 1.1.0 (and mealpy,
+        # which it needs) pin numpy<=1.26.0 while this project runs on numpy 2, so `make venv` puts it
+        # in its own virtualenv (.venv-xanfis, with the CPU build of torch) and the report talks to
+        # it through a worker process. Listed here so the pins live in one place with the others.
+        'xanfis': [
+            'torch==2.13.0',
+            'xanfis==1.1.0',
+        ],
         'test': [
             'pytest>=8',
             'pytest-timeout>=2.3',

@@ -1,0 +1,41 @@
+"""``haptic-anfis report``: speed against error of our force models and their peers."""
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from ..dataset import DEFAULT_DATASET, load_dataset
+
+NAME = 'report'
+HELP = ('speed-against-error report: our ANFIS models and peers (xanfis, RBF, k-NN, MLP, linear) '
+        'on one split; writes report.md + PNG figures')
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument('--out', default='out/report', help='output directory (default: %(default)s)')
+    p.add_argument('--dataset', default=str(DEFAULT_DATASET), help='force dataset CSV')
+    p.add_argument('--quick', action='store_true',
+                   help='few structures, tiny peers, short timings (for CI; numbers are not the report)')
+    p.add_argument('--seed', type=int, default=0, help='train/test split seed (default: %(default)s)')
+
+
+def run(args: argparse.Namespace) -> int:
+    try:
+        import matplotlib  # noqa: F401
+        import sklearn  # noqa: F401
+    except ImportError as exc:
+        raise OSError(f'the report needs the "report" extra: pip install -e ".[report]" ({exc})') from None
+    from ..report import build_report, headline_table
+
+    ds = load_dataset(args.dataset)
+    label = Path(args.dataset).name
+    print(f'report: {label}, {len(ds)} samples; training and measuring every model on one split')
+    res = build_report(ds, args.out, quick=args.quick, seed=args.seed, dataset_label=label)
+    print()
+    print(headline_table(res))
+    failed = [r['name'] for r in res['rows'] if r['status'] != 'ok']
+    if failed:
+        print(f'failed (listed in the report): {", ".join(failed)}')
+    print(f'\nwrote {Path(args.out) / "report.md"} and {len(res["figures"])} figures '
+          f'({res["seconds"]:.0f} s)')
+    return 0

@@ -1,0 +1,261 @@
+"""Build the speed-against-error report: every model on the same split, one run, one Markdown file
+plus PNG figures. ``haptic-anfis report`` and ``bench/bench_report.py`` call :func:`build_report`.
+"""
+from __future__ import annotations
+
+import datetime as _dt
+import json
+import os
+import platform
+import sys
+import time
+from pathlib import Path
+from typing import Any, Sequence
+
+import numpy as np
+
+from .. import __version__
+from ..dataset import OUTPUT_NAMES, ForceDataset, split_indices
+from .measure import (JUMP_STEP_M, MONOTONE_TOL_N, data_jump_scale, make_probes, measure)
+from .peers import OursPeer, Peer, default_peers
+
+HAPTIC_BUDGET_US = 1000.0               # one servo tick at 1 kHz
+PAPER_RMSE_N = (0.0791, 0.0063, 0.0181)  # Amirkhani & Nahvi, test RMSE Fx, Fy, Fz on their FE data
+PAPER_EVALS_PER_S = 1e5
+
+FULL_STRUCTURES: tuple[tuple[int, ...], ...] = ((2, 2, 2, 2), (3, 3, 3, 2), (4, 4, 4, 2), (5, 5, 5, 3))
+QUICK_STRUCTURES: tuple[tuple[int, ...], ...] = ((2, 2, 2, 2), (3, 3, 3, 2))
+
+
+def our_models(quick: bool, seed: int = 0,
+               structures: Sequence[tuple[int, ...]] | None = None) -> list[OursPeer]:
+    """The structure search first, then fixed structures (the paper's 3-3-3-2 and 4-4-4-2 among)."""
+    if structures is None:
+        structures = QUICK_STRUCTURES if quick else FULL_STRUCTURES
+    kw: dict[str, Any] = {'seed': seed}
+    if quick:
+        kw.update(epochs=8)
+        search = OursPeer(None, search_epochs=4, max_mfs=(3, 2, 2, 2), **kw)
+    else:
+        search = OursPeer(None, **kw)
+    return [search, *(OursPeer(tuple(s), **kw) for s in structures)]
+
+
+def fe_cost(provenance: dict[str, Any]) -> dict[str, Any]:
+    """Seconds of FE computation per surface point (all depths, one load path) from the dataset's
+    provenance sidecar, or why it is not available."""
+    kind = str(provenance.get('kind', 'unknown'))
+    wt = provenance.get('wall_time_s')
+    n = provenance.get('n_points')
+    if 'SYNTHETIC' in kind.upper() or 'PLACEHOLDER' in kind.upper():
+        return {'seconds_per_point': None, 'why': 'n/a: the dataset is the synthetic placeholder '
+                '(closed-form forces, no FE solve was timed)'}
+    total = wt.get('sum_over_points') if isinstance(wt, dict) else wt
+    if isinstance(total, (int, float)) and isinstance(n, int) and n > 0:
+        return {'seconds_per_point': float(total) / n,
+                'why': f'from the sidecar: wall_time_s.sum_over_points / n_points = {total:.0f} s / {n}'}
+    return {'seconds_per_point': None, 'why': f'n/a: the sidecar (kind {kind!r}) records no FE wall time'}
+
+
+def pareto_front(latency: np.ndarray, error: np.ndarray) -> np.ndarray:
+    """Boolean mask of points no other point beats on both (lower latency and lower error)."""
+    n = len(latency)
+    keep = np.ones(n, dtype=bool)
+    for i in range(n):
+        for j in range(n):
+            if j != i and latency[j] <= latency[i] and error[j] <= error[i] and (
+                    latency[j] < latency[i] or error[j] < error[i]):
+                keep[i] = False
+                break
+    return keep
+
+
+def build_report(ds: ForceDataset, out_dir: str | os.PathLike, quick: bool = False, seed: int = 0,
+                 dataset_label: str = '', peers: Sequence[Peer] | None = None,
+                 ours: Sequence[Peer] | None = None, repeats: int | None = None,
+                 log=print) -> dict[str, Any]:
+    """Train and measure every model on one split; write ``report.md``, ``results.json`` and the
+    figures into ``out_dir``. Returns the results (rows, split, settings)."""
+    from . import figures
+    t_start = time.perf_counter()
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    tr_idx, te_idx = split_indices(ds, 0.2, seed, by='point')   # as train_on_dataset does
+    train, test = ds.subset(tr_idx), ds.subset(te_idx)
+    force_range = ds.Y.max(0) - ds.Y.min(0)
+    force_range = np.where(force_range > 0, force_range, 1.0)
+    probes = make_probes(ds, n_lines=3 if quick else 8, n_depths=2 if quick else 3,
+                         batch=5000 if quick else 100_000, seed=seed)
+    repeats = repeats or (300 if quick else 20000)
+    peer_repeats = max(100, repeats // 10)
+    batch_seconds = 0.05 if quick else 0.3
+    models = list(ours) if ours is not None else our_models(quick, seed)
+    others = list(peers) if peers is not None else default_peers(quick, seed)
+    rows = []
+    for m in [*models, *others]:
+        log(f'  {getattr(m, "name", m)} ...')
+        r = measure(m, train, test, probes, force_range, ds,
+                    repeats if isinstance(m, OursPeer) else peer_repeats, batch_seconds)
+        r['ours'] = isinstance(m, OursPeer)
+        log(f'    {r["status"]}' + (f', RMSE {np.round(r["rmse"], 4).tolist()} N, '
+                                    f'fit {r["fit_s"]:.1f} s' if r['status'] == 'ok' else ''))
+        rows.append(r)
+    ok = [r for r in rows if r['status'] == 'ok']
+    if ok:
+        lat = np.array([r['single_p50_us'] for r in ok])
+        err = np.array([r['rmse_vec'] for r in ok])
+        for r, p in zip(ok, pareto_front(lat, err)):
+            r['pareto'] = bool(p)
+    res = {
+        'dataset': {'label': dataset_label, 'kind': ds.provenance.get('kind', 'unknown'),
+                    'sha256': ds.sha256(), 'n_samples': len(ds),
+                    'n_points': int(len(np.unique(ds.point))),
+                    'provenance': {k: ds.provenance.get(k) for k in ('tumour_yz_m',)
+                                   if k in ds.provenance}},
+        'split': {'by': 'point', 'test_fraction': 0.2, 'seed': seed,
+                  'n_train': len(train), 'n_test': len(test),
+                  'test_points': [int(p) for p in np.unique(test.point)]},
+        'force_range_N': force_range.tolist(),
+        'fe': fe_cost(ds.provenance),
+        'probes': probes.summary, 'data_jump_N': data_jump_scale(ds),
+        'quick': quick, 'repeats': {'ours': repeats, 'peers': peer_repeats},
+        'machine': {'python': platform.python_version(), 'cpu_count': os.cpu_count(),
+                    'platform': platform.platform(), 'numpy': np.__version__},
+        'software_version': __version__,
+        'created_utc': _dt.datetime.now(_dt.timezone.utc).isoformat(timespec='seconds'),
+        'rows': rows,
+    }
+    res['figures'] = figures.make_all(res, ds, train, test, out)
+    res['seconds'] = time.perf_counter() - t_start
+    (out / 'report.md').write_text(format_markdown(res))
+    (out / 'results.json').write_text(json.dumps(_jsonable(res), indent=1) + '\n')
+    return res
+
+
+def _jsonable(obj: Any) -> Any:
+    if isinstance(obj, dict):
+        return {k: _jsonable(v) for k, v in obj.items()
+                if k not in ('test_pred', 'full_pred', 'traceback')}
+    if isinstance(obj, (list, tuple)):
+        return [_jsonable(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return obj.tolist()
+    if isinstance(obj, np.generic):
+        return obj.item()
+    return obj
+
+
+# ---- Markdown -------------------------------------------------------------------------------
+def _f(v: float, digits: int = 3) -> str:
+    return f'{v:.{digits}g}'
+
+
+def headline_table(res: dict[str, Any]) -> str:
+    """The one table: every model, same split, measured in this run."""
+    head = ('| model | test RMSE Fx / Fy / Fz [N] | RMSE / force range [%] | max error Fx / Fy / Fz [N] '
+            '| fit [s] | single query p50 / p99 [µs] | batch [eval/s] | max jump per 0.1 mm [N] '
+            '| Fx grows with depth [% points] |')
+    lines = [head, '|' + '---|' * 9]
+    for r in res['rows']:
+        name = f'**{r["name"]}**' if r.get('pareto') else r['name']
+        if r.get('detail'):
+            name += f' ({r["detail"]})'
+        if r['status'] != 'ok':
+            lines.append(f'| {name} | **{r["status"]}** | – | – | – | – | – | – | – |')
+            continue
+        rm, rel, mx = r['rmse'], 100 * np.asarray(r['rel_rmse']), r['max_err']
+        lines.append(
+            f'| {name} | {" / ".join(_f(v) for v in rm)} | {" / ".join(f"{v:.2f}" for v in rel)} '
+            f'| {" / ".join(_f(v) for v in mx)} | {r["fit_s"]:.2f} '
+            f'| {r["single_p50_us"]:.3g} / {r["single_p99_us"]:.3g} | {r["batch_per_s"]:.2g} '
+            f'| {r["max_jump_N"]:.3g} | {100 * r["fx_monotone_frac"]:.0f} |')
+    fe = res['fe']
+    fe_cell = (f'{fe["seconds_per_point"]:.3g} s per surface point (all depths)'
+               if fe['seconds_per_point'] is not None else fe['why'])
+    lines.append(f'| FE model (the data itself) | 0 (reference) | 0 | 0 | – | {fe_cell} | – | – | – |')
+    p = PAPER_RMSE_N
+    lines.append(f'| paper (MATLAB, **its own FE data, not this data**) | {p[0]} / {p[1]} / {p[2]} '
+                 f'| – | – | – | – | ~1e5 | – | – |')
+    lines.append(f'| haptic budget (1 kHz loop) | – | – | – | – | {HAPTIC_BUDGET_US:.0f} per loop, '
+                 'contact + force + I/O | ≥ 1e3 | – | – |')
+    return '\n'.join(lines)
+
+
+def format_markdown(res: dict[str, Any]) -> str:
+    d, s = res['dataset'], res['split']
+    rng = res['force_range_N']
+    pr = res['probes']
+    failed = [r for r in res['rows'] if r['status'] != 'ok']
+    ok = [r for r in res['rows'] if r['status'] == 'ok']
+    L = [f'# Speed against error: the force model among the alternatives',
+         '',
+         f'Generated by `haptic-anfis report{" --quick" if res["quick"] else ""}` '
+         f'({res["created_utc"]}, haptic_anfis {res["software_version"]}, {res["seconds"]:.0f} s). '
+         'Every number below was measured in this run.',
+         '',
+         f'- **Data**: {d["label"] or "dataset"} — {d["n_samples"]} samples at {d["n_points"]} surface '
+         f'points; kind: *{d["kind"]}*; sha256 `{d["sha256"][:16]}…`.',
+         f'- **Split**: the same for every model — `split_indices(by="point", fraction=0.2, '
+         f'seed={s["seed"]})` as `train_on_dataset` uses: {s["n_train"]} training samples, '
+         f'{s["n_test"]} test samples at {len(s["test_points"])} surface points never seen in '
+         'training. Ours hold out 20 % of the training points again to choose structure and epoch.',
+         f'- **Force range** (max − min over the data): Fx {rng[0]:.3g} N, Fy {rng[1]:.3g} N, '
+         f'Fz {rng[2]:.3g} N.',
+         f'- **Machine**: Python {res["machine"]["python"]}, {res["machine"]["cpu_count"]} cores '
+         f'(shared; timings are wall clock, p50/p99 of {res["repeats"]["ours"]} calls for ours, '
+         f'{res["repeats"]["peers"]} for peers).',
+         '',
+         '## Headline table',
+         '',
+         headline_table(res),
+         '',
+         'Bold: on the Pareto front of single-query p50 latency against RMS force-vector error '
+         '(no other model is both faster and more accurate). *Single query* is the real-time path each '
+         'model offers: ours `ForceModel.predict_one` (numba, parameters baked in), every peer its '
+         '`predict` on one (1, 4) row; xanfis is timed inside its own process. *Batch*: ours '
+         '`predict_compiled`, peers `predict`, on random surface inputs.',
+         '',
+         f'**Smoothness.** *Max jump*: the largest change of the force vector between neighbouring '
+         f'inputs {JUMP_STEP_M * 1e3:.1f} mm apart, over {pr["n_lines"]} lines along y and z across '
+         f'the surface (at depths {", ".join(f"{1e3 * v:.1f}" for v in pr["depths_m"])} mm; contact '
+         f'points kept on the surface by interpolating x from the data\'s surface points) and along '
+         f'depth at all {pr["n_depth_lines"]} surface points. For scale, the data\'s own steepest '
+         f'slope is {res["data_jump_N"]:.3g} N per 0.1 mm. *Fx grows with depth*: the share of '
+         f'surface points where predicted Fx never decreases (tolerance {MONOTONE_TOL_N:g} N) from '
+         'the shallowest to the deepest sampled depth.',
+         '',
+         f'**FE model**: {res["fe"]["why"]}.',
+         '',
+         '**Paper**: Amirkhani & Nahvi report test RMSE 0.0791 / 0.0063 / 0.0181 N and >1e5 '
+         'evaluations/s, on their own FE data (glandular tissue with tumour, 765 samples): shown for '
+         'scale only, not comparable number for number.',
+         '']
+    if failed:
+        L += ['## Models that failed', '']
+        L += [f'- **{r["name"]}** ({r["family"]}): {r["status"]}' for r in failed]
+        L += ['']
+    L += ['## Figures', '']
+    captions = {
+        'speed_vs_error': 'Speed against error: single-query latency (p50, log) against RMS '
+                          'force-vector error on the test points; Pareto front joined.',
+        'pred_vs_fe': 'Predicted against FE (dataset) force for the test set, per output '
+                      '(the paper\'s Figure 11).',
+        'error_map': 'Error over the surface (y-z plane): RMS force-vector error over the depths '
+                     'of each surface point; ringed points are held-out test points.',
+        'training_curves': 'Training and checking RMSE per epoch of our searched model (the epoch '
+                           'kept is marked).',
+    }
+    for key, fname in res['figures'].items():
+        L += [f'![{key}]({fname})', '', captions.get(key, key), '']
+    L += ['## Models', '']
+    for r in res['rows']:
+        L.append(f'- **{r["name"]}** — {r["family"]}; real-time path: {r["realtime_path"]}.')
+    L += ['', 'Reproduce: `haptic-anfis report --out DIR [--dataset CSV] [--quick]` '
+          '(or `make bench`, which writes `out/report/`).', '']
+    if ok:
+        best = min(ok, key=lambda r: r['rmse_vec'])
+        fast = min(ok, key=lambda r: r['single_p50_us'])
+        L += ['## In one line', '',
+              f'Most accurate here: {best["name"]} (RMS vector error {best["rmse_vec"]:.3g} N); '
+              f'fastest single query: {fast["name"]} ({fast["single_p50_us"]:.3g} µs p50).', '']
+    return '\n'.join(L)
