@@ -33,12 +33,11 @@ PARAMS = [
 
 
 def load_model(p: dict) -> tuple[Path, ForceModel]:
-    """(path, warmed model) from the node's parameter values ``p`` (also used by the bag
-    re-simulation). Raises ModelFileError (a ValueError) on a bad file."""
+    """(path, model) from the node's parameter values ``p`` (also used by the bag re-simulation and
+    the reload service). ``ForceModel.load`` compiles and warms the real-time path, so the first
+    contact pays no compilation. Raises ModelFileError (a ValueError) on a bad file."""
     path = Path(p['model_path']) if p['model_path'] else DEFAULT_MODEL
-    model = ForceModel.load(path)
-    model.predict_one(0.03, 0.0, 0.0, 0.005)  # warm (load already compiled it)
-    return path, model
+    return path, ForceModel.load(path)
 
 
 def force_from_contact(model: ForceModel, v) -> tuple[float, float, float, str | None]:
@@ -99,8 +98,7 @@ class ForceServer(Node):
         """Load ``model_path`` again; keep the current model if that fails."""
         t0 = time.perf_counter()
         try:
-            model = ForceModel.load(self.model_path)
-            model.predict_one(0.03, 0.0, 0.0, 0.005)
+            _, model = load_model(self.params)
         except Exception as exc:  # any failure keeps the old model
             msg = f'kept the previous model: cannot load {self.model_path}: {exc}'
             self.get_logger().error(msg)
