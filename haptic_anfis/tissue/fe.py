@@ -76,12 +76,16 @@ def load_steps(depths: Sequence[float], max_step: float) -> list[float]:
 def solve_load_path(mesh: HexMesh, shear: np.ndarray | float, bulk: np.ndarray | float,
                     direction: Sequence[float], depths: Sequence[float], max_step: float = 2e-3,
                     max_cutbacks: int = 6, tol: float = 1e-6, maxiter: int = 16,
-                    solver: Callable | None = None, predictor: bool = False) -> LoadPathResult:
+                    solver: Callable | None = None, predictor: bool = False,
+                    bonded: bool = True) -> LoadPathResult:
     """Indent ``mesh``'s footprint along the unit vector ``direction`` to each of ``depths`` [m].
 
     Args:
         mesh: the hexahedral mesh with its footprint and clamped node sets.
         shear, bulk: shear and bulk moduli [Pa], scalars or (M,) per cell.
+        bonded: prescribe all three displacement components of the footprint (default, the
+            robust choice); False prescribes only the components along ``direction``
+            (a frictionless probe, for validation against frictionless analytic solutions).
         direction: (3,) unit vector the probe moves along (into the tissue).
         depths: increasing depths [m] to record; the path is stepped by at most ``max_step``.
     Raises:
@@ -107,6 +111,8 @@ def solve_load_path(mesh: HexMesh, shear: np.ndarray | float, bulk: np.ndarray |
     probe[mesh.footprint] = True
     bounds = {'fixed': fem.Boundary(field[0], mask=fixed)}
     for i, ax in enumerate('xyz'):
+        if not bonded and abs(direction[i]) < 1e-12:
+            continue
         skip = [1, 1, 1]
         skip[i] = 0
         bounds[f'probe_{ax}'] = fem.Boundary(field[0], mask=probe, skip=tuple(skip))
@@ -127,7 +133,8 @@ def solve_load_path(mesh: HexMesh, shear: np.ndarray | float, bulk: np.ndarray |
             u_now = field[0].values.copy()
             field[0].values[:] = u_now + (u_now - u_prev) * (target - done) / (done - d_prev)
         for i in range(3):
-            bounds[f'probe_{"xyz"[i]}'].update(target * direction[i])
+            if f'probe_{"xyz"[i]}' in bounds:
+                bounds[f'probe_{"xyz"[i]}'].update(target * direction[i])
         ext0 = fem.dof.apply(field, bounds, dof0)
         try:
             with np.errstate(all='ignore'):
@@ -217,9 +224,11 @@ def solve_scene_point(scene: Scene, point: Sequence[float], coarse: bool = False
 
     n = probe_cells or (scene.mesh.coarse_probe_cells if coarse else scene.mesh.probe_cells)
     point = np.asarray(point, dtype=float)
-    mesh = build_mesh(scene_domain(scene), (point[1], point[2]), scene.probe_radius, n)
+    mesh = build_mesh(scene_domain(scene), (point[1], point[2]), scene.probe_radius, n,
+                      refine=scene.mesh.edge_refine)
     mu, bulk = scene_moduli(scene, mesh)
     direction = indentation_direction(scene, point[None])[0]
     res = solve_load_path(mesh, mu, bulk, direction, scene.depths, scene.max_step, solver=solver)
-    res.info.update(probe_cells=n, direction=direction.tolist())
+    res.info.update(probe_cells=n, edge_refine=scene.mesh.edge_refine,
+                    direction=direction.tolist())
     return res

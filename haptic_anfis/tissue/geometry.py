@@ -47,18 +47,23 @@ def indentation_direction(scene: Scene, points: np.ndarray) -> np.ndarray:
 
 
 def surface_mesh(radii: tuple[float, float, float], subdivisions: int = 5):
-    """Closed triangulated semi-ellipsoid (dome plus the chest-wall cap at x = 0), in metres.
+    """Closed triangulated semi-ellipsoid (dome plus the chest-wall disc at x = 0), in metres.
 
-    An icosphere is scaled to the radii and cut at x = 0, so triangles are near-uniform
-    (about 2 mm edges for 70 mm radii at 5 subdivisions). Returns a ``trimesh.Trimesh``.
+    An icosphere's x >= 0 half becomes the dome; its x < 0 half is folded flat onto the chest-wall
+    disc (azimuthal equidistant, so base triangles stay well shaped). Triangles are near-uniform,
+    about 2 mm edges for 70 mm radii at 5 subdivisions; the rim is resolved to one triangle.
+    Returns a watertight ``trimesh.Trimesh``.
     """
     import trimesh
 
     sphere = trimesh.creation.icosphere(subdivisions=subdivisions, radius=1.0)
-    sphere.apply_scale(radii)
-    dome = trimesh.intersections.slice_mesh_plane(sphere, plane_normal=[1.0, 0.0, 0.0],
-                                                  plane_origin=[0.0, 0.0, 0.0], cap=True)
-    dome.merge_vertices()
+    v = np.array(sphere.vertices)
+    back = v[:, 0] < 0
+    lateral = np.linalg.norm(v[back, 1:], axis=1, keepdims=True)
+    rho = np.arccos(np.clip(-v[back, 0], -1.0, 1.0))[:, None] / (0.5 * np.pi)
+    v[back, 1:] = np.where(lateral > 0, v[back, 1:] / np.where(lateral > 0, lateral, 1.0), 0.0) * rho
+    v[back, 0] = 0.0
+    dome = trimesh.Trimesh(v * np.asarray(radii, dtype=float), sphere.faces, process=True)
     dome.fix_normals()
     return dome
 

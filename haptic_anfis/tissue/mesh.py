@@ -64,16 +64,27 @@ class HexMesh:
         return 3 * len(self.points)
 
 
-def disc_ogrid(n: int, s: float) -> tuple[np.ndarray, np.ndarray, int]:
-    """O-grid of the unit disc with an inner disc |w| <= s meshed as a mapped n x n square.
+def disc_ogrid(n: int, s: float, refine: int = 0) -> tuple[np.ndarray, np.ndarray, int]:
+    """O-grid of the unit disc holding the circle |w| = s as a mesh line.
+
+    The disc |w| <= s is an n x n square grid mapped to a disc, surrounded (when ``refine`` > 0)
+    by rings graded towards |w| = s; outside, rings grow from s to 1. With ``refine`` = k the
+    radial cell size at the circle is 2^-k of the circumferential one, on both sides: the probe's
+    edge singularity needs radial (and depth) resolution, not circumferential.
 
     Returns:
-        w: (N2,) complex node positions; the first (n+1)^2 are the inner disc's nodes.
+        w: (N2,) complex node positions; the first (n+1)^2 are the mapped square's nodes.
         quads: (M2, 4) counter-clockwise quadrilaterals.
-        n_core: number of inner-disc nodes, (n+1)^2.
+        n_core: number of mapped-square nodes, (n+1)^2.
     """
     if not 0.0 < s < 1.0:
         raise ValueError(f'inner radius must be in (0, 1), got {s!r}')
+    dq = 0.5 * np.pi / n
+    fine = dq * 2.0 ** -np.arange(refine, 0, -1)  # e.g. dq/4, dq/2 for refine = 2
+    # log-radius offsets of the graded rings inside the circle (from the mapped square outwards)
+    inner_steps = np.concatenate([[dq], fine[::-1]]) if refine else np.zeros(0)
+    s_out = s
+    s = s * np.exp(-inner_steps.sum())  # the mapped square's radius
     # tan-spaced lines put the square's boundary nodes at even angles once mapped to the circle.
     g = np.tan(0.25 * np.pi * np.linspace(-1.0, 1.0, n + 1))
     u, v = np.meshgrid(g, g, indexing='ij')
@@ -89,7 +100,9 @@ def disc_ogrid(n: int, s: float) -> tuple[np.ndarray, np.ndarray, int]:
     boundary = np.unique(np.concatenate([idx[0], idx[-1], idx[:, 0], idx[:, -1]]))
     boundary = boundary[np.argsort(np.angle(core[boundary]))]
     theta = np.angle(core[boundary])
-    radii = ring_radii(s, n)
+    radii = np.concatenate([s * np.exp(np.cumsum(inner_steps)),
+                            s_out * np.exp(np.cumsum(fine)) if refine else np.zeros(0)])
+    radii = np.concatenate([radii, ring_radii(radii[-1] if refine else s, n)])
     nodes = [core]
     inner = boundary
     start = len(core)
@@ -140,10 +153,11 @@ def moebius_for_circle(p: complex, a: float) -> tuple[complex, float]:
     return gamma * p / P, float(s)
 
 
-def layer_fractions(thickness: float, first: float, growth: float) -> np.ndarray:
+def layer_fractions(thickness: float, first: float, growth: float, refine: int = 0) -> np.ndarray:
     """(L+1,) increasing fractions 0 .. 1 of the local thickness: layers from the chest wall up,
-    the top one about ``first`` [m] thick at ``thickness`` [m], growing by ``growth`` downwards."""
-    t = [first]
+    the top one about ``first`` * 2^-refine [m] thick at ``thickness`` [m], doubling down to
+    ``first`` and then growing by ``growth`` downwards."""
+    t = [first * 2.0 ** -k for k in range(refine, 0, -1)] + [first]
     while sum(t) < thickness:
         t.append(t[-1] * growth)
     d = np.array(t[::-1])
@@ -176,17 +190,18 @@ def _tumour_fraction(points: np.ndarray, cells: np.ndarray,
 
 
 def build_mesh(domain: Domain, centre_yz: tuple[float, float], a: float, n: int,
-               growth_vertical: float | None = None) -> HexMesh:
+               growth_vertical: float | None = None, refine: int = 2) -> HexMesh:
     """Hexahedral mesh of ``domain`` whose surface holds the probe outline (radius a [m], centred
     above ``centre_yz`` [m]) as a mesh line, with ``n`` cells across the probe.
 
     The element edge along the outline is about pi a / (2 n); layers under the skin start at that
     size and grow by ``growth_vertical`` (default: the larger of 1.25 and the in-plane growth).
+    ``refine`` halvings of the radial and depth cell size grade the mesh towards the probe edge.
     """
     rm = np.sqrt(domain.ry * domain.rz)
     p_hat = complex(centre_yz[0] / domain.ry, centre_yz[1] / domain.rz)
     c, s = moebius_for_circle(p_hat, a / rm)
-    w, quads, n_core = disc_ogrid(n, s)
+    w, quads, _ = disc_ogrid(n, s, refine)
     zeta = (w + c) / (1.0 + np.conj(c) * w)
     y, z = domain.ry * zeta.real, domain.rz * zeta.imag
     if not np.isclose(domain.ry, domain.rz):
@@ -196,7 +211,8 @@ def build_mesh(domain: Domain, centre_yz: tuple[float, float], a: float, n: int,
         raise ValueError('domain height must be > 0 over the whole base')
     edge = 0.5 * np.pi * a / n
     t0 = float(domain.height(np.array(centre_yz[0]), np.array(centre_yz[1])))
-    frac = layer_fractions(t0, edge, growth_vertical or max(np.exp(0.5 * np.pi / n), 1.25))
+    frac = layer_fractions(t0, edge, growth_vertical or max(np.exp(0.5 * np.pi / n), 1.25),
+                           refine)
     L, N2 = len(frac) - 1, len(w)
     pts = np.empty((L + 1, N2, 3))
     pts[:, :, 0] = frac[:, None] * thick[None, :]
@@ -205,7 +221,7 @@ def build_mesh(domain: Domain, centre_yz: tuple[float, float], a: float, n: int,
     lay = np.arange(L)[:, None, None] * N2
     # Local (r, s, t) -> (y, z, x): quad counter-clockwise in (y, z), t along +x, so det J > 0.
     cells = np.concatenate([quads[None] + lay, quads[None] + lay + N2], axis=2).reshape(-1, 8)
-    footprint = L * N2 + np.arange(n_core)
+    footprint = L * N2 + np.flatnonzero(np.abs(w) <= s * (1.0 + 1e-9))
     fixed = [np.arange(N2)]
     if domain.fix_rim:
         ring = np.flatnonzero(np.abs(w) > 1.0 - 1e-9)

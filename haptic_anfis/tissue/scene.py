@@ -65,11 +65,13 @@ class MeshSettings:
     """Structured hexahedral mesh density.
 
     probe_cells: cells across the probe footprint (4 * probe_cells nodes lie on its rim);
-    the element size at the probe edge is about pi * a / (2 * probe_cells).
+    the element size along the probe edge is about pi * a / (2 * probe_cells); ``edge_refine``
+    halvings of the radial and depth size grade the cells towards the edge singularity.
     """
 
-    probe_cells: int = 10
-    coarse_probe_cells: int = 6
+    probe_cells: int = 6
+    coarse_probe_cells: int = 4
+    edge_refine: int = 1
     rim: float = 0.99
 
 
@@ -108,7 +110,7 @@ _KEYS: dict[str, set[str]] = {
     'tumour': {'name', 'centre_mm', 'radius_mm', 'youngs_kPa', 'source'},
     'probe': {'diameter_mm', 'direction'},
     'loading': {'spacing_mm', 'palpable_radius_mm', 'depths_mm', 'max_step_mm'},
-    'mesh': {'probe_cells', 'coarse_probe_cells', 'rim'},
+    'mesh': {'probe_cells', 'coarse_probe_cells', 'edge_refine', 'rim'},
 }
 
 
@@ -194,10 +196,14 @@ def parse_scene(data: Any, name: str = 'scene', source_sha256: str = '') -> Scen
 
     mesh_d = _check_keys(top.get('mesh', {}) or {}, 'mesh', 'mesh')
     mesh = MeshSettings(probe_cells=int(_num(mesh_d, 'probe_cells', 'mesh', default=10)),
-                        coarse_probe_cells=int(_num(mesh_d, 'coarse_probe_cells', 'mesh', default=6)),
+                        coarse_probe_cells=int(_num(mesh_d, 'coarse_probe_cells', 'mesh', default=4)),
+                        edge_refine=int(_num(mesh_d, 'edge_refine', 'mesh', positive=False,
+                                             default=1)),
                         rim=_num(mesh_d, 'rim', 'mesh', default=0.99))
     if mesh.probe_cells < 2 or mesh.coarse_probe_cells < 2:
         raise SceneError('mesh.probe_cells / coarse_probe_cells: need at least 2')
+    if not 0 <= mesh.edge_refine <= 4:
+        raise SceneError(f'mesh.edge_refine: 0 .. 4 halvings, got {mesh.edge_refine!r}')
     if not 0.5 < mesh.rim < 1.0:
         raise SceneError(f'mesh.rim: fraction of the base radius that is meshed, in (0.5, 1), '
                          f'got {mesh.rim!r}')

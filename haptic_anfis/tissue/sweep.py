@@ -112,7 +112,7 @@ def run_sweep(scene: Scene, work_dir: str | os.PathLike, *, coarse: bool = False
     work.mkdir(parents=True, exist_ok=True)
     n_cells = scene.mesh.coarse_probe_cells if coarse else scene.mesh.probe_cells
     manifest = {'scene_sha256': scene.sha256(), 'scene_name': scene.name, 'probe_cells': n_cells,
-                'coarse': coarse}
+                'edge_refine': scene.mesh.edge_refine, 'coarse': coarse}
     mpath = work / 'manifest.json'
     if mpath.is_file():
         old = json.loads(mpath.read_text())
@@ -207,6 +207,7 @@ def records_to_dataset(scene: Scene, records: list[dict[str, Any]], coarse: bool
         'scene_si': scene.to_dict(),
         'coarse': coarse,
         'mesh': {'probe_cells': scene.mesh.coarse_probe_cells if coarse else scene.mesh.probe_cells,
+                 'edge_refine': scene.mesh.edge_refine,
                  'probe_edge_m': ok[0]['probe_edge_m'] if ok else None,
                  'ndof_min': int(min(ndofs)), 'ndof_max': int(max(ndofs)),
                  'ndof_mean': float(np.mean(ndofs))},
