@@ -87,3 +87,15 @@ def test_surface_mesh_closed_and_in_mm(tmp_path):
     path = write_surface_mesh(s, tmp_path / 'surf.stl')
     back = trimesh.load(path)
     assert back.bounds[1] == pytest.approx([45.0, 70.0, 70.0], rel=1e-3)
+
+
+def test_cli_surface_and_errors(tmp_path, capsys):
+    from haptic_anfis.cli import main
+
+    assert main(['dataset', '--surface', str(tmp_path / 's.ply'), '--surface-units', 'm']) == 0
+    assert (tmp_path / 's.ply').is_file()
+    assert main(['dataset']) == 2
+    bad = tmp_path / 'bad.yaml'
+    bad.write_text(DEFAULT_SCENE.read_text().replace('youngs_kPa: 33', 'youngs_kPa: -33'))
+    assert main(['dataset', str(bad), '--out', str(tmp_path / 'x.csv')]) == 1
+    assert 'material.youngs_kPa: must be > 0' in capsys.readouterr().err

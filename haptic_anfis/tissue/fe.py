@@ -76,8 +76,7 @@ def load_steps(depths: Sequence[float], max_step: float) -> list[float]:
 def solve_load_path(mesh: HexMesh, shear: np.ndarray | float, bulk: np.ndarray | float,
                     direction: Sequence[float], depths: Sequence[float], max_step: float = 2e-3,
                     max_cutbacks: int = 6, tol: float = 1e-6, maxiter: int = 16,
-                    solver: Callable | None = None, predictor: bool = False,
-                    bonded: bool = True) -> LoadPathResult:
+                    solver: Callable | None = None, bonded: bool = True) -> LoadPathResult:
     """Indent ``mesh``'s footprint along the unit vector ``direction`` to each of ``depths`` [m].
 
     Args:
@@ -124,14 +123,9 @@ def solve_load_path(mesh: HexMesh, shear: np.ndarray | float, bulk: np.ndarray |
     done, iters, cutbacks = 0.0, 0, 0
     queue = list(steps)
     halvings = 0
-    u_prev, d_prev = None, 0.0  # last converged displacement field and its depth
     while queue:
         target = queue[0]
         state = solid.checkpoint()
-        if predictor and u_prev is not None and done > d_prev:
-            # Predictor: extrapolate the last increment linearly; saves ~1 Newton iteration.
-            u_now = field[0].values.copy()
-            field[0].values[:] = u_now + (u_now - u_prev) * (target - done) / (done - d_prev)
         for i in range(3):
             if f'probe_{"xyz"[i]}' in bounds:
                 bounds[f'probe_{"xyz"[i]}'].update(target * direction[i])
@@ -158,7 +152,6 @@ def solve_load_path(mesh: HexMesh, shear: np.ndarray | float, bulk: np.ndarray |
             queue.insert(0, 0.5 * (done + target))
             continue
         halvings = 0
-        u_prev, d_prev = state['field'][0].values, done
         done = queue.pop(0)
         if int(round(done / 1e-9)) in wanted:
             r = np.asarray(solid.results.force.toarray() if hasattr(solid.results.force, 'toarray')
