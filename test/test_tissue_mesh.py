@@ -79,3 +79,17 @@ def test_tumour_fraction_recovers_sphere_volume():
 
     vol = fem.RegionHexahedron(fem.Mesh(m.points, m.cells, 'hexahedron')).dV.sum(0)
     assert (frac * vol).sum() == pytest.approx(4 / 3 * np.pi * r ** 3, rel=0.05)
+
+
+def test_elliptic_base_keeps_probe_outline_round():
+    import felupe as fem
+
+    ry, rz = 0.069, 0.055
+    dom = Domain(ry=ry, rz=rz, height=lambda y, z: 0.045 * np.sqrt(
+        np.clip(1 - (y / 0.07) ** 2 - (z / 0.056) ** 2, 0.01, None)))
+    m = build_mesh(dom, (0.01, -0.02), 0.008, 6)
+    fp = m.points[m.footprint]
+    rho = np.hypot(fp[:, 1] - 0.01, fp[:, 2] + 0.02)
+    assert rho.max() == pytest.approx(0.008, rel=1e-9)
+    region = fem.RegionHexahedron(fem.Mesh(m.points, m.cells, 'hexahedron'))
+    assert np.all(region.dV > 0)

@@ -144,3 +144,17 @@ def test_executor_without_native_futures(scene, tmp_path):
     res = run_sweep(scene, tmp_path, indices=[5, 6], executor=_DaskLikeExecutor(),
                     task=_fake_task, progress=False)
     assert res.dataset.point.tolist() == [5, 6]
+
+
+def test_normal_direction_pushes_along_the_surface_normal(scene):
+    from haptic_anfis.tissue.fe import solve_scene_point
+    from haptic_anfis.tissue.geometry import surface_normals
+
+    s = dataclasses.replace(scene, direction='normal', depths=(0.002,))
+    pts = loading_points(s)
+    p = pts[int(np.argmax(np.hypot(pts[:, 1], pts[:, 2])))]  # steepest point
+    res = solve_scene_point(s, p, coarse=True)
+    n = surface_normals(p[None], s.radii)[0]
+    f = res.forces[0]
+    assert f @ n > 0.9 * np.linalg.norm(f)  # the tissue pushes the probe back out along n
+    assert res.info['direction'] == pytest.approx((-n).tolist())
