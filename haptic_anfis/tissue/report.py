@@ -135,11 +135,13 @@ def write_report(scene: Scene, out_dir: str | os.PathLike, data: str | os.PathLi
     # Convergence study.
     fig, ax = plt.subplots(figsize=(6, 4.2))
     h = np.array([c['probe_edge_m'] for c in conv]) * 1e3
-    hf = np.array([c['probe_edge_m'] for c in full]) * 1e3
     for j, depth in enumerate(scene.depths):
-        f = np.array([c['forces_N'][j][0] for c in full])
+        # every mesh that reached this depth; the reference is the finest of them
+        have = [c for c in conv if len(c['forces_N']) > j]
+        f = np.array([c['forces_N'][j][0] for c in have])
+        hj = np.array([c['probe_edge_m'] for c in have]) * 1e3
         if len(f):
-            ax.plot(hf, 100 * (f / f[-1] - 1), 'o-', label=f'{depth * 1e3:g} mm')
+            ax.plot(hj, 100 * (f / f[-1] - 1), 'o-', label=f'{depth * 1e3:g} mm')
     for kind, mk in (('hayes', 'k^--'), ('sneddon', 'kv:')):
         have = [k for k, n in enumerate(ns) if f'{kind}_n{n}' in store]
         e = [100 * store[f'{kind}_n{ns[k]}']['err_vs_hayes'][0] for k in have]
@@ -147,7 +149,7 @@ def write_report(scene: Scene, out_dir: str | os.PathLike, data: str | os.PathLi
     ax.axhline(-3, color='r', lw=0.8)
     ax.axhline(3, color='r', lw=0.8)
     ax.set_xlabel('element edge along the probe outline [mm]')
-    ax.set_ylabel('force error [%] (apex: vs finest mesh)')
+    ax.set_ylabel('force error [%] (apex: vs finest mesh reaching that depth)')
     ax.set_title('Mesh convergence')
     ax.legend(fontsize=7, ncol=2)
     ax.grid(alpha=0.3)
