@@ -25,11 +25,12 @@ setup(
     name=PACKAGE,
     version='0.1.0',
     packages=find_packages(exclude=['test', 'test.*']),
-    package_data={PACKAGE: ['data/*.csv', 'data/*.json']},
+    package_data={PACKAGE: ['data/*.csv', 'data/*.json', 'data/*.stl']},
     data_files=[
         ('share/ament_index/resource_index/packages', [f'resource/{PACKAGE}']),
         (f'share/{PACKAGE}', ['package.xml']),
         (f'share/{PACKAGE}/config', glob('config/*.yaml')),
+        (f'share/{PACKAGE}/config/scenes', glob('config/scenes/*.yaml')),
     ],
     python_requires='>=3.10',
     # Plain-Python dependencies. rclpy and the message packages come from the ROS install (or the
@@ -55,6 +56,7 @@ setup(
         # Finite-element data generation (haptic_anfis.tissue). Optional for running the simulator.
         'fe': [
             'felupe==11.3.0',
+            'matplotlib>=3.7',  # `haptic-anfis dataset --report` plots
         ],
         # A real Novint Falcon (falcon_driver backend 'falcon'): pure-Python FTDI access over
         # pyusb/libusb. Imported only when that backend is chosen.

@@ -1,0 +1,83 @@
+"""Breast surface geometry: loading points, surface normals and the triangulated surface mesh.
+
+Pure numpy/trimesh, SI units (m) unless a function says otherwise. Frame: chest wall x = 0, +x out
+of the body; the surface is the semi-ellipsoid with radii (Rx, Ry, Rz).
+"""
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+
+from .scene import Scene, surface_height
+
+
+def loading_points(scene: Scene) -> np.ndarray:
+    """Loading points on the undeformed surface: a square (y, z) grid of ``scene.spacing`` inside the
+    palpable disc, lifted onto the surface.
+
+    Returns:
+        (P, 3) array of surface points (x, y, z) [m], ordered by y then z (row-major grid).
+    """
+    half = int(np.floor(scene.palpable_radius / scene.spacing + 1e-9))
+    g = np.arange(-half, half + 1) * scene.spacing
+    yy, zz = np.meshgrid(g, g, indexing='ij')
+    keep = yy ** 2 + zz ** 2 <= scene.palpable_radius ** 2 * (1 + 1e-9)
+    y, z = yy[keep], zz[keep]
+    return np.column_stack([surface_height(y, z, scene.radii), y, z])
+
+
+def surface_normals(points: np.ndarray, radii: tuple[float, float, float]) -> np.ndarray:
+    """Outward unit normals (P, 3) of the ellipsoid at surface points (P, 3) [m]."""
+    n = np.asarray(points, dtype=float) / np.asarray(radii, dtype=float) ** 2
+    return n / np.linalg.norm(n, axis=1, keepdims=True)
+
+
+def indentation_direction(scene: Scene, points: np.ndarray) -> np.ndarray:
+    """Unit vectors (P, 3) along which the probe moves INTO the tissue at each point.
+
+    'axis' is -x (perpendicular to the body, the paper's protocol); 'normal' is the inward local
+    surface normal.
+    """
+    points = np.atleast_2d(points)
+    if scene.direction == 'axis':
+        return np.tile([-1.0, 0.0, 0.0], (len(points), 1))
+    return -surface_normals(points, scene.radii)
+
+
+def surface_mesh(radii: tuple[float, float, float], subdivisions: int = 5):
+    """Closed triangulated semi-ellipsoid (dome plus the chest-wall disc at x = 0), in metres.
+
+    An icosphere's x >= 0 half becomes the dome; its x < 0 half is folded flat onto the chest-wall
+    disc (azimuthal equidistant, so base triangles stay well shaped). Triangles are near-uniform,
+    about 2 mm edges for 70 mm radii at 5 subdivisions; the rim is resolved to one triangle.
+    Returns a watertight ``trimesh.Trimesh``.
+    """
+    import trimesh
+
+    sphere = trimesh.creation.icosphere(subdivisions=subdivisions, radius=1.0)
+    v = np.array(sphere.vertices)
+    back = v[:, 0] < 0
+    lateral = np.linalg.norm(v[back, 1:], axis=1, keepdims=True)
+    rho = np.arccos(np.clip(-v[back, 0], -1.0, 1.0))[:, None] / (0.5 * np.pi)
+    v[back, 1:] = np.where(lateral > 0, v[back, 1:] / np.where(lateral > 0, lateral, 1.0), 0.0) * rho
+    v[back, 0] = 0.0
+    dome = trimesh.Trimesh(v * np.asarray(radii, dtype=float), sphere.faces, process=True)
+    dome.fix_normals()
+    return dome
+
+
+def write_surface_mesh(scene: Scene, path: str | os.PathLike, units: str = 'mm') -> Path:
+    """Write the scene's tissue surface as STL/PLY (by suffix); ``units`` 'mm' (default) or 'm'."""
+    if units not in ('mm', 'm'):
+        raise ValueError(f"surface mesh units must be 'mm' or 'm', got {units!r}")
+    mesh = surface_mesh(scene.radii)
+    if units == 'mm':
+        mesh.apply_scale(1e3)
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(path.name + '.tmp' + path.suffix)
+    mesh.export(tmp)
+    os.replace(tmp, path)
+    return path

@@ -1,0 +1,276 @@
+"""Tissue scenes: breast geometry, tumours, materials, probe and loading protocol.
+
+A scene is a YAML file (see ``config/scenes/default.yaml``). Lengths are millimetres and moduli
+kilopascals at that edge, as people write them; :func:`load_scene` converts everything to SI
+(m, Pa) and validates it, raising :class:`SceneError` with the offending key named.
+
+Frame (same as :mod:`haptic_anfis.synthetic_data`): the chest wall is the plane x = 0, +x points out
+of the body, the breast is the semi-ellipsoid (x/Rx)^2 + (y/Ry)^2 + (z/Rz)^2 <= 1, x >= 0.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+MM = 1e-3
+KPA = 1e3
+
+
+
+def _scene_dir() -> Path:
+    """config/scenes of the source tree, else of the installed share dir (colcon / pip)."""
+    src = Path(__file__).resolve().parents[2] / 'config' / 'scenes'
+    if src.is_dir():
+        return src
+    try:
+        from ament_index_python.packages import get_package_share_directory
+
+        return Path(get_package_share_directory('haptic_anfis')) / 'config' / 'scenes'
+    except Exception:  # no ament index: fall back to the install prefix's share dir
+        import sys
+
+        return Path(sys.prefix) / 'share' / 'haptic_anfis' / 'config' / 'scenes'
+
+
+SCENE_DIR = _scene_dir()
+DEFAULT_SCENE = SCENE_DIR / 'default.yaml'
+
+
+class SceneError(ValueError):
+    """A scene file is missing, malformed or physically inconsistent."""
+
+
+@dataclass(frozen=True)
+class Tumour:
+    """A spherical inclusion. centre (3,) [m] in the tissue frame, radius [m], Young's modulus [Pa]."""
+
+    name: str
+    centre: tuple[float, float, float]
+    radius: float
+    youngs: float
+    source: str = ''
+
+
+@dataclass(frozen=True)
+class Material:
+    """Nearly incompressible Neo-Hookean tissue: Young's modulus [Pa] (small strain), Poisson's ratio."""
+
+    youngs: float
+    poisson: float
+    source: str = ''
+
+    @property
+    def shear(self) -> float:
+        """Shear modulus mu = E / (2 (1 + nu)) [Pa]."""
+        return self.youngs / (2.0 * (1.0 + self.poisson))
+
+    def bulk_ratio(self) -> float:
+        """K / mu for this Poisson's ratio (the same ratio is used for every region)."""
+        nu = self.poisson
+        return 2.0 * (1.0 + nu) / (3.0 * (1.0 - 2.0 * nu))
+
+
+@dataclass(frozen=True)
+class MeshSettings:
+    """Structured hexahedral mesh density.
+
+    probe_cells: cells across the probe footprint (4 * probe_cells nodes lie on its rim);
+    the element size along the probe edge is about pi * a / (2 * probe_cells); ``edge_refine``
+    halvings of the radial and depth size grade the cells towards the edge singularity.
+    """
+
+    probe_cells: int = 6
+    coarse_probe_cells: int = 4
+    edge_refine: int = 1
+    rim: float = 0.99
+
+
+@dataclass(frozen=True)
+class Scene:
+    """A validated scene in SI units. See the module docstring for the frame."""
+
+    name: str
+    radii: tuple[float, float, float]
+    material: Material
+    tumours: tuple[Tumour, ...]
+    probe_radius: float
+    direction: str
+    spacing: float
+    palpable_radius: float
+    depths: tuple[float, ...]
+    max_step: float
+    mesh: MeshSettings = field(default_factory=MeshSettings)
+    source_sha256: str = ''
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain-dict form in SI units (for provenance sidecars)."""
+        return asdict(self)
+
+    def sha256(self) -> str:
+        """Hash of the validated SI content (stable across YAML formatting)."""
+        d = self.to_dict()
+        d.pop('source_sha256')
+        return hashlib.sha256(json.dumps(d, sort_keys=True).encode()).hexdigest()
+
+
+_KEYS: dict[str, set[str]] = {
+    '': {'name', 'breast', 'material', 'tumours', 'probe', 'loading', 'mesh'},
+    'breast': {'radii_mm'},
+    'material': {'model', 'youngs_kPa', 'poisson', 'source'},
+    'tumour': {'name', 'centre_mm', 'radius_mm', 'youngs_kPa', 'source'},
+    'probe': {'diameter_mm', 'direction'},
+    'loading': {'spacing_mm', 'palpable_radius_mm', 'depths_mm', 'max_step_mm'},
+    'mesh': {'probe_cells', 'coarse_probe_cells', 'edge_refine', 'rim'},
+}
+
+
+def _check_keys(d: Any, section: str, where: str) -> dict[str, Any]:
+    if not isinstance(d, dict):
+        raise SceneError(f'{where}: expected a mapping, got {type(d).__name__}')
+    unknown = sorted(set(d) - _KEYS[section])
+    if unknown:
+        raise SceneError(f'{where}: unknown key(s) {unknown}; allowed: {sorted(_KEYS[section])}')
+    return d
+
+
+def _num(d: dict[str, Any], key: str, where: str, *, positive: bool = True,
+         default: float | None = None) -> float:
+    if key not in d:
+        if default is None:
+            raise SceneError(f'{where}: missing required key {key!r}')
+        return default
+    v = d[key]
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not np.isfinite(v):
+        raise SceneError(f'{where}.{key}: expected a finite number, got {v!r}')
+    if positive and v <= 0:
+        raise SceneError(f'{where}.{key}: must be > 0, got {v!r}')
+    return float(v)
+
+
+def _vec(d: dict[str, Any], key: str, where: str, n: int) -> tuple[float, ...]:
+    v = d.get(key)
+    if (not isinstance(v, (list, tuple)) or len(v) != n
+            or not all(isinstance(c, (int, float)) and not isinstance(c, bool) and np.isfinite(c)
+                       for c in v)):
+        raise SceneError(f'{where}.{key}: expected a list of {n} finite numbers, got {v!r}')
+    return tuple(float(c) for c in v)
+
+
+def surface_height(y: np.ndarray, z: np.ndarray, radii: tuple[float, float, float]) -> np.ndarray:
+    """Height x [m] of the semi-ellipsoid above the chest wall at (y, z) [m]; 0 outside."""
+    rx, ry, rz = radii
+    return rx * np.sqrt(np.clip(1.0 - (np.asarray(y) / ry) ** 2 - (np.asarray(z) / rz) ** 2,
+                                0.0, None))
+
+
+def parse_scene(data: Any, name: str = 'scene', source_sha256: str = '') -> Scene:
+    """Validate a scene mapping (YAML units: mm, kPa) and return it in SI units."""
+    top = _check_keys(data, '', name)
+    for req in ('breast', 'material', 'probe', 'loading'):
+        if req not in top:
+            raise SceneError(f'{name}: missing required section {req!r}')
+    breast = _check_keys(top['breast'], 'breast', 'breast')
+    radii = tuple(r * MM for r in _vec(breast, 'radii_mm', 'breast', 3))
+    if min(radii) <= 0:
+        raise SceneError(f'breast.radii_mm: radii must be > 0, got {breast["radii_mm"]!r}')
+
+    mat = _check_keys(top['material'], 'material', 'material')
+    if mat.get('model', 'neo_hookean') != 'neo_hookean':
+        raise SceneError(f"material.model: only 'neo_hookean' is supported, got {mat['model']!r}")
+    nu = _num(mat, 'poisson', 'material', default=0.499)
+    if not 0.0 < nu < 0.5:
+        raise SceneError(f'material.poisson: must be in (0, 0.5) (nearly incompressible: '
+                         f'0.49-0.4999), got {nu!r}')
+    material = Material(youngs=_num(mat, 'youngs_kPa', 'material') * KPA, poisson=nu,
+                        source=str(mat.get('source', '')))
+
+    probe = _check_keys(top['probe'], 'probe', 'probe')
+    a = 0.5 * _num(probe, 'diameter_mm', 'probe') * MM
+    direction = probe.get('direction', 'axis')
+    if direction not in ('axis', 'normal'):
+        raise SceneError(f"probe.direction: expected 'axis' (along -x, perpendicular to the body) "
+                         f"or 'normal' (local surface normal), got {direction!r}")
+
+    load = _check_keys(top['loading'], 'loading', 'loading')
+    spacing = _num(load, 'spacing_mm', 'loading') * MM
+    palp = _num(load, 'palpable_radius_mm', 'loading') * MM
+    max_step = _num(load, 'max_step_mm', 'loading', default=2.0) * MM
+    depths_raw = load.get('depths_mm')
+    if (not isinstance(depths_raw, (list, tuple)) or not depths_raw
+            or not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in depths_raw)):
+        raise SceneError(f'loading.depths_mm: expected a non-empty list of numbers, got {depths_raw!r}')
+    depths = tuple(float(v) * MM for v in depths_raw)
+    if any(d <= 0 for d in depths) or any(np.diff(depths) <= 0):
+        raise SceneError(f'loading.depths_mm: depths must be > 0 and strictly increasing, '
+                         f'got {depths_raw!r}')
+
+    mesh_d = _check_keys(top.get('mesh', {}) or {}, 'mesh', 'mesh')
+    mesh = MeshSettings(probe_cells=int(_num(mesh_d, 'probe_cells', 'mesh', default=10)),
+                        coarse_probe_cells=int(_num(mesh_d, 'coarse_probe_cells', 'mesh', default=4)),
+                        edge_refine=int(_num(mesh_d, 'edge_refine', 'mesh', positive=False,
+                                             default=1)),
+                        rim=_num(mesh_d, 'rim', 'mesh', default=0.99))
+    if mesh.probe_cells < 2 or mesh.coarse_probe_cells < 2:
+        raise SceneError('mesh.probe_cells / coarse_probe_cells: need at least 2')
+    if not 0 <= mesh.edge_refine <= 4:
+        raise SceneError(f'mesh.edge_refine: 0 .. 4 halvings, got {mesh.edge_refine!r}')
+    if not 0.5 < mesh.rim < 1.0:
+        raise SceneError(f'mesh.rim: fraction of the base radius that is meshed, in (0.5, 1), '
+                         f'got {mesh.rim!r}')
+
+    # The probe footprint must stay on tissue: the palpable disc plus the probe radius must fit
+    # inside the meshed base ellipse.
+    rmin = min(radii[1], radii[2]) * mesh.rim
+    if palp + a >= rmin:
+        raise SceneError(f'loading.palpable_radius_mm: {palp / MM:g} mm plus the probe radius '
+                         f'{a / MM:g} mm reaches the edge of the breast ({rmin / MM:.1f} mm)')
+    # Depth beyond thickness: the deepest indentation must leave tissue under the probe.
+    thinnest = float(surface_height(np.array(palp), np.array(0.0),
+                                    (radii[0], rmin / mesh.rim, rmin / mesh.rim)))
+    if depths[-1] >= 0.8 * thinnest:
+        raise SceneError(f'loading.depths_mm: deepest indentation {depths[-1] / MM:g} mm is beyond '
+                         f'80 % of the tissue thickness at the palpable edge '
+                         f'({thinnest / MM:.1f} mm at {palp / MM:g} mm from the centre)')
+
+    tumours = []
+    for i, t in enumerate(top.get('tumours', []) or []):
+        where = f'tumours[{i}]'
+        t = _check_keys(t, 'tumour', where)
+        c = tuple(v * MM for v in _vec(t, 'centre_mm', where, 3))
+        r = _num(t, 'radius_mm', where) * MM
+        e = _num(t, 'youngs_kPa', where) * KPA
+        # Sufficient test: the centre lies in the ellipsoid shrunk by r (which the inner
+        # parallel body contains) and the sphere stays above the chest wall.
+        shrunk = np.array(radii) - r
+        inside = (np.all(shrunk > 0) and c[0] - r >= 0
+                  and sum((ci / si) ** 2 for ci, si in zip(c, shrunk)) <= 1.0)
+        if not inside:
+            raise SceneError(f'{where}: tumour (centre {t["centre_mm"]} mm, radius {t["radius_mm"]} '
+                             'mm) is not inside the tissue (it must clear the skin surface and the '
+                             'chest wall x = 0)')
+        tumours.append(Tumour(name=str(t.get('name', f'tumour{i}')), centre=c, radius=r,
+                              youngs=e, source=str(t.get('source', ''))))
+    return Scene(name=str(top.get('name', name)), radii=radii, material=material,
+                 tumours=tuple(tumours), probe_radius=a, direction=direction, spacing=spacing,
+                 palpable_radius=palp, depths=depths, max_step=max_step, mesh=mesh,
+                 source_sha256=source_sha256)
+
+
+def load_scene(path: str | os.PathLike = DEFAULT_SCENE) -> Scene:
+    """Read and validate a scene YAML file. Raises SceneError (a ValueError) on any problem."""
+    path = Path(path)
+    if not path.is_file():
+        raise SceneError(f'scene file {str(path)!r} does not exist')
+    raw = path.read_bytes()
+    try:
+        data = yaml.safe_load(raw)
+    except yaml.YAMLError as exc:
+        raise SceneError(f'scene file {str(path)!r} is not valid YAML: {exc}') from None
+    return parse_scene(data, name=path.stem, source_sha256=hashlib.sha256(raw).hexdigest())
