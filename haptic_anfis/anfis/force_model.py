@@ -53,7 +53,7 @@ class ForceModel:
     """
 
     def __init__(self, structure: Structure | Sequence[Structure] | None = None, epochs: int = 60,
-                 search_epochs: int = 40, search_start: Structure = (2, 2, 2, 2),
+                 search_epochs: int = 10, search_start: Structure = (2, 2, 2, 2),
                  max_mfs: Structure = (5, 5, 5, 3), candidates: list[Structure] | None = None,
                  tol: float = 0.05, ridge: float = DEFAULT_RIDGE, step: float = 0.01,
                  val_fraction: float = 0.2, split: str = 'point',
