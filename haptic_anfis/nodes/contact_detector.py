@@ -17,15 +17,20 @@ from rclpy.node import Node
 from sensor_msgs.msg import JointState
 
 from ..contact import ContactDetector, ContactTracker, ellipsoid_dome
+from ..dataset import DATA_DIR
 from . import interfaces as ifc
 from ._common import (LOOP_QOS, Param, declare_parameters, finite_vector, non_negative, one_of,
                       positive, run_node)
 
+#: Surface mesh of the default FE scene (config/scenes/default.yaml), in millimetres.
+DEFAULT_SURFACE = DATA_DIR / 'default_surface.stl'
+
 MESH_PARAMS = [
-    Param('mesh_path', '', "tissue surface mesh file (STL, OBJ, PLY...; '' = the built-in "
-          'semi-ellipsoid dome)'),
+    Param('mesh_path', '', "tissue surface mesh file (STL, OBJ, PLY...; '' = the shipped surface "
+          "of the default FE scene, so forces and surface agree by construction; 'dome' = a "
+          'built-in semi-ellipsoid with dome_radii)'),
     Param('mesh_unit', 'mm', "length unit of mesh_path: 'mm' or 'm'", one_of('mm', 'm')),
-    Param('dome_radii', [0.045, 0.070, 0.070], 'radii (x, y, z) [m] of the built-in dome',
+    Param('dome_radii', [0.045, 0.070, 0.070], "radii (x, y, z) [m] of the mesh_path 'dome'",
           finite_vector(3, positive=True)),
     Param('frame_id', 'tissue', 'the tissue frame: poses in other frames are rejected; frame of '
           'the published messages'),
@@ -43,10 +48,12 @@ PARAMS = MESH_PARAMS + [
 
 def load_surface(node, p: dict):
     """The tissue mesh named by the mesh parameters (metres, tissue frame)."""
-    if p['mesh_path']:
-        from ..contact import load_mesh
-        return load_mesh(p['mesh_path'], unit=p['mesh_unit'])
-    return ellipsoid_dome(tuple(p['dome_radii']))
+    from ..contact import load_mesh
+    if p['mesh_path'] == 'dome':
+        return ellipsoid_dome(tuple(p['dome_radii']))
+    if not p['mesh_path']:  # the default scene's surface, written in mm by the FE pipeline
+        return load_mesh(DEFAULT_SURFACE, unit='mm')
+    return load_mesh(p['mesh_path'], unit=p['mesh_unit'])
 
 
 def make_tracker(p: dict) -> ContactTracker:
@@ -94,7 +101,7 @@ class ContactDetectorNode(Node):
         self.max_depth_seen = 0.0
         self.last = None
         self.get_logger().info(
-            f"tissue mesh {p['mesh_path'] or 'built-in dome ' + str(p['dome_radii'])}: "
+            f"tissue mesh {p['mesh_path'] or DEFAULT_SURFACE}: "
             f'{self.detector.n_faces} faces; direction {d}')
 
     def _on_pose(self, msg: PoseStamped) -> None:
