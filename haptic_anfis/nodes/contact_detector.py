@@ -51,9 +51,12 @@ def load_surface(node, p: dict):
     from ..contact import load_mesh
     if p['mesh_path'] == 'dome':
         return ellipsoid_dome(tuple(p['dome_radii']))
-    if not p['mesh_path']:  # the default scene's surface, written in mm by the FE pipeline
-        return load_mesh(DEFAULT_SURFACE, unit='mm')
-    return load_mesh(p['mesh_path'], unit=p['mesh_unit'])
+    path, unit = (p['mesh_path'], p['mesh_unit']) if p['mesh_path'] else (DEFAULT_SURFACE, 'mm')
+    mesh = load_mesh(path, unit=unit)
+    # Files such as STL store every triangle's corners separately: join equal vertices so the
+    # surface is connected (same faces and coordinates, so the same contact answers).
+    mesh.merge_vertices()
+    return mesh
 
 
 def make_tracker(p: dict) -> ContactTracker:
