@@ -211,7 +211,7 @@ def format_markdown(res: dict[str, Any]) -> str:
          '',
          'Bold: on the Pareto front of single-query p50 latency against RMS force-vector error '
          '(no other model is both faster and more accurate). *Single query* is the real-time path each '
-         'model offers: ours `ForceModel.predict_one` (numba, parameters baked in), every peer its '
+         'model offers: ours `ForceModel.predict_one` (numba, packed parameter arrays), every peer its '
          '`predict` on one (1, 4) row; xanfis is timed inside its own process. *Batch*: ours '
          '`predict_compiled`, peers `predict`, on random surface inputs.',
          '',
