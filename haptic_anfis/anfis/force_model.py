@@ -288,9 +288,11 @@ def train_on_dataset(ds: ForceDataset, test_fraction: float = 0.2, seed: int = 0
     on the rest (which itself holds out 20 % for structure/epoch selection), record RMSEs and the
     dataset hash in the model. Returns (model, test set).
     """
-    if len(np.unique(ds.point)) < 5:
-        raise DatasetError('training needs at least 5 surface points (train/validation/test split)')
-    train_idx, test_idx = split_indices(ds, test_fraction, seed, by=params.get('split', 'point'))
+    by = params.get('split', 'point')
+    if by == 'point' and len(np.unique(ds.point)) < 5:
+        raise DatasetError(f'training needs at least 5 surface points for a split by point, the '
+                           f'dataset has {len(np.unique(ds.point))} (or split by sample)')
+    train_idx, test_idx = split_indices(ds, test_fraction, seed, by=by)
     tr, te = ds.subset(train_idx), ds.subset(test_idx)
     model = ForceModel(seed=seed, **params).fit(tr.X, tr.Y, groups=tr.point, verbose=verbose)
     model.metadata_['rmse'] = {

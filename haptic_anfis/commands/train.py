@@ -4,7 +4,8 @@ from __future__ import annotations
 import argparse
 
 from ..anfis import train_on_dataset
-from ..dataset import OUTPUT_NAMES, load_dataset
+from ..bag.training_data import load_training_data
+from ..dataset import OUTPUT_NAMES
 
 NAME = 'train'
 HELP = 'train the Fx/Fy/Fz ANFIS models on a force dataset (structure search, hybrid learning)'
@@ -22,7 +23,8 @@ def parse_structure(text: str) -> tuple[int, ...]:
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument('dataset', help='force dataset CSV (point,x_m,y_m,z_m,depth_m,fx_N,fy_N,fz_N)')
+    p.add_argument('dataset', help='force dataset CSV (point,x_m,y_m,z_m,depth_m,fx_N,fy_N,fz_N), '
+                   'or a recorded session bag (its contact and force-command topics)')
     p.add_argument('--out', required=True, help='model file to write (JSON)')
     p.add_argument('--config', default=None,
                    help='YAML with a "force_model" section of hyper-parameters '
@@ -64,7 +66,7 @@ def load_config(path: str | None) -> dict:
 
 
 def run(args: argparse.Namespace) -> int:
-    ds = load_dataset(args.dataset)
+    ds = load_training_data(args.dataset)
     print(f'dataset {args.dataset}: {len(ds)} samples at {len(set(ds.point.tolist()))} surface points'
           + (f' [{ds.provenance["kind"]}]' if ds.provenance.get('kind') else ''))
     params = load_config(args.config)

@@ -1,11 +1,12 @@
-"""``trainer``: trains the force model from a dataset file and hands it to the force server.
+"""``trainer``: trains the force model from a dataset or a recorded session, hands it to the force server.
 
 On the service ``~/train`` (``std_srvs/Trigger``; or at start with ``train_at_start``) it trains
 :class:`~haptic_anfis.anfis.ForceModel` on ``dataset_path`` (the paper's protocol,
 :func:`~haptic_anfis.anfis.train_on_dataset`) on a worker thread, publishes progress lines on
 ``~/progress`` (``std_msgs/String``), writes ``model_path`` atomically and calls the force server's
 reload service (``reload_service``). Point the force server's ``model_path`` at the same file.
-Training from recorded bags is a later issue; only dataset CSV files are read here.
+``dataset_path`` is a force dataset CSV or a recorded session bag: then the in-contact pairs of
+contact message and force command are the samples (:mod:`haptic_anfis.bag.training_data`).
 """
 from __future__ import annotations
 
@@ -17,7 +18,8 @@ from std_msgs.msg import String
 from std_srvs.srv import Trigger
 
 from ..anfis import train_on_dataset
-from ..dataset import DEFAULT_DATASET, load_dataset
+from ..bag.training_data import load_training_data
+from ..dataset import DEFAULT_DATASET
 from . import interfaces as ifc
 from ._common import Param, declare_parameters, positive, run_node
 
@@ -33,7 +35,8 @@ def _structure_check(v: str):
 
 
 PARAMS = [
-    Param('dataset_path', '', "force dataset CSV ('' = the shipped default dataset)"),
+    Param('dataset_path', '', "force dataset CSV, or a recorded session bag (directory or .mcap: "
+          "its in-contact contact/force-command pairs) ('' = the shipped default dataset)"),
     Param('model_path', 'haptic_anfis_model.json', 'model file to write (atomically)',
           lambda v: None if v else 'expected a file path'),
     Param('structure', '', "MF counts for all outputs, e.g. '3-3-3-2' ('' = structure search)",
@@ -85,7 +88,7 @@ class Trainer(Node):
         p = self.params
         path = p['dataset_path'] or str(DEFAULT_DATASET)
         try:
-            ds = load_dataset(path)
+            ds = load_training_data(path)
             self.say(f'dataset {path}: {len(ds)} samples')
             st = tuple(int(c) for c in p['structure'].split('-')) if p['structure'] else None
             self.say(f"training: structure {p['structure'] or 'search'}, up to {p['epochs']} epochs")
