@@ -13,36 +13,12 @@ import numpy as np
 
 from .anfis import ForceModel, rmse
 from .dataset import ForceDataset, split_indices
-
-
-def _percentiles_us(samples: np.ndarray) -> tuple[float, float]:
-    return float(np.percentile(samples, 50) * 1e6), float(np.percentile(samples, 99) * 1e6)
+from .timing import percentiles_us, throughput, time_calls
 
 
 def time_single(fn, queries: np.ndarray, repeats: int) -> np.ndarray:
     """Per-call wall times [s] of ``fn(x, y, z, depth)`` over ``repeats`` calls cycling ``queries``."""
-    out = np.empty(repeats)
-    clock = time.perf_counter
-    n = len(queries)
-    rows = [tuple(float(v) for v in q) for q in queries]
-    for k in range(repeats):
-        q = rows[k % n]
-        t0 = clock()
-        fn(*q)
-        out[k] = clock() - t0
-    return out
-
-
-def throughput(fn, X: np.ndarray, min_seconds: float = 0.3) -> float:
-    """Evaluations per second of batch ``fn(X)``."""
-    fn(X[:10])
-    n_calls, t0 = 0, time.perf_counter()
-    while True:
-        fn(X)
-        n_calls += 1
-        dt = time.perf_counter() - t0
-        if dt >= min_seconds:
-            return n_calls * len(X) / dt
+    return time_calls(fn, [tuple(float(v) for v in q) for q in queries], repeats)
 
 
 def bench_structures(ds: ForceDataset, structures: Sequence[tuple[int, ...] | None], seed: int = 0,
@@ -59,8 +35,8 @@ def bench_structures(ds: ForceDataset, structures: Sequence[tuple[int, ...] | No
         model = ForceModel(structure=st, seed=seed).fit(tr.X, tr.Y, groups=tr.point)
         fit_s = time.perf_counter() - t0
         numpy_one = lambda x, y, z, d: model.predict(np.array([[x, y, z, d]]))  # noqa: E731
-        c50, c99 = _percentiles_us(time_single(model.predict_one, te.X, repeats))
-        n50, n99 = _percentiles_us(time_single(numpy_one, te.X, max(repeats // 10, 200)))
+        c50, c99 = percentiles_us(time_single(model.predict_one, te.X, repeats))
+        n50, n99 = percentiles_us(time_single(numpy_one, te.X, max(repeats // 10, 200)))
         rows.append({
             'label': 'search' if st is None else '-'.join(map(str, st)),
             'structures': ['-'.join(map(str, s)) for s in model.structures_],

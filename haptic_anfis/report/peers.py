@@ -22,34 +22,16 @@ import subprocess
 import sys
 import time
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 
-
-def time_calls(fn: Callable[[np.ndarray], Any], Q: np.ndarray, repeats: int) -> np.ndarray:
-    """Per-call wall times [s] of ``fn(row)`` over ``repeats`` calls cycling the rows (1, 4) of Q."""
-    rows = [np.ascontiguousarray(Q[i:i + 1]) for i in range(len(Q))]
-    out = np.empty(repeats)
-    clock = time.perf_counter
-    for k in range(repeats):
-        q = rows[k % len(rows)]
-        t0 = clock()
-        fn(q)
-        out[k] = clock() - t0
-    return out
+from ..timing import throughput, time_calls
 
 
-def batch_rate(fn: Callable[[np.ndarray], Any], X: np.ndarray, min_seconds: float) -> float:
-    """Evaluations per second of ``fn(X)`` on a batch, timed over at least ``min_seconds``."""
-    fn(X[:10])
-    n, t0 = 0, time.perf_counter()
-    while True:
-        fn(X)
-        n += 1
-        dt = time.perf_counter() - t0
-        if dt >= min_seconds:
-            return n * len(X) / dt
+def _rows(Q: np.ndarray) -> list[tuple[np.ndarray]]:
+    """Each row of Q as a (1, 4) array argument: the single-query call of a batch ``predict``."""
+    return [(np.ascontiguousarray(Q[i:i + 1]),) for i in range(len(Q))]
 
 
 class Peer:
@@ -66,10 +48,10 @@ class Peer:
         raise NotImplementedError
 
     def time_single(self, Q: np.ndarray, repeats: int) -> np.ndarray:
-        return time_calls(self.predict, Q, repeats)
+        return time_calls(self.predict, _rows(Q), repeats)
 
     def throughput(self, X: np.ndarray, min_seconds: float = 0.3) -> float:
-        return batch_rate(self.predict, X, min_seconds)
+        return throughput(self.predict, X, min_seconds)
 
     def curves(self) -> list[dict[str, list[float]]]:
         return []
@@ -116,10 +98,10 @@ class OursPeer(Peer):
 
     def time_single(self, Q, repeats):
         one = self.model_.predict_one
-        return time_calls(lambda q: one(q[0, 0], q[0, 1], q[0, 2], q[0, 3]), Q, repeats)
+        return time_calls(one, [tuple(float(v) for v in q) for q in Q], repeats)
 
     def throughput(self, X, min_seconds=0.3):
-        return batch_rate(self.model_.predict_compiled, X, min_seconds)
+        return throughput(self.model_.predict_compiled, X, min_seconds)
 
     def curves(self):
         return [dict(c) for c in self.model_.train_curves_]
