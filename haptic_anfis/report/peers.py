@@ -20,7 +20,6 @@ import pickle
 import struct
 import subprocess
 import sys
-import time
 from pathlib import Path
 from typing import Any
 
