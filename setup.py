@@ -54,6 +54,11 @@ setup(
             'ros-jazzy-visualization-msgs==5.3.6',
         ],
         # Finite-element data generation (haptic_anfis.tissue). Optional for running the simulator.
+        # Optional: Intel MKL PARDISO for the FE solves (~5x faster than SciPy's SuperLU here;
+        # ~700 MB, x86-64 only). haptic_anfis.tissue uses it when importable.
+        'fe-fast': [
+            'pypardiso>=0.4',
+        ],
         'fe': [
             'felupe==11.3.0',
             'matplotlib>=3.7',  # `haptic-anfis dataset --report` plots
