@@ -1,6 +1,6 @@
-"""A clearly labelled SYNTHETIC placeholder force dataset (no finite-element solve behind it).
+"""A clearly labelled SYNTHETIC force dataset (no finite-element solve behind it).
 
-It stands in for the FE dataset until the tissue/FE pipeline ships one, and serves as a fast,
+It stood in for the FE dataset before the tissue/FE pipeline shipped one; now it is a fast,
 deterministic fixture for tests. Geometry and sampling follow the paper's set-up; the forces come
 from a closed-form approximation, NOT from mechanics we have validated:
 
@@ -43,7 +43,7 @@ def make_synthetic_dataset(
     tumour_gain: float = 0.20,
     noise: float = 0.005,
 ) -> ForceDataset:
-    """Build the synthetic placeholder dataset (SI units; see the module docstring).
+    """Build the synthetic dataset (SI units; see the module docstring).
 
     Surface points lie on a square grid of ``spacing`` in the (y, z) chest plane, inside a disc of
     ``palpable_radius``; every point is indented to every depth in ``depths``.

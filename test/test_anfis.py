@@ -245,7 +245,7 @@ def test_property_outputs_finite_and_paths_agree(small_model, q):
 
 
 def test_fit_on_synthetic_tissue_meets_paper_level_accuracy(synthetic):
-    """The end-to-end protocol (structure search, hybrid learning) on the placeholder data."""
+    """The end-to-end protocol (structure search, hybrid learning) on the synthetic fixture."""
     from haptic_anfis.anfis import train_on_dataset
     model, test = train_on_dataset(synthetic, search_epochs=15, epochs=30)
     r = model.metadata_['rmse']['test']
