@@ -93,3 +93,19 @@ def test_elliptic_base_keeps_probe_outline_round():
     assert rho.max() == pytest.approx(0.008, rel=1e-9)
     region = fem.RegionHexahedron(fem.Mesh(m.points, m.cells, 'hexahedron'))
     assert np.all(region.dV > 0)
+
+
+def test_separate_depth_and_outer_grading():
+    # edge grading split into radial-inside, radial-outside (outer_refine) and depth (depth_refine)
+    w3, q3, _ = disc_ogrid(6, 0.2, refine=3)
+    w0, q0, _ = disc_ogrid(6, 0.2, refine=3, outer_refine=0)
+    assert len(w0) < len(w3)
+    r3 = np.unique(np.round(np.abs(w3[np.abs(w3) > 0.2 * (1 + 1e-9)]), 12))
+    r0 = np.unique(np.round(np.abs(w0[np.abs(w0) > 0.2 * (1 + 1e-9)]), 12))
+    assert np.log(r3[0] / 0.2) == pytest.approx(0.5 * np.pi / 6 / 8)  # dq / 2^3 outside
+    assert np.log(r0[0] / 0.2) == pytest.approx(0.5 * np.pi / 6)  # no grading
+    dom = Domain(ry=0.1, rz=0.1, height=lambda y, z: np.full(np.shape(y), 0.04), fix_rim=False)
+    m_d = build_mesh(dom, (0.0, 0.0), 0.008, 6, refine=2, depth_refine=0)
+    m_2 = build_mesh(dom, (0.0, 0.0), 0.008, 6, refine=2)
+    assert len(m_d.points) < len(m_2.points)
+    assert np.sort(np.unique(m_2.points[:, 0]))[-2] > np.sort(np.unique(m_d.points[:, 0]))[-2]

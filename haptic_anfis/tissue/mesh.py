@@ -64,7 +64,8 @@ class HexMesh:
         return 3 * len(self.points)
 
 
-def disc_ogrid(n: int, s: float, refine: int = 0) -> tuple[np.ndarray, np.ndarray, int]:
+def disc_ogrid(n: int, s: float, refine: int = 0, outer_refine: int | None = None
+               ) -> tuple[np.ndarray, np.ndarray, int]:
     """O-grid of the unit disc holding the circle |w| = s as a mesh line.
 
     The disc |w| <= s is an n x n square grid mapped to a disc, surrounded (when ``refine`` > 0)
@@ -81,6 +82,8 @@ def disc_ogrid(n: int, s: float, refine: int = 0) -> tuple[np.ndarray, np.ndarra
         raise ValueError(f'inner radius must be in (0, 1), got {s!r}')
     dq = 0.5 * np.pi / n
     fine = dq * 2.0 ** -np.arange(refine, 0, -1)  # e.g. dq/4, dq/2 for refine = 2
+    ko = refine if outer_refine is None else min(outer_refine, refine)
+    fine_out = dq * 2.0 ** -np.arange(ko, 0, -1)  # the graded rings outside the circle
     # log-radius offsets of the graded rings inside the circle (from the mapped square outwards)
     inner_steps = np.concatenate([[dq], fine[::-1]]) if refine else np.zeros(0)
     s_out = s
@@ -101,7 +104,7 @@ def disc_ogrid(n: int, s: float, refine: int = 0) -> tuple[np.ndarray, np.ndarra
     boundary = boundary[np.argsort(np.angle(core[boundary]))]
     theta = np.angle(core[boundary])
     radii = np.concatenate([s * np.exp(np.cumsum(inner_steps)),
-                            s_out * np.exp(np.cumsum(fine)) if refine else np.zeros(0)])
+                            s_out * np.exp(np.cumsum(fine_out)) if ko else np.zeros(0)])
     radii = np.concatenate([radii, ring_radii(radii[-1] if refine else s, n)])
     nodes = [core]
     inner = boundary
@@ -190,18 +193,20 @@ def _tumour_fraction(points: np.ndarray, cells: np.ndarray,
 
 
 def build_mesh(domain: Domain, centre_yz: tuple[float, float], a: float, n: int,
-               growth_vertical: float | None = None, refine: int = 2) -> HexMesh:
+               growth_vertical: float | None = None, refine: int = 2,
+               depth_refine: int | None = None, outer_refine: int | None = None) -> HexMesh:
     """Hexahedral mesh of ``domain`` whose surface holds the probe outline (radius a [m], centred
     above ``centre_yz`` [m]) as a mesh line, with ``n`` cells across the probe.
 
     The element edge along the outline is about pi a / (2 n); layers under the skin start at that
     size and grow by ``growth_vertical`` (default: the larger of 1.25 and the in-plane growth).
-    ``refine`` halvings of the radial and depth cell size grade the mesh towards the probe edge.
+    ``refine`` halvings of the radial and depth cell size grade the mesh towards the probe edge;
+    ``depth_refine`` (default: ``refine``) sets the depth halvings separately.
     """
     rm = np.sqrt(domain.ry * domain.rz)
     p_hat = complex(centre_yz[0] / domain.ry, centre_yz[1] / domain.rz)
     c, s = moebius_for_circle(p_hat, a / rm)
-    w, quads, _ = disc_ogrid(n, s, refine)
+    w, quads, _ = disc_ogrid(n, s, refine, outer_refine)
     zeta = (w + c) / (1.0 + np.conj(c) * w)
     y, z = domain.ry * zeta.real, domain.rz * zeta.imag
     if not np.isclose(domain.ry, domain.rz):
@@ -212,7 +217,7 @@ def build_mesh(domain: Domain, centre_yz: tuple[float, float], a: float, n: int,
     edge = 0.5 * np.pi * a / n
     t0 = float(domain.height(np.array(centre_yz[0]), np.array(centre_yz[1])))
     frac = layer_fractions(t0, edge, growth_vertical or max(np.exp(0.5 * np.pi / n), 1.25),
-                           refine)
+                           refine if depth_refine is None else depth_refine)
     L, N2 = len(frac) - 1, len(w)
     pts = np.empty((L + 1, N2, 3))
     pts[:, :, 0] = frac[:, None] * thick[None, :]
