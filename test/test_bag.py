@@ -8,6 +8,7 @@ import signal
 import subprocess
 import sys
 import time
+from contextlib import contextmanager
 from pathlib import Path
 
 import pytest
@@ -195,6 +196,30 @@ def test_bad_bags_give_clear_errors(tmp_path, capsys):
         bw.add_topic('/y', 'my_pkg/msg/Mystery')
 
 
+@contextmanager
+def _pose_publisher(domain: int, proc: subprocess.Popen, why=lambda: ''):
+    """A PoseStamped publisher on falcon/measured_cp in its own context, yielded once the process
+    ``proc`` subscribes to it; on exit the process is killed if still running and ROS shut down."""
+    from rclpy.context import Context
+    ctx = Context()
+    rclpy.init(context=ctx, domain_id=domain)
+    node = rclpy.create_node('pose_publisher', context=ctx)
+    pub = node.create_publisher(PoseStamped, '/falcon/measured_cp', QoSProfile(
+        depth=1000, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE))
+    try:
+        end = time.monotonic() + 60
+        while pub.get_subscription_count() == 0:
+            assert time.monotonic() < end and proc.poll() is None, why()
+            time.sleep(0.05)
+        time.sleep(0.5)  # let the match complete on the subscriber's side too
+        yield pub
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+        node.destroy_node()
+        rclpy.try_shutdown(context=ctx)
+
+
 def test_recorder_killed_with_sigkill_is_recovered(tmp_path):
     """A recorder process is SIGKILLed while a 1 kHz publisher runs: recover keeps >= 95 %."""
     domain = next(_domains)
@@ -203,19 +228,7 @@ def test_recorder_killed_with_sigkill_is_recovered(tmp_path):
     proc = subprocess.Popen([str(BIN / 'recorder'), '--ros-args', '-p', f'output:={bag}',
                              '-p', 'topics:=[falcon/measured_cp]', '-p', 'flush_period:=0.2'],
                             env=node_env(domain), cwd=ROOT, stdout=log, stderr=subprocess.STDOUT)
-    from rclpy.context import Context
-    ctx = Context()
-    rclpy.init(context=ctx, domain_id=domain)
-    node = rclpy.create_node('killer', context=ctx)
-    pub = node.create_publisher(PoseStamped, '/falcon/measured_cp', QoSProfile(
-        depth=1000, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE))
-    try:
-        end = time.monotonic() + 60
-        while pub.get_subscription_count() == 0:
-            assert time.monotonic() < end and proc.poll() is None, \
-                (tmp_path / 'recorder.log').read_text()
-            time.sleep(0.05)
-        time.sleep(0.5)  # let the match complete on the recorder's side too
+    with _pose_publisher(domain, proc, lambda: (tmp_path / 'recorder.log').read_text()) as pub:
         msg = PoseStamped()
         msg.header.frame_id = 'tissue'
         published = 0
@@ -227,11 +240,6 @@ def test_recorder_killed_with_sigkill_is_recovered(tmp_path):
             time.sleep(0.001)
         proc.send_signal(signal.SIGKILL)  # while "publishing": nothing closes the bag
         proc.wait(10)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-        node.destroy_node()
-        rclpy.try_shutdown(context=ctx)
     assert not (bag / 'metadata.yaml').exists()
     with pytest.raises(BagError, match='metadata.yaml is missing'):
         bag_info(bag)
@@ -251,18 +259,7 @@ def test_record_command_closes_bag_on_sigint(tmp_path):
     proc = subprocess.Popen([str(BIN / 'haptic-anfis'), 'bag', 'record', '-o', str(bag),
                              'falcon/measured_cp'], env=node_env(domain), cwd=ROOT,
                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-    from rclpy.context import Context
-    ctx = Context()
-    rclpy.init(context=ctx, domain_id=domain)
-    node = rclpy.create_node('pub', context=ctx)
-    pub = node.create_publisher(PoseStamped, '/falcon/measured_cp', QoSProfile(
-        depth=1000, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE))
-    try:
-        end = time.monotonic() + 60
-        while pub.get_subscription_count() == 0:
-            assert time.monotonic() < end and proc.poll() is None
-            time.sleep(0.05)
-        time.sleep(0.5)
+    with _pose_publisher(domain, proc) as pub:
         msg = PoseStamped()
         msg.header.frame_id = 'tissue'
         for i in range(300):
@@ -272,11 +269,6 @@ def test_record_command_closes_bag_on_sigint(tmp_path):
         time.sleep(1.0)
         proc.send_signal(signal.SIGINT)
         out, _ = proc.communicate(timeout=30)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-        node.destroy_node()
-        rclpy.try_shutdown(context=ctx)
     assert proc.returncode == 0, out
     assert (bag / 'metadata.yaml').is_file(), out
     assert bag_info(bag).message_count == 300, out
