@@ -3,7 +3,6 @@ process. Own ROS_DOMAIN_ID per test, localhost discovery; no wall-clock assertio
 is checked by comparing receive-time gaps with the recorded gaps."""
 from __future__ import annotations
 
-import signal
 import statistics
 import subprocess
 import time
@@ -18,7 +17,7 @@ from rclpy.parameter import Parameter  # noqa: E402
 from haptic_anfis.bag import BagWriter  # noqa: E402
 from haptic_anfis.nodes.player import PLAY_QOS, Player  # noqa: E402
 from test_bag import _pose_bytes  # noqa: E402
-from test_nodes_process import BIN, ROOT, _domains, node_env  # noqa: E402
+from test_nodes_process import BIN, ROOT, _domains, launch, node_env, stop  # noqa: E402
 
 pytestmark = pytest.mark.ros
 
@@ -100,16 +99,10 @@ def running_player(irregular_bag, tmp_path):
     bag, _ = irregular_bag
     env = node_env(domain)
     log = tmp_path / 'player.log'
-    proc = subprocess.Popen([str(BIN / 'player'), '--ros-args', '-p', f'bag_path:={bag}',
-                             '-p', 'loop:=true', '-p', 'rate:=4.0'], env=env, cwd=ROOT,
-                            stdout=log.open('w'), stderr=subprocess.STDOUT)
+    proc = launch('player', ['-p', f'bag_path:={bag}', '-p', 'loop:=true', '-p', 'rate:=4.0'],
+                  domain, log)
     yield env, proc, log
-    proc.send_signal(signal.SIGINT)
-    try:
-        proc.wait(10)
-    except subprocess.TimeoutExpired:
-        proc.kill()
-        proc.wait(5)
+    stop(proc)
 
 
 def _cmd(env, *argv, timeout=90):
