@@ -11,9 +11,8 @@ for _v in ('OMP_NUM_THREADS', 'MKL_NUM_THREADS', 'OPENBLAS_NUM_THREADS'):
 
 import numpy as np  # noqa: E402
 
-from haptic_anfis.tissue.fe import default_linear_solver, scene_domain, solve_scene_point  # noqa: E402
+from haptic_anfis.tissue.fe import default_linear_solver, scene_mesh, solve_scene_point  # noqa: E402
 from haptic_anfis.tissue.geometry import loading_points  # noqa: E402
-from haptic_anfis.tissue.mesh import build_mesh  # noqa: E402
 from haptic_anfis.tissue.scene import load_scene  # noqa: E402
 
 
@@ -27,8 +26,7 @@ def main() -> None:
     for label, n in (('coarse', scene.mesh.coarse_probe_cells), ('default', scene.mesh.probe_cells)):
         t0 = time.perf_counter()
         for _ in range(10):
-            build_mesh(scene_domain(scene), (apex[1], apex[2]), scene.probe_radius, n,
-                       refine=scene.mesh.edge_refine)
+            scene_mesh(scene, apex[1:], n)
         t_mesh = (time.perf_counter() - t0) / 10
         res = solve_scene_point(scene, apex, probe_cells=n)
         print(f'{label:>8s} {res.ndof:7d} {1e3 * t_mesh:8.1f} {res.wall_time:8.1f} '

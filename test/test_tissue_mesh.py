@@ -109,3 +109,17 @@ def test_separate_depth_and_outer_grading():
     m_2 = build_mesh(dom, (0.0, 0.0), 0.008, 6, refine=2)
     assert len(m_d.points) < len(m_2.points)
     assert np.sort(np.unique(m_2.points[:, 0]))[-2] > np.sort(np.unique(m_d.points[:, 0]))[-2]
+
+
+def test_edge_offset_pulls_the_footprint_outline_inside_the_probe():
+    # alpha = 0.2 of the first outer cell (~ a * pi / (2 n)) inside a; n = 6 -> a / 1.05236
+    dom = Domain(ry=0.1, rz=0.1, height=lambda y, z: np.full(np.shape(y), 0.04), fix_rim=False)
+    m0 = build_mesh(dom, (0.0, 0.0), 0.008, 6, refine=0)
+    m2 = build_mesh(dom, (0.0, 0.0), 0.008, 6, refine=0, edge_offset=0.2)
+    r2 = np.hypot(*m2.points[m2.footprint][:, 1:].T)
+    assert m0.footprint_radius == pytest.approx(0.008)
+    assert m2.footprint_radius == pytest.approx(0.008 / (1 + 0.2 * np.pi / 12))
+    assert r2.max() == pytest.approx(m2.footprint_radius, rel=1e-9)
+    assert len(m2.footprint) == len(m0.footprint)  # same topology, smaller outline
+    with pytest.raises(ValueError, match='edge_offset'):
+        build_mesh(dom, (0.0, 0.0), 0.008, 6, edge_offset=1.0)

@@ -59,6 +59,8 @@ def _bad(raw, path, value):
     (('tumours', 0, 'centre_mm'), [3, 0, 0], 'not inside the tissue'),
     (('tumours', 0, 'youngs_kPa'), 0, 'must be > 0'),
     (('loading', 'spacing_mm'), 'six', 'finite number'),
+    (('mesh', 'edge_offset'), 1.5, 'edge_offset'),
+    (('mesh', 'edge_offset'), -0.1, 'edge_offset'),
     (('probe',), KeyError, "missing required section 'probe'"),
 ])
 def test_invalid_scenes_raise_clear_errors(raw, path, value, message):

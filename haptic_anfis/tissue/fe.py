@@ -209,6 +209,14 @@ def scene_moduli(scene: Scene, mesh: HexMesh) -> tuple[np.ndarray, np.ndarray]:
     return mu, mu * mat.bulk_ratio()
 
 
+def scene_mesh(scene: Scene, centre_yz: Sequence[float], probe_cells: int) -> HexMesh:
+    """The mesh of ``scene`` for a probe centred over ``centre_yz`` (y, z) [m], with the scene's
+    edge grading and edge offset."""
+    return build_mesh(scene_domain(scene), (float(centre_yz[0]), float(centre_yz[1])),
+                      scene.probe_radius, probe_cells, refine=scene.mesh.edge_refine,
+                      edge_offset=scene.mesh.edge_offset)
+
+
 def solve_scene_point(scene: Scene, point: Sequence[float], coarse: bool = False,
                       probe_cells: int | None = None, solver: Callable | None = None
                       ) -> LoadPathResult:
@@ -217,11 +225,10 @@ def solve_scene_point(scene: Scene, point: Sequence[float], coarse: bool = False
 
     n = probe_cells or (scene.mesh.coarse_probe_cells if coarse else scene.mesh.probe_cells)
     point = np.asarray(point, dtype=float)
-    mesh = build_mesh(scene_domain(scene), (point[1], point[2]), scene.probe_radius, n,
-                      refine=scene.mesh.edge_refine)
+    mesh = scene_mesh(scene, point[1:], n)
     mu, bulk = scene_moduli(scene, mesh)
     direction = indentation_direction(scene, point[None])[0]
     res = solve_load_path(mesh, mu, bulk, direction, scene.depths, scene.max_step, solver=solver)
     res.info.update(probe_cells=n, edge_refine=scene.mesh.edge_refine,
-                    direction=direction.tolist())
+                    edge_offset=scene.mesh.edge_offset, direction=direction.tolist())
     return res

@@ -22,19 +22,22 @@ from .validation import fe_punch_on_layer, hayes_kappa, sneddon_force
 SMALL_DEPTH = 0.2e-3  # m: delta / a = 0.025, where the Neo-Hookean punch is still linear
 
 
-def punch_case(scene: Scene, kind: str, probe_cells: int, depths: tuple[float, ...] = (SMALL_DEPTH,)
-               ) -> dict[str, Any]:
+def punch_case(scene: Scene, kind: str, probe_cells: int, depths: tuple[float, ...] = (SMALL_DEPTH,),
+               edge_offset: float | None = None) -> dict[str, Any]:
     """FE punch on a flat layer ('hayes': h = 5a = 40 mm for a = 8 mm; 'sneddon': h = 40a) with the
-    scene's probe and tissue; returns FE and analytic forces and the relative errors."""
+    scene's probe, tissue and mesh settings (``edge_offset`` overrides the scene's); returns FE and
+    analytic forces and the relative errors."""
+    offset = scene.mesh.edge_offset if edge_offset is None else edge_offset
     a, E, nu = scene.probe_radius, scene.material.youngs, scene.material.poisson
     h = 5.0 * a if kind == 'hayes' else 40.0 * a
     radius = 5.0 * h if kind == 'hayes' else h
     res = fe_punch_on_layer(h, a, E, nu, depths=depths, probe_cells=probe_cells, radius=radius,
-                            refine=scene.mesh.edge_refine)
+                            refine=scene.mesh.edge_refine, edge_offset=offset)
     kappa = hayes_kappa(a / h, nu)
     sned = sneddon_force(a, E, nu, res.depths)
     fx = res.forces[:, 0]
-    return {'kind': kind, 'h_m': h, 'a_m': a, 'probe_cells': probe_cells, 'ndof': res.ndof,
+    return {'kind': kind, 'h_m': h, 'a_m': a, 'probe_cells': probe_cells, 'edge_offset': offset,
+            'ndof': res.ndof,
             'probe_edge_m': res.probe_edge_size, 'depths_m': res.depths.tolist(),
             'fe_N': fx.tolist(), 'sneddon_N': sned.tolist(), 'kappa': kappa,
             'hayes_N': (kappa * sned).tolist(),
@@ -55,7 +58,8 @@ def convergence_case(scene: Scene, probe_cells: int, point_index: int | None = N
     except FESolveError as exc:  # report how deep it got rather than nothing
         res, error = exc.partial, str(exc)
     return {'point': i, 'surface_point_m': pts[i].tolist(), 'probe_cells': probe_cells,
-            'edge_refine': scene.mesh.edge_refine, 'error': error,
+            'edge_refine': scene.mesh.edge_refine, 'edge_offset': scene.mesh.edge_offset,
+            'error': error,
             'ndof': res.ndof, 'ncells': res.ncells, 'probe_edge_m': res.probe_edge_size,
             'depths_m': res.depths.tolist(), 'forces_N': res.forces.tolist(),
             'wall_time_s': res.wall_time, 'newton_iterations': res.newton_iterations}
@@ -84,6 +88,8 @@ def write_report(scene: Scene, out_dir: str | os.PathLike, data: str | os.PathLi
     out.mkdir(parents=True, exist_ok=True)
     jpath = out / 'validation.json'
     store: dict[str, Any] = json.loads(jpath.read_text()) if jpath.is_file() else {}
+    if store.get('scene_sha256') != scene.sha256():  # cached cases of another scene / mesh
+        store = {'scene_sha256': scene.sha256()}
     default_n = scene.mesh.probe_cells
     ns = [scene.mesh.coarse_probe_cells] if coarse else sorted(
         {scene.mesh.coarse_probe_cells, default_n, default_n + 2, default_n + 4})
@@ -94,6 +100,13 @@ def write_report(scene: Scene, out_dir: str | os.PathLike, data: str | os.PathLi
             yield (f'{kind:8s} n={n:2d} ({c["ndof"]:6d} DOF, edge {c["probe_edge_m"] * 1e3:.2f} mm): '
                    f'FE {c["fe_N"][0]:.4f} N, vs Sneddon {100 * c["err_vs_sneddon"][0]:+.2f} %, '
                    f'vs Hayes (kappa {c["kappa"]:.3f}) {100 * c["err_vs_hayes"][0]:+.2f} %')
+    if scene.mesh.edge_offset and not coarse:
+        for kind in ('hayes', 'sneddon'):  # the same mesh without the edge offset, for comparison
+            c = _cached(store, jpath, f'{kind}_n{default_n}_no_offset', punch_case, scene, kind,
+                        default_n, edge_offset=0.0)
+            yield (f'{kind:8s} n={default_n:2d} without edge offset: FE {c["fe_N"][0]:.4f} N, '
+                   f'vs Sneddon {100 * c["err_vs_sneddon"][0]:+.2f} %, '
+                   f'vs Hayes {100 * c["err_vs_hayes"][0]:+.2f} %')
     curve = _cached(store, jpath, f'hayes_curve_n{ns[0] if coarse else default_n}', punch_case,
                     scene, 'hayes', ns[0] if coarse else default_n, tuple(scene.depths))
     conv = [_cached(store, jpath, f'convergence_n{n}', convergence_case, scene, n) for n in ns]

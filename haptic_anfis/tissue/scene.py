@@ -83,13 +83,16 @@ class MeshSettings:
 
     probe_cells: cells across the probe footprint (4 * probe_cells nodes lie on its rim);
     the element size along the probe edge is about pi * a / (2 * probe_cells); ``edge_refine``
-    halvings of the radial and depth size grade the cells towards the edge singularity.
+    halvings of the radial and depth size grade the cells towards the edge singularity;
+    ``edge_offset`` pulls the meshed footprint outline that fraction of the first outer cell
+    inside the probe radius (the O(h) edge correction, see ``mesh.build_mesh``).
     """
 
     probe_cells: int = 6
     coarse_probe_cells: int = 4
     edge_refine: int = 1
     rim: float = 0.99
+    edge_offset: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -127,7 +130,7 @@ _KEYS: dict[str, set[str]] = {
     'tumour': {'name', 'centre_mm', 'radius_mm', 'youngs_kPa', 'source'},
     'probe': {'diameter_mm', 'direction'},
     'loading': {'spacing_mm', 'palpable_radius_mm', 'depths_mm', 'max_step_mm'},
-    'mesh': {'probe_cells', 'coarse_probe_cells', 'edge_refine', 'rim'},
+    'mesh': {'probe_cells', 'coarse_probe_cells', 'edge_refine', 'rim', 'edge_offset'},
 }
 
 
@@ -216,11 +219,16 @@ def parse_scene(data: Any, name: str = 'scene', source_sha256: str = '') -> Scen
                         coarse_probe_cells=int(_num(mesh_d, 'coarse_probe_cells', 'mesh', default=4)),
                         edge_refine=int(_num(mesh_d, 'edge_refine', 'mesh', positive=False,
                                              default=1)),
-                        rim=_num(mesh_d, 'rim', 'mesh', default=0.99))
+                        rim=_num(mesh_d, 'rim', 'mesh', default=0.99),
+                        edge_offset=_num(mesh_d, 'edge_offset', 'mesh', positive=False,
+                                         default=0.0))
     if mesh.probe_cells < 2 or mesh.coarse_probe_cells < 2:
         raise SceneError('mesh.probe_cells / coarse_probe_cells: need at least 2')
     if not 0 <= mesh.edge_refine <= 4:
         raise SceneError(f'mesh.edge_refine: 0 .. 4 halvings, got {mesh.edge_refine!r}')
+    if not 0.0 <= mesh.edge_offset < 1.0:
+        raise SceneError(f'mesh.edge_offset: fraction of the first cell outside the probe edge, '
+                         f'in [0, 1), got {mesh.edge_offset!r}')
     if not 0.5 < mesh.rim < 1.0:
         raise SceneError(f'mesh.rim: fraction of the base radius that is meshed, in (0.5, 1), '
                          f'got {mesh.rim!r}')

@@ -112,7 +112,8 @@ def run_sweep(scene: Scene, work_dir: str | os.PathLike, *, coarse: bool = False
     work.mkdir(parents=True, exist_ok=True)
     n_cells = scene.mesh.coarse_probe_cells if coarse else scene.mesh.probe_cells
     manifest = {'scene_sha256': scene.sha256(), 'scene_name': scene.name, 'probe_cells': n_cells,
-                'edge_refine': scene.mesh.edge_refine, 'coarse': coarse}
+                'edge_refine': scene.mesh.edge_refine, 'edge_offset': scene.mesh.edge_offset,
+                'coarse': coarse}
     mpath = work / 'manifest.json'
     if mpath.is_file():
         old = json.loads(mpath.read_text())
@@ -208,6 +209,7 @@ def records_to_dataset(scene: Scene, records: list[dict[str, Any]], coarse: bool
         'coarse': coarse,
         'mesh': {'probe_cells': scene.mesh.coarse_probe_cells if coarse else scene.mesh.probe_cells,
                  'edge_refine': scene.mesh.edge_refine,
+                 'edge_offset': scene.mesh.edge_offset,
                  'probe_edge_m': ok[0]['probe_edge_m'] if ok else None,
                  'ndof_min': int(min(ndofs)), 'ndof_max': int(max(ndofs)),
                  'ndof_mean': float(np.mean(ndofs))},

@@ -70,7 +70,7 @@ def fe_punch_on_layer(h: float, a: float = 8e-3, youngs: float = 33e3, nu: float
                       depths: tuple[float, ...] = (0.2e-3,), probe_cells: int = 10,
                       radius: float | None = None, max_step: float = 2e-3, refine: int = 1,
                       bonded: bool = True, depth_refine: int | None = None,
-                      outer_refine: int | None = None):
+                      outer_refine: int | None = None, edge_offset: float = 0.0):
     """FE flat bonded punch (radius a [m]) on a flat layer of thickness h [m], bonded to a rigid
     base, laterally ``radius`` [m] wide (default 5 h) with a free side: the Hayes et al. set-up,
     meshed and solved exactly as the breast is. Returns fe.LoadPathResult (forces in N)."""
@@ -80,7 +80,7 @@ def fe_punch_on_layer(h: float, a: float = 8e-3, youngs: float = 33e3, nu: float
     radius = radius or 5.0 * h
     dom = Domain(ry=radius, rz=radius, height=lambda y, z: np.full(np.shape(y), h), fix_rim=False)
     mesh = build_mesh(dom, (0.0, 0.0), a, probe_cells, refine=refine, depth_refine=depth_refine,
-                      outer_refine=outer_refine)
+                      outer_refine=outer_refine, edge_offset=edge_offset)
     mu = youngs / (2.0 * (1.0 + nu))
     bulk = mu * 2.0 * (1.0 + nu) / (3.0 * (1.0 - 2.0 * nu))
     return solve_load_path(mesh, mu, bulk, (-1.0, 0.0, 0.0), depths, max_step, bonded=bonded)
