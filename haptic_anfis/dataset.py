@@ -150,6 +150,25 @@ def save_dataset(ds: ForceDataset, path: str | os.PathLike) -> Path:
     return path
 
 
+def fold_indices(ds: ForceDataset, k: int, seed: int, by: str = 'point'
+                 ) -> list[tuple[np.ndarray, np.ndarray]]:
+    """``k`` random (keep, held_out) index pairs whose held-out parts partition the data; whole
+    surface points stay together with ``by='point'`` (as in :func:`split_indices`)."""
+    if by not in ('point', 'sample'):
+        raise ValueError(f"split 'by' must be 'point' or 'sample', got {by!r}")
+    groups = ds.point if by == 'point' else np.arange(len(ds))
+    units = np.unique(groups)
+    if not 2 <= k <= len(units):
+        raise ValueError(f'need 2 <= folds <= {len(units)} ({"points" if by == "point" else "samples"}'
+                         f'), got {k!r}')
+    order = np.random.default_rng(seed).permutation(units)
+    out = []
+    for part in np.array_split(order, k):
+        held = np.isin(groups, part)
+        out.append((np.flatnonzero(~held), np.flatnonzero(held)))
+    return out
+
+
 def split_indices(ds: ForceDataset, fraction: float, seed: int, by: str = 'point'
                   ) -> tuple[np.ndarray, np.ndarray]:
     """Random split into (keep, held_out) index arrays, ``fraction`` of the data held out.

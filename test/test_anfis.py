@@ -257,3 +257,41 @@ def test_fit_on_synthetic_tissue_meets_paper_level_accuracy(synthetic):
         chosen = model.structures_[o]
         best = min(c['val_rmse'] for c in cands)
         assert any(tuple(c['structure']) == chosen and c['val_rmse'] <= best * 1.05 for c in cands)
+
+
+def test_structure_search_k_fold_scores_every_training_point(rng):
+    """k-fold scoring: each candidate is trained once per fold; a candidate's score is the root
+    mean of its fold scores, so it can be checked by hand."""
+    from haptic_anfis.anfis import search_structure
+    from haptic_anfis.anfis.training import train as train_one
+
+    X = rng.random((120, 2))
+    t = np.sin(3 * X[:, 0]) + X[:, 1] ** 2
+    folds = [(np.setdiff1d(np.arange(120), v), v) for v in np.array_split(rng.permutation(120), 3)]
+    res = search_structure(X, t, candidates=[(2, 2), (3, 2)], epochs=3, folds=folds)
+    by_hand = []
+    for f, v in folds:
+        r = train_one(X[f], t[f], (3, 2), 3, X_check=X[v], t_check=t[v], lo=None, hi=None)
+        by_hand.append(r.check_rmse[r.best_epoch - 1])
+    got = next(c for c in res.candidates if c.structure == (3, 2))
+    assert got.val_rmse == pytest.approx(np.sqrt(np.mean(np.square(by_hand))), rel=1e-12)
+    with pytest.raises(ValueError, match='either'):
+        search_structure(X, t, epochs=3)
+    with pytest.raises(ValueError, match='either'):
+        search_structure(X, t, X[:10], t[:10], epochs=3, folds=folds)
+
+
+@pytest.mark.parametrize('bad', [0, -2, 2.5, True])
+def test_search_folds_must_be_a_positive_integer(synthetic, bad):
+    with pytest.raises(ValueError, match='search_folds'):
+        ForceModel(search_folds=bad).fit(synthetic.X, synthetic.Y, groups=synthetic.point)
+
+
+def test_search_folds_capped_by_points_and_recorded(synthetic):
+    pts = np.unique(synthetic.point)
+    few = np.isin(synthetic.point, pts[np.linspace(0, len(pts) - 1, 4).astype(int)])
+    X = synthetic.X[few]
+    assert np.all(np.ptp(X, axis=0) > 0)
+    m = ForceModel(search_folds=5, candidates=[(2, 2, 2, 2)], search_epochs=2, epochs=2)
+    m.fit(X, synthetic.Y[few], groups=synthetic.point[few])  # 4 points: 4 folds, not 5
+    assert m.metadata_['training']['search_folds'] == 5

@@ -2,8 +2,8 @@
 import numpy as np
 import pytest
 
-from haptic_anfis.dataset import (DEFAULT_DATASET, DatasetError, ForceDataset, load_dataset,
-                                  save_dataset, split_indices)
+from haptic_anfis.dataset import (DEFAULT_DATASET, DatasetError, ForceDataset, fold_indices,
+                                  load_dataset, save_dataset, split_indices)
 
 
 def test_round_trip_is_exact(synthetic, tmp_path):
@@ -59,3 +59,25 @@ def test_split_rejects_bad_arguments(synthetic):
     one = ForceDataset(np.zeros((3, 4)), np.zeros((3, 3)), np.zeros(3))
     with pytest.raises(ValueError, match='fewer than two'):
         split_indices(one, 0.2, 0)
+
+
+@pytest.mark.parametrize('by', ['point', 'sample'])
+def test_folds_partition_the_data(synthetic, by):
+    folds = fold_indices(synthetic, 5, seed=1, by=by)
+    held = np.concatenate([v for _, v in folds])
+    assert np.array_equal(np.sort(held), np.arange(len(synthetic)))  # each sample held out once
+    for keep, out in folds:
+        assert len(keep) + len(out) == len(synthetic) and len(out) > 0
+        if by == 'point':
+            assert not set(synthetic.point[keep]) & set(synthetic.point[out])
+    again = fold_indices(synthetic, 5, seed=1, by=by)
+    assert all(np.array_equal(a[1], b[1]) for a, b in zip(folds, again))  # seeded
+
+
+def test_folds_reject_bad_arguments(synthetic):
+    with pytest.raises(ValueError, match='folds'):
+        fold_indices(synthetic, 1, 0)
+    with pytest.raises(ValueError, match='folds'):
+        fold_indices(synthetic, len(np.unique(synthetic.point)) + 1, 0)
+    with pytest.raises(ValueError, match="'point' or 'sample'"):
+        fold_indices(synthetic, 3, 0, by='rows')

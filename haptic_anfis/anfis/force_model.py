@@ -19,7 +19,8 @@ from typing import Any, Sequence
 import numpy as np
 
 from .. import __version__
-from ..dataset import INPUT_NAMES, OUTPUT_NAMES, DatasetError, ForceDataset, split_indices
+from ..dataset import (INPUT_NAMES, OUTPUT_NAMES, DatasetError, ForceDataset, fold_indices,
+                       split_indices)
 from . import compiled
 from .model_file import (FORMAT, FORMAT_VERSION, ModelFileError, model_from_dict, model_to_dict,
                          read_model_doc, write_json_atomic)
@@ -45,7 +46,13 @@ class ForceModel:
         search_start, max_mfs, candidates, tol: structure search settings.
         ridge: relative ridge weight of the consequent least squares.
         step: initial gradient step (fraction of an input's range).
-        val_fraction: part of the training data held out to choose structure and epoch.
+        val_fraction: part of the training data held out to choose the epoch count (and the
+            structure when ``search_folds`` is 1).
+        search_folds: k > 1 scores each structure candidate by k-fold validation over the
+            training data (whole surface points per fold with ``split='point'``; k is capped at
+            the number of points); 1 uses the single ``val_fraction`` hold-out. On the FE data
+            (~24 validation points) one hold-out chose a 2-2-3-2 Fx model with 0.23 N test RMSE;
+            5 folds chose 0.08-0.12 N over three seeds, at ~4x the search time.
         split: ``'point'`` (hold out whole surface points, when ``groups`` are given) or ``'sample'``.
         extrapolation: out-of-range band per input (x, y, z, depth), fraction of its range (see
             :mod:`.sugeno`): by default positions saturate and depth extrapolates by 25 %.
@@ -56,7 +63,7 @@ class ForceModel:
                  search_epochs: int = 10, search_start: Structure = (2, 2, 2, 2),
                  max_mfs: Structure = (5, 5, 5, 3), candidates: list[Structure] | None = None,
                  tol: float = 0.05, ridge: float = DEFAULT_RIDGE, step: float = 0.01,
-                 val_fraction: float = 0.2, split: str = 'point',
+                 val_fraction: float = 0.2, split: str = 'point', search_folds: int = 5,
                  extrapolation: Sequence[float] = DEFAULT_EXTRAPOLATION, seed: int = 0) -> None:
         self.structure = structure
         self.epochs = epochs
@@ -69,6 +76,7 @@ class ForceModel:
         self.step = step
         self.val_fraction = val_fraction
         self.split = split
+        self.search_folds = search_folds
         self.extrapolation = extrapolation
         self.seed = seed
         self.metadata_: dict[str, Any] = {}
@@ -102,6 +110,12 @@ class ForceModel:
         groups = np.arange(len(X)) if groups is None else np.asarray(groups)
         ds = ForceDataset(X, Y, groups)
         fit_idx, val_idx = split_indices(ds, self.val_fraction, self.seed, by=by)
+        if isinstance(self.search_folds, bool) or not isinstance(self.search_folds, (int, np.integer)) \
+                or self.search_folds < 1:
+            raise ValueError(f'search_folds: expected an integer >= 1, got {self.search_folds!r}')
+        k = min(int(self.search_folds), len(np.unique(ds.point)) if by == 'point' else len(ds))
+        folds = (fold_indices(ds, k, self.seed, by=by)
+                 if k > 1 and any(s is None for s in self._structures()) else None)
         lo, hi = X.min(axis=0), X.max(axis=0)
         kw = dict(ridge=self.ridge, step=self.step)
         t_start = time.perf_counter()
@@ -115,9 +129,11 @@ class ForceModel:
             t0 = time.perf_counter()
             Xf, tf, Xv, tv = X[fit_idx], Y[fit_idx, o], X[val_idx], Y[val_idx, o]
             if fixed is None:
-                sr = search_structure(Xf, tf, Xv, tv, start=self.search_start, max_mfs=self.max_mfs,
+                held = dict(folds=folds) if folds else dict(X_val=Xv, t_val=tv)
+                sr = search_structure(X if folds else Xf, Y[:, o] if folds else tf,
+                                      start=self.search_start, max_mfs=self.max_mfs,
                                       candidates=self.candidates, tol=self.tol,
-                                      epochs=self.search_epochs, lo=lo, hi=hi, **kw)
+                                      epochs=self.search_epochs, lo=lo, hi=hi, **held, **kw)
                 structure = sr.chosen.structure
             else:
                 sr = None
@@ -141,6 +157,7 @@ class ForceModel:
         self.metadata_ = {'training': {
             'epochs': self.epochs, 'search_epochs': self.search_epochs, 'tol': self.tol,
             'ridge': self.ridge, 'val_fraction': self.val_fraction, 'split': by,
+            'search_folds': self.search_folds,
             'seed': self.seed, 'seconds': round(self.fit_seconds_, 3),
             'n_samples': int(len(X)),
             'candidates': [[_candidate_dict(c) for c in sr.candidates] if sr else []

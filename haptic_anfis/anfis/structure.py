@@ -34,16 +34,22 @@ class SearchResult:
     candidates: list[Candidate] = field(default_factory=list)
 
 
-def search_structure(X: np.ndarray, t: np.ndarray, X_val: np.ndarray, t_val: np.ndarray,
-                     start: tuple[int, ...] = (2, 2, 2, 2), max_mfs: tuple[int, ...] = (5, 5, 5, 3),
+def search_structure(X: np.ndarray, t: np.ndarray, X_val: np.ndarray | None = None,
+                     t_val: np.ndarray | None = None, start: tuple[int, ...] = (2, 2, 2, 2),
+                     max_mfs: tuple[int, ...] = (5, 5, 5, 3),
                      candidates: list[tuple[int, ...]] | None = None, tol: float = 0.05,
                      epochs: int = 40, lo: np.ndarray | None = None, hi: np.ndarray | None = None,
+                     folds: list[tuple[np.ndarray, np.ndarray]] | None = None,
                      **train_kwargs) -> SearchResult:
     """Choose MF counts per input by validation RMSE.
 
     Args:
         X, t: (n, d) training inputs and (n,) targets.
         X_val, t_val: validation inputs and targets (the held-out 20 % of the training part).
+        folds: instead of X_val/t_val, (fit, validation) index pairs into X for k-fold scoring:
+            a candidate's validation RMSE is then the root mean of its per-fold mean squares
+            (train RMSE and best epoch likewise averaged). A few dozen validation points make a
+            single hold-out's ranking noisy; k folds see every training point once.
         start: first structure of the greedy search.
         max_mfs: per-input upper bound of the greedy search.
         candidates: if given, an explicit list of structures (grid search) instead of greedy.
@@ -53,16 +59,25 @@ def search_structure(X: np.ndarray, t: np.ndarray, X_val: np.ndarray, t_val: np.
     """
     import time
 
+    if (folds is None) == (X_val is None or t_val is None):
+        raise ValueError('search_structure needs either X_val and t_val or folds')
+    parts = ([(X, t, X_val, t_val)] if folds is None else
+             [(X[f], t[f], X[v], t[v]) for f, v in folds])
     tried: dict[tuple[int, ...], Candidate] = {}
 
     def evaluate(st: tuple[int, ...]) -> Candidate:
         if st not in tried:
             t0 = time.perf_counter()
-            res: TrainResult = train(X, t, st, epochs, X_check=X_val, t_check=t_val, lo=lo, hi=hi,
-                                     **train_kwargs)
-            k = res.best_epoch - 1
-            tried[st] = Candidate(st, res.model.n_rules, res.model.n_params, res.train_rmse[k],
-                                  res.check_rmse[k], res.best_epoch, time.perf_counter() - t0)
+            scores = []
+            for Xf, tf, Xv, tv in parts:
+                res: TrainResult = train(Xf, tf, st, epochs, X_check=Xv, t_check=tv, lo=lo, hi=hi,
+                                         **train_kwargs)
+                k = res.best_epoch - 1
+                scores.append((res.train_rmse[k], res.check_rmse[k], res.best_epoch))
+            tr, va, ep = np.array(scores).T
+            tried[st] = Candidate(st, res.model.n_rules, res.model.n_params,
+                                  float(np.sqrt(np.mean(tr ** 2))), float(np.sqrt(np.mean(va ** 2))),
+                                  int(round(ep.mean())), time.perf_counter() - t0)
         return tried[st]
 
     if candidates:
