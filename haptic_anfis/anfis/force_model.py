@@ -52,7 +52,8 @@ class ForceModel:
             training data (whole surface points per fold with ``split='point'``; k is capped at
             the number of points); 1 uses the single ``val_fraction`` hold-out. On the FE data
             (~24 validation points) one hold-out chose a 2-2-3-2 Fx model with 0.23 N test RMSE;
-            5 folds chose 0.08-0.12 N over three seeds, at ~4x the search time.
+            Fx test RMSE over seeds 0-2: 1 fold 0.09-0.23 N, 3 folds 0.06-0.14 N (~6 s for the
+            three outputs), 5 folds 0.08-0.12 N (~16 s; the shipped model, config/force_model.yaml).
         split: ``'point'`` (hold out whole surface points, when ``groups`` are given) or ``'sample'``.
         extrapolation: out-of-range band per input (x, y, z, depth), fraction of its range (see
             :mod:`.sugeno`): by default positions saturate and depth extrapolates by 25 %.
@@ -63,7 +64,7 @@ class ForceModel:
                  search_epochs: int = 10, search_start: Structure = (2, 2, 2, 2),
                  max_mfs: Structure = (5, 5, 5, 3), candidates: list[Structure] | None = None,
                  tol: float = 0.05, ridge: float = DEFAULT_RIDGE, step: float = 0.01,
-                 val_fraction: float = 0.2, split: str = 'point', search_folds: int = 5,
+                 val_fraction: float = 0.2, split: str = 'point', search_folds: int = 3,
                  extrapolation: Sequence[float] = DEFAULT_EXTRAPOLATION, seed: int = 0) -> None:
         self.structure = structure
         self.epochs = epochs
