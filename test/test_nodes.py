@@ -1,6 +1,7 @@
 """In-process tests of the ROS 2 nodes (one rclpy context per test, EventsExecutor)."""
 from __future__ import annotations
 
+import json
 import math
 import shutil
 from pathlib import Path
@@ -190,11 +191,17 @@ def test_trainer_trains_writes_and_reloads(tmp_path):
 def test_sim_command_prints_loop_statistics(capfd, tmp_path):
     from haptic_anfis.cli import main
     bag = tmp_path / 'session'
-    assert main(['sim', '--duration', '3', '--no-viz', '--record', str(bag)]) == 0
+    assert main(['sim', '--duration', '3', '--no-viz', '--record', str(bag), '--json']) == 0
     out = capfd.readouterr().out
     for key in ('servo loop', 'Hz', 'deadline misses', 'p50', 'p99', 'max applied', 'poses in contact',
                 'recorded'):
         assert key in out, out
+    last = json.loads(out.strip().splitlines()[-1])  # --json: the last line is one JSON object
+    for key in ('rate_hz', 'latency_p50_ms', 'latency_p99_ms', 'latency_max_ms', 'deadline_misses',
+                'cycles', 'max_force_n', 'contact_s', 'recorded_messages'):
+        assert key in last, last
+    assert last['cycles'] > 1000 and 0.0 <= last['contact_s'] <= last['seconds']
+    assert last['recorded_messages'] > 0
     assert (bag / 'metadata.yaml').is_file()
     assert main(['sim', '--duration', '1', '--record', str(bag)]) == 1  # exists: clear error
     assert 'exists already' in capfd.readouterr().err

@@ -2,11 +2,13 @@
 
 falcon_driver (1 kHz servo thread, scripted virtual hand) -> contact_detector -> force_server ->
 falcon_driver, plus the visualizer, on one EventsExecutor. Prints the loop rate, pose -> wrench
-latency percentiles, deadline misses, the largest applied force and contact statistics.
+latency percentiles, deadline misses, the largest applied force and contact statistics; with
+``--json`` the last line of output is one JSON object (see ``json_summary``).
 """
 from __future__ import annotations
 
 import argparse
+import json
 import math
 from pathlib import Path
 
@@ -22,6 +24,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument('--record', metavar='BAG', default=None,
                    help='record every loop topic (pose, velocity, applied force, buttons, contact, '
                         'force command) to this new bag directory (rosbag2, MCAP)')
+    p.add_argument('--json', action='store_true',
+                   help='end with one line of JSON: rate_hz, latency_p50_ms, latency_p99_ms, '
+                        'latency_max_ms, deadline_misses, cycles, max_force_n, contact_s, ...')
     p.add_argument('ros_args', nargs=argparse.REMAINDER,
                    help='--ros-args ... passed to rclpy (e.g. --ros-args -p rate:=500.0)')
 
@@ -61,13 +66,38 @@ def run(args: argparse.Namespace) -> int:
         print('interrupted', flush=True)
     finally:
         graph.shutdown()
-    print_summary(graph.summary())
+    summary = graph.summary()
+    print_summary(summary)
+    recorded = None
     for n in graph.extra:
         if hasattr(n, 'writer'):
-            r = n.summary()
+            recorded = r = n.summary()
             print(f"recorded       {r['written']} messages on {len(r['topics'])} topics to "
                   f"{r['output']} (dropped {r['dropped']})")
+    if args.json:
+        print(json.dumps(json_summary(summary, recorded)), flush=True)
     return 0
+
+
+def json_summary(s: dict, recorded: dict | None = None) -> dict:
+    """The run's headline figures as one flat JSON-able dict (non-finite numbers become null).
+
+    ``contact_s`` is the run time multiplied by the share of poses the contact detector found in
+    contact; ``cycles`` counts servo ticks.
+    """
+    lp, c = s['loop'], s['contact']
+    out = {'rate_hz': lp['rate_hz'], 'latency_p50_ms': lp['latency_p50_ms'],
+           'latency_p99_ms': lp['latency_p99_ms'], 'latency_max_ms': lp['latency_max_ms'],
+           'deadline_misses': lp['deadline_misses'], 'cycles': lp['ticks'],
+           'max_force_n': lp['max_force_N'], 'contact_s': lp['seconds'] * c['contact_fraction'],
+           'seconds': lp['seconds'], 'commands': lp['latency_n'],
+           'watchdog_trips': lp['watchdog_trips'], 'clamped': lp['clamped'],
+           'rejected': lp['rejected_nonfinite'] + lp['rejected_frame'],
+           'max_depth_mm': c['max_depth_mm'], 'contact_fraction': c['contact_fraction']}
+    if recorded is not None:
+        out.update(recorded_messages=recorded['written'], dropped_messages=recorded['dropped'])
+    return {k: (None if isinstance(v, float) and not math.isfinite(v) else v)
+            for k, v in out.items()}
 
 
 def print_summary(s: dict) -> None:
