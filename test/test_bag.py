@@ -272,3 +272,22 @@ def test_record_command_closes_bag_on_sigint(tmp_path):
     assert proc.returncode == 0, out
     assert (bag / 'metadata.yaml').is_file(), out
     assert bag_info(bag).message_count == 300, out
+
+
+def test_export_keeps_rows_when_joint_names_change(tmp_path):
+    """A JointState topic whose names change mid-bag: every message still gets a CSV row."""
+    ts = typestore()
+    J = ts.types['sensor_msgs/msg/JointState']
+    H, T = ts.types['std_msgs/msg/Header'], ts.types['builtin_interfaces/msg/Time']
+    import numpy as np
+    bag = tmp_path / 'names'
+    with BagWriter(bag) as w:
+        w.add_topic('/joints', J.__msgtype__)
+        for i, names in enumerate([['a', 'b']] * 3 + [['c']] * 2):
+            msg = J(H(T(i, 0), 'tissue'), names, np.arange(len(names), dtype=float),
+                    np.zeros(0), np.zeros(0))
+            w.write('/joints', ts.serialize_cdr(msg, J.__msgtype__), 1_000 + i)
+    assert cli(['bag', 'export', str(bag), '--csv', str(tmp_path / 'csv')]) == 0
+    with (tmp_path / 'csv' / 'joints.csv').open() as fh:
+        rows = list(csv.DictReader(fh))
+    assert len(rows) == 5

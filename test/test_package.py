@@ -48,8 +48,8 @@ def test_top_level_layout():
 def test_colcon_build_installs_executables_and_ament_index(tmp_path):
     src = tmp_path / 'ws' / 'src' / 'haptic_anfis'
     shutil.copytree(ROOT, src, ignore=shutil.ignore_patterns(
-        '.venv', '.git', 'build', 'install', 'log', 'out', '__pycache__', '*.egg-info',
-        '.pytest_cache', '.hypothesis', '.whl'))
+        '.venv*', '.git', 'build', 'install', 'log', 'out', '__pycache__', '*.egg-info',
+        '.pytest_cache', '.hypothesis', '.whl', '.fe_work'))
     env = {k: v for k, v in os.environ.items() if k != '_ROS_WHEELS_BOOTSTRAP_COMPLETE'}
     env['PATH'] = f'{BIN}{os.pathsep}{env.get("PATH", "")}'
     ws = tmp_path / 'ws'

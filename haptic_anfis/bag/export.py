@@ -77,9 +77,8 @@ def export_csv(path: str | Path, out_dir: str | Path, topics=None) -> dict[str, 
                 names[topic] = list(msg.name)
             if names[topic] is not None:
                 row = _joint_state_row(msg, names[topic])
-                if row is None:  # names changed: fall back to the generic layout for the topic
-                    names[topic] = None
-                    rows[topic] = []
+                if row is None:  # names changed: the generic layout from here on; the rows
+                    names[topic] = None  # written so far keep theirs (the CSV takes both columns)
         if row is None:
             row = flatten(msg)
         rows.setdefault(topic, []).append({'t_recv': f'{t // 10**9}.{t % 10**9:09d}', **row})

@@ -19,7 +19,8 @@ HELP = 'run the haptic node graph in one process with the simulated Falcon and p
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument('--duration', type=float, default=10.0, help='seconds to run (default 10)')
     p.add_argument('--params-file', action='append', default=[], metavar='YAML',
-                   help='ROS 2 parameter file for the nodes (repeatable), e.g. config/sim.yaml')
+                   help='ROS 2 parameter file for the nodes (repeatable), e.g. '
+                        'config/falcon_driver.yaml')
     p.add_argument('--no-viz', action='store_true', help='leave the visualizer out')
     p.add_argument('--record', metavar='BAG', default=None,
                    help='record every loop topic (pose, velocity, applied force, buttons, contact, '
@@ -110,7 +111,7 @@ def print_summary(s: dict) -> None:
           f"clamped {lp['clamped']}, watchdog trips {lp['watchdog_trips']}, "
           f"rejected {lp['rejected_nonfinite'] + lp['rejected_frame']}")
     print(f"contact        {c['in_contact']} of {c['poses']} poses in contact "
-          f"({100 * c['contact_fraction']:.1f} %), max depth {c['max_depth_mm']:.2f} mm, "
-          f"bad poses {c['bad_poses']}")
+          f"({100 * c['contact_fraction']:.1f} %, ~{lp['seconds'] * c['contact_fraction']:.1f} s), "
+          f"max depth {c['max_depth_mm']:.2f} mm, bad poses {c['bad_poses']}")
     if 'visualizer' in s:
         print(f"visualizer     {s['visualizer']['marker_arrays']} marker arrays")

@@ -31,8 +31,9 @@ PARAMS = MESH_PARAMS + [
     Param('force_scale', 0.01, 'force arrow length per newton [m/N]', positive),
     Param('probe_radius', 0.008, 'probe sphere radius [m]', positive),
     Param('show_tumours', False, 'draw the tumours'),
-    Param('tumours', [0.030, 0.015, -0.010, 0.005], 'tumours, flat x, y, z, radius [m] per '
-          'tumour (tissue frame; default: the synthetic dataset\'s tumour)', _tumour_check),
+    Param('tumours', [0.0285, 0.015, -0.010, 0.0075], 'tumours, flat x, y, z, radius [m] per '
+          'tumour (tissue frame; default: the default FE scene\'s tumour, '
+          'config/scenes/default.yaml)', _tumour_check),
     Param('mesh_alpha', 0.5, 'tissue mesh opacity (0..1)',
           lambda v: None if 0 <= v <= 1 else 'expected 0 <= value <= 1'),
 ]

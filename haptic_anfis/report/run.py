@@ -198,7 +198,8 @@ def format_markdown(res: dict[str, Any]) -> str:
          f'- **Split**: the same for every model — `split_indices(by="point", fraction=0.2, '
          f'seed={s["seed"]})` as `train_on_dataset` uses: {s["n_train"]} training samples, '
          f'{s["n_test"]} test samples at {len(s["test_points"])} surface points never seen in '
-         'training. Ours hold out 20 % of the training points again to choose structure and epoch.',
+         'training. Ours choose the structure by 3-fold validation over the training points and the '
+         'epoch on a 20 % hold-out of them.',
          f'- **Force range** (max − min over the data): Fx {rng[0]:.3g} N, Fy {rng[1]:.3g} N, '
          f'Fz {rng[2]:.3g} N.',
          f'- **Machine**: Python {res["machine"]["python"]}, {res["machine"]["cpu_count"]} cores '
