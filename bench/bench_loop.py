@@ -15,7 +15,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import signal
 import subprocess
 import sys
 import time
@@ -39,15 +38,13 @@ def one_process(seconds: float, visualizer: bool) -> dict:
 
 
 def multi_process(seconds: float) -> dict:
-    env = {k: v for k, v in os.environ.items() if k != '_ROS_WHEELS_BOOTSTRAP_COMPLETE'}
-    env.update(ROS_DOMAIN_ID=str(150 + os.getpid() % 50), ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST',
-               AMENT_PREFIX_PATH=str(Path(sys.executable).parents[1]))
-    bin_ = Path(sys.executable).parent
-    helpers = [subprocess.Popen([str(bin_ / n)], env=env, stdout=subprocess.DEVNULL,
-                                stderr=subprocess.DEVNULL) for n in ('force_server', 'contact_detector')]
+    from haptic_anfis.launch import node_env, start_node, stop_node
+    env = node_env(150 + os.getpid() % 50, localhost=True)
+    helpers = [start_node(n, env=env, log=subprocess.DEVNULL)
+               for n in ('force_server', 'contact_detector')]
     try:
         time.sleep(3.0)
-        p = subprocess.run([str(bin_ / 'falcon_driver'), '--ros-args',
+        p = subprocess.run([str(Path(sys.executable).parent / 'falcon_driver'), '--ros-args',
                             '-p', f'run_duration:={float(seconds)}'], env=env,
                            capture_output=True, text=True, timeout=seconds + 90)
         for line in p.stdout.splitlines():
@@ -57,12 +54,7 @@ def multi_process(seconds: float) -> dict:
                            f'{p.stderr[-2000:]}')
     finally:
         for h in helpers:
-            h.send_signal(signal.SIGINT)
-        for h in helpers:
-            try:
-                h.wait(10)
-            except subprocess.TimeoutExpired:
-                h.kill()
+            stop_node(h)
 
 
 def row(name: str, s: dict) -> str:
