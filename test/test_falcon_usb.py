@@ -190,6 +190,39 @@ def test_positions_from_a_synthetic_stream_cut_anywhere_with_garbage():
     dev.close()
 
 
+# Two reply packets written out by hand from the packet layout (falcon_protocol's docstring, which
+# follows libnifalcon's FalconFirmwareNovintSDK): '<', encoders 1-3 as four 'A'+nibble bytes each,
+# least significant first, byte 13 = 'A' + (buttons | homed << 4), byte 14 = 'A', '>'. They do not
+# come from encode_reply, so the decoder is checked against an independent byte stream.
+#   -561 = 0xFDCF -> F C D F -> 'PMNP'; buttons 0, homed 0b111 -> 0x70 -> 0xB1
+#   -26 = 0xFFE6 -> 'GOPP'; -672 = 0xFD60 -> 'AGNP'; -499 = 0xFE0D -> 'NAOP'; buttons 0b0101 -> 0xB6
+HAND_PACKETS = (b'\x00junk<PMNPPMNPPMNP\xb1A>', b'><GOPPAGNPNAOP\xb6A>')  # with stray bytes
+
+
+def test_backend_driven_by_a_hand_written_byte_stream():
+    fake = FakeFalcon(firmware_running=True, max_read=7)
+    dev = make(fake)
+    dev.connect()
+    fake.replying = False  # the device side is now the fixed stream below
+    while fake.rx:  # take the replies to connect()'s packets first
+        dev.read(0.0)
+    c = np.array(k.WORKSPACE_CENTER)
+    # ticks (-561, -561, -561) are the workspace centre; (-26, -672, -499) are 10 / -20 / 5 mm off
+    expected = [((0, 0, 0, 0), c), ((1, 0, 1, 0), c + (0.01, -0.02, 0.005))]
+    for chunk, (buttons, where) in zip(HAND_PACKETS, expected):
+        before = dev.parser.packets
+        fake.rx += chunk
+        for i in range(10):  # 7 bytes per USB read: a packet takes several reads
+            state = dev.read(i * 1e-3)
+            if dev.parser.packets > before:
+                break
+        assert dev.parser.packets == before + 1
+        assert state.buttons == buttons
+        assert np.allclose(np.array(device_to_falcon(state.position)) + c, where, atol=2e-4)
+    assert dev.kinematics_errors == 0
+    dev.close()
+
+
 def test_velocity_is_filtered_finite_difference():
     clock = Clock()
     fake = FakeFalcon(firmware_running=True)
