@@ -11,8 +11,16 @@ import sys
 from pathlib import Path
 from typing import IO, Mapping, Sequence
 
-#: The nodes' console scripts sit next to the interpreter (a virtualenv's bin/).
+#: The nodes' console scripts sit next to the interpreter in a virtualenv (bin/); on a colcon
+#: install they are in lib/haptic_anfis/ instead, and nodes are started as modules.
 BIN = Path(sys.executable).parent
+NODES_DIR = Path(__file__).resolve().parent / 'nodes'
+
+
+def node_names() -> list[str]:
+    """The package's nodes: modules of haptic_anfis.nodes that run as ``python -m``."""
+    return sorted(f.stem for f in NODES_DIR.glob('*.py')
+                  if "__name__ == '__main__'" in f.read_text())
 
 
 def node_env(domain_id: int | None = None, localhost: bool = True,
@@ -34,13 +42,14 @@ def node_env(domain_id: int | None = None, localhost: bool = True,
 def start_node(name: str, ros_args: Sequence[str] = (), env: Mapping[str, str] | None = None,
                log: IO | int | None = None, cwd: str | os.PathLike | None = None
                ) -> subprocess.Popen:
-    """Start node ``name`` (a console script of this package) with ``--ros-args ros_args``;
-    its stdout and stderr go to ``log`` (a file object, ``subprocess.DEVNULL``, or inherited)."""
+    """Start node ``name`` with ``--ros-args ros_args``: its console script when it sits next to
+    this interpreter, else ``python -m haptic_anfis.nodes.<name>``. Its stdout and stderr go to
+    ``log`` (a file object, ``subprocess.DEVNULL``, or inherited)."""
+    if name not in node_names():
+        raise ValueError(f'unknown node {name!r}; known: {", ".join(node_names())}')
     exe = BIN / name
-    if not exe.exists():
-        raise FileNotFoundError(f'node {name!r}: no executable {exe} (install the package: '
-                                f'make venv)')
-    cmd = [str(exe), *(['--ros-args', *ros_args] if ros_args else [])]
+    cmd = [str(exe)] if exe.exists() else [sys.executable, '-m', f'haptic_anfis.nodes.{name}']
+    cmd += ['--ros-args', *ros_args] if ros_args else []
     return subprocess.Popen(cmd, env=dict(env) if env is not None else node_env(), cwd=cwd,
                             stdout=log, stderr=subprocess.STDOUT if log is not None else None)
 

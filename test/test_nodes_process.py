@@ -186,3 +186,14 @@ def test_launch_rejects_unknown_nodes_and_missing_files(tmp_path, capsys):
     assert 'teleporter' in err and 'contact_detector' in err  # names the known nodes
     assert main(['launch', '--params-file', str(tmp_path / 'none.yaml')]) == 1
     assert 'no such file' in capsys.readouterr().err
+
+
+def test_nodes_start_as_modules_when_no_console_script(tmp_path, monkeypatch):
+    """On a colcon install the scripts are not beside the interpreter: nodes start as modules."""
+    monkeypatch.setattr(launcher, 'BIN', tmp_path)  # no scripts here
+    p = launcher.start_node('falcon_driver', ['-p', 'backend:=nonsense'],
+                            env=node_env(next(_domains)), log=(tmp_path / 'log').open('w'))
+    assert p.wait(60) == 1
+    assert 'backend' in (tmp_path / 'log').read_text()
+    with pytest.raises(ValueError, match='unknown node'):
+        launcher.start_node('teleporter')

@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import argparse
 import math
-import pkgutil
 import time
 from pathlib import Path
 
@@ -41,16 +40,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="write each node's output to DIR/<node>.log (default: this terminal)")
 
 
-def node_names() -> list[str]:
-    """The package's node modules (haptic_anfis/nodes/<name>.py with a console script)."""
-    from .. import nodes
-    from ..launch import BIN
-    return sorted(m.name for m in pkgutil.iter_modules(nodes.__path__)
-                  if not m.name.startswith('_') and (BIN / m.name).exists())
-
-
 def run(args: argparse.Namespace) -> int:
-    from ..launch import node_env, start_node, stop_node
+    from ..launch import node_env, node_names, start_node, stop_node
 
     known = node_names()
     names = [n.strip() for n in args.nodes.split(',') if n.strip()]
