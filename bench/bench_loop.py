@@ -44,14 +44,15 @@ def multi_process(seconds: float) -> dict:
                for n in ('force_server', 'contact_detector')]
     try:
         time.sleep(3.0)
-        p = subprocess.run([str(Path(sys.executable).parent / 'falcon_driver'), '--ros-args',
-                            '-p', f'run_duration:={float(seconds)}'], env=env,
-                           capture_output=True, text=True, timeout=seconds + 90)
-        for line in p.stdout.splitlines():
+        driver = start_node('falcon_driver', ['-p', f'run_duration:={float(seconds)}'], env=env,
+                            log=subprocess.PIPE)
+        helpers.append(driver)  # stopped below if it outlives the timeout
+        out = driver.communicate(timeout=seconds + 90)[0].decode(errors='replace')
+        for line in out.splitlines():
             if line.startswith('{"falcon_driver_stats"'):
                 return json.loads(line)['falcon_driver_stats']
-        raise RuntimeError(f'falcon_driver printed no statistics (rc {p.returncode}):\n'
-                           f'{p.stderr[-2000:]}')
+        raise RuntimeError(f'falcon_driver printed no statistics (rc {driver.returncode}):\n'
+                           f'{out[-2000:]}')
     finally:
         for h in helpers:
             stop_node(h)

@@ -4,6 +4,7 @@ loop benchmark and the cross-process tests.
 """
 from __future__ import annotations
 
+import functools
 import os
 import signal
 import subprocess
@@ -17,10 +18,11 @@ BIN = Path(sys.executable).parent
 NODES_DIR = Path(__file__).resolve().parent / 'nodes'
 
 
-def node_names() -> list[str]:
+@functools.lru_cache(maxsize=1)
+def node_names() -> tuple[str, ...]:
     """The package's nodes: modules of haptic_anfis.nodes that run as ``python -m``."""
-    return sorted(f.stem for f in NODES_DIR.glob('*.py')
-                  if "__name__ == '__main__'" in f.read_text())
+    return tuple(sorted(f.stem for f in NODES_DIR.glob('*.py')
+                        if "__name__ == '__main__'" in f.read_text()))
 
 
 def node_env(domain_id: int | None = None, localhost: bool = True,

@@ -83,14 +83,13 @@ def run(args: argparse.Namespace) -> int:
 def json_summary(s: dict, recorded: dict | None = None) -> dict:
     """The run's headline figures as one flat JSON-able dict (non-finite numbers become null).
 
-    ``contact_s`` is the run time multiplied by the share of poses the contact detector found in
-    contact; ``cycles`` counts servo ticks.
+    ``contact_s`` is :func:`contact_seconds`; ``cycles`` counts servo ticks.
     """
     lp, c = s['loop'], s['contact']
     out = {'rate_hz': lp['rate_hz'], 'latency_p50_ms': lp['latency_p50_ms'],
            'latency_p99_ms': lp['latency_p99_ms'], 'latency_max_ms': lp['latency_max_ms'],
            'deadline_misses': lp['deadline_misses'], 'cycles': lp['ticks'],
-           'max_force_n': lp['max_force_N'], 'contact_s': lp['seconds'] * c['contact_fraction'],
+           'max_force_n': lp['max_force_N'], 'contact_s': contact_seconds(s),
            'seconds': lp['seconds'], 'commands': lp['latency_n'],
            'watchdog_trips': lp['watchdog_trips'], 'clamped': lp['clamped'],
            'rejected': lp['rejected_nonfinite'] + lp['rejected_frame'],
@@ -99,6 +98,11 @@ def json_summary(s: dict, recorded: dict | None = None) -> dict:
         out.update(recorded_messages=recorded['written'], dropped_messages=recorded['dropped'])
     return {k: (None if isinstance(v, float) and not math.isfinite(v) else v)
             for k, v in out.items()}
+
+
+def contact_seconds(s: dict) -> float:
+    """Time in contact [s]: the run time times the share of poses found in contact."""
+    return s['loop']['seconds'] * s['contact']['contact_fraction']
 
 
 def print_summary(s: dict) -> None:
@@ -111,7 +115,7 @@ def print_summary(s: dict) -> None:
           f"clamped {lp['clamped']}, watchdog trips {lp['watchdog_trips']}, "
           f"rejected {lp['rejected_nonfinite'] + lp['rejected_frame']}")
     print(f"contact        {c['in_contact']} of {c['poses']} poses in contact "
-          f"({100 * c['contact_fraction']:.1f} %, ~{lp['seconds'] * c['contact_fraction']:.1f} s), "
+          f"({100 * c['contact_fraction']:.1f} %, ~{contact_seconds(s):.1f} s), "
           f"max depth {c['max_depth_mm']:.2f} mm, bad poses {c['bad_poses']}")
     if 'visualizer' in s:
         print(f"visualizer     {s['visualizer']['marker_arrays']} marker arrays")

@@ -67,6 +67,12 @@ class HexMesh:
         return 3 * len(self.points)
 
 
+def outer_halvings(refine: int, outer_refine: int | None) -> int:
+    """Halvings of the radial cell size just outside the probe circle (``outer_refine`` defaults
+    to ``refine`` and cannot exceed it)."""
+    return refine if outer_refine is None else min(outer_refine, refine)
+
+
 def disc_ogrid(n: int, s: float, refine: int = 0, outer_refine: int | None = None
                ) -> tuple[np.ndarray, np.ndarray, int]:
     """O-grid of the unit disc holding the circle |w| = s as a mesh line.
@@ -85,7 +91,7 @@ def disc_ogrid(n: int, s: float, refine: int = 0, outer_refine: int | None = Non
         raise ValueError(f'inner radius must be in (0, 1), got {s!r}')
     dq = 0.5 * np.pi / n
     fine = dq * 2.0 ** -np.arange(refine, 0, -1)  # e.g. dq/4, dq/2 for refine = 2
-    ko = refine if outer_refine is None else min(outer_refine, refine)
+    ko = outer_halvings(refine, outer_refine)
     fine_out = dq * 2.0 ** -np.arange(ko, 0, -1)  # the graded rings outside the circle
     # log-radius offsets of the graded rings inside the circle (from the mapped square outwards)
     inner_steps = np.concatenate([[dq], fine[::-1]]) if refine else np.zeros(0)
@@ -215,8 +221,8 @@ def build_mesh(domain: Domain, centre_yz: tuple[float, float], a: float, n: int,
     """
     if not 0.0 <= edge_offset < 1.0:
         raise ValueError(f'edge_offset: fraction of the edge cell in [0, 1), got {edge_offset!r}')
-    ko = refine if outer_refine is None else min(outer_refine, refine)
-    a = a / (1.0 + edge_offset * 0.5 * np.pi / n * 2.0 ** -ko)  # first outer cell ~ a * dq
+    # first outer cell ~ a * dq: its log-radius step times the radius
+    a = a / (1.0 + edge_offset * 0.5 * np.pi / n * 2.0 ** -outer_halvings(refine, outer_refine))
     rm = np.sqrt(domain.ry * domain.rz)
     p_hat = complex(centre_yz[0] / domain.ry, centre_yz[1] / domain.rz)
     c, s = moebius_for_circle(p_hat, a / rm)
