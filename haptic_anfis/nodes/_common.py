@@ -100,15 +100,19 @@ def set_stamp(stamp: Time, ns: int) -> None:
 
 
 def config_file(name: str) -> Path:
-    """A file shipped in ``config/``: the installed share directory, else the source tree."""
+    """A file shipped in ``config/``: the source tree's (an editable install or a checkout being
+    worked on), else the installed share directory (colcon / pip), as scene files are found."""
+    src = Path(__file__).resolve().parents[2] / 'config' / name
+    if src.is_file():
+        return src
     try:
         from ament_index_python.packages import get_package_share_directory
         p = Path(get_package_share_directory('haptic_anfis')) / 'config' / name
         if p.is_file():
             return p
-    except Exception:  # not installed as an ament package (e.g. an editable venv install)
+    except Exception:  # no ament index: the source tree's path, for a clear 'not found' later
         pass
-    return Path(__file__).resolve().parents[2] / 'config' / name
+    return src
 
 
 def make_executor():
