@@ -78,6 +78,9 @@ class FakeFalcon:
         powered: the power supply is on.
     """
 
+    #: what the bootloader answers to its query (a subclass may model another device)
+    BOOT_REPLY = bytes((0x0A, 0x44, 0x2C, 0x0D))
+
     def __init__(self, firmware_running: bool = False, expected_firmware: bytes | None = None,
                  boot_query_ignored: int = 2, corrupt_echo_at: int | None = None,
                  encoders=(0, 0, 0), powerup_offset=(0, 0, 0), homed: bool = True,
@@ -106,6 +109,7 @@ class FakeFalcon:
         self.write_times: list[float] = []           # time.monotonic() of each command packet
         self.calls: list[tuple] = []
         self.boot_replies = 0
+        self.upload_writes: list[int] = []           # size of each write during the upload
         self.homing_dropped = 0                      # packets that cleared the homing
         self.open_args = None
         self.closed = False
@@ -171,15 +175,17 @@ class FakeFalcon:
                 if self._ignore > 0:
                     self._ignore -= 1
                 else:
-                    self.rx += bytes((0x0A, 0x44, 0x2C, 0x0D))
+                    self.rx += self.BOOT_REPLY
                     self.boot_replies += 1
-                    self.mode = 'boot_request'
+                    if self.BOOT_REPLY == bytes((0x0A, 0x44, 0x2C, 0x0D)):
+                        self.mode = 'boot_request'
         elif self.mode == 'boot_request':
             if data == b'A' and self.baud == UPLOAD_BAUD and not self.dtr:
                 self.rx += b'\x41'
                 self.mode = 'upload'
                 self.uploaded.clear()
         elif self.mode == 'upload':
+            self.upload_writes.append(len(data))
             echo = bytearray(data)
             i = self.corrupt_echo_at
             if i is not None and len(self.uploaded) <= i < len(self.uploaded) + len(data):
