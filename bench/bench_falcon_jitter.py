@@ -10,7 +10,7 @@ thread in two settings:
   2. ``graph``: the whole one-process node graph (driver, contact detector, force server, ROS
      executor) with the simulated device, each device write time-stamped.
 
-It prints p50 / p99 / p99.9 / max of the gaps [ms], how many exceed 5 / 10 / 20 / 25 ms, the load
+It prints p50 / p99 / p99.9 / max of the gaps [ms], how many exceed 5 / 10 / 25 / 50 / 100 ms, the load
 average, and the stall_timeout these numbers support. Printed, never asserted (shared machine).
 
     .venv/bin/python bench/bench_falcon_jitter.py [--seconds 20] [--only usb|graph]
@@ -29,7 +29,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / 'test'))  # the protocol-derived fake device
 
-THRESHOLDS_MS = (5.0, 10.0, 20.0, 25.0)
+THRESHOLDS_MS = (5.0, 10.0, 25.0, 50.0, 100.0)
 
 
 def usb_gaps(seconds: float) -> np.ndarray:
