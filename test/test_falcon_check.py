@@ -13,7 +13,7 @@ from haptic_anfis import cli
 from haptic_anfis.device import falcon_kinematics as k
 from haptic_anfis.device.falcon_check import (calibrate, calibrated_counts_per_nm, run_check,
                                               write_counts_per_nm)
-from haptic_anfis.device.falcon_usb import FalconUSB, PyFtdiTransport, falcon_to_device
+from haptic_anfis.device.falcon_usb import FalconUSB, PyFtdiTransport
 from haptic_anfis.nodes._common import config_file
 
 
@@ -152,6 +152,3 @@ def test_cli_check_without_usb_library_says_how_to_install(monkeypatch, capsys):
     assert cli.main(['falcon', 'check', '--spring-force', '5']) == 1
     assert 'at most 3 N' in capsys.readouterr().err
 
-
-def test_falcon_to_device_is_used_for_positions():  # the check prints device-frame millimetres
-    assert falcon_to_device((1.0, 2.0, 3.0)) == (3.0, 1.0, 2.0)

@@ -57,9 +57,11 @@ INSTALL_HINT = "pip install 'haptic_anfis[falcon]'"
 #: it as the continuous rating and do not ask for more. ``max_force`` overrides it.
 RATED_FORCE = 8.9
 #: Default stall-guard timeout [s], chosen from the servo thread's measured write-to-write gaps
-#: (bench/bench_falcon_jitter.py; figures in the README): above the worst gap seen on a loaded
-#: 2-core machine, so the guard fires on real stalls, not on scheduling jitter.
-DEFAULT_STALL_TIMEOUT = 0.025
+#: (bench/bench_falcon_jitter.py; figures in the README): on a 2-core machine at load 7-17 the
+#: FalconUSB servo thread's p99.9 gap was 14 ms, gaps > 25 ms came about 4-6 times a minute and
+#: > 50 ms about twice a minute at load 17 (none at load 7), where the old 5 ms tripped ~2000
+#: times a minute. A real stall keeps the last force (<= max_force) on for at most this long.
+DEFAULT_STALL_TIMEOUT = 0.05
 #: Where the firmware file comes from (for error messages).
 FIRMWARE_HINT = ("the Novint SDK ('nVent') firmware, nvent_firmware.bin — the file libnifalcon's "
                  "findfalcons loads, in the firmware/ folder of the libnifalcon sources "

@@ -65,7 +65,7 @@ PARAMS = [
           'the tip'),
     Param('gravity_mass', 0.1, 'falcon: grip + arm mass lumped at the tip [kg] (an estimate: tune '
           'per device)', non_negative),
-    Param('stall_timeout', 0.025, 'falcon: no packet sent for this long [s] (servo loop stalled): '
+    Param('stall_timeout', 0.05, 'falcon: no packet sent for this long [s] (servo loop stalled): '
           'a guard thread sends zero force to the device and logs it (default above the servo '
           "thread's measured worst gap, bench/bench_falcon_jitter.py)", positive),
     Param('disconnect_after', 200, 'falcon: this many consecutive servo ticks without a reply (or '
