@@ -274,6 +274,7 @@ class FalconUSB(Device):
         self._guard_stop = threading.Event()
         self._guard: threading.Thread | None = None
         self._fail_streak = 0
+        self._failed_reconnects = 0
         # counters
         self.replies = 0
         self.missed_replies = 0
@@ -549,7 +550,11 @@ class FalconUSB(Device):
             self._bring_up(firmware)
         except (OSError, ValueError) as exc:
             self.last_error = exc
+            self._failed_reconnects += 1
+            if self._failed_reconnects in (1, 10) or self._failed_reconnects % 60 == 0:
+                self.log(f'Falcon: reconnect attempt {self._failed_reconnects} failed: {exc}')
             return False
+        self._failed_reconnects = 0
         with self._lock:
             self._lost = False
             self._fail_streak = 0
