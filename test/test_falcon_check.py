@@ -152,3 +152,18 @@ def test_cli_check_without_usb_library_says_how_to_install(monkeypatch, capsys):
     assert cli.main(['falcon', 'check', '--spring-force', '5']) == 1
     assert 'at most 3 N' in capsys.readouterr().err
 
+
+
+def test_cli_check_runs_against_the_fake_device(monkeypatch, capsys, tmp_path):
+    from haptic_anfis.device import falcon_usb
+    fake = MovedGrip(firmware_running=True)
+    monkeypatch.setattr(falcon_usb, 'import_ftdi', lambda: ftdi_class(fake))
+    params = tmp_path / 'falcon_driver.yaml'
+    params.write_text('falcon_driver:\n  ros__parameters:\n    counts_per_nm: 9000.0\n')
+    assert cli.main(['falcon', 'check', '--move-seconds', '0.3', '--spring-seconds', '0.3',
+                     '--params-file', str(params)]) == 0
+    out = capsys.readouterr().out
+    assert 'motor scale 9000 counts per N m' in out and 'all steps passed' in out
+    assert fake.closed and fake.commands[-1].motors == (0, 0, 0)
+    assert cli.main(['falcon', 'check', '--calibrate', '-1']) == 1
+    assert '--calibrate: expected a mass' in capsys.readouterr().err

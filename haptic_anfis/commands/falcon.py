@@ -47,6 +47,9 @@ def run(args: argparse.Namespace) -> int:
                     ('--counts-per-nm', counts)):
         if not v > 0:
             raise ValueError(f'{name}: expected a number > 0, got {v!r}')
+    if args.calibrate is not None and not (args.calibrate > 0 and args.calibrate < 2.0):
+        raise ValueError(f'--calibrate: expected a mass in kg between 0 and 2 (the Falcon holds '
+                         f'about 0.9 kg), got {args.calibrate!r}')
     if args.spring_force > 3.0:
         raise ValueError(f'--spring-force: a check is gentle: expected at most 3 N, got '
                          f'{args.spring_force!r}')
@@ -57,11 +60,10 @@ def run(args: argparse.Namespace) -> int:
     if args.calibrate is None:
         return run_check(dev, move_seconds=args.move_seconds, spring_seconds=args.spring_seconds,
                          spring_force=args.spring_force)
-    # keep the device open after the check for the calibration
-    close, dev.close = dev.close, lambda: None
     try:
         code = run_check(dev, move_seconds=args.move_seconds,
-                         spring_seconds=args.spring_seconds, spring_force=args.spring_force)
+                         spring_seconds=args.spring_seconds, spring_force=args.spring_force,
+                         keep_open=True)
         if code:
             return code
         print(f'7. calibration with {args.calibrate:g} kg')
@@ -70,8 +72,7 @@ def run(args: argparse.Namespace) -> int:
         print(f'   [ok] counts_per_nm: {c:.1f} written to {params_file}')
         return 0
     finally:
-        dev.close = close
-        dev.close()
+        dev.close()  # zero force; safe when the check already closed it
 
 
 def _counts_in(params_file: str) -> float:

@@ -85,9 +85,10 @@ def spring_to_centre(stiffness: float, limit: float) -> Callable[[tuple], tuple]
 
 def run_check(dev: FalconUSB, say: Say = print, move_seconds: float = 5.0,
               spring_seconds: float = 5.0, spring_force: float = 1.0, clock=time.monotonic,
-              sleep=time.sleep) -> int:
+              sleep=time.sleep, keep_open: bool = False) -> int:
     """The check (see the module doc). Returns 0 when every step passed, else the number of the
-    failed step (after printing why). The device is closed at the end either way."""
+    failed step (after printing why). The device is closed at the end (at zero force), unless all
+    passed and ``keep_open`` (for the calibration that follows)."""
     step = 0
     try:
         step = 1
@@ -153,13 +154,18 @@ def run_check(dev: FalconUSB, say: Say = print, move_seconds: float = 5.0,
         say('   [ok]')
         step = 6
         dev.write((0.0, 0.0, 0.0))
-        say('6. zero force, closing: [ok] all steps passed')
+        say('6. zero force' + ('' if keep_open else ', closing') + ': [ok] all steps passed')
         return 0
     except CheckFailed as exc:
         say(f'   [FAIL] {exc}')
+        keep_open = False
         return exc.step
+    except BaseException:
+        keep_open = False
+        raise
     finally:
-        dev.close()
+        if not keep_open:
+            dev.close()
 
 
 # -- calibration ---------------------------------------------------------------------------------
