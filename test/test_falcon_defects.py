@@ -255,3 +255,25 @@ def test_homing_false_on_a_never_homed_device_is_an_error():
     with pytest.raises(FalconError, match=r'homing is false but the Falcon is not homed'):
         dev.connect()
     assert not dev.connected and fake.closed and fake.commands[-1].motors == (0, 0, 0)
+
+
+def test_guard_thread_outlives_a_usb_error():
+    import time
+    fake = FakeFalcon(firmware_running=True, encoders=ticks_at(k.WORKSPACE_CENTER))
+    dev = FalconUSB(transport=PyFtdiTransport(ftdi_class(fake)), stall_timeout=0.01,
+                    disconnect_after=10 ** 6, log=lambda m: None)  # real clock and guard thread
+    dev.connect()
+    dev.write((1.0, 0.0, 0.0))
+    fake.unplug()
+    deadline = time.monotonic() + 5.0
+    while dev.stall_events == 0 and time.monotonic() < deadline:
+        time.sleep(0.005)
+    assert dev.stall_events == 1 and dev.io_errors == 1
+    assert dev._guard is not None and dev._guard.is_alive()  # still watching
+    fake.replug(power_cycled=False)
+    dev.write((1.0, 0.0, 0.0))  # the loop is back; a second stall is caught too
+    deadline = time.monotonic() + 5.0
+    while dev.stall_events < 2 and time.monotonic() < deadline:
+        time.sleep(0.005)
+    assert dev.stall_events == 2
+    dev.close()
