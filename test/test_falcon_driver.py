@@ -116,7 +116,8 @@ def test_replugged_falcon_is_reconnected_and_force_resumes(ctx, monkeypatch):
     try:
         assert _wait(lambda: d.device.replies >= 50)
         fake.unplug()
-        assert _wait(lambda: d.device.disconnected) and not d.safety.enabled
+        # the flag is set on the servo thread just before the hook stops the safety layer
+        assert _wait(lambda: d.device.disconnected and not d.safety.enabled)
         fake.replug(power_cycled=False)  # a loose cable: firmware and homing kept
         assert _wait(lambda: d.device.reconnects == 1 and d.device.connected)
         assert d.safety.enabled and not d.finished
