@@ -119,8 +119,9 @@ def test_replugged_falcon_is_reconnected_and_force_resumes(ctx, monkeypatch):
         # the flag is set on the servo thread just before the hook stops the safety layer
         assert _wait(lambda: d.device.disconnected and not d.safety.enabled)
         fake.replug(power_cycled=False)  # a loose cable: firmware and homing kept
-        assert _wait(lambda: d.device.reconnects == 1 and d.device.connected)
-        assert d.safety.enabled and not d.finished
+        assert _wait(lambda: d.device.reconnects == 1 and d.device.connected
+                     and d.safety.enabled)  # the hook restarts it just after the flag
+        assert not d.finished
         n = len(fake.commands)
         assert _wait(lambda: len(fake.commands) > n + 50 and fake.commands[-1].motors != (0, 0, 0))
     finally:

@@ -529,9 +529,10 @@ class FalconUSB(Device):
         msg = (f'Falcon disconnected: {why}; force zero, velocity zero; '
                + (f'reconnecting every {self.reconnect_period:g} s' if self.reconnect
                   else 'reconnect is off'))
-        self.log(msg)
-        if self.on_disconnect is not None:
+        if self.on_disconnect is not None:  # the hook reports it (the driver logs an error)
             self.on_disconnect(msg)
+        else:
+            self.log(msg)
 
     def try_reconnect(self, now: float) -> bool:
         """One attempt to reopen a lost device (firmware reloaded if it lost power); True if it
@@ -567,9 +568,10 @@ class FalconUSB(Device):
         msg = ('Falcon reconnected' + ('; not homed: move the grip all the way out, then push '
                                        'it straight in (LED red, no force until homed)'
                                        if self._awaiting_home else ''))
-        self.log(msg)
         if self.on_reconnect is not None:
             self.on_reconnect(msg)
+        else:
+            self.log(msg)
         return True
 
     # -- guard ------------------------------------------------------------------------------------
