@@ -81,3 +81,49 @@ def test_node_process_exits_1_with_one_line_error_without_the_usb_library(tmp_pa
     assert r.returncode == 1, r.stderr
     assert "error: backend 'falcon' needs the optional USB library pyftdi" in r.stderr
     assert "pip install 'haptic_anfis[falcon]'" in r.stderr and 'Traceback' not in r.stderr
+
+
+def _wait(cond, seconds=10.0):
+    deadline = time.monotonic() + seconds
+    while not cond() and time.monotonic() < deadline:
+        time.sleep(0.01)
+    return cond()
+
+
+def test_unplugged_falcon_stops_the_node_with_exit_1_without_reconnect(ctx, monkeypatch):
+    fake = FakeFalcon(firmware_running=True,
+                      encoders=k.angles_to_ticks(k.inverse_kinematics(k.WORKSPACE_CENTER)))
+    monkeypatch.setattr(falcon_usb, 'import_ftdi', lambda: ftdi_class(fake))
+    d = driver(ctx, backend='falcon', reconnect=False, disconnect_after=20)
+    try:
+        assert _wait(lambda: d.device.replies >= 50)
+        fake.unplug()
+        assert _wait(lambda: d.finished)  # run_node leaves its spin loop on this
+        assert d.exit_code == 1 and d.device.disconnected and not d.safety.enabled
+        assert d.device.read(time.monotonic()).velocity == (0.0, 0.0, 0.0)
+        assert d.servo.running and d.servo.errors == 0  # the servo thread did not crash
+    finally:
+        d.close()
+        d.destroy_node()
+
+
+def test_replugged_falcon_is_reconnected_and_force_resumes(ctx, monkeypatch):
+    fake = FakeFalcon(firmware_running=True,
+                      encoders=k.angles_to_ticks(k.inverse_kinematics(k.WORKSPACE_CENTER)))
+    monkeypatch.setattr(falcon_usb, 'import_ftdi', lambda: ftdi_class(fake))
+    d = driver(ctx, backend='falcon', disconnect_after=20, reconnect_period=0.1,
+               gravity_compensation=True)
+    try:
+        assert _wait(lambda: d.device.replies >= 50)
+        fake.unplug()
+        # the flag is set on the servo thread just before the hook stops the safety layer
+        assert _wait(lambda: d.device.disconnected and not d.safety.enabled)
+        fake.replug(power_cycled=False)  # a loose cable: firmware and homing kept
+        assert _wait(lambda: d.device.reconnects == 1 and d.device.connected
+                     and d.safety.enabled)  # the hook restarts it just after the flag
+        assert not d.finished
+        n = len(fake.commands)
+        assert _wait(lambda: len(fake.commands) > n + 50 and fake.commands[-1].motors != (0, 0, 0))
+    finally:
+        d.close()
+        d.destroy_node()

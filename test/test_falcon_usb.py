@@ -10,7 +10,7 @@ import time
 
 import numpy as np
 import pytest
-from falcon_fake import FakeFalcon, ftdi_class
+from falcon_fake import FakeFalcon, Received, ftdi_class
 
 from haptic_anfis.device import SafetyLayer, ServoLoop
 from haptic_anfis.device import falcon_kinematics as k
@@ -70,15 +70,17 @@ def test_running_firmware_is_used_and_motors_start_at_zero():
     assert np.allclose(s.position, (0.12 - k.WORKSPACE_CENTER[2], 0.01, -0.02), atol=2e-4)
     assert s.buttons == (1, 0, 1, 0)
     dev.close()
-    assert fake.closed and fake.commands[-1] == fp.Command((0, 0, 0), 0, False)
+    assert fake.closed and fake.commands[-1] == Received((0, 0, 0), 0, True)  # LEDs off, homed
 
 
 def test_firmware_upload_retries_then_succeeds(tmp_path):
-    fake = FakeFalcon(expected_firmware=FIRMWARE, boot_failures=1)
+    fake = FakeFalcon(expected_firmware=FIRMWARE, corrupt_echo_at=100)
     dev = make(fake, FIRMWARE, tmp_path, firmware_attempts=3, io_timeout=0.05)
+    logs = dev.logs
+    dev.log = lambda m: (logs.append(m), setattr(fake, 'corrupt_echo_at', None))  # 1 bad line
     dev.connect()
     assert fake.firmware_running and bytes(fake.uploaded) == FIRMWARE
-    assert any('attempt 1 of 3 failed' in m and 'bootloader did not answer' in m
+    assert any('attempt 1 of 3 failed' in m and 'echo mismatch at byte 100' in m
                for m in dev.logs)
     assert any('loaded (attempt 2 of 3)' in m for m in dev.logs)
     assert ('line', 8, 1, 'N') in fake.calls and ('flow', '') in fake.calls
@@ -87,14 +89,16 @@ def test_firmware_upload_retries_then_succeeds(tmp_path):
 
 
 def test_firmware_upload_failure_says_why_every_attempt_failed(tmp_path):
-    fake = FakeFalcon(expected_firmware=FIRMWARE, boot_failures=99)
-    dev = make(fake, FIRMWARE, tmp_path, firmware_attempts=3, io_timeout=0.02)
+    fake = FakeFalcon(expected_firmware=FIRMWARE, boot_query_ignored=10 ** 6)
+    dev = make(fake, FIRMWARE, tmp_path, firmware_attempts=3, io_timeout=0.02,
+               boot_query_tries=4)
     with pytest.raises(FalconError) as exc:
         dev.connect()
     msg = str(exc.value)
     assert 'in 3 attempt(s)' in msg and 'falcon_fw.bin' in msg
     for i in (1, 2, 3):
-        assert f'attempt {i}: the bootloader did not answer its query' in msg
+        assert (f'attempt {i}: the bootloader did not answer its query 0a 43 0d with '
+                '0a 44 2c 0d in 4 tries (no bytes)') in msg
     assert 'power supply' in msg and 'firmware_attempts' in msg
     assert not dev.connected and fake.closed  # cleaned up, nothing left open
 
@@ -122,7 +126,9 @@ def test_missing_firmware_file_fails_before_touching_usb(tmp_path):
 
 
 def test_absent_device_message_lists_what_was_found():
-    dev = make(FakeFalcon(present=False))
+    gone = FakeFalcon()
+    gone.unplug()
+    dev = make(gone)
     with pytest.raises(FalconError,
                        match=r'cannot open the Novint Falcon \(index 0.*found: 0.*udev'):
         dev.connect()
@@ -143,30 +149,24 @@ def test_missing_usb_library_tells_how_to_install(monkeypatch):
 
 
 def test_homing_waits_for_the_arms_with_red_led():
-    fake = FakeFalcon(firmware_running=True, homed=0, homes_after=5)
+    fake = FakeFalcon(firmware_running=True, homed=False, homes_after=5)
     dev = make(fake, homing=True)
     dev.connect()
     assert dev.homed
-    homing = [c for c in fake.commands if c.homing]
-    assert len(homing) >= 5 and all(c.leds == fp.LED_RED for c in homing)
-    assert fake.commands[-1] == fp.Command((0, 0, 0), fp.LED_GREEN, False)
+    assert all(c.homing for c in fake.commands)  # the homing bit is in every packet
+    red = [c for c in fake.commands if c.leds == fp.LED_RED]
+    assert len(red) >= 5 and fake.commands[0].leds == fp.LED_GREEN  # the probe, then homing
+    assert fake.commands[-1] == Received((0, 0, 0), fp.LED_GREEN, True)
     assert any('push it straight all the way in' in m for m in dev.logs)
     dev.close()
 
 
 def test_homing_timeout_fails_clearly():
-    fake = FakeFalcon(firmware_running=True, homed=0b001, homes_after=10 ** 9)
+    fake = FakeFalcon(firmware_running=True, homed=False, homes_after=10 ** 9)
     dev = make(fake, homing=True, homing_timeout=0.05)
-    with pytest.raises(FalconError, match=r'homing timed out after 0.05 s \(homed flags 0b001'):
+    with pytest.raises(FalconError, match=r'homing timed out after 0.05 s \(homed flags 0b000'):
         dev.connect()
     assert fake.commands[-1].motors == (0, 0, 0) and fake.closed
-
-
-def test_homing_off_warns_when_not_homed():
-    dev = make(FakeFalcon(firmware_running=True, homed=0), homing=False)
-    dev.connect()
-    assert not dev.homed and any('not homed' in m for m in dev.logs)
-    dev.close()
 
 
 # -- the byte stream -------------------------------------------------------------------------------
@@ -194,9 +194,9 @@ def test_positions_from_a_synthetic_stream_cut_anywhere_with_garbage():
 # follows libnifalcon's FalconFirmwareNovintSDK): '<', encoders 1-3 as four 'A'+nibble bytes each,
 # least significant first, byte 13 = 'A' + (buttons | homed << 4), byte 14 = 'A', '>'. They do not
 # come from encode_reply, so the decoder is checked against an independent byte stream.
-#   -561 = 0xFDCF -> F C D F -> 'PMNP'; buttons 0, homed 0b111 -> 0x70 -> 0xB1
-#   -26 = 0xFFE6 -> 'GOPP'; -672 = 0xFD60 -> 'AGNP'; -499 = 0xFE0D -> 'NAOP'; buttons 0b0101 -> 0xB6
-HAND_PACKETS = (b'\x00junk<PMNPPMNPPMNP\xb1A>', b'><GOPPAGNPNAOP\xb6A>')  # with stray bytes
+#   -516 = 0xFDFC -> C F D F -> 'MPNP'; buttons 0, homed 0b111 -> 0x70 -> 0xB1
+#   28 = 0x001C -> 'MBAA'; -616 = 0xFD98 -> 'IJNP'; -484 = 0xFE1C -> 'MBOP'; buttons 0b0101 -> 0xB6
+HAND_PACKETS = (b'\x00junk<MPNPMPNPMPNP\xb1A>', b'><MBAAIJNPMBOP\xb6A>')  # with stray bytes
 
 
 def test_backend_driven_by_a_hand_written_byte_stream():
@@ -207,7 +207,8 @@ def test_backend_driven_by_a_hand_written_byte_stream():
     while fake.rx:  # take the replies to connect()'s packets first
         dev.read(0.0)
     c = np.array(k.WORKSPACE_CENTER)
-    # ticks (-561, -561, -561) are the workspace centre; (-26, -672, -499) are 10 / -20 / 5 mm off
+    # ticks (-516, -516, -516) are the workspace centre; (28, -616, -484) are 10 / -20 / 5 mm off
+    # (with libnifalcon's 2009 geometry constants)
     expected = [((0, 0, 0, 0), c), ((1, 0, 1, 0), c + (0.01, -0.02, 0.005))]
     for chunk, (buttons, where) in zip(HAND_PACKETS, expected):
         before = dev.parser.packets
@@ -290,7 +291,7 @@ def test_clamp_and_gravity_compensation():
 def test_stall_guard_sends_zero_then_ramps_back():
     clock = Clock()
     fake = FakeFalcon(firmware_running=True, encoders=ticks_at(k.WORKSPACE_CENTER))
-    dev = make(fake, clock=clock, stall_timeout=0.005, resume_ramp=0.05)
+    dev = make(fake, clock=clock, stall_timeout=0.005, resume_ramp=0.05, max_force=10.0)
     dev.connect()
     dev.read(clock.t)
     dev.write((5.0, 0.0, 0.0))
@@ -354,7 +355,7 @@ def test_atexit_hook_zeroes_an_open_device(monkeypatch):
 def test_servo_loop_with_safety_layer_drives_the_falcon_and_stops_at_zero():
     clock = Clock(0.0)
     fake = FakeFalcon(firmware_running=True, encoders=ticks_at(k.WORKSPACE_CENTER))
-    dev = make(fake, clock=clock)
+    dev = make(fake, clock=clock, max_force=10.0)
     safety = SafetyLayer(max_force=10.0, max_force_rate=1000.0, watchdog_timeout=0.010,
                          frame_id='tissue')
     loop = ServoLoop(dev, safety, rate=1000.0, clock=clock)

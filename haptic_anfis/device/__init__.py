@@ -9,7 +9,9 @@ with a scripted virtual hand, servo-loop timing statistics.
 
 A real Novint Falcon (not imported here; its USB library is the optional ``falcon`` extra):
 :mod:`.falcon_protocol` (packets), :mod:`.falcon_kinematics` (delta robot, SI units),
-:mod:`.falcon_usb` (``FalconUSB``: the same device interface over USB, with a stall guard).
+:mod:`.falcon_usb` (``FalconUSB``: the same device interface over USB, with a stall guard,
+disconnect detection and reconnect), :mod:`.falcon_check` (the step-by-step hardware check and the
+force-scale calibration behind ``haptic-anfis falcon check``).
 """
 from .falcon import Device, DeviceState, HandParams, SimulatedFalcon, WorkspaceMapping
 from .palpation import PalpationScript, dome_height

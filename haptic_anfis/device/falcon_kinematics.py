@@ -28,8 +28,11 @@ theta_i in closed form; forward kinematics solves g(p, theta) = 0 for p by Newto
 Jacobian ``J = dp/dtheta = -(dg/dp)^-1 diag(dg/dtheta)`` follows from the implicit function
 theorem, and by virtual work the motor torques for a tip force F are ``tau = J^T F``.
 
-Geometry constants: libnifalcon's ``FalconGeometry.h`` (measurements by Kevin Ouellet, letters
-as in Stamper's thesis figure, p. 30), in metres. Encoder: 320-slot wheel read in quadrature
+Geometry constants: libnifalcon's ``include/falcon/core/FalconGeometry.h`` (measurements by Kevin
+Ouellet, letters as in Stamper's thesis figure, p. 30), in metres, in its 2009 revision: c = 0.01443,
+r = 0.0400, s = -0.02309 m replaced the 2007-08 values c = 0.014, r = 0.037233758,
+s = -0.027330909 m (the later values are the ones libnifalcon ships and the ones its users run on
+hardware; with the old ones the computed tip is 2-4.5 mm off, see the tests). Encoder: 320-slot wheel read in quadrature
 (1280 ticks per motor turn), a 14.25 mm capstan on a 110 mm arm drum, ticks = 0 at about 35 deg
 (libnifalcon ``getTheta``). Motor command scale: libnifalcon sends ``-10000 * tau`` [N m]
 counts — an empirical scale from that project, not a measured motor constant. Nothing here has
@@ -46,12 +49,12 @@ class FalconGeometry:
     """The Falcon's leg geometry [m, rad] and encoder / motor-command scales (see module doc)."""
     a: float = 0.060          # upper arm: motor axis to knee
     b: float = 0.1025         # parallelogram side (shin)
-    c: float = 0.014          # effector attachment offset along u
+    c: float = 0.01443        # effector attachment offset along u (2009 value; was 0.014)
     d: float = 0.01125        # shin-to-effector joint offset
     e: float = 0.01125        # knee-to-shin joint offset
     f: float = -0.025         # effector attachment offset along v
-    r: float = 0.037233758    # leg base, u component
-    s: float = -0.027330909   # leg base, v component
+    r: float = 0.0400         # leg base, u component (2009 value; was 0.037233758)
+    s: float = -0.02309       # leg base, v component (2009 value; was -0.027330909)
     #: leg angles about z: 90, -30, -150 deg plus the 15 deg tilt of the legs to the desk plane.
     phi: tuple[float, float, float] = (math.radians(105.0), math.radians(-15.0),
                                        math.radians(-135.0))

@@ -16,12 +16,18 @@ The device
     "Novint SDK" firmware, distributed with Novint's drivers and with libnifalcon's sources; we
     ship none).
 
-Bootloader handshake (firmware upload), as libnifalcon describes it
+Bootloader handshake (firmware upload), as libnifalcon's libusb back end does it
+(``FalconCommLibUSB::setFirmwareMode`` / ``setNormalMode``, ``FalconFirmware::loadFirmware``)
     purge, reset, latency timer 16 ms, 9600 baud 8N1 no flow control, RTS low, DTR low then
-    high; send :data:`BOOT_QUERY` and read 4 bytes back; DTR low, :data:`FIRMWARE_BAUD` baud;
-    send ``b'A'`` and read 2 bytes back; then send the firmware file in chunks of
-    :data:`FIRMWARE_CHUNK` bytes, each echoed back byte for byte. Afterwards "normal mode":
-    latency timer 1 ms, :data:`NORMAL_BAUD` baud.
+    high; send :data:`BOOT_QUERY` until the bootloader answers exactly :data:`BOOT_QUERY_REPLY`
+    (up to :data:`BOOT_QUERY_TRIES` times: it often ignores the first ones); DTR low,
+    :data:`FIRMWARE_BAUD` baud; send ``b'A'`` and expect ONE byte back, :data:`FIRMWARE_REQUEST_REPLY`
+    (0x41). The FTDI chip prefixes every USB read with two modem-status bytes: libnifalcon's libusb
+    code reads 3 bytes and checks the third; pyftdi strips the status bytes, so we see one. (The
+    older libftdi back end's comment says "0x13 0x41", two bytes, but never checks them.) Then the
+    firmware file goes in chunks of :data:`FIRMWARE_CHUNK` (62) bytes, each echoed back byte for
+    byte. Afterwards "normal mode": latency timer 1 ms, :data:`NORMAL_BAUD` baud, and both FTDI
+    buffers purged (left-over bootloader bytes must not reach the packet parser or the device).
 
 Normal-mode packets (both directions 16 bytes)
     ``'<'``, 14 payload bytes, ``'>'``. Every payload byte carries a value ``v`` as ``0x41 + v``
@@ -30,7 +36,10 @@ Normal-mode packets (both directions 16 bytes)
     host -> device (:func:`encode_command`)
         bytes 1-4, 5-8, 9-12: motor 1, 2, 3 command, signed 16-bit, 4 nibbles each;
         byte 13: LED bits (:data:`LED_GREEN`, :data:`LED_BLUE`, :data:`LED_RED`) | homing-mode
-        request (:data:`HOMING_MODE`); byte 14: 0.
+        bit (:data:`HOMING_MODE`); byte 14: 0. The homing bit is not a one-off request: the
+        reference tools set it once and leave it set in every later packet (libnifalcon's
+        ``setHomingMode(true)`` is sticky; ros_falcon and libnifalcon's examples never clear it,
+        "keep track of encoders, needed"); a host that clears it after homing loses the homing.
     device -> host (:func:`decode_reply`)
         bytes 1-12: encoder 1, 2, 3, signed 16-bit ticks, 4 nibbles each;
         byte 13: value = grip buttons (bits 0-3) | per-motor "homed" flags (bits 4-6);
@@ -67,11 +76,15 @@ INT16_MIN, INT16_MAX = -0x8000, 0x7FFF
 BOOT_BAUD = 9600
 BOOT_LATENCY_MS = 16
 BOOT_QUERY = bytes((0x0A, 0x43, 0x0D))
-BOOT_QUERY_REPLY_LEN = 4
+BOOT_QUERY_REPLY = bytes((0x0A, 0x44, 0x2C, 0x0D))
+#: libnifalcon's libusb back end also accepts the reply behind one 0x00 byte (macOS).
+BOOT_QUERY_REPLY_ALT = b'\x00' + BOOT_QUERY_REPLY
+BOOT_QUERY_TRIES = 100
 FIRMWARE_BAUD = 140_000
 FIRMWARE_REQUEST = b'A'
-FIRMWARE_REQUEST_REPLY_LEN = 2
-FIRMWARE_CHUNK = 128
+FIRMWARE_REQUEST_REPLY = b'\x41'
+#: 64-byte full-speed USB packets less the FTDI's 2 status bytes (libnifalcon's READ_SIZE).
+FIRMWARE_CHUNK = 62
 #: Normal (servo) mode settings.
 NORMAL_BAUD = 1_456_312
 NORMAL_LATENCY_MS = 1

@@ -36,7 +36,8 @@ PARAMS = [
     Param('rate', 1000.0, 'servo loop rate [Hz]', positive),
     Param('frame_id', 'tissue', 'frame of the published pose/velocity/force and of accepted '
           'force commands (others are rejected)'),
-    Param('max_force', 10.0, 'device force limit [N]; commands are clamped to it', positive),
+    Param('max_force', 8.9, 'device force limit [N]; commands are clamped to it (default: the '
+          "Falcon's rated force, > 2 lbf = 8.9 N per Novint's specification)", positive),
     Param('max_force_rate', 1000.0, 'largest change of the applied force [N/s]', positive),
     Param('watchdog_timeout', 0.010, 'no force command for this long [s] ramps the force to zero '
           '(at max_force_rate)', positive),
@@ -64,8 +65,21 @@ PARAMS = [
           'the tip'),
     Param('gravity_mass', 0.1, 'falcon: grip + arm mass lumped at the tip [kg] (an estimate: tune '
           'per device)', non_negative),
-    Param('stall_timeout', 0.005, 'falcon: no packet sent for this long [s] (servo loop stalled): '
-          'a guard thread sends zero force to the device', positive),
+    Param('stall_timeout', 0.05, 'falcon: no packet sent for this long [s] (servo loop stalled): '
+          'a guard thread sends zero force to the device and logs it (default above the servo '
+          "thread's measured worst gap, bench/bench_falcon_jitter.py)", positive),
+    Param('disconnect_after', 200, 'falcon: this many consecutive servo ticks without a reply (or '
+          'with a USB error) mark the device disconnected: zero force, zero velocity, logged',
+          lambda v: None if v >= 1 else 'expected an integer >= 1'),
+    Param('reconnect', True, 'falcon: after a disconnect, try to reopen the device every '
+          'reconnect_period (firmware and homing redone as needed); false: stop the node (exit 1)'),
+    Param('reconnect_period', 1.0, 'falcon: seconds between reconnect attempts', positive),
+    Param('max_motor_command', 32767, 'falcon: largest motor command [counts, <= 32767]; the three '
+          'motor values are scaled together under it (the force keeps its direction)',
+          lambda v: None if 1 <= v <= 32767 else 'expected an integer in 1..32767'),
+    Param('counts_per_nm', 10000.0, "falcon: motor command counts per N m of motor torque "
+          "(libnifalcon's uncalibrated scale; 'haptic-anfis falcon check --calibrate' measures it)",
+          positive),
     Param('measured_cf_every', 10, 'publish the applied force every N servo ticks (>= 1)',
           lambda v: None if v >= 1 else 'expected an integer >= 1'),
     Param('run_duration', 0.0, 'stop this long [s] after the first force command arrives, print '
@@ -131,13 +145,34 @@ class FalconDriver(Node):
         """The USB backend (imported here: its USB library is an optional extra). Connecting,
         firmware upload and homing happen when the servo loop opens it; a FalconError (an
         OSError) stops the node at start with its message."""
+        import dataclasses
+
+        from ..device.falcon_kinematics import GEOMETRY
         from ..device.falcon_usb import FalconUSB
         return FalconUSB(firmware_path=p['firmware_path'], device_index=p['device_index'],
                          serial=p['device_serial'], firmware_attempts=p['firmware_attempts'],
                          homing=p['homing'], homing_timeout=p['homing_timeout'],
                          gravity_compensation=p['gravity_compensation'],
                          gravity_mass=p['gravity_mass'], max_force=p['max_force'],
-                         stall_timeout=p['stall_timeout'], log=self.get_logger().info)
+                         stall_timeout=p['stall_timeout'], log=self.get_logger().info,
+                         disconnect_after=p['disconnect_after'], reconnect=p['reconnect'],
+                         reconnect_period=p['reconnect_period'],
+                         max_motor_command=p['max_motor_command'],
+                         geometry=dataclasses.replace(GEOMETRY, counts_per_nm=p['counts_per_nm']),
+                         on_disconnect=self._device_lost, on_reconnect=self._device_back)
+
+    def _device_lost(self, why: str) -> None:
+        """The Falcon backend lost the device (servo thread): zero the force; without reconnect,
+        stop the node with exit status 1."""
+        self.safety.stop()
+        self.get_logger().error(why)
+        if not self.params['reconnect']:
+            self.exit_code = 1
+            self.finished = True
+
+    def _device_back(self, msg: str) -> None:
+        self.get_logger().info(msg)
+        self.safety.start(time.monotonic())  # force ramps up from zero
 
     # -- servo thread ---------------------------------------------------------------------------
     def _publish_state(self, state, force, now) -> None:
