@@ -78,11 +78,14 @@ def bag_typestore(reader, path: Path):
 
 
 def read_messages(path: str | Path, topics=None, *, deserialize: bool = True,
-                  expect_types: dict[str, str] | None = None) -> Iterator[tuple]:
-    """Yield ``(topic, msgtype, t_ns, msg)`` in receive-time order.
+                  expect_types: dict[str, str] | None = None,
+                  start_ns: int | None = None) -> Iterator[tuple]:
+    """Yield ``(topic, msgtype, t_ns, msg)`` in receive-time order, streaming: one MCAP chunk at a
+    time is in memory (plus the chunk index), whatever the bag's length.
 
     ``msg`` is a rosbags message object (``deserialize``) or the raw CDR bytes. ``topics`` limits
     the topics read (each must be in the bag). ``expect_types``: {topic: type} checked first.
+    ``start_ns``: only messages received at or after this time (chunks before it are not read).
     """
     with open_bag(path) as reader:
         p = Path(path)
@@ -99,7 +102,7 @@ def read_messages(path: str | Path, topics=None, *, deserialize: bool = True,
         conns = [c for c in reader.connections if not topics or c.topic in topics]
         ts = bag_typestore(reader, p) if deserialize else None
         try:
-            for c, t, raw in reader.messages(connections=conns):
+            for c, t, raw in reader.messages(connections=conns, start=start_ns):
                 if deserialize:
                     yield c.topic, c.msgtype, t, ts.deserialize_cdr(raw, c.msgtype)
                 else:

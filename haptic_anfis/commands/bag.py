@@ -78,7 +78,7 @@ def _recover(args) -> int:
 
 
 def _resim(args) -> int:
-    from ..bag.resim import resimulate
+    from ..nodes.resim import resimulate
     from ..nodes._common import ParameterError
     try:
         r = resimulate(args.path, params_files=args.params_file,
