@@ -134,3 +134,61 @@ def test_recorder_node_stops_with_status_1_and_one_error_line(tmp_path):
     xs = _xs(bag)
     assert len(xs) > 100 and xs == [float(k) for k in range(len(xs))]
     assert bag_info(bag).message_count == len(xs)
+
+
+@pytest.mark.ros
+def test_recorder_and_player_config_yaml_match_declared_parameters():
+    import importlib
+
+    import yaml
+
+    from test_nodes_process import ROOT
+    for node in ('recorder', 'player'):
+        mod = importlib.import_module(f'haptic_anfis.nodes.{node}')
+        values = yaml.safe_load((ROOT / 'config' / f'{node}.yaml').read_text())[node][
+            'ros__parameters']
+        assert list(values) == [p.name for p in mod.PARAMS], node
+        for p in mod.PARAMS:
+            assert values[p.name] == p.default and type(values[p.name]) is type(p.default), p.name
+
+
+def test_bag_layer_imports_neither_rclpy_nor_the_nodes():
+    code = ('import sys, haptic_anfis.bag, haptic_anfis.bag.export, haptic_anfis.bag.playback, '
+            'haptic_anfis.bag.training_data, haptic_anfis.bag.recover; '
+            'print([m for m in sys.modules if m.startswith(("rclpy", "haptic_anfis.nodes"))])')
+    out = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip() == '[]'
+
+
+@pytest.mark.ros
+def test_trainer_logs_its_failures_at_error(tmp_path):
+    """Issue 21 item 5: a failed training is an ERROR, not an INFO line."""
+    from rclpy.context import Context
+    from rclpy.parameter import Parameter
+
+    from haptic_anfis.nodes.trainer import Trainer
+
+    class Log:
+        def __init__(self):
+            self.lines = []
+
+        def info(self, m, **kw):
+            self.lines.append(('INFO', m))
+
+        def error(self, m, **kw):
+            self.lines.append(('ERROR', m))
+    ctx = Context()
+    rclpy.init(context=ctx)
+    try:
+        tr = Trainer(context=ctx, parameter_overrides=[
+            Parameter('dataset_path', value=str(tmp_path / 'missing.csv')),
+            Parameter('model_path', value=str(tmp_path / 'm.json'))])
+        log = Log()
+        tr.get_logger = lambda: log
+        tr._train()  # synchronously, in this thread
+        tr.destroy_node()
+    finally:
+        rclpy.try_shutdown(context=ctx)
+    assert tr.results and not tr.results[-1][0]
+    assert [lvl for lvl, m in log.lines if 'training failed' in m] == ['ERROR'], log.lines
