@@ -19,7 +19,8 @@ from geometry_msgs.msg import PoseStamped  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy  # noqa: E402
 
-from haptic_anfis.bag import BagError, BagWriter, bag_info, read_messages, recover_bag  # noqa: E402
+from haptic_anfis.bag import (BagError, BagWriter, bag_info, format_info, read_messages,  # noqa: E402
+                              recover_bag)
 from haptic_anfis.nodes.resim import resimulate  # noqa: E402
 from haptic_anfis.bag.topics import typestore  # noqa: E402
 from haptic_anfis.cli import main as cli  # noqa: E402
@@ -249,6 +250,9 @@ def test_recorder_killed_with_sigkill_is_recovered(tmp_path):
     assert len(got) >= 0.95 * published, (len(got), published)
     assert got == sorted(got) and len(set(got)) == len(got)
     assert (bag / 'killed.mcap.damaged').is_file()
+    info = bag_info(bag)
+    assert [f for f, _ in info.kept] == ['killed.mcap.damaged']
+    assert 'Kept files:    killed.mcap.damaged (' in format_info(info)
     assert recover_bag(bag).already_valid
 
 
