@@ -168,6 +168,33 @@ def write_session(path: Path, seconds: float, compression: str, messages=None) -
             float(np.percentile(flush_times, 99)) * 1e3, 'chunks': len(flush_times)}
 
 
+def gil_stall(name: str, nbytes: int = 16_000_000) -> tuple[float, float]:
+    """(seconds one compress of ``nbytes`` of noisy doubles took, the longest gap [s] between
+    wake-ups of another thread sleeping 0.2 ms meanwhile): a compressor that holds the GIL stalls
+    every other thread of the process (the servo thread included) for the whole call."""
+    import threading
+
+    from haptic_anfis.bag.segment import compressor
+    data = np.random.default_rng(0).normal(size=nbytes // 8).astype('<f8').tobytes()
+    fn = compressor(name)[1]
+    done, ticks = threading.Event(), []
+
+    def spin():
+        while not done.is_set():
+            ticks.append(time.perf_counter())
+            time.sleep(0.0002)
+    th = threading.Thread(target=spin)
+    th.start()
+    time.sleep(0.01)
+    t0 = time.perf_counter()
+    fn(data)
+    t1 = time.perf_counter()
+    done.set()
+    th.join()
+    inside = [t0] + [x for x in ticks if t0 <= x <= t1] + [t1]
+    return t1 - t0, float(np.max(np.diff(inside)))
+
+
 def rss_mb() -> float:
     with open('/proc/self/statm') as fh:
         return int(fh.read().split()[1]) * os.sysconf('SC_PAGE_SIZE') / 2**20
@@ -233,6 +260,10 @@ def main() -> int:
             print(f'{comp:<12} {mb_h:>9.0f} {base / mb_h:>6.2f} {100 * r["cpu_s"] / secs:>16.1f} '
                   f'{r["flush_p99_ms"]:>17.2f} {r["flush_max_ms"]:>7.2f}')
         del msgs
+        for comp in ('zstd', 'lz4'):
+            el, gap = gil_stall(comp)
+            print(f'{comp}: compressing 16 MB took {el * 1e3:.0f} ms; another thread\'s longest '
+                  f'stall meanwhile {gap * 1e3:.1f} ms ({100 * gap / el:.0f} % of it: the GIL)')
         print(f'\n2. a {a.minutes:g}-minute session, compression {a.compression}')
         long = tmp / 'long'
         r = write_session(long, a.minutes * 60, a.compression)

@@ -56,7 +56,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     a.add_argument('--fallback-dir', default='', metavar='DIR',
                    help='if writing fails (disk full), continue in a bag of the same name here')
     a.add_argument('--compression', default=None, choices=('none', 'zstd', 'lz4'),
-                   help='MCAP chunk compression (default: none)')
+                   help='MCAP chunk compression (default: zstd)')
 
 
 def run(args: argparse.Namespace) -> int:
