@@ -192,3 +192,35 @@ def test_trainer_logs_its_failures_at_error(tmp_path):
         rclpy.try_shutdown(context=ctx)
     assert tr.results and not tr.results[-1][0]
     assert [lvl for lvl, m in log.lines if 'training failed' in m] == ['ERROR'], log.lines
+
+
+def test_no_room_for_the_footer_leaves_a_file_bag_recover_rebuilds(tmp_path):
+    """When not even the footer fits, the MCAP is left cut back to its last whole chunk (no torn
+    tail) and ``bag recover`` restores every message that was flushed."""
+    import errno
+    import pathlib
+
+    from haptic_anfis.bag.segment import Segment
+    from test_bag import _pose_bytes
+
+    class FullDisk(type(pathlib.Path())):
+        def open(self, mode='r', *a, **kw):
+            if 'a' in mode:
+                raise OSError(errno.ENOSPC, 'No space left on device')
+            return super().open(mode, *a, **kw)
+    seg = Segment(tmp_path / 'b', {})
+    seg.add_connection('/falcon/measured_cp', 'geometry_msgs/msg/PoseStamped')
+    for i in range(40):
+        seg.write('/falcon/measured_cp', 10**9 + i, _pose_bytes(i))
+    seg.flush()
+    good = seg.good_offset
+    for i in range(40, 60):  # written, not flushed: lost with the failing disk
+        seg.write('/falcon/measured_cp', 10**9 + i, _pose_bytes(i))
+    seg.mcap = FullDisk(seg.mcap)
+    how = seg.seal()
+    assert 'no room to close it' in how
+    assert (tmp_path / 'b' / 'b.mcap').stat().st_size == good
+    assert not (tmp_path / 'b' / 'metadata.yaml').exists()
+    report = recover_bag(tmp_path / 'b')
+    assert report.messages == 40  # stopped at the end of the data: no footer, nothing torn
+    assert _xs(tmp_path / 'b') == [float(i) for i in range(40)]
