@@ -42,6 +42,9 @@ setup(
         'numba>=0.58',
         'pyyaml>=6',
         'trimesh>=4',
+        # trimesh decodes text formats (ASCII STL with a non-UTF-8 name, or random bytes) with it;
+        # without it those fail with "No module named 'charset_normalizer'" (issue 22)
+        'charset-normalizer>=3',
         'rosbags>=0.11,<0.12',
         'mcap>=1.2',  # bag recover: stream-reads the MCAP a killed recording left (no summary)
     ],

@@ -44,7 +44,7 @@ def main() -> int:
     ap.add_argument('--messages', type=int, default=50_000)
     a = ap.parse_args()
     from haptic_anfis.bag import BagWriter, read_messages
-    from haptic_anfis.bag.resim import resimulate
+    from haptic_anfis.nodes.resim import resimulate
     from haptic_anfis.bag.topics import typestore
     print(f'bag benchmark, {a.seconds:g} s per loop run, {os.cpu_count()} CPUs, '
           f'load average {os.getloadavg()[0]:.2f}')

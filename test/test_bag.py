@@ -19,8 +19,9 @@ from geometry_msgs.msg import PoseStamped  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy  # noqa: E402
 
-from haptic_anfis.bag import BagError, BagWriter, bag_info, read_messages, recover_bag  # noqa: E402
-from haptic_anfis.bag.resim import resimulate  # noqa: E402
+from haptic_anfis.bag import (BagError, BagWriter, bag_info, format_info, read_messages,  # noqa: E402
+                              recover_bag)
+from haptic_anfis.nodes.resim import resimulate  # noqa: E402
 from haptic_anfis.bag.topics import typestore  # noqa: E402
 from haptic_anfis.cli import main as cli  # noqa: E402
 from haptic_anfis.nodes.graph import build_graph  # noqa: E402
@@ -249,6 +250,9 @@ def test_recorder_killed_with_sigkill_is_recovered(tmp_path):
     assert len(got) >= 0.95 * published, (len(got), published)
     assert got == sorted(got) and len(set(got)) == len(got)
     assert (bag / 'killed.mcap.damaged').is_file()
+    info = bag_info(bag)
+    assert [f for f, _ in info.kept] == ['killed.mcap.damaged']
+    assert 'Kept files:    killed.mcap.damaged (' in format_info(info)
     assert recover_bag(bag).already_valid
 
 
@@ -300,7 +304,7 @@ def test_player_resimulate_mode_plays_the_recomputed_wrenches(session, monkeypat
     from rclpy.context import Context
     from rclpy.serialization import deserialize_message
 
-    import haptic_anfis.bag.resim as resim_mod
+    import haptic_anfis.nodes.resim as resim_mod
     from haptic_anfis.nodes.player import Player
 
     bag, _, _ = session
@@ -322,7 +326,7 @@ def test_player_resimulate_mode_plays_the_recomputed_wrenches(session, monkeypat
         try:
             recorded = {m.header.stamp.sec * 10**9 + m.header.stamp.nanosec: m.wrench.force.x
                         for _, _, _, m in read_messages(bag, ['/falcon/servo_cf'])}
-            played = [deserialize_message(r.data, WrenchStamped) for r in p.records
+            played = [deserialize_message(r.data, WrenchStamped) for _, r in p.schedule()
                       if r.topic == '/falcon/servo_cf']
             assert len(played) == len(recorded) > 0
             for m in played:

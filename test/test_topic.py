@@ -36,14 +36,14 @@ def irregular_bag(tmp_path_factory):
     return path, np.diff(t) * 1e-9
 
 
-def _play_in_process(bag, rate: float, extra=()):
+def _play_in_process(bag, rate: float, extra=(), topic='/playback/falcon/measured_cp'):
     from rclpy.context import Context
     from rclpy.experimental import EventsExecutor
     ctx = Context()
     rclpy.init(context=ctx, domain_id=next(_domains))
     sub_node = rclpy.create_node('listener', context=ctx)
     got: list[tuple[float, float]] = []
-    sub_node.create_subscription(PoseStamped, '/falcon/measured_cp',
+    sub_node.create_subscription(PoseStamped, topic,
                                  lambda m: got.append((time.monotonic(), m.pose.position.x)),
                                  PLAY_QOS)
     player = Player(context=ctx, parameter_overrides=[
@@ -85,6 +85,18 @@ def test_player_preserves_relative_timing(irregular_bag, rate):
     assert abs(recv.sum() - want.sum()) < 0.25 * want.sum()
 
 
+def test_player_never_publishes_on_the_recorded_names_unless_live(irregular_bag):
+    """Issue 21 item 6: a live driver / detector subscribes to the recorded names; by default the
+    player publishes under /playback only; live:=true publishes on the recorded names."""
+    bag, _ = irregular_bag
+    player, got = _play_in_process(bag, 8.0, topic='/falcon/measured_cp')
+    assert player.published == 60 and got == []
+    assert player.topic_map == {'/falcon/measured_cp': '/playback/falcon/measured_cp'}
+    player, got = _play_in_process(bag, 8.0, [Parameter('live', value=True)],
+                                   topic='/falcon/measured_cp')
+    assert [x for _, x in got] == list(range(60))
+
+
 def test_player_start_offset_skips_the_beginning(irregular_bag):
     bag, gaps = irregular_bag
     offset = float(np.cumsum(gaps)[29]) - 1e-6  # message 30 is the first due
@@ -114,20 +126,21 @@ def test_topic_list_echo_hz_against_a_running_publisher(running_player):
     env, proc, log = running_player
     p = _cmd(env, 'list', '-t', '--wait', '3')
     assert p.returncode == 0, p.stderr
-    if '/falcon/measured_cp' not in p.stdout:  # slow discovery under load: one more try
+    if '/playback/falcon/measured_cp' not in p.stdout:  # slow discovery under load: one more try
         p = _cmd(env, 'list', '-t', '--wait', '10')
-    assert '/falcon/measured_cp [geometry_msgs/msg/PoseStamped]' in p.stdout, \
+    assert '/playback/falcon/measured_cp [geometry_msgs/msg/PoseStamped]' in p.stdout, \
         p.stdout + log.read_text()
-    p = _cmd(env, 'echo', 'falcon/measured_cp', '--once', '--timeout', '30')
+    p = _cmd(env, 'echo', 'playback/falcon/measured_cp', '--once', '--timeout', '30')
     assert p.returncode == 0, p.stderr + log.read_text()
     assert p.stdout.count('---') == 1
     assert 'frame_id: tissue' in p.stdout and 'position: {x: ' in p.stdout
-    p = _cmd(env, 'echo', '/falcon/measured_cp', '--count', '3', '--flat', '--timeout', '30')
+    p = _cmd(env, 'echo', '/playback/falcon/measured_cp', '--count', '3', '--flat', '--timeout', '30')
     assert p.returncode == 0, p.stderr
     lines = p.stdout.strip().splitlines()
     assert len(lines) == 3 and all("header.frame_id='tissue'" in ln for ln in lines)
     assert all('pose.position.x=' in ln for ln in lines)
-    p = _cmd(env, 'hz', 'falcon/measured_cp', '--duration', '2', '--period', '1', '--timeout', '30')
+    p = _cmd(env, 'hz', 'playback/falcon/measured_cp', '--duration', '2', '--period', '1',
+             '--timeout', '30')
     assert p.returncode == 0, p.stderr
     assert 'average rate:' in p.stdout and 'window:' in p.stdout
     assert proc.poll() is None

@@ -1,11 +1,14 @@
-"""Playback timing (pure): when each recorded message is due, relative to the start of playback."""
+"""Playback (pure, streaming): the recorded messages in order with when each is due, relative to
+the start of playback; memory stays bounded whatever the bag's length (one MCAP chunk at a time,
+see :func:`haptic_anfis.bag.reader.read_messages`)."""
 from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Iterator
 
 from .errors import BagError
-from .reader import read_messages
+from .reader import bag_info, read_messages
 
 
 @dataclass(frozen=True)
@@ -16,20 +19,30 @@ class Recorded:
     data: bytes     # serialized CDR
 
 
-def load(path: str | Path, topics=None) -> list[Recorded]:
-    """Every message of ``topics`` (None: all), in receive-time order, serialized."""
-    return [Recorded(t, topic, ty, bytes(raw))
-            for topic, ty, t, raw in read_messages(path, topics, deserialize=False)]
-
-
-def due_times(records: list[Recorded], rate: float = 1.0, start_offset: float = 0.0):
-    """``(seconds after playback start, record)`` for the records at or after ``start_offset``
-    seconds into the bag, time scaled by 1/``rate`` (2.0 = twice as fast)."""
+def check_timing(rate: float, start_offset: float) -> None:
     if not rate > 0:
         raise BagError(f'rate {rate}: expected > 0')
     if not start_offset >= 0:
         raise BagError(f'start offset {start_offset}: expected >= 0 s')
-    if not records:
-        return []
-    t0 = records[0].t_ns + int(round(start_offset * 1e9))
-    return [((r.t_ns - t0) * 1e-9 / rate, r) for r in records if r.t_ns >= t0]
+
+
+def stream(path: str | Path, topics=None, start_ns: int | None = None) -> Iterator[Recorded]:
+    """Every message of ``topics`` (None: all) received at or after ``start_ns``, in receive-time
+    order, serialized; read lazily."""
+    for topic, ty, t, raw in read_messages(path, topics, deserialize=False, start_ns=start_ns):
+        yield Recorded(t, topic, ty, bytes(raw))
+
+
+def schedule(path: str | Path, topics=None, rate: float = 1.0, start_offset: float = 0.0,
+             start_ns: int | None = None) -> Iterator[tuple[float, Recorded]]:
+    """``(seconds after playback start, record)`` for the messages at or after ``start_offset``
+    seconds into the bag, time scaled by 1/``rate`` (2.0 = twice as fast); lazily.
+    ``start_ns``: the bag's first receive time, when the caller knows it (else read from the bag).
+    """
+    check_timing(rate, start_offset)
+    if start_ns is None:
+        start_ns = bag_info(path).start_ns
+    t0 = start_ns + int(round(start_offset * 1e9))
+    for r in stream(path, topics, t0):
+        yield (r.t_ns - t0) * 1e-9 / rate, r
+

@@ -78,11 +78,14 @@ def bag_typestore(reader, path: Path):
 
 
 def read_messages(path: str | Path, topics=None, *, deserialize: bool = True,
-                  expect_types: dict[str, str] | None = None) -> Iterator[tuple]:
-    """Yield ``(topic, msgtype, t_ns, msg)`` in receive-time order.
+                  expect_types: dict[str, str] | None = None,
+                  start_ns: int | None = None) -> Iterator[tuple]:
+    """Yield ``(topic, msgtype, t_ns, msg)`` in receive-time order, streaming: one MCAP chunk at a
+    time is in memory (plus the chunk index), whatever the bag's length.
 
     ``msg`` is a rosbags message object (``deserialize``) or the raw CDR bytes. ``topics`` limits
     the topics read (each must be in the bag). ``expect_types``: {topic: type} checked first.
+    ``start_ns``: only messages received at or after this time (chunks before it are not read).
     """
     with open_bag(path) as reader:
         p = Path(path)
@@ -99,7 +102,7 @@ def read_messages(path: str | Path, topics=None, *, deserialize: bool = True,
         conns = [c for c in reader.connections if not topics or c.topic in topics]
         ts = bag_typestore(reader, p) if deserialize else None
         try:
-            for c, t, raw in reader.messages(connections=conns):
+            for c, t, raw in reader.messages(connections=conns, start=start_ns):
                 if deserialize:
                     yield c.topic, c.msgtype, t, ts.deserialize_cdr(raw, c.msgtype)
                 else:
@@ -130,6 +133,9 @@ class BagInfo:
     message_count: int
     topics: list[TopicStats]
     custom_data: dict
+    #: other files in the bag directory, counted in ``size_bytes`` (e.g. the ``*.damaged``
+    #: originals ``bag recover`` keeps): [(name, bytes)]
+    kept: list = ()
 
     @property
     def duration_s(self) -> float:
@@ -144,6 +150,9 @@ def bag_info(path: str | Path) -> BagInfo:
         files = [str(f) for f in meta.get('relative_file_paths', [])] or [p.name]
         size = (sum(f.stat().st_size for f in p.iterdir() if f.is_file()) if p.is_dir()
                 else p.stat().st_size)
+        kept = ([(f.name, f.stat().st_size) for f in sorted(p.iterdir())
+                 if f.is_file() and f.name not in files and f.name != 'metadata.yaml']
+                if p.is_dir() else [])
         n = reader.message_count
         start, end = (reader.start_time, reader.end_time) if n else (0, 0)
         dur = max(end - start, 0) * 1e-9
@@ -153,7 +162,7 @@ def bag_info(path: str | Path) -> BagInfo:
         topics = [TopicStats(t, ty, k, (k - 1) / dur if dur > 0 and k > 1 else 0.0)
                   for (t, ty), k in sorted(counts.items())]
         return BagInfo(p, files, size, meta.get('storage_identifier', p.suffix.lstrip('.')),
-                       start, end, n, topics, dict(meta.get('custom_data') or {}))
+                       start, end, n, topics, dict(meta.get('custom_data') or {}), kept)
 
 
 def _metadata_yaml(p: Path) -> dict:
@@ -172,13 +181,21 @@ def _stamp(ns: int) -> str:
     return f'{t:%Y-%m-%d %H:%M:%S.%f} UTC ({ns // 10**9}.{ns % 10**9:09d})'
 
 
+def _size(n: int) -> str:
+    v, u = next(((n / 1024 ** i, u) for i, u in ((3, 'GiB'), (2, 'MiB'), (1, 'KiB'))
+                 if n >= 1024 ** i), (n, 'B'))
+    return f'{v:.1f} {u}'
+
+
 def format_info(info: BagInfo) -> str:
-    size = info.size_bytes
-    unit = next(((size / 1024 ** i, u) for i, u in ((3, 'GiB'), (2, 'MiB'), (1, 'KiB'))
-                 if size >= 1024 ** i), (size, 'B'))
+    kept = sum(n for _, n in info.kept)
     lines = [f'Bag:           {info.path}',
-             f'Files:         {", ".join(info.files)}',
-             f'Bag size:      {unit[0]:.1f} {unit[1]}',
+             f'Files:         {", ".join(info.files)}']
+    if info.kept:
+        lines.append('Kept files:    ' + ', '.join(f'{f} ({_size(n)})' for f, n in info.kept)
+                     + ' (not part of the bag; counted in its size)')
+    lines += [f'Bag size:      {_size(info.size_bytes)}'
+              + (f' ({_size(kept)} of it in kept files)' if kept else ''),
              f'Storage id:    {info.storage}',
              f'Duration:      {info.duration_s:.3f} s',
              f'Start:         {_stamp(info.start_ns) if info.message_count else "-"}',

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from functools import lru_cache
 
-from ..nodes import interfaces as ifc
+from .. import interfaces as ifc
 
 POSE_TYPE = 'geometry_msgs/msg/PoseStamped'
 TWIST_TYPE = 'geometry_msgs/msg/TwistStamped'
@@ -43,3 +43,9 @@ def typestore():
     """rosbags' ROS 2 Jazzy typestore (all the standard message types this package uses)."""
     from rosbags.typesys import Stores, get_typestore
     return get_typestore(Stores.ROS2_JAZZY)
+
+
+def playback_topic(topic: str, namespace: str = 'playback') -> str:
+    """The topic a recorded ``topic`` is played on when not live: '/falcon/servo_cf' ->
+    '/playback/falcon/servo_cf' (no live node subscribes there)."""
+    return '/' + namespace.strip('/') + absolute(topic)

@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from ..dataset import DatasetError, ForceDataset, load_dataset
-from ..nodes import interfaces as ifc
+from .. import interfaces as ifc
 from .errors import BagError
 from .reader import check_bag_path, read_messages
 from .topics import JOINT_STATE_TYPE, WRENCH_TYPE, absolute

@@ -40,6 +40,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         'comparison')
     a.add_argument('--params-file', action='append', default=[], metavar='YAML',
                    help='parameter file for the re-simulated nodes (repeatable)')
+    a.add_argument('--live', action='store_true',
+                   help='publish on the RECORDED topic names (default: under /playback): a running '
+                        'falcon_driver then applies the recorded force commands to the device')
     a = sub.add_parser('record', help='record topics to a new bag (Ctrl-C stops and closes it)')
     a.add_argument('-o', '--output', default='', help='bag directory to create '
                    '(default: session_YYYYmmdd-HHMMSS)')
@@ -50,6 +53,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help='stop after S seconds (default: until Ctrl-C)')
     a.add_argument('--flush-period', type=float, default=None, metavar='S',
                    help='flush to disk at least this often (default 0.5 s)')
+    a.add_argument('--fallback-dir', default='', metavar='DIR',
+                   help='if writing fails (disk full), continue in a bag of the same name here')
+    a.add_argument('--compression', default=None, choices=('none', 'zstd', 'lz4'),
+                   help='MCAP chunk compression (default: zstd)')
 
 
 def run(args: argparse.Namespace) -> int:
@@ -78,7 +85,7 @@ def _recover(args) -> int:
 
 
 def _resim(args) -> int:
-    from ..bag.resim import resimulate
+    from ..nodes.resim import resimulate
     from ..nodes._common import ParameterError
     try:
         r = resimulate(args.path, params_files=args.params_file,
@@ -112,7 +119,8 @@ def _play(args) -> int:
           Parameter('start_offset', value=float(args.start_offset)),
           Parameter('loop', value=bool(args.loop)), Parameter('clock', value=bool(args.clock)),
           Parameter('topics', value=','.join(args.topics or [])),
-          Parameter('resimulate', value=bool(args.resimulate))]
+          Parameter('resimulate', value=bool(args.resimulate)),
+          Parameter('live', value=bool(args.live))]
     if args.params_file:
         ov.append(Parameter('params_files', value=list(args.params_file)))
     return _ros_node(Player, ov)
@@ -127,6 +135,10 @@ def _record(args) -> int:
         ov.append(Parameter('topics', value=list(args.topics)))
     if args.flush_period is not None:
         ov.append(Parameter('flush_period', value=float(args.flush_period)))
+    if args.fallback_dir:
+        ov.append(Parameter('fallback_output_dir', value=str(args.fallback_dir)))
+    if args.compression is not None:
+        ov.append(Parameter('compression', value=args.compression))
 
     def stop_after(node):
         if args.duration > 0:

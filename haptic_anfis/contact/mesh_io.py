@@ -1,7 +1,9 @@
 """Load a tissue surface mesh into the tissue frame (metres) and check it is usable for contact.
 
-Errors (``ValueError``, naming the input) for what no query could survive: no faces, non-finite
-vertices, face indices out of range, every face of zero area. Warnings (``warnings.warn``) for what
+Errors (``ValueError``, naming the input) for what no query could survive: not a mesh file, no
+faces, non-finite vertices, face indices out of range, every face of zero area, and an extent no
+breast has in the stated unit (a millimetre file read as metres is a 45 m breast; the error names
+``mesh_unit``, the contact detector's parameter, and the unit the numbers look like). Warnings (``warnings.warn``) for what
 the detector handles but the user should know: an open (not watertight) surface, duplicate
 vertices, some zero-area faces.
 """
@@ -16,6 +18,10 @@ import trimesh
 
 #: Metres per unit.
 UNITS = {'m': 1.0, 'mm': 1e-3}
+#: Plausible size of a tissue surface [m] (largest bounding-box side): a breast, or a phantom
+#: patch the 10 cm Falcon workspace can reach, is between 1 cm and 1 m across.
+PLAUSIBLE_EXTENT = (0.01, 1.0)
+_FORMATS = 'STL, OBJ, PLY, OFF or GLB'
 
 
 class MeshWarning(UserWarning):
@@ -23,7 +29,8 @@ class MeshWarning(UserWarning):
 
 
 def load_mesh(path: str | os.PathLike, unit: str = 'mm',
-              transform: np.ndarray | None = None) -> trimesh.Trimesh:
+              transform: np.ndarray | None = None,
+              plausible_extent: tuple[float, float] | None = PLAUSIBLE_EXTENT) -> trimesh.Trimesh:
     """Read any mesh trimesh reads (STL, OBJ, PLY, OFF, GLB...) into the tissue frame.
 
     Args:
@@ -31,6 +38,8 @@ def load_mesh(path: str | os.PathLike, unit: str = 'mm',
         unit: length unit of the file's coordinates, ``'mm'`` or ``'m'``.
         transform: optional (4, 4) homogeneous transform applied after the unit scaling, from the
             file's frame (in metres) into the tissue frame (chest wall x = 0, +x out of the body).
+        plausible_extent: (min, max) [m] of the surface's largest bounding-box side; outside it
+            the unit is wrong (error naming ``mesh_unit``). None: no check.
 
     Returns:
         ``trimesh.Trimesh`` in metres, faces and vertex order as in the file (``process=False``: no
@@ -50,10 +59,13 @@ def load_mesh(path: str | os.PathLike, unit: str = 'mm',
         # force='mesh' concatenates a multi-body scene into one mesh.
         mesh = trimesh.load(str(path), force='mesh', process=False)
     except Exception as exc:  # trimesh raises many kinds; all mean "not a mesh we can read"
-        raise ValueError(f'{path}: could not read a triangle mesh ({type(exc).__name__}: {exc})'
-                         ) from exc
+        raise ValueError(f'{path}: not a mesh file: could not read a triangle mesh '
+                         f'({type(exc).__name__}: {exc}); expected {_FORMATS}') from exc
     if not isinstance(mesh, trimesh.Trimesh):
         raise ValueError(f'{path}: expected a triangle mesh, trimesh read {type(mesh).__name__}')
+    if len(mesh.faces) == 0 and path.stat().st_size > 0:
+        raise ValueError(f'{path}: not a mesh file: no triangle could be read from its '
+                         f'{path.stat().st_size} bytes (expected {_FORMATS})')
     vertices = np.asarray(mesh.vertices, dtype=np.float64) * UNITS[unit]
     if transform is not None:
         T = np.asarray(transform, dtype=np.float64)
@@ -69,7 +81,31 @@ def load_mesh(path: str | os.PathLike, unit: str = 'mm',
     faces = np.asarray(mesh.faces)
     # STL stores each triangle's corners separately: duplicates there are the format, not a defect.
     validate(vertices, faces, name=str(path), warn_duplicates=path.suffix.lower() != '.stl')
+    if plausible_extent is not None:
+        check_extent(vertices[np.unique(faces)], unit, str(path), plausible_extent)
     return trimesh.Trimesh(vertices=vertices, faces=faces, process=False)
+
+
+def _length(m: float) -> str:
+    return (f'{m:.3g} m' if m >= 1.0 else f'{m * 1e3:.3g} mm' if m >= 1e-3
+            else f'{m * 1e6:.3g} µm')
+
+
+def check_extent(vertices: np.ndarray, unit: str, name: str = 'mesh',
+                 plausible: tuple[float, float] = PLAUSIBLE_EXTENT) -> float:
+    """The largest bounding-box side [m] of ``vertices`` (V, 3) [m]; ValueError naming
+    ``mesh_unit`` (and the unit the numbers look like) when it lies outside ``plausible``."""
+    extent = float(np.max(np.ptp(vertices, axis=0)))
+    lo, hi = plausible
+    if lo <= extent <= hi:
+        return extent
+    scale = 1.0 / UNITS[unit]  # the file's numbers
+    fits = [u for u, k in UNITS.items() if u != unit and lo <= extent * scale * k <= hi]
+    hint = (f"the numbers look like {fits[0]}: set mesh_unit: {fits[0]}" if fits
+            else "check the file's scale and mesh_unit")
+    raise ValueError(f"{name}: the surface is {_length(extent)} across read with mesh_unit "
+                     f"'{unit}', implausible for a breast (expected {_length(lo)} to "
+                     f"{_length(hi)} across); {hint}")
 
 
 def validate(vertices: np.ndarray, faces: np.ndarray, name: str = 'mesh',

@@ -8,16 +8,24 @@ appear); any other topic is subscribed once the graph shows its type (checked ev
 ``discovery_period``). Ctrl-C / SIGTERM write everything received, the MCAP summary and
 metadata.yaml; after a crash at most ``flush_period`` s (plus the queue) are lost, and
 ``haptic-anfis bag recover PATH`` rebuilds the bag.
+
+A write failure (disk full, file-size limit, I/O error) is logged at ERROR the moment the writer
+thread meets it; the bag is sealed up to its last whole chunk (``bag info`` opens it). With
+``fallback_output_dir`` the recording continues in a bag of the same name there; without, the node
+ends with exit status 1 (a launch sees it) after the one-line message.
 """
 from __future__ import annotations
 
+import signal
+import threading
 import time
 from functools import partial
 
 from rclpy.node import Node
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 
-from ..bag import BagWriter
+from ..bag import BagError, BagWriter
+from ..bag.segment import COMPRESSIONS
 from ..bag.topics import DEFAULT_TOPICS, KNOWN_TYPES
 from ._common import Param, declare_parameters, message_class, positive, run_node
 
@@ -38,6 +46,12 @@ PARAMS = [
     Param('max_queue', 200000, 'messages allowed to wait for the writer thread; beyond that new '
           'ones are dropped and counted', positive),
     Param('qos_depth', 1000, 'history depth of the (reliable) recording subscriptions', positive),
+    Param('fallback_output_dir', '', "if writing the bag fails (disk full, I/O error): continue "
+          "in a new bag of the same name in this directory ('' = stop, exit status 1)"),
+    Param('compression', 'zstd', 'MCAP chunk compression: zstd (level 1; 3.6x smaller, releases '
+          'the GIL), lz4 (2.9x; stalls other threads, the servo thread too, for much of its '
+          'compress time) or none', lambda v: None if v in COMPRESSIONS else
+          f'expected one of {", ".join(COMPRESSIONS)}'),
     Param('discovery_period', 0.5, 'how often the graph is checked for topics still to subscribe '
           '[s]', positive),
 ]
@@ -60,9 +74,17 @@ class Recorder(Node):
         self.all_topics = p['all_topics']
         self.qos = QoSProfile(depth=p['qos_depth'], history=HistoryPolicy.KEEP_LAST,
                               reliability=ReliabilityPolicy.RELIABLE)
+        self.exit_code = 0
+        if threading.current_thread() is threading.main_thread():
+            # a file-size limit (ulimit -f) would kill the process silently with SIGXFSZ; ignored,
+            # the write fails with EFBIG and is reported like a full disk
+            signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
         self.writer = BagWriter(self.output, flush_period=p['flush_period'],
                                 chunk_size=p['chunk_size'], max_queue=p['max_queue'],
-                                custom_data={'recorder': 'haptic_anfis recorder'})
+                                custom_data={'recorder': 'haptic_anfis recorder'},
+                                compression=p['compression'],
+                                fallback_dir=p['fallback_output_dir'] or None,
+                                on_error=self._on_write_error)
         self.subs: dict[str, object] = {}
         self._closed = False
         self._discover()
@@ -93,6 +115,13 @@ class Recorder(Node):
             self.subs[topic] = self.create_subscription(
                 cls, topic, partial(self.writer.write, topic), self.qos, raw=True)
 
+    def _on_write_error(self, message: str) -> None:
+        """From the writer thread, at the failure: say it now; stop if nothing continues."""
+        self.get_logger().error(message)
+        if not hasattr(self, 'writer') or self.writer.failed:
+            self.exit_code = 1
+            self.finished = True  # run_node stops spinning: the process exits with status 1
+
     def summary(self) -> dict:
         return {'output': str(self.output), 'topics': sorted(self.subs), **self.writer.stats()}
 
@@ -103,10 +132,16 @@ class Recorder(Node):
         self._closed = True
         for s in self.subs.values():
             self.destroy_subscription(s)
-        self.writer.close()
+        try:
+            self.writer.close()
+        except BagError:  # a write failure, reported when it happened (ERROR log)
+            self.exit_code = 1
         s = self.writer.stats()
-        self.get_logger().info(f"recorded {s['written']} messages to {self.output}"
-                               + (f" ({s['dropped']} dropped: queue full)" if s['dropped'] else ''))
+        where = ' + '.join(s['bags'])
+        msg = (f"recorded {s['written']} messages to {where}"
+               + (f" ({s['dropped']} dropped: queue full)" if s['dropped'] else '')
+               + (f" ({s['lost']} lost after the write failure)" if s['lost'] else ''))
+        (self.get_logger().error if s['failed'] else self.get_logger().info)(msg)
 
     def destroy_node(self):
         self.close()

@@ -65,8 +65,9 @@ class Trainer(Node):
         if self.params['train_at_start']:
             self.start_training()
 
-    def say(self, text: str) -> None:
-        self.get_logger().info(text)
+    def say(self, text: str, error: bool = False) -> None:
+        """Log ``text`` (at ERROR for a failure, else INFO) and publish it on ``~/progress``."""
+        (self.get_logger().error if error else self.get_logger().info)(text)
         self.pub.publish(String(data=text))
 
     @property
@@ -101,7 +102,7 @@ class Trainer(Node):
             model.save(p['model_path'])
             self.say(f"wrote {p['model_path']}")
         except Exception as exc:
-            self.say(f'training failed: {exc}')
+            self.say(f'training failed: {exc}', error=True)
             self.results.append((False, str(exc)))
             return
         self._request_reload()
@@ -112,14 +113,15 @@ class Trainer(Node):
             return
         if not self.client.wait_for_service(timeout_sec=self.params['reload_timeout']):
             msg = f"reload service {self.params['reload_service']} not available"
-            self.say(msg)
+            self.say(msg, error=True)
             self.results.append((False, msg))
             return
         fut = self.client.call_async(Trigger.Request())
 
         def done(f):
             res = f.result()
-            self.say(f'force server reload: {"ok" if res.success else "FAILED"}: {res.message}')
+            self.say(f'force server reload: {"ok" if res.success else "FAILED"}: {res.message}',
+                     error=not res.success)
             self.results.append((res.success, res.message))
         fut.add_done_callback(done)
 

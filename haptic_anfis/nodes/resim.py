@@ -1,5 +1,6 @@
 """Re-simulation: recorded poses through the CURRENT contact tracker and force model, compared with
-the recorded force commands (offline, no ROS publishing).
+the recorded force commands (offline, no ROS publishing). It lives with the nodes because it runs
+their code (the bag layer itself imports no node).
 
 The tracker and model are built by the nodes' own construction code
 (:func:`haptic_anfis.nodes.contact_detector.make_tracker`, :func:`...force_server.load_model`) from
@@ -16,10 +17,10 @@ import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from .errors import BagError
-from .reader import read_messages
-from .topics import JOINT_STATE_TYPE, POSE_TYPE, WRENCH_TYPE, absolute
-from ..nodes import interfaces as ifc
+from .. import interfaces as ifc
+from ..bag.errors import BagError
+from ..bag.reader import read_messages
+from ..bag.topics import JOINT_STATE_TYPE, POSE_TYPE, WRENCH_TYPE, absolute
 
 
 def _ns(stamp) -> int:
@@ -59,9 +60,9 @@ class ResimResult:
 
 def build_pipeline(params_files=(), contact_overrides=None, force_overrides=None):
     """(contact_detector params, tracker, model path, model) as the nodes would build them."""
-    from ..nodes import contact_detector as cd
-    from ..nodes import force_server as fs
-    from ..nodes._common import resolve_parameters
+    from . import contact_detector as cd
+    from . import force_server as fs
+    from ._common import resolve_parameters
     pc = resolve_parameters(cd.PARAMS, 'contact_detector', params_files, contact_overrides)
     pf = resolve_parameters(fs.PARAMS, 'force_server', params_files, force_overrides)
     tracker = cd.make_tracker(pc)
@@ -73,8 +74,8 @@ def resimulate(path: str | Path, params_files=(), contact_overrides=None, force_
                pose_topic: str = ifc.TOPIC_POSE, contact_topic: str = ifc.TOPIC_CONTACT,
                wrench_topic: str = ifc.TOPIC_COMMAND) -> ResimResult:
     """Feed the bag's poses through the current tracker and model; compare (see module doc)."""
-    from ..nodes.contact_detector import contact_values
-    from ..nodes.force_server import force_from_contact
+    from .contact_detector import contact_values
+    from .force_server import force_from_contact
     p = Path(path)
     tp, tc, tw = absolute(pose_topic), absolute(contact_topic), absolute(wrench_topic)
     poses, contacts, wrenches = [], {}, {}

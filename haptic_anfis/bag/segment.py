@@ -1,0 +1,149 @@
+"""One bag being written (rosbags ``Writer``, MCAP storage) with what a failing disk needs: the
+file offset and per-topic counts of the last chunk known to be on disk, the messages written since
+(to hand to a second bag), and :meth:`Segment.seal` to leave a readable bag after a write failed.
+
+Relies on rosbags 0.11's MCAP storage internals (``storage.chunk``, ``storage.close_chunk()``,
+``storage.bio``, ``storage.compressor``); the version is pinned to <0.12 in setup.py.
+"""
+from __future__ import annotations
+
+import os
+import struct
+from pathlib import Path
+
+from .errors import BagError
+from .topics import typestore
+
+#: Chunk compressions the writer offers (MCAP chunk ``compression`` field; '' = none).
+COMPRESSIONS = ('none', 'zstd', 'lz4')
+
+_MAGIC = b'\x89MCAP0\r\n'
+# DataEnd (op 0x0F, crc 0 = not computed) then a Footer (op 0x02) with no summary section:
+# a valid MCAP that readers index by scanning (rosbags: meta_scan; mcap: StreamReader).
+_TAIL = (b'\x0f' + struct.pack('<QI', 4, 0) + b'\x02' + struct.pack('<QQQI', 20, 0, 0, 0)
+         + _MAGIC)
+
+
+def compressor(name: str):
+    """``(mcap compression name, compress(bytes) -> bytes)`` for ``name`` in :data:`COMPRESSIONS`."""
+    if name == 'none':
+        return '', None
+    if name == 'zstd':
+        import zstandard
+        return 'zstd', zstandard.ZstdCompressor(level=1).compress
+    if name == 'lz4':
+        import lz4.frame
+        return 'lz4', lz4.frame.compress
+    raise BagError(f'compression {name!r}: expected one of {", ".join(COMPRESSIONS)}')
+
+
+class Segment:
+    """A bag directory being written from one thread (the writer thread of :class:`BagWriter`)."""
+
+    def __init__(self, path: Path, custom_data: dict[str, str], compression: str = 'none'):
+        from rosbags.rosbag2 import StoragePlugin, Writer
+        self.path = path
+        if path.exists():
+            raise BagError(f'{path}: exists already; a recording needs a new directory '
+                           '(choose another path or remove it)')
+        path.parent.mkdir(parents=True, exist_ok=True)
+        self.w = Writer(path, version=9, storage_plugin=StoragePlugin.MCAP)
+        for k, v in custom_data.items():
+            self.w.set_custom_data(k, str(v))
+        name, fn = compressor(compression)
+        try:
+            self.w.open()
+            self.storage = self.w.storage
+            if fn is not None:
+                self.storage.compression, self.storage.compressor = name, fn
+            self.storage.bio.flush()
+        except BagError:
+            raise
+        except Exception as exc:  # permissions, disk, ...
+            raise BagError(f'{path}: cannot create the bag: {exc}') from exc
+        self.mcap = Path(self.storage.path)
+        self.conns: dict[str, object] = {}
+        # The last state known to be on disk (after a successful flush) ...
+        self.good_offset = self.storage.bio.tell()
+        self.good_counts: dict[int, int] = {}
+        self.good_span = (2**63 - 1, 0)
+        self.good_messages = 0
+        # ... and what was written since: handed to the next bag if the disk fails.
+        self.unflushed: list[tuple[str, int, bytes]] = []
+
+    def add_connection(self, topic: str, msgtype: str) -> None:
+        self.conns[topic] = self.w.add_connection(topic, msgtype, typestore=typestore())
+
+    def write(self, topic: str, t_ns: int, data: bytes) -> None:
+        self.w.write(self.conns[topic], t_ns, data)
+        self.unflushed.append((topic, t_ns, data))
+
+    @property
+    def pending_bytes(self) -> int:
+        return self.storage.chunk.bio.tell()
+
+    def flush(self) -> None:
+        """Close the pending chunk and hand it to the OS; then it counts as on disk."""
+        if self.storage.chunk.msgs:
+            self.storage.close_chunk()
+        self.storage.bio.flush()
+        self.good_offset = self.storage.bio.tell()
+        self.good_counts = dict(self.w.counts)
+        self.good_span = (self.w.min_timestamp, self.w.max_timestamp)
+        self.good_messages = sum(self.good_counts.values())
+        self.unflushed.clear()
+
+    def close(self) -> None:
+        """Write the last chunk, the summary and metadata.yaml (rosbags' normal close)."""
+        self.flush()
+        self.w.close()
+
+    def seal(self) -> str:
+        """After a write failed: keep what is on disk as a readable bag; say what was done.
+
+        The MCAP is cut back to the end of the last chunk flushed whole (dropping a torn chunk),
+        closed with a footer that has no summary (readers scan it), and metadata.yaml is written
+        with the counts of what the file holds. If the disk has no room even for that (~60 B and
+        the metadata), the file is left cut back, without footer: ``bag recover`` rebuilds it.
+        """
+        try:
+            self.storage.bio.close()  # flushes what it can, then closes the file in any case
+        except Exception:
+            pass
+        try:
+            os.truncate(self.mcap, self.good_offset)
+            with self.mcap.open('ab') as fh:
+                fh.write(_TAIL)
+        except OSError as exc:
+            try:
+                os.truncate(self.mcap, self.good_offset)
+            except OSError:
+                pass
+            return f'cut back to its last whole chunk; no room to close it ({exc.strerror})'
+        try:
+            self._write_metadata()
+        except Exception as exc:
+            for f in (self.path / 'metadata.yaml.tmp', self.path / 'metadata.yaml'):
+                f.unlink(missing_ok=True)
+            return f'closed without metadata.yaml ({exc})'
+        return 'closed'
+
+    def _write_metadata(self) -> None:
+        """rosbags' metadata.yaml for what is on disk (its close() with the storage left out)."""
+        mcap = self.mcap
+
+        class _Written:  # the storage's close() is replaced: the file is closed already
+            path = mcap
+
+            def close(self, version, metadata):
+                pass
+
+        w = self.w
+        w.storage = _Written()
+        w.counts = dict(self.good_counts)
+        for c in w.connections:
+            w.counts.setdefault(c.id, 0)
+        w.min_timestamp, w.max_timestamp = self.good_span
+        if not self.good_messages:
+            w.min_timestamp = w.max_timestamp = 0
+        w.close()
