@@ -148,7 +148,7 @@ class ForceModel:
         if scol >= 0 and not np.all(X[:, scol] > 0):
             k = int(np.argmin(X[:, scol]))
             raise ValueError(f'fit: the depth-scaled form needs depths > 0; sample {k} has depth '
-                             f'{X[k, scol]!r} m')
+                             f'{float(X[k, scol])} m')
         X4, X = X, X[:, list(cols)]
         S = X4[:, scol] if scol >= 0 else None
         sub = (lambda idx: None) if S is None else (lambda idx: S[idx])  # noqa: E731

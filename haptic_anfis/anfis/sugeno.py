@@ -34,9 +34,11 @@ from . import membership as mfun
 
 #: Per-input extrapolation fractions of the force model's inputs (x, y, z, depth).
 DEFAULT_EXTRAPOLATION = (0.0, 0.0, 0.0, 0.25)
-#: The same for the depth-scaled form F = depth · g: g saturates in every input, so below the
-#: shallowest sample F falls linearly to 0 at contact and past the deepest it grows linearly.
-DEFAULT_EXTRAPOLATION_SCALED = (0.0, 0.0, 0.0, 0.0)
+#: The same for the depth-scaled form F = depth · g: g saturates in depth, so below the shallowest
+#: sample F falls linearly to 0 at contact and past the deepest it grows linearly; y and z
+#: consequents extend 15 % of their range past the data (the rim of the palpated disc: grouped-CV
+#: Fx RMSE 0.103 -> 0.076 N, seed 0) and saturate beyond.
+DEFAULT_EXTRAPOLATION_SCALED = (0.0, 0.15, 0.15, 0.0)
 
 
 def check_finite_inputs(X: np.ndarray, names: tuple[str, ...] | None = None) -> np.ndarray:
