@@ -127,7 +127,12 @@ def build_report(ds: ForceDataset, out_dir: str | os.PathLike, quick: bool = Fal
                     repeats if isinstance(m, OursPeer) else peer_repeats, batch_seconds)
         r['ours'] = isinstance(m, OursPeer)
         if r['status'] == 'ok':
-            r['contact'] = contact_onset(m, ds)
+            try:
+                r['contact'] = contact_onset(m, ds)
+            except Exception as exc:  # noqa: BLE001 - e.g. a peer whose worker measure() closed
+                r['contact_error'] = repr(exc)
+            finally:
+                m.close()
         log(f'    {r["status"]}' + (f', RMSE {np.round(r["rmse"], 4).tolist()} N, '
                                     f'fit {r["fit_s"]:.1f} s' if r['status'] == 'ok' else ''))
         rows.append(r)
@@ -246,7 +251,7 @@ def contact_section(res: dict[str, Any]) -> list[str]:
          f'step when contact begins), the largest |F|/ε at ε = {c0["eps_m"] * 1e3:.1f} mm, and the '
          'lowest force component along the outward surface normal for depths 0 to '
          f'{c0["depth_max_m"] * 1e3:.0f} mm (negative: the model pulls the probe into the tissue).',
-         '', '| model | max \|F(0)\| [N] | max \|F(ε)\|/ε [N/m] | min F·n [N] | points pulling in |',
+         '', r'| model | max \|F(0)\| [N] | max \|F(ε)\|/ε [N/m] | min F·n [N] | points pulling in |',
          '|---|---|---|---|---|']
     for r in rows:
         c = r['contact']
