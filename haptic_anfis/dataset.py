@@ -13,6 +13,7 @@ from __future__ import annotations
 import csv
 import hashlib
 import json
+import math
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -65,8 +66,8 @@ class ForceDataset:
             bad = ~np.isfinite(arr)
             if bad.any():
                 row, col = np.argwhere(bad)[0]
-                raise DatasetError(f'non-finite {name} value {arr[row, col]!r} in column '
-                                   f'{cols[col]!r}, sample {row}')
+                raise DatasetError(f'non-finite {name} value {float(arr[row, col])} in column '
+                                   f'{cols[col]!r}, sample {row} (0-based)')
 
     def __len__(self) -> int:
         return len(self.X)
@@ -112,9 +113,14 @@ def load_dataset(path: str | os.PathLike = DEFAULT_DATASET) -> ForceDataset:
             if not row or all(not c.strip() for c in row):
                 continue
             try:
-                rows.append([float(row[i]) for i in idx])
+                values = [float(row[i]) for i in idx]
             except (ValueError, IndexError):
                 raise DatasetError(f'{path}:{lineno}: cannot read row {row!r} as numbers') from None
+            bad = [c for c, v in zip(COLUMNS, values) if not math.isfinite(v)]
+            if bad:
+                raise DatasetError(f'{path}:{lineno}: non-finite value in column(s) {bad} '
+                                   f'(row {row!r}); every number must be finite')
+            rows.append(values)
     if not rows:
         raise DatasetError(f'dataset file {str(path)!r} has a header but no samples')
     data = np.array(rows, dtype=np.float64)

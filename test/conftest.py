@@ -24,10 +24,10 @@ def synthetic():
 
 @pytest.fixture(scope='session')
 def small_model(synthetic):
-    """A ForceModel with a fixed 3-2-2-2 / 3-3-3-2 / 2-2-2-2 structure (fast to train)."""
+    """A plain-form ForceModel with a fixed 3-2-2-2 / 3-3-3-2 / 2-2-2-2 structure (fast to train)."""
     from haptic_anfis.anfis import ForceModel
-    return ForceModel(structure=[(3, 2, 2, 2), (3, 3, 3, 2), (2, 2, 2, 2)], epochs=15).fit(
-        synthetic.X, synthetic.Y, groups=synthetic.point)
+    return ForceModel(structure=[(3, 2, 2, 2), (3, 3, 3, 2), (2, 2, 2, 2)], epochs=15,
+                      form='plain').fit(synthetic.X, synthetic.Y, groups=synthetic.point)
 
 
 @pytest.fixture

@@ -292,6 +292,6 @@ def test_search_folds_capped_by_points_and_recorded(synthetic):
     few = np.isin(synthetic.point, pts[np.linspace(0, len(pts) - 1, 4).astype(int)])
     X = synthetic.X[few]
     assert np.all(np.ptp(X, axis=0) > 0)
-    m = ForceModel(search_folds=5, candidates=[(2, 2, 2, 2)], search_epochs=2, epochs=2)
+    m = ForceModel(search_folds=5, candidates=[(2, 2, 2, 2)], search_epochs=2, epochs=2, form='plain')
     m.fit(X, synthetic.Y[few], groups=synthetic.point[few])  # 4 points: 4 folds, not 5
     assert m.metadata_['training']['search_folds'] == 5

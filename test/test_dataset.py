@@ -26,7 +26,11 @@ def test_shipped_default_dataset_loads():
     ('point,x_m,y_m\n1,2,3\n', 'lacks column'),
     ('point,x_m,y_m,z_m,depth_m,fx_N,fy_N,fz_N\n', 'no samples'),
     ('point,x_m,y_m,z_m,depth_m,fx_N,fy_N,fz_N\n0,1,2,3,4,5,6,abc\n', r':2: cannot read'),
-    ('point,x_m,y_m,z_m,depth_m,fx_N,fy_N,fz_N\n0,1,2,3,4,5,6,nan\n', "non-finite output.*fz_N"),
+    ('point,x_m,y_m,z_m,depth_m,fx_N,fy_N,fz_N\n0,1,2,3,4,5,6,nan\n',
+     r"bad\.csv:2: non-finite value in column\(s\) \['fz_N'\]"),
+    ('point,x_m,y_m,z_m,depth_m,fx_N,fy_N,fz_N\n0,1,2,3,4,5,6,7\n1,1,NaN,3,4,5,6,7\n',
+     r"bad\.csv:3: non-finite value in column\(s\) \['y_m'\]"),
+    ('point,x_m,y_m,z_m,depth_m,fx_N,fy_N,fz_N\n0,1,2,3,inf,5,6,7\n', r"bad\.csv:2: .*'depth_m'"),
     ('point,x_m,y_m,z_m,depth_m,fx_N,fy_N,fz_N\n0.5,1,2,3,4,5,6,7\n', 'integers'),
 ])
 def test_bad_files_fail_clearly(tmp_path, text, message):
@@ -81,3 +85,11 @@ def test_folds_reject_bad_arguments(synthetic):
         fold_indices(synthetic, len(np.unique(synthetic.point)) + 1, 0)
     with pytest.raises(ValueError, match="'point' or 'sample'"):
         fold_indices(synthetic, 3, 0, by='rows')
+
+
+def test_non_finite_arrays_name_column_and_sample_without_numpy_repr():
+    X = np.zeros((3, 4))
+    X[2, 1] = np.nan
+    with pytest.raises(DatasetError, match=r"non-finite input value nan in column 'y_m', sample 2") as e:
+        ForceDataset(X, np.zeros((3, 3)), np.zeros(3))
+    assert 'np.float64' not in str(e.value)

@@ -80,3 +80,64 @@ def test_missing_and_garbage_files(tmp_path):
 def test_unfitted_model_says_so():
     with pytest.raises(RuntimeError, match='not trained'):
         ForceModel().predict(np.zeros((1, 4)))
+
+
+@pytest.fixture(scope='module')
+def scaled_model(synthetic):
+    return ForceModel(structure=(2, 3, 2), epochs=3).fit(synthetic.X, synthetic.Y,
+                                                         groups=synthetic.point)
+
+
+def test_depth_scaled_round_trip_is_bit_exact(scaled_model, synthetic, tmp_path):
+    path = scaled_model.save(tmp_path / 's.json')
+    doc = json.loads(path.read_text())
+    assert doc['format_version'] == FORMAT_VERSION == 2
+    assert doc['form'] == {'name': 'depth_scaled', 'inputs': ['y', 'z', 'depth'], 'scale': 'depth'}
+    loaded = ForceModel.load(path)
+    assert loaded.input_cols_ == (1, 2, 3) and loaded.scale_col_ == 3
+    np.testing.assert_array_equal(loaded.input_range_[0], scaled_model.input_range_[0])
+    assert np.array_equal(loaded.predict(synthetic.X), scaled_model.predict(synthetic.X))
+    q = synthetic.X[7]
+    assert loaded.predict_one(*q) == scaled_model.predict_one(*q)
+
+
+def test_version_1_files_load_as_the_plain_form(small_model, synthetic, tmp_path):
+    doc = _doc(small_model)
+    doc['format_version'] = 1
+    del doc['form']
+    loaded = ForceModel.load(_write(tmp_path, doc, 'v1.json'))
+    assert loaded.scale_col_ == -1 and loaded.input_cols_ == (0, 1, 2, 3)
+    assert np.array_equal(loaded.predict(synthetic.X), small_model.predict(synthetic.X))
+
+
+@pytest.mark.parametrize('version', [3, 0, '2', None, True])
+def test_unknown_versions_name_the_file_and_version(small_model, tmp_path, version):
+    doc = _doc(small_model)
+    doc['format_version'] = version
+    with pytest.raises(ModelFileError, match=rf"v\.json' has format_version {version!r}"):
+        ForceModel.load(_write(tmp_path, doc, 'v.json'))
+
+
+@pytest.mark.parametrize('form', [None, {'name': 'depth_scaled', 'inputs': ['y', 'z'], 'scale': 'x'},
+                                  {'name': 'plain', 'inputs': ['z', 'y'], 'scale': None},
+                                  {'name': 'plain', 'inputs': ['q'], 'scale': None}, 'text'])
+def test_bad_form_names_the_file(scaled_model, tmp_path, form):
+    doc = json.loads(json.dumps(scaled_model.to_dict()))
+    doc['form'] = form
+    with pytest.raises(ModelFileError, match=r"f\.json'.*\"form\""):
+        ForceModel.load(_write(tmp_path, doc, 'f.json'))
+
+
+def test_form_not_matching_the_consequents_fails(scaled_model, tmp_path):
+    doc = json.loads(json.dumps(scaled_model.to_dict()))
+    doc['form']['inputs'] = ['x', 'y', 'z', 'depth']
+    with pytest.raises(ModelFileError, match=r"m\.json'.*needs 4 numbers"):
+        ForceModel.load(_write(tmp_path, doc, 'm.json'))
+
+
+@pytest.mark.parametrize('lo, hi', [(36.0, 45.0), (-1e9, 0.01), (0.0, 2.0)])
+def test_absurd_input_range_names_the_file(small_model, tmp_path, lo, hi):
+    doc = _doc(small_model)
+    doc['inputs'][0].update(min=lo, max=hi)
+    with pytest.raises(ModelFileError, match=r"mm\.json'.*input 'x' has range.*millimetres"):
+        ForceModel.load(_write(tmp_path, doc, 'mm.json'))

@@ -44,9 +44,10 @@ def report(small_ds, tmp_path_factory):
     out = tmp_path_factory.mktemp('report')
     peers = [P.LinearPeer(), P.KnnPeer(3), P.RbfPeer(), BrokenPeer(), ShapeLiar(),
              P.XanfisPeer(python=out / 'no-such-python')]
-    ours = [P.OursPeer((2, 2, 2, 2), epochs=5), P.OursPeer((3, 2, 2, 2), epochs=5)]
+    ours = [P.OursPeer((2, 2, 2, 2), epochs=5, form='plain'),
+            P.OursPeer((3, 2, 2, 2), epochs=5, form='plain'), P.OursPeer((3, 2, 2), epochs=5)]
     res = build_report(small_ds, out, quick=True, peers=peers, ours=ours, repeats=200,
-                       dataset_label='small', log=lambda *a: None)
+                       dataset_label='small', log=lambda *a: None, cv_seeds=(0, 1), cv_folds=3)
     return out, res
 
 
@@ -83,9 +84,9 @@ def test_table_rmse_is_an_independent_recomputation(report, small_ds):
     np.testing.assert_allclose(shown, want, rtol=5e-3)
     # ours: the same recomputation from the model the report trained
     from haptic_anfis.anfis import ForceModel
-    m = ForceModel(structure=(2, 2, 2, 2), epochs=5, seed=0).fit(
+    m = ForceModel(structure=(2, 2, 2, 2), epochs=5, seed=0, form='plain').fit(
         small_ds.X[tr], small_ds.Y[tr], groups=small_ds.point[tr])
-    np.testing.assert_allclose(_row(res, 'ours 2-2-2-2')['rmse'],
+    np.testing.assert_allclose(_row(res, 'ours plain 2-2-2-2')['rmse'],
                                np.sqrt(np.mean((m.predict(small_ds.X[te]) - small_ds.Y[te]) ** 2, 0)),
                                rtol=1e-9)
 
@@ -151,3 +152,38 @@ def test_cli_quick_runs(tmp_path, small_ds):
     assert main(['report', '--quick', '--dataset', str(csv), '--out', str(out)]) == 0
     for f in ('report.md', *FIGURES):
         assert (out / f).is_file()
+
+
+def test_report_has_group_cv_and_contact_onset(report):
+    out, res = report
+    text = (out / 'report.md').read_text()
+    assert '## Grouped cross-validation' in text and '## Contact onset' in text
+    cv = res['cv']
+    assert set(cv) == {'ours depth·g 3-3-2', 'RBF (thin plate spline)', 'linear regression'}
+    for r in cv.values():
+        assert r['rmse'].shape == (2, 3) and np.all(r['rmse'] > 0)
+        np.testing.assert_allclose(r['mean'], r['rmse'].mean(0))
+    scaled = _row(res, 'ours depth·g 3-2-2')['contact']
+    assert scaled['max_force_at_zero_N'] == 0.0
+    assert _row(res, 'ours plain 2-2-2-2')['contact']['max_force_at_zero_N'] > 0.0
+
+
+def test_group_cv_is_out_of_fold_by_point(small_ds):
+    """Recompute one seed's out-of-fold RMSE by hand; no held-out point is ever trained on."""
+    from haptic_anfis.dataset import fold_indices
+    from haptic_anfis.report.cv import group_cv
+
+    seen = []
+
+    class Spy(P.LinearPeer):
+        def fit(self, X, Y, groups=None):
+            seen.append(set(groups.tolist()))
+            return super().fit(X, Y, groups)
+
+    res = group_cv(small_ds, lambda s: Spy(), folds=4, seeds=(3,))
+    pred = np.empty_like(small_ds.Y)
+    for (keep, held), trained in zip(fold_indices(small_ds, 4, 3), seen):
+        assert not trained & set(small_ds.point[held].tolist())
+        m = P.LinearPeer().fit(small_ds.X[keep], small_ds.Y[keep])
+        pred[held] = m.predict(small_ds.X[held])
+    np.testing.assert_allclose(res['rmse'][0], np.sqrt(np.mean((pred - small_ds.Y) ** 2, axis=0)))

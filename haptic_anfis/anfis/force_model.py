@@ -25,13 +25,17 @@ from . import compiled
 from .model_file import (FORMAT, FORMAT_VERSION, ModelFileError, model_from_dict, model_to_dict,
                          read_model_doc, write_json_atomic)
 from .structure import Candidate, SearchResult, search_structure
-from .sugeno import DEFAULT_EXTRAPOLATION, SugenoModel, check_finite_inputs
+from .sugeno import (DEFAULT_EXTRAPOLATION, DEFAULT_EXTRAPOLATION_SCALED, SugenoModel,
+                     check_finite_inputs)
 from .training import DEFAULT_RIDGE, train
 
 INPUT_UNITS = ('m', 'm', 'm', 'm')
 OUTPUT_UNITS = ('N', 'N', 'N')
 
 Structure = tuple[int, ...]
+
+#: Model forms: the paper's F = ANFIS(inputs), and F = depth · ANFIS(inputs) (zero at contact).
+FORMS = ('plain', 'depth_scaled')
 
 
 class ForceModel:
@@ -58,14 +62,24 @@ class ForceModel:
         extrapolation: out-of-range band per input (x, y, z, depth), fraction of its range (see
             :mod:`.sugeno`): by default positions saturate and depth extrapolates by 25 %.
         seed: seeds the validation split.
+        form: ``'plain'``: F = ANFIS(inputs) (the paper's form); ``'depth_scaled'``: F = depth ·
+            g(inputs) with g a first-order Sugeno ANFIS per output trained by the same hybrid rule
+            on the error of F: exactly 0 N at zero depth and continuous from contact (|F| ≤ c·depth).
+        inputs: names of the ANFIS inputs among (x, y, z, depth); default all four for ``'plain'``
+            and (y, z, depth) for ``'depth_scaled'`` (on the skin x is a function of y and z).
+            ``structure``, ``search_start``, ``max_mfs`` have one entry per ANFIS input;
+            ``extrapolation`` one per column of (x, y, z, depth).
     """
 
     def __init__(self, structure: Structure | Sequence[Structure] | None = None, epochs: int = 60,
-                 search_epochs: int = 10, search_start: Structure = (2, 2, 2, 2),
-                 max_mfs: Structure = (5, 5, 5, 3), candidates: list[Structure] | None = None,
-                 tol: float = 0.05, ridge: float = DEFAULT_RIDGE, step: float = 0.01,
+                 search_epochs: int = 10, search_start: Structure | None = None,
+                 max_mfs: Structure | None = None, candidates: list[Structure] | None = None,
+                 tol: float = 0.0, ridge: float = DEFAULT_RIDGE, step: float = 0.01,
                  val_fraction: float = 0.2, split: str = 'point', search_folds: int = 3,
-                 extrapolation: Sequence[float] = DEFAULT_EXTRAPOLATION, seed: int = 0) -> None:
+                 extrapolation: Sequence[float] | None = None, seed: int = 0,
+                 form: str = 'depth_scaled', inputs: Sequence[str] | None = None) -> None:
+        self.form = form
+        self.inputs = inputs
         self.structure = structure
         self.epochs = epochs
         self.search_epochs = search_epochs
@@ -93,6 +107,29 @@ class ForceModel:
             raise ValueError(f'structure must be None, one tuple, or three tuples; got {s!r}')
         return [tuple(int(v) for v in st) for st in s]
 
+    def _form(self) -> tuple[tuple[int, ...], int, np.ndarray, Structure, Structure]:
+        """(input columns, scale column, extrapolation (4,), search start, max MFs), checked."""
+        if self.form not in FORMS:
+            raise ValueError(f'form: expected one of {FORMS}, got {self.form!r}')
+        scaled = self.form == 'depth_scaled'
+        names = self.inputs if self.inputs is not None else (
+            ('y', 'z', 'depth') if scaled else INPUT_NAMES)
+        unknown = [n for n in names if n not in INPUT_NAMES]
+        if unknown or not names or len(set(names)) != len(names):
+            raise ValueError(f'inputs: expected distinct names among {INPUT_NAMES}, got {names!r}')
+        cols = tuple(sorted(INPUT_NAMES.index(n) for n in names))
+        d = len(cols)
+        ext = self.extrapolation if self.extrapolation is not None else (
+            DEFAULT_EXTRAPOLATION_SCALED if scaled else DEFAULT_EXTRAPOLATION)
+        ext = np.broadcast_to(np.asarray(ext, dtype=np.float64), (4,)).copy()
+        start = tuple(self.search_start) if self.search_start is not None else (2,) * d
+        max_mfs = tuple(self.max_mfs) if self.max_mfs is not None else tuple(
+            3 if c == 3 else 5 for c in cols)
+        if len(start) != d or len(max_mfs) != d:
+            raise ValueError(f'search_start {start} and max_mfs {max_mfs} need one entry per ANFIS '
+                             f'input {tuple(INPUT_NAMES[c] for c in cols)}')
+        return cols, (3 if scaled else -1), ext, start, max_mfs
+
     def fit(self, X: np.ndarray, Y: np.ndarray, groups: np.ndarray | None = None,
             verbose: bool = False) -> 'ForceModel':
         """Train the three models on (X (n, 4) [m], Y (n, 3) [N]).
@@ -107,9 +144,21 @@ class ForceModel:
             raise ValueError(f'fit needs X (n, 4) and Y (n, 3); got {X.shape} and {Y.shape}')
         if not np.all(np.isfinite(Y)):
             raise ValueError('fit: Y holds non-finite forces')
+        cols, scol, ext, search_start, max_mfs = self._form()
+        if scol >= 0 and not np.all(X[:, scol] > 0):
+            k = int(np.argmin(X[:, scol]))
+            raise ValueError(f'fit: the depth-scaled form needs depths > 0; sample {k} has depth '
+                             f'{float(X[k, scol])} m')
+        X4, X = X, X[:, list(cols)]
+        S = X4[:, scol] if scol >= 0 else None
+        sub = (lambda idx: None) if S is None else (lambda idx: S[idx])  # noqa: E731
+        for o, st in enumerate(self._structures()):
+            if st is not None and len(st) != len(cols):
+                raise ValueError(f'structure {st} of output {OUTPUT_NAMES[o]} needs one MF count '
+                                 f'per ANFIS input {tuple(INPUT_NAMES[c] for c in cols)}')
         by = self.split if groups is not None else 'sample'
         groups = np.arange(len(X)) if groups is None else np.asarray(groups)
-        ds = ForceDataset(X, Y, groups)
+        ds = ForceDataset(X4, Y, groups)
         fit_idx, val_idx = split_indices(ds, self.val_fraction, self.seed, by=by)
         if isinstance(self.search_folds, bool) or not isinstance(self.search_folds, (int, np.integer)) \
                 or self.search_folds < 1:
@@ -117,7 +166,7 @@ class ForceModel:
         k = min(int(self.search_folds), len(np.unique(ds.point)) if by == 'point' else len(ds))
         folds = (fold_indices(ds, k, self.seed, by=by)
                  if k > 1 and any(s is None for s in self._structures()) else None)
-        lo, hi = X.min(axis=0), X.max(axis=0)
+        lo, hi = X.min(axis=0), X.max(axis=0)  # of the ANFIS inputs
         kw = dict(ridge=self.ridge, step=self.step)
         t_start = time.perf_counter()
         self.models_: list[SugenoModel] = []
@@ -130,9 +179,10 @@ class ForceModel:
             t0 = time.perf_counter()
             Xf, tf, Xv, tv = X[fit_idx], Y[fit_idx, o], X[val_idx], Y[val_idx, o]
             if fixed is None:
-                held = dict(folds=folds) if folds else dict(X_val=Xv, t_val=tv)
+                held = (dict(folds=folds, scale=S) if folds else
+                        dict(X_val=Xv, t_val=tv, scale=sub(fit_idx), scale_val=sub(val_idx)))
                 sr = search_structure(X if folds else Xf, Y[:, o] if folds else tf,
-                                      start=self.search_start, max_mfs=self.max_mfs,
+                                      start=search_start, max_mfs=max_mfs,
                                       candidates=self.candidates, tol=self.tol,
                                       epochs=self.search_epochs, lo=lo, hi=hi, **held, **kw)
                 structure = sr.chosen.structure
@@ -140,22 +190,26 @@ class ForceModel:
                 sr = None
                 structure = fixed
             # Choose the epoch with the full epoch budget on the held-out part ...
-            chk = train(Xf, tf, structure, self.epochs, X_check=Xv, t_check=tv, lo=lo, hi=hi, **kw)
+            chk = train(Xf, tf, structure, self.epochs, X_check=Xv, t_check=tv, lo=lo, hi=hi,
+                        scale=sub(fit_idx), scale_check=sub(val_idx), **kw)
             # ... then retrain on all the training data for exactly that many epochs.
-            final = train(X, Y[:, o], structure, chk.best_epoch, lo=lo, hi=hi, **kw)
-            final.model.extrapolation = np.broadcast_to(
-                np.asarray(self.extrapolation, dtype=np.float64), (4,)).copy()
+            final = train(X, Y[:, o], structure, chk.best_epoch, lo=lo, hi=hi, scale=S, **kw)
+            final.model.extrapolation = ext[list(cols)]
             self.models_.append(final.model)
             self.search_.append(sr)
             self.best_epoch_.append(chk.best_epoch)
             self.val_rmse_.append(chk.check_rmse[chk.best_epoch - 1])
-            self.train_rmse_.append(float(np.sqrt(np.mean((final.model.predict(X) - Y[:, o]) ** 2))))
+            pred = final.model.predict(X) * (1.0 if S is None else S)
+            self.train_rmse_.append(float(np.sqrt(np.mean((pred - Y[:, o]) ** 2))))
             self.train_curves_.append({'train': chk.train_rmse, 'check': chk.check_rmse})
             if verbose:
                 _print_output_summary(OUTPUT_NAMES[o], sr, structure, chk.best_epoch,
                                       self.train_rmse_[-1], self.val_rmse_[-1], time.perf_counter() - t0)
         self.fit_seconds_ = time.perf_counter() - t_start
+        self._input_cols, self._scale_col = cols, scol
+        self._range = (X4.min(axis=0), X4.max(axis=0))
         self.metadata_ = {'training': {
+            'form': self.form, 'inputs': [INPUT_NAMES[c] for c in cols], 'max_mfs': list(max_mfs),
             'epochs': self.epochs, 'search_epochs': self.search_epochs, 'tol': self.tol,
             'ridge': self.ridge, 'val_fraction': self.val_fraction, 'split': by,
             'search_folds': self.search_folds,
@@ -172,8 +226,18 @@ class ForceModel:
         if not getattr(self, 'models_', None):
             raise RuntimeError('ForceModel is not trained: call fit() or ForceModel.load()')
 
+    @property
+    def input_cols_(self) -> tuple[int, ...]:
+        """Columns of (x, y, z, depth) the single-output models read."""
+        return getattr(self, '_input_cols', (0, 1, 2, 3))
+
+    @property
+    def scale_col_(self) -> int:
+        """Column of (x, y, z, depth) that multiplies the outputs (3: F = depth · g), or -1."""
+        return getattr(self, '_scale_col', -1)
+
     def _compile(self) -> None:
-        self._fp, self._ip = compiled.pack(self.models_)
+        self._fp, self._ip = compiled.pack(self.models_, self.input_cols_, self.scale_col_, 4)
         compiled.warm_up(self._fp, self._ip)
 
     def predict(self, X: np.ndarray) -> np.ndarray:
@@ -182,7 +246,45 @@ class ForceModel:
         X = check_finite_inputs(X, INPUT_NAMES)
         if X.shape[1] != 4:
             raise ValueError(f'predict needs X of shape (n, 4); got {X.shape}')
-        return np.column_stack([m.predict(X) for m in self.models_])
+        U = X[:, list(self.input_cols_)]
+        F = np.column_stack([m.predict(U) for m in self.models_])
+        if self.scale_col_ >= 0:
+            F *= np.maximum(X[:, self.scale_col_], 0.0)[:, None]
+        return F
+
+    def predict_with_jacobian(self, X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Compiled batch forces and their exact derivatives w.r.t. the inputs.
+
+        Args:
+            X: (n, 4) queries (x, y, z, depth) [m] (any float dtype).
+        Returns:
+            (F (n, 3) [N], J (n, 3, 4) [N/m]) with ``J[i, a, b] = dF_a / dX_b`` at ``X[i]``.
+            Where an input is clamped by the out-of-range policy its column is 0; at an MF kink
+            the derivative is one-sided.
+        Raises:
+            ValueError: on NaN/Inf input.
+        """
+        self._check_fitted()
+        X = np.ascontiguousarray(check_finite_inputs(X, INPUT_NAMES))
+        if X.shape[1] != 4:
+            raise ValueError(f'predict_with_jacobian needs X of shape (n, 4); got {X.shape}')
+        return compiled.eval_jac_batch(X, self._fp, self._ip)
+
+    def jacobian_one(self, x: float, y: float, z: float, depth: float
+                     ) -> tuple[np.ndarray, np.ndarray]:
+        """Compiled real-time forces and Jacobian for one contact: metres in.
+
+        Returns:
+            (F (3,) [N], J (3, 4) [N/m]), ``J[a, b] = dF_a / d(x, y, z, depth)_b``. From njit code
+            call :func:`.compiled.jac_xyzd` with :attr:`kernel_params` instead.
+        Raises:
+            ValueError: if any input is NaN or Inf.
+        """
+        F, J, ok = compiled.jac_xyzd(x, y, z, depth, self._fp, self._ip)
+        if not ok:
+            raise ValueError(f'non-finite input to jacobian_one: x={x!r}, y={y!r}, z={z!r}, '
+                             f'depth={depth!r}')
+        return F, J
 
     def predict_compiled(self, X: np.ndarray) -> np.ndarray:
         """Compiled batch path: X (n, 4) [m] -> (n, 3) [N]. Raises ValueError on NaN/Inf input."""
@@ -214,7 +316,10 @@ class ForceModel:
     def input_range_(self) -> tuple[np.ndarray, np.ndarray]:
         """(min, max) (4,) arrays of the trained input domain [m]."""
         self._check_fitted()
-        return self.models_[0].lo.copy(), self.models_[0].hi.copy()
+        rng = getattr(self, '_range', None)
+        if rng is None:  # assembled by hand from 4-input models
+            return self.models_[0].lo.copy(), self.models_[0].hi.copy()
+        return rng[0].copy(), rng[1].copy()
 
     @property
     def structures_(self) -> list[Structure]:
@@ -232,8 +337,13 @@ class ForceModel:
             entry['best_epoch'] = self.best_epoch_[o] if hasattr(self, 'best_epoch_') else None
             entry['rmse'] = {k: v[o] for k, v in rmse.items()}
             outputs.append(entry)
+        scol = self.scale_col_
+        form = {'name': 'depth_scaled' if scol >= 0 else 'plain',
+                'inputs': [INPUT_NAMES[c] for c in self.input_cols_],
+                'scale': INPUT_NAMES[scol] if scol >= 0 else None}
         return {
             'format': FORMAT, 'format_version': FORMAT_VERSION, 'software_version': __version__,
+            'form': form,
             'created_utc': _dt.datetime.now(_dt.timezone.utc).isoformat(timespec='seconds'),
             'inputs': [{'name': n, 'unit': u, 'min': float(a), 'max': float(b)}
                        for n, u, a, b in zip(INPUT_NAMES, INPUT_UNITS, lo, hi)],
@@ -259,12 +369,19 @@ class ForceModel:
                                  f'{list(OUTPUT_NAMES)}')
         lo = np.array([i['min'] for i in doc['inputs']], dtype=np.float64)
         hi = np.array([i['max'] for i in doc['inputs']], dtype=np.float64)
+        cols, scol = _read_form(doc, path)
         self = cls()
-        self.models_ = [model_from_dict(o, lo, hi, o['name']) for o in doc['outputs']]
+        try:
+            self.models_ = [model_from_dict(o, lo[list(cols)], hi[list(cols)], o['name'])
+                            for o in doc['outputs']]
+        except ModelFileError as exc:
+            raise ModelFileError(f'model file {str(path)!r}: {exc}') from None
+        self._input_cols, self._scale_col = cols, scol
+        self._range = (lo, hi)
         self.best_epoch_ = [o.get('best_epoch') for o in doc['outputs']]
         rmse_keys = set().union(*(o.get('rmse', {}).keys() for o in doc['outputs']))
         self.metadata_ = {k: v for k, v in doc.items()
-                          if k not in ('format', 'format_version', 'inputs', 'outputs',
+                          if k not in ('format', 'format_version', 'inputs', 'outputs', 'form',
                                        'software_version', 'created_utc')}
         self.metadata_['rmse'] = {k: [o.get('rmse', {}).get(k) for o in doc['outputs']]
                                   for k in sorted(rmse_keys)}
@@ -272,6 +389,26 @@ class ForceModel:
                         'created_utc': doc.get('created_utc')}
         self._compile()
         return self
+
+
+def _read_form(doc: dict[str, Any], path: str | os.PathLike) -> tuple[tuple[int, ...], int]:
+    """(ANFIS input columns, scale column or -1) from a model file's "form" (version 1: plain)."""
+    if doc['format_version'] == 1:
+        return (0, 1, 2, 3), -1
+    form = doc.get('form')
+    try:
+        names = list(form['inputs'])
+        cols = tuple(INPUT_NAMES.index(n) for n in names)
+        scale = form.get('scale')
+        scol = {None: -1, 'depth': 3}[scale]
+        ok = form.get('name') == ('plain' if scol < 0 else 'depth_scaled')
+    except (TypeError, KeyError, ValueError, AttributeError):
+        ok = False
+    if not ok or not cols or list(cols) != sorted(set(cols)):
+        raise ModelFileError(f'model file {str(path)!r} (format_version 2): "form" must be '
+                             '{"name": "plain" | "depth_scaled", "inputs": [names among '
+                             f'{list(INPUT_NAMES)} in order], "scale": null | "depth"}}; got {form!r}')
+    return cols, scol
 
 
 def _candidate_dict(c: Candidate) -> dict[str, Any]:

@@ -1,17 +1,22 @@
 """The versioned force-model file (JSON): read, validate, write atomically.
 
 JSON keeps the file readable and diffable, and Python's float repr round-trips every float64 bit
-for bit, so save -> load is exact. Layout (``format_version`` 1)::
+for bit, so save -> load is exact. Layout (``format_version`` 2)::
 
-    {"format": "haptic_anfis.force_model", "format_version": 1,
+    {"format": "haptic_anfis.force_model", "format_version": 2,
+     "form": {"name": "depth_scaled", "inputs": ["y", "z", "depth"], "scale": "depth"},
      "software_version": "...", "created_utc": "...",
      "inputs":  [{"name": "x", "unit": "m", "min": .., "max": ..}, ...],
-     "outputs": [{"name": "Fx", "unit": "N", "structure": [3, 3, 3, 2],
-                  "membership": [[[a, b, c], ...] per input],   # metres
-                  "consequents": [[p_x, p_y, p_z, p_depth, q] per rule],  # N/m and N
+     "outputs": [{"name": "Fx", "unit": "N", "structure": [5, 5, 3],     # per ANFIS input
+                  "membership": [[[a, b, c], ...] per ANFIS input],   # metres
+                  "consequents": [[p_y, p_z, p_depth, q] per rule],  # N/m² and N/m if scaled
                   "extrapolation": [0, 0, 0, 0.25], "best_epoch": .., "rmse": {"train": .., ...}}, ...],
      "dataset": {"sha256": "...", "path": "...", "n_samples": ..},
      "training": {...}}
+
+The "form" says which of (x, y, z, depth) the per-output ANFIS read and whether the output is
+multiplied by the depth (F = depth · g(inputs): zero force at contact). Version 1 files (no "form":
+F = ANFIS(x, y, z, depth)) still load, as that plain form; any other version fails, naming the file.
 """
 from __future__ import annotations
 
@@ -26,7 +31,12 @@ import numpy as np
 from .sugeno import SugenoModel
 
 FORMAT = 'haptic_anfis.force_model'
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2
+#: Versions this software reads (1: the plain four-input form, before "form" existed).
+READABLE_VERSIONS = (1, 2)
+#: Largest |min|, |max| of an input [m] a model file may declare: a tissue model spans centimetres,
+#: so anything past this is a unit mistake (millimetres written as metres) or garbage.
+MAX_ABS_INPUT_M = 1.0
 
 
 class ModelFileError(ValueError):
@@ -96,9 +106,9 @@ def read_model_doc(path: str | os.PathLike) -> dict[str, Any]:
         raise ModelFileError(f'{str(path)!r} is not a haptic_anfis force-model file '
                              f'(expected "format": "{FORMAT}")')
     version = doc.get('format_version')
-    if version != FORMAT_VERSION:
+    if isinstance(version, bool) or version not in READABLE_VERSIONS:
         raise ModelFileError(f'model file {str(path)!r} has format_version {version!r}; this '
-                             f'software reads version {FORMAT_VERSION} only (retrain with '
+                             f'software reads versions {list(READABLE_VERSIONS)} (retrain with '
                              '"haptic-anfis train")')
     for key in ('inputs', 'outputs'):
         if not isinstance(doc.get(key), list) or not doc[key]:
@@ -112,4 +122,8 @@ def read_model_doc(path: str | os.PathLike) -> dict[str, Any]:
         if not (math.isfinite(lo) and math.isfinite(hi) and hi > lo):
             raise ModelFileError(f'model file {str(path)!r}: input {inp.get("name")!r} has '
                                  f'range [{lo}, {hi}]; expected finite min < max')
+        if max(abs(lo), abs(hi)) > MAX_ABS_INPUT_M:
+            raise ModelFileError(f'model file {str(path)!r}: input {inp.get("name")!r} has range '
+                                 f'[{lo}, {hi}] m; expected metres within ±{MAX_ABS_INPUT_M} m '
+                                 '(a file in millimetres?)')
     return doc

@@ -37,9 +37,10 @@ class SearchResult:
 def search_structure(X: np.ndarray, t: np.ndarray, X_val: np.ndarray | None = None,
                      t_val: np.ndarray | None = None, start: tuple[int, ...] = (2, 2, 2, 2),
                      max_mfs: tuple[int, ...] = (5, 5, 5, 3),
-                     candidates: list[tuple[int, ...]] | None = None, tol: float = 0.05,
+                     candidates: list[tuple[int, ...]] | None = None, tol: float = 0.0,
                      epochs: int = 40, lo: np.ndarray | None = None, hi: np.ndarray | None = None,
                      folds: list[tuple[np.ndarray, np.ndarray]] | None = None,
+                     scale: np.ndarray | None = None, scale_val: np.ndarray | None = None,
                      **train_kwargs) -> SearchResult:
     """Choose MF counts per input by validation RMSE.
 
@@ -56,22 +57,25 @@ def search_structure(X: np.ndarray, t: np.ndarray, X_val: np.ndarray | None = No
         tol: relative tolerance: a bigger structure must beat the best by more than this.
         epochs: maximum epochs per candidate.
         lo, hi: input domain (default: range of ``X``).
+        scale, scale_val: (n,) output factors of the scaled form (see
+            :func:`~.training.fit_normalized`) for ``X`` and ``X_val``.
     """
     import time
 
     if (folds is None) == (X_val is None or t_val is None):
         raise ValueError('search_structure needs either X_val and t_val or folds')
-    parts = ([(X, t, X_val, t_val)] if folds is None else
-             [(X[f], t[f], X[v], t[v]) for f, v in folds])
+    sc = (lambda idx: None) if scale is None else (lambda idx: scale[idx])  # noqa: E731
+    parts = ([(X, t, X_val, t_val, scale, scale_val)] if folds is None else
+             [(X[f], t[f], X[v], t[v], sc(f), sc(v)) for f, v in folds])
     tried: dict[tuple[int, ...], Candidate] = {}
 
     def evaluate(st: tuple[int, ...]) -> Candidate:
         if st not in tried:
             t0 = time.perf_counter()
             scores = []
-            for Xf, tf, Xv, tv in parts:
+            for Xf, tf, Xv, tv, sf, sv in parts:
                 res: TrainResult = train(Xf, tf, st, epochs, X_check=Xv, t_check=tv, lo=lo, hi=hi,
-                                         **train_kwargs)
+                                         scale=sf, scale_check=sv, **train_kwargs)
                 k = res.best_epoch - 1
                 scores.append((res.train_rmse[k], res.check_rmse[k], res.best_epoch))
             tr, va, ep = np.array(scores).T

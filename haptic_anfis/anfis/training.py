@@ -72,7 +72,7 @@ def solve_consequents(Phi: np.ndarray, t: np.ndarray, ridge: float = DEFAULT_RID
     if P % d1:
         raise ValueError(f'design matrix has {P} columns, not a multiple of d + 1 = {d1}')
     R = P // d1
-    X1 = Phi.reshape(n, R, d1).sum(axis=1)  # Σ_r w̄_r = 1, so this is [x, 1]
+    X1 = Phi.reshape(n, R, d1).sum(axis=1)  # Σ_r w̄_r = 1, so this is [x, 1] (rows × s if scaled)
     theta_g = np.linalg.lstsq(X1, t, rcond=None)[0]
     resid = t - X1 @ theta_g
     dual = n < P
@@ -116,7 +116,8 @@ def _rmse(y: np.ndarray, t: np.ndarray) -> float:
 def fit_normalized(U: np.ndarray, t: np.ndarray, structure: tuple[int, ...], epochs: int = 60,
                    U_check: np.ndarray | None = None, t_check: np.ndarray | None = None,
                    step: float = 0.01, ridge: float = DEFAULT_RIDGE, patience: int = 20,
-                   initial_mfs: list[np.ndarray] | None = None) -> TrainResult:
+                   initial_mfs: list[np.ndarray] | None = None, scale: np.ndarray | None = None,
+                   scale_check: np.ndarray | None = None) -> TrainResult:
     """Hybrid training on normalised inputs U in [0, 1]^d.
 
     Args:
@@ -128,6 +129,10 @@ def fit_normalized(U: np.ndarray, t: np.ndarray, structure: tuple[int, ...], epo
             (×1.1 after 4 consecutive error decreases, ×0.9 after two up-down alternations).
         patience: stop when the checking error has not improved for this many epochs.
         initial_mfs: optional initial MF parameters (repaired onto the constraints).
+        scale, scale_check: (n,) positive factors s of the scaled form: the fitted output is
+            s · y(U) (the force model's F = depth · g), so the consequents solve the least squares
+            on the rows of Φ times s and the MF gradient weighs by s² (both still the hybrid rule
+            on the error of s · y). Targets ``t`` and the reported RMSEs are of s · y.
     """
     d = U.shape[1]
     if len(structure) != d:
@@ -146,14 +151,25 @@ def fit_normalized(U: np.ndarray, t: np.ndarray, structure: tuple[int, ...], epo
     best = np.inf
     errors: list[float] = []
     since_best = 0
+    if scale is not None:
+        scale = np.asarray(scale, dtype=np.float64)
+        if scale.shape != t.shape or not np.all(scale > 0):
+            raise ValueError('scale must hold one positive factor per training sample')
+        t_fit, w_fit = t / scale, scale * scale
+    else:
+        t_fit, w_fit = t, None
+    s_check = 1.0 if scale_check is None else np.asarray(scale_check, dtype=np.float64)
     for epoch in range(1, epochs + 1):
-        model.coef = solve_consequents(model.design_matrix(U), t, ridge, d).reshape(R, d + 1)
-        grads, E = model.mf_gradient(U, t)
+        Phi = model.design_matrix(U)
+        if scale is not None:
+            Phi *= scale[:, None]
+        model.coef = solve_consequents(Phi, t, ridge, d).reshape(R, d + 1)
+        grads, E = model.mf_gradient(U, t_fit, w_fit)
         train_err = float(np.sqrt(2.0 * E / len(t)))
         result.train_rmse.append(train_err)
         score = train_err
         if has_check:
-            score = _rmse(model.predict(U_check), t_check)
+            score = _rmse(s_check * model.predict(U_check), t_check)
             result.check_rmse.append(score)
         if score < best:
             best, since_best = score, 0

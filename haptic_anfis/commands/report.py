@@ -17,6 +17,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument('--quick', action='store_true',
                    help='few structures, tiny peers, short timings (for CI; numbers are not the report)')
     p.add_argument('--seed', type=int, default=0, help='train/test split seed (default: %(default)s)')
+    p.add_argument('--cv-seeds', type=int, nargs='*', default=None,
+                   help='seeds of the grouped cross-validation table (default: 0 1 2; 0 with '
+                        '--quick; none given: skip it)')
+    p.add_argument('--cv-folds', type=int, default=None,
+                   help='folds over surface points (default: 5; 3 with --quick)')
 
 
 def run(args: argparse.Namespace) -> int:
@@ -30,7 +35,10 @@ def run(args: argparse.Namespace) -> int:
     ds = load_dataset(args.dataset)
     label = Path(args.dataset).name
     print(f'report: {label}, {len(ds)} samples; training and measuring every model on one split')
-    res = build_report(ds, args.out, quick=args.quick, seed=args.seed, dataset_label=label)
+    seeds = args.cv_seeds if args.cv_seeds is not None else ([0] if args.quick else [0, 1, 2])
+    folds = args.cv_folds if args.cv_folds is not None else (3 if args.quick else 5)
+    res = build_report(ds, args.out, quick=args.quick, seed=args.seed, dataset_label=label,
+                       cv_seeds=seeds, cv_folds=folds)
     print()
     print(headline_table(res))
     failed = [r['name'] for r in res['rows'] if r['status'] != 'ok']

@@ -42,7 +42,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 #: Keys of the config's "force_model" section: ForceModel arguments plus the test split.
 CONFIG_KEYS = {'structure', 'epochs', 'search_epochs', 'search_start', 'max_mfs', 'tol', 'ridge',
                'step', 'val_fraction', 'split', 'search_folds', 'extrapolation', 'seed',
-               'test_fraction'}
+               'test_fraction', 'form', 'inputs'}
 
 
 def load_config(path: str | None) -> dict:
@@ -60,7 +60,7 @@ def load_config(path: str | None) -> dict:
     if unknown:
         raise ValueError(f'{path}: unknown force_model key(s) {unknown}; known: {sorted(CONFIG_KEYS)}')
     params = {k: v for k, v in section.items() if v is not None}
-    for key in ('structure', 'search_start', 'max_mfs', 'extrapolation'):
+    for key in ('structure', 'search_start', 'max_mfs', 'extrapolation', 'inputs'):
         if key in params:
             params[key] = tuple(params[key])
     return params

@@ -85,7 +85,9 @@ class OursPeer(Peer):
     def __init__(self, structure: tuple[int, ...] | None, **params: Any) -> None:
         self.structure = structure
         self.params = params
-        self.name = 'ours: search' if structure is None else 'ours ' + '-'.join(map(str, structure))
+        form = 'plain' if params.get('form') == 'plain' else 'depth·g'
+        self.name = (f'ours {form}: search' if structure is None else
+                     f'ours {form} ' + '-'.join(map(str, structure)))
 
     def fit(self, X, Y, groups=None):
         from ..anfis import ForceModel
@@ -166,6 +168,37 @@ class MlpPeer(_Standardised):
     def curves(self):
         lc = getattr(self.model_, 'loss_curve_', None)
         return [{'train': [float(v) for v in lc]}] if lc else []
+
+
+class CompiledMlpPeer(MlpPeer):
+    """The MLP peer with its forward pass compiled like ours (numba, packed parameters): the fair
+    speed comparison (same weights as :class:`MlpPeer`, so the same errors)."""
+
+    family = 'scikit-learn MLPRegressor, forward pass in numba'
+    realtime_path = 'mlp_one (numba)'
+
+    def __init__(self, hidden: tuple[int, ...] = (32, 32), max_iter: int = 2000, seed: int = 0) -> None:
+        super().__init__(hidden, max_iter, seed)
+        self.name = f'MLP {"-".join(map(str, hidden))} (tanh, numba)'
+
+    def fit(self, X, Y, groups=None):
+        from .compiled_mlp import mlp_batch, mlp_one, pack_mlp
+        super().fit(X, Y, groups)
+        self.fp_, self.ip_ = pack_mlp(self.model_.coefs_, self.model_.intercepts_, self.mu_,
+                                      self.sd_, self.ymu_, self.ysd_)
+        mlp_one(0.0, 0.0, 0.0, 0.0, self.fp_, self.ip_)  # compile (or load) outside the timings
+        mlp_batch(np.zeros((1, 4)), self.fp_, self.ip_)
+        return self
+
+    def predict(self, X):
+        from .compiled_mlp import mlp_batch
+        return mlp_batch(np.ascontiguousarray(X, dtype=np.float64), self.fp_, self.ip_)
+
+    def time_single(self, Q, repeats):
+        from .compiled_mlp import mlp_one
+        fp, ip = self.fp_, self.ip_
+        return time_calls(lambda x, y, z, d: mlp_one(x, y, z, d, fp, ip),
+                          [tuple(float(v) for v in q) for q in Q], repeats)
 
 
 class RbfPeer(_Standardised):
@@ -290,6 +323,7 @@ def default_peers(quick: bool = False, seed: int = 0) -> list[Peer]:
     """The peers of a full report (or tiny ones for ``quick``)."""
     if quick:
         return [LinearPeer(), KnnPeer(5), RbfPeer(), MlpPeer((8,), max_iter=200, seed=seed),
+                CompiledMlpPeer((8,), max_iter=200, seed=seed),
                 XanfisPeer(num_rules=4, epochs=5, seed=seed)]
     return [LinearPeer(), KnnPeer(5), RbfPeer(), MlpPeer((32, 32), seed=seed),
-            XanfisPeer(seed=seed)]
+            CompiledMlpPeer((32, 32), seed=seed), XanfisPeer(seed=seed)]

@@ -23,22 +23,46 @@ HAPTIC_BUDGET_US = 1000.0               # one servo tick at 1 kHz
 PAPER_RMSE_N = (0.0791, 0.0063, 0.0181)  # Amirkhani & Nahvi, test RMSE Fx, Fy, Fz on their FE data
 PAPER_EVALS_PER_S = 1e5
 
-FULL_STRUCTURES: tuple[tuple[int, ...], ...] = ((2, 2, 2, 2), (3, 3, 3, 2), (4, 4, 4, 2), (5, 5, 5, 3))
-QUICK_STRUCTURES: tuple[tuple[int, ...], ...] = ((2, 2, 2, 2), (3, 3, 3, 2))
+#: Plain-form (the paper's F = ANFIS(x, y, z, depth)) structures the report also trains.
+FULL_STRUCTURES: tuple[tuple[int, ...], ...] = ((3, 3, 3, 2), (4, 4, 4, 2))
+QUICK_STRUCTURES: tuple[tuple[int, ...], ...] = ((2, 2, 2, 2),)
+#: The shipped default (config/force_model.yaml): depth-scaled form over (y, z, depth).
+DEFAULT_STRUCTURE = (5, 5, 2)
+#: ... with its extrapolation (x, y, z, depth): consequents extend 15 % past the y, z range.
+DEFAULT_EXTRAPOLATION = (0.0, 0.15, 0.15, 0.0)
 
 
 def our_models(quick: bool, seed: int = 0,
                structures: Sequence[tuple[int, ...]] | None = None) -> list[OursPeer]:
-    """The structure search first, then fixed structures (the paper's 3-3-3-2 and 4-4-4-2 among)."""
+    """The shipped default first (depth-scaled 5-5-2), the depth-scaled structure search, then
+    plain-form fixed structures (the paper's 3-3-3-2 and 4-4-4-2)."""
     if structures is None:
         structures = QUICK_STRUCTURES if quick else FULL_STRUCTURES
     kw: dict[str, Any] = {'seed': seed}
     if quick:
         kw.update(epochs=8)
-        search = OursPeer(None, search_epochs=4, max_mfs=(3, 2, 2, 2), **kw)
+        default = OursPeer((3, 3, 2), **kw)
+        search = OursPeer(None, search_epochs=4, max_mfs=(3, 2, 2), **kw)
     else:
+        default = OursPeer(DEFAULT_STRUCTURE, extrapolation=DEFAULT_EXTRAPOLATION, **kw)
         search = OursPeer(None, **kw)
-    return [search, *(OursPeer(tuple(s), **kw) for s in structures)]
+    return [default, search, *(OursPeer(tuple(s), form='plain', **kw) for s in structures)]
+
+
+def cv_models(quick: bool) -> dict[str, Any]:
+    """``name -> (seed -> model)`` of the grouped-CV table: our default and the paper's plain
+    form, and the best plain peers (compiled MLP has the MLP's errors, so it is not repeated)."""
+    from .peers import LinearPeer, MlpPeer, RbfPeer
+    if quick:
+        return {'ours depth·g 3-3-2': lambda s: OursPeer((3, 3, 2), epochs=5, seed=s),
+                'RBF (thin plate spline)': lambda s: RbfPeer(),
+                'linear regression': lambda s: LinearPeer()}
+    return {'ours depth·g 5-5-2 (default)': lambda s: OursPeer(
+                DEFAULT_STRUCTURE, extrapolation=DEFAULT_EXTRAPOLATION, seed=s),
+            'ours plain 3-3-3-2 (paper)': lambda s: OursPeer((3, 3, 3, 2), form='plain', seed=s),
+            'RBF (thin plate spline)': lambda s: RbfPeer(),
+            'MLP 32-32 (tanh)': lambda s: MlpPeer((32, 32), seed=s),
+            'linear regression': lambda s: LinearPeer()}
 
 
 def fe_cost(provenance: dict[str, Any]) -> dict[str, Any]:
@@ -73,10 +97,15 @@ def pareto_front(latency: np.ndarray, error: np.ndarray) -> np.ndarray:
 def build_report(ds: ForceDataset, out_dir: str | os.PathLike, quick: bool = False, seed: int = 0,
                  dataset_label: str = '', peers: Sequence[Peer] | None = None,
                  ours: Sequence[Peer] | None = None, repeats: int | None = None,
+                 cv_seeds: Sequence[int] = (0, 1, 2), cv_folds: int = 5,
                  log=print) -> dict[str, Any]:
-    """Train and measure every model on one split; write ``report.md``, ``results.json`` and the
-    figures into ``out_dir``. Returns the results (rows, split, settings)."""
+    """Train and measure every model on one split, then the grouped cross-validation of
+    :func:`cv_models` (``cv_seeds`` × ``cv_folds`` folds over surface points; no seeds: skipped);
+    write ``report.md``, ``results.json`` and the figures into ``out_dir``. Returns the results
+    (rows, split, settings, cv)."""
     from . import figures
+    from .contact import contact_onset
+    from .cv import group_cv
     t_start = time.perf_counter()
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -97,9 +126,23 @@ def build_report(ds: ForceDataset, out_dir: str | os.PathLike, quick: bool = Fal
         r = measure(m, train, test, probes, force_range, ds,
                     repeats if isinstance(m, OursPeer) else peer_repeats, batch_seconds)
         r['ours'] = isinstance(m, OursPeer)
+        if r['status'] == 'ok':
+            try:
+                r['contact'] = contact_onset(m, ds)
+            except Exception as exc:  # noqa: BLE001 - e.g. a peer whose worker measure() closed
+                r['contact_error'] = repr(exc)
+            finally:
+                m.close()
         log(f'    {r["status"]}' + (f', RMSE {np.round(r["rmse"], 4).tolist()} N, '
                                     f'fit {r["fit_s"]:.1f} s' if r['status'] == 'ok' else ''))
         rows.append(r)
+    cv: dict[str, Any] = {}
+    for name, make in (cv_models(quick).items() if cv_seeds else ()):
+        log(f'  group CV: {name} ...')
+        try:
+            cv[name] = group_cv(ds, make, folds=cv_folds, seeds=cv_seeds)
+        except Exception as exc:  # noqa: BLE001 - a failed peer is listed, not fatal
+            log(f'    failed: {exc!r}')
     ok = [r for r in rows if r['status'] == 'ok']
     if ok:
         lat = np.array([r['single_p50_us'] for r in ok])
@@ -124,6 +167,7 @@ def build_report(ds: ForceDataset, out_dir: str | os.PathLike, quick: bool = Fal
         'software_version': __version__,
         'created_utc': _dt.datetime.now(_dt.timezone.utc).isoformat(timespec='seconds'),
         'rows': rows,
+        'cv': cv,
     }
     res['figures'] = figures.make_all(res, ds, train, test, out)
     res['seconds'] = time.perf_counter() - t_start
@@ -181,6 +225,42 @@ def headline_table(res: dict[str, Any]) -> str:
     return '\n'.join(lines)
 
 
+def cv_section(res: dict[str, Any]) -> list[str]:
+    """Markdown lines of the grouped cross-validation table (empty when it was skipped)."""
+    from .cv import format_cv_table
+    cv = res.get('cv') or {}
+    if not cv:
+        return []
+    first = next(iter(cv.values()))
+    return ['## Grouped cross-validation', '',
+            f'{first["folds"]}-fold cross-validation over surface points (every depth of a point in '
+            f'the same fold), seeds {first["seeds"]}: out-of-fold RMSE over the whole dataset per '
+            'seed, mean ± std over the seeds (bold: best per axis). A steadier measure than the '
+            'single split above, whose ~30 test points decide its ranking.', '',
+            format_cv_table(cv), '']
+
+
+def contact_section(res: dict[str, Any]) -> list[str]:
+    """Markdown lines of the contact-onset check (see :mod:`.contact`)."""
+    rows = [r for r in res['rows'] if r['status'] == 'ok' and 'contact' in r]
+    if not rows:
+        return []
+    c0 = rows[0]['contact']
+    L = ['## Contact onset', '',
+         f'At the {c0["n_points"]} surface points of the data: the largest |F| at depth 0 (a force '
+         f'step when contact begins), the largest |F|/ε at ε = {c0["eps_m"] * 1e3:.1f} mm, and the '
+         'lowest force component along the outward surface normal for depths 0 to '
+         f'{c0["depth_max_m"] * 1e3:.0f} mm (negative: the model pulls the probe into the tissue).',
+         '', r'| model | max \|F(0)\| [N] | max \|F(ε)\|/ε [N/m] | min F·n [N] | points pulling in |',
+         '|---|---|---|---|---|']
+    for r in rows:
+        c = r['contact']
+        L.append(f'| {r["name"]} | {c["max_force_at_zero_N"]:.3g} | '
+                 f'{c["max_slope_at_eps_N_per_m"]:.3g} | {c["min_normal_force_N"]:.3g} | '
+                 f'{c["n_points_pulling"]} / {c["n_points"]} |')
+    return L + ['']
+
+
 def format_markdown(res: dict[str, Any]) -> str:
     d, s = res['dataset'], res['split']
     rng = res['force_range_N']
@@ -210,6 +290,8 @@ def format_markdown(res: dict[str, Any]) -> str:
          '',
          headline_table(res),
          '',
+         *cv_section(res),
+         *contact_section(res),
          'Bold: on the Pareto front of single-query p50 latency against RMS force-vector error '
          '(no other model is both faster and more accurate). *Single query* is the real-time path each '
          'model offers: ours `ForceModel.predict_one` (numba, packed parameter arrays), every peer its '

@@ -1,0 +1,120 @@
+"""Numerical hard cases of training and evaluation: ill-conditioned least squares, extreme input
+scales, knots and out-of-range inputs of the depth-scaled form, float32 inputs, determinism."""
+import itertools
+
+import numpy as np
+import pytest
+
+from haptic_anfis.anfis import ForceModel, solve_consequents, train
+
+
+def test_duplicate_samples_give_the_same_fit_as_weighted_unique_ones(rng):
+    """Each sample repeated 20 times: Φ has rank ≤ n/20; the solve stays finite and equals the
+    fit of the unique samples (duplication scales ΦᵀΦ, the relative ridge scales with it)."""
+    X = rng.uniform(0, 1, (40, 2))
+    t = np.sin(3 * X[:, 0]) * X[:, 1]
+    a = train(X, t, (3, 3), epochs=5)
+    b = train(np.repeat(X, 20, axis=0), np.repeat(t, 20), (3, 3), epochs=5)
+    assert np.all(np.isfinite(b.model.coef))
+    np.testing.assert_allclose(b.model.predict(X), a.model.predict(X), rtol=0, atol=1e-6)
+
+
+def test_every_sample_identical_except_one_input(rng):
+    """All rows but a constant-free input are duplicates of one point: no crash, no NaN."""
+    X = np.tile([0.3, 0.6], (50, 1))
+    X[:, 1] = np.linspace(0, 1, 50)
+    X = np.vstack([X, [[1.0, 0.5], [0.0, 0.5]]])
+    t = X[:, 1] ** 2
+    res = train(X, t, (3, 3), epochs=3)
+    assert np.all(np.isfinite(res.model.coef))
+    assert np.all(np.isfinite(res.model.predict(np.random.default_rng(0).uniform(0, 1, (100, 2)))))
+
+
+def test_unexcited_rules_of_a_scaled_fit_follow_the_global_trend(rng):
+    """Depth-scaled least squares (rows × s) with every sample in one corner."""
+    X = rng.uniform(0, 0.3, (60, 3))
+    s = rng.uniform(0.5, 2.0, 60)
+    g = 1.0 + X @ np.array([2.0, -1.0, 0.5])
+    res = train(X, s * g, (3, 3, 3), epochs=2, scale=s, lo=np.zeros(3), hi=np.ones(3))
+    far = rng.uniform(0.7, 1.0, (50, 3))
+    np.testing.assert_allclose(res.model.predict(far), 1.0 + far @ np.array([2.0, -1.0, 0.5]),
+                               atol=1e-5)
+
+
+@pytest.mark.parametrize('unit', [1e-6, 1.0, 1e3])
+def test_input_scale_does_not_change_the_fit(rng, unit):
+    """The same problem in micrometres-sized and metre-sized inputs: identical predictions (the
+    training normalises inputs; the ridge is relative)."""
+    X = rng.uniform(0, 1, (200, 3))
+    t = np.exp(-X[:, 0]) + X[:, 1] * X[:, 2]
+    ref = train(X, t, (3, 2, 2), epochs=8).model.predict(X)
+    got = train(X * unit, t, (3, 2, 2), epochs=8).model.predict(X * unit)
+    np.testing.assert_allclose(got, ref, rtol=0, atol=1e-9)
+
+
+def test_mixed_input_scales_in_one_model(rng):
+    """1e-6 m next to 1 m in the same model: consequent slopes differ by 1e6, the fit is exact
+    for a function linear in both."""
+    X = np.column_stack([rng.uniform(0, 1e-6, 300), rng.uniform(0, 1.0, 300)])
+    t = 3.0 + 2e6 * X[:, 0] - 4.0 * X[:, 1]
+    res = train(X, t, (2, 3), epochs=3)
+    np.testing.assert_allclose(res.model.predict(X), t, rtol=0, atol=1e-6)
+    Phi = res.model.design_matrix(X)
+    assert np.all(np.isfinite(solve_consequents(Phi, t, n_inputs=2)))
+
+
+@pytest.fixture(scope='module')
+def scaled(synthetic):
+    return ForceModel(structure=[(3, 2, 2), (2, 3, 2), (2, 2, 3)], epochs=6).fit(
+        synthetic.X, synthetic.Y, groups=synthetic.point)
+
+
+def test_scaled_paths_agree_on_knots_corners_and_outside(scaled, synthetic, rng):
+    lo, hi = scaled.input_range_
+    knots = []
+    for m in scaled.models_:
+        for k in itertools.product(*[P[:, 1] for P in m.mfs]):
+            knots.append([0.04, *k])
+    corners = [np.where(np.array(c), hi, lo) for c in itertools.product((0, 1), repeat=4)]
+    span = hi - lo
+    X = np.vstack([synthetic.X, np.array(knots), np.array(corners),
+                   lo + span * rng.uniform(-0.5, 1.5, (2000, 4))])
+    F_np = scaled.predict(X)
+    np.testing.assert_allclose(scaled.predict_compiled(X), F_np, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(np.array([scaled.predict_one(*x) for x in X]), F_np, rtol=0,
+                               atol=1e-12)
+    F_j, _ = scaled.predict_with_jacobian(X)
+    np.testing.assert_allclose(F_j, F_np, rtol=0, atol=1e-12)
+    assert np.all(np.isfinite(F_np))
+    np.testing.assert_array_equal(F_np[X[:, 3] <= 0], 0.0)
+
+
+def test_scaled_force_is_linear_in_depth_outside_the_trained_depths(scaled):
+    """g saturates: below the shallowest and past the deepest sample F = depth · g(edge)."""
+    lo, hi = scaled.input_range_
+    y, z = 0.5 * (lo[1] + hi[1]), 0.5 * (lo[2] + hi[2])
+    F = lambda d: np.array(scaled.predict_one(0.04, y, z, d))  # noqa: E731
+    np.testing.assert_allclose(F(0.5 * lo[3]), 0.5 * F(lo[3]), rtol=1e-12)
+    np.testing.assert_allclose(F(3 * hi[3]), 3 * F(hi[3]), rtol=1e-12)
+
+
+@pytest.mark.parametrize('model_name', ['small_model', 'scaled'])
+def test_float32_inputs_equal_float64_of_the_same_values(request, model_name, synthetic):
+    model = request.getfixturevalue(model_name)
+    X32 = synthetic.X[:50].astype(np.float32)
+    X64 = X32.astype(np.float64)
+    np.testing.assert_array_equal(model.predict(X32), model.predict(X64))
+    np.testing.assert_array_equal(model.predict_compiled(X32), model.predict_compiled(X64))
+    for a, b in zip(X32[:5], X64[:5]):
+        assert model.predict_one(*a) == model.predict_one(*b)
+        assert model.predict_one(*(np.float32(v) for v in a)) == model.predict_one(*b)
+
+
+def test_training_is_deterministic_for_a_seed(synthetic):
+    kw = dict(candidates=[(2, 2, 2), (3, 2, 2)], search_epochs=2, epochs=3, seed=4)
+    a = ForceModel(**kw).fit(synthetic.X, synthetic.Y, groups=synthetic.point)
+    b = ForceModel(**kw).fit(synthetic.X, synthetic.Y, groups=synthetic.point)
+    assert a.structures_ == b.structures_
+    for ma, mb in zip(a.models_, b.models_):
+        assert np.array_equal(ma.coef, mb.coef)
+        assert all(np.array_equal(P, Q) for P, Q in zip(ma.mfs, mb.mfs))
