@@ -262,6 +262,9 @@ def displacements_from_records(records: list[dict[str, Any]], depths: Sequence[f
             coeffs[i, j] = c[k]
             trunc[i, j] = disp['truncation_rms_m'][k]
         dirs[i] = r.get('direction', [np.nan] * 3)
+    fp = [r['displacement'].get('footprint_radius_m') or np.nan for r in recs]
+    meta = {'footprint_radius_m': float(np.nanmedian(fp)) if np.isfinite(fp).any() else None,
+            **meta}
     return DisplacementSet(point=np.array([r['point'] for r in recs], dtype=np.int64),
                            surface_point=np.array([r['surface_point_m'] for r in recs]),
                            direction=dirs, depths=depths, rho=rho, coeffs=coeffs,
