@@ -50,6 +50,8 @@ class DeformationModel:
         form: 'interpolant' (default; harmonics blended over the loading points), 'nearest'
             (the nearest loading point's field) or 'radial' (one axisymmetric profile per depth,
             averaged over all points) -- the alternatives measured against it.
+        taper, reach: the dent fades from ``taper`` to exactly 0 at ``reach`` probe radii
+            (defaults R_TAPER, R_MAX: the recorded extent; a display may cut it shorter).
     Learned attributes:
         yz_: (P, 2) loading points' (y, z) [m]; unit_: (P, D, K, H, 3) harmonics / depth on
         the knots rho_ (K,) [m] (footprint, then the recorded radii); depths_: (D,) [m];
@@ -58,12 +60,17 @@ class DeformationModel:
     """
 
     form: str = 'interpolant'
+    taper: float = R_TAPER
+    reach: float = R_MAX
 
     def fit(self, data: DisplacementSet, footprint_radius: float | None = None
             ) -> 'DeformationModel':
         """Learn from ``data`` (points with a failed depth are left out)."""
         if self.form not in FORMS:
             raise ValueError(f'deformation form must be one of {FORMS}, got {self.form!r}')
+        if not 1.0 < self.taper < self.reach <= R_MAX:
+            raise ValueError(f'need 1 < taper < reach <= {R_MAX} probe radii, got taper '
+                             f'{self.taper!r}, reach {self.reach!r}')
         ok = np.all(np.isfinite(data.coeffs), axis=(1, 2, 3, 4))
         if ok.sum() < (1 if self.form != 'interpolant' else 3):
             raise DisplacementDataError(f'only {int(ok.sum())} loading points have a complete '
@@ -108,23 +115,23 @@ class DeformationModel:
 
     @classmethod
     def load(cls, path: str | os.PathLike, dataset_sha256: str | None = None,
-             form: str = 'interpolant') -> 'DeformationModel':
+             **params) -> 'DeformationModel':
         """Model from a displacement file (``<dataset>.displacement.npz``, or the dataset CSV
         beside which it lies); ``dataset_sha256`` checks it belongs to that force data."""
         path = Path(path)
         if path.suffix == '.csv':
             path = displacement_path(path)
-        return cls(form=form).fit(load_displacements(path, dataset_sha256))
+        return cls(**params).fit(load_displacements(path, dataset_sha256))
 
     @classmethod
-    def load_default(cls) -> 'DeformationModel':
+    def load_default(cls, **params) -> 'DeformationModel':
         """The shipped default scene's model, checked against the shipped force data's hash."""
         import json
 
         from ..dataset import DEFAULT_DATASET, sidecar_path
 
         sha = json.loads(sidecar_path(DEFAULT_DATASET).read_text()).get('sha256')
-        return cls.load(displacement_path(DEFAULT_DATASET), dataset_sha256=sha)
+        return cls.load(displacement_path(DEFAULT_DATASET), dataset_sha256=sha, **params)
 
     # -- evaluation --------------------------------------------------------------------------
 
@@ -201,7 +208,7 @@ class DeformationModel:
         if d == 0.0 or len(P) == 0:
             return out
         a = self.probe_radius_
-        rmax = R_MAX * a
+        rmax = self.reach * a
         # Cheap cull first: only vertices within the sampled radius of the probe axis move.
         v = P - c
         s = v @ frame[0]
@@ -234,7 +241,7 @@ class DeformationModel:
         u = comp[:, :1] * frame[0] + comp[:, 1:2] * radial + comp[:, 2:3] * tang
         inside = rho <= a
         u[inside] = d * frame[0]  # the flat probe face, exactly
-        fade = 1.0 - _smoothstep((rho - R_TAPER * a) / ((R_MAX - R_TAPER) * a))
+        fade = 1.0 - _smoothstep((rho - self.taper * a) / ((self.reach - self.taper) * a))
         out[near] = u * fade[:, None]
         return out
 
@@ -262,8 +269,8 @@ class DeformationModel:
         inside = rho <= self.probe_radius_
         vals[inside] = 0.0
         vals[inside, :, 0] = max(float(depth), 0.0)
-        fade = 1.0 - _smoothstep((rho - R_TAPER * self.probe_radius_)
-                                 / ((R_MAX - R_TAPER) * self.probe_radius_))
+        fade = 1.0 - _smoothstep((rho - self.taper * self.probe_radius_)
+                                 / ((self.reach - self.taper) * self.probe_radius_))
         return vals * fade[:, None, None] if K else vals
 
 
@@ -276,7 +283,7 @@ def fe_samples(data: DisplacementSet, index: int, depth_index: int, n_angles: in
 
 
 def holdout_errors(data: DisplacementSet, form: str = 'interpolant', folds: int = 5,
-                   seed: int = 0, hold_depth: int | None = None) -> dict[str, float]:
+                   seed: int = 0, hold_depth: int | None = None, **params) -> dict[str, float]:
     """Error of a model form against FE fields it never saw (grouped by loading point).
 
     Each fold fits on the other points and compares with the held-out points' FE fields on the
@@ -301,7 +308,7 @@ def holdout_errors(data: DisplacementSet, form: str = 'interpolant', folds: int 
     foot = 0.0
     for keep, held in fold_indices(stub, folds, seed):
         sub = _subset(data, ok[keep], drop_depth=hold_depth)
-        model = DeformationModel(form=form).fit(sub)
+        model = DeformationModel(form=form, **params).fit(sub)
         for i in ok[held]:
             for j, d in enumerate(data.depths):
                 if hold_depth is not None and j != hold_depth:
