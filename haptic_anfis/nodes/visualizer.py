@@ -41,7 +41,8 @@ def _tumour_check(v):
 PARAMS = MESH_PARAMS + [
     Param('rate', 30.0, 'marker rate [Hz]', positive),
     Param('force_scale', 0.01, 'force arrow length per newton [m/N]', positive),
-    Param('probe_radius', 0.008, 'probe radius [m] (the flat FE probe, drawn as a cylinder)', positive),
+    Param('probe_radius', 0.008, 'probe radius [m] (the flat FE probe, drawn as a cylinder)',
+          positive),
     Param('show_tumours', False, 'draw the tumours'),
     Param('tumours', [0.0285, 0.015, -0.010, 0.0075], 'tumours, flat x, y, z, radius [m] per '
           'tumour (tissue frame; default: the default FE scene\'s tumour, '
