@@ -102,26 +102,29 @@ def timing(data, n):
     d = np.array([-1.0, 0.0, 0.0])
     for i in range(5):
         model.displace(V, P[i], d, D[i])
-    t = []
+    t, cpu = [], []
     for p, dep in zip(P, D):
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         model.displace(V, p, d, dep)
         t.append(time.perf_counter() - t0)
+        cpu.append(time.process_time() - c0)
     print(f'== per frame ({len(V)} vertices, {len(F)} faces; load {os.getloadavg()[0]:.1f} '
           f'on {os.cpu_count()} cores)')
-    print(f'displace, every vertex          {pct(t)}')
+    print(f'displace, every vertex          {pct(t)} wall; CPU mean {np.mean(cpu) * 1e3:.2f} ms')
     for reach in (9.0, 5.0):
         surf = DentSurface(V, F, DeformationModel(taper=reach - 1, reach=reach).fit(data))
-        t, corners = [], []
+        t, cpu, corners = [], [], []
         # a press that moves: consecutive contacts 0.5 mm apart, depth ramping
         path = P[0] + np.linspace(0, 0.01, n)[:, None] * np.array([0.0, 1.0, 0.5])
         depth = np.linspace(0.002, 0.016, n)
         for p, dep in zip(path, depth):
-            t0 = time.perf_counter()
+            t0, c0 = time.perf_counter(), time.process_time()
             ch = surf.update(p, d, dep)
             t.append(time.perf_counter() - t0)
+            cpu.append(time.process_time() - c0)
             corners.append(sum(len(c.corners) for c in ch))
-        print(f'DentSurface.update, reach {reach:.0f}a   {pct(t)}; corners re-sent per frame '
+        print(f'DentSurface.update, reach {reach:.0f}a   {pct(t)} wall; CPU mean '
+              f'{np.mean(cpu) * 1e3:.2f} ms; corners re-sent per frame '
               f'p50 {np.percentile(corners, 50):.0f}, max {max(corners)} '
               f'(of {3 * len(F)})')
 
