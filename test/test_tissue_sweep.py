@@ -202,3 +202,23 @@ def test_resumed_sweep_solves_records_without_displacement_again(coarse_run, sce
     assert 'displacement' in json.loads(f.read_text())
     np.testing.assert_allclose(again.dataset.Y, res.dataset.Y, rtol=1e-9)
     np.testing.assert_allclose(again.displacements.coeffs, res.displacements.coeffs, atol=1e-12)
+
+
+def test_displacements_ship_beside_an_equal_force_csv(coarse_run, tmp_path):
+    from haptic_anfis.tissue.displacement import (DisplacementDataError, displacement_path,
+                                                  load_displacements, save_displacements,
+                                                  ship_beside)
+
+    _, res, _ = coarse_run
+    new = save_dataset(res.dataset, tmp_path / 'new.csv')
+    save_displacements(res.displacements, displacement_path(new))
+    old_ds = dataclasses.replace(res.dataset, Y=res.dataset.Y * (1 + 1e-13))  # float noise
+    old = save_dataset(old_ds, tmp_path / 'old.csv')
+    path = ship_beside(new, old)
+    assert path == displacement_path(old)
+    back = load_displacements(path, dataset_sha256=old_ds.sha256())
+    assert back.meta['forces_max_rel_diff_vs_dataset'] < 1e-12
+    other = save_dataset(dataclasses.replace(res.dataset, Y=res.dataset.Y * 1.01),
+                         tmp_path / 'other.csv')
+    with pytest.raises(DisplacementDataError, match='forces differ'):
+        ship_beside(new, other)

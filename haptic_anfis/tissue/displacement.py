@@ -323,3 +323,38 @@ def load_displacements(path: str | os.PathLike, dataset_sha256: str | None = Non
             f'displacement file {str(path)!r} belongs to dataset {meta.get("dataset_sha256")!r}, '
             f'not {dataset_sha256!r}; regenerate it with haptic-anfis dataset')
     return data
+
+
+def ship_beside(new_csv: str | os.PathLike, old_csv: str | os.PathLike,
+                rtol: float = 1e-9) -> Path:
+    """Key a re-run sweep's displacement file to an existing force CSV whose forces it reproduces.
+
+    A shipped force model is trained on ``old_csv``; re-running the sweep to get the skin
+    displacements gives the same forces up to float noise but a different file hash. If every
+    sample's inputs are identical and every force agrees within ``rtol`` times the largest force,
+    the new displacement file is written beside ``old_csv`` with ``old_csv``'s hash (and the
+    measured difference in ``meta``), leaving ``old_csv`` untouched.
+
+    Raises:
+        DisplacementDataError: the samples differ, or the forces differ beyond ``rtol``.
+    """
+    from ..dataset import load_dataset
+
+    new, old = load_dataset(new_csv), load_dataset(old_csv)
+    if len(new) != len(old) or not np.array_equal(new.point, old.point) \
+            or not np.array_equal(new.X, old.X):
+        raise DisplacementDataError(f'{new_csv} and {old_csv} hold different samples')
+    diff = float(np.abs(new.Y - old.Y).max() / np.abs(old.Y).max())
+    if diff > rtol:
+        raise DisplacementDataError(f'forces differ by {diff:.3g} of the largest force '
+                                    f'(> {rtol:g}): ship the new dataset instead')
+    data = load_displacements(displacement_path(new_csv), dataset_sha256=new.sha256())
+    data.meta.update(dataset_sha256=old.sha256(), forces_max_rel_diff_vs_dataset=diff,
+                     solved_as=str(new_csv))
+    return save_displacements(data, displacement_path(old_csv))
+
+
+if __name__ == '__main__':  # python -m haptic_anfis.tissue.displacement NEW.csv OLD.csv
+    import sys
+
+    print(ship_beside(sys.argv[1], sys.argv[2]))
