@@ -68,7 +68,8 @@ def contacts(n, seed, radii=(0.045, 0.07, 0.07), r_max=0.042):
 
 def pct(v):
     v = np.asarray(v) * 1e3
-    return f'p50 {np.percentile(v, 50):6.2f}  p99 {np.percentile(v, 99):6.2f}  max {v.max():6.2f} ms'
+    p50, p99 = np.percentile(v, [50, 99])
+    return f'p50 {p50:6.2f}  p99 {p99:6.2f}  max {v.max():6.2f} ms'
 
 
 def errors(data):
@@ -87,9 +88,10 @@ def errors(data):
     mid = len(data.depths) // 2
     e = holdout_errors(data, folds=5, hold_depth=mid)
     print(f'interpolant, {data.depths[mid] * 1e3:.0f} mm depth also held out: annulus '
-          f'{100 * e["annulus_rms_over_depth"]:.2f}% (worst {100 * e["annulus_worst_over_depth"]:.1f}%)')
-    print(f'harmonic truncation (in the data): max {np.nanmax(data.truncation_rms / data.depths):.2%}'
-          ' of the depth within 3a')
+          f'{100 * e["annulus_rms_over_depth"]:.2f}% '
+          f'(worst {100 * e["annulus_worst_over_depth"]:.1f}%)')
+    trunc = np.nanmax(data.truncation_rms / data.depths)
+    print(f'harmonic truncation (in the data): max {trunc:.2%} of the depth within 3a')
 
 
 def timing(data, n):
