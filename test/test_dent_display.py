@@ -53,11 +53,18 @@ def test_dent_depth_under_probe_and_nothing_far(surface, yz):
     # every drawn corner is within the tolerance of the model's dent
     for f, corners in drawn.items():
         assert np.abs(corners - (V[F[f]] + surface.displacement[F[f]])).max() <= 1e-4
-    # a steady press re-sends nothing
+    # a steady press re-sends nothing; a slightly deeper one re-sends the footprint, exactly
     assert surface.update(c, d, depth) == []
+    deeper = surface.update(c, d, depth + 1e-6)
+    assert deeper
+    for f, corners in _drawn(surface, deeper).items():
+        for k, vid in enumerate(F[f]):
+            if rho[vid] <= A * (1 - 1e-9) and skin[vid]:
+                np.testing.assert_allclose(corners[k], V[vid] + (depth + 1e-6) * d, atol=1e-12)
+    changed = changed + deeper
     # lifting restores exactly the dented patches
     restored = surface.update(None, None, 0.0)
-    assert sorted(p.index for p in restored) == sorted(p.index for p in changed)
+    assert sorted(p.index for p in restored) == sorted({p.index for p in changed})
     for f, corners in _drawn(surface, restored).items():
         np.testing.assert_array_equal(corners, V[F[f]])
     assert surface.update(None, None, 0.0) == []

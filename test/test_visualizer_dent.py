@@ -48,10 +48,12 @@ def test_published_dent_depth_under_probe_and_zero_far_away(tmp_path):
         assert g.spin_for(120.0, lambda: vis.last_dent is not None and vis.last_dent[2] > 0.004), \
             'no dent drawn while pressing'
         g.driver.close()  # freeze the contact (mid-hold): the drawing settles on the last one
-        g.spin_for(2.0)
-        count = vis.n_dent_messages
-        g.spin_for(1.0)
-        assert vis.n_dent_messages == count
+        for _ in range(30):  # until the drawing has settled (nothing re-sent for a second)
+            count = vis.n_dent_messages
+            g.spin_for(1.0)
+            if vis.n_dent_messages == count:
+                break
+        assert vis.n_dent_messages == count, 'the drawing did not settle'
         assert vis.last_dent is not None
         c, d, depth = vis.last_dent
         assert depth > 0.002
@@ -70,6 +72,7 @@ def test_published_dent_depth_under_probe_and_zero_far_away(tmp_path):
         np.testing.assert_allclose((V1[under] - V0[under]) @ d, depth, atol=1e-9)
         far = rho > 5 * A
         np.testing.assert_array_equal(V1[far], V0[far])
-        assert np.abs(V1 - V0).max() <= depth + 1e-9
+        # elsewhere each corner is drawn within the re-send tolerance (0.1 mm) of the dent
+        assert np.abs(V1 - V0).max() <= depth + 1e-4
     finally:
         g.shutdown()

@@ -35,9 +35,9 @@ class DentSurface:
     """The tissue surface as patches, dented by a deformation model.
 
     Each patch remembers the displacement it was last drawn with; :meth:`update` re-sends a patch
-    only when one of its corners would move by more than ``tolerance`` (so a steady press, or the
-    slowly changing far field, costs nothing), and restores every dented patch exactly when the
-    probe lifts. Adjacent patches therefore agree within 2 ``tolerance`` at shared vertices.
+    when a corner under the probe moved at all, or another corner would move by more than
+    ``tolerance`` (so a steady press, or the slowly changing far field, costs nothing), and
+    restores every dented patch exactly when the probe lifts. Adjacent patches therefore agree within 2 ``tolerance`` at shared vertices.
 
     Args:
         vertices: (n, 3) skin vertices [m]; faces: (f, 3) vertex ids.
@@ -106,6 +106,11 @@ class DentSurface:
                                                         depth)
             err = np.abs(self.displacement[self._corner_vid] - self._sent).max(axis=1)
             limit = self.tolerance
+            # under the probe the drawing is exact: any change re-sends (the footprint's
+            # vertices are the ones moved by exactly depth x direction)
+            d = np.asarray(direction, dtype=float)
+            face = np.all(self.displacement == depth * d / np.linalg.norm(d), axis=1)
+            err[face[self._corner_vid] & (err > 0)] = np.inf
         worst = np.maximum.reduceat(err, self._start)
         dirty = np.flatnonzero(worst > limit)
         for k in dirty:
