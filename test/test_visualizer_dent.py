@@ -54,6 +54,15 @@ def test_published_dent_depth_under_probe_and_zero_far_away(tmp_path):
             if vis.n_dent_messages == count:
                 break
         assert vis.n_dent_messages == count, 'the drawing did not settle'
+        # A new subscriber gets every patch as drawn now (what RViz would show on connecting);
+        # read the surface from that snapshot, not from a stream a busy test may lag behind.
+        latest.clear()
+        probe.create_subscription(MarkerArray, ifc.TOPIC_TISSUE, on_tissue, QoSProfile(
+            depth=1000, durability=DurabilityPolicy.TRANSIENT_LOCAL))
+        need = count + int(np.ceil(3 * len(vis.surface.faces) / 1500))
+        assert g.spin_for(60.0, lambda: vis.n_dent_messages >= need), 'no snapshot re-sent'
+        g.spin_for(3.0)
+        assert len(latest) == n
         assert vis.last_dent is not None
         c, d, depth = vis.last_dent
         assert depth > 0.002
