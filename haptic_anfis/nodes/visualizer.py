@@ -1,23 +1,35 @@
 """``visualizer``: RViz markers at ~30 Hz, off the haptic loop.
 
-Publishes ``visualization/tissue`` (``MarkerArray``, transient local, once at start: the tissue
-mesh as a TRIANGLE_LIST) and ``visualization/markers`` (``MarkerArray`` at ``rate`` Hz: the probe
-sphere, the contact point on the undeformed surface, the force arrow, and the tumours when
-``show_tumours``). Subscribes to the pose, contact and force command topics.
+Publishes ``visualization/tissue`` (``MarkerArray``, transient local: the tissue surface as
+TRIANGLE_LIST patches with per-corner colour, all of them at start; then, at ``rate`` Hz while the
+probe dents the skin, only the patches whose drawing changed: the dent from the FE sweep's skin
+displacements, ``haptic_anfis.tissue.deformation``) and ``visualization/markers`` (``MarkerArray``
+at ``rate`` Hz: the probe as a flat 16 mm cylinder whose face is at the probe position, the
+contact point on the undeformed surface, the force arrow, and the tumours when ``show_tumours``).
+Subscribes to the pose, contact and force command topics. The dent is computed and published on
+the node's own thread, in messages of a bounded size, so the executor that carries the haptic
+loop (``haptic-anfis sim``) only stores the latest messages.
 """
 from __future__ import annotations
 
+import collections
+import threading
+import time
+
+import numpy as np
 from geometry_msgs.msg import Point, PoseStamped, WrenchStamped
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile
 from sensor_msgs.msg import JointState
+from std_msgs.msg import ColorRGBA
 from visualization_msgs.msg import Marker, MarkerArray
 
 from . import interfaces as ifc
-from ._common import LOOP_QOS, Param, declare_parameters, positive, run_node
+from ._common import LOOP_QOS, Param, declare_parameters, non_negative, positive, run_node
 from .contact_detector import MESH_PARAMS, load_surface
 
-LATCHED = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+# transient local, deep enough to hold the whole surface's messages for a late subscriber
+LATCHED = QoSProfile(depth=100, durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
 
 def _tumour_check(v):
@@ -29,13 +41,26 @@ def _tumour_check(v):
 PARAMS = MESH_PARAMS + [
     Param('rate', 30.0, 'marker rate [Hz]', positive),
     Param('force_scale', 0.01, 'force arrow length per newton [m/N]', positive),
-    Param('probe_radius', 0.008, 'probe sphere radius [m]', positive),
+    Param('probe_radius', 0.008, 'probe radius [m] (the flat FE probe, drawn as a cylinder)',
+          positive),
     Param('show_tumours', False, 'draw the tumours'),
     Param('tumours', [0.0285, 0.015, -0.010, 0.0075], 'tumours, flat x, y, z, radius [m] per '
           'tumour (tissue frame; default: the default FE scene\'s tumour, '
           'config/scenes/default.yaml)', _tumour_check),
     Param('mesh_alpha', 0.5, 'tissue mesh opacity (0..1)',
           lambda v: None if 0 <= v <= 1 else 'expected 0 <= value <= 1'),
+    Param('deform', True, 'draw the dent under the probe (FE skin displacements)'),
+    Param('displacement_path', '', "skin displacement file of the force data "
+          "('' = the shipped default scene's, haptic_anfis/data/default_forces.displacement.npz)"),
+    Param('dent_reach', 5.0, 'the drawn dent fades to exactly 0 at this many probe radii from '
+          'the probe axis (fade over the last probe radius; at most 9.0)',
+          lambda v: None if 2.0 < v <= 9.0 else 'expected 2.0 < value <= 9.0'),
+    Param('patch_size', 0.008, 'edge of the square (y, z) patches the surface is re-sent in [m]',
+          positive),
+    Param('dent_tolerance', 0.0001, 'a patch is re-sent when one of its corners would move by '
+          'more than this [m]', non_negative),
+    Param('max_points_per_message', 1500, 'triangle corners per dent message (bounds how long '
+          'one publish holds the interpreter)', lambda v: None if v >= 3 else 'expected >= 3'),
 ]
 
 
@@ -49,21 +74,65 @@ def _marker(kind, mid, frame, ns, rgba, scale):
     return m
 
 
+def _points(xyz: np.ndarray) -> list:
+    """Point messages for (n, 3) coordinates without the per-field checks of Point(...) (the
+    values are finite floats by construction; this is the per-frame cost of the dent)."""
+    new = Point.__new__
+    out = []
+    for x, y, z in xyz.tolist():
+        p = new(Point)
+        p._x, p._y, p._z = x, y, z
+        out.append(p)
+    return out
+
+
+def _colours(rgba: np.ndarray) -> list:
+    new = ColorRGBA.__new__
+    out = []
+    for r, g, b, a in rgba.tolist():
+        c = new(ColorRGBA)
+        c._r, c._g, c._b, c._a = r, g, b, a
+        out.append(c)
+    return out
+
+
+def _direction_quaternion(d) -> tuple[float, float, float, float]:
+    """(x, y, z, w) rotating the marker z axis onto -d (the cylinder stands out of the tissue)."""
+    v = -np.asarray(d, dtype=float)
+    v = v / np.linalg.norm(v)
+    z = np.array([0.0, 0.0, 1.0])
+    c = float(z @ v)
+    if c < -1 + 1e-12:
+        return 1.0, 0.0, 0.0, 0.0
+    axis = np.cross(z, v)
+    w = 1.0 + c
+    q = np.array([axis[0], axis[1], axis[2], w])
+    q /= np.linalg.norm(q)
+    return tuple(float(x) for x in q)
+
+
+PROBE_LENGTH = 0.03  # drawn length of the probe cylinder [m]
+
+
 class Visualizer(Node):
     def __init__(self, name: str = 'visualizer', **kw):
         super().__init__(name, **kw)
         p = self.params = declare_parameters(self, PARAMS)
         f = self.frame_id = p['frame_id']
         mesh = load_surface(self, p)
-        tissue = _marker(Marker.TRIANGLE_LIST, 0, f, 'tissue', (1.0, 0.8, 0.7, p['mesh_alpha']),
-                         (1.0, 1.0, 1.0))
-        tissue.points = [Point(x=float(a), y=float(b), z=float(c))
-                         for a, b, c in mesh.vertices[mesh.faces.reshape(-1)]]
         self.pub_tissue = self.create_publisher(MarkerArray, ifc.TOPIC_TISSUE, LATCHED)
-        self.pub_tissue.publish(MarkerArray(markers=[tissue]))
+        self.surface = None
+        if p['deform']:
+            self.surface = self._dent_surface(mesh, p)
+        if self.surface is None:
+            tissue = _marker(Marker.TRIANGLE_LIST, 0, f, 'tissue',
+                             (1.0, 0.8, 0.7, p['mesh_alpha']), (1.0, 1.0, 1.0))
+            tissue.points = _points(mesh.vertices[mesh.faces.reshape(-1)])
+            self.pub_tissue.publish(MarkerArray(markers=[tissue]))
         self.pub = self.create_publisher(MarkerArray, ifc.TOPIC_MARKERS, 10)
         d = 2 * p['probe_radius']
-        self.probe = _marker(Marker.SPHERE, 0, f, 'probe', (0.2, 0.4, 1.0, 1.0), (d, d, d))
+        self.probe = _marker(Marker.CYLINDER, 0, f, 'probe', (0.2, 0.4, 1.0, 1.0),
+                             (d, d, PROBE_LENGTH))
         self.contact = _marker(Marker.SPHERE, 1, f, 'contact', (1.0, 0.2, 0.2, 1.0),
                                (0.004, 0.004, 0.004))
         self.arrow = _marker(Marker.ARROW, 2, f, 'force', (0.1, 0.9, 0.1, 1.0), (0.002, 0.004, 0.004))
@@ -83,6 +152,116 @@ class Visualizer(Node):
         self.create_subscription(WrenchStamped, ifc.TOPIC_COMMAND, self._set('_force'), LOOP_QOS)
         self.timer = self.create_timer(1.0 / p['rate'], self._draw)
         self.n_published = 0
+        self.n_dent_messages = 0
+        # compute + publish time of the last dent frames [s] (bounded: a long session)
+        self.dent_seconds: collections.deque = collections.deque(maxlen=10000)
+        self.last_dent = None
+        self._stop = threading.Event()
+        self._thread = None
+        if self.surface is not None:
+            self._publish_patches(self.surface.all_patches())
+            self._thread = threading.Thread(target=self._dent_loop, name='visualizer-dent',
+                                            daemon=True)
+            self._thread.start()
+
+    # -- the dent --------------------------------------------------------------------------
+
+    def _dent_surface(self, mesh, p):
+        """The patched surface with its dent model, or None (logged) when there is no data."""
+        from ..tissue.deformation import DeformationModel
+        from ..tissue.dent_display import DentSurface
+        from ..tissue.displacement import DisplacementDataError
+
+        reach = p['dent_reach']
+        try:
+            model = (DeformationModel.load(p['displacement_path'], taper=reach - 1.0,
+                                           reach=reach)
+                     if p['displacement_path']
+                     else DeformationModel.load_default(taper=reach - 1.0, reach=reach))
+        except (DisplacementDataError, OSError, ValueError) as exc:
+            self.get_logger().warning(f'no dent drawn: {exc}')
+            return None
+        if abs(model.probe_radius_ - p['probe_radius']) > 1e-9:
+            self.get_logger().warning(
+                f'probe_radius {p["probe_radius"]} m differs from the FE probe '
+                f'{model.probe_radius_} m the dent was computed for')
+        return DentSurface(np.asarray(mesh.vertices), np.asarray(mesh.faces), model,
+                           patch_size=p['patch_size'], tolerance=p['dent_tolerance'],
+                           alpha=p['mesh_alpha'])
+
+    def _patch_markers(self, patches) -> list:
+        """Markers for patches, split so no message exceeds max_points_per_message corners."""
+        out = []
+        for pt in patches:
+            m = _marker(Marker.TRIANGLE_LIST, pt.index, self.frame_id, 'tissue',
+                        (1.0, 1.0, 1.0, 1.0), (1.0, 1.0, 1.0))
+            m.points = _points(pt.corners)
+            m.colors = _colours(pt.colours)
+            out.append(m)
+        return out
+
+    def _publish_patches(self, patches) -> None:
+        cap = self.params['max_points_per_message']
+        batch, n = [], 0
+        for m in self._patch_markers(patches):
+            if batch and n + len(m.points) > cap:
+                self.pub_tissue.publish(MarkerArray(markers=batch))
+                self.n_dent_messages += 1
+                batch, n = [], 0
+                time.sleep(0)  # let the executor thread run between messages
+            batch.append(m)
+            n += len(m.points)
+        if batch:
+            self.pub_tissue.publish(MarkerArray(markers=batch))
+            self.n_dent_messages += 1
+
+    def _contact_state(self):
+        c = self._contact
+        if c is None or len(c.position) != len(ifc.CONTACT_FIELDS) \
+                or c.position[ifc.I_IN_CONTACT] < 0.5:
+            return None
+        v = np.asarray(c.position, dtype=float)
+        if not np.all(np.isfinite(v)):
+            return None
+        return v[0:3], v[ifc.I_DX:ifc.I_DZ + 1], float(v[ifc.I_DEPTH])
+
+    def _dent_loop(self) -> None:
+        period = 1.0 / self.params['rate']
+        last = None
+        subscribers = self.pub_tissue.get_subscription_count()
+        while not self._stop.wait(period):
+            try:
+                state = self._contact_state()
+                key = None if state is None else np.concatenate([state[0], state[1],
+                                                                  [state[2]]])
+                n_sub = self.pub_tissue.get_subscription_count()
+                if n_sub > subscribers:  # a late subscriber: send every patch as drawn now
+                    self._publish_patches(self.surface.all_patches())
+                subscribers = n_sub
+                if (key is None and last is None) or \
+                        (key is not None and last is not None and np.array_equal(key, last)):
+                    continue
+                t0 = time.perf_counter()
+                changed = self.surface.update(*(state or (None, None, 0.0)))
+                self._publish_patches(changed)
+                self.dent_seconds.append(time.perf_counter() - t0)
+                self.last_dent = state  # (point, direction, depth) the surface now shows
+                last = key
+            except Exception as exc:  # never let the drawing thread die silently
+                self.get_logger().error(f'dent drawing failed: {exc!r}', throttle_duration_sec=5.0)
+
+    def close(self) -> None:
+        """Stop the dent thread (called before the node is destroyed)."""
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout=2.0)
+            self._thread = None
+
+    def destroy_node(self):
+        self.close()
+        return super().destroy_node()
+
+    # -- the 30 Hz markers -----------------------------------------------------------------
 
     def _set(self, attr):
         def cb(msg):
@@ -93,11 +272,22 @@ class Visualizer(Node):
         markers = list(self.tumours)
         if self._pose is not None:
             q = self._pose.pose.position
-            self.probe.pose.position = q
-            markers.append(self.probe)
             c = self._contact
             touching = c is not None and len(c.position) == len(ifc.CONTACT_FIELDS) \
                 and c.position[ifc.I_IN_CONTACT] > 0.5
+            d = np.asarray(c.position[ifc.I_DX:ifc.I_DZ + 1], dtype=float) \
+                if touching else np.array([-1.0, 0.0, 0.0])
+            if not np.all(np.isfinite(d)) or np.linalg.norm(d) < 1e-9:
+                d = np.array([-1.0, 0.0, 0.0])
+            d = d / np.linalg.norm(d)
+            # the flat probe face at the probe position, the cylinder standing out along -d
+            pos = self.probe.pose.position
+            pos.x, pos.y, pos.z = (float(q.x - 0.5 * PROBE_LENGTH * d[0]),
+                                   float(q.y - 0.5 * PROBE_LENGTH * d[1]),
+                                   float(q.z - 0.5 * PROBE_LENGTH * d[2]))
+            o = self.probe.pose.orientation
+            o.x, o.y, o.z, o.w = _direction_quaternion(d)
+            markers.append(self.probe)
             self.contact.action = Marker.ADD if touching else Marker.DELETE
             if touching:
                 pos = self.contact.pose.position

@@ -1,0 +1,119 @@
+"""The drawn tissue surface, split into patches so only the dent is re-sent each frame (no ROS).
+
+A marker message pays per triangle corner (rclpy converts every ``geometry_msgs/Point`` one by
+one), so the visualizer cannot re-send the whole skin at 30 Hz. The surface's faces are grouped
+into square (y, z) patches; each frame :meth:`DentSurface.update` moves the vertices by the
+:class:`~haptic_anfis.tissue.deformation.DeformationModel` and reports only the patches whose
+drawing changed (dented now, or dented last frame and restored now). Every triangle corner carries
+a colour: skin tone, darkening with the local displacement.
+
+SI units (m); tissue frame.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Sequence
+
+import numpy as np
+
+from .deformation import DeformationModel
+
+SKIN = np.array([1.0, 0.8, 0.7])
+DEEP = np.array([0.75, 0.25, 0.25])
+
+
+@dataclass
+class Patch:
+    """One drawn piece: ``corners`` (3 m, 3) triangle corners [m] and ``colours`` (3 m, 4)."""
+
+    index: int
+    corners: np.ndarray
+    colours: np.ndarray
+
+
+class DentSurface:
+    """The tissue surface as patches, dented by a deformation model.
+
+    Each patch remembers the displacement it was last drawn with; :meth:`update` re-sends a patch
+    when a corner under the probe moved at all, or another corner would move by more than
+    ``tolerance`` (so a steady press, or the slowly changing far field, costs nothing), and
+    restores every dented patch exactly when the probe lifts. Adjacent patches therefore agree within 2 ``tolerance`` at shared vertices.
+
+    Args:
+        vertices: (n, 3) skin vertices [m]; faces: (f, 3) vertex ids.
+        model: the dent model (its reach bounds the re-sent region).
+        patch_size: edge of the square (y, z) patches [m]; faces on the chest wall (x = 0) form
+            patches of their own (they never move).
+        tolerance: largest drawn error of a corner [m] before its patch is re-sent.
+        alpha: opacity of every corner colour; colour_depth: displacement [m] drawn darkest.
+    """
+
+    def __init__(self, vertices: np.ndarray, faces: np.ndarray, model: DeformationModel,
+                 patch_size: float = 0.008, tolerance: float = 1e-4, alpha: float = 1.0,
+                 colour_depth: float = 0.016) -> None:
+        self.vertices = np.ascontiguousarray(vertices, dtype=float)
+        self.faces = np.asarray(faces, dtype=np.int64)
+        if self.vertices.ndim != 2 or self.vertices.shape[1] != 3 or self.faces.ndim != 2 \
+                or self.faces.shape[1] != 3:
+            raise ValueError('vertices must be (n, 3) and faces (f, 3)')
+        if not patch_size > 0:
+            raise ValueError(f'patch_size must be > 0 m, got {patch_size!r}')
+        if not tolerance >= 0:
+            raise ValueError(f'tolerance must be >= 0 m, got {tolerance!r}')
+        self.model, self.alpha, self.colour_depth = model, float(alpha), float(colour_depth)
+        self.tolerance = float(tolerance)
+        cen = self.vertices[self.faces].mean(axis=1)
+        key = np.column_stack([np.floor(cen[:, 1:] / patch_size).astype(np.int64),
+                               (self.vertices[self.faces][:, :, 0] > 0).any(axis=1)])
+        _, label = np.unique(key, axis=0, return_inverse=True)
+        label = label.ravel()
+        order = np.argsort(label, kind='stable')
+        self.face_patch = label
+        self.patch_faces = np.split(order, np.flatnonzero(np.diff(label[order])) + 1)
+        counts = np.array([len(f) for f in self.patch_faces])
+        self._start = 3 * np.concatenate([[0], np.cumsum(counts)[:-1]])  # corner offsets
+        self._corner_vid = self.faces[order].reshape(-1)  # corners in patch order
+        self._corner_xyz = self.vertices[self._corner_vid]
+        self._sent = np.zeros_like(self._corner_xyz)  # displacement each corner is drawn with
+        self.displacement = np.zeros_like(self.vertices)
+
+    @property
+    def n_patches(self) -> int:
+        return len(self.patch_faces)
+
+    def patch(self, k: int) -> Patch:
+        """Patch ``k`` as drawn now."""
+        sl = slice(self._start[k], self._start[k] + 3 * len(self.patch_faces[k]))
+        u = self._sent[sl]
+        t = np.clip(np.linalg.norm(u, axis=1) / self.colour_depth, 0.0, 1.0)[:, None]
+        rgb = (1 - t) * SKIN + t * DEEP
+        return Patch(k, self._corner_xyz[sl] + u, np.column_stack([rgb, np.full(len(u),
+                                                                                 self.alpha)]))
+
+    def all_patches(self) -> list[Patch]:
+        return [self.patch(k) for k in range(self.n_patches)]
+
+    def update(self, contact_point: Sequence[float] | None, direction: Sequence[float] | None,
+               depth: float) -> list[Patch]:
+        """Dent the surface for a contact (``contact_point`` None or depth <= 0: no contact) and
+        return the patches whose drawing changed."""
+        if contact_point is None or direction is None or not depth > 0:
+            self.displacement = np.zeros_like(self.vertices)
+            err = np.abs(self._sent).max(axis=1)  # restore exactly
+            limit = 0.0
+        else:
+            self.displacement = self.model.displacement(self.vertices, contact_point, direction,
+                                                        depth)
+            err = np.abs(self.displacement[self._corner_vid] - self._sent).max(axis=1)
+            limit = self.tolerance
+            # under the probe the drawing is exact: any change re-sends (the footprint's
+            # vertices are the ones moved by exactly depth x direction)
+            d = np.asarray(direction, dtype=float)
+            face = np.all(self.displacement == depth * d / np.linalg.norm(d), axis=1)
+            err[face[self._corner_vid] & (err > 0)] = np.inf
+        worst = np.maximum.reduceat(err, self._start)
+        dirty = np.flatnonzero(worst > limit)
+        for k in dirty:
+            sl = slice(self._start[k], self._start[k] + 3 * len(self.patch_faces[k]))
+            self._sent[sl] = self.displacement[self._corner_vid[sl]]
+        return [self.patch(int(k)) for k in dirty]
