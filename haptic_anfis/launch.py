@@ -67,3 +67,68 @@ def stop_node(p: subprocess.Popen, timeout: float = 10.0) -> int:
             p.kill()
             p.wait(5.0)
     return p.returncode
+
+
+class Supervisor:
+    """The launched node processes and their restarts (no ROS; ``haptic-anfis launch``).
+
+    ``start(name, args)`` starts a node and remembers how; :meth:`dead` lists nodes that exited on
+    their own; :meth:`restart` starts one again with the same arguments (``rename`` may adjust
+    them, e.g. a new bag directory for the recorder) while at most ``max_restarts`` restarts per
+    node are allowed. ``log_dir``: each node's output goes to ``DIR/<node>.log`` (appended to on a
+    restart), else to this terminal.
+    """
+
+    def __init__(self, env: Mapping[str, str], log_dir: Path | None = None,
+                 max_restarts: int = 3):
+        if max_restarts < 0:
+            raise ValueError(f'max_restarts: expected >= 0, got {max_restarts}')
+        self.env, self.log_dir, self.max_restarts = dict(env), log_dir, max_restarts
+        self.procs: dict[str, subprocess.Popen] = {}
+        self.args: dict[str, list[str]] = {}
+        self.started_at: dict[str, float] = {}
+        self.restarts: dict[str, int] = {}
+        self.logs: dict[str, IO] = {}
+
+    def start(self, name: str, args: Sequence[str] = ()) -> subprocess.Popen:
+        import time
+        log = None
+        if self.log_dir is not None:
+            log = self.logs.get(name) or (self.log_dir / f'{name}.log').open('w')
+            self.logs[name] = log
+        p = start_node(name, list(args), env=self.env, log=log)
+        self.procs[name], self.args[name] = p, list(args)
+        self.started_at[name] = time.monotonic()
+        self.restarts.setdefault(name, 0)
+        return p
+
+    def dead(self) -> list[tuple[str, int]]:
+        """(name, exit code) of every node that has exited (and was not restarted since)."""
+        return [(n, p.returncode) for n, p in self.procs.items() if p.poll() is not None]
+
+    def may_restart(self, name: str) -> bool:
+        return self.restarts.get(name, 0) < self.max_restarts
+
+    def restart(self, name: str, rename=None) -> subprocess.Popen:
+        """Start ``name`` again (``rename(args, n) -> args`` for restart number ``n``)."""
+        self.restarts[name] = n = self.restarts.get(name, 0) + 1
+        args = self.args[name] if rename is None else rename(self.args[name], n)
+        if self.log_dir is not None:
+            self.logs[name].write(f'\n--- restart {n} ---\n')
+            self.logs[name].flush()
+        return self.start(name, args)
+
+    def stop_all(self, order: Sequence[str]) -> dict[str, int]:
+        """Stop every node, in ``order`` first (SIGINT, then kill after a timeout)."""
+        names = [n for n in order if n in self.procs] + [n for n in self.procs if n not in order]
+        codes = {n: stop_node(self.procs[n]) for n in names}
+        for f in self.logs.values():
+            f.close()
+        return codes
+
+
+def renamed_output(args: Sequence[str], n: int) -> list[str]:
+    """The recorder's arguments for restart ``n``: ``output:=X`` becomes ``output:=X.restartN``
+    (a bag directory is never reused; the killed one is salvaged by ``haptic-anfis bag recover``).
+    """
+    return [f'{a}.restart{n}' if a.startswith('output:=') else a for a in args]

@@ -135,6 +135,12 @@ def settle_gc() -> None:
     gc.freeze()
 
 
+def make_executor_for(context):
+    """:func:`make_executor` for a given rclpy ``context``."""
+    from rclpy.experimental import EventsExecutor
+    return EventsExecutor(context=context)
+
+
 def run_node(factory: Callable[[], Any], args=None) -> int:
     """Init rclpy, build the node, spin it until shut down or ``node.finished``; 1 on bad params.
 

@@ -83,9 +83,12 @@ class Readiness:
             self.ready_after = d['t']
         self._msg.data = json.dumps(d)
         self.pub.publish(self._msg)
-        log = self.node.get_logger()
-        (log.warning if state == 'waiting' else log.info)(
-            f"{state} after {d['t']:.1f} s" + (f': {detail}' if detail else ''))
+        text = f"{state} after {d['t']:.1f} s" + (f': {detail}' if detail else '')
+        # rclpy refuses one call site logging at two severities: one call per severity
+        if state == 'waiting':
+            self.node.get_logger().warning(text)
+        else:
+            self.node.get_logger().info(text)
 
     def _check(self) -> None:
         cond: Callable | None = getattr(self.node, 'ready_condition', None)
@@ -113,3 +116,59 @@ def parse_status(data: str) -> dict | None:
     except ValueError:
         return None
     return d if isinstance(d, dict) else None
+
+
+class SessionMonitor:
+    """The launcher's window on the session (``haptic-anfis launch``): a node that keeps every
+    node's latest status (``statuses[node] = (receive time [monotonic s], status dict)``) and
+    publishes session events. Drive it with :meth:`spin` from the launcher's loop."""
+
+    def __init__(self, name: str = 'launch_monitor', domain_id: int | None = None):
+        import rclpy
+        from rclpy.context import Context
+
+        from ._common import make_executor_for
+        self.ctx = Context()
+        rclpy.init(args=[], context=self.ctx, domain_id=domain_id)
+        self.node = rclpy.create_node(name, context=self.ctx,
+                                      start_parameter_services=False)
+        self.statuses: dict[str, tuple[float, dict]] = {}
+        self.events_pub = self.node.create_publisher(String, EVENTS_TOPIC, EVENTS_QOS)
+        self.node.create_subscription(String, STATUS_TOPIC, self._on_status,
+                                      QoSProfile(depth=100, history=HistoryPolicy.KEEP_LAST,
+                                                 reliability=ReliabilityPolicy.RELIABLE,
+                                                 durability=DurabilityPolicy.TRANSIENT_LOCAL))
+        self.executor = make_executor_for(self.ctx)
+        self.executor.add_node(self.node)
+
+    def _on_status(self, msg: String) -> None:
+        d = parse_status(msg.data)
+        if d is not None and isinstance(d.get('node'), str):
+            self.statuses[d['node']] = (time.monotonic(), d)
+
+    def state(self, node: str, since: float = float('-inf')) -> str:
+        """``node``'s latest state received after ``since`` (monotonic s), '' if none."""
+        t, d = self.statuses.get(node, (None, None))
+        return d.get('state', '') if t is not None and t >= since else ''
+
+    def event(self, **fields) -> dict:
+        """Publish one session event (JSON of ``fields``, plus ``wall_time``); returns it."""
+        fields['wall_time'] = round(time.time(), 3)
+        msg = String()
+        msg.data = json.dumps(fields)
+        self.events_pub.publish(msg)
+        return fields
+
+    def spin(self, seconds: float) -> None:
+        end = time.monotonic() + seconds
+        while True:
+            left = end - time.monotonic()
+            if left <= 0:
+                return
+            self.executor.spin_once(timeout_sec=min(left, 0.05))
+
+    def close(self) -> None:
+        import rclpy
+        self.executor.shutdown(timeout_sec=1.0)
+        self.node.destroy_node()
+        rclpy.try_shutdown(context=self.ctx)
