@@ -60,7 +60,30 @@ def row(t_min, rate, lat, misses, bag, rss: dict) -> str:
             + ' '.join(f'{k} {v:.1f}' for k, v in rss.items()))
 
 
-def one_process(minutes: float, interval: float, workdir: Path) -> None:
+class GcPauses:
+    """Collections and their longest pause [s] (gc.callbacks), per generation, since reset."""
+
+    def __init__(self):
+        import gc
+        self.reset()
+        self._t0 = 0.0
+        gc.callbacks.append(self._cb)
+
+    def reset(self) -> None:
+        self.count, self.max_pause = [0, 0, 0], 0.0
+
+    def _cb(self, phase, info) -> None:
+        if phase == 'start':
+            self._t0 = time.perf_counter()
+        else:
+            self.count[info['generation']] += 1
+            self.max_pause = max(self.max_pause, time.perf_counter() - self._t0)
+
+    def text(self) -> str:
+        return f'gc {"/".join(map(str, self.count))} max {self.max_pause * 1e3:.2f} ms'
+
+
+def one_process(minutes: float, interval: float, workdir: Path, freeze: bool = True) -> None:
     import gc
 
     from haptic_anfis.bag.topics import ALL_LOOP_TOPICS
@@ -76,23 +99,27 @@ def one_process(minutes: float, interval: float, workdir: Path) -> None:
         st = g.driver.servo.stats
         st.reset()
         rec = g.extra[0]
-        print(f'one process + recorder, {minutes:g} min, load {os.getloadavg()[0]:.2f}')
-        print(HEADER + ', gc collections (gen 0/1/2), recorder chunks flushed / pending')
+        if not freeze:  # for comparison: what build_graph's gc.freeze() avoids
+            gc.unfreeze()
+        pauses = GcPauses()
+        print(f'one process + recorder, {minutes:g} min, load {os.getloadavg()[0]:.2f}, gc '
+              f'{"frozen after start" if freeze else "not frozen"}')
+        print(HEADER + ', gc collections (gen 0/1/2) and longest pause, recorder chunks flushed '
+              '/ pending')
         t0 = time.monotonic()
         ticks0 = misses0 = lat0 = 0
         tprev = t0
-        gc0 = [s['collections'] for s in gc.get_stats()]
         while time.monotonic() - t0 < minutes * 60 - 1e-3:
             g.spin_for(min(interval, minutes * 60 - (time.monotonic() - t0)))
             now = time.monotonic()
             ticks, misses, lats = st.ticks, st.deadline_misses, st.latencies
-            gcs = [s['collections'] for s in gc.get_stats()]
             w = rec.writer.stats()
             print(row((now - t0) / 60, (ticks - ticks0) / (now - tprev), lats[lat0:],
                       misses - misses0, dir_mb(bag), {'sim': rss_mb()})
-                  + f', gc {"/".join(str(a - b) for a, b in zip(gcs, gc0))}, '
-                  f'chunks {w["chunks_flushed"]} pending {w["pending"]}', flush=True)
-            ticks0, misses0, lat0, tprev, gc0 = ticks, misses, len(lats), now, gcs
+                  + f', {pauses.text()}, chunks {w["chunks_flushed"]} pending {w["pending"]}',
+                  flush=True)
+            pauses.reset()
+            ticks0, misses0, lat0, tprev = ticks, misses, len(lats), now
         s = g.driver.summary()
         print(f'whole run: {s["rate_hz"]:.1f} Hz, p99 {s["latency_p99_ms"]:.3f} ms, max '
               f'{s["latency_max_ms"]:.3f} ms, misses {s["deadline_misses"]} of {s["ticks"]} '
@@ -174,6 +201,8 @@ def main() -> int:
     ap.add_argument('--multi-minutes', type=float, default=10.0,
                     help='minutes of the multi-process run (0 = skip; default 10)')
     ap.add_argument('--interval', type=float, default=60.0, help='seconds per row (default 60)')
+    ap.add_argument('--no-freeze', action='store_true',
+                    help='one process: undo the gc.freeze() done after start (for comparison)')
     ap.add_argument('--keep', metavar='DIR', default=None,
                     help='write the bags and logs here and keep them (default: a temporary '
                          'directory, removed)')
@@ -183,7 +212,7 @@ def main() -> int:
     print(f'soak: {os.cpu_count()} CPUs, load average {os.getloadavg()}')
     try:
         if a.one_minutes > 0:
-            one_process(a.one_minutes, a.interval, work)
+            one_process(a.one_minutes, a.interval, work, freeze=not a.no_freeze)
         if a.multi_minutes > 0:
             multi_process(a.multi_minutes, a.interval, work)
     finally:
