@@ -23,6 +23,7 @@ from __future__ import annotations
 import argparse
 import math
 import os
+import signal
 import time
 from pathlib import Path
 
@@ -109,6 +110,13 @@ def run(args: argparse.Namespace) -> int:
     for k in ('ROS_DOMAIN_ID', 'ROS_AUTOMATIC_DISCOVERY_RANGE'):
         if k in env:
             os.environ[k] = env[k]
+    # The nodes run in their own sessions (a terminal's Ctrl-C reaches only this process): every
+    # stop signal becomes KeyboardInterrupt here, so the nodes are always stopped in order and
+    # none is left running.
+    def _stop(signum, frame):
+        raise KeyboardInterrupt
+    stop_signals = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
+    previous = {sig: signal.signal(sig, _stop) for sig in stop_signals}
     from ..nodes.session import SessionMonitor
     mon = SessionMonitor(domain_id=args.domain_id)
     sup = Supervisor(env, log_dir, max_restarts=args.max_restarts)
@@ -180,10 +188,15 @@ def run(args: argparse.Namespace) -> int:
     except KeyboardInterrupt:
         print('interrupted: stopping the nodes', flush=True)
     finally:
+        for sig in stop_signals:  # a second Ctrl-C must not cut the ordered stop short
+            signal.signal(sig, lambda *_: print('stopping the nodes, please wait', flush=True))
         try:
-            codes = sup.stop_all(list(reversed(order)))
+            codes = sup.stop_all(list(reversed(order)), starting=[
+                n for n in sup.procs if not mon.state(n, sup.started_at[n])])
         finally:
             mon.close()
+            for sig, h in previous.items():
+                signal.signal(sig, h)
     for n in reversed(order):
         if n in codes:
             print(f'stopped {n:<17} exit code {codes[n]}', flush=True)

@@ -129,7 +129,12 @@ class SessionMonitor:
 
         from ._common import make_executor_for
         self.ctx = Context()
-        rclpy.init(args=[], context=self.ctx, domain_id=domain_id)
+        from rclpy.signals import SignalHandlerOptions
+
+        # No rclpy signal handlers here: Ctrl-C must reach the launcher as KeyboardInterrupt so
+        # that it stops the nodes in order.
+        rclpy.init(args=[], context=self.ctx, domain_id=domain_id,
+                   signal_handler_options=SignalHandlerOptions.NO)
         self.node = rclpy.create_node(name, context=self.ctx,
                                       start_parameter_services=False)
         self.statuses: dict[str, tuple[float, dict]] = {}
