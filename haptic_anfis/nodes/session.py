@@ -127,7 +127,7 @@ class SessionMonitor:
         import rclpy
         from rclpy.context import Context
 
-        from ._common import make_executor_for
+        from .graph import make_executor_for
         self.ctx = Context()
         from rclpy.signals import SignalHandlerOptions
 
