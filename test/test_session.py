@@ -215,3 +215,35 @@ def test_path_parameters_are_read_only_after_start(tmp_path, module, cls, param,
             node.close()
         node.destroy_node()
         rclpy.try_shutdown(context=ctx)
+
+
+@pytest.mark.ros
+def test_killed_recorder_restarts_into_a_new_bag_with_the_events(tmp_path):
+    """kill -9 of the recorder: it restarts into BAG.restart1, which gets the session's events
+    replayed; the killed bag is recoverable. Nodes run with --enclave (security off: accepted)."""
+    from haptic_anfis.bag import read_messages
+    from haptic_anfis.cli import main as cli
+    bag, out = tmp_path / 'bag', tmp_path / 'launch.out'
+    p = subprocess.Popen([sys.executable, '-m', 'haptic_anfis.cli', 'launch', '--nodes',
+                          'falcon_driver,contact_detector,force_server', '--duration', '40',
+                          '--domain-id', str(_domain + 5), '--localhost', '--record', str(bag),
+                          '--enclave-root', '/haptic_anfis',
+                          '--log-dir', str(tmp_path / 'logs')], cwd=ROOT, env=_env(),
+                         stdout=out.open('w'), stderr=subprocess.STDOUT)
+    try:
+        _wait_line(out, r'ready after', 300)
+        pid = int(_wait_line(out, r'started recorder +pid (\d+)', 5).group(1))
+        time.sleep(2.0)
+        os.kill(pid, signal.SIGKILL)
+        assert p.wait(300) == 0, out.read_text()
+    finally:
+        if p.poll() is None:
+            p.send_signal(signal.SIGINT)
+            p.wait(60)
+    new = Path(f'{bag}.restart1')
+    events = [json.loads(m.data) for *_, m in read_messages(new, ['/session/events'])]
+    assert {'died', 'restarted'} <= {e['event'] for e in events if e.get('node') == 'recorder'}
+    assert all(e.get('replayed') for e in events if e['event'] == 'died')
+    assert sum(1 for _ in read_messages(new, ['/falcon/measured_cp'])) > 100
+    assert cli(['bag', 'recover', str(bag)]) == 0
+    assert sum(1 for _ in read_messages(bag, ['/falcon/measured_cp'])) > 0

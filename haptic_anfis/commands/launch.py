@@ -61,6 +61,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         'being restarted')
     p.add_argument('--max-restarts', type=int, default=3,
                    help='restarts allowed per node before the launch gives up (default 3)')
+    p.add_argument('--enclave-root', default=None, metavar='ENCLAVE',
+                   help='SROS2: start each node with --enclave ENCLAVE/<node> (the launcher\'s own '
+                        'monitor with ENCLAVE/launch_monitor); security itself is switched on by '
+                        'ROS_SECURITY_KEYSTORE / ROS_SECURITY_ENABLE / ROS_SECURITY_STRATEGY')
     p.add_argument('--ready-timeout', type=float, default=300.0,
                    help='seconds to wait for the nodes to start and the first force command to '
                         'reach the driver (default 300: a cold numba compile on a busy machine)')
@@ -99,6 +103,10 @@ def run(args: argparse.Namespace) -> int:
         topics = ','.join([*DEFAULT_TOPICS, STATUS_TOPIC, EVENTS_TOPIC])
         extra.setdefault('recorder', []).extend(
             ['-p', f'output:={Path(args.record).resolve()}', '-p', f'topics:=[{topics}]'])
+    if args.enclave_root:
+        root = '/' + args.enclave_root.strip('/')
+        for n in extra:
+            extra[n] += ['--enclave', f'{root}/{n}']
     if 'falcon_driver' in extra and not {'force_server', 'contact_detector'} <= set(extra):
         # no force source in this launch: the simulated hand must not wait for one
         extra['falcon_driver'] += ['-p', 'hold_until_force:=false']
@@ -118,17 +126,31 @@ def run(args: argparse.Namespace) -> int:
     stop_signals = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
     previous = {sig: signal.signal(sig, _stop) for sig in stop_signals}
     from ..nodes.session import SessionMonitor
-    mon = SessionMonitor(domain_id=args.domain_id)
+    mon = SessionMonitor(domain_id=args.domain_id, enclave=(
+        f"/{args.enclave_root.strip('/')}/launch_monitor" if args.enclave_root else None))
     sup = Supervisor(env, log_dir, max_restarts=args.max_restarts)
     order = sorted(extra, key=lambda n: ORDER.index(n) if n in ORDER else len(ORDER))
     t0 = time.monotonic()
     failed: list[tuple[str, int]] = []
     codes: dict[str, int] = {}
 
+    history: list[dict] = []
+    replay = {'pending': False, 'known': set()}
+
     def say(event: str, **kw) -> None:
         e = mon.event(event=event, t=round(time.monotonic() - t0, 3), **kw)
+        history.append(e)
         print('session: ' + ', '.join(f'{k} {v}' for k, v in e.items() if k != 'wall_time'),
               flush=True)
+
+    def replay_to_new_recorder() -> None:
+        """A restarted recorder joined after the events that explain its new bag: once it is
+        ready and subscribed, publish the session's events again (``replayed: true``)."""
+        if replay['pending'] and mon.state('recorder', sup.started_at['recorder']) == 'ready' \
+                and mon.subscriber_gids() - replay['known']:
+            replay['pending'] = False
+            for e in list(history):
+                mon.event(**{k: v for k, v in e.items() if k != 'wall_time'}, replayed=True)
 
     def start(name: str) -> None:
         p = sup.start(name, [*ros_args, *extra[name]])
@@ -149,6 +171,9 @@ def run(args: argparse.Namespace) -> int:
                 return False
             p = sup.restart(name, renamed_output if name == 'recorder' else None)
             say('restarted', node=name, pid=p.pid, restarts=sup.restarts[name])
+            if name == 'recorder':
+                replay['pending'], replay['known'] = True, mon.subscriber_gids()
+        replay_to_new_recorder()
         return True
 
     def wait_for(pred, what: str) -> bool:

@@ -123,7 +123,8 @@ class SessionMonitor:
     node's latest status (``statuses[node] = (receive time [monotonic s], status dict)``) and
     publishes session events. Drive it with :meth:`spin` from the launcher's loop."""
 
-    def __init__(self, name: str = 'launch_monitor', domain_id: int | None = None):
+    def __init__(self, name: str = 'launch_monitor', domain_id: int | None = None,
+                 enclave: str | None = None):
         import rclpy
         from rclpy.context import Context
 
@@ -133,7 +134,8 @@ class SessionMonitor:
 
         # No rclpy signal handlers here: Ctrl-C must reach the launcher as KeyboardInterrupt so
         # that it stops the nodes in order.
-        rclpy.init(args=[], context=self.ctx, domain_id=domain_id,
+        rclpy.init(args=['--ros-args', '--enclave', enclave] if enclave else [], context=self.ctx,
+                   domain_id=domain_id,
                    signal_handler_options=SignalHandlerOptions.NO)
         self.node = rclpy.create_node(name, context=self.ctx,
                                       start_parameter_services=False)
@@ -163,6 +165,11 @@ class SessionMonitor:
         msg.data = json.dumps(fields)
         self.events_pub.publish(msg)
         return fields
+
+    def subscriber_gids(self, topic: str = EVENTS_TOPIC) -> set[bytes]:
+        """Endpoint ids of the subscriptions to ``topic`` the graph shows (a killed process's
+        stay listed until their DDS lease runs out, so compare sets, not counts)."""
+        return {bytes(i.endpoint_gid) for i in self.node.get_subscriptions_info_by_topic(topic)}
 
     def spin(self, seconds: float) -> None:
         end = time.monotonic() + seconds
