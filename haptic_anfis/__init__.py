@@ -12,4 +12,10 @@ import os as _os
 for _var in ('OPENBLAS_NUM_THREADS', 'OMP_NUM_THREADS', 'MKL_NUM_THREADS'):
     _os.environ.setdefault(_var, '1')
 
+# numba's kernel cache: beside the sources, or the user cache directory when the package
+# directory is not writable (see numba_cache.py). Before anything imports numba.
+from .numba_cache import configure as _configure_numba_cache  # noqa: E402
+
+_configure_numba_cache()
+
 __version__ = '0.1.0'

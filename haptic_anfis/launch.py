@@ -42,28 +42,105 @@ def node_env(domain_id: int | None = None, localhost: bool = True,
 
 
 def start_node(name: str, ros_args: Sequence[str] = (), env: Mapping[str, str] | None = None,
-               log: IO | int | None = None, cwd: str | os.PathLike | None = None
-               ) -> subprocess.Popen:
+               log: IO | int | None = None, cwd: str | os.PathLike | None = None,
+               own_session: bool = False) -> subprocess.Popen:
     """Start node ``name`` with ``--ros-args ros_args``: its console script when it sits next to
     this interpreter, else ``python -m haptic_anfis.nodes.<name>``. Its stdout and stderr go to
-    ``log`` (a file object, ``subprocess.DEVNULL``, or inherited)."""
+    ``log`` (a file object, ``subprocess.DEVNULL``, or inherited). ``own_session``: in its own
+    session, so a Ctrl-C at the terminal reaches only the launcher, which stops the nodes in
+    order (the driver first) instead of all at once."""
     if name not in node_names():
         raise ValueError(f'unknown node {name!r}; known: {", ".join(node_names())}')
     exe = BIN / name
     cmd = [str(exe)] if exe.exists() else [sys.executable, '-m', f'haptic_anfis.nodes.{name}']
     cmd += ['--ros-args', *ros_args] if ros_args else []
     return subprocess.Popen(cmd, env=dict(env) if env is not None else node_env(), cwd=cwd,
+                            start_new_session=own_session,
                             stdout=log, stderr=subprocess.STDOUT if log is not None else None)
 
 
-def stop_node(p: subprocess.Popen, timeout: float = 10.0) -> int:
+def stop_node(p: subprocess.Popen, timeout: float = 10.0, sig: int = signal.SIGINT) -> int:
     """Ask a node to stop as Ctrl-C would (SIGINT: nodes zero the force and close their bags),
-    kill it if it has not exited after ``timeout`` seconds; returns its exit code."""
+    kill it if it has not exited after ``timeout`` seconds; returns its exit code. ``sig``
+    SIGTERM suits a node still importing (before rclpy handles signals SIGINT would print a
+    KeyboardInterrupt traceback; SIGTERM ends it quietly, and once rclpy is up both are handled
+    alike)."""
     if p.poll() is None:
-        p.send_signal(signal.SIGINT)
+        p.send_signal(sig)
         try:
             p.wait(timeout)
         except subprocess.TimeoutExpired:
             p.kill()
             p.wait(5.0)
     return p.returncode
+
+
+class Supervisor:
+    """The launched node processes and their restarts (no ROS; ``haptic-anfis launch``).
+
+    ``start(name, args)`` starts a node and remembers how; :meth:`dead` lists nodes that exited on
+    their own; :meth:`restart` starts one again with the same arguments (``rename`` may adjust
+    them, e.g. a new bag directory for the recorder) while at most ``max_restarts`` restarts per
+    node are allowed. ``log_dir``: each node's output goes to ``DIR/<node>.log`` (appended to on a
+    restart), else to this terminal.
+    """
+
+    def __init__(self, env: Mapping[str, str], log_dir: Path | None = None,
+                 max_restarts: int = 3):
+        if max_restarts < 0:
+            raise ValueError(f'max_restarts: expected >= 0, got {max_restarts}')
+        self.env, self.log_dir, self.max_restarts = dict(env), log_dir, max_restarts
+        self.procs: dict[str, subprocess.Popen] = {}
+        self.args: dict[str, list[str]] = {}
+        self.started_at: dict[str, float] = {}
+        self.restarts: dict[str, int] = {}
+        self.logs: dict[str, IO] = {}
+
+    def start(self, name: str, args: Sequence[str] = ()) -> subprocess.Popen:
+        import time
+        log = None
+        if self.log_dir is not None:
+            log = self.logs.get(name) or (self.log_dir / f'{name}.log').open('w')
+            self.logs[name] = log
+        p = start_node(name, list(args), env=self.env, log=log, own_session=True)
+        self.procs[name], self.args[name] = p, list(args)
+        self.started_at[name] = time.monotonic()
+        self.restarts.setdefault(name, 0)
+        return p
+
+    def dead(self) -> list[tuple[str, int]]:
+        """(name, exit code) of every node that has exited (and was not restarted since)."""
+        return [(n, p.returncode) for n, p in self.procs.items() if p.poll() is not None]
+
+    def may_restart(self, name: str) -> bool:
+        return self.restarts.get(name, 0) < self.max_restarts
+
+    def restart(self, name: str, rename=None) -> subprocess.Popen:
+        """Start ``name`` again (``rename(args, n) -> args`` for restart number ``n``)."""
+        self.restarts[name] = n = self.restarts.get(name, 0) + 1
+        args = self.args[name] if rename is None else rename(self.args[name], n)
+        if self.log_dir is not None:
+            self.logs[name].write(f'\n--- restart {n} ---\n')
+            self.logs[name].flush()
+        return self.start(name, args)
+
+    def stop_all(self, order: Sequence[str], starting: Sequence[str] = ()) -> dict[str, int]:
+        """Stop every node, in ``order`` first (SIGINT, then kill after a timeout); nodes in
+        ``starting`` (no status yet: maybe still importing) get SIGTERM, and their exit by that
+        signal counts as a clean stop (code 0)."""
+        names = [n for n in order if n in self.procs] + [n for n in self.procs if n not in order]
+        codes = {}
+        for n in names:
+            sig = signal.SIGTERM if n in starting else signal.SIGINT
+            code = stop_node(self.procs[n], sig=sig)
+            codes[n] = 0 if (n in starting and code == -signal.SIGTERM) else code
+        for f in self.logs.values():
+            f.close()
+        return codes
+
+
+def renamed_output(args: Sequence[str], n: int) -> list[str]:
+    """The recorder's arguments for restart ``n``: ``output:=X`` becomes ``output:=X.restartN``
+    (a bag directory is never reused; the killed one is salvaged by ``haptic-anfis bag recover``).
+    """
+    return [f'{a}.restart{n}' if a.startswith('output:=') else a for a in args]

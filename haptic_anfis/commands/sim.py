@@ -25,6 +25,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument('--record', metavar='BAG', default=None,
                    help='record every loop topic (pose, velocity, applied force, buttons, contact, '
                         'force command) to this new bag directory (rosbag2, MCAP)')
+    p.add_argument('--ready-timeout', type=float, default=300.0,
+                   help='seconds to wait for the graph to be ready (first force command at the '
+                        'driver) before giving up (default 300)')
     p.add_argument('--json', action='store_true',
                    help='end with one line of JSON: rate_hz, latency_p50_ms, latency_p99_ms, '
                         'latency_max_ms, deadline_misses, cycles, max_force_n, contact_s, ...')
@@ -60,8 +63,16 @@ def run(args: argparse.Namespace) -> int:
     except ParameterError as exc:
         raise ValueError(str(exc)) from None
     try:
-        print(f'running the haptic graph for {args.duration:g} s (one process, EventsExecutor)',
-              flush=True)
+        waited = graph.wait_ready(args.ready_timeout)
+        if waited is None:
+            print(f'not ready after {args.ready_timeout:g} s: no force command reached the driver',
+                  flush=True)
+            return 1
+        # Statistics cover the session, not the start (the hand waited, force zero, until now).
+        graph.driver.servo.stats.reset()
+        from ..nodes.session import process_age
+        print(f'ready after {process_age():.1f} s; running the haptic graph for {args.duration:g} s '
+              '(one process, EventsExecutor)', flush=True)
         graph.spin_for(args.duration)
     except KeyboardInterrupt:
         print('interrupted', flush=True)

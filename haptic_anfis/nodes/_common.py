@@ -121,32 +121,66 @@ def make_executor():
     return EventsExecutor()
 
 
+def interrupted(context=None) -> bool:
+    """True once rclpy's context was shut down (Ctrl-C / SIGTERM handled by rclpy)."""
+    return not rclpy.ok(context=context)
+
+
+def settle_gc() -> None:
+    """Collect once, then move every object alive now (modules, compiled kernels, the mesh, the
+    model) into the permanent generation: later collections walk only what the running loop
+    allocates (measured: longest gen-0 pause 0.26 ms frozen, 0.87 ms not; bench_soak.py)."""
+    import gc
+    gc.collect()
+    gc.freeze()
+
+
 def run_node(factory: Callable[[], Any], args=None) -> int:
     """Init rclpy, build the node, spin it until shut down or ``node.finished``; 1 on bad params.
 
     Uses EventsExecutor with a ``spin_once(timeout_sec=...)`` loop (its ``spin()`` runs no
     callbacks with the rclpy wheels here, see DESIGN.md). Calls ``node.close()`` (if defined)
-    before destroying the node.
+    before destroying the node. Once built, the node announces its status on ``session/status``
+    (:class:`~haptic_anfis.nodes.session.Readiness`). Interrupted while starting (Ctrl-C or SIGTERM
+    during a long compile), the node exits with code 0 and a one-line message, no traceback.
     """
     from rclpy.executors import ExternalShutdownException
+
+    from .session import Readiness
     rclpy.init(args=args)
-    node = None
+    node = executor = None
     code = 0
     try:
         try:
             node = factory()
         except (ParameterError, ValueError, OSError) as exc:
+            if interrupted():
+                return _interrupted_while_starting()
             print(f'error: {exc}', file=sys.stderr, flush=True)
             return 1
-        executor = make_executor()
-        executor.add_node(node)
+        except (KeyboardInterrupt, ExternalShutdownException):
+            return _interrupted_while_starting()
+        except Exception:
+            if interrupted():  # e.g. "rcl node's context is invalid" after Ctrl-C
+                return _interrupted_while_starting()
+            raise
         try:
+            node.readiness = Readiness(node)
+            executor = make_executor()
+            executor.add_node(node)
+            settle_gc()
             while rclpy.ok() and not getattr(node, 'finished', False):
                 executor.spin_once(timeout_sec=0.05)
         except (KeyboardInterrupt, ExternalShutdownException):
             pass
+        except Exception:
+            if not interrupted():
+                raise
         code = int(getattr(node, 'exit_code', 0) or 0)
-        executor.shutdown(timeout_sec=1.0)
+        if executor is not None:
+            executor.shutdown(timeout_sec=1.0)
+    except KeyboardInterrupt:  # a second Ctrl-C while shutting down
+        pass
     finally:
         if node is not None:
             if hasattr(node, 'close'):
@@ -154,6 +188,11 @@ def run_node(factory: Callable[[], Any], args=None) -> int:
             node.destroy_node()
         rclpy.try_shutdown()
     return code
+
+
+def _interrupted_while_starting() -> int:
+    print('interrupted while starting: exiting', file=sys.stderr, flush=True)
+    return 0
 
 
 def resolve_parameters(params: list[Param], node_name: str, params_files=(),

@@ -23,6 +23,7 @@ from sensor_msgs.msg import Joy
 from ..device import (HandParams, PalpationScript, SafetyLayer, ServoLoop, SimulatedFalcon,
                       WorkspaceMapping)
 from ..device.safety import OK
+from ..device.start_gate import HeldScript
 from . import interfaces as ifc
 from ._common import (LOOP_QOS, Param, config_file, declare_parameters, finite_vector,
                       non_negative, one_of, positive, run_node, set_stamp, stamp_ns)
@@ -47,6 +48,9 @@ PARAMS = [
           finite_vector(3)),
     Param('force_scale', 1.0, 'device force = force_scale * commanded (tissue) force', positive),
     Param('palpation_script', '', "sim: YAML palpation pattern ('' = config/palpation.yaml)"),
+    Param('hold_until_force', True, 'sim: hold the virtual hand at the script start (and the force '
+          'at zero) until the first valid force command arrives, i.e. until the contact detector '
+          'and force server are up; false = the script runs from the start'),
     Param('hand_mass', 0.2, 'sim: hand + handle mass [kg]', positive),
     Param('hand_stiffness', 1000.0, 'sim: hand spring to the scripted target [N/m], device frame',
           positive),
@@ -111,6 +115,7 @@ class FalconDriver(Node):
         else:
             script_path = p['palpation_script'] or str(config_file('palpation.yaml'))
             script = PalpationScript.from_yaml(script_path)  # ValueError naming the file -> exit 1
+            script = HeldScript(script, held=p['hold_until_force'])
             self.device = SimulatedFalcon(script, self.mapping,
                                           HandParams(p['hand_mass'], p['hand_stiffness'],
                                                      p['hand_damping']),
@@ -222,9 +227,16 @@ class FalconDriver(Node):
             return
         if self.first_command is None:
             self.first_command = now
+            if isinstance(getattr(self.device, 'script', None), HeldScript):
+                self.device.script.release()  # a force source is up: start the palpation
             if self.run_duration > 0:  # measure from the first command on
                 self.servo.stats.reset()
         self.servo.stats.latency((time.time_ns() - stamp_ns(msg.header.stamp)) * 1e-9)
+
+    def ready_condition(self) -> tuple[bool, str]:
+        """Ready (see nodes/session.py) once a valid force command arrived."""
+        return self.first_command is not None, ('force source seen' if self.first_command
+                                                is not None else 'no force command yet')
 
     def summary(self) -> dict:
         s = self.servo.stats.summary()

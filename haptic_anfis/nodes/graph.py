@@ -27,6 +27,14 @@ class Graph:
         return [n for n in (self.driver, self.contact, self.force, self.visualizer, *self.extra)
                 if n is not None]
 
+    def wait_ready(self, timeout: float = 300.0) -> float | None:
+        """Spin until the driver has seen a force command (the graph carries pose -> contact ->
+        force end to end; the palpation script starts then); seconds waited, None on timeout."""
+        t0 = time.monotonic()
+        if self.spin_for(timeout, until=lambda: self.driver.first_command is not None):
+            return time.monotonic() - t0
+        return None
+
     def spin_for(self, seconds: float, until=None) -> bool:
         """Spin for ``seconds`` or until ``until()`` is true (checked between callbacks)."""
         end = time.monotonic() + seconds
@@ -45,7 +53,9 @@ class Graph:
 
     def shutdown(self) -> None:
         """Stop the servo thread first (device to zero force), then the nodes and the context."""
+        import gc
         self.driver.close()
+        gc.unfreeze()
         self.executor.shutdown(timeout_sec=1.0)
         for n in self.nodes:
             n.destroy_node()
@@ -97,9 +107,13 @@ def build_graph(args: list[str] | None = None, visualizer: bool = True,
             n.destroy_node()
         rclpy.try_shutdown(context=ctx)
         raise
+    from ._common import settle_gc
+    from .session import Readiness
     ex = make_executor_for(ctx)
     for n in made:
+        n.readiness = Readiness(n)
         ex.add_node(n)
+    settle_gc()
     return Graph(ctx, ex, driver, contact, force, vis, extra=extra_nodes)
 
 

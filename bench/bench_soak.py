@@ -1,0 +1,226 @@
+"""Soak benchmark: a long session, one process with recording, then separate processes.
+
+Prints one row per interval (default a minute) for each configuration: servo rate, pose->wrench
+latency p99 and max, deadline misses, the resident memory (RSS) of every node and the bag size, so
+what degrades over a session-length run shows (garbage collection pauses, bag chunk flushes,
+queues, memory growth). Usage: ``python bench/bench_soak.py [--one-minutes 10] [--multi-minutes
+10] [--interval 60]`` (issue 20; issue 21 reads the RSS and bag size columns).
+
+- one process: ``haptic-anfis sim``'s graph (driver, contact detector, force server, no
+  visualizer) plus the recorder of every loop topic; figures from the driver's own statistics
+  (latency = pose stamp -> command arrival at the driver; a miss = a servo tick more than one
+  period late).
+- multi process: ``haptic-anfis launch --record`` (recorder, force server, contact detector,
+  driver as processes); figures from an observer node in this process: rate of poses received,
+  latency = pose stamp -> command received here, "misses" = pose gaps > 2 periods seen here
+  (includes DDS delivery jitter, so an upper bound on the driver's misses).
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import re
+import shutil
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+
+def rss_mb(pid: int | str = 'self') -> float:
+    try:
+        for line in Path(f'/proc/{pid}/status').read_text().splitlines():
+            if line.startswith('VmRSS:'):
+                return int(line.split()[1]) / 1024
+    except OSError:
+        pass
+    return float('nan')
+
+
+def dir_mb(path: Path) -> float:
+    return sum(f.stat().st_size for f in Path(path).rglob('*') if f.is_file()) / 2**20 \
+        if Path(path).exists() else 0.0
+
+
+HEADER = (f'{"min":>5} {"rate Hz":>8} {"p99 ms":>7} {"max ms":>7} {"misses":>7} {"n":>7} '
+          f'{"bag MB":>7}  RSS MB per node')
+
+
+def row(t_min, rate, lat, misses, bag, rss: dict) -> str:
+    p99 = np.percentile(lat, 99) * 1e3 if len(lat) else float('nan')
+    mx = lat.max() * 1e3 if len(lat) else float('nan')
+    return (f'{t_min:5.1f} {rate:8.1f} {p99:7.3f} {mx:7.3f} {misses:7d} {len(lat):7d} {bag:7.1f}  '
+            + ' '.join(f'{k} {v:.1f}' for k, v in rss.items()))
+
+
+class GcPauses:
+    """Collections and their longest pause [s] (gc.callbacks), per generation, since reset."""
+
+    def __init__(self):
+        import gc
+        self.reset()
+        self._t0 = 0.0
+        gc.callbacks.append(self._cb)
+
+    def reset(self) -> None:
+        self.count, self.max_pause = [0, 0, 0], 0.0
+
+    def _cb(self, phase, info) -> None:
+        if phase == 'start':
+            self._t0 = time.perf_counter()
+        else:
+            self.count[info['generation']] += 1
+            self.max_pause = max(self.max_pause, time.perf_counter() - self._t0)
+
+    def text(self) -> str:
+        return f'gc {"/".join(map(str, self.count))} max {self.max_pause * 1e3:.2f} ms'
+
+
+def one_process(minutes: float, interval: float, workdir: Path, freeze: bool = True) -> None:
+    import gc
+
+    from haptic_anfis.bag.topics import ALL_LOOP_TOPICS
+    from haptic_anfis.nodes.graph import build_graph
+    from haptic_anfis.nodes.recorder import Recorder
+    bag = workdir / 'one_process_bag'
+    g = build_graph(None, visualizer=False,
+                    extra=[lambda ctx: Recorder(context=ctx, output=str(bag),
+                                                topics=ALL_LOOP_TOPICS)])
+    try:
+        if g.wait_ready(300.0) is None:
+            raise RuntimeError('no force command within 300 s')
+        st = g.driver.servo.stats
+        st.reset()
+        rec = g.extra[0]
+        if not freeze:  # for comparison: what build_graph's gc.freeze() avoids
+            gc.unfreeze()
+        pauses = GcPauses()
+        print(f'one process + recorder, {minutes:g} min, load {os.getloadavg()[0]:.2f}, gc '
+              f'{"frozen after start" if freeze else "not frozen"}')
+        print(HEADER + ', gc collections (gen 0/1/2) and longest pause, recorder chunks flushed '
+              '/ pending')
+        t0 = time.monotonic()
+        ticks0 = misses0 = lat0 = 0
+        tprev = t0
+        while time.monotonic() - t0 < minutes * 60 - 1e-3:
+            g.spin_for(min(interval, minutes * 60 - (time.monotonic() - t0)))
+            now = time.monotonic()
+            ticks, misses, lats = st.ticks, st.deadline_misses, st.latencies
+            w = rec.writer.stats()
+            print(row((now - t0) / 60, (ticks - ticks0) / (now - tprev), lats[lat0:],
+                      misses - misses0, dir_mb(bag), {'sim': rss_mb()})
+                  + f', {pauses.text()}, chunks {w["chunks_flushed"]} pending {w["pending"]}',
+                  flush=True)
+            pauses.reset()
+            ticks0, misses0, lat0, tprev = ticks, misses, len(lats), now
+        s = g.driver.summary()
+        print(f'whole run: {s["rate_hz"]:.1f} Hz, p99 {s["latency_p99_ms"]:.3f} ms, max '
+              f'{s["latency_max_ms"]:.3f} ms, misses {s["deadline_misses"]} of {s["ticks"]} '
+              f'ticks, watchdog trips {s["watchdog_trips"]}')
+    finally:
+        g.shutdown()
+    print(f'bag {bag}: {dir_mb(bag):.1f} MB, recorded {rec.writer.stats()}', flush=True)
+
+
+def multi_process(minutes: float, interval: float, workdir: Path) -> None:
+    import rclpy
+    from geometry_msgs.msg import PoseStamped, WrenchStamped
+    from rclpy.context import Context
+
+    from haptic_anfis.launch import node_env
+    from haptic_anfis.nodes import interfaces as ifc
+    from haptic_anfis.nodes._common import LOOP_QOS, stamp_ns
+    from haptic_anfis.nodes.graph import make_executor_for
+    domain = 170 + os.getpid() % 40
+    bag, out = workdir / 'multi_process_bag', workdir / 'launch.out'
+    env = node_env(domain, localhost=True)
+    env['PYTHONPATH'] = str(ROOT)
+    launch = subprocess.Popen(
+        [sys.executable, '-m', 'haptic_anfis.cli', 'launch', '--nodes',
+         'falcon_driver,contact_detector,force_server', '--domain-id', str(domain), '--localhost',
+         '--record', str(bag), '--log-dir', str(workdir / 'logs')],
+        cwd=ROOT, env=env, stdout=out.open('w'), stderr=subprocess.STDOUT)
+    ctx = Context()
+    rclpy.init(context=ctx, domain_id=domain)
+    node = rclpy.create_node('soak_observer', context=ctx)
+    poses: list[int] = []
+    lats: list[float] = []
+    node.create_subscription(PoseStamped, ifc.TOPIC_POSE,
+                             lambda m: poses.append(stamp_ns(m.header.stamp)), LOOP_QOS)
+    node.create_subscription(WrenchStamped, ifc.TOPIC_COMMAND,
+                             lambda m: lats.append((time.time_ns() - stamp_ns(m.header.stamp))
+                                                   * 1e-9), LOOP_QOS)
+    ex = make_executor_for(ctx)
+    ex.add_node(node)
+    try:
+        end = time.monotonic() + 300
+        while 'ready after' not in out.read_text():
+            if launch.poll() is not None or time.monotonic() > end:
+                raise RuntimeError('launch not ready:\n' + out.read_text()[-2000:])
+            ex.spin_once(timeout_sec=0.1)
+        pids = dict(re.findall(r'started (\w+) +pid (\d+)', out.read_text()))
+        print(f'separate processes (launch --record), {minutes:g} min, load '
+              f'{os.getloadavg()[0]:.2f}')
+        print(HEADER)
+        t0 = tprev = time.monotonic()
+        p0 = l0 = 0
+        while time.monotonic() - t0 < minutes * 60 - 1e-3:
+            stop = min(tprev + interval, t0 + minutes * 60)
+            while time.monotonic() < stop:
+                ex.spin_once(timeout_sec=0.01)
+            now = time.monotonic()
+            pids.update(re.findall(r'node (\w+), pid (\d+)', out.read_text()))  # restarts
+            st = np.asarray(poses[p0:], dtype=np.int64)
+            gaps = int(np.sum(np.diff(st) > 2_000_000)) if len(st) > 1 else 0
+            print(row((now - t0) / 60, len(st) / (now - tprev), np.asarray(lats[l0:]), gaps,
+                      dir_mb(bag), {n: rss_mb(p) for n, p in pids.items()}), flush=True)
+            p0, l0, tprev = len(poses), len(lats), now
+    finally:
+        launch.send_signal(signal.SIGINT)
+        try:
+            launch.wait(120)
+        except subprocess.TimeoutExpired:
+            launch.kill()
+        ex.shutdown(timeout_sec=1.0)
+        node.destroy_node()
+        rclpy.try_shutdown(context=ctx)
+    print(out.read_text().strip().splitlines()[-1])
+    print(f'bag {bag}: {dir_mb(bag):.1f} MB', flush=True)
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument('--one-minutes', type=float, default=10.0,
+                    help='minutes of the one-process run (0 = skip; default 10)')
+    ap.add_argument('--multi-minutes', type=float, default=10.0,
+                    help='minutes of the multi-process run (0 = skip; default 10)')
+    ap.add_argument('--interval', type=float, default=60.0, help='seconds per row (default 60)')
+    ap.add_argument('--no-freeze', action='store_true',
+                    help='one process: undo the gc.freeze() done after start (for comparison)')
+    ap.add_argument('--keep', metavar='DIR', default=None,
+                    help='write the bags and logs here and keep them (default: a temporary '
+                         'directory, removed)')
+    a = ap.parse_args()
+    work = Path(a.keep) if a.keep else Path(tempfile.mkdtemp(prefix='soak_'))
+    work.mkdir(parents=True, exist_ok=True)
+    print(f'soak: {os.cpu_count()} CPUs, load average {os.getloadavg()}')
+    try:
+        if a.one_minutes > 0:
+            one_process(a.one_minutes, a.interval, work, freeze=not a.no_freeze)
+        if a.multi_minutes > 0:
+            multi_process(a.multi_minutes, a.interval, work)
+    finally:
+        if not a.keep:
+            shutil.rmtree(work, ignore_errors=True)
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
