@@ -77,23 +77,23 @@ class ForceInput:
 
     def command(self, force, stamp_ns: int, frame_id: str | None, now: float) -> str:
         """A force command (3,) [N], tissue frame, answering the pose ``stamp_ns``, received at
-        ``now``. Zoh mode: the safety layer's target, timed by its pose (returns OK or why not).
-        Local-model mode: only a non-finite or wrong-frame command acts (zero force, as in zoh
-        mode); the force itself comes with the model."""
+        ``now``. A non-finite or wrong-frame command zeroes the force at once (whatever its
+        stamp: zero is the safe state). Zoh mode: the safety layer's target, timed by its pose;
+        local-model mode: the force itself comes with the model. Returns OK or why not."""
+        bad = not all(math.isfinite(float(v)) for v in force)
+        sf = self.safety.frame_id
+        if bad or (sf and frame_id is not None and frame_id != sf):
+            self.renderer.clear()
+            return self.safety.command((math.nan,) * 3 if bad else (0.0,) * 3, now, frame_id)
         why, t_pose = self._stamp(stamp_ns, now)
         if why != STAMP_OK:
             return f'rejected: stamp {why}'
-        if self.mode == 'zoh':
-            fd = self.mapping.force_to_device(force)
-            why = self.safety.command(fd, t_pose, frame_id)
-            if why == OK:
-                self.last_in_contact = any(v != 0.0 for v in force)
-            return why
-        if not all(math.isfinite(float(v)) for v in force):
-            self.renderer.clear()
-            self.safety.reject('rejected: non-finite force command')
-            return 'rejected: non-finite force'
-        return OK
+        if self.mode != 'zoh':
+            return OK
+        why = self.safety.command(self.mapping.force_to_device(force), t_pose, frame_id)
+        if why == OK:
+            self.last_in_contact = any(v != 0.0 for v in force)
+        return why
 
     def model(self, m: LocalModel, stamp_ns: int, frame_id: str | None, now: float) -> str:
         """A local force model (tissue frame) answering the pose ``stamp_ns``, received at
@@ -107,18 +107,20 @@ class ForceInput:
             self.renderer.clear()
             self.safety.reject(f'{REJECTED_FRAME} {frame_id!r} (expected {sf!r})')
             return REJECTED_FRAME
+        try:
+            m.check()  # a malformed model zeroes the force whatever its stamp
+        except ValueError as exc:
+            self.renderer.clear()
+            self.renderer.stats.rejected += 1
+            self.safety.reject(f'rejected: {exc}')
+            return f'rejected: {exc}'
         why, t_pose = self._stamp(stamp_ns, now)
         if why != STAMP_OK:
             return f'rejected: stamp {why}'
         cur = self.renderer.model
         if cur is not None and t_pose < cur.time:
             return 'ignored: older than the current model'
-        try:
-            self.renderer.offer(replace(m, time=t_pose))
-        except ValueError as exc:
-            self.renderer.clear()
-            self.safety.reject(f'rejected: {exc}')
-            return f'rejected: {exc}'
+        self.renderer.offer(replace(m, time=t_pose))
         self.last_in_contact = m.in_contact
         return OK
 

@@ -66,21 +66,33 @@ def depth_gradient(normal, direction) -> np.ndarray:
     return n / c
 
 
-def contact_jacobian(J: np.ndarray, normal, direction) -> np.ndarray:
+def contact_jacobian(J, normal, direction) -> np.ndarray:
     """K = dF/dp (3, 3) [N/m] from the model's J = dF/d(x, y, z, depth) (3, 4) through the contact
     geometry, to first order in the tangent plane at the contact point:
 
     - depth(p) = depth0 + g . (p - p0), g from :func:`depth_gradient`;
-    - contact point c(p) = p - depth(p) d, so dc/dp = I - d g^T (it slides in the plane).
+    - contact point c(p) = p - depth(p) d, so dc/dp = I - d g^T (it slides in the plane);
 
-    Both contact-detector modes are this formula: a fixed ``direction`` d (the paper's axis), or
-    the normal mode where d = -n (the tracker freezes d at entry; the stateless query has d = -n,
-    giving dc/dp = I - n n^T and d depth/dp = -n^T)."""
-    J = np.asarray(J, dtype=np.float64).reshape(3, 4)
-    d = np.asarray(direction, dtype=np.float64)
-    g = depth_gradient(normal, direction)
-    dc = np.eye(3) - np.outer(d, g)
-    return J[:, :3] @ dc + np.outer(J[:, 3], g)
+    hence K = J_c (I - d g^T) + J_depth g^T = J_c + (J_depth - J_c d) g^T. Both contact-detector
+    modes are this formula: a fixed ``direction`` d (the paper's axis), or the normal mode where
+    d = -n (the tracker freezes d at entry; the stateless query has d = -n, giving
+    dc/dp = I - n n^T and d depth/dp = -n^T). Plain floats: ~10 µs, called at 1 kHz."""
+    return np.array(contact_stiffness(np.asarray(J, dtype=np.float64).reshape(3, 4).tolist(),
+                                      normal, direction)).reshape(3, 3)
+
+
+def contact_stiffness(J, normal, direction) -> list[float]:
+    """:func:`contact_jacobian` on plain sequences: J 3 rows of 4, returns K row-major (9,)."""
+    nx, ny, nz = (float(v) for v in normal)
+    dx, dy, dz = (float(v) for v in direction)
+    c = min(nx * dx + ny * dy + nz * dz, -MIN_COS)
+    gx, gy, gz = nx / c, ny / c, nz / c
+    K = []
+    for row in J:
+        ja, jb, jc, jd = (float(v) for v in row)
+        w = jd - (ja * dx + jb * dy + jc * dz)
+        K += [ja + w * gx, jb + w * gy, jc + w * gz]
+    return K
 
 
 def condition_stiffness(K, max_stiffness: float) -> np.ndarray:
@@ -275,3 +287,39 @@ class LocalModelRenderer:
             fy -= w * (f0[1] + k1[0] * sx + k1[1] * sy + k1[2] * sz)
             fz -= w * (f0[2] + k2[0] * sx + k2[1] * sy + k2[2] * sz)
         return (fx, fy, fz), (FRESH if fresh else EXTRAPOLATED)
+
+
+def force_and_jacobian(model, x: float, y: float, z: float, depth: float
+                       ) -> tuple[tuple[float, float, float], np.ndarray]:
+    """The model's force F (3,) [N] and J = dF/d(x, y, z, depth) (3, 4) [N/m] at one contact.
+
+    Uses the model's analytic ``jacobian_one`` when it has one; otherwise (the reference used to
+    test it) central finite differences of ``predict_one`` with a 1 µm step.
+    """
+    jac = getattr(model, 'jacobian_one', None)
+    if jac is not None:
+        F, J = jac(x, y, z, depth)
+        return (float(F[0]), float(F[1]), float(F[2])), np.asarray(J, dtype=np.float64)
+    return force_and_jacobian_fd(model, x, y, z, depth)
+
+
+def force_and_jacobian_fd(model, x: float, y: float, z: float, depth: float, h: float = 1e-6
+                          ) -> tuple[tuple[float, float, float], np.ndarray]:
+    """:func:`force_and_jacobian` by central differences of ``model.predict_one`` (step h [m];
+    one-sided in depth where depth < h, so the model is never asked for a negative depth)."""
+    f = model.predict_one
+    F = f(x, y, z, depth)
+    X = (x, y, z, depth)
+    cols = []
+    for b in range(4):
+        hi = list(X)
+        hi[b] += h
+        fh = f(*hi)
+        if b == 3 and depth < h:
+            cols.append([(fh[a] - F[a]) / h for a in range(3)])
+            continue
+        lo = list(X)
+        lo[b] -= h
+        fl = f(*lo)
+        cols.append([(fh[a] - fl[a]) / (2 * h) for a in range(3)])
+    return (float(F[0]), float(F[1]), float(F[2])), np.array(cols).T

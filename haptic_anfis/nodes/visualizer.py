@@ -96,7 +96,7 @@ class Visualizer(Node):
             self.probe.pose.position = q
             markers.append(self.probe)
             c = self._contact
-            touching = c is not None and len(c.position) == len(ifc.CONTACT_FIELDS) \
+            touching = c is not None and ifc.is_contact_values(c.position) \
                 and c.position[ifc.I_IN_CONTACT] > 0.5
             self.contact.action = Marker.ADD if touching else Marker.DELETE
             if touching:
