@@ -1,7 +1,7 @@
 """Speed against error for the ANFIS force model (``haptic-anfis bench model``, ``make bench``).
 
 For each structure: test RMSE per output, single-query latency percentiles of the compiled path
-(``predict_one``) and of the numpy path (``predict`` on one row), and batch throughput of both.
+(``predict_one``), of its Jacobian (``jacobian_one``) and of the numpy path (``predict`` on one row), and batch throughput of both.
 Timings are printed, never asserted: the machines are shared and noisy.
 """
 from __future__ import annotations
@@ -37,6 +37,7 @@ def bench_structures(ds: ForceDataset, structures: Sequence[tuple[int, ...] | No
         numpy_one = lambda x, y, z, d: model.predict(np.array([[x, y, z, d]]))  # noqa: E731
         c50, c99 = percentiles_us(time_single(model.predict_one, te.X, repeats))
         n50, n99 = percentiles_us(time_single(numpy_one, te.X, max(repeats // 10, 200)))
+        j50, j99 = percentiles_us(time_single(model.jacobian_one, te.X, repeats))
         rows.append({
             'label': 'search' if st is None else '-'.join(map(str, st)),
             'structures': ['-'.join(map(str, s)) for s in model.structures_],
@@ -45,6 +46,7 @@ def bench_structures(ds: ForceDataset, structures: Sequence[tuple[int, ...] | No
             'fit_s': fit_s,
             'compiled_p50_us': c50, 'compiled_p99_us': c99,
             'numpy_p50_us': n50, 'numpy_p99_us': n99,
+            'jacobian_p50_us': j50, 'jacobian_p99_us': j99,
             'compiled_batch_per_s': throughput(model.predict_compiled, Xb),
             'numpy_batch_per_s': throughput(model.predict, Xb[:20000]),
         })
@@ -53,7 +55,8 @@ def bench_structures(ds: ForceDataset, structures: Sequence[tuple[int, ...] | No
 
 def format_table(rows: list[dict]) -> str:
     head = (f'{"model":<8} {"structures (Fx/Fy/Fz)":<28} {"RMSE Fx":>8} {"Fy":>8} {"Fz":>8} '
-            f'{"fit s":>6} {"jit p50":>8} {"p99 µs":>7} {"np p50":>7} {"p99 µs":>7} '
+            f'{"fit s":>6} {"jit p50":>8} {"p99 µs":>7} {"jac p50":>7} {"p99 µs":>7} '
+            f'{"np p50":>7} {"p99 µs":>7} '
             f'{"jit eval/s":>11} {"np eval/s":>10}')
     lines = [head, '-' * len(head)]
     for r in rows:
@@ -61,6 +64,7 @@ def format_table(rows: list[dict]) -> str:
         lines.append(
             f'{r["label"]:<8} {"/".join(r["structures"]):<28} {e[0]:>8.4f} {e[1]:>8.4f} {e[2]:>8.4f} '
             f'{r["fit_s"]:>6.1f} {r["compiled_p50_us"]:>8.2f} {r["compiled_p99_us"]:>7.2f} '
+            f'{r["jacobian_p50_us"]:>7.2f} {r["jacobian_p99_us"]:>7.2f} '
             f'{r["numpy_p50_us"]:>7.1f} {r["numpy_p99_us"]:>7.1f} '
             f'{r["compiled_batch_per_s"]:>11.3g} {r["numpy_batch_per_s"]:>10.3g}')
     lines.append('paper (MATLAB, its own data): RMSE 0.0791 / 0.0063 / 0.0181 N, ~1e5 evaluations/s; '

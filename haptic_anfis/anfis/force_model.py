@@ -172,8 +172,18 @@ class ForceModel:
         if not getattr(self, 'models_', None):
             raise RuntimeError('ForceModel is not trained: call fit() or ForceModel.load()')
 
+    @property
+    def input_cols_(self) -> tuple[int, ...]:
+        """Columns of (x, y, z, depth) the single-output models read."""
+        return getattr(self, '_input_cols', (0, 1, 2, 3))
+
+    @property
+    def scale_col_(self) -> int:
+        """Column of (x, y, z, depth) that multiplies the outputs (3: F = depth · g), or -1."""
+        return getattr(self, '_scale_col', -1)
+
     def _compile(self) -> None:
-        self._fp, self._ip = compiled.pack(self.models_)
+        self._fp, self._ip = compiled.pack(self.models_, self.input_cols_, self.scale_col_, 4)
         compiled.warm_up(self._fp, self._ip)
 
     def predict(self, X: np.ndarray) -> np.ndarray:
@@ -182,7 +192,45 @@ class ForceModel:
         X = check_finite_inputs(X, INPUT_NAMES)
         if X.shape[1] != 4:
             raise ValueError(f'predict needs X of shape (n, 4); got {X.shape}')
-        return np.column_stack([m.predict(X) for m in self.models_])
+        U = X[:, list(self.input_cols_)]
+        F = np.column_stack([m.predict(U) for m in self.models_])
+        if self.scale_col_ >= 0:
+            F *= np.maximum(X[:, self.scale_col_], 0.0)[:, None]
+        return F
+
+    def predict_with_jacobian(self, X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Compiled batch forces and their exact derivatives w.r.t. the inputs.
+
+        Args:
+            X: (n, 4) queries (x, y, z, depth) [m] (any float dtype).
+        Returns:
+            (F (n, 3) [N], J (n, 3, 4) [N/m]) with ``J[i, a, b] = dF_a / dX_b`` at ``X[i]``.
+            Where an input is clamped by the out-of-range policy its column is 0; at an MF kink
+            the derivative is one-sided.
+        Raises:
+            ValueError: on NaN/Inf input.
+        """
+        self._check_fitted()
+        X = np.ascontiguousarray(check_finite_inputs(X, INPUT_NAMES))
+        if X.shape[1] != 4:
+            raise ValueError(f'predict_with_jacobian needs X of shape (n, 4); got {X.shape}')
+        return compiled.eval_jac_batch(X, self._fp, self._ip)
+
+    def jacobian_one(self, x: float, y: float, z: float, depth: float
+                     ) -> tuple[np.ndarray, np.ndarray]:
+        """Compiled real-time forces and Jacobian for one contact: metres in.
+
+        Returns:
+            (F (3,) [N], J (3, 4) [N/m]), ``J[a, b] = dF_a / d(x, y, z, depth)_b``. From njit code
+            call :func:`.compiled.jac_xyzd` with :attr:`kernel_params` instead.
+        Raises:
+            ValueError: if any input is NaN or Inf.
+        """
+        F, J, ok = compiled.jac_xyzd(x, y, z, depth, self._fp, self._ip)
+        if not ok:
+            raise ValueError(f'non-finite input to jacobian_one: x={x!r}, y={y!r}, z={z!r}, '
+                             f'depth={depth!r}')
+        return F, J
 
     def predict_compiled(self, X: np.ndarray) -> np.ndarray:
         """Compiled batch path: X (n, 4) [m] -> (n, 3) [N]. Raises ValueError on NaN/Inf input."""
