@@ -78,13 +78,14 @@ def local_model_from_contact(model: ForceModel, v, jacobian=force_and_jacobian
     contact has no normal: the normal is then taken as -direction. Not in contact, or a bad
     contact: zero force and a model with depth 0 (the driver renders zero)."""
     lm = [0.0] * len(ifc.LOCAL_MODEL_FIELDS)
-    fx, fy, fz, error = force_from_contact(model, v)
-    if error is not None or not (v[ifc.I_IN_CONTACT] > 0.5 and v[ifc.I_DEPTH] > 0.0):
-        return (0.0, 0.0, 0.0), lm, error
-    x, y, z, depth = v[0], v[1], v[2], v[ifc.I_DEPTH]
-    d = [v[ifc.I_DX], v[ifc.I_DY], v[ifc.I_DZ]]
-    n = list(v[ifc.I_NX:ifc.I_NZ + 1]) if len(v) == len(ifc.CONTACT_FIELDS) else []
-    if len(n) != 3 or not 0.5 < math.sqrt(sum(c * c for c in n)) < 1.5:
+    if not ifc.is_contact_values(v):
+        return (0.0, 0.0, 0.0), lm, force_from_contact(model, v)[3]
+    if not (v[ifc.I_IN_CONTACT] > 0.5 and v[ifc.I_DEPTH] > 0.0):
+        return (0.0, 0.0, 0.0), lm, None
+    x, y, z, depth = float(v[0]), float(v[1]), float(v[2]), float(v[ifc.I_DEPTH])
+    d = [float(v[ifc.I_DX]), float(v[ifc.I_DY]), float(v[ifc.I_DZ])]
+    n = [float(c) for c in v[ifc.I_NX:ifc.I_NZ + 1]] if len(v) == len(ifc.CONTACT_FIELDS) else []
+    if len(n) != 3 or not 0.25 < n[0] * n[0] + n[1] * n[1] + n[2] * n[2] < 2.25:
         n = [-c for c in d]
     try:
         F, J = jacobian(model, x, y, z, depth)
@@ -105,7 +106,8 @@ def local_model_from_contact(model: ForceModel, v, jacobian=force_and_jacobian
     lm[ifc.LM_N] = n
     lm[ifc.LM_D] = d
     lm[ifc.LM_DEPTH] = depth
-    lm[ifc.LM_ZERO] = 1.0 if math.sqrt(sum(c * c for c in F_surface)) < ifc.ZERO_FORCE_TOL else 0.0
+    fs0, fs1, fs2 = F_surface
+    lm[ifc.LM_ZERO] = 1.0 if fs0 * fs0 + fs1 * fs1 + fs2 * fs2 < ifc.ZERO_FORCE_TOL ** 2 else 0.0
     return F, lm, None
 
 
