@@ -126,7 +126,7 @@ class LocalModel:
     Attributes:
         f0: (3,) force at p0 [N].
         p0: (3,) probe position the model was computed at [m].
-        k: (3, 3) stiffness dF/dp [N/m] (conditioned by the renderer).
+        k: (3, 3) stiffness dF/dp [N/m], or its 9 values row-major (conditioned by the renderer).
         contact: (3,) contact point on the undeformed surface [m].
         normal: (3,) outward unit surface normal there.
         direction: (3,) unit indentation direction (into the tissue).
@@ -155,6 +155,8 @@ class LocalModel:
             if len(v) != 3 or not all(math.isfinite(float(c)) for c in v):
                 raise ValueError(f'local model {name}: expected 3 finite numbers, got {v!r}')
         k = np.asarray(self.k, dtype=np.float64)
+        if k.size == 9:
+            k = k.reshape(3, 3)
         if k.shape != (3, 3) or not np.isfinite(k).all():
             raise ValueError(f'local model stiffness K: expected a finite (3, 3) matrix, got {k!r}')
         if not (math.isfinite(self.depth0) and self.depth0 >= 0.0):
@@ -229,8 +231,9 @@ class LocalModelRenderer:
         except ValueError:
             self.stats.rejected += 1
             raise
-        k = condition_stiffness(m.k, self.max_stiffness)
-        if not np.allclose(k, m.k, rtol=1e-9, atol=1e-9):
+        k_in = np.asarray(m.k, dtype=np.float64).reshape(3, 3)
+        k = condition_stiffness(k_in, self.max_stiffness)
+        if not np.allclose(k, k_in, rtol=1e-9, atol=1e-9):
             self.stats.stiffness_clamped += 1
         f0 = tuple(float(v) for v in m.f0)
         p0 = tuple(float(v) for v in m.p0)

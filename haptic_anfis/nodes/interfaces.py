@@ -86,3 +86,21 @@ TOPIC_CONTACT = 'contact'
 TOPIC_MARKERS = 'visualization/markers'
 TOPIC_TISSUE = 'visualization/tissue'
 SERVICE_RELOAD = '/force_server/reload'
+
+
+def local_model_from_values(v, frame_time: float = 0.0):
+    """A :class:`haptic_anfis.device.local_model.LocalModel` from a local force model message's
+    ``position`` values (:data:`LOCAL_MODEL_FIELDS`); ``time`` is ``frame_time`` (the driver sets
+    the time of the pose it answers).
+
+    Raises:
+        ValueError: not exactly len(LOCAL_MODEL_FIELDS) values.
+    """
+    from ..device.local_model import LocalModel
+    if len(v) != len(LOCAL_MODEL_FIELDS):
+        raise ValueError(f'local force model message with {len(v)} values, expected '
+                         f'{len(LOCAL_MODEL_FIELDS)} ({", ".join(LOCAL_MODEL_FIELDS)})')
+    v = [float(c) for c in v]
+    return LocalModel(f0=tuple(v[LM_F0]), p0=tuple(v[LM_P0]), k=v[LM_K], contact=tuple(v[LM_C]),
+                      normal=tuple(v[LM_N]), direction=tuple(v[LM_D]), depth0=v[LM_DEPTH],
+                      zero_at_surface=v[LM_ZERO] > 0.5, time=frame_time)
