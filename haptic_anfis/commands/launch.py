@@ -38,10 +38,14 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help='discovery on this machine only (ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST)')
     p.add_argument('--log-dir', default=None,
                    help="write each node's output to DIR/<node>.log (default: this terminal)")
+    p.add_argument('--json', action='store_true',
+                   help='end with the loop report (haptic-anfis loop) as one JSON object on the '
+                        'last line')
 
 
 def run(args: argparse.Namespace) -> int:
     from ..launch import node_env, node_names, start_node, stop_node
+    from .loop import launch_trace_path, print_launch_report
 
     known = node_names()
     names = [n.strip() for n in args.nodes.split(',') if n.strip()]
@@ -66,6 +70,7 @@ def run(args: argparse.Namespace) -> int:
     if log_dir:
         log_dir.mkdir(parents=True, exist_ok=True)
 
+    trace = launch_trace_path(extra, log_dir)  # the loop report at the end
     procs = []
     t0 = time.monotonic()
     failed = None
@@ -90,6 +95,7 @@ def run(args: argparse.Namespace) -> int:
         codes = {n: stop_node(p) for n, p in reversed(procs)}
     for n, _ in procs:
         print(f'stopped {n:<17} exit code {codes[n]}', flush=True)
+    print_launch_report(trace, args.params_file, args.json)
     if failed:
         print(f'node(s) exited on their own: '
               + ', '.join(f'{n} (code {c})' for n, c in failed), flush=True)

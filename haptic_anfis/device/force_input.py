@@ -53,6 +53,7 @@ class ForceInput:
         #: still rendered correctly until then; refusing it would only leave an older one).
         self.max_age = safety.watchdog_timeout if mode == 'zoh' else validity_time
         self.last_in_contact = False
+        self.commands_received = self.models_received = 0
 
     # -- servo thread -----------------------------------------------------------------------
     def on_pose(self, stamp_ns: int, now: float) -> None:
@@ -80,6 +81,7 @@ class ForceInput:
         ``now``. A non-finite or wrong-frame command zeroes the force at once (whatever its
         stamp: zero is the safe state). Zoh mode: the safety layer's target, timed by its pose;
         local-model mode: the force itself comes with the model. Returns OK or why not."""
+        self.commands_received += 1
         bad = not all(math.isfinite(float(v)) for v in force)
         sf = self.safety.frame_id
         if bad or (sf and frame_id is not None and frame_id != sf):
@@ -100,6 +102,7 @@ class ForceInput:
         ``now`` (``m.time`` is replaced by that pose's time). Returns OK or why it was refused:
         a refused stamp is not taken (the current model keeps running until it expires); a
         malformed / non-finite model or a wrong frame zeroes the force at once."""
+        self.models_received += 1
         if self.mode != 'local_model':
             return 'ignored: zoh mode'
         sf = self.safety.frame_id
@@ -132,8 +135,13 @@ class ForceInput:
                 'ticks_free': r.ticks_free, 'ticks_no_model': r.ticks_none, 'models': r.models,
                 'models_rejected': r.rejected, 'stiffness_clamped': r.stiffness_clamped,
                 'rejected_stale': s.rejected_stale, 'rejected_future': s.rejected_future,
-                'rejected_unknown_stamp': s.rejected_unknown}
+                'rejected_unknown_stamp': s.rejected_unknown,
+                'commands_received': self.commands_received,
+                'models_received': self.models_received}
 
     def reset_stats(self) -> None:
+        """Start a new measurement window (tick counts, received counts, stamp rejections)."""
         self.renderer.reset_stats()
+        self.commands_received = self.models_received = 0
+        self.stamps.stats = type(self.stamps.stats)()
 
