@@ -74,10 +74,11 @@ def trace_report(trace: str | Path, params_files=()) -> dict:
     st = meta.get('stats', {})
     F, contact = ideal_forces(rows[:, 1:4], params_files)
     err = force_error(rows[:, 4:7], F, contact, max_force=meta.get('max_force', math.inf))
-    secs = st.get('seconds') or 0.0
+    # the trace and the received counts start at the first command (the driver resets them)
+    secs = float(rows[-1, 0] - rows[0, 0]) if len(rows) > 1 else 0.0
     rate = lambda k: round(st[k] / secs, 1) if secs > 0 and k in st else None  # noqa: E731
     r = {'force_mode': st.get('mode'),
-         'rates_hz': {'falcon/measured_cp': round(st.get('rate_hz', 0.0), 1),
+         'rates_hz': {'falcon/measured_cp': round((len(rows) - 1) / secs, 1) if secs else None,
                       'falcon/servo_cf': rate('commands_received'),
                       'falcon/servo_cf_local': rate('models_received')},
          **{k: st.get(k) for k in ('latency_p50_ms', 'latency_p99_ms', 'latency_max_ms',

@@ -239,11 +239,12 @@ class FalconDriver(Node):
     def _accepted(self, now: float, stamp) -> None:
         if self.first_command is None:
             self.first_command = now
-            if self.run_duration > 0:  # measure from the first command on
+            # the trace and the model statistics measure the loop from the first command on
+            self.input.reset_stats()
+            if self.servo.trace is not None:
+                self.servo.trace.clear()
+            if self.run_duration > 0:  # so do the loop statistics
                 self.servo.stats.reset()
-                self.input.reset_stats()
-                if self.servo.trace is not None:
-                    self.servo.trace.clear()
         self.servo.stats.latency((time.time_ns() - stamp_ns(stamp)) * 1e-9)
 
     def summary(self) -> dict:
