@@ -330,3 +330,59 @@ def test_trace_roundtrip(tmp_path):
     (tmp_path / 'bad.npz').write_bytes(b'nope')
     with pytest.raises(ValueError, match='bad.npz'):
         load_trace(tmp_path / 'bad.npz')
+
+
+@pytest.fixture(scope='module')
+def default_model():
+    from haptic_anfis.nodes.force_server import load_model
+    return load_model({'model_path': ''})[1]
+
+
+@pytest.mark.parametrize('seed', range(3))
+def test_force_server_local_model_matches_finite_differences(default_model, seed):
+    """The published K (analytic Jacobian through the geometry) equals central differences of
+    the model through the same geometry; F0 is the model's force; p0 = contact + depth d."""
+    from haptic_anfis.device.local_model import force_and_jacobian_fd
+    from haptic_anfis.nodes import interfaces as ifc
+    from haptic_anfis.nodes.force_server import local_model_from_contact
+    rng = np.random.default_rng(seed)
+    c = np.array([0.035, *rng.uniform(-0.02, 0.02, 2)])
+    n = unit([1.0, *rng.uniform(-0.4, 0.4, 2)])
+    d = np.array([-1.0, 0.0, 0.0])
+    depth = rng.uniform(0.003, 0.012)
+    v = [*c, depth, *d, 1.0, 0.0, *n]
+    F, lm, err = local_model_from_contact(default_model, v)
+    assert err is None
+    np.testing.assert_allclose(F, default_model.predict_one(*c, depth), atol=1e-12)
+    np.testing.assert_allclose(lm[ifc.LM_P0], c + depth * d, atol=1e-15)
+    _, Jfd = force_and_jacobian_fd(default_model, *c, depth)
+    K = np.array(lm[ifc.LM_K]).reshape(3, 3)
+    np.testing.assert_allclose(K, contact_jacobian(Jfd, n, d), rtol=1e-3, atol=0.5)
+    m = ifc.local_model_from_values(lm)
+    assert m.in_contact and m.depth0 == depth
+    # the older 9-value contact: normal taken as -direction
+    F9, lm9, err9 = local_model_from_contact(default_model, v[:9])
+    assert err9 is None and lm9[ifc.LM_N] == [1.0, -0.0, -0.0]
+    # saturated: the depth column does not count
+    vs = list(v)
+    vs[ifc.I_SATURATED] = 1.0
+    Ks = np.array(local_model_from_contact(default_model, vs)[1][ifc.LM_K]).reshape(3, 3)
+    J0 = Jfd.copy()
+    J0[:, 3] = 0.0
+    np.testing.assert_allclose(Ks, contact_jacobian(J0, n, d), rtol=1e-3, atol=0.5)
+
+
+def test_force_server_local_model_without_contact_or_bad(default_model):
+    from haptic_anfis.nodes import interfaces as ifc
+    from haptic_anfis.nodes.force_server import local_model_from_contact
+    free = [0.05, 0.0, 0.0, 0.0, -1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]
+    F, lm, err = local_model_from_contact(default_model, free)
+    assert F == (0.0, 0.0, 0.0) and err is None and lm[ifc.LM_DEPTH] == 0.0
+    assert not ifc.local_model_from_values(lm).in_contact
+    bad = [math.nan, 0.0, 0.0, 0.005, -1.0, 0.0, 0.0, 1.0, 0.0, 1.0, 0.0, 0.0]
+    F, lm, err = local_model_from_contact(default_model, bad)
+    assert F == (0.0, 0.0, 0.0) and 'non-finite' in err and lm[ifc.LM_DEPTH] == 0.0
+    F, lm, err = local_model_from_contact(default_model, [1.0] * 5)
+    assert F == (0.0, 0.0, 0.0) and 'expected 12' in err
+    with pytest.raises(ValueError, match='expected 26'):
+        ifc.local_model_from_values([0.0] * 3)
