@@ -123,7 +123,7 @@ class ForceInput:
         cur = self.renderer.model
         if cur is not None and t_pose < cur.time:
             return 'ignored: older than the current model'
-        self.renderer.offer(replace(m, time=t_pose))
+        self.renderer.offer(replace(m, time=t_pose), checked=True)
         self.last_in_contact = m.in_contact
         return OK
 
