@@ -33,6 +33,7 @@ from ..device import (HandParams, PalpationScript, SafetyLayer, ServoLoop, Simul
 from ..device.force_input import MODES, ForceInput
 from ..device.local_model import FALCON_MAX_STIFFNESS, STATUS_NAMES
 from ..device.safety import OK
+from ..device.stamps import STALE
 from ..device.trace import TickTrace, save_trace
 from . import interfaces as ifc
 from ._common import (LOOP_QOS, Param, config_file, declare_parameters, finite_vector,
@@ -213,14 +214,13 @@ class FalconDriver(Node):
         f = msg.wrench.force
         why = self.input.command((f.x, f.y, f.z), stamp_ns(msg.header.stamp),
                                  msg.header.frame_id, now)
+        if self.input.mode == 'zoh':
+            self._arrived(why, msg.header.stamp)
         if why != OK:
             self.get_logger().warning(f'force command {why}: ({f.x}, {f.y}, {f.z}) in frame '
                                       f'{msg.header.frame_id!r}; '
                                       + ('not taken' if 'stamp' in why else 'applying zero force'),
                                       throttle_duration_sec=1.0)
-            return
-        if self.input.mode == 'zoh':
-            self._accepted(now, msg.header.stamp)
 
     def _on_local_model(self, msg: JointState) -> None:
         now = time.monotonic()
@@ -231,13 +231,16 @@ class FalconDriver(Node):
             self.input.renderer.clear()
             self.safety.reject(f'rejected: {exc}')
             why = f'rejected: {exc}'
+        self._arrived(why, msg.header.stamp)
         if why != OK:
             self.get_logger().warning(f'local force model {why}', throttle_duration_sec=1.0)
-            return
-        self._accepted(now, msg.header.stamp)
 
-    def _accepted(self, now: float, stamp) -> None:
-        if self.first_command is None:
+    def _arrived(self, why: str, stamp) -> None:
+        """Latency of every command (zoh) / model (local_model) answering a known pose, taken or
+        refused as stale (so the figures are not cut at the age limit); the measurement window
+        opens at the first one taken."""
+        if why == OK and self.first_command is None:
+            now = time.monotonic()
             self.first_command = now
             # the trace and the model statistics measure the loop from the first command on
             self.input.reset_stats()
@@ -245,7 +248,8 @@ class FalconDriver(Node):
                 self.servo.trace.clear()
             if self.run_duration > 0:  # so do the loop statistics
                 self.servo.stats.reset()
-        self.servo.stats.latency((time.time_ns() - stamp_ns(stamp)) * 1e-9)
+        if self.first_command is not None and (why == OK or why.endswith(STALE)):
+            self.servo.stats.latency((time.time_ns() - stamp_ns(stamp)) * 1e-9)
 
     def summary(self) -> dict:
         s = self.servo.stats.summary()
