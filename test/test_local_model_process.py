@@ -37,8 +37,9 @@ def press_script(tmp_path):
 @pytest.mark.parametrize('mode', ['local_model', 'zoh'])
 def test_force_follows_a_press_through_a_delayed_force_server(tmp_path, mode):
     """Every force command / model arrives 20 ms late, past the 10 ms watchdog. The local model
-    follows the press (never zero while pressing, close to the ideal force, no watchdog trip in
-    contact); the zero-order hold refuses every command as stale and renders nothing."""
+    follows the press (once risen, never zero while pressing; close to the ideal force; no
+    watchdog trip in contact); the zero-order hold refuses every command as stale and renders
+    nothing."""
     domain = next(_domains)
     trace = tmp_path / 'trace.npz'
     procs = {}
@@ -49,7 +50,9 @@ def test_force_follows_a_press_through_a_delayed_force_server(tmp_path, mode):
                                            tmp_path / 'contact_detector.log')
         procs['falcon_driver'] = launch('falcon_driver', [
             '-p', f'palpation_script:={press_script(tmp_path)}', '-p', f'force_mode:={mode}',
-            '-p', f'trace_path:={trace}', '-p', 'run_duration:=4.0'], domain,
+            '-p', f'trace_path:={trace}', '-p', 'run_duration:=4.0',
+            # 0.2 s: the 20 ms delay plus this shared machine's scheduling (p99 ~50 ms at load 25)
+            '-p', 'model_validity_time:=0.2'], domain,
             tmp_path / 'falcon_driver.log')
         procs['falcon_driver'].wait(240)
     finally:
@@ -66,9 +69,17 @@ def test_force_follows_a_press_through_a_delayed_force_server(tmp_path, mode):
     if mode == 'zoh':
         assert fa.max() == 0.0 and st['rejected_stale'] > 100, st
         return
-    assert fa[pressing].min() > 0.5, fa[pressing].min()  # never dropped to zero while pressing
-    err = np.linalg.norm(rows[:, 4:7] - F, axis=1)[pressing]
-    assert np.sqrt(np.mean(err ** 2)) < 0.1 * np.sqrt(np.mean(fi[pressing] ** 2)), st
+    # Onset: the first in-contact model arrives >= 20 ms after contact (a model computed out of
+    # contact renders zero). Once the force has risen in a press it never drops to zero.
+    held = np.zeros(len(rows), dtype=bool)
+    risen = False
+    for i in range(len(rows)):
+        risen = pressing[i] and (risen or fa[i] > 0.5)
+        held[i] = risen
+    assert held.sum() > 0.8 * pressing.sum(), (held.sum(), pressing.sum())
+    assert fa[held].min() > 0.5, fa[held].min()
+    err = np.linalg.norm(rows[:, 4:7] - F, axis=1)[held]
+    assert np.sqrt(np.mean(err ** 2)) < 0.1 * np.sqrt(np.mean(fi[held] ** 2)), st
     assert st['watchdog_trips_in_contact'] == 0 and st['ticks_extrapolated'] > 200, st
     assert st['ticks_fresh'] == 0  # every model was >= 20 ms old: all ticks extrapolated
 
