@@ -221,7 +221,7 @@ class StillDevice:
 
 @pytest.mark.parametrize('mode', ['zoh', 'local_model'])
 def test_stall_and_kill(mode):
-    """Issue 22: the driver applies ~4.3 N, is paused (no servo tick) for 1 s during which the
+    """Issue 22: the driver applies 9.5 N, is paused (no servo tick) for 1 s during which the
     force server sends commands answering its old poses and dies; on resume the queued commands
     arrive. No force above 0.05 N after the resume."""
     mapping = WorkspaceMapping(1.0, (0.0, 0.0, 0.0), 1.0)
@@ -241,7 +241,7 @@ def test_stall_and_kill(mode):
                       render=fi.render)
     servo.start()
     n = np.array([1.0, 0, 0])
-    F0 = np.array([4.34, 0.0, 0.0])
+    F0 = np.array([9.5, 0.0, 0.0])  # more than one max_dt ramp step (5 N) above zero
     lm = make(F0, p, -500 * np.outer(n, n), (0, 0, 0), n, -n, 0.004, zero=True)
 
     def answer(stamp, now):  # what the force server sends for the pose `stamp`
@@ -253,7 +253,7 @@ def test_stall_and_kill(mode):
         clock[0] = i * 0.001
         servo.tick(clock[0])
         answer(stamps[-1], clock[0] + 0.0005)
-    assert np.linalg.norm(dev.forces[-1]) == pytest.approx(4.34, abs=0.01)
+    assert np.linalg.norm(dev.forces[-1]) == pytest.approx(9.5, abs=0.01)
     late = stamps[-5:]  # poses answered while the driver was paused; the server then died
     clock[0] = 1.1  # resume: 1 s later
     for s in late:  # the queued commands arrive before the first tick ...

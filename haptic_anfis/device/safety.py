@@ -9,7 +9,9 @@ tick. Rules, in order:
    stays there until the next valid command.
 3. Watchdog: when the newest valid command is older than ``watchdog_timeout`` seconds, the target
    becomes zero and the output ramps down to it at the rate limit (``max_force / max_force_rate``
-   seconds from full force: 10 ms with the defaults). The next valid command re-arms it. A
+   seconds from full force: 10 ms with the defaults); if the caller itself was stalled longer than
+   the timeout since the previous output (a paused process), the output is zero at once: the
+   ramp's time has passed already. The next valid command re-arms it. A
    command's time is the time the caller gives :meth:`SafetyLayer.command`: the driver gives the
    time of its own pose the command answers (its stamp's age, issue 22), not its arrival; a
    command older than the current one is ignored (out of order).
@@ -152,7 +154,8 @@ class SafetyLayer:
             if not self._enabled:
                 return (0.0, 0.0, 0.0)
             last = self._last_out if self._last_out is not None else now
-            dt = min(max(now - last, 0.0), self.max_dt)
+            gap = now - last
+            dt = min(max(gap, 0.0), self.max_dt)
             self._last_out = now
             age = math.inf if self._last_cmd is None else now - self._last_cmd
             if age > self.watchdog_timeout:
@@ -162,6 +165,10 @@ class SafetyLayer:
                         self.stats.watchdog_trips_in_contact += 1
                 self._tripped = True
                 self._target = (0.0, 0.0, 0.0)
+                if gap > self.watchdog_timeout:
+                    # The caller itself stalled longer than the watchdog (a paused process): the
+                    # ramp's time has passed already; zero now, not a ramp from a stale force.
+                    self._out = (0.0, 0.0, 0.0)
             tx, ty, tz = self._target
             tn = math.sqrt(tx * tx + ty * ty + tz * tz)
             if tn > self.max_force:
