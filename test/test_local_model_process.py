@@ -20,6 +20,9 @@ pytest.importorskip('rclpy')
 from haptic_anfis.commands.loop import ideal_forces  # noqa: E402
 from haptic_anfis.device.trace import load_trace  # noqa: E402
 
+from geometry_msgs.msg import WrenchStamped  # noqa: E402
+
+from haptic_anfis.nodes import interfaces as ifc  # noqa: E402
 from test_nodes_process import Observer, _domains, launch, stop  # noqa: E402
 
 pytestmark = pytest.mark.ros
@@ -43,6 +46,9 @@ def test_force_follows_a_press_through_a_delayed_force_server(tmp_path, mode):
     domain = next(_domains)
     trace = tmp_path / 'trace.npz'
     procs = {}
+    obs = Observer(domain)
+    commands = []
+    obs.node.create_subscription(WrenchStamped, ifc.TOPIC_COMMAND, commands.append, 100)
     try:
         procs['force_server'] = launch('force_server', ['-p', 'delay:=0.02'], domain,
                                        tmp_path / 'force_server.log')
@@ -50,14 +56,15 @@ def test_force_follows_a_press_through_a_delayed_force_server(tmp_path, mode):
                                            tmp_path / 'contact_detector.log')
         procs['falcon_driver'] = launch('falcon_driver', [
             '-p', f'palpation_script:={press_script(tmp_path)}', '-p', f'force_mode:={mode}',
-            '-p', f'trace_path:={trace}', '-p', 'run_duration:=4.0',
+            '-p', f'trace_path:={trace}',
             # 0.2 s: the 20 ms delay plus this shared machine's scheduling (p99 ~50 ms at load 25)
-            '-p', 'model_validity_time:=0.2'], domain,
-            tmp_path / 'falcon_driver.log')
-        procs['falcon_driver'].wait(240)
+            '-p', 'model_validity_time:=0.2'], domain, tmp_path / 'falcon_driver.log')
+        # ~4 s of commands (the zoh driver takes none, so it cannot time its own run)
+        assert obs.wait(lambda: len(commands) > 2000, 240.0), 'the graph did not run'
     finally:
         for p in procs.values():
-            stop(p)
+            stop(p)  # the driver writes its trace
+        obs.close()
     log = (tmp_path / 'falcon_driver.log').read_text()
     assert trace.is_file(), log[-3000:]
     rows, meta = load_trace(trace)
@@ -77,7 +84,8 @@ def test_force_follows_a_press_through_a_delayed_force_server(tmp_path, mode):
         risen = pressing[i] and (risen or fa[i] > 0.5)
         held[i] = risen
     assert held.sum() > 0.8 * pressing.sum(), (held.sum(), pressing.sum())
-    assert fa[held].min() > 0.5, fa[held].min()
+    drops = np.flatnonzero(held & (fa <= 0.5))
+    assert not len(drops), (drops[:10], rows[drops[:10], 7], fi[drops[:10]], st)
     err = np.linalg.norm(rows[:, 4:7] - F, axis=1)[held]
     assert np.sqrt(np.mean(err ** 2)) < 0.1 * np.sqrt(np.mean(fi[held] ** 2)), st
     assert st['watchdog_trips_in_contact'] == 0 and st['ticks_extrapolated'] > 200, st
