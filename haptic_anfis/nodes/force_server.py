@@ -174,12 +174,26 @@ class ForceServer(Node):
             self.pub_lm.publish(lm)
 
     def _delay_line(self) -> None:
-        """TESTS ONLY (``delay`` > 0): publish each output ``delay`` seconds after it was made."""
+        """TESTS ONLY (``delay`` > 0): publish each output ``delay`` seconds after it was made.
+        Outputs already due together go out as the newest one only (the loop topics keep the
+        last sample anyway), so a late wake-up on a loaded machine cannot build a backlog."""
+        pending = None
         while True:
-            due, out, lm = self._delayed.get()
-            wait = due - time.monotonic()
+            item = pending if pending is not None else self._delayed.get()
+            pending = None
+            wait = item[0] - time.monotonic()
             if wait > 0:
                 time.sleep(wait)
+            while True:  # skip to the newest output that is due
+                try:
+                    nxt = self._delayed.get_nowait()
+                except queue.Empty:
+                    break
+                if nxt[0] > time.monotonic():
+                    pending = nxt
+                    break
+                item = nxt
+            _, out, lm = item
             try:
                 self.pub.publish(out)
                 if lm is not None:
