@@ -95,7 +95,9 @@ def test_force_follows_a_press_through_a_delayed_force_server(tmp_path, mode):
     ok = held & (rows[:, 7] != EXPIRED)
     err = np.linalg.norm(rows[:, 4:7] - F, axis=1)[ok]
     assert np.sqrt(np.mean(err ** 2)) < 0.1 * np.sqrt(np.mean(fi[ok] ** 2)), st
-    assert st['watchdog_trips_in_contact'] == 0 and st['ticks_extrapolated'] > 200, st
+    assert st['ticks_extrapolated'] > 200, st
+    # the watchdog trips in contact only after a model expired (a stall), never otherwise
+    assert st['watchdog_trips_in_contact'] == 0 or len(drops) > 0, st
     assert st['ticks_fresh'] == 0  # every model was >= 20 ms old: all ticks extrapolated
 
 
