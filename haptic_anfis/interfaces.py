@@ -13,6 +13,8 @@ topic                      type                            meaning
 ``falcon/buttons``         sensor_msgs/Joy                 device buttons (0/1)
 ``falcon/servo_cf``        geometry_msgs/WrenchStamped     force command to the device, tissue
                                                            frame [N] (CRTK servo_cf)
+``falcon/servo_cf_local``  sensor_msgs/JointState          local force model at the contact,
+                                                           packed as below; with every servo_cf
 ``contact``                sensor_msgs/JointState          contact, packed as below
 ``visualization/markers``  visualization_msgs/MarkerArray  probe, contact point, force arrow,
                                                            tumours; ~30 Hz
@@ -31,19 +33,75 @@ stamp of the pose it was computed from, ``header.frame_id`` the tissue frame; ``
 - ``in_contact``: 1.0 in contact, 0.0 not.
 - ``saturated``: 1.0 when the probe is deeper than the tissue is thick (or ``max_depth``), the
   depth then being held at that limit.
+- ``normal_x/y/z``: outward unit surface normal at the contact point (zeros when not in contact).
+  Added after the first nine: readers accept the older 9-value messages (:data:`N_CONTACT_V1`).
+
+Local force model message (``sensor_msgs/JointState`` on ``falcon/servo_cf_local``, published by
+the force server with every ``falcon/servo_cf``, same stamp: the contact's, i.e. the driver's pose
+it answers; ``header.frame_id`` the tissue frame; ``name`` is exactly :data:`LOCAL_MODEL_FIELDS`,
+``position[i]`` holds that field). The driver renders F(p) = F0 + K (p - p0) at every servo tick
+(:mod:`haptic_anfis.device.local_model`):
+
+- ``f0_x/y/z`` [N]: the model's force at the contact (= the servo_cf force).
+- ``p0_x/y/z`` [m]: probe position it was computed at (contact point + depth * direction).
+- ``k_xx, k_xy, ... k_zz`` [N/m]: row-major K = dF/dp through the contact geometry (row = force
+  component, column = position component), unconditioned (the driver symmetrises and clamps).
+- ``contact_x/y/z`` [m], ``normal_x/y/z``, ``direction_x/y/z``, ``depth`` [m]: as in the contact
+  message; depth 0 = no contact (the driver renders zero force).
+- ``zero_at_surface``: 1.0 when the model's force at depth 0 at the contact point is below
+  :data:`ZERO_FORCE_TOL` (the driver then makes the local model zero on the surface).
 """
 from __future__ import annotations
 
 CONTACT_FIELDS = ('contact_x', 'contact_y', 'contact_z', 'depth', 'direction_x', 'direction_y',
-                  'direction_z', 'in_contact', 'saturated')
-(I_X, I_Y, I_Z, I_DEPTH, I_DX, I_DY, I_DZ, I_IN_CONTACT, I_SATURATED) = range(len(CONTACT_FIELDS))
+                  'direction_z', 'in_contact', 'saturated', 'normal_x', 'normal_y', 'normal_z')
+(I_X, I_Y, I_Z, I_DEPTH, I_DX, I_DY, I_DZ, I_IN_CONTACT, I_SATURATED, I_NX, I_NY,
+ I_NZ) = range(len(CONTACT_FIELDS))
+#: values in a contact message before the normal was added (still accepted by readers)
+N_CONTACT_V1 = 9
+
+
+def is_contact_values(v) -> bool:
+    """``v`` has the length of a contact message (current or the older 9-value layout)."""
+    return len(v) in (len(CONTACT_FIELDS), N_CONTACT_V1)
+
+
+LOCAL_MODEL_FIELDS = ('f0_x', 'f0_y', 'f0_z', 'p0_x', 'p0_y', 'p0_z',
+                      'k_xx', 'k_xy', 'k_xz', 'k_yx', 'k_yy', 'k_yz', 'k_zx', 'k_zy', 'k_zz',
+                      'contact_x', 'contact_y', 'contact_z', 'normal_x', 'normal_y', 'normal_z',
+                      'direction_x', 'direction_y', 'direction_z', 'depth', 'zero_at_surface')
+#: slices of LOCAL_MODEL_FIELDS
+LM_F0, LM_P0, LM_K, LM_C, LM_N, LM_D = (slice(0, 3), slice(3, 6), slice(6, 15), slice(15, 18),
+                                        slice(18, 21), slice(21, 24))
+LM_DEPTH, LM_ZERO = 24, 25
+#: |F| [N] at depth 0 below which a model counts as zero at the surface
+ZERO_FORCE_TOL = 0.05
 
 TOPIC_POSE = 'falcon/measured_cp'
 TOPIC_TWIST = 'falcon/measured_cv'
 TOPIC_APPLIED = 'falcon/measured_cf'
 TOPIC_BUTTONS = 'falcon/buttons'
 TOPIC_COMMAND = 'falcon/servo_cf'
+TOPIC_LOCAL_MODEL = 'falcon/servo_cf_local'
 TOPIC_CONTACT = 'contact'
 TOPIC_MARKERS = 'visualization/markers'
 TOPIC_TISSUE = 'visualization/tissue'
 SERVICE_RELOAD = '/force_server/reload'
+
+
+def local_model_from_values(v, frame_time: float = 0.0):
+    """A :class:`haptic_anfis.device.local_model.LocalModel` from a local force model message's
+    ``position`` values (:data:`LOCAL_MODEL_FIELDS`); ``time`` is ``frame_time`` (the driver sets
+    the time of the pose it answers).
+
+    Raises:
+        ValueError: not exactly len(LOCAL_MODEL_FIELDS) values.
+    """
+    from .device.local_model import LocalModel
+    if len(v) != len(LOCAL_MODEL_FIELDS):
+        raise ValueError(f'local force model message with {len(v)} values, expected '
+                         f'{len(LOCAL_MODEL_FIELDS)} ({", ".join(LOCAL_MODEL_FIELDS)})')
+    v = [float(c) for c in v]
+    return LocalModel(f0=tuple(v[LM_F0]), p0=tuple(v[LM_P0]), k=v[LM_K], contact=tuple(v[LM_C]),
+                      normal=tuple(v[LM_N]), direction=tuple(v[LM_D]), depth0=v[LM_DEPTH],
+                      zero_at_surface=v[LM_ZERO] > 0.5, time=frame_time)

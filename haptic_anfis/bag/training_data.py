@@ -42,7 +42,7 @@ def dataset_from_bag(path: str | Path, contact_topic: str = ifc.TOPIC_CONTACT,
         stamp = _ns(msg.header.stamp)
         if topic == ct:
             v = msg.position
-            if (len(v) == len(ifc.CONTACT_FIELDS) and v[ifc.I_IN_CONTACT] > 0.5
+            if (ifc.is_contact_values(v) and v[ifc.I_IN_CONTACT] > 0.5
                     and v[ifc.I_DEPTH] > 0.0):
                 contacts[stamp] = (v[ifc.I_X], v[ifc.I_Y], v[ifc.I_Z], v[ifc.I_DEPTH])
         else:

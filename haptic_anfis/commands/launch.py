@@ -68,6 +68,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument('--ready-timeout', type=float, default=300.0,
                    help='seconds to wait for the nodes to start and the first force command to '
                         'reach the driver (default 300: a cold numba compile on a busy machine)')
+    p.add_argument('--json', action='store_true',
+                   help='end with the loop report (haptic-anfis loop) as one JSON object on the '
+                        'last line')
 
 
 def _check(args: argparse.Namespace, known: tuple[str, ...]) -> list[str]:
@@ -93,6 +96,7 @@ def _check(args: argparse.Namespace, known: tuple[str, ...]) -> list[str]:
 
 def run(args: argparse.Namespace) -> int:
     from ..launch import Supervisor, node_env, node_names, renamed_output
+    from .loop import launch_trace_path, print_launch_report
 
     names = _check(args, node_names())
     ros_args = [a for f in args.params_file for a in ('--params-file', str(Path(f).resolve()))]
@@ -130,6 +134,7 @@ def run(args: argparse.Namespace) -> int:
         f"/{args.enclave_root.strip('/')}/launch_monitor" if args.enclave_root else None))
     sup = Supervisor(env, log_dir, max_restarts=args.max_restarts)
     order = sorted(extra, key=lambda n: ORDER.index(n) if n in ORDER else len(ORDER))
+    trace = launch_trace_path(extra, log_dir)  # the loop report at the end
     t0 = time.monotonic()
     failed: list[tuple[str, int]] = []
     codes: dict[str, int] = {}
@@ -225,6 +230,7 @@ def run(args: argparse.Namespace) -> int:
     for n in reversed(order):
         if n in codes:
             print(f'stopped {n:<17} exit code {codes[n]}', flush=True)
+    print_launch_report(trace, args.params_file, args.json)
     if failed:
         print('launch failed: ' + ', '.join(f'{n} (code {c})' for n, c in failed), flush=True)
         return 1

@@ -7,9 +7,14 @@ tick. Rules, in order:
 2. A command holding NaN/Inf, or stamped in a frame other than ``frame_id``, is rejected: the
    target becomes zero and the output drops to zero at once (zero is the safe state; no ramp), and
    stays there until the next valid command.
-3. Watchdog: when no valid command arrived for ``watchdog_timeout`` seconds, the target becomes zero
-   and the output ramps down to it at the rate limit (``max_force / max_force_rate`` seconds from
-   full force: 10 ms with the defaults). The next valid command re-arms it.
+3. Watchdog: when the newest valid command is older than ``watchdog_timeout`` seconds, the target
+   becomes zero and the output ramps down to it at the rate limit (``max_force / max_force_rate``
+   seconds from full force: 10 ms with the defaults); if the caller itself was stalled longer than
+   the timeout since the previous output (a paused process), the output is zero at once: the
+   ramp's time has passed already. The next valid command re-arms it. A
+   command's time is the time the caller gives :meth:`SafetyLayer.command`: the driver gives the
+   time of its own pose the command answers (its stamp's age, issue 22), not its arrival; a
+   command older than the current one is ignored (out of order).
 4. Rate limit: the output vector moves towards the target by at most ``max_force_rate * dt``
    (``dt`` = time since the last output, capped at ``max_dt``).
 5. Clamp: the output's magnitude is at most ``max_force`` (direction kept).
@@ -24,8 +29,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-OK, REJECTED_NONFINITE, REJECTED_FRAME, IGNORED_DISABLED = (
-    'ok', 'rejected: non-finite force', 'rejected: wrong frame', 'ignored: disabled')
+OK, REJECTED_NONFINITE, REJECTED_FRAME, IGNORED_DISABLED, IGNORED_OLDER = (
+    'ok', 'rejected: non-finite force', 'rejected: wrong frame', 'ignored: disabled',
+    'ignored: older than the current command')
 
 
 @dataclass
@@ -35,6 +41,7 @@ class SafetyStats:
     rejected_nonfinite: int = 0
     rejected_frame: int = 0
     watchdog_trips: int = 0
+    watchdog_trips_in_contact: int = 0  # trips while a non-zero force was commanded
     clamped: int = 0  # outputs whose target exceeded max_force
     max_output: float = 0.0  # largest output magnitude [N]
     last_reject: str = field(default='')
@@ -98,8 +105,10 @@ class SafetyLayer:
             self._target = self._out = (0.0, 0.0, 0.0)
 
     # -- input ----------------------------------------------------------------------------------
-    def command(self, force, now: float, frame_id: str | None = None) -> str:
-        """Offer a force command (3,) [N] received at ``now``; returns OK or why it was refused."""
+    def command(self, force, now: float, frame_id: str | None = None, count: bool = True) -> str:
+        """Offer a force command (3,) [N] whose time is ``now`` (the time of the pose it answers,
+        or its arrival); returns OK or why it was refused. ``count=False``: not counted in
+        ``stats.commands`` (the local model feeds its force every servo tick)."""
         try:
             fx, fy, fz = (float(v) for v in force)
         except (TypeError, ValueError):
@@ -107,7 +116,8 @@ class SafetyLayer:
         with self._lock:
             if not self._enabled:
                 return IGNORED_DISABLED
-            self.stats.commands += 1
+            if count:
+                self.stats.commands += 1
             if not math.isfinite(fx + fy + fz) or not all(map(math.isfinite, (fx, fy, fz))):
                 self.stats.rejected_nonfinite += 1
                 self._fault(REJECTED_NONFINITE)
@@ -116,10 +126,21 @@ class SafetyLayer:
                 self.stats.rejected_frame += 1
                 self._fault(f'{REJECTED_FRAME} {frame_id!r} (expected {self.frame_id!r})')
                 return REJECTED_FRAME
+            if self._last_cmd is not None and now < self._last_cmd:
+                return IGNORED_OLDER
             self._target = (fx, fy, fz)
             self._last_cmd = now
             self._tripped = False
             return OK
+
+    def reject(self, why: str) -> None:
+        """A non-finite input from elsewhere (e.g. a local force model): counted as a non-finite
+        command, and the output drops to zero at once as for one."""
+        with self._lock:
+            if not self._enabled:
+                return
+            self.stats.rejected_nonfinite += 1
+            self._fault(why)
 
     def _fault(self, why: str) -> None:
         self._target = self._out = (0.0, 0.0, 0.0)
@@ -133,14 +154,21 @@ class SafetyLayer:
             if not self._enabled:
                 return (0.0, 0.0, 0.0)
             last = self._last_out if self._last_out is not None else now
-            dt = min(max(now - last, 0.0), self.max_dt)
+            gap = now - last
+            dt = min(max(gap, 0.0), self.max_dt)
             self._last_out = now
             age = math.inf if self._last_cmd is None else now - self._last_cmd
             if age > self.watchdog_timeout:
                 if not self._tripped and self._last_cmd is not None:
                     self.stats.watchdog_trips += 1
+                    if self._target != (0.0, 0.0, 0.0):
+                        self.stats.watchdog_trips_in_contact += 1
                 self._tripped = True
                 self._target = (0.0, 0.0, 0.0)
+                if gap > self.watchdog_timeout:
+                    # The caller itself stalled longer than the watchdog (a paused process): the
+                    # ramp's time has passed already; zero now, not a ramp from a stale force.
+                    self._out = (0.0, 0.0, 0.0)
             tx, ty, tz = self._target
             tn = math.sqrt(tx * tx + ty * ty + tz * tz)
             if tn > self.max_force:

@@ -1,7 +1,9 @@
 """The servo loop: its own thread, fixed period, absolute deadlines (no ROS).
 
-Each tick: read the device, hand the reading to ``on_state`` (the driver publishes it), ask the
-safety layer for the force and write it to the device. Sleeping to absolute deadlines absorbs
+Each tick: read the device, hand the reading to ``on_state`` (the driver publishes it), let
+``render`` offer the safety layer this tick's force (the local force model, evaluated at this
+tick's position), ask the safety layer for the force and write it to the device; optionally append
+the tick to a :class:`~.trace.TickTrace`. Sleeping to absolute deadlines absorbs
 ``time.sleep`` overshoot; a tick that starts more than a period late counts as a deadline miss and
 the schedule re-synchronises (no burst of catch-up ticks). On exit the safety layer is stopped and
 the device gets zero force.
@@ -15,6 +17,7 @@ from typing import Callable
 from .falcon import Device, DeviceState
 from .safety import SafetyLayer
 from .stats import LoopStats
+from .trace import TickTrace
 
 
 class ServoLoop:
@@ -22,15 +25,20 @@ class ServoLoop:
 
     ``on_state(state, force, now)`` runs on the servo thread after each read; ``force`` is the
     force applied in the previous tick (device frame). Exceptions in it are counted and the loop
-    keeps running (``errors``; the last one in ``last_error``).
+    keeps running (``errors``; the last one in ``last_error``). ``render(state, now) -> int``
+    runs next (same error handling) and returns the tick's status code, kept in ``status`` and
+    written to ``trace`` (a :class:`~.trace.TickTrace`, or None) with the applied force.
     """
 
     def __init__(self, device: Device, safety: SafetyLayer, rate: float = 1000.0,
                  on_state: Callable[[DeviceState, tuple, float], None] | None = None,
-                 clock: Callable[[], float] = time.monotonic):
+                 clock: Callable[[], float] = time.monotonic,
+                 render: Callable[[DeviceState, float], int] | None = None,
+                 trace: TickTrace | None = None):
         if not rate > 0:
             raise ValueError(f'rate: expected > 0 Hz, got {rate!r}')
         self.device, self.safety, self.on_state, self.clock = device, safety, on_state, clock
+        self.render, self.trace, self.status = render, trace, -1
         self.period = 1.0 / rate
         self.stats = LoopStats(period=self.period)
         self.errors = 0
@@ -67,9 +75,17 @@ class ServoLoop:
             except Exception as exc:  # a publishing hiccup must not stop the servo
                 self.errors += 1
                 self.last_error = exc
+        if self.render is not None:
+            try:
+                self.status = self.render(state, now)
+            except Exception as exc:  # as above: the safety layer's watchdog covers a failure
+                self.errors += 1
+                self.last_error = exc
         f = self.safety.output(now)
         self.device.write(f)
         self.force = f
+        if self.trace is not None:
+            self.trace.add(now, state.position, f, self.status)
         n = (f[0] * f[0] + f[1] * f[1] + f[2] * f[2]) ** 0.5
         if n > self.stats.max_force:
             self.stats.max_force = n

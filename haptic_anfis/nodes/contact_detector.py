@@ -81,10 +81,11 @@ def contact_values(tracker: ContactTracker, frame_id: str, pose_frame: str, xyz)
     except ValueError as exc:  # NaN/Inf pose: tracker reset, no contact
         tracker.reset()
         return [0.0] * len(ifc.CONTACT_FIELDS), None, str(exc)
-    cp, dv = c.contact_point, c.direction
+    cp, dv, nv = c.contact_point, c.direction, c.normal
     return [float(cp[0]), float(cp[1]), float(cp[2]), float(c.depth),
             float(dv[0]), float(dv[1]), float(dv[2]),
-            1.0 if c.in_contact else 0.0, 1.0 if c.saturated else 0.0], c, None
+            1.0 if c.in_contact else 0.0, 1.0 if c.saturated else 0.0,
+            float(nv[0]), float(nv[1]), float(nv[2])], c, None
 
 
 class ContactDetectorNode(Node):

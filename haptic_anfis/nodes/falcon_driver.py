@@ -3,11 +3,18 @@
 Publishes the tip pose (``falcon/measured_cp``), velocity (``falcon/measured_cv``), the force it
 applies (``falcon/measured_cf``, every ``measured_cf_every`` ticks) and the buttons
 (``falcon/buttons``, on change and every 100 ticks), all in the tissue frame; subscribes to the
-force command ``falcon/servo_cf`` (``geometry_msgs/WrenchStamped``, tissue frame) and applies the
-newest one through the safety layer (:class:`haptic_anfis.device.SafetyLayer`: clamp, rate limit,
-watchdog, NaN/wrong-frame rejection). The servo thread is not a ROS timer: it keeps its period
-whatever the executor is doing. Pose -> command latency (pose stamp to command arrival) and
-deadline misses are collected in :attr:`FalconDriver.servo` ``.stats``.
+force command ``falcon/servo_cf`` (``geometry_msgs/WrenchStamped``, tissue frame) and the local
+force model ``falcon/servo_cf_local`` (``sensor_msgs/JointState``, layout in
+:mod:`haptic_anfis.nodes.interfaces`). ``force_mode``: ``local_model`` (default) evaluates the
+newest local model at every servo tick's position; ``zoh`` holds the newest command (the
+zero-order hold). Either goes through the safety layer (:class:`haptic_anfis.device.SafetyLayer`:
+clamp, rate limit, watchdog, NaN/wrong-frame rejection). A command or model is judged by the age
+of the driver's own pose it answers (its stamp), not by its arrival; stale, future and unknown
+stamps are refused and counted (:class:`haptic_anfis.device.force_input.ForceInput`). The servo
+thread is not a ROS timer: it keeps its period whatever the executor is doing. Pose -> command
+latency (pose stamp to command arrival) and deadline misses are collected in
+:attr:`FalconDriver.servo` ``.stats``; ``trace_path`` writes every servo tick for the applied-force
+error (:mod:`haptic_anfis.device.force_error`).
 """
 from __future__ import annotations
 
@@ -16,14 +23,19 @@ import math
 import sys
 import time
 
+import numpy as np
 from geometry_msgs.msg import PoseStamped, TwistStamped, WrenchStamped
 from rclpy.node import Node
-from sensor_msgs.msg import Joy
+from sensor_msgs.msg import JointState, Joy
 
 from ..device import (HandParams, PalpationScript, SafetyLayer, ServoLoop, SimulatedFalcon,
                       WorkspaceMapping)
+from ..device.force_input import MODES, ForceInput
+from ..device.local_model import FALCON_MAX_STIFFNESS, STATUS_NAMES
 from ..device.safety import OK
 from ..device.start_gate import HeldScript
+from ..device.stamps import STALE
+from ..device.trace import TickTrace, save_trace
 from . import interfaces as ifc
 from ._common import (LOOP_QOS, Param, config_file, declare_parameters, finite_vector,
                       non_negative, one_of, positive, run_node, set_stamp, stamp_ns)
@@ -89,6 +101,17 @@ PARAMS = [
     Param('run_duration', 0.0, 'stop this long [s] after the first force command arrives, print '
           'the loop statistics as one JSON line on stdout and exit (0 = run until shut down)',
           non_negative),
+    Param('force_mode', 'local_model', "'local_model': render the force server's local force model "
+          "(F0 + K (p - p0)) at every servo tick; 'zoh': hold the newest force command "
+          '(zero-order hold)', one_of(*MODES)),
+    Param('model_validity_time', 0.05, 'local_model: a model older than this [s] (from its pose) '
+          'expires: the last force is held and the watchdog ramps it to zero', positive),
+    Param('model_validity_radius', 0.005, 'local_model: a probe further than this [m] (tissue '
+          'frame) from the model\'s position expires it', positive),
+    Param('max_stiffness', FALCON_MAX_STIFFNESS, 'local_model: stiffness bound [N/m] in the DEVICE '
+          'frame (3000.0: the Falcon figure CHAI3D uses); the model is clamped to it', positive),
+    Param('trace_path', '', "write every servo tick (time, position, applied force, model status) "
+          "and the loop statistics to this .npz file at shutdown ('' = no trace)"),
     Param('gil_switch_interval', 0.0002, "this process's Python thread switch interval [s]: how "
           'long another thread may hold the GIL before the servo thread gets it back (Python '
           'default 0.005; 0 = leave it)', non_negative),
@@ -123,12 +146,18 @@ class FalconDriver(Node):
             what = f'script {script_path} ({script.duration:.1f} s)'
         self.safety = SafetyLayer(p['max_force'], p['max_force_rate'], p['watchdog_timeout'],
                                   frame_id=self.frame_id)
+        self.input = ForceInput(self.safety, self.mapping, p['force_mode'], p['max_stiffness'],
+                                p['model_validity_time'], p['model_validity_radius'],
+                                1.0 / p['rate'])
         self.pub_pose = self.create_publisher(PoseStamped, ifc.TOPIC_POSE, LOOP_QOS)
         self.pub_twist = self.create_publisher(TwistStamped, ifc.TOPIC_TWIST, LOOP_QOS)
         self.pub_applied = self.create_publisher(WrenchStamped, ifc.TOPIC_APPLIED, LOOP_QOS)
         self.pub_buttons = self.create_publisher(Joy, ifc.TOPIC_BUTTONS, 10)
         self.sub_cmd = self.create_subscription(WrenchStamped, ifc.TOPIC_COMMAND, self._on_command,
                                                 LOOP_QOS)
+        if p['force_mode'] == 'local_model':
+            self.sub_lm = self.create_subscription(JointState, ifc.TOPIC_LOCAL_MODEL,
+                                                   self._on_local_model, LOOP_QOS)
         self._pose, self._twist, self._applied = PoseStamped(), TwistStamped(), WrenchStamped()
         for m in (self._pose, self._twist, self._applied):
             m.header.frame_id = self.frame_id
@@ -140,11 +169,15 @@ class FalconDriver(Node):
         self.first_command: float | None = None
         self.finished = False
         self.exit_code = 0
-        self.servo = ServoLoop(self.device, self.safety, p['rate'], on_state=self._publish_state)
+        self.trace_path = p['trace_path']
+        self.servo = ServoLoop(self.device, self.safety, p['rate'], on_state=self._publish_state,
+                               render=self.input.render,
+                               trace=TickTrace() if self.trace_path else None)
         self.servo.start()
         self.get_logger().info(
             f"backend {p['backend']}, {p['rate']:.0f} Hz servo thread, max force "
-            f"{p['max_force']} N, watchdog {p['watchdog_timeout'] * 1e3:.1f} ms, {what}")
+            f"{p['max_force']} N, watchdog {p['watchdog_timeout'] * 1e3:.1f} ms, force "
+            f"{p['force_mode']}, {what}")
 
     def _make_falcon(self, p):
         """The USB backend (imported here: its USB library is an optional extra). Connecting,
@@ -186,6 +219,7 @@ class FalconDriver(Node):
         x, y, z = m.to_tissue(state.position)
         pose = self._pose
         set_stamp(pose.header.stamp, ns)
+        self.input.on_pose(ns, now)
         pos = pose.pose.position
         pos.x, pos.y, pos.z = x, y, z
         self.pub_pose.publish(pose)
@@ -218,20 +252,46 @@ class FalconDriver(Node):
     def _on_command(self, msg: WrenchStamped) -> None:
         now = time.monotonic()
         f = msg.wrench.force
-        fd = self.mapping.force_to_device((f.x, f.y, f.z))
-        why = self.safety.command(fd, now, msg.header.frame_id)
+        why = self.input.command((f.x, f.y, f.z), stamp_ns(msg.header.stamp),
+                                 msg.header.frame_id, now)
+        if self.input.mode == 'zoh':
+            self._arrived(why, msg.header.stamp)
         if why != OK:
             self.get_logger().warning(f'force command {why}: ({f.x}, {f.y}, {f.z}) in frame '
-                                      f'{msg.header.frame_id!r}; applying zero force',
+                                      f'{msg.header.frame_id!r}; '
+                                      + ('not taken' if 'stamp' in why else 'applying zero force'),
                                       throttle_duration_sec=1.0)
-            return
-        if self.first_command is None:
+
+    def _on_local_model(self, msg: JointState) -> None:
+        now = time.monotonic()
+        try:
+            m = ifc.local_model_from_values(msg.position)
+            why = self.input.model(m, stamp_ns(msg.header.stamp), msg.header.frame_id, now)
+        except ValueError as exc:  # wrong length: zero force, as for a non-finite model
+            self.input.renderer.clear()
+            self.safety.reject(f'rejected: {exc}')
+            why = f'rejected: {exc}'
+        self._arrived(why, msg.header.stamp)
+        if why != OK:
+            self.get_logger().warning(f'local force model {why}', throttle_duration_sec=1.0)
+
+    def _arrived(self, why: str, stamp) -> None:
+        """Latency of every command (zoh) / model (local_model) answering a known pose, taken or
+        refused as stale (so the figures are not cut at the age limit); the measurement window
+        opens at the first one taken."""
+        if why == OK and self.first_command is None:
+            now = time.monotonic()
             self.first_command = now
             if isinstance(getattr(self.device, 'script', None), HeldScript):
                 self.device.script.release()  # a force source is up: start the palpation
-            if self.run_duration > 0:  # measure from the first command on
+            # the trace and the model statistics measure the loop from the first command on
+            self.input.reset_stats()
+            if self.servo.trace is not None:
+                self.servo.trace.clear()
+            if self.run_duration > 0:  # so do the loop statistics
                 self.servo.stats.reset()
-        self.servo.stats.latency((time.time_ns() - stamp_ns(msg.header.stamp)) * 1e-9)
+        if self.first_command is not None and (why == OK or why.endswith(STALE)):
+            self.servo.stats.latency((time.time_ns() - stamp_ns(stamp)) * 1e-9)
 
     def ready_condition(self) -> tuple[bool, str]:
         """Ready (see nodes/session.py) once a valid force command arrived."""
@@ -243,15 +303,31 @@ class FalconDriver(Node):
         ss = self.safety.stats
         s.update(commands=ss.commands, rejected_nonfinite=ss.rejected_nonfinite,
                  rejected_frame=ss.rejected_frame, watchdog_trips=ss.watchdog_trips,
-                 clamped=ss.clamped, servo_errors=self.servo.errors)
+                 watchdog_trips_in_contact=ss.watchdog_trips_in_contact,
+                 clamped=ss.clamped, servo_errors=self.servo.errors, **self.input.summary())
         return s
 
     def close(self) -> None:
         """Stop the servo thread; the device is left at zero force."""
         if self.servo.running or self.safety.enabled:
             self.servo.stop()
+        if self.trace_path and self.servo.trace is not None:
+            self._save_trace()
         if self.run_duration > 0:
             print(json.dumps({'falcon_driver_stats': _jsonable(self.summary())}), flush=True)
+
+
+    def _save_trace(self) -> None:
+        """The servo ticks in the tissue frame (position, applied force) with the statistics."""
+        rows = self.servo.trace.arrays()
+        m = self.mapping
+        rows[:, 1:4] = np.asarray(m.offset) + m.scale * rows[:, 1:4]
+        rows[:, 4:7] /= m.force_scale
+        save_trace(self.trace_path, rows, stats=_jsonable(self.summary()),
+                   status_names=list(STATUS_NAMES), max_force=self.params['max_force'] /
+                   m.force_scale, frame_id=self.frame_id)
+        self.get_logger().info(f'servo tick trace: {len(rows)} ticks -> {self.trace_path}')
+        self.servo.trace = None
 
 
 def _jsonable(d: dict) -> dict:

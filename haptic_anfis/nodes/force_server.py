@@ -4,12 +4,18 @@ Subscribes to ``contact`` (``sensor_msgs/JointState``, see :mod:`haptic_anfis.no
 evaluates the Fx, Fy, Fz ANFIS models on the compiled path (compiled and warmed when the model is
 loaded, before the first message) and publishes ``falcon/servo_cf`` (``geometry_msgs/
 WrenchStamped``, tissue frame) with the contact's stamp: zero when not in contact (or on a malformed
-contact / NaN input). The service ``~/reload`` (``std_srvs/Trigger``) re-reads ``model_path``: the
+contact / NaN input), and with it ``falcon/servo_cf_local`` (``sensor_msgs/JointState``, layout
+in :mod:`haptic_anfis.nodes.interfaces`): the local force model at the contact — F0, p0 and the
+stiffness K = dF/dp through the contact geometry (:func:`local_model_from_contact`) — that the
+falcon driver renders at every servo tick. The service ``~/reload`` (``std_srvs/Trigger``) re-reads ``model_path``: the
 new model replaces the old in one reference swap between two messages (a load takes ~1-2 ms); a
 bad file keeps the old model and the response says why.
 """
 from __future__ import annotations
 
+import math
+import queue
+import threading
 import time
 from pathlib import Path
 
@@ -20,8 +26,9 @@ from std_srvs.srv import Trigger
 
 from ..anfis import ForceModel
 from ..dataset import DATA_DIR
+from ..device.local_model import contact_stiffness, force_and_jacobian
 from . import interfaces as ifc
-from ._common import LOOP_QOS, Param, declare_parameters, run_node
+from ._common import LOOP_QOS, Param, declare_parameters, non_negative, run_node
 
 DEFAULT_MODEL = DATA_DIR / 'default_model.json'
 
@@ -29,6 +36,10 @@ PARAMS = [
     Param('model_path', '', "ANFIS model file (JSON) ('' = the shipped default model); re-read "
           'by ~/reload'),
     Param('frame_id', 'tissue', 'frame of the published force (the tissue frame)'),
+    Param('publish_local_model', True, 'also publish the local force model (F0, p0, K) on '
+          'falcon/servo_cf_local with every force (the driver renders it at every servo tick)'),
+    Param('delay', 0.0, 'TESTS ONLY: hold every output this long [s] before publishing it (a slow '
+          'or loaded force server); 0 = publish at once', non_negative),
 ]
 
 
@@ -43,7 +54,7 @@ def load_model(p: dict) -> tuple[Path, ForceModel]:
 def force_from_contact(model: ForceModel, v) -> tuple[float, float, float, str | None]:
     """(fx, fy, fz, error or None) for the contact message values ``v``: the model's force in
     contact, zero when not in contact or on a malformed / non-finite contact (with the reason)."""
-    if len(v) != len(ifc.CONTACT_FIELDS):
+    if not ifc.is_contact_values(v):
         return 0.0, 0.0, 0.0, (f'contact message with {len(v)} values, expected '
                                f'{len(ifc.CONTACT_FIELDS)} ({", ".join(ifc.CONTACT_FIELDS)})')
     if v[ifc.I_IN_CONTACT] > 0.5 and v[ifc.I_DEPTH] > 0.0:
@@ -55,6 +66,51 @@ def force_from_contact(model: ForceModel, v) -> tuple[float, float, float, str |
     return 0.0, 0.0, 0.0, None
 
 
+def local_model_from_contact(model: ForceModel, v, jacobian=force_and_jacobian
+                             ) -> tuple[tuple[float, float, float], list[float], str | None]:
+    """(force (3,) [N], local model message values (:data:`~.interfaces.LOCAL_MODEL_FIELDS`),
+    error or None) for the contact message values ``v``.
+
+    In contact: F0 and J = dF/d(x, y, z, depth) from ``jacobian`` (the model's analytic one when
+    it has it), chained through the contact geometry into K = dF/dp
+    (:func:`~haptic_anfis.device.local_model.contact_jacobian`; the depth column is dropped when
+    the depth is saturated, since the force then no longer grows with it). The older 9-value
+    contact has no normal: the normal is then taken as -direction. Not in contact, or a bad
+    contact: zero force and a model with depth 0 (the driver renders zero)."""
+    lm = [0.0] * len(ifc.LOCAL_MODEL_FIELDS)
+    if not ifc.is_contact_values(v):
+        return (0.0, 0.0, 0.0), lm, force_from_contact(model, v)[3]
+    if not (v[ifc.I_IN_CONTACT] > 0.5 and v[ifc.I_DEPTH] > 0.0):
+        return (0.0, 0.0, 0.0), lm, None
+    x, y, z, depth = float(v[0]), float(v[1]), float(v[2]), float(v[ifc.I_DEPTH])
+    d = [float(v[ifc.I_DX]), float(v[ifc.I_DY]), float(v[ifc.I_DZ])]
+    n = [float(c) for c in v[ifc.I_NX:ifc.I_NZ + 1]] if len(v) == len(ifc.CONTACT_FIELDS) else []
+    if len(n) != 3 or not 0.25 < n[0] * n[0] + n[1] * n[1] + n[2] * n[2] < 2.25:
+        n = [-c for c in d]
+    try:
+        F, J = jacobian(model, x, y, z, depth)
+        J = J.tolist()
+        if v[ifc.I_SATURATED] > 0.5:
+            for row in J:
+                row[3] = 0.0
+        K = contact_stiffness(J, n, d)
+        F_surface = model.predict_one(x, y, z, 0.0)
+    except ValueError as exc:
+        return (0.0, 0.0, 0.0), lm, str(exc)
+    if not math.isfinite(sum(K)):
+        return (0.0, 0.0, 0.0), lm, f'non-finite stiffness at contact ({x}, {y}, {z}, {depth})'
+    lm[ifc.LM_F0] = F
+    lm[ifc.LM_P0] = [x + depth * d[0], y + depth * d[1], z + depth * d[2]]
+    lm[ifc.LM_K] = K
+    lm[ifc.LM_C] = [x, y, z]
+    lm[ifc.LM_N] = n
+    lm[ifc.LM_D] = d
+    lm[ifc.LM_DEPTH] = depth
+    fs0, fs1, fs2 = F_surface
+    lm[ifc.LM_ZERO] = 1.0 if fs0 * fs0 + fs1 * fs1 + fs2 * fs2 < ifc.ZERO_FORCE_TOL ** 2 else 0.0
+    return F, lm, None
+
+
 class ForceServer(Node):
     def __init__(self, name: str = 'force_server', **kw):
         super().__init__(name, **kw)
@@ -64,8 +120,20 @@ class ForceServer(Node):
         self.sub = self.create_subscription(JointState, ifc.TOPIC_CONTACT, self._on_contact,
                                             LOOP_QOS)
         self.srv = self.create_service(Trigger, '~/reload', self._on_reload)
+        self.frame_id = p['frame_id']
         self._msg = WrenchStamped()
         self._msg.header.frame_id = p['frame_id']
+        self.pub_lm = None
+        if p['publish_local_model']:
+            self.pub_lm = self.create_publisher(JointState, ifc.TOPIC_LOCAL_MODEL, LOOP_QOS)
+            self._lm = JointState()
+            self._lm.name = list(ifc.LOCAL_MODEL_FIELDS)
+            self._lm.header.frame_id = p['frame_id']
+        self.delay = p['delay']
+        self._delayed: queue.Queue | None = None
+        if self.delay > 0:
+            self._delayed = queue.Queue()
+            threading.Thread(target=self._delay_line, name='delay', daemon=True).start()
         self.n_contacts = self.n_forces = self.n_bad = self.reloads = 0
         self.max_force = 0.0
         self.get_logger().info(f'model {self.model_path} ({self._describe()})')
@@ -76,10 +144,20 @@ class ForceServer(Node):
 
     def _on_contact(self, msg: JointState) -> None:
         self.n_contacts += 1
-        out = self._msg
+        delayed = self._delayed is not None
+        out = WrenchStamped() if delayed else self._msg
+        out.header.frame_id = self.frame_id
         out.header.stamp = msg.header.stamp
         f = out.wrench.force
-        fx, fy, fz, error = force_from_contact(self.model, msg.position)
+        lm = None
+        if self.pub_lm is not None:
+            (fx, fy, fz), values, error = local_model_from_contact(self.model, msg.position)
+            lm = JointState(name=self._lm.name) if delayed else self._lm
+            lm.header.frame_id = self.frame_id
+            lm.header.stamp = msg.header.stamp
+            lm.position = values
+        else:
+            fx, fy, fz, error = force_from_contact(self.model, msg.position)
         if error is not None:
             self._bad(error)
         elif fx or fy or fz:
@@ -88,7 +166,40 @@ class ForceServer(Node):
             if n > self.max_force:
                 self.max_force = n
         f.x, f.y, f.z = fx, fy, fz
+        if delayed:
+            self._delayed.put((time.monotonic() + self.delay, out, lm))
+            return
         self.pub.publish(out)
+        if lm is not None:
+            self.pub_lm.publish(lm)
+
+    def _delay_line(self) -> None:
+        """TESTS ONLY (``delay`` > 0): publish each output ``delay`` seconds after it was made.
+        Outputs already due together go out as the newest one only (the loop topics keep the
+        last sample anyway), so a late wake-up on a loaded machine cannot build a backlog."""
+        pending = None
+        while True:
+            item = pending if pending is not None else self._delayed.get()
+            pending = None
+            wait = item[0] - time.monotonic()
+            if wait > 0:
+                time.sleep(wait)
+            while True:  # skip to the newest output that is due
+                try:
+                    nxt = self._delayed.get_nowait()
+                except queue.Empty:
+                    break
+                if nxt[0] > time.monotonic():
+                    pending = nxt
+                    break
+                item = nxt
+            _, out, lm = item
+            try:
+                self.pub.publish(out)
+                if lm is not None:
+                    self.pub_lm.publish(lm)
+            except Exception:  # the node is shutting down
+                return
 
     def _bad(self, why: str) -> None:
         self.n_bad += 1

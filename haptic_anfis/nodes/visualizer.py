@@ -273,7 +273,7 @@ class Visualizer(Node):
         if self._pose is not None:
             q = self._pose.pose.position
             c = self._contact
-            touching = c is not None and len(c.position) == len(ifc.CONTACT_FIELDS) \
+            touching = c is not None and ifc.is_contact_values(c.position) \
                 and c.position[ifc.I_IN_CONTACT] > 0.5
             d = np.asarray(c.position[ifc.I_DX:ifc.I_DZ + 1], dtype=float) \
                 if touching else np.array([-1.0, 0.0, 0.0])

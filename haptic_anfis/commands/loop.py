@@ -1,0 +1,145 @@
+"""``haptic-anfis loop TRACE``: the haptic loop's report from a servo tick trace.
+
+The falcon driver writes every servo tick to ``trace_path`` (.npz: time, probe position, applied
+force, local-model status, tissue frame) with its loop statistics. This verb replays the traced
+positions through the contact tracker and the force model configured exactly as the nodes are
+(the same parameter files), i.e. the ideal loop with zero latency, and prints the applied-force
+error (:mod:`haptic_anfis.device.force_error`) with the loop figures. ``haptic-anfis launch`` and
+``bench/bench_loop.py`` call :func:`trace_report` at the end of a run.
+
+Report keys (JSON): ``rates_hz`` (topic -> Hz, as the driver sees them: the poses it publishes, the
+commands and local models it receives), ``latency_p50_ms``, ``latency_p99_ms``,
+``latency_max_ms`` (pose stamp -> command / model arrival), ``ticks_fresh``,
+``ticks_extrapolated``, ``ticks_expired`` (local model), ``watchdog_trips``,
+``watchdog_trips_in_contact``, ``force_error_rms_pct``, ``force_error_rms_n``,
+``force_error_p99_n``, ``force_error_p99_pct``, ``contact_ticks``, ``force_mode``,
+``deadline_misses``, ``rejected_stale``, ``rejected_future``, ``rejected_unknown_stamp``.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+
+NAME = 'loop'
+HELP = 'applied-force error and loop statistics of a falcon_driver servo tick trace (trace_path)'
+
+#: the keys printed first, in this order (issue 17)
+KEYS = ('force_mode', 'rates_hz', 'latency_p50_ms', 'latency_p99_ms', 'latency_max_ms',
+        'ticks_fresh', 'ticks_extrapolated', 'ticks_expired', 'watchdog_trips',
+        'watchdog_trips_in_contact', 'force_error_rms_pct', 'force_error_rms_n',
+        'force_error_p99_n', 'force_error_p99_pct', 'contact_ticks', 'deadline_misses',
+        'rejected_stale', 'rejected_future', 'rejected_unknown_stamp')
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument('trace', help='the .npz the falcon driver wrote (parameter trace_path)')
+    p.add_argument('--params-file', action='append', default=[], metavar='YAML',
+                   help='ROS 2 parameter file(s) the nodes ran with (repeatable), so the replay '
+                        'uses the same mesh, direction and model')
+    p.add_argument('--json', action='store_true', help='print one JSON object as the last line')
+
+
+def ideal_forces(positions: np.ndarray, params_files=()) -> tuple[np.ndarray, np.ndarray]:
+    """(F (n, 3) [N], in_contact (n,) bool): the contact tracker and force model (configured from
+    ``params_files`` as the contact_detector and force_server nodes are) over the probe
+    ``positions`` (n, 3) [m], tissue frame, in order."""
+    from ..nodes import contact_detector as cd
+    from ..nodes import force_server as fs
+    from ..nodes._common import resolve_parameters
+    cp = resolve_parameters(cd.PARAMS, 'contact_detector', params_files)
+    fp = resolve_parameters(fs.PARAMS, 'force_server', params_files)
+    tracker = cd.make_tracker(cp)
+    _, model = fs.load_model(fp)
+    n = len(positions)
+    F = np.zeros((n, 3))
+    contact = np.zeros(n, dtype=bool)
+    frame = cp['frame_id']
+    for i, p in enumerate(np.ascontiguousarray(positions, dtype=np.float64)):
+        values, c, _ = cd.contact_values(tracker, frame, frame, p)
+        fx, fy, fz, _ = fs.force_from_contact(model, values)
+        F[i] = (fx, fy, fz)
+        contact[i] = c is not None and c.in_contact
+    return F, contact
+
+
+def trace_report(trace: str | Path, params_files=()) -> dict:
+    """The report of one trace (keys in the module docstring)."""
+    from ..device.force_error import force_error
+    from ..device.trace import load_trace
+    rows, meta = load_trace(trace)
+    st = meta.get('stats', {})
+    F, contact = ideal_forces(rows[:, 1:4], params_files)
+    err = force_error(rows[:, 4:7], F, contact, max_force=meta.get('max_force', math.inf))
+    # the trace and the received counts start at the first command (the driver resets them)
+    secs = float(rows[-1, 0] - rows[0, 0]) if len(rows) > 1 else 0.0
+    rate = lambda k: round(st[k] / secs, 1) if secs > 0 and k in st else None  # noqa: E731
+    r = {'force_mode': st.get('mode'),
+         'rates_hz': {'falcon/measured_cp': round((len(rows) - 1) / secs, 1) if secs else None,
+                      'falcon/servo_cf': rate('commands_received'),
+                      'falcon/servo_cf_local': rate('models_received')},
+         **{k: st.get(k) for k in ('latency_p50_ms', 'latency_p99_ms', 'latency_max_ms',
+                                   'ticks_fresh', 'ticks_extrapolated', 'ticks_expired',
+                                   'watchdog_trips', 'watchdog_trips_in_contact',
+                                   'deadline_misses', 'rejected_stale', 'rejected_future',
+                                   'rejected_unknown_stamp')},
+         **err, 'ticks': int(len(rows))}
+    return {k: r[k] for k in KEYS if k in r} | {k: v for k, v in r.items() if k not in KEYS}
+
+
+def format_report(r: dict) -> str:
+    """Human-readable lines of :func:`trace_report`'s dict."""
+    f = lambda v, d=2: 'n/a' if v is None else (f'{v:.{d}f}' if isinstance(v, float) else str(v))  # noqa: E731
+    rates = ', '.join(f'{t} {f(v, 0)}' for t, v in r['rates_hz'].items())
+    return '\n'.join([
+        f"loop ({r['force_mode']}): rates Hz: {rates}",
+        f"  pose->command latency ms: p50 {f(r['latency_p50_ms'])} p99 {f(r['latency_p99_ms'])} "
+        f"max {f(r['latency_max_ms'])}; deadline misses {r['deadline_misses']}",
+        f"  local model ticks: fresh {r['ticks_fresh']} extrapolated {r['ticks_extrapolated']} "
+        f"expired {r['ticks_expired']}; watchdog trips {r['watchdog_trips']} "
+        f"(in contact {r['watchdog_trips_in_contact']}); stamps refused: stale "
+        f"{r['rejected_stale']} future {r['rejected_future']} unknown "
+        f"{r['rejected_unknown_stamp']}",
+        f"  applied-force error over {r['contact_ticks']} contact ticks: RMS "
+        f"{f(r['force_error_rms_n'], 3)} N = {f(r['force_error_rms_pct'])} % of the RMS force, "
+        f"p99 {f(r['force_error_p99_n'], 3)} N ({f(r['force_error_p99_pct'])} % per tick, "
+        f"forces >= 0.5 N)"])
+
+
+def run(args: argparse.Namespace) -> int:
+    if not Path(args.trace).is_file():
+        raise ValueError(f'{args.trace}: no such trace file')
+    r = trace_report(args.trace, args.params_file)
+    print(format_report(r))
+    if args.json:
+        print(json.dumps(r))
+    return 0
+
+
+# -- used by haptic-anfis launch (kept here so launch.py only calls two functions) --------------
+def launch_trace_path(extra: dict[str, list[str]], where: Path | None) -> Path | None:
+    """Ask the falcon driver of a launch (``extra``: node -> extra ROS args) to write its tick
+    trace: a new file in ``where`` (the log dir) or a temporary directory. None: no driver."""
+    if 'falcon_driver' not in extra:
+        return None
+    import tempfile
+    d = Path(where) if where else Path(tempfile.mkdtemp(prefix='haptic_anfis_loop_'))
+    path = (d / 'falcon_driver_trace.npz').resolve()
+    extra['falcon_driver'] += ['-p', f'trace_path:={path}']
+    return path
+
+
+def print_launch_report(trace: Path | None, params_files, as_json: bool) -> None:
+    """The loop report of a finished launch (nothing if the driver left no trace)."""
+    if trace is None:
+        return
+    if not trace.is_file():
+        print(f'loop report: the falcon driver wrote no trace ({trace})', flush=True)
+        return
+    r = trace_report(trace, params_files)
+    print(format_report(r), flush=True)
+    if as_json:
+        print(json.dumps(r), flush=True)

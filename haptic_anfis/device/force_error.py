@@ -1,0 +1,66 @@
+"""Applied-force error of a recorded servo session (no ROS): what the device applied at every tick
+vs what the ideal loop (zero latency: the force model evaluated at that tick's own pose) would
+have applied.
+
+Input: the driver's tick trace (:mod:`.trace`, tissue frame) and the ideal forces at the traced
+positions (the caller runs the contact tracker and the force model over them, in order, so the
+tracker's state follows the session as in the live graph). Only ticks where the ideal loop is in
+contact count. The ideal force is clamped to the device's force limit, as the safety layer would.
+
+Figures (:func:`force_error`):
+
+- ``force_error_rms_n``, ``force_error_p99_n``: RMS and 99th percentile of |F_applied - F_ideal| [N].
+- ``force_error_rms_pct``: 100 * RMS(error) / RMS(|F_ideal|) over the contact ticks — the RMS
+  error as a % of the (RMS) force; stable where single ticks have near-zero force (contact onset).
+- ``force_error_p99_pct``: 99th percentile of the per-tick error as % of that tick's force, over
+  ticks with |F_ideal| >= ``min_force`` (default 0.5 N; below it a % says little).
+- ``contact_ticks``: ticks in contact.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+
+def force_error(applied: np.ndarray, ideal: np.ndarray, in_contact: np.ndarray,
+                max_force: float = math.inf, min_force: float = 0.5) -> dict:
+    """Error figures (see the module docstring).
+
+    Args:
+        applied: (n, 3) force the device applied at each tick [N], tissue frame.
+        ideal: (n, 3) the ideal loop's force at each tick [N] (clamped here to ``max_force``).
+        in_contact: (n,) bool, the ideal loop is in contact.
+        max_force: device force limit [N] (tissue frame).
+        min_force: smallest force [N] a per-tick % is computed for.
+
+    Raises:
+        ValueError: shapes that do not match.
+    """
+    applied = np.asarray(applied, dtype=np.float64)
+    ideal = np.asarray(ideal, dtype=np.float64)
+    mask = np.asarray(in_contact, dtype=bool)
+    if applied.shape != ideal.shape or applied.ndim != 2 or applied.shape[1] != 3 \
+            or mask.shape != (len(applied),):
+        raise ValueError(f'force_error: expected applied and ideal (n, 3) and in_contact (n,), '
+                         f'got {applied.shape}, {ideal.shape}, {mask.shape}')
+    n = np.linalg.norm(ideal, axis=1)
+    over = n > max_force
+    ideal = ideal.copy()
+    ideal[over] *= (max_force / n[over])[:, None]
+    n = np.minimum(n, max_force)
+    e = np.linalg.norm(applied - ideal, axis=1)[mask]
+    f = n[mask]
+    out = {'contact_ticks': int(mask.sum())}
+    if not len(e):
+        return {**out, 'force_error_rms_n': None, 'force_error_p99_n': None,
+                'force_error_rms_pct': None, 'force_error_p99_pct': None,
+                'force_rms_n': None}
+    rms_e = float(np.sqrt(np.mean(e * e)))
+    rms_f = float(np.sqrt(np.mean(f * f)))
+    big = f >= min_force
+    return {**out, 'force_error_rms_n': rms_e, 'force_error_p99_n': float(np.percentile(e, 99)),
+            'force_error_rms_pct': 100.0 * rms_e / rms_f if rms_f > 0 else None,
+            'force_error_p99_pct': (float(np.percentile(100.0 * e[big] / f[big], 99))
+                                    if big.any() else None),
+            'force_rms_n': rms_f}

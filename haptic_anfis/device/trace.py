@@ -1,0 +1,82 @@
+"""Per-servo-tick trace (no ROS): what the device was told at every tick, for the force error.
+
+One row per tick: time [s] (the loop's monotonic clock), probe position (3,) [m] and applied force
+(3,) [N] in the frame the caller chooses, and the local-model status code of that tick
+(:data:`haptic_anfis.device.local_model.STATUS_NAMES`; -1 in zero-order-hold mode). Rows go into
+preallocated chunks (no allocation per tick in the servo thread); :meth:`TickTrace.arrays`
+concatenates them.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+COLUMNS = ('t', 'px', 'py', 'pz', 'fx', 'fy', 'fz', 'status')
+
+
+class TickTrace:
+    """Rows of :data:`COLUMNS`, appended by one thread (the servo loop).
+
+    Args:
+        chunk: rows per preallocated chunk (at 1 kHz, 8192 = 8 s).
+        max_rows: rows kept at most (the newest ones are dropped beyond it; 0 = unbounded).
+    """
+
+    def __init__(self, chunk: int = 8192, max_rows: int = 3_600_000) -> None:
+        self.chunk = int(chunk)
+        self.max_rows = int(max_rows)
+        self._chunks: list[np.ndarray] = [np.empty((self.chunk, len(COLUMNS)))]
+        self._i = 0
+        self.rows = 0
+        self.dropped = 0
+
+    def add(self, t: float, p, f, status: int) -> None:
+        if self.max_rows and self.rows >= self.max_rows:
+            self.dropped += 1
+            return
+        if self._i == self.chunk:
+            self._chunks.append(np.empty((self.chunk, len(COLUMNS))))
+            self._i = 0
+        self._chunks[-1][self._i] = (t, p[0], p[1], p[2], f[0], f[1], f[2], status)
+        self._i += 1
+        self.rows += 1
+
+    def clear(self) -> None:
+        self.__init__(self.chunk, self.max_rows)
+
+    def arrays(self) -> np.ndarray:
+        """All rows (n, 8), in order."""
+        parts = self._chunks[:-1] + [self._chunks[-1][:self._i]]
+        return np.concatenate(parts, axis=0) if parts else np.empty((0, len(COLUMNS)))
+
+
+def save_trace(path: str | Path, rows: np.ndarray, **meta) -> Path:
+    """Write ``rows`` (n, 8) and ``meta`` (JSON-able values, stored as strings) to ``path`` (.npz),
+    through a temporary file renamed into place (a crash leaves the old file or the new one)."""
+    import json
+    path = Path(path)
+    tmp = path.with_name(path.name + '.tmp.npz')
+    np.savez(tmp, rows=rows, columns=np.array(COLUMNS),
+             meta=np.array(json.dumps(meta)))
+    tmp.replace(path)
+    return path
+
+
+def load_trace(path: str | Path) -> tuple[np.ndarray, dict]:
+    """(rows (n, 8), meta dict) from :func:`save_trace`'s file.
+
+    Raises:
+        ValueError: the file is not such a trace.
+    """
+    import json
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            rows, cols, meta = z['rows'], tuple(z['columns'].tolist()), json.loads(str(z['meta']))
+    except (OSError, KeyError, ValueError) as exc:
+        raise ValueError(f'{path}: not a servo tick trace (.npz with rows/columns/meta): '
+                         f'{exc}') from exc
+    if cols != COLUMNS or rows.ndim != 2 or rows.shape[1] != len(COLUMNS):
+        raise ValueError(f'{path}: expected columns {COLUMNS}, got {cols} with shape '
+                         f'{rows.shape}')
+    return rows, meta

@@ -1,0 +1,390 @@
+"""The local force model (device/local_model.py), the stamp book (device/stamps.py) and the
+driver's force input (device/force_input.py): exactness, guards, and issue 22's stall-and-kill."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from haptic_anfis.device import DeviceState, SafetyLayer, ServoLoop, WorkspaceMapping
+from haptic_anfis.device.force_input import ForceInput
+from haptic_anfis.device.local_model import (EXPIRED, EXTRAPOLATED, FREE, FRESH, NONE,
+                                             LocalModel, LocalModelRenderer, condition_stiffness,
+                                             contact_jacobian, depth_gradient)
+from haptic_anfis.device.stamps import FUTURE, OK, STALE, UNKNOWN, StampBook
+from haptic_anfis.device.trace import TickTrace, load_trace, save_trace
+
+
+def unit(v):
+    v = np.asarray(v, dtype=float)
+    return v / np.linalg.norm(v)
+
+
+def spd_neg(rng, scale=500.0):
+    A = rng.normal(size=(3, 3))
+    return -(A @ A.T) / np.linalg.norm(A @ A.T) * scale  # symmetric negative-semidefinite
+
+
+def make(f0, p0, K, c0, n, d, depth0, zero=False, t=0.0):
+    return LocalModel(tuple(f0), tuple(p0), np.asarray(K), tuple(c0), tuple(n), tuple(d),
+                      float(depth0), zero, t)
+
+
+def geometry(rng):
+    """A contact: surface point c0, outward normal n, direction d into the tissue, depth0, p0."""
+    n = unit(rng.normal(size=3))
+    d = unit(-n + 0.4 * rng.normal(size=3))
+    if n @ d > -0.5:
+        d = -n
+    c0 = rng.normal(size=3) * 0.02
+    depth0 = 0.004
+    return c0, n, d, depth0, c0 + depth0 * d
+
+
+@pytest.mark.parametrize('seed', range(5))
+def test_exact_for_a_linear_field(seed):
+    rng = np.random.default_rng(seed)
+    c0, n, d, depth0, p0 = geometry(rng)
+    K = spd_neg(rng)
+    F0 = rng.normal(size=3)
+    r = LocalModelRenderer(max_stiffness=1e4, validity_time=1.0, validity_radius=0.01)
+    r.offer(make(F0, p0, K, c0, n, d, depth0))
+    g = depth_gradient(n, d)
+    for _ in range(50):
+        p = p0 + rng.normal(size=3) * 0.002
+        f, st = r.render(tuple(p), 0.0)
+        if depth0 + g @ (p - p0) <= 0:
+            assert st == FREE and f == (0.0, 0.0, 0.0)
+        else:
+            assert st == FRESH
+            np.testing.assert_allclose(f, F0 + K @ (p - p0), rtol=0, atol=1e-12)
+
+
+@pytest.mark.parametrize('seed', range(5))
+def test_exact_for_a_linear_field_zero_on_the_surface(seed):
+    """A field zero on the tangent plane (F = a * depth, K = a g^T symmetric when a || g):
+    the onset correction changes nothing."""
+    rng = np.random.default_rng(seed)
+    c0, n, _, depth0, _ = geometry(rng)
+    d = -n  # normal mode: K = -k n n^T is symmetric negative-semidefinite
+    p0 = c0 + depth0 * d
+    k = 800.0
+    field = lambda p: k * (-(p - c0) @ n) * n  # noqa: E731
+    K = -k * np.outer(n, n)
+    r = LocalModelRenderer(max_stiffness=1e4, validity_time=1.0, validity_radius=0.01)
+    r.offer(make(field(p0), p0, K, c0, n, d, depth0, zero=True))
+    for _ in range(50):
+        p = p0 + rng.normal(size=3) * 0.003
+        f, st = r.render(tuple(p), 0.0)
+        if -(p - c0) @ n > 0:
+            np.testing.assert_allclose(f, field(p), rtol=0, atol=1e-12)
+
+
+def test_no_step_at_contact_onset():
+    """Force ~ depth^1.5 (zero at the surface, stiffening): the tangent model alone gives a pull
+    at depth 0; with the onset correction the force goes continuously to zero and keeps the
+    tangent stiffness at depth0."""
+    n = np.array([1.0, 0.0, 0.0])
+    d = -n
+    c0 = np.zeros(3)
+    a = 2e3
+    F = lambda dep: a * dep ** 1.5 * n  # noqa: E731
+    depth0 = 0.005
+    p0 = c0 + depth0 * d
+    K = -1.5 * a * depth0 ** 0.5 * np.outer(n, n)
+    r = LocalModelRenderer(max_stiffness=1e5, validity_time=1.0, validity_radius=0.02)
+    r.offer(make(F(depth0), p0, K, c0, n, d, depth0, zero=True))
+    plain = F(depth0) + K @ (c0 - p0)
+    assert plain[0] < -0.1  # the uncorrected model would pull at the surface
+    forces = [r.render(tuple(c0 + dep * d + [0, 0.001, 0]), 0.0)[0][0]
+              for dep in np.linspace(1e-6, depth0, 200)]
+    assert abs(forces[0]) < 1e-3 and min(forces) >= -1e-9
+    assert np.all(np.diff(forces) > 0)  # monotonic: no step, no pull
+    # tangent kept at depth0: one-sided slope matches K
+    h = 1e-7
+    f1 = r.render(tuple(p0 - h * d), 0.0)[0][0]
+    f2 = r.render(tuple(p0), 0.0)[0][0]
+    assert (f2 - f1) / h == pytest.approx(1.5 * a * depth0 ** 0.5, rel=1e-3)
+    assert r.render(tuple(c0 - 1e-6 * d), 0.0) == ((0.0, 0.0, 0.0), FREE)
+
+
+def test_stiffness_guard():
+    rng = np.random.default_rng(0)
+    A = rng.normal(size=(3, 3)) * 5e3  # asymmetric, indefinite, too stiff
+    K = condition_stiffness(A, 3000.0)
+    np.testing.assert_allclose(K, K.T, atol=1e-9)
+    w = np.linalg.eigvalsh(K)
+    assert w.min() >= -3000.0 - 1e-6 and w.max() <= 1e-9
+    # a conforming K passes unchanged
+    S = spd_neg(rng, 1000.0)
+    np.testing.assert_allclose(condition_stiffness(S, 3000.0), S, atol=1e-9)
+    # positive (pulling) stiffness becomes 0
+    np.testing.assert_allclose(condition_stiffness(np.eye(3) * 100.0, 3000.0), 0.0, atol=1e-12)
+    for bad in (np.full((3, 3), np.nan), np.diag([np.inf, 1.0, 1.0]), np.eye(2)):
+        with pytest.raises(ValueError, match='stiffness K'):
+            condition_stiffness(bad, 3000.0)
+    r = LocalModelRenderer(max_stiffness=2000.0)
+    n = np.array([1.0, 0, 0])
+    r.offer(make((1, 0, 0), (-0.001, 0, 0), -1e5 * np.eye(3), (0, 0, 0), n, -n, 0.001))
+    assert r.stats.stiffness_clamped == 1
+    f, _ = r.render((-0.002, 0, 0), 0.0)
+    assert f[0] == pytest.approx(1.0 + 2000.0 * 0.001)
+
+
+@pytest.mark.parametrize('field', ['f0', 'p0', 'k', 'normal'])
+def test_non_finite_model_rejected(field):
+    n = np.array([1.0, 0, 0])
+    kw = dict(f0=(1, 0, 0), p0=(-0.001, 0, 0), k=-np.eye(3), contact=(0, 0, 0), normal=tuple(n),
+              direction=tuple(-n), depth0=0.001, zero_at_surface=False, time=0.0)
+    kw[field] = np.full((3, 3), np.nan) if field == 'k' else (np.nan, 0.0, 0.0)
+    r = LocalModelRenderer()
+    with pytest.raises(ValueError, match='local model'):
+        r.offer(LocalModel(**kw))
+    assert r.stats.rejected == 1 and r.render((0, 0, 0), 0.0) == (None, NONE)
+
+
+def test_expiry_time_radius_and_leaving_contact():
+    n = np.array([1.0, 0, 0])
+    r = LocalModelRenderer(validity_time=0.05, validity_radius=0.005, fresh_age=0.0015)
+    r.offer(make((2, 0, 0), (-0.004, 0, 0), -500 * np.eye(3), (0, 0, 0), n, -n, 0.004, t=1.0))
+    assert r.render((-0.004, 0, 0), 1.001)[1] == FRESH
+    assert r.render((-0.004, 0, 0), 1.02)[1] == EXTRAPOLATED
+    assert r.render((-0.004, 0, 0), 1.0501) == (None, EXPIRED)
+    assert r.render((-0.004, 0.0051, 0), 1.01) == (None, EXPIRED)
+    # out along the normal: zero at once, even beyond the radius
+    assert r.render((0.0001, 0, 0), 1.01) == ((0.0, 0.0, 0.0), FREE)
+    assert r.render((0.02, 0, 0), 1.01) == ((0.0, 0.0, 0.0), FREE)
+    s = r.stats
+    assert (s.ticks_fresh, s.ticks_extrapolated, s.ticks_expired, s.ticks_free) == (1, 1, 2, 2)
+
+
+@pytest.mark.parametrize('seed', range(4))
+@pytest.mark.parametrize('normal_mode', [False, True])
+def test_contact_jacobian_through_the_geometry(seed, normal_mode):
+    """K from J through a planar surface equals the finite-difference derivative of
+    p -> F(c(p), depth(p)) computed geometrically (ray along d back to the plane)."""
+    rng = np.random.default_rng(seed)
+    c0, n, d, depth0, p0 = geometry(rng)
+    if normal_mode:
+        d = -n
+        p0 = c0 + depth0 * d
+    W = rng.normal(size=(3, 4))
+    model = lambda x: np.tanh(W @ x) + 0.3 * (W @ x) ** 2  # noqa: E731  a nonlinear F(x, y, z, depth)
+
+    def composed(p):
+        t = ((p - c0) @ n) / (d @ n)  # distance along d from the plane (the depth)
+        c = p - t * d
+        return model(np.array([*c, t]))
+
+    x0 = np.array([*c0, depth0])
+    h = 1e-6
+    J = np.stack([(model(x0 + h * e) - model(x0 - h * e)) / (2 * h) for e in np.eye(4)], axis=1)
+    Kfd = np.stack([(composed(p0 + h * e) - composed(p0 - h * e)) / (2 * h) for e in np.eye(3)],
+                   axis=1)
+    np.testing.assert_allclose(contact_jacobian(J, n, d), Kfd, rtol=1e-5, atol=1e-6)
+
+
+def test_stamp_book():
+    b = StampBook(size=4)
+    for i in range(6):
+        b.record(1000 + i, 10.0 + i * 0.001)
+    assert b.check(1005, 10.006, 0.01) == (OK, pytest.approx(10.005))
+    assert b.check(1002, 10.006, 0.01)[0] == OK
+    assert b.check(1001, 10.006, 0.01)[0] == UNKNOWN  # evicted
+    assert b.check(1007, 10.006, 0.01)[0] == FUTURE
+    assert b.check(1003, 10.02, 0.01)[0] == STALE
+    assert b.check(7, 10.0, 0.01)[0] == UNKNOWN
+    s = b.stats
+    assert (s.rejected_unknown, s.rejected_future, s.rejected_stale) == (2, 1, 1)
+
+
+class StillDevice:
+    """A device held at one position (the hand pressing), recording what it is told."""
+    max_force = 10.0
+
+    def __init__(self, p):
+        self.p, self.forces = tuple(p), []
+
+    def open(self, now):
+        pass
+
+    def read(self, now):
+        return DeviceState(self.p, (0.0, 0.0, 0.0), ())
+
+    def write(self, f):
+        self.forces.append(f)
+
+    def close(self):
+        pass
+
+
+@pytest.mark.parametrize('mode', ['zoh', 'local_model'])
+def test_stall_and_kill(mode):
+    """Issue 22: the driver applies 9.5 N, is paused (no servo tick) for 1 s during which the
+    force server sends commands answering its old poses and dies; on resume the queued commands
+    arrive. No force above 0.05 N after the resume."""
+    mapping = WorkspaceMapping(1.0, (0.0, 0.0, 0.0), 1.0)
+    safety = SafetyLayer(10.0, 1000.0, 0.010, frame_id='tissue')
+    fi = ForceInput(safety, mapping, mode=mode)
+    p = np.array([-0.004, 0.0, 0.0])
+    dev = StillDevice(p)
+    clock = [0.0]
+    stamps: list[int] = []
+
+    def on_state(state, force, now):
+        ns = int(round(now * 1e9)) + 1_000_000_000
+        stamps.append(ns)
+        fi.on_pose(ns, now)
+
+    servo = ServoLoop(dev, safety, 1000.0, on_state=on_state, clock=lambda: clock[0],
+                      render=fi.render)
+    servo.start()
+    n = np.array([1.0, 0, 0])
+    F0 = np.array([9.5, 0.0, 0.0])  # more than one max_dt ramp step (5 N) above zero
+    lm = make(F0, p, -500 * np.outer(n, n), (0, 0, 0), n, -n, 0.004, zero=True)
+
+    def answer(stamp, now):  # what the force server sends for the pose `stamp`
+        assert fi.command(tuple(F0), stamp, 'tissue', now) == 'ok'
+        if mode == 'local_model':
+            assert fi.model(lm, stamp, 'tissue', now) == 'ok'
+
+    for i in range(100):  # 0.1 s of normal running, 1 ms latency
+        clock[0] = i * 0.001
+        servo.tick(clock[0])
+        answer(stamps[-1], clock[0] + 0.0005)
+    assert np.linalg.norm(dev.forces[-1]) == pytest.approx(9.5, abs=0.01)
+    late = stamps[-5:]  # poses answered while the driver was paused; the server then died
+    clock[0] = 1.1  # resume: 1 s later
+    for s in late:  # the queued commands arrive before the first tick ...
+        if mode == 'zoh':
+            assert fi.command(tuple(F0), s, 'tissue', clock[0]).startswith('rejected: stamp')
+        else:
+            assert fi.model(lm, s, 'tissue', clock[0]).startswith('rejected: stamp')
+    after = []
+    for i in range(30):
+        clock[0] = 1.1 + i * 0.001
+        servo.tick(clock[0])
+        after.append(np.linalg.norm(dev.forces[-1]))
+        if i == 3:  # ... or after the first ticks
+            for s in late:
+                fi.command(tuple(F0), s, 'tissue', clock[0])
+                if mode == 'local_model':
+                    assert fi.model(lm, s, 'tissue', clock[0]).startswith('rejected')
+    assert max(after) <= 0.05, after
+    assert fi.stamps.stats.rejected_stale >= 5
+    assert safety.stats.watchdog_trips_in_contact == 1
+
+
+def test_local_model_rides_out_latency_zoh_does_not():
+    """A press at 0.1 m/s with every answer 15 ms late (past the 10 ms watchdog): the zero-order
+    hold refuses every stale command and its force stays at zero; the local model follows the
+    ideal force within 2 % with no watchdog trip."""
+    res = {}
+    for mode in ('zoh', 'local_model'):
+        mapping = WorkspaceMapping(1.0, (0.0, 0.0, 0.0), 1.0)
+        safety = SafetyLayer(10.0, 1000.0, 0.010, frame_id='tissue')
+        fi = ForceInput(safety, mapping, mode=mode)
+        dev = StillDevice((0.0, 0.0, 0.0))
+        n = np.array([1.0, 0, 0])
+        k = 400.0
+        ideal = lambda p: max(0.0, -p[0]) * k * n  # noqa: E731
+        pend = []
+        servo = ServoLoop(dev, safety, 1000.0,
+                          on_state=lambda st, f, now: (fi.on_pose(int(now * 1e9) + 1, now),
+                                                       pend.append((now + 0.015, st.position,
+                                                                    int(now * 1e9) + 1))),
+                          clock=lambda: 0.0, render=fi.render)
+        servo.start()
+        errs, forces = [], []
+        for i in range(400):
+            now = i * 0.001
+            dev.p = (0.0005 - 0.1 * now * (1 if now < 0.2 else 0) - (0.02 if now >= 0.2 else 0),
+                     0.0, 0.0)
+            while pend and pend[0][0] <= now:
+                _, pos, st = pend.pop(0)
+                f = ideal(pos)
+                fi.command(tuple(f), st, 'tissue', now)
+                depth = max(0.0, -pos[0])
+                fi.model(make(f, pos, -k * np.outer(n, n), (0, pos[1], pos[2]), n, -n, depth,
+                              zero=True), st, 'tissue', now)
+            servo.tick(now)
+            if 0.05 < now < 0.2:
+                errs.append(np.linalg.norm(np.array(dev.forces[-1]) - ideal(dev.p)))
+                forces.append(np.linalg.norm(ideal(dev.p)))
+        res[mode] = (np.sqrt(np.mean(np.square(errs))) / np.sqrt(np.mean(np.square(forces))),
+                     safety.stats.watchdog_trips_in_contact, max(np.linalg.norm(f)
+                                                                  for f in dev.forces))
+    assert res['local_model'][0] < 0.02 and res['local_model'][1] == 0
+    assert res['zoh'][2] == 0.0  # every command refused as stale: never any force
+
+
+def test_trace_roundtrip(tmp_path):
+    t = TickTrace(chunk=3)
+    for i in range(7):
+        t.add(i * 1e-3, (i, 0, 0), (0, i, 0), i % 5)
+    rows = t.arrays()
+    assert rows.shape == (7, 8) and rows[6, 1] == 6 and rows[6, 5] == 6
+    path = save_trace(tmp_path / 'x.npz', rows, mode='zoh')
+    r2, meta = load_trace(path)
+    np.testing.assert_array_equal(r2, rows)
+    assert meta == {'mode': 'zoh'}
+    (tmp_path / 'bad.npz').write_bytes(b'nope')
+    with pytest.raises(ValueError, match='bad.npz'):
+        load_trace(tmp_path / 'bad.npz')
+
+
+@pytest.fixture(scope='module')
+def default_model():
+    from haptic_anfis.nodes.force_server import load_model
+    return load_model({'model_path': ''})[1]
+
+
+@pytest.mark.parametrize('seed', range(3))
+def test_force_server_local_model_matches_finite_differences(default_model, seed):
+    """The published K (analytic Jacobian through the geometry) equals central differences of
+    the model through the same geometry; F0 is the model's force; p0 = contact + depth d."""
+    from haptic_anfis.device.local_model import force_and_jacobian_fd
+    from haptic_anfis.nodes import interfaces as ifc
+    from haptic_anfis.nodes.force_server import local_model_from_contact
+    rng = np.random.default_rng(seed)
+    c = np.array([0.035, *rng.uniform(-0.02, 0.02, 2)])
+    n = unit([1.0, *rng.uniform(-0.4, 0.4, 2)])
+    d = np.array([-1.0, 0.0, 0.0])
+    depth = rng.uniform(0.003, 0.012)
+    v = [*c, depth, *d, 1.0, 0.0, *n]
+    F, lm, err = local_model_from_contact(default_model, v)
+    assert err is None
+    np.testing.assert_allclose(F, default_model.predict_one(*c, depth), atol=1e-12)
+    np.testing.assert_allclose(lm[ifc.LM_P0], c + depth * d, atol=1e-15)
+    _, Jfd = force_and_jacobian_fd(default_model, *c, depth)
+    K = np.array(lm[ifc.LM_K]).reshape(3, 3)
+    np.testing.assert_allclose(K, contact_jacobian(Jfd, n, d), rtol=1e-3, atol=0.5)
+    m = ifc.local_model_from_values(lm)
+    assert m.in_contact and m.depth0 == depth
+    # the older 9-value contact: normal taken as -direction
+    F9, lm9, err9 = local_model_from_contact(default_model, v[:9])
+    assert err9 is None and lm9[ifc.LM_N] == [1.0, -0.0, -0.0]
+    # saturated: the depth column does not count
+    vs = list(v)
+    vs[ifc.I_SATURATED] = 1.0
+    Ks = np.array(local_model_from_contact(default_model, vs)[1][ifc.LM_K]).reshape(3, 3)
+    J0 = Jfd.copy()
+    J0[:, 3] = 0.0
+    np.testing.assert_allclose(Ks, contact_jacobian(J0, n, d), rtol=1e-3, atol=0.5)
+
+
+def test_force_server_local_model_without_contact_or_bad(default_model):
+    from haptic_anfis.nodes import interfaces as ifc
+    from haptic_anfis.nodes.force_server import local_model_from_contact
+    free = [0.05, 0.0, 0.0, 0.0, -1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]
+    F, lm, err = local_model_from_contact(default_model, free)
+    assert F == (0.0, 0.0, 0.0) and err is None and lm[ifc.LM_DEPTH] == 0.0
+    assert not ifc.local_model_from_values(lm).in_contact
+    bad = [math.nan, 0.0, 0.0, 0.005, -1.0, 0.0, 0.0, 1.0, 0.0, 1.0, 0.0, 0.0]
+    F, lm, err = local_model_from_contact(default_model, bad)
+    assert F == (0.0, 0.0, 0.0) and 'non-finite' in err and lm[ifc.LM_DEPTH] == 0.0
+    F, lm, err = local_model_from_contact(default_model, [1.0] * 5)
+    assert F == (0.0, 0.0, 0.0) and 'expected 12' in err
+    with pytest.raises(ValueError, match='expected 26'):
+        ifc.local_model_from_values([0.0] * 3)
