@@ -2,7 +2,9 @@
 
 Publishes the tip pose (``falcon/measured_cp``), velocity (``falcon/measured_cv``), the force it
 applies (``falcon/measured_cf``, every ``measured_cf_every`` ticks) and the buttons
-(``falcon/buttons``, on change and every 100 ticks), all in the tissue frame; subscribes to the
+(``falcon/buttons``, on change and every 100 ticks), all in the tissue frame; button 0 is the
+clutch and button 1 the mark (:class:`haptic_anfis.device.buttons.ClutchMark`; a mark is published
+as ``exam/marks``, ``geometry_msgs/PointStamped`` at the probe tip); subscribes to the
 force command ``falcon/servo_cf`` (``geometry_msgs/WrenchStamped``, tissue frame) and applies the
 newest one through the safety layer (:class:`haptic_anfis.device.SafetyLayer`: clamp, rate limit,
 watchdog, NaN/wrong-frame rejection). The servo thread is not a ROS timer: it keeps its period
@@ -16,12 +18,13 @@ import math
 import sys
 import time
 
-from geometry_msgs.msg import PoseStamped, TwistStamped, WrenchStamped
+from geometry_msgs.msg import PointStamped, PoseStamped, TwistStamped, WrenchStamped
 from rclpy.node import Node
 from sensor_msgs.msg import Joy
 
 from ..device import (HandParams, PalpationScript, SafetyLayer, ServoLoop, SimulatedFalcon,
                       WorkspaceMapping)
+from ..device.buttons import ClutchMark
 from ..device.safety import OK
 from . import interfaces as ifc
 from ._common import (LOOP_QOS, Param, config_file, declare_parameters, finite_vector,
@@ -108,6 +111,9 @@ class FalconDriver(Node):
         self.pub_twist = self.create_publisher(TwistStamped, ifc.TOPIC_TWIST, LOOP_QOS)
         self.pub_applied = self.create_publisher(WrenchStamped, ifc.TOPIC_APPLIED, LOOP_QOS)
         self.pub_buttons = self.create_publisher(Joy, ifc.TOPIC_BUTTONS, 10)
+        # Button 0 clutch (zero force, mapping follows the hand), button 1 mark (exam/marks).
+        self.clutch = ClutchMark()
+        self.pub_mark = self.create_publisher(PointStamped, ifc.TOPIC_MARKS, 10)
         self.sub_cmd = self.create_subscription(WrenchStamped, ifc.TOPIC_COMMAND, self._on_command,
                                                 LOOP_QOS)
         self._pose, self._twist, self._applied = PoseStamped(), TwistStamped(), WrenchStamped()
@@ -143,7 +149,7 @@ class FalconDriver(Node):
     def _publish_state(self, state, force, now) -> None:
         ns = time.time_ns()
         m = self.mapping
-        x, y, z = m.to_tissue(state.position)
+        (x, y, z), ev = self.clutch.update(state.buttons, m.to_tissue(state.position), now)
         pose = self._pose
         set_stamp(pose.header.stamp, ns)
         pos = pose.pose.position
@@ -170,6 +176,11 @@ class FalconDriver(Node):
             joy.header.frame_id = self.frame_id
             joy.buttons = list(state.buttons)
             self.pub_buttons.publish(joy)
+        if ev.mark:  # the probe tip; the examiner projects it on the surface
+            mk = PointStamped()
+            mk.header.stamp, mk.header.frame_id = pose.header.stamp, self.frame_id
+            mk.point.x, mk.point.y, mk.point.z = x, y, z
+            self.pub_mark.publish(mk)
         if self.first_command is not None and self.run_duration > 0 \
                 and now - self.first_command >= self.run_duration:
             self.finished = True
@@ -178,7 +189,8 @@ class FalconDriver(Node):
     def _on_command(self, msg: WrenchStamped) -> None:
         now = time.monotonic()
         f = msg.wrench.force
-        fd = self.mapping.force_to_device((f.x, f.y, f.z))
+        g = self.clutch.gain((f.x, f.y, f.z), now)  # 0 while clutched, then no jump
+        fd = self.mapping.force_to_device((g * f.x, g * f.y, g * f.z))
         why = self.safety.command(fd, now, msg.header.frame_id)
         if why != OK:
             self.get_logger().warning(f'force command {why}: ({f.x}, {f.y}, {f.z}) in frame '
