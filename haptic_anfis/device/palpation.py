@@ -31,7 +31,8 @@ button 1 mark); the simulated Falcon reports them.
 
 Top-level keys: ``approach_height`` (clearance above the surface between moves, m),
 ``travel_speed`` (m/s in free space), ``press_speed`` (m/s into, out of and along the tissue),
-``start_delay`` (s at the first point before anything moves), ``loop`` (repeat for ever), ``surface``
+``start_delay`` (s at the first point before anything moves), ``start`` ([y, z]: begin above this
+point rather than the first move's), ``loop`` (repeat for ever), ``surface``
 (``{radii: [rx, ry, rz]}``), ``pattern`` (the list of moves).
 """
 from __future__ import annotations
@@ -136,7 +137,14 @@ class PalpationScript:
                 raise ValueError
         except (TypeError, ValueError, IndexError):
             first = (0.0, 0.0)  # malformed: the move itself reports the precise error below
-        b.start(first, _pos(doc, 'start_delay', 0.5, zero_ok=True))
+        home = first
+        if 'start' in doc:  # begin above this (y, z) instead of the first move's point
+            st = doc['start']
+            if not isinstance(st, (list, tuple)) or len(st) != 2 or not all(
+                    isinstance(v, (int, float)) and math.isfinite(v) for v in st):
+                raise ValueError(f'start: expected [y, z] in metres, got {st!r}')
+            home = (float(st[0]), float(st[1]))
+        b.start(home, _pos(doc, 'start_delay', 0.5, zero_ok=True))
         for k, move in enumerate(moves):
             if not isinstance(move, dict) or len(move) != 1:
                 raise ValueError(f'pattern[{k}]: expected one of press/strip/circle/pause/'
