@@ -38,7 +38,8 @@ def classify(yz: np.ndarray, segment: np.ndarray, footprint_radius: float, step:
     """Pattern of the in-contact path ``yz`` (n, 2) [m] with contact-episode ids ``segment`` (n,).
 
     Returns {pattern, shares: {vertical_strip, spiral_circular, radial}, strips: {count,
-    spacing_mm, overlap, gaps}} where strips are vertical runs >= 10 mm grouped by y (3 mm), spacing
+    spacing_mm, overlap, gaps}} where strips are vertical runs >= 10 mm grouped by y (within half
+    a footprint radius), spacing
     the mean distance between neighbouring strips, overlap = 1 - spacing / footprint diameter
     (negative = gaps) and gaps = neighbouring strips farther apart than the footprint diameter.
     """
@@ -79,8 +80,8 @@ def classify(yz: np.ndarray, segment: np.ndarray, footprint_radius: float, step:
         pattern = best if shares[best] >= min_share else 'mixed'
     ys = sorted(y for y, _ in runs)
     strips = []
-    for y in ys:  # group runs 3 mm apart or closer into one strip
-        if strips and y - strips[-1][-1] <= 0.003:
+    for y in ys:  # group runs closer than half a footprint radius into one strip
+        if strips and y - strips[-1][-1] <= 0.5 * footprint_radius:
             strips[-1].append(y)
         else:
             strips.append([y])
