@@ -156,7 +156,7 @@ def test_figure_is_written(surface, subject, tmp_path):
 
 
 def test_exam_config_checks(tmp_path):
-    assert load_exam_config().deep == pytest.approx(0.010)
+    assert load_exam_config().deep == pytest.approx(0.008)
     p = tmp_path / 'x.yaml'
     p.write_text('levels: {light: 0.005, medium: 0.002, deep: 0.01}\n')
     with pytest.raises(ValueError, match='light <= medium'):

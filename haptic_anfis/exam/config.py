@@ -21,7 +21,7 @@ class ExamConfig:
     radius [m] (0 = the scene's palpable radius), hit margin [m], mark tolerance [m], score weights."""
     light: float = 0.002
     medium: float = 0.005
-    deep: float = 0.010
+    deep: float = 0.008
     footprint_radius: float = 0.008
     region_radius: float = 0.0
     hit_margin: float = 0.008

@@ -34,16 +34,20 @@ def _design(y, z, ld):
 
 
 def detect_lumps(points: np.ndarray, depths: np.ndarray, forces: np.ndarray, *,
-                 min_depth: float = 0.008, cell: float = 0.006, min_samples: int = 5,
-                 min_rel: float = 0.06, k_sigma: float = 4.0, exclude: float = 0.020,
+                 min_depth: float = 0.004, max_depth: float = 0.016, cell: float = 0.006,
+                 min_samples: int = 5, min_rel: float = 0.06, k_sigma: float = 5.0,
+                 exclude: float = 0.020,
                  max_lumps: int = 3) -> list[Detection]:
     """Suspected lumps from force samples; ``points`` (n, 3) contact points [m], ``depths`` (n,)
-    [m], ``forces`` (n,) force magnitudes [N]. Only samples at least ``min_depth`` deep count
-    (the lump is felt at medium / deep pressure). Returns [] when nothing stands out."""
+    [m], ``forces`` (n,) force magnitudes [N]. Only samples ``min_depth`` to ``max_depth`` deep
+    count: the lump is felt at medium / deep pressure, and past 16 mm (the deepest FE sample) the
+    force model extrapolates and then saturates, so force no longer says anything about the tissue.
+    Returns [] when nothing stands out."""
     P = np.asarray(points, float).reshape(-1, 3)
     d = np.asarray(depths, float).reshape(-1)
     F = np.asarray(forces, float).reshape(-1)
-    ok = np.isfinite(P).all(axis=1) & np.isfinite(d) & np.isfinite(F) & (d >= min_depth) & (F > 0)
+    ok = np.isfinite(P).all(axis=1) & np.isfinite(d) & np.isfinite(F) & (d >= min_depth) & (d <= max_depth) \
+        & (F > 0)
     y, z, ld, lf = P[ok, 1], P[ok, 2], np.log(d[ok]), np.log(F[ok])
     found: list[Detection] = []
     use = np.ones(len(y), bool)
