@@ -16,8 +16,8 @@ def test_systematic_trainee_covers_and_finds_the_lesion_from_forces(tmp_path, ca
     assert main(['exam', 'run', '--trainee', 'systematic', '--json', '--out',
                  str(tmp_path)]) == 0
     r = last_json(capfd.readouterr().out)
-    assert r['coverage_pct']['deep'] >= 90
-    assert r['hits'] == 1 and r['misses'] == 0 and r['false_marks'] == 0
+    assert r['coverage_pct']['deep'] >= 90, r
+    assert r['hits'] == 1 and r['misses'] == 0 and r['false_marks'] == 0, r
     assert r['pattern'] == 'vertical_strip' and r['verdict'] == 'pass'
     assert r['trainee']['finished'] and len(r['trainee']['detections']) == 1
     assert r['heat_maps_published'] >= 5 * r['duration_s'] * 0.5   # ~5 Hz (loaded machine)

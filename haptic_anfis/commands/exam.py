@@ -134,7 +134,8 @@ def _run_sim(args):
     report['trainee'] = {'name': args.trainee, 'detections': [
         {'y_mm': round(d.y * 1e3, 2), 'z_mm': round(d.z * 1e3, 2),
          'excess_pct': round(100 * d.excess, 1), 'sigma': round(d.sigma, 1)}
-        for d in controller.detections or []], 'finished': controller.finished}
+        for d in controller.detections or []], 'finished': controller.finished,
+        'felt_samples': controller.felt}
     report['heat_maps_published'] = examiner.n_published
     return report, examiner.session
 

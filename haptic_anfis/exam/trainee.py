@@ -115,6 +115,11 @@ class TraineeController:
         self._samples.append((point[0], point[1], point[2], depth, force))
 
     @property
+    def felt(self) -> int:
+        """Samples felt so far."""
+        return len(self._samples)
+
+    @property
     def search_over(self) -> bool:
         return self.t_now >= self.search.duration
 
