@@ -55,10 +55,12 @@ class CoverageGrid:
         # Thin the 1 kHz stream: one sample per 1 mm cell per level is enough for an 8 mm footprint.
         key = np.c_[np.round(points * 1e3).astype(np.int64), level]
         _, first = np.unique(key, axis=0, return_index=True)
-        for p, lv in zip(points[first], level[first]):
-            idx = self._tree.query_ball_point(p, self.footprint_radius)
-            if idx:
-                self.covered[idx, :lv] = True
+        lists = self._tree.query_ball_point(points[first], self.footprint_radius)
+        lv = level[first]
+        for k in range(len(self.thresholds)):   # cumulative: level k+1 or deeper covers level k
+            hit = [ix for ix, ok in zip(lists, lv > k) if ok and ix]
+            if hit:
+                self.covered[np.concatenate(hit).astype(np.int64), k] = True
 
     def fraction(self) -> dict[str, float]:
         """Area share of the region covered per level, {light, medium, deep} in [0, 1]."""

@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 from geometry_msgs.msg import Point, PointStamped, PoseStamped, WrenchStamped
 from rclpy.node import Node
+from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import Joy, JointState
 from std_msgs.msg import ColorRGBA
 from visualization_msgs.msg import Marker, MarkerArray
@@ -22,7 +23,7 @@ from visualization_msgs.msg import Marker, MarkerArray
 from ..exam import ExamSession, Surface, load_exam_config, subject_from_scene
 from ..exam.lesions import ExamSubject
 from . import interfaces as ifc
-from ._common import LOOP_QOS, Param, declare_parameters, positive, run_node, stamp_ns
+from ._common import Param, declare_parameters, positive, run_node, stamp_ns
 from .contact_detector import MESH_PARAMS, load_surface
 
 PARAMS = MESH_PARAMS + [
@@ -33,6 +34,10 @@ PARAMS = MESH_PARAMS + [
     Param('rate', 5.0, 'coverage heat map rate [Hz]', positive),
     Param('report_dir', '', "directory for report.json and report.png at the end ('' = none)"),
 ]
+
+#: The examiner wants every sample, not only the newest (as the recorder): a deep queue.
+SAMPLE_QOS = QoSProfile(depth=1000, history=HistoryPolicy.KEEP_LAST,
+                        reliability=ReliabilityPolicy.RELIABLE)
 
 LEVEL_COLOURS = ((0.6, 0.6, 0.6, 0.5), (1.0, 0.9, 0.2, 0.8), (1.0, 0.55, 0.0, 0.85),
                  (0.85, 0.1, 0.1, 0.9))
@@ -65,9 +70,9 @@ class Examiner(Node):
         self._colours = [ColorRGBA(r=r, g=g, b=b, a=a) for r, g, b, a in LEVEL_COLOURS]
         self._last_levels = None
         self.pub = self.create_publisher(MarkerArray, ifc.TOPIC_COVERAGE, 1)
-        self.create_subscription(JointState, ifc.TOPIC_CONTACT, self._on_contact, LOOP_QOS)
-        self.create_subscription(WrenchStamped, ifc.TOPIC_COMMAND, self._on_force, LOOP_QOS)
-        self.create_subscription(PoseStamped, ifc.TOPIC_POSE, self._on_pose, LOOP_QOS)
+        self.create_subscription(JointState, ifc.TOPIC_CONTACT, self._on_contact, SAMPLE_QOS)
+        self.create_subscription(WrenchStamped, ifc.TOPIC_COMMAND, self._on_force, SAMPLE_QOS)
+        self.create_subscription(PoseStamped, ifc.TOPIC_POSE, self._on_pose, SAMPLE_QOS)
         self.create_subscription(PointStamped, ifc.TOPIC_MARKS, self._on_mark, 10)
         self.create_subscription(Joy, ifc.TOPIC_BUTTONS, self._on_buttons, 10)
         self.timer = self.create_timer(1.0 / p['rate'], self._publish)

@@ -14,7 +14,8 @@ from rclpy.node import Node
 from sensor_msgs.msg import JointState
 
 from . import interfaces as ifc
-from ._common import LOOP_QOS, stamp_ns
+from ._common import stamp_ns
+from .examiner import SAMPLE_QOS
 
 
 class SimTrainee(Node):
@@ -22,8 +23,8 @@ class SimTrainee(Node):
         super().__init__(name, **kw)
         self.controller = controller
         self._pending: dict[int, tuple] = {}
-        self.create_subscription(JointState, ifc.TOPIC_CONTACT, self._on_contact, LOOP_QOS)
-        self.create_subscription(WrenchStamped, ifc.TOPIC_COMMAND, self._on_force, LOOP_QOS)
+        self.create_subscription(JointState, ifc.TOPIC_CONTACT, self._on_contact, SAMPLE_QOS)
+        self.create_subscription(WrenchStamped, ifc.TOPIC_COMMAND, self._on_force, SAMPLE_QOS)
         self.create_timer(0.1, self._tick)
         self.felt = 0
 
