@@ -3,7 +3,11 @@ import json
 
 import pytest
 
+from pathlib import Path
+
 from haptic_anfis.cli import main
+
+ROOT = Path(__file__).resolve().parents[1]
 
 pytestmark = pytest.mark.ros
 
@@ -40,6 +44,14 @@ def test_careless_trainee_scores_lower_and_misses_and_the_bag_says_the_same(tmp_
     b = last_json(capfd.readouterr().out)
     assert b['hits'] == 0 and b['misses'] == 1 and b['pattern'] == r['pattern']
     assert b['coverage_pct']['light'] == pytest.approx(r['coverage_pct']['light'], abs=5)
+    # the same session scored against a case without lesions: valid, and says so
+    scene = (ROOT / 'config' / 'scenes' / 'default.yaml').read_text()
+    i, j = scene.index('tumours:'), scene.index('probe:')
+    (tmp_path / 'none.yaml').write_text(scene[:i] + 'tumours: []\n\n' + scene[j:])
+    assert main(['exam', 'report', str(bag), '--case', str(tmp_path / 'none.yaml'), '--json']) == 0
+    n = last_json(capfd.readouterr().out)
+    assert n['misses'] == 0 and n['hits'] == 0 and n['lesions'] == []
+    assert any('no lesion' in x for x in n['notes'])
 
 
 def test_report_of_a_bag_without_the_topics_is_valid(tmp_path, capfd):

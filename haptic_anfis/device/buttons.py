@@ -90,12 +90,10 @@ class ClutchMark:
             return 0.0
         if self._wait_zero:
             if any(c != 0.0 for c in command):
-                if self._ramp_start is None:
-                    return 0.0          # still inside the tissue since the release
-            else:
-                self._wait_zero = False
-                self._ramp_start = now
-                return 0.0
+                return 0.0              # still inside the tissue since the release
+            self._wait_zero = False     # the probe left the tissue: ramp from the next contact
+            self._ramp_start = now
+            return 0.0
         if self._ramp_start is None:
             return 1.0
         a = (now - self._ramp_start) / self.ramp_s

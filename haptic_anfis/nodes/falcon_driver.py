@@ -157,7 +157,7 @@ class FalconDriver(Node):
         self.pub_pose.publish(pose)
         tw = self._twist
         tw.header.stamp = pose.header.stamp
-        vx, vy, vz = m.velocity_to_tissue(state.velocity)
+        vx, vy, vz = (0.0, 0.0, 0.0) if self.clutch.held else m.velocity_to_tissue(state.velocity)
         lin = tw.twist.linear
         lin.x, lin.y, lin.z = vx, vy, vz
         self.pub_twist.publish(tw)
