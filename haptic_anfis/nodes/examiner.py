@@ -4,7 +4,8 @@ Subscribes to the probe pose, contact, force command, buttons and marks (``exam/
 case's lesions from ``scene`` (:func:`lesion_source`, where a case library plugs in). Publishes a
 live coverage heat map on the mesh (``exam/coverage``, ``visualization_msgs/MarkerArray``: the
 palpable region's triangles coloured by the deepest level pressed — grey none, yellow light,
-orange medium, red deep — at ``rate`` Hz) and, on :meth:`Examiner.close`, writes the report
+orange medium, red deep — in ~16 mm patches, each sent when it changes and all every 2 s, plus a
+text marker with the coverage numbers, at ``rate`` Hz) and, on :meth:`Examiner.close`, writes the report
 (``report.json`` + ``report.png``) into ``report_dir``.
 """
 from __future__ import annotations
@@ -58,17 +59,18 @@ class Examiner(Node):
         mesh = load_surface(self, p)
         self.session = ExamSession(Surface.from_mesh(mesh), self.subject, self.config)
         s = self.session
-        tri = s.grid.vertices[s.grid.faces[s.grid.faces_index]].reshape(-1, 3)
-        self._heat = Marker()
-        m = self._heat
-        m.header.frame_id = p['frame_id']
-        m.ns, m.id, m.type, m.action = 'exam_coverage', 0, Marker.TRIANGLE_LIST, Marker.ADD
-        m.pose.orientation.w = 1.0
-        m.scale.x = m.scale.y = m.scale.z = 1.0
-        # lifted 0.5 mm along the outward normal (+x mostly) so it draws over the tissue mesh
-        m.points = [Point(x=float(a) + 5e-4, y=float(b), z=float(c)) for a, b, c in tri]
         self._colours = [ColorRGBA(r=r, g=g, b=b, a=a) for r, g, b, a in LEVEL_COLOURS]
+        self._patches, self._patch_faces = _patch_markers(s, p['frame_id'])
+        self._text = Marker()
+        t = self._text
+        t.header.frame_id = p['frame_id']
+        t.ns, t.id, t.type, t.action = 'exam_summary', 0, Marker.TEXT_VIEW_FACING, Marker.ADD
+        t.pose.orientation.w = 1.0
+        t.pose.position.x, t.pose.position.z = 0.06, s.region_radius + 0.01
+        t.scale.z = 0.006
+        t.color.r = t.color.g = t.color.b = t.color.a = 1.0
         self._last_levels = None
+        self._last_full = -1e9
         self.pub = self.create_publisher(MarkerArray, ifc.TOPIC_COVERAGE, 1)
         self.create_subscription(JointState, ifc.TOPIC_CONTACT, self._on_contact, SAMPLE_QOS)
         self.create_subscription(WrenchStamped, ifc.TOPIC_COMMAND, self._on_force, SAMPLE_QOS)
@@ -103,15 +105,32 @@ class Examiner(Node):
         self.session.add_buttons(stamp_ns(msg.header.stamp) * 1e-9, list(msg.buttons))
 
     def _publish(self) -> None:
-        """Fold the new samples into the grid and publish the heat map (colours only change)."""
+        """Fold the new samples into the grid; publish the summary text and the heat-map patches
+        whose colours changed (all of them every ``FULL_REFRESH`` s, for late subscribers): the
+        whole map is ~6k vertices, too slow to serialise at 5 Hz on a loaded machine."""
         self.session.update_coverage()
         levels = self.session.grid.level_per_face()
-        if self._last_levels is None or not np.array_equal(levels, self._last_levels):
-            cols = self._colours
-            self._heat.colors = [cols[lv] for lv in np.repeat(levels, 3)]
-            self._last_levels = levels
-        self._heat.header.stamp = self.get_clock().now().to_msg()
-        self.pub.publish(MarkerArray(markers=[self._heat]))
+        now = self.get_clock().now()
+        full = (now.nanoseconds * 1e-9 - self._last_full) >= FULL_REFRESH
+        if full:
+            self._last_full = now.nanoseconds * 1e-9
+        changed = np.ones(len(levels), bool) if full or self._last_levels is None \
+            else levels != self._last_levels
+        self._last_levels = levels
+        stamp = now.to_msg()
+        out = []
+        cols = self._colours
+        for m, faces in zip(self._patches, self._patch_faces):
+            if changed[faces].any():
+                m.colors = [cols[lv] for lv in np.repeat(levels[faces], 3)]
+                m.header.stamp = stamp
+                out.append(m)
+        c = self.session.grid.fraction()
+        self._text.text = (f"light {100 * c['light']:.0f} %  medium {100 * c['medium']:.0f} %  "
+                           f"deep {100 * c['deep']:.0f} %  marks {len(self.session.marks)}")
+        self._text.header.stamp = stamp
+        out.append(self._text)
+        self.pub.publish(MarkerArray(markers=out))
         self.n_published += 1
 
     def report(self) -> dict:
@@ -121,6 +140,33 @@ class Examiner(Node):
         """Write the report into ``report_dir`` (when set)."""
         if self.params['report_dir']:
             write_report(self.session, self.params['report_dir'])
+
+
+FULL_REFRESH = 2.0   # [s] between heat maps carrying every patch
+PATCH = 0.016        # [m] patch size: ~30 patches over the default region
+
+
+def _patch_markers(session, frame_id: str):
+    """The region's triangles split into square (y, z) patches of ``PATCH`` m, one TRIANGLE_LIST
+    marker each (points fixed, lifted 0.5 mm out of the skin so they draw over the tissue mesh);
+    returns (markers, face indices into the region per marker)."""
+    g = session.grid
+    key = np.floor(g.centroids[:, 1:3] / PATCH).astype(np.int64)
+    _, inv = np.unique(key, axis=0, return_inverse=True)
+    inv = inv.reshape(-1)
+    markers, faces = [], []
+    for k in range(inv.max() + 1):
+        idx = np.flatnonzero(inv == k)
+        m = Marker()
+        m.header.frame_id = frame_id
+        m.ns, m.id, m.type, m.action = 'exam_coverage', k, Marker.TRIANGLE_LIST, Marker.ADD
+        m.pose.orientation.w = 1.0
+        m.scale.x = m.scale.y = m.scale.z = 1.0
+        tri = g.vertices[g.faces[g.faces_index[idx]]].reshape(-1, 3)
+        m.points = [Point(x=float(a) + 5e-4, y=float(b), z=float(c)) for a, b, c in tri]
+        markers.append(m)
+        faces.append(idx)
+    return markers, faces
 
 
 def write_report(session: ExamSession, out_dir, report: dict | None = None) -> dict:
