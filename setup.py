@@ -19,6 +19,7 @@ NODES: dict[str, str] = {
     'visualizer': 'haptic_anfis.nodes.visualizer:main',
     'recorder': 'haptic_anfis.nodes.recorder:main',
     'player': 'haptic_anfis.nodes.player:main',
+    'examiner': 'haptic_anfis.nodes.examiner:main',
 }
 
 setup(
@@ -31,6 +32,7 @@ setup(
         (f'share/{PACKAGE}', ['package.xml']),
         (f'share/{PACKAGE}/config', glob('config/*.yaml')),
         (f'share/{PACKAGE}/config/scenes', glob('config/scenes/*.yaml')),
+        (f'share/{PACKAGE}/config/trainees', glob('config/trainees/*.yaml')),
     ],
     python_requires='>=3.10',
     # Plain-Python dependencies. rclpy and the message packages come from the ROS install (or the

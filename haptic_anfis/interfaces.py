@@ -19,6 +19,9 @@ topic                      type                            meaning
 ``visualization/markers``  visualization_msgs/MarkerArray  probe, contact point, force arrow,
                                                            tumours; ~30 Hz
 ``visualization/tissue``   visualization_msgs/MarkerArray  tissue mesh, latched (transient local)
+``exam/marks``             geometry_msgs/PointStamped      "lump here" (button 1), probe tip [m]
+``exam/coverage``          visualization_msgs/MarkerArray  examiner's live coverage heat map, 5 Hz
+``exam/report``            std_msgs/String                 examiner's report JSON, at the end
 =========================  ==============================  ==========================================
 
 Contact message (``sensor_msgs/JointState``, no custom interfaces needed): ``header.stamp`` is the
@@ -86,6 +89,9 @@ TOPIC_LOCAL_MODEL = 'falcon/servo_cf_local'
 TOPIC_CONTACT = 'contact'
 TOPIC_MARKERS = 'visualization/markers'
 TOPIC_TISSUE = 'visualization/tissue'
+TOPIC_MARKS = 'exam/marks'
+TOPIC_COVERAGE = 'exam/coverage'
+TOPIC_EXAM_REPORT = 'exam/report'
 SERVICE_RELOAD = '/force_server/reload'
 
 

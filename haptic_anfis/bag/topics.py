@@ -12,6 +12,7 @@ WRENCH_TYPE = 'geometry_msgs/msg/WrenchStamped'
 JOINT_STATE_TYPE = 'sensor_msgs/msg/JointState'
 JOY_TYPE = 'sensor_msgs/msg/Joy'
 MARKERS_TYPE = 'visualization_msgs/msg/MarkerArray'
+POINT_TYPE = 'geometry_msgs/msg/PointStamped'
 
 
 def absolute(topic: str) -> str:
@@ -29,13 +30,15 @@ KNOWN_TYPES: dict[str, str] = {
     absolute(ifc.TOPIC_CONTACT): JOINT_STATE_TYPE,
     absolute(ifc.TOPIC_MARKERS): MARKERS_TYPE,
     absolute(ifc.TOPIC_TISSUE): MARKERS_TYPE,
+    absolute(ifc.TOPIC_MARKS): POINT_TYPE,
 }
 
 #: What the recorder records by default: pose, contact, force command, buttons.
-DEFAULT_TOPICS = (ifc.TOPIC_POSE, ifc.TOPIC_CONTACT, ifc.TOPIC_COMMAND, ifc.TOPIC_BUTTONS)
+DEFAULT_TOPICS = (ifc.TOPIC_POSE, ifc.TOPIC_CONTACT, ifc.TOPIC_COMMAND, ifc.TOPIC_BUTTONS,
+                  ifc.TOPIC_MARKS)
 #: Every topic of the haptic loop (``haptic-anfis sim --record``): the visualization is left out.
 ALL_LOOP_TOPICS = (ifc.TOPIC_POSE, ifc.TOPIC_TWIST, ifc.TOPIC_APPLIED, ifc.TOPIC_BUTTONS,
-                   ifc.TOPIC_CONTACT, ifc.TOPIC_COMMAND)
+                   ifc.TOPIC_CONTACT, ifc.TOPIC_COMMAND, ifc.TOPIC_MARKS)
 
 
 @lru_cache(maxsize=1)

@@ -98,7 +98,7 @@ class SimulatedFalcon(Device):
     of at most ``dt_max``; :meth:`read` advances the simulation to ``now`` (at most ``max_catch_up``
     seconds at once, so a stalled caller does not make the handle jump). The handle stops at the
     workspace walls. The commanded motor force really pushes the handle, so the rendered tissue
-    force resists the hand. Button 0 is pressed while the script is pushing into the tissue.
+    force resists the hand. The buttons are the script's (button 0 clutch, button 1 mark).
     """
 
     def __init__(self, script: PalpationScript, mapping: WorkspaceMapping = WorkspaceMapping(),
@@ -157,5 +157,5 @@ class SimulatedFalcon(Device):
                         x[i], v[i] = h, min(v[i], 0.0)
                     elif x[i] < -h:
                         x[i], v[i] = -h, max(v[i], 0.0)
-        pressing = int(self.script.is_pressing(now - (now if self._t0 is None else self._t0)))
-        return DeviceState(tuple(self._x), tuple(self._v), (pressing, 0, 0, 0))
+        b0, b1 = self.script.buttons(now - (now if self._t0 is None else self._t0))
+        return DeviceState(tuple(self._x), tuple(self._v), (b0, b1, 0, 0))

@@ -13,6 +13,7 @@ from __future__ import annotations
 import math
 from dataclasses import replace
 
+from .buttons import ClutchMark
 from .falcon import DeviceState, WorkspaceMapping
 from .local_model import (FALCON_MAX_STIFFNESS, LocalModel, LocalModelRenderer,
                           tissue_stiffness_limit)
@@ -35,15 +36,19 @@ class ForceInput:
         validity_time, validity_radius: local model expiry [s], [m] (tissue frame).
         period: servo period [s] (a model no older than 1.5 periods is "fresh").
         stamps: the book of the driver's pose stamps (a new one by default).
+        clutch: the grip buttons' state machine (:class:`.buttons.ClutchMark`), or None: its
+            offset moves the rendered position and its gain scales every force (zero while the
+            clutch is held, no jump after it).
     """
 
     def __init__(self, safety: SafetyLayer, mapping: WorkspaceMapping, mode: str = 'local_model',
                  max_stiffness: float = FALCON_MAX_STIFFNESS, validity_time: float = 0.05,
                  validity_radius: float = 0.005, period: float = 0.001,
-                 stamps: StampBook | None = None) -> None:
+                 stamps: StampBook | None = None, clutch: ClutchMark | None = None) -> None:
         if mode not in MODES:
             raise ValueError(f'mode: expected one of {MODES}, got {mode!r}')
         self.safety, self.mapping, self.mode = safety, mapping, mode
+        self.clutch = clutch
         self.stamps = stamps if stamps is not None else StampBook()
         self.renderer = LocalModelRenderer(
             tissue_stiffness_limit(max_stiffness, mapping.force_scale, mapping.scale),
@@ -66,9 +71,15 @@ class ForceInput:
         safety layer holds the last force and its watchdog ramps it to zero."""
         if self.mode != 'local_model':
             return -1
-        m = self.mapping
-        f, status = self.renderer.render(m.to_tissue(state.position), now)
+        m, c = self.mapping, self.clutch
+        p = m.to_tissue(state.position)
+        if c is not None:
+            p = c.tissue(p)
+        f, status = self.renderer.render(p, now)
         if f is not None:
+            if c is not None:
+                g = c.gain(f, now)
+                f = (g * f[0], g * f[1], g * f[2])
             self.safety.command(m.force_to_device(f), now, count=False)
         return status
 
@@ -92,6 +103,9 @@ class ForceInput:
         why, t_pose = self._stamp(stamp_ns, now)
         if why != STAMP_OK:
             return f'rejected: stamp {why}'
+        if self.clutch is not None:  # 0 while clutched, then no jump
+            g = self.clutch.gain(force, now)
+            force = tuple(g * float(v) for v in force)
         why = self.safety.command(self.mapping.force_to_device(force), t_pose, frame_id)
         if why == OK:
             self.last_in_contact = any(v != 0.0 for v in force)

@@ -16,10 +16,23 @@ Moves:
 ``circle``: ``{center: [y, z], radius, depth, turns, period}`` — in at the circle's start, go
     round ``turns`` times at ``period`` s per turn, out.
 ``pause``: ``{duration}`` — stay where the last move ended (above the surface).
+``mark``: ``{points: [[y, z], ...], depth, hold}`` — like ``press``, and half-way through the hold
+    the hand presses button 1 ("I feel a lump here") for ``click`` s (default 0.1).
+``clutch``: ``{shift: [dx, dy, dz]}`` — above the surface, hold button 0 (clutch) and move the hand
+    by ``shift`` [m, tissue-frame units of the mapped device position], then release: the probe
+    stays put while the device re-centres. Later moves are emitted shifted by the sum of the
+    shifts, so the probe still follows the script's tissue coordinates.
+
+``strip`` also takes ``depths: [d1, d2, ...]`` (instead of ``depth``): one pass per depth, going
+back and forth along the strip without leaving the tissue (the MammaCare light / medium / deep
+passes), and ``clip_radius`` [m]: each strip's z range is cut to the disc of that radius (so strips
+follow a round breast). Segment buttons: :meth:`PalpationScript.buttons` (button 0 clutch,
+button 1 mark); the simulated Falcon reports them.
 
 Top-level keys: ``approach_height`` (clearance above the surface between moves, m),
 ``travel_speed`` (m/s in free space), ``press_speed`` (m/s into, out of and along the tissue),
-``start_delay`` (s at the first point before anything moves), ``loop`` (repeat for ever), ``surface``
+``start_delay`` (s at the first point before anything moves), ``start`` ([y, z]: begin above this
+point rather than the first move's), ``loop`` (repeat for ever), ``surface``
 (``{radii: [rx, ry, rz]}``), ``pattern`` (the list of moves).
 """
 from __future__ import annotations
@@ -47,11 +60,13 @@ def dome_height(y: float, z: float, radii=DEFAULT_RADII) -> float:
 @dataclass
 class PalpationScript:
     """A piecewise-linear hand trajectory: ``times`` (n,) [s], ``points`` (n, 3) [m], ``pressing``
-    (n - 1,) bool per segment (the hand is pushing into the tissue)."""
+    (n - 1,) bool per segment (the hand is pushing into the tissue), ``button_states`` (n - 1, 2)
+    0/1 per segment (button 0 clutch, button 1 mark; None = never pressed)."""
     times: np.ndarray
     points: np.ndarray
     pressing: np.ndarray
     loop: bool = True
+    button_states: np.ndarray | None = None
 
     @property
     def duration(self) -> float:
@@ -79,9 +94,20 @@ class PalpationScript:
         i = min(max(bisect.bisect_right(self._tl, t) - 1, 0), len(self.pressing) - 1)
         return bool(self.pressing[i])
 
+    def buttons(self, t: float) -> tuple[int, int]:
+        """(clutch, mark) buttons the hand holds at time ``t`` [s]."""
+        if self._bl is None:
+            return (0, 0)
+        t = self._local(t)
+        i = min(max(bisect.bisect_right(self._tl, t) - 1, 0), len(self._bl) - 1)
+        return self._bl[i]
+
     def __post_init__(self) -> None:
         self._tl = [float(v) for v in self.times]
         self._pl = [tuple(float(c) for c in p) for p in self.points]
+        bs = self.button_states
+        self._bl = None if bs is None or not np.any(bs) else [
+            (int(a), int(b)) for a, b in np.asarray(bs, dtype=int)]
 
     # -- building -------------------------------------------------------------------------------
     @classmethod
@@ -111,10 +137,18 @@ class PalpationScript:
                 raise ValueError
         except (TypeError, ValueError, IndexError):
             first = (0.0, 0.0)  # malformed: the move itself reports the precise error below
-        b.start(first, _pos(doc, 'start_delay', 0.5, zero_ok=True))
+        home = first
+        if 'start' in doc:  # begin above this (y, z) instead of the first move's point
+            st = doc['start']
+            if not isinstance(st, (list, tuple)) or len(st) != 2 or not all(
+                    isinstance(v, (int, float)) and math.isfinite(v) for v in st):
+                raise ValueError(f'start: expected [y, z] in metres, got {st!r}')
+            home = (float(st[0]), float(st[1]))
+        b.start(home, _pos(doc, 'start_delay', 0.5, zero_ok=True))
         for k, move in enumerate(moves):
             if not isinstance(move, dict) or len(move) != 1:
-                raise ValueError(f'pattern[{k}]: expected one of press/strip/circle/pause, '
+                raise ValueError(f'pattern[{k}]: expected one of press/strip/circle/pause/'
+                                 f'mark/clutch, '
                                  f'got {move!r}')
             (kind, spec), = move.items()
             spec = spec or {}
@@ -123,8 +157,33 @@ class PalpationScript:
                     b.press(y, z, _pos(spec, 'depth', 0.010), _pos(spec, 'hold', 0.5, zero_ok=True))
             elif kind == 'strip':
                 z0, z1 = (float(v) for v in spec['z'])
+                depths = [float(d) for d in spec['depths']] if 'depths' in spec \
+                    else [_pos(spec, 'depth', 0.006)]
+                if not depths or any(not (math.isfinite(d) and d > 0) for d in depths):
+                    raise ValueError(f'pattern[{k}].depths: expected depths > 0 m, got {depths!r}')
+                clip = _pos(spec, 'clip_radius', 0.0, zero_ok=True)
                 for y in spec['y']:
-                    b.strip(float(y), z0, z1, _pos(spec, 'depth', 0.006))
+                    y = float(y)
+                    za, zb = z0, z1
+                    if clip > 0:
+                        if abs(y) >= clip:
+                            continue
+                        h = math.sqrt(clip * clip - y * y)
+                        za, zb = max(min(z0, z1), -h), min(max(z0, z1), h)
+                        if z1 < z0:
+                            za, zb = zb, za
+                    b.strip(y, za, zb, depths)
+            elif kind == 'mark':
+                for y, z in _pairs(spec, 'points', k):
+                    b.press(y, z, _pos(spec, 'depth', 0.010), _pos(spec, 'hold', 0.6),
+                            click=_pos(spec, 'click', 0.1))
+            elif kind == 'clutch':
+                shift = spec.get('shift')
+                if not isinstance(shift, list) or len(shift) != 3 \
+                        or not all(isinstance(v, (int, float)) and math.isfinite(v) for v in shift):
+                    raise ValueError(f'pattern[{k}].shift: expected [dx, dy, dz] in metres, '
+                                     f'got {shift!r}')
+                b.clutch(tuple(float(v) for v in shift))
             elif kind == 'circle':
                 yc, zc = (float(v) for v in spec['center'])
                 b.circle(yc, zc, _pos(spec, 'radius', 0.02), _pos(spec, 'depth', 0.006),
@@ -133,9 +192,11 @@ class PalpationScript:
                 b.hold(_pos(spec, 'duration', 0.5, zero_ok=True), False)
             else:
                 raise ValueError(f'pattern[{k}]: unknown move {kind!r} '
-                                 '(expected press, strip, circle or pause)')
+                                 '(expected press, strip, circle, pause, mark or clutch)')
         b.travel_to(first)  # a looping script returns to its start
-        return cls(np.array(b.t), np.array(b.p), np.array(b.pressing), bool(doc.get('loop', True)))
+        pts = np.array(b.p) + np.array(b.shifts)
+        return cls(np.array(b.t), pts, np.array(b.pressing), bool(doc.get('loop', True)),
+                   np.array(b.buttons, dtype=int).reshape(-1, 2))
 
 
 def _pos(d: dict, key: str, default: float, zero_ok: bool = False) -> float:
@@ -171,8 +232,11 @@ class _Builder:
     def __init__(self, radii, clearance, travel, press):
         self.radii, self.clearance, self.travel, self.press_v = radii, clearance, travel, press
         self.t: list[float] = []
-        self.p: list[tuple[float, float, float]] = []
+        self.p: list[tuple[float, float, float]] = []   # probe targets, script coordinates
+        self.shifts: list[tuple[float, float, float]] = []  # + clutch shift = hand target
+        self.shift = (0.0, 0.0, 0.0)
         self.pressing: list[bool] = []
+        self.buttons: list[tuple[int, int]] = []
 
     def h(self, y, z):
         return dome_height(y, z, self.radii)
@@ -181,19 +245,37 @@ class _Builder:
         y, z = yz
         self.t.append(0.0)
         self.p.append((self.h(y, z) + self.clearance, y, z))
+        self.shifts.append(self.shift)
         self.hold(delay, False)
 
-    def go(self, p, speed, pressing):
+    def go(self, p, speed, pressing, buttons=(0, 0)):
         d = math.dist(p, self.p[-1])
         self.t.append(self.t[-1] + max(d / speed, 1e-3))
         self.p.append(tuple(p))
+        self.shifts.append(self.shift)
         self.pressing.append(pressing)
+        self.buttons.append(buttons)
 
-    def hold(self, dt, pressing):
+    def hold(self, dt, pressing, buttons=(0, 0)):
         if dt > 0:
             self.t.append(self.t[-1] + dt)
             self.p.append(self.p[-1])
+            self.shifts.append(self.shift)
             self.pressing.append(pressing)
+            self.buttons.append(buttons)
+
+    def clutch(self, d):
+        # Button 0 down for 0.05 s, the hand moves by d (the probe stays), button 0 up.
+        self.hold(0.05, False, (1, 0))
+        s = self.shift
+        self.shift = (s[0] + d[0], s[1] + d[1], s[2] + d[2])
+        self.t.append(self.t[-1] + max(math.sqrt(sum(v * v for v in d)) / self.travel, 1e-3))
+        self.p.append(self.p[-1])
+        self.shifts.append(self.shift)
+        self.pressing.append(False)
+        self.buttons.append((1, 0))
+        self.hold(0.05, False, (1, 0))
+        self.hold(0.05, False)
 
     def travel_to(self, yz):
         y, z = yz
@@ -206,19 +288,29 @@ class _Builder:
         if top > above:
             self.go((above, y, z), self.travel, False)
 
-    def press(self, y, z, depth, hold):
+    def press(self, y, z, depth, hold, click=0.0):
         self.travel_to((y, z))
         self.go((self.h(y, z) - depth, y, z), self.press_v, True)
-        self.hold(hold, True)
+        if click > 0:  # button 1 half-way through the hold
+            self.hold(hold / 2, True)
+            self.hold(click, True, (0, 1))
+            self.hold(hold / 2, True)
+        else:
+            self.hold(hold, True)
         self.go((self.h(y, z) + self.clearance, y, z), self.press_v, False)
 
-    def strip(self, y, z0, z1, depth):
+    def strip(self, y, z0, z1, depths):
         self.travel_to((y, z0))
-        self.go((self.h(y, z0) - depth, y, z0), self.press_v, True)
+        self.go((self.h(y, z0) - depths[0], y, z0), self.press_v, True)
         n = max(int(abs(z1 - z0) / 0.002), 1)
-        for z in np.linspace(z0, z1, n + 1)[1:]:
-            self.go((self.h(y, z) - depth, y, float(z)), self.press_v, True)
-        self.go((self.h(y, z1) + self.clearance, y, z1), self.press_v, False)
+        ends = (z0, z1)
+        for k, depth in enumerate(depths):
+            za, zb = ends[k % 2], ends[(k + 1) % 2]
+            self.go((self.h(y, za) - depth, y, za), self.press_v, True)  # to this pass's depth
+            for z in np.linspace(za, zb, n + 1)[1:]:
+                self.go((self.h(y, z) - depth, y, float(z)), self.press_v, True)
+        zl = self.p[-1][2]
+        self.go((self.h(y, zl) + self.clearance, y, zl), self.press_v, False)
 
     def circle(self, yc, zc, r, depth, turns, period):
         y0, z0 = yc + r, zc

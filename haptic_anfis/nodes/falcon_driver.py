@@ -2,7 +2,9 @@
 
 Publishes the tip pose (``falcon/measured_cp``), velocity (``falcon/measured_cv``), the force it
 applies (``falcon/measured_cf``, every ``measured_cf_every`` ticks) and the buttons
-(``falcon/buttons``, on change and every 100 ticks), all in the tissue frame; subscribes to the
+(``falcon/buttons``, on change and every 100 ticks), all in the tissue frame; button 0 is the
+clutch and button 1 the mark (:class:`haptic_anfis.device.buttons.ClutchMark`; a mark is published
+as ``exam/marks``, ``geometry_msgs/PointStamped`` at the probe tip); subscribes to the
 force command ``falcon/servo_cf`` (``geometry_msgs/WrenchStamped``, tissue frame) and the local
 force model ``falcon/servo_cf_local`` (``sensor_msgs/JointState``, layout in
 :mod:`haptic_anfis.nodes.interfaces`). ``force_mode``: ``local_model`` (default) evaluates the
@@ -24,12 +26,13 @@ import sys
 import time
 
 import numpy as np
-from geometry_msgs.msg import PoseStamped, TwistStamped, WrenchStamped
+from geometry_msgs.msg import PointStamped, PoseStamped, TwistStamped, WrenchStamped
 from rclpy.node import Node
 from sensor_msgs.msg import JointState, Joy
 
 from ..device import (HandParams, PalpationScript, SafetyLayer, ServoLoop, SimulatedFalcon,
                       WorkspaceMapping)
+from ..device.buttons import ClutchMark
 from ..device.force_input import MODES, ForceInput
 from ..device.local_model import FALCON_MAX_STIFFNESS, STATUS_NAMES
 from ..device.safety import OK
@@ -146,13 +149,16 @@ class FalconDriver(Node):
             what = f'script {script_path} ({script.duration:.1f} s)'
         self.safety = SafetyLayer(p['max_force'], p['max_force_rate'], p['watchdog_timeout'],
                                   frame_id=self.frame_id)
+        # Button 0 clutch (zero force, mapping follows the hand), button 1 mark (exam/marks).
+        self.clutch = ClutchMark()
         self.input = ForceInput(self.safety, self.mapping, p['force_mode'], p['max_stiffness'],
                                 p['model_validity_time'], p['model_validity_radius'],
-                                1.0 / p['rate'])
+                                1.0 / p['rate'], clutch=self.clutch)
         self.pub_pose = self.create_publisher(PoseStamped, ifc.TOPIC_POSE, LOOP_QOS)
         self.pub_twist = self.create_publisher(TwistStamped, ifc.TOPIC_TWIST, LOOP_QOS)
         self.pub_applied = self.create_publisher(WrenchStamped, ifc.TOPIC_APPLIED, LOOP_QOS)
         self.pub_buttons = self.create_publisher(Joy, ifc.TOPIC_BUTTONS, 10)
+        self.pub_mark = self.create_publisher(PointStamped, ifc.TOPIC_MARKS, 10)
         self.sub_cmd = self.create_subscription(WrenchStamped, ifc.TOPIC_COMMAND, self._on_command,
                                                 LOOP_QOS)
         if p['force_mode'] == 'local_model':
@@ -216,7 +222,7 @@ class FalconDriver(Node):
     def _publish_state(self, state, force, now) -> None:
         ns = time.time_ns()
         m = self.mapping
-        x, y, z = m.to_tissue(state.position)
+        (x, y, z), ev = self.clutch.update(state.buttons, m.to_tissue(state.position), now)
         pose = self._pose
         set_stamp(pose.header.stamp, ns)
         self.input.on_pose(ns, now)
@@ -225,7 +231,7 @@ class FalconDriver(Node):
         self.pub_pose.publish(pose)
         tw = self._twist
         tw.header.stamp = pose.header.stamp
-        vx, vy, vz = m.velocity_to_tissue(state.velocity)
+        vx, vy, vz = (0.0, 0.0, 0.0) if self.clutch.held else m.velocity_to_tissue(state.velocity)
         lin = tw.twist.linear
         lin.x, lin.y, lin.z = vx, vy, vz
         self.pub_twist.publish(tw)
@@ -244,6 +250,11 @@ class FalconDriver(Node):
             joy.header.frame_id = self.frame_id
             joy.buttons = list(state.buttons)
             self.pub_buttons.publish(joy)
+        if ev.mark:  # the probe tip; the examiner projects it on the surface
+            mk = PointStamped()
+            mk.header.stamp, mk.header.frame_id = pose.header.stamp, self.frame_id
+            mk.point.x, mk.point.y, mk.point.z = x, y, z
+            self.pub_mark.publish(mk)
         if self.first_command is not None and self.run_duration > 0 \
                 and now - self.first_command >= self.run_duration:
             self.finished = True

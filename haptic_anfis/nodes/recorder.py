@@ -36,7 +36,7 @@ PARAMS = [
     Param('output', '', "bag directory to create ('' = session_YYYYmmdd-HHMMSS in the working "
           'directory); it must not exist yet'),
     Param('topics', list(DEFAULT_TOPICS), 'topics to record (relative names resolve in the node '
-          'namespace); default: pose, contact, force command, buttons'),
+          'namespace); default: pose, contact, force command, buttons, marks'),
     Param('all_topics', False, 'also record every other topic that appears in the graph '
           '(except /rosout and /parameter_events)'),
     Param('flush_period', 0.5, 'close and flush the pending MCAP chunk at least this often [s]: '

@@ -1,0 +1,86 @@
+"""Examination mode timings (printed, never asserted): the simulated trainees' full exams through
+the one-process graph, and the examiner's per-update cost.
+
+1. ``haptic-anfis exam run --trainee systematic|careless --json`` in a child process: wall time
+   (start-up included), the session's duration, deep coverage, hits / misses / false marks, score.
+2. The examiner's core, ROS-free: folding 200 ms of 1 kHz contact samples into the coverage grid
+   (what one 5 Hz heat-map tick does) and the end-of-session report, on the shipped mesh.
+
+Run: ``.venv/bin/python bench/bench_exam.py [--quick]`` (``--quick`` skips the full exams).
+The machine's load is printed with every figure: on a shared 2-core machine it dominates.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def load() -> str:
+    return Path('/proc/loadavg').read_text().split()[0] if Path('/proc/loadavg').exists() else '?'
+
+
+def full_exam(trainee: str) -> None:
+    t0 = time.perf_counter()
+    p = subprocess.run([sys.executable, '-m', 'haptic_anfis.cli', 'exam', 'run', '--trainee',
+                        trainee, '--json'], capture_output=True, text=True, cwd=ROOT,
+                       env=dict(os.environ), timeout=600)
+    wall = time.perf_counter() - t0
+    if p.returncode != 0:
+        print(f'{trainee:10s} FAILED ({p.returncode}): {p.stderr.strip()[-300:]}')
+        return
+    r = json.loads(p.stdout.strip().splitlines()[-1])
+    c = r['coverage_pct']
+    print(f"{trainee:10s} wall {wall:6.1f} s (session {r['duration_s']:.1f} s, in contact "
+          f"{r['contact_s']:.1f} s) | coverage light/medium/deep {c['light']:.0f}/{c['medium']:.0f}/"
+          f"{c['deep']:.0f} % | hits {r['hits']} misses {r['misses']} false {r['false_marks']} | "
+          f"score {r['score']:.1f} {r['verdict']} | felt {r['trainee'].get('felt_samples')} | "
+          f"load {load()}")
+
+
+def core_costs() -> None:
+    from haptic_anfis.contact import load_mesh
+    from haptic_anfis.exam import ExamConfig, ExamSession, Surface, subject_from_scene
+    from haptic_anfis.nodes.contact_detector import DEFAULT_SURFACE
+    mesh = load_mesh(DEFAULT_SURFACE, unit='mm')
+    mesh.merge_vertices()
+    s = ExamSession(Surface.from_mesh(mesh), subject_from_scene(), ExamConfig())
+    rng = np.random.default_rng(0)
+    ticks = []
+    for k in range(50):   # 50 heat-map ticks of 200 samples along a strip
+        y = -0.04 + 0.0016 * k
+        for i in range(200):
+            z = -0.04 + 0.0004 * i
+            x = 0.045 * np.sqrt(max(1 - (y / 0.07) ** 2 - (z / 0.07) ** 2, 0))
+            s.add_contact(k + i * 1e-3, (x, y, z), rng.uniform(0.002, 0.012), True)
+        t0 = time.perf_counter()
+        s.update_coverage()
+        ticks.append(time.perf_counter() - t0)
+    t0 = time.perf_counter()
+    s.report()
+    rep = time.perf_counter() - t0
+    q = np.percentile(np.array(ticks) * 1e3, [50, 99])
+    print(f'coverage update (200 samples): p50 {q[0]:.2f} ms, p99 {q[1]:.2f} ms '
+          f'({len(s.grid.centroids)} region cells); report {rep * 1e3:.0f} ms; load {load()}')
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split('\n')[0])
+    ap.add_argument('--quick', action='store_true', help='skip the full simulated exams')
+    a = ap.parse_args()
+    core_costs()
+    if not a.quick:
+        for trainee in ('systematic', 'careless'):
+            full_exam(trainee)
+
+
+if __name__ == '__main__':
+    main()

@@ -1,0 +1,215 @@
+"""``haptic-anfis exam``: score a palpation session (examination mode).
+
+``exam run``: the one-process haptic graph (:func:`haptic_anfis.nodes.graph.build_graph`) with the
+examiner and a simulated trainee at the simulated Falcon's hand; ``exam report BAG``: the same
+report from a recorded session. Both print the summary and, with ``--json``, end with one JSON
+line (``coverage_pct`` {light, medium, deep}, ``duration_s``, ``hits``, ``misses``,
+``false_marks``, ``score``, ``pattern``, ``verdict`` and more); ``--out DIR`` writes report.json
+and report.png there.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+from pathlib import Path
+
+NAME = 'exam'
+HELP = 'examination mode: run a simulated trainee through an exam, or score a recorded session'
+
+HEADLINE = ('coverage_pct', 'duration_s', 'contact_s', 'path_length_m', 'hits', 'misses',
+            'false_marks', 'score', 'verdict', 'pattern')
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    sub = p.add_subparsers(dest='exam_command', metavar='{run,report}', required=True)
+    r = sub.add_parser('run', help='run the graph with the examiner and a simulated trainee')
+    r.add_argument('--case', default=None, metavar='NAME',
+                   help='scene name in config/scenes or a scene file (default: default)')
+    r.add_argument('--trainee', default='systematic', metavar='systematic|careless|SCRIPT',
+                   help='simulated trainee: systematic, careless or a palpation script (YAML)')
+    r.add_argument('--speed', type=float, default=None,
+                   help="the trainee's speed along the tissue [m/s] (default: the script's)")
+    r.add_argument('--duration', type=float, default=None,
+                   help='stop after this many seconds (default: when the trainee is done, '
+                        'at most 300 s)')
+    r.add_argument('--record', metavar='BAG', default=None,
+                   help='record the session (loop topics + marks) to this new bag directory')
+    _common(r)
+    b = sub.add_parser('report', help='score a recorded session bag')
+    b.add_argument('bag', metavar='BAG')
+    b.add_argument('--case', default=None, metavar='NAME',
+                   help='scene name in config/scenes or a scene file (default: default)')
+    _common(b)
+
+
+def _common(p):
+    p.add_argument('--json', action='store_true', help='end with one line of JSON (the report)')
+    p.add_argument('--out', metavar='DIR', default=None,
+                   help='write report.json and report.png into DIR')
+    p.add_argument('--exam-config', metavar='YAML', default=None,
+                   help='scoring settings (default config/exam.yaml)')
+
+
+def scene_for_case(case: str | None) -> str | None:
+    """--case NAME (a scene in config/scenes) or a scene file path -> path (None = default)."""
+    if case is None:
+        return None
+    from ..tissue.scene import SCENE_DIR
+    p = Path(case)
+    if p.suffix in ('.yaml', '.yml') and p.is_file():
+        return str(p)
+    q = SCENE_DIR / f'{case}.yaml'
+    if q.is_file():
+        return str(q)
+    have = ', '.join(sorted(f.stem for f in SCENE_DIR.glob('*.yaml')))
+    raise ValueError(f'--case {case!r}: no such case (have: {have}) and no such scene file')
+
+
+def run(args: argparse.Namespace) -> int:
+    if args.exam_command == 'run':
+        report, session = _run_sim(args)
+    else:
+        report, session = _report_bag(args)
+    print_report(report)
+    if args.out:
+        from ..nodes.examiner import write_report
+        write_report(session, args.out, report)
+        print(f'report         {Path(args.out) / "report.json"}, {Path(args.out) / "report.png"}')
+    if args.json:
+        print(json.dumps(report), flush=True)
+    return 0
+
+
+def _run_sim(args):
+    from rclpy.parameter import Parameter
+
+    from ..exam.trainee import TraineeController, trainee_path
+    from ..nodes._common import ParameterError
+    from ..nodes.examiner import Examiner
+    from ..nodes.graph import build_graph
+    from ..nodes.sim_trainee import SimTrainee
+    if args.record and Path(args.record).exists():
+        raise ValueError(f'--record {args.record}: exists already; a recording needs a new '
+                         'directory')
+    if args.duration is not None and not (args.duration > 0 and math.isfinite(args.duration)):
+        raise ValueError(f'--duration: expected > 0 s, got {args.duration}')
+    if args.speed is not None and not (args.speed > 0 and math.isfinite(args.speed)):
+        raise ValueError(f'--speed: expected > 0 m/s, got {args.speed}')
+    scene = scene_for_case(args.case)
+    script = trainee_path(args.trainee)
+    controller = TraineeController.from_yaml(script, args.speed)
+    ex_params = [Parameter('scene', value=scene or ''),
+                 Parameter('exam_config', value=args.exam_config or '')]
+    extra = [lambda ctx: Examiner(context=ctx, parameter_overrides=ex_params),
+             lambda ctx: SimTrainee(controller, context=ctx)]
+    if args.record:
+        from ..bag.topics import ALL_LOOP_TOPICS
+        from ..nodes.recorder import Recorder
+        extra.append(lambda ctx: Recorder(context=ctx, output=args.record, topics=ALL_LOOP_TOPICS))
+    try:
+        graph = build_graph(['haptic-anfis-exam'], visualizer=False, extra=extra,
+                            overrides={'falcon_driver': [
+                                Parameter('palpation_script', value=str(script))]})
+    except ParameterError as exc:
+        raise ValueError(str(exc)) from None
+    # The driver's simulated Falcon plays the trainee (same start point as the script it loaded).
+    graph.driver.device.script = controller
+    examiner = graph.extra[0]
+    limit = args.duration if args.duration is not None else 300.0
+    print(f'exam: trainee {args.trainee} ({controller.search.duration:.0f} s search), lesions from '
+          f'{examiner.subject.source}', flush=True)
+    try:
+        graph.spin_for(limit, lambda: controller.finished)
+        graph.spin_for(0.2)
+    except KeyboardInterrupt:
+        print('interrupted', flush=True)
+    finally:
+        graph.shutdown()
+    for n in graph.extra:
+        if hasattr(n, 'writer'):
+            r = n.summary()
+            print(f"recorded       {r['written']} messages to {r['output']} (dropped {r['dropped']})")
+    report = examiner.report()
+    report['trainee'] = {'name': args.trainee, 'detections': [
+        {'y_mm': round(d.y * 1e3, 2), 'z_mm': round(d.z * 1e3, 2),
+         'excess_pct': round(100 * d.excess, 1), 'sigma': round(d.sigma, 1)}
+        for d in controller.detections or []], 'finished': controller.finished,
+        'felt_samples': controller.felt}
+    report['heat_maps_published'] = examiner.n_published
+    return report, examiner.session
+
+
+def _report_bag(args):
+    from ..bag.reader import read_messages
+    from ..contact import load_mesh
+    from ..exam import ExamSession, Surface, load_exam_config, subject_from_scene
+    from ..nodes import interfaces as ifc
+    from ..nodes.contact_detector import DEFAULT_SURFACE
+    from ..bag.reader import bag_info
+    from ..bag.topics import absolute
+    cfg = load_exam_config(args.exam_config)
+    subject = subject_from_scene(scene_for_case(args.case))
+    mesh = load_mesh(DEFAULT_SURFACE, unit='mm')
+    mesh.merge_vertices()
+    session = ExamSession(Surface.from_mesh(mesh), subject, cfg)
+    info = bag_info(args.bag)
+    have = {t.topic for t in info.topics}
+    need = [absolute(ifc.TOPIC_CONTACT)]
+    missing = [t for t in need if t not in have]
+    wanted = {absolute(t) for t in (ifc.TOPIC_CONTACT, ifc.TOPIC_COMMAND, ifc.TOPIC_POSE,
+                                    ifc.TOPIC_MARKS, ifc.TOPIC_BUTTONS)} & have
+    notes = []
+    if missing:
+        notes.append(f'{args.bag}: no {", ".join(missing)} topic (it has '
+                     f'{", ".join(sorted(have)) or "none"}): nothing to score, zero coverage')
+    marks_topic = absolute(ifc.TOPIC_MARKS) in have
+    if not marks_topic:
+        notes.append('no exam/marks topic: marks taken from button 1 presses at the probe pose')
+    last_pose, b1 = None, 0
+    for topic, _, _, msg in read_messages(args.bag, sorted(wanted)) if wanted else ():
+        t = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
+        if topic == absolute(ifc.TOPIC_CONTACT):
+            v = msg.position
+            if len(v) == len(ifc.CONTACT_FIELDS):
+                session.add_contact(t, v[0:3], v[ifc.I_DEPTH], v[ifc.I_IN_CONTACT] > 0.5)
+        elif topic == absolute(ifc.TOPIC_COMMAND):
+            f = msg.wrench.force
+            session.add_force(t, (f.x, f.y, f.z))
+        elif topic == absolute(ifc.TOPIC_POSE):
+            q = msg.pose.position
+            last_pose = (q.x, q.y, q.z)
+            session.add_pose(t, last_pose)
+        elif topic == absolute(ifc.TOPIC_MARKS):
+            q = msg.point
+            session.add_mark(t, (q.x, q.y, q.z))
+        elif topic == absolute(ifc.TOPIC_BUTTONS):
+            b = list(msg.buttons)
+            session.add_buttons(t, b)
+            now = b[1] if len(b) > 1 else 0
+            if not marks_topic and now and not b1 and last_pose is not None:
+                session.add_mark(t, last_pose)
+            b1 = now
+    report = session.report()
+    report['notes'] = notes + report['notes']
+    report['bag'] = str(args.bag)
+    return report, session
+
+
+def print_report(r: dict) -> None:
+    c = r['coverage_pct']
+    print(f"coverage       light {c['light']:.1f} %, medium {c['medium']:.1f} %, deep "
+          f"{c['deep']:.1f} % of {r['region_faces']} cells (radius {r['region_radius_mm']:.0f} mm)")
+    print(f"pattern        {r['pattern']} ({r['pattern_detail']['strips']['count']} strips, "
+          f"overlap {r['pattern_detail']['strips']['overlap']}, gaps "
+          f"{r['pattern_detail']['strips']['gaps']})")
+    print(f"time           {r['duration_s']:.1f} s, in contact {r['contact_s']:.1f} s, path "
+          f"{r['path_length_m']:.2f} m, max depth {r['max_depth_mm']:.1f} mm")
+    print(f"findings       hits {r['hits']}, misses {r['misses']}, false marks {r['false_marks']}")
+    for les in r['lesions']:
+        print(f"  lesion {les['name']}: {'found' if les['found'] else les['missed']}")
+    print(f"score          {r['score']:.1f} ({r['verdict']})")
+    for line in r['feedback']:
+        print(f'  - {line}')
+    for n in r['notes']:
+        print(f'note: {n}')

@@ -1,0 +1,76 @@
+"""Exam scoring settings (``config/exam.yaml``): pressure levels, footprint, margins, score weights.
+
+Every key is documented, with its source, in the YAML file. SI units (metres).
+"""
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass, fields
+from pathlib import Path
+
+import yaml
+
+LEVELS = ('light', 'medium', 'deep')
+DEFAULT_CONFIG = Path(__file__).resolve().parents[2] / 'config' / 'exam.yaml'
+
+
+@dataclass(frozen=True)
+class ExamConfig:
+    """Depth thresholds per pressure level [m] (cumulative), probe footprint radius [m], region
+    radius [m] (0 = the scene's palpable radius), hit margin [m], mark tolerance [m], score weights."""
+    light: float = 0.002
+    medium: float = 0.005
+    deep: float = 0.008
+    footprint_radius: float = 0.008
+    region_radius: float = 0.0
+    hit_margin: float = 0.008
+    mark_tolerance: float = 0.005
+    w_coverage: float = 0.5
+    w_findings: float = 0.4
+    w_pattern: float = 0.1
+    false_mark_penalty: float = 10.0
+    pass_deep_coverage: float = 0.9
+
+    def __post_init__(self):
+        for f in fields(self):
+            v = getattr(self, f.name)
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) \
+                    or v < 0:
+                raise ValueError(f'exam config {f.name}: expected a finite number >= 0, got {v!r}')
+        if not 0 < self.light <= self.medium <= self.deep:
+            raise ValueError('exam config levels: expected 0 < light <= medium <= deep, got '
+                             f'{self.light}, {self.medium}, {self.deep} m')
+        if self.footprint_radius <= 0:
+            raise ValueError('exam config footprint_radius: expected > 0 m')
+
+    @property
+    def thresholds(self) -> tuple[float, float, float]:
+        """Depth thresholds (light, medium, deep) [m]."""
+        return (self.light, self.medium, self.deep)
+
+
+def load_exam_config(path: str | os.PathLike | None = None) -> ExamConfig:
+    """Read ``path`` (default ``config/exam.yaml``); ValueError naming the file on a bad one."""
+    path = Path(path) if path else DEFAULT_CONFIG
+    if not path.is_file():
+        if path == DEFAULT_CONFIG:
+            return ExamConfig()  # an install without the source tree's config: the same defaults
+        raise ValueError(f'exam config {str(path)!r}: no such file')
+    try:
+        doc = yaml.safe_load(path.read_text()) or {}
+        if not isinstance(doc, dict):
+            raise ValueError('expected a mapping')
+        kw = dict(doc)
+        levels = kw.pop('levels', {}) or {}
+        unknown = set(levels) - set(LEVELS)
+        if unknown:
+            raise ValueError(f'levels: unknown {sorted(unknown)} (expected {", ".join(LEVELS)})')
+        kw.update(levels)
+        known = {f.name for f in fields(ExamConfig)}
+        bad = set(kw) - known
+        if bad:
+            raise ValueError(f'unknown key(s) {sorted(bad)}')
+        return ExamConfig(**kw)
+    except (OSError, yaml.YAMLError, ValueError, TypeError) as exc:
+        raise ValueError(f'exam config {str(path)!r}: {exc}') from None

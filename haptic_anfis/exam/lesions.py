@@ -1,0 +1,50 @@
+"""Where the lesions are: a small source function, so a case library can plug in (no ROS)."""
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class Lesion:
+    """A lesion to find: ``name``, ``centre`` (3,) [m] tissue frame, ``radius`` [m]."""
+    name: str
+    centre: tuple[float, float, float]
+    radius: float
+
+
+@dataclass(frozen=True)
+class ExamSubject:
+    """What the examiner needs to know of the case: its lesions, the palpable radius [m] and the
+    probe radius [m] from the scene, and the scene file (provenance)."""
+    lesions: tuple[Lesion, ...]
+    palpable_radius: float
+    probe_radius: float
+    source: str
+
+
+def subject_from_scene(path: str | os.PathLike | None = None) -> ExamSubject:
+    """The lesions (tumours) and palpable radius of a scene file (default: the default scene).
+
+    Raises:
+        SceneError (a ValueError): the file is missing or malformed.
+    """
+    from ..tissue.scene import DEFAULT_SCENE, load_scene
+    p = Path(path) if path else DEFAULT_SCENE
+    sc = load_scene(p)
+    les = tuple(Lesion(t.name, tuple(float(c) for c in t.centre), float(t.radius))
+                for t in sc.tumours)
+    return ExamSubject(les, float(sc.palpable_radius), float(sc.probe_radius), str(p))
+
+
+def lesion_surface_points(detector, lesions) -> np.ndarray:
+    """(k, 3) [m]: each lesion's centre projected on the skin along the probe axis (the surface
+    point a probe pressing straight in over the lesion touches)."""
+    out = []
+    for les in lesions:
+        r = detector.query(np.asarray(les.centre, float))
+        out.append(r.contact_point if r.in_contact else r.point)
+    return np.array(out, float).reshape(-1, 3)

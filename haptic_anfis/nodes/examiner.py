@@ -1,0 +1,188 @@
+"""``examiner``: watches a palpation session and scores it (:mod:`haptic_anfis.exam`).
+
+Subscribes to the probe pose, contact, force command, buttons and marks (``exam/marks``); knows the
+case's lesions from ``scene`` (:func:`lesion_source`, where a case library plugs in). Publishes a
+live coverage heat map on the mesh (``exam/coverage``, ``visualization_msgs/MarkerArray``: the
+palpable region's triangles coloured by the deepest level pressed — grey none, yellow light,
+orange medium, red deep — in ~16 mm patches, each sent when it changes and all every 2 s, plus a
+text marker with the coverage numbers, at ``rate`` Hz) and, on :meth:`Examiner.close`, writes the report
+(``report.json`` + ``report.png``) into ``report_dir``.
+"""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+from geometry_msgs.msg import Point, PointStamped, PoseStamped, WrenchStamped
+from rclpy.node import Node
+from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import Joy, JointState
+from std_msgs.msg import ColorRGBA
+from visualization_msgs.msg import Marker, MarkerArray
+
+from ..exam import ExamSession, Surface, load_exam_config, subject_from_scene
+from ..exam.lesions import ExamSubject
+from . import interfaces as ifc
+from ._common import Param, declare_parameters, positive, run_node, stamp_ns
+from .contact_detector import MESH_PARAMS, load_surface
+
+PARAMS = MESH_PARAMS + [
+    Param('scene', '', "scene file whose tumours are the lesions to find ('' = "
+          'config/scenes/default.yaml)'),
+    Param('exam_config', '', "scoring settings ('' = config/exam.yaml: pressure levels, margins, "
+          'score weights, with their sources)'),
+    Param('rate', 5.0, 'coverage heat map rate [Hz]', positive),
+    Param('report_dir', '', "directory for report.json and report.png at the end ('' = none)"),
+]
+
+#: The examiner wants every sample, not only the newest (as the recorder): a deep queue.
+SAMPLE_QOS = QoSProfile(depth=1000, history=HistoryPolicy.KEEP_LAST,
+                        reliability=ReliabilityPolicy.RELIABLE)
+
+LEVEL_COLOURS = ((0.6, 0.6, 0.6, 0.5), (1.0, 0.9, 0.2, 0.8), (1.0, 0.55, 0.0, 0.85),
+                 (0.85, 0.1, 0.1, 0.9))
+
+
+def lesion_source(p: dict) -> ExamSubject:
+    """The lesions to find from the node's parameters (today the scene file; a ``case``
+    parameter resolves to its scene here)."""
+    return subject_from_scene(p['scene'] or None)
+
+
+class Examiner(Node):
+    def __init__(self, name: str = 'examiner', **kw):
+        super().__init__(name, **kw)
+        p = self.params = declare_parameters(self, PARAMS)
+        self.config = load_exam_config(p['exam_config'] or None)   # ValueError -> exit 1
+        self.subject = lesion_source(p)
+        mesh = load_surface(self, p)
+        self.session = ExamSession(Surface.from_mesh(mesh), self.subject, self.config)
+        s = self.session
+        self._colours = [ColorRGBA(r=r, g=g, b=b, a=a) for r, g, b, a in LEVEL_COLOURS]
+        self._patches, self._patch_faces = _patch_markers(s, p['frame_id'])
+        self._text = Marker()
+        t = self._text
+        t.header.frame_id = p['frame_id']
+        t.ns, t.id, t.type, t.action = 'exam_summary', 0, Marker.TEXT_VIEW_FACING, Marker.ADD
+        t.pose.orientation.w = 1.0
+        t.pose.position.x, t.pose.position.z = 0.06, s.region_radius + 0.01
+        t.scale.z = 0.006
+        t.color.r = t.color.g = t.color.b = t.color.a = 1.0
+        self._last_levels = None
+        self._last_full = -1e9
+        self.pub = self.create_publisher(MarkerArray, ifc.TOPIC_COVERAGE, 1)
+        self.create_subscription(JointState, ifc.TOPIC_CONTACT, self._on_contact, SAMPLE_QOS)
+        self.create_subscription(WrenchStamped, ifc.TOPIC_COMMAND, self._on_force, SAMPLE_QOS)
+        self.create_subscription(PoseStamped, ifc.TOPIC_POSE, self._on_pose, SAMPLE_QOS)
+        self.create_subscription(PointStamped, ifc.TOPIC_MARKS, self._on_mark, 10)
+        self.create_subscription(Joy, ifc.TOPIC_BUTTONS, self._on_buttons, 10)
+        self.timer = self.create_timer(1.0 / p['rate'], self._publish)
+        self.n_published = 0
+        self.get_logger().info(f'{len(self.subject.lesions)} lesion(s) from {self.subject.source}, '
+                               f'{len(s.grid.centroids)} surface cells in the palpable region')
+
+    def _on_contact(self, msg: JointState) -> None:
+        v = msg.position
+        if len(v) == len(ifc.CONTACT_FIELDS):
+            self.session.add_contact(stamp_ns(msg.header.stamp) * 1e-9, v[0:3], v[ifc.I_DEPTH],
+                                     v[ifc.I_IN_CONTACT] > 0.5)
+
+    def _on_force(self, msg: WrenchStamped) -> None:
+        f = msg.wrench.force
+        self.session.add_force(stamp_ns(msg.header.stamp) * 1e-9, (f.x, f.y, f.z))
+
+    def _on_pose(self, msg: PoseStamped) -> None:
+        q = msg.pose.position
+        self.session.add_pose(stamp_ns(msg.header.stamp) * 1e-9, (q.x, q.y, q.z))
+
+    def _on_mark(self, msg: PointStamped) -> None:
+        q = msg.point
+        self.session.add_mark(stamp_ns(msg.header.stamp) * 1e-9, (q.x, q.y, q.z))
+        self.get_logger().info(f'mark at ({q.x * 1e3:.1f}, {q.y * 1e3:.1f}, {q.z * 1e3:.1f}) mm')
+
+    def _on_buttons(self, msg: Joy) -> None:
+        self.session.add_buttons(stamp_ns(msg.header.stamp) * 1e-9, list(msg.buttons))
+
+    def _publish(self) -> None:
+        """Fold the new samples into the grid; publish the summary text and the heat-map patches
+        whose colours changed (all of them every ``FULL_REFRESH`` s, for late subscribers): the
+        whole map is ~6k vertices, too slow to serialise at 5 Hz on a loaded machine."""
+        self.session.update_coverage()
+        levels = self.session.grid.level_per_face()
+        now = self.get_clock().now()
+        full = (now.nanoseconds * 1e-9 - self._last_full) >= FULL_REFRESH
+        if full:
+            self._last_full = now.nanoseconds * 1e-9
+        changed = np.ones(len(levels), bool) if full or self._last_levels is None \
+            else levels != self._last_levels
+        self._last_levels = levels
+        stamp = now.to_msg()
+        out = []
+        cols = self._colours
+        for m, faces in zip(self._patches, self._patch_faces):
+            if changed[faces].any():
+                m.colors = [cols[lv] for lv in np.repeat(levels[faces], 3)]
+                m.header.stamp = stamp
+                out.append(m)
+        c = self.session.grid.fraction()
+        self._text.text = (f"light {100 * c['light']:.0f} %  medium {100 * c['medium']:.0f} %  "
+                           f"deep {100 * c['deep']:.0f} %  marks {len(self.session.marks)}")
+        self._text.header.stamp = stamp
+        out.append(self._text)
+        self.pub.publish(MarkerArray(markers=out))
+        self.n_published += 1
+
+    def report(self) -> dict:
+        return self.session.report()
+
+    def close(self) -> None:
+        """Write the report into ``report_dir`` (when set)."""
+        if self.params['report_dir']:
+            write_report(self.session, self.params['report_dir'])
+
+
+FULL_REFRESH = 2.0   # [s] between heat maps carrying every patch
+PATCH = 0.016        # [m] patch size: ~30 patches over the default region
+
+
+def _patch_markers(session, frame_id: str):
+    """The region's triangles split into square (y, z) patches of ``PATCH`` m, one TRIANGLE_LIST
+    marker each (points fixed, lifted 0.5 mm out of the skin so they draw over the tissue mesh);
+    returns (markers, face indices into the region per marker)."""
+    g = session.grid
+    key = np.floor(g.centroids[:, 1:3] / PATCH).astype(np.int64)
+    _, inv = np.unique(key, axis=0, return_inverse=True)
+    inv = inv.reshape(-1)
+    markers, faces = [], []
+    for k in range(inv.max() + 1):
+        idx = np.flatnonzero(inv == k)
+        m = Marker()
+        m.header.frame_id = frame_id
+        m.ns, m.id, m.type, m.action = 'exam_coverage', k, Marker.TRIANGLE_LIST, Marker.ADD
+        m.pose.orientation.w = 1.0
+        m.scale.x = m.scale.y = m.scale.z = 1.0
+        tri = g.vertices[g.faces[g.faces_index[idx]]].reshape(-1, 3)
+        m.points = [Point(x=float(a) + 5e-4, y=float(b), z=float(c)) for a, b, c in tri]
+        markers.append(m)
+        faces.append(idx)
+    return markers, faces
+
+
+def write_report(session: ExamSession, out_dir, report: dict | None = None) -> dict:
+    """report.json + report.png of ``session`` into ``out_dir`` (created); returns the report."""
+    from ..exam.figure import save_figure
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    report = report if report is not None else session.report()
+    (out / 'report.json').write_text(json.dumps(report, indent=1))
+    save_figure(session, report, out / 'report.png')
+    return report
+
+
+def main(args=None) -> None:
+    raise SystemExit(run_node(Examiner, args))
+
+
+if __name__ == '__main__':
+    main()

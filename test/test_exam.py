@@ -1,0 +1,209 @@
+"""Examination room (no ROS): coverage, pattern, findings, score, report, lump detector."""
+import json
+
+import numpy as np
+import pytest
+
+from haptic_anfis.contact import load_mesh
+from haptic_anfis.exam import (ExamConfig, ExamSession, ExamSubject, Lesion, Surface, classify,
+                               load_exam_config, subject_from_scene)
+from haptic_anfis.exam.detector import detect_lumps
+from haptic_anfis.exam.figure import save_figure
+from haptic_anfis.nodes.contact_detector import DEFAULT_SURFACE
+
+RX, R = 0.045, 0.070
+
+
+def skin(y, z):
+    return RX * np.sqrt(np.clip(1 - (y / R) ** 2 - (z / R) ** 2, 0, None))
+
+
+@pytest.fixture(scope='module')
+def surface():
+    mesh = load_mesh(DEFAULT_SURFACE, unit='mm')
+    mesh.merge_vertices()
+    return Surface.from_mesh(mesh)
+
+
+@pytest.fixture(scope='module')
+def subject():
+    return subject_from_scene()
+
+
+def strips(ys, depth, step=0.0005, t0=0.0):
+    """Contact samples of vertical strips: (t, point, depth, in_contact) rows."""
+    rows, t = [], t0
+    for y in ys:
+        h = np.sqrt(max(0.042 ** 2 - y * y, 0))
+        for z in np.arange(-h, h, step):
+            rows.append((t, (skin(y, z), y, z), depth, True))
+            t += 0.01
+        rows.append((t, (skin(y, h) + 0.01, y, h), 0.0, False))
+        t += 0.01
+    return rows
+
+
+def session_with(surface, subject, rows, marks=(), cfg=ExamConfig()):
+    s = ExamSession(surface, subject, cfg)
+    for t, p, d, c in rows:
+        s.add_contact(t, p, d, c)
+        s.add_pose(t, p)
+    for t, p in marks:
+        s.add_mark(t, p)
+    return s
+
+
+def test_default_subject_is_the_scene_tumour(subject):
+    assert [les.name for les in subject.lesions] == ['idc']
+    assert subject.lesions[0].radius == pytest.approx(0.0075)
+    assert subject.palpable_radius == pytest.approx(0.042)
+
+
+def test_full_deep_strips_cover_everything_and_find_nothing_without_marks(surface, subject):
+    s = session_with(surface, subject, strips(np.arange(-0.040, 0.041, 0.008), 0.012))
+    r = s.report()
+    assert r['coverage_pct']['deep'] >= 99 and r['coverage_pct']['light'] >= 99
+    assert r['pattern'] == 'vertical_strip'
+    assert r['pattern_detail']['strips']['count'] == 11
+    assert r['pattern_detail']['strips']['spacing_mm'] == pytest.approx(8.0, abs=0.1)
+    assert r['pattern_detail']['strips']['gaps'] == 0
+    assert r['misses'] == 1 and r['hits'] == 0
+    assert r['lesions'][0]['missed'] == 'missed although palpated deep'
+    assert r['verdict'] == 'retry'
+
+
+def test_levels_are_cumulative_and_half_the_breast_is_half(surface, subject):
+    s = session_with(surface, subject, strips(np.arange(-0.040, 0.0001, 0.008), 0.003))
+    c = s.report()['coverage_pct']
+    assert c['deep'] == 0 and c['medium'] == 0
+    # y <= 0 plus one footprint radius (8 mm) past it: the disc's share with y <= 8 mm of 42 mm
+    t = 8 / 42
+    share = 0.5 + (np.arcsin(t) + t * np.sqrt(1 - t * t)) / np.pi
+    assert c['light'] == pytest.approx(100 * share, abs=3)
+
+
+def test_hits_false_marks_and_outside_marks(surface, subject):
+    les = subject.lesions[0]
+    y, z = les.centre[1], les.centre[2]
+    marks = [(1.0, (skin(y + 0.012, z) - 0.005, y + 0.012, z)),   # 12 mm off: hit (7.5 + 8)
+             (2.0, (skin(y, z) - 0.005, y, z)),                   # a repeat on the found lesion
+             (3.0, (skin(-0.02, 0.0) - 0.005, -0.02, 0.0)),       # far: false
+             (4.0, (0.2, 0.0, 0.0))]                              # in the air: outside
+    s = session_with(surface, subject, strips([y], 0.012), marks)
+    r = s.report()
+    assert r['hits'] == 1 and r['misses'] == 0 and r['false_marks'] == 2
+    assert [m['result'] for m in r['marks']] == ['hit', 'repeat', 'false', 'false']
+    assert 'outside the surface' in r['marks'][3]['reason']
+    assert any('outside the surface' in n for n in r['notes'])
+
+
+def test_just_outside_the_margin_is_a_false_mark(surface, subject):
+    les = subject.lesions[0]
+    y, z = les.centre[1], les.centre[2]
+    d = les.radius + ExamConfig().hit_margin + 0.002
+    s = session_with(surface, subject, [], [(0.0, (skin(y, z + d), y, z + d))])
+    r = s.report()
+    assert r['hits'] == 0 and r['false_marks'] == 1 and r['lesions'][0]['missed'] == \
+        'never palpated deep'
+
+
+def test_no_samples_no_lesions_valid_report(surface):
+    s = ExamSession(surface, ExamSubject((), 0.042, 0.008, 'none'), ExamConfig())
+    r = s.report()
+    json.dumps(r)
+    assert r['coverage_pct'] == {'light': 0.0, 'medium': 0.0, 'deep': 0.0}
+    assert r['hits'] == r['misses'] == r['false_marks'] == 0 and r['pattern'] == 'none'
+    assert r['duration_s'] == 0 and r['path_length_m'] == 0
+    assert any('no contact' in n for n in r['notes'])
+    assert any('no lesion' in n for n in r['notes'])
+    assert r['score_parts']['findings'] == 40.0 and r['score'] == 40.0
+
+
+def test_no_contact_session_is_zero_coverage(surface, subject):
+    rows = [(k * 0.01, (0.06, 0.0, 0.001 * k), 0.0, False) for k in range(50)]
+    r = session_with(surface, subject, rows).report()
+    assert r['coverage_pct']['light'] == 0 and r['contact_s'] == 0
+    assert any('never touched' in n for n in r['notes'])
+
+
+def test_pattern_circles_and_spokes():
+    a = np.linspace(0, 2 * np.pi, 400)
+    circ = np.concatenate([np.c_[r * np.cos(a), r * np.sin(a)] for r in (0.01, 0.02, 0.03)])
+    seg = np.repeat([0, 1, 2], 400)
+    assert classify(circ, seg, 0.008)['pattern'] == 'spiral_circular'
+    rr = np.linspace(0.006, 0.04, 100)
+    spokes = np.concatenate([np.c_[rr * np.cos(t), rr * np.sin(t)]
+                             for t in np.linspace(0, 2 * np.pi, 12, endpoint=False)])
+    assert classify(spokes, np.repeat(np.arange(12), 100), 0.008)['pattern'] == 'radial'
+    assert classify(np.zeros((0, 2)), np.zeros(0), 0.008)['pattern'] == 'none'
+
+
+def test_score_formula(surface, subject):
+    les = subject.lesions[0]
+    y, z = les.centre[1], les.centre[2]
+    s = session_with(surface, subject, strips(np.arange(-0.040, 0.041, 0.008), 0.012),
+                     [(99.0, (skin(y, z) - 0.005, y, z))])
+    r = s.report()
+    assert r['score'] == pytest.approx(100.0, abs=0.5) and r['verdict'] == 'pass'
+    assert r['score_parts'] == {'coverage': pytest.approx(50, abs=0.5), 'findings': 40.0,
+                                'pattern': 10.0, 'false_marks': 0.0}
+
+
+def test_figure_is_written(surface, subject, tmp_path):
+    s = session_with(surface, subject, strips([0.0, 0.016], 0.006), [(9.0, (0.04, 0.0, 0.0))])
+    save_figure(s, s.report(), tmp_path / 'r.png')
+    assert (tmp_path / 'r.png').stat().st_size > 10_000
+
+
+def test_exam_config_checks(tmp_path):
+    assert load_exam_config().deep == pytest.approx(0.008)
+    p = tmp_path / 'x.yaml'
+    p.write_text('levels: {light: 0.005, medium: 0.002, deep: 0.01}\n')
+    with pytest.raises(ValueError, match='light <= medium'):
+        load_exam_config(p)
+    p.write_text('hit_margin_mm: 8\n')
+    with pytest.raises(ValueError, match='unknown key'):
+        load_exam_config(p)
+
+
+# -- the lump detector ----------------------------------------------------------------------------
+def strip_samples(rng, spacing=0.008, depth=(0.009, 0.013)):
+    pts = []
+    for y in np.arange(-0.040, 0.041, spacing):
+        h = np.sqrt(max(0.042 ** 2 - y * y, 0))
+        for z in np.arange(-h, h, 0.0005):
+            pts.append((y + rng.normal(0, 0.0005), z))
+    pts = np.array(pts)
+    d = rng.uniform(*depth, len(pts))
+    return np.c_[skin(pts[:, 0], pts[:, 1]), pts], d
+
+
+def test_detector_finds_the_default_tumour_in_the_shipped_model():
+    from haptic_anfis.anfis import ForceModel
+    from haptic_anfis.dataset import DATA_DIR
+    m = ForceModel.load(DATA_DIR / 'default_model.json')
+    P, d = strip_samples(np.random.default_rng(0))
+    F = np.linalg.norm(m.predict(np.c_[P, d]), axis=1)
+    found = detect_lumps(P, d, F)
+    assert len(found) == 1
+    assert np.hypot(found[0].y - 0.015, found[0].z + 0.010) < 0.0075 + 0.008
+    assert 0.06 < found[0].excess < 0.25
+
+
+def test_detector_quiet_on_a_homogeneous_breast():
+    """A smooth homogeneous force map (Hayes-like thickness stiffening, power law in depth) with
+    2 % noise: no lump."""
+    rng = np.random.default_rng(1)
+    P, d = strip_samples(rng)
+    h = P[:, 0]
+    F = 900.0 * d ** 1.2 * (1 + 0.4 * 0.008 / h) * (1 + rng.normal(0, 0.02, len(d)))
+    assert detect_lumps(P, d, F) == []
+    # ... and a +15 % bump 15 mm wide on it is found
+    bump = 1 + 0.15 * np.exp(-((P[:, 1] + 0.02) ** 2 + (P[:, 2] - 0.01) ** 2) / (2 * 0.006 ** 2))
+    found = detect_lumps(P, d, F * bump)
+    assert len(found) == 1 and np.hypot(found[0].y + 0.02, found[0].z - 0.01) < 0.006
+
+
+def test_detector_with_too_few_samples_is_empty():
+    assert detect_lumps(np.zeros((0, 3)), np.zeros(0), np.zeros(0)) == []
+    assert detect_lumps(np.full((5, 3), np.nan), np.ones(5), np.ones(5)) == []

@@ -1,0 +1,75 @@
+"""haptic-anfis exam run / report end to end: the simulated trainees through the whole graph."""
+import json
+
+import pytest
+
+from pathlib import Path
+
+from haptic_anfis.cli import main
+
+ROOT = Path(__file__).resolve().parents[1]
+
+pytestmark = pytest.mark.ros
+
+
+def last_json(out: str) -> dict:
+    return json.loads(out.strip().splitlines()[-1])
+
+
+def test_systematic_trainee_covers_and_finds_the_lesion_from_forces(tmp_path, capfd):
+    assert main(['exam', 'run', '--trainee', 'systematic', '--json', '--out',
+                 str(tmp_path)]) == 0
+    r = last_json(capfd.readouterr().out)
+    assert r['coverage_pct']['deep'] >= 90, r
+    assert r['hits'] == 1 and r['misses'] == 0 and r['false_marks'] == 0, r
+    assert r['pattern'] == 'vertical_strip' and r['verdict'] == 'pass'
+    assert r['trainee']['finished'] and len(r['trainee']['detections']) == 1
+    assert r['heat_maps_published'] >= 5 * r['duration_s'] * 0.5   # ~5 Hz (loaded machine)
+    assert (tmp_path / 'report.png').is_file()
+    assert json.loads((tmp_path / 'report.json').read_text())['score'] == r['score']
+    pytest.systematic_score = r['score']
+
+
+def test_careless_trainee_scores_lower_and_misses_and_the_bag_says_the_same(tmp_path, capfd):
+    bag = tmp_path / 'bag'
+    assert main(['exam', 'run', '--trainee', 'careless', '--json', '--record', str(bag)]) == 0
+    r = last_json(capfd.readouterr().out)
+    assert r['coverage_pct']['deep'] == 0 and r['coverage_pct']['light'] < 70
+    assert r['hits'] == 0 and r['misses'] == 1 and r['false_marks'] == 0
+    assert r['lesions'][0]['missed'] == 'never palpated deep'
+    assert r['score'] < 50 and r['verdict'] == 'retry'
+    assert r['score'] < getattr(pytest, 'systematic_score', 100.0) - 40
+    # the instructor's review of the recorded session
+    assert main(['exam', 'report', str(bag), '--json']) == 0
+    b = last_json(capfd.readouterr().out)
+    assert b['hits'] == 0 and b['misses'] == 1 and b['pattern'] == r['pattern']
+    assert b['coverage_pct']['light'] == pytest.approx(r['coverage_pct']['light'], abs=5)
+    # the same session scored against a case without lesions: valid, and says so
+    scene = (ROOT / 'config' / 'scenes' / 'default.yaml').read_text()
+    i, j = scene.index('tumours:'), scene.index('probe:')
+    (tmp_path / 'none.yaml').write_text(scene[:i] + 'tumours: []\n\n' + scene[j:])
+    assert main(['exam', 'report', str(bag), '--case', str(tmp_path / 'none.yaml'), '--json']) == 0
+    n = last_json(capfd.readouterr().out)
+    assert n['misses'] == 0 and n['hits'] == 0 and n['lesions'] == []
+    assert any('no lesion' in x for x in n['notes'])
+
+
+def test_report_of_a_bag_without_the_topics_is_valid(tmp_path, capfd):
+    from haptic_anfis.bag.writer import BagWriter
+    bag = tmp_path / 'empty'
+    w = BagWriter(bag)
+    w.add_topic('/falcon/buttons', 'sensor_msgs/msg/Joy')
+    w.close()
+    assert main(['exam', 'report', str(bag), '--json']) == 0
+    r = last_json(capfd.readouterr().out)
+    assert r['coverage_pct'] == {'light': 0.0, 'medium': 0.0, 'deep': 0.0}
+    assert any('no /contact topic' in n for n in r['notes'])
+
+
+def test_bad_inputs_are_named(tmp_path, capfd):
+    assert main(['exam', 'report', str(tmp_path / 'nope')]) == 1
+    assert 'nope' in capfd.readouterr().err
+    assert main(['exam', 'run', '--case', 'no_such_case']) == 1
+    assert 'no_such_case' in capfd.readouterr().err
+    assert main(['exam', 'run', '--trainee', 'lazy']) == 1
+    assert 'lazy' in capfd.readouterr().err
