@@ -27,7 +27,8 @@ def loading_points(scene: Scene) -> np.ndarray:
     """Loading points on the undeformed surface: a square (y, z) grid of ``scene.spacing`` inside the
     palpable disc, lifted onto the surface; then, if the scene asks for it
     (``refine_spacing`` > 0), the points of a finer grid that lie within lesion radius +
-    ``refine_margin`` of a lesion's (y, z) and are not already base points.
+    ``refine_margin`` of a lesion's (y, z), each lesion's centre (y, z) and its mirror point
+    (-y, -z) (where the lesion contrast is measured), all that are not already base points.
 
     Returns:
         (P, 3) array of surface points (x, y, z) [m]: the base grid first, ordered by y then z (so a
@@ -40,7 +41,12 @@ def loading_points(scene: Scene) -> np.ndarray:
         for t in scene.tumours:
             near |= np.hypot(fine[:, 0] - t.centre[1], fine[:, 1] - t.centre[2]) \
                 <= t.radius + scene.refine_margin + 1e-12
-        fine = fine[near]
+        # every lesion's centre and its mirror point (-y, -z): the FE contrast the models must keep
+        marks = [(s * t.centre[1], s * t.centre[2]) for t in scene.tumours for s in (1.0, -1.0)]
+        marks = np.array([m for m in marks if np.hypot(*m) <= scene.palpable_radius + 1e-12])
+        fine = np.concatenate([fine[near], marks.reshape(-1, 2)])
+        fine = fine[np.unique(np.round(fine / 1e-9), axis=0, return_index=True)[1]]
+        fine = fine[np.lexsort((fine[:, 1], fine[:, 0]))]
         dist = np.min(np.hypot(fine[:, None, 0] - yz[None, :, 0], fine[:, None, 1] - yz[None, :, 1]),
                       axis=1) if len(fine) else np.zeros(0)
         yz = np.concatenate([yz, fine[dist > 1e-9]])
