@@ -158,3 +158,47 @@ def test_normal_direction_pushes_along_the_surface_normal(scene):
     f = res.forces[0]
     assert f @ n > 0.9 * np.linalg.norm(f)  # the tissue pushes the probe back out along n
     assert res.info['direction'] == pytest.approx((-n).tolist())
+
+
+# --- skin displacement profiles (issue 16) ---
+
+def test_sweep_records_skin_displacement_beside_forces(coarse_run, scene, tmp_path):
+    from haptic_anfis.tissue.displacement import (RHO_OVER_A, DisplacementDataError,
+                                                  displacement_path, load_displacements,
+                                                  save_displacements)
+
+    ids, res, _ = coarse_run
+    disp = res.displacements
+    assert disp is not None and sorted(disp.point.tolist()) == sorted(ids)
+    assert disp.meta['dataset_sha256'] == res.dataset.sha256()
+    np.testing.assert_allclose(disp.depths, scene.depths)
+    axial0 = disp.coeffs[:, :, :, 0, 0]  # (P, D, K): harmonic 0 of the axial displacement
+    inside = RHO_OVER_A <= 0.9  # inside the meshed footprint (bonded): exactly the depth
+    want = np.broadcast_to(disp.depths[None, :, None], axial0[:, :, inside].shape)
+    np.testing.assert_allclose(axial0[:, :, inside], want, atol=1e-9)
+    assert np.all(np.abs(disp.coeffs[:, :, inside, 1:]) < 1e-9)
+    assert np.all(np.abs(disp.coeffs[:, :, inside, 0, 1:]) < 1e-9)
+    # the dent decays: at 3 probe radii under a quarter of the depth, monotone across the edge
+    k3 = int(np.flatnonzero(RHO_OVER_A == 3.2)[0])
+    assert np.all(axial0[:, :, k3] < 0.25 * disp.depths[None])
+    edge = (RHO_OVER_A >= 1.0) & (RHO_OVER_A <= 2.0)
+    assert np.all(np.diff(axial0[:, :, edge], axis=2) < 0)
+    assert np.all(disp.truncation_rms < 0.02 * disp.depths[None])  # harmonics 0..2 suffice
+    path = save_displacements(disp, displacement_path(tmp_path / 'd.csv'))
+    assert path.name == 'd.displacement.npz'
+    back = load_displacements(path, dataset_sha256=res.dataset.sha256())
+    np.testing.assert_allclose(back.coeffs, disp.coeffs, atol=1e-9)  # float32, m
+    with pytest.raises(DisplacementDataError, match='belongs to dataset'):
+        load_displacements(path, dataset_sha256='0' * 64)
+
+
+def test_resumed_sweep_solves_records_without_displacement_again(coarse_run, scene):
+    ids, res, work = coarse_run
+    f = work / f'point_{ids[2]:04d}.json'
+    rec = json.loads(f.read_text())
+    rec.pop('displacement')  # a work file written before displacement output existed
+    f.write_text(json.dumps(rec))
+    again = run_sweep(scene, work, coarse=True, workers=1, indices=ids, progress=False)
+    assert 'displacement' in json.loads(f.read_text())
+    np.testing.assert_allclose(again.dataset.Y, res.dataset.Y, rtol=1e-9)
+    np.testing.assert_allclose(again.displacements.coeffs, res.displacements.coeffs, atol=1e-12)

@@ -1,6 +1,7 @@
 """``haptic-anfis dataset``: finite-element force data for a tissue scene.
 
     haptic-anfis dataset SCENE --out DATA.csv [--coarse] [--workers N] [--work-dir DIR]
+        # also writes DATA.displacement.npz: the skin's dent for every point and depth
     haptic-anfis dataset [SCENE] --surface OUT.stl        # the contact detector's surface mesh
     haptic-anfis dataset [SCENE] --report DIR [--data DATA.csv] [--coarse]
 """
@@ -62,6 +63,12 @@ def run(args: argparse.Namespace) -> int:
         res = run_sweep(scene, work, coarse=args.coarse, workers=args.workers, indices=indices,
                         progress=not args.quiet)
         save_dataset(res.dataset, args.out)
+        if res.displacements is not None:
+            from ..tissue.displacement import displacement_path, save_displacements
+
+            dpath = save_displacements(res.displacements, displacement_path(args.out))
+            print(f'wrote {dpath} (skin displacement profiles, dataset sha256 '
+                  f'{res.dataset.sha256()[:12]})')
         prov = res.dataset.provenance
         print(f'wrote {args.out}: {len(res.dataset)} samples from {prov["n_points"]} points '
               f'({len(res.failed)} failed: {res.failed}); mesh {prov["mesh"]["ndof_mean"]:.0f} '

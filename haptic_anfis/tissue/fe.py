@@ -38,6 +38,9 @@ class LoadPathResult:
         probe_edge_size: element edge along the probe outline [m].
         newton_iterations: total Newton iterations; cutbacks: number of halved increments.
         wall_time: seconds for mesh + solve.
+        skin_displacements: (D, S, 3) displacement [m] of the mesh's skin nodes (``mesh.skin``)
+            at each recorded depth, tissue frame; (D, 0, 3) if the mesh names no skin.
+        mesh: the mesh solved on (its skin nodes and faces locate the displacements).
     """
 
     depths: np.ndarray
@@ -49,6 +52,8 @@ class LoadPathResult:
     cutbacks: int = 0
     wall_time: float = 0.0
     info: dict = field(default_factory=dict)
+    skin_displacements: np.ndarray = field(default_factory=lambda: np.zeros((0, 0, 3)))
+    mesh: HexMesh | None = None
 
 
 def default_linear_solver() -> tuple[str, Callable]:
@@ -119,7 +124,7 @@ def solve_load_path(mesh: HexMesh, shear: np.ndarray | float, bulk: np.ndarray |
 
     steps = load_steps(depths, max_step)
     wanted = set(np.round(np.asarray(depths) / 1e-9).astype(np.int64).tolist())
-    forces, recorded = [], []
+    forces, recorded, skin_u = [], [], []
     done, iters, cutbacks = 0.0, 0, 0
     queue = list(steps)
     halvings = 0
@@ -147,7 +152,8 @@ def solve_load_path(mesh: HexMesh, shear: np.ndarray | float, bulk: np.ndarray |
                     depths=np.array(recorded), forces=np.array(forces).reshape(-1, 3),
                     ndof=3 * npts, ncells=len(mesh.cells), probe_edge_size=mesh.probe_edge_size,
                     newton_iterations=iters, cutbacks=cutbacks,
-                    wall_time=time.perf_counter() - t0)
+                    wall_time=time.perf_counter() - t0,
+                    skin_displacements=np.array(skin_u).reshape(len(recorded), -1, 3), mesh=mesh)
                 raise err from None
             queue.insert(0, 0.5 * (done + target))
             continue
@@ -159,11 +165,15 @@ def solve_load_path(mesh: HexMesh, shear: np.ndarray | float, bulk: np.ndarray |
             # Internal nodal forces at the footprint equal the load the probe applies to the
             # tissue; the tissue pushes back on the probe with the opposite sign.
             forces.append(-r.reshape(-1, 3)[mesh.footprint].sum(axis=0))
+            # The skin's displacement field at this depth: the dent the display shows.
+            skin_u.append(np.array(field[0].values[mesh.skin], dtype=float))
             recorded.append(done)
     return LoadPathResult(depths=np.array(recorded), forces=np.array(forces), ndof=3 * npts,
                           ncells=len(mesh.cells), probe_edge_size=mesh.probe_edge_size,
                           newton_iterations=iters, cutbacks=cutbacks,
-                          wall_time=time.perf_counter() - t0)
+                          wall_time=time.perf_counter() - t0,
+                          skin_displacements=np.array(skin_u).reshape(len(recorded), -1, 3),
+                          mesh=mesh)
 
 
 class _CellwiseScaled:
@@ -230,5 +240,6 @@ def solve_scene_point(scene: Scene, point: Sequence[float], coarse: bool = False
     direction = indentation_direction(scene, point[None])[0]
     res = solve_load_path(mesh, mu, bulk, direction, scene.depths, scene.max_step, solver=solver)
     res.info.update(probe_cells=n, edge_refine=scene.mesh.edge_refine,
-                    edge_offset=scene.mesh.edge_offset, direction=direction.tolist())
+                    edge_offset=scene.mesh.edge_offset, direction=direction.tolist(),
+                    footprint_radius=mesh.footprint_radius)
     return res

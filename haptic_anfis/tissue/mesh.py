@@ -20,7 +20,7 @@ so forces vary smoothly as the mesh moves with the loading point (no staircase n
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Callable, Sequence
 
 import numpy as np
@@ -52,6 +52,8 @@ class HexMesh:
         probe_edge_size: element edge length along the probe outline [m].
         footprint_radius: radius of the meshed footprint outline [m]: the probe radius, less
             ``edge_offset`` times the first cell outside it (see ``build_mesh``).
+        skin: (S,) ids of the skin (top-layer) nodes; empty if the builder did not say.
+        skin_quads: (Q, 4) skin faces as node ids (the top faces of the top-layer cells).
     """
 
     points: np.ndarray
@@ -61,6 +63,8 @@ class HexMesh:
     surface_point: np.ndarray
     probe_edge_size: float
     footprint_radius: float = 0.0
+    skin: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    skin_quads: np.ndarray = field(default_factory=lambda: np.zeros((0, 4), dtype=np.int64))
 
     @property
     def ndof(self) -> int:
@@ -255,7 +259,8 @@ def build_mesh(domain: Domain, centre_yz: tuple[float, float], a: float, n: int,
     return HexMesh(points=pts, cells=cells.astype(np.int64), footprint=footprint,
                    fixed=np.unique(np.concatenate(fixed)),
                    surface_point=np.array([centre_x, *centre_yz]), probe_edge_size=edge,
-                   footprint_radius=a)
+                   footprint_radius=a, skin=L * N2 + np.arange(N2, dtype=np.int64),
+                   skin_quads=(quads + L * N2).astype(np.int64))
 
 
 def _round_footprint(y: np.ndarray, z: np.ndarray, centre: tuple[float, float], a: float,

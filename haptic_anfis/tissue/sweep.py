@@ -22,6 +22,7 @@ from typing import Any, Callable, Iterable
 import numpy as np
 
 from ..dataset import ForceDataset
+from .displacement import DisplacementSet, displacements_from_records, record_is_current
 from .geometry import loading_points
 from .scene import Scene
 
@@ -37,24 +38,31 @@ def limit_threads() -> None:
 
 
 def _solve_task(scene: Scene, index: int, point: list[float], coarse: bool) -> dict[str, Any]:
-    """Worker: solve one loading point; never raises for a failed solve (records the error)."""
+    """Worker: solve one loading point; never raises for a failed solve (records the error).
+    The record holds the forces and the skin's displacement profile at every depth reached."""
     limit_threads()
+    from .displacement import profile_record
     from .fe import FESolveError, default_linear_solver, solve_scene_point
+    from .geometry import indentation_direction
 
     t0 = time.perf_counter()
-    out: dict[str, Any] = {'point': index, 'surface_point_m': point, 'status': 'ok'}
+    direction = indentation_direction(scene, np.asarray(point)[None])[0]
+    out: dict[str, Any] = {'point': index, 'surface_point_m': point, 'status': 'ok',
+                           'direction': direction.tolist()}
     try:
         res = solve_scene_point(scene, point, coarse=coarse)
         out.update(depths_m=res.depths.tolist(), forces_N=res.forces.tolist(), ndof=res.ndof,
                    ncells=res.ncells, probe_edge_m=res.probe_edge_size,
-                   newton_iterations=res.newton_iterations, cutbacks=res.cutbacks)
+                   newton_iterations=res.newton_iterations, cutbacks=res.cutbacks,
+                   displacement=profile_record(res, point, direction, scene.probe_radius))
     except FESolveError as exc:
         part = getattr(exc, 'partial', None)
         out.update(status='failed', error=str(exc),
                    depths_m=[] if part is None else part.depths.tolist(),
                    forces_N=[] if part is None else part.forces.tolist())
         if part is not None:
-            out.update(ndof=part.ndof, ncells=part.ncells, probe_edge_m=part.probe_edge_size)
+            out.update(ndof=part.ndof, ncells=part.ncells, probe_edge_m=part.probe_edge_size,
+                       displacement=profile_record(part, point, direction, scene.probe_radius))
     out['wall_time_s'] = time.perf_counter() - t0
     out['linear_solver'] = default_linear_solver()[0]
     return out
@@ -68,12 +76,14 @@ def _write_json(path: Path, data: dict[str, Any]) -> None:
 
 @dataclass
 class SweepResult:
-    """Outcome of a sweep: the dataset (all recorded samples) and per-point records."""
+    """Outcome of a sweep: the dataset (all recorded samples), per-point records, and the skin
+    displacement profiles (None when the task recorded none, e.g. a test's stand-in task)."""
 
     dataset: ForceDataset
     records: list[dict[str, Any]]
     failed: list[int]
     elapsed_s: float
+    displacements: DisplacementSet | None = None
 
 
 class _Progress:
@@ -104,8 +114,12 @@ def run_sweep(scene: Scene, work_dir: str | os.PathLike, *, coarse: bool = False
         workers: process-pool size when no ``executor`` is given (each single-threaded).
         executor: any Executor-like object; the caller owns (and shuts down) it.
         indices: subset of loading-point ids (default: all).
+        task: the per-point solve (the FE solve by default). With the FE solve, a persisted
+            record without the current displacement profile (from an older version) is solved
+            again, so the forces and the dent always come from the same solve.
     Returns:
-        SweepResult with a ForceDataset of every recorded (point, depth) sample.
+        SweepResult with a ForceDataset of every recorded (point, depth) sample and the
+        DisplacementSet of the same solves (its ``meta['dataset_sha256']`` is the dataset's).
     """
     limit_threads()
     work = Path(work_dir)
@@ -132,9 +146,12 @@ def run_sweep(scene: Scene, work_dir: str | os.PathLike, *, coarse: bool = False
         f = work / f'point_{i:04d}.json'
         if f.is_file():
             try:
-                records[i] = json.loads(f.read_text())
+                rec = json.loads(f.read_text())
             except json.JSONDecodeError:
                 f.unlink()  # a torn write cannot happen (rename), but be forgiving
+                continue
+            if task is not _solve_task or record_is_current(rec):
+                records[i] = rec
     todo = [i for i in todo_ids if i not in records]
     t0 = time.time()
     bar = _Progress(len(todo_ids), len(records)) if progress else None
@@ -164,9 +181,17 @@ def run_sweep(scene: Scene, work_dir: str | os.PathLike, *, coarse: bool = False
             bar.close()
     elapsed = time.time() - t0
     recs = [records[i] for i in todo_ids]
-    return SweepResult(dataset=records_to_dataset(scene, recs, coarse=coarse, elapsed_s=elapsed),
-                       records=recs, failed=[r['point'] for r in recs if r['status'] != 'ok'],
-                       elapsed_s=elapsed)
+    dataset = records_to_dataset(scene, recs, coarse=coarse, elapsed_s=elapsed)
+    disp = None
+    if any(record_is_current(r) for r in recs):
+        disp = displacements_from_records(recs, scene.depths, {
+            'dataset_sha256': dataset.sha256(), 'scene_sha256': scene.sha256(),
+            'scene': scene.name, 'probe_radius_m': scene.probe_radius, 'coarse': coarse,
+            'mesh': dataset.provenance['mesh'],
+            'generator': 'haptic_anfis.tissue.sweep.run_sweep'})
+    return SweepResult(dataset=dataset, records=recs,
+                       failed=[r['point'] for r in recs if r['status'] != 'ok'],
+                       elapsed_s=elapsed, displacements=disp)
 
 
 def solver_versions() -> dict[str, str]:
