@@ -53,6 +53,11 @@ def sweep_case(case: Case, *, coarse: bool = False, workers: int = 2, executor: 
     res.dataset.provenance['case'] = case.name
     save_dataset(res.dataset, case.dataset_path)
     out.written.append(str(case.dataset_path))
+    if res.displacements is not None:  # the skin's dent of the same solves (issue 16)
+        from ..tissue.displacement import displacement_path, save_displacements
+
+        out.written.append(str(save_displacements(res.displacements,
+                                                  displacement_path(case.dataset_path))))
     return res.dataset, out
 
 
