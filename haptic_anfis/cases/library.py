@@ -175,3 +175,31 @@ def resolve_case(case: str = '', random_seed: int = -1) -> Case | None:
     if random_seed >= 0:
         return random_case(random_seed)
     return get_case(case) if case else None
+
+
+def add_case_arguments(parser) -> None:
+    """``--case NAME`` / ``--random-case --seed N`` for the commands that run the graph."""
+    g = parser.add_argument_group('case (haptic-anfis cases list)')
+    g.add_argument('--case', default='', metavar='NAME',
+                   help='run this case of the library (default: the default scene)')
+    g.add_argument('--random-case', action='store_true',
+                   help='draw a case with --seed; its name is not shown (for a blind session)')
+    g.add_argument('--seed', type=int, default=None, help='seed of --random-case')
+
+
+def case_node_arguments(args) -> list[str]:
+    """ROS arguments (``-p name:=value``) for the nodes from ``--case`` / ``--random-case``,
+    checked first (unknown case, missing files, --seed without --random-case: CaseError)."""
+    if args.random_case:
+        if args.case:
+            raise CaseError('give --case NAME or --random-case --seed N, not both')
+        if args.seed is None or args.seed < 0:
+            raise CaseError(f'--random-case needs --seed N with N >= 0, got {args.seed}')
+        random_case(args.seed)  # a ready case exists
+        return ['-p', f'random_case_seed:={int(args.seed)}']
+    if args.seed is not None:
+        raise CaseError('--seed is for --random-case')
+    if args.case:
+        get_case(args.case)
+        return ['-p', f'case:={args.case}']
+    return []

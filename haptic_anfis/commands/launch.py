@@ -16,6 +16,8 @@ from pathlib import Path
 NAME = 'launch'
 HELP = 'run the haptic nodes as separate processes (falcon_driver, contact_detector, ...)'
 
+#: nodes that take the case parameters (--case / --random-case)
+CASE_NODES = ('contact_detector', 'force_server', 'visualizer')
 DEFAULT_NODES = 'falcon_driver,contact_detector,force_server,visualizer'
 #: start order: consumers before producers, the device last (it starts publishing poses at once)
 ORDER = ('recorder', 'trainer', 'force_server', 'contact_detector', 'visualizer', 'player',
@@ -36,6 +38,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help='ROS_DOMAIN_ID for the nodes (default: inherited)')
     p.add_argument('--localhost', action='store_true',
                    help='discovery on this machine only (ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST)')
+    from ..cases.library import add_case_arguments
+    add_case_arguments(p)
     p.add_argument('--log-dir', default=None,
                    help="write each node's output to DIR/<node>.log (default: this terminal)")
 
@@ -55,7 +59,10 @@ def run(args: argparse.Namespace) -> int:
         if not Path(f).is_file():
             raise ValueError(f'--params-file {f}: no such file')
     ros_args = [a for f in args.params_file for a in ('--params-file', str(Path(f).resolve()))]
-    extra: dict[str, list[str]] = {n: [] for n in names}
+    from ..cases.library import case_node_arguments
+    case_args = case_node_arguments(args)
+    extra: dict[str, list[str]] = {n: (list(case_args) if n in CASE_NODES else [])
+                                   for n in names}
     if args.record:
         if Path(args.record).exists():
             raise ValueError(f'--record {args.record}: exists already; a recording needs a new '

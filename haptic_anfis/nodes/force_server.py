@@ -21,7 +21,8 @@ from std_srvs.srv import Trigger
 from ..anfis import ForceModel
 from ..dataset import DATA_DIR
 from . import interfaces as ifc
-from ._common import LOOP_QOS, Param, declare_parameters, run_node
+from ._case import CASE_PARAMS, apply_case, declare_case  # noqa: F401 (CASE_PARAMS: documented in config/)
+from ._common import LOOP_QOS, Param, declare_parameters, positive, run_node
 
 DEFAULT_MODEL = DATA_DIR / 'default_model.json'
 
@@ -29,6 +30,8 @@ PARAMS = [
     Param('model_path', '', "ANFIS model file (JSON) ('' = the shipped default model); re-read "
           'by ~/reload'),
     Param('frame_id', 'tissue', 'frame of the published force (the tissue frame)'),
+    Param('case_ramp', 0.5, 'after a case switch the force ramps from 0 to the model force over '
+          'this long [s] (the new surface may put the probe deeper at once)', positive),
 ]
 
 
@@ -58,7 +61,9 @@ def force_from_contact(model: ForceModel, v) -> tuple[float, float, float, str |
 class ForceServer(Node):
     def __init__(self, name: str = 'force_server', **kw):
         super().__init__(name, **kw)
-        p = self.params = declare_parameters(self, PARAMS)
+        p = self.own_params = declare_parameters(self, PARAMS)
+        self._ramp_t0: float | None = None  # monotonic time of the last case switch
+        p = self.params = apply_case(p, declare_case(self, self.switch_case))
         self.model_path, self.model = load_model(p)  # ModelFileError (a ValueError) -> exit 1
         self.pub = self.create_publisher(WrenchStamped, ifc.TOPIC_COMMAND, LOOP_QOS)
         self.sub = self.create_subscription(JointState, ifc.TOPIC_CONTACT, self._on_contact,
@@ -79,7 +84,16 @@ class ForceServer(Node):
         out = self._msg
         out.header.stamp = msg.header.stamp
         f = out.wrench.force
-        fx, fy, fz, error = force_from_contact(self.model, msg.position)
+        model = self.model
+        fx, fy, fz, error = (force_from_contact(model, msg.position) if model is not None
+                             else (0.0, 0.0, 0.0, None))  # no model: mid case switch
+        if self._ramp_t0 is not None:  # after a case switch: ramp up from zero force
+            k = (time.monotonic() - self._ramp_t0) / self.params['case_ramp']
+            if k >= 1.0:
+                self._ramp_t0 = None
+            else:
+                k = max(k, 0.0)
+                fx, fy, fz = k * fx, k * fy, k * fz
         if error is not None:
             self._bad(error)
         elif fx or fy or fz:
@@ -109,6 +123,16 @@ class ForceServer(Node):
                f'{(time.perf_counter() - t0) * 1e3:.1f} ms')
         self.get_logger().info(msg)
         return True, msg
+
+    def switch_case(self, case) -> None:
+        """Swap in the model of ``case`` (None: the own ``model_path``); zero force while it is
+        swapped, then a ramp over ``case_ramp``. A bad model raises and keeps the old one."""
+        params = apply_case(self.params, case, self.own_params)
+        path, model = load_model(params)  # raises on a bad file: nothing changed
+        self.model = None  # a contact arriving mid-swap (other thread) gets zero force
+        self._ramp_t0 = time.monotonic()
+        self.params, self.model_path = params, path
+        self.model = model
 
     def _on_reload(self, request, response):
         response.success, response.message = self.reload()

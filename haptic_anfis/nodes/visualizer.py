@@ -14,6 +14,7 @@ from sensor_msgs.msg import JointState
 from visualization_msgs.msg import Marker, MarkerArray
 
 from . import interfaces as ifc
+from ._case import CASE_PARAMS, apply_case, declare_case  # noqa: F401 (CASE_PARAMS: documented in config/)
 from ._common import LOOP_QOS, Param, declare_parameters, positive, run_node
 from .contact_detector import MESH_PARAMS, load_surface
 
@@ -52,37 +53,55 @@ def _marker(kind, mid, frame, ns, rgba, scale):
 class Visualizer(Node):
     def __init__(self, name: str = 'visualizer', **kw):
         super().__init__(name, **kw)
-        p = self.params = declare_parameters(self, PARAMS)
+        p = self.own_params = declare_parameters(self, PARAMS)
+        p = self.params = apply_case(p, declare_case(self, self.switch_case))
         f = self.frame_id = p['frame_id']
-        mesh = load_surface(self, p)
-        tissue = _marker(Marker.TRIANGLE_LIST, 0, f, 'tissue', (1.0, 0.8, 0.7, p['mesh_alpha']),
-                         (1.0, 1.0, 1.0))
-        tissue.points = [Point(x=float(a), y=float(b), z=float(c))
-                         for a, b, c in mesh.vertices[mesh.faces.reshape(-1)]]
         self.pub_tissue = self.create_publisher(MarkerArray, ifc.TOPIC_TISSUE, LATCHED)
-        self.pub_tissue.publish(MarkerArray(markers=[tissue]))
         self.pub = self.create_publisher(MarkerArray, ifc.TOPIC_MARKERS, 10)
+        self._publish_tissue(p)
         d = 2 * p['probe_radius']
         self.probe = _marker(Marker.SPHERE, 0, f, 'probe', (0.2, 0.4, 1.0, 1.0), (d, d, d))
         self.contact = _marker(Marker.SPHERE, 1, f, 'contact', (1.0, 0.2, 0.2, 1.0),
                                (0.004, 0.004, 0.004))
         self.arrow = _marker(Marker.ARROW, 2, f, 'force', (0.1, 0.9, 0.1, 1.0), (0.002, 0.004, 0.004))
         self.arrow.points = [Point(), Point()]
-        self.tumours = []
-        if p['show_tumours']:
-            t = p['tumours']
-            for i in range(len(t) // 4):
-                x, y, z, r = t[4 * i:4 * i + 4]
-                m = _marker(Marker.SPHERE, 10 + i, f, 'tumours', (0.6, 0.0, 0.6, 0.8),
-                            (2 * r, 2 * r, 2 * r))
-                m.pose.position.x, m.pose.position.y, m.pose.position.z = x, y, z
-                self.tumours.append(m)
+        self.tumours = self._tumour_markers(p)
         self._pose = self._contact = self._force = None
         self.create_subscription(PoseStamped, ifc.TOPIC_POSE, self._set('_pose'), LOOP_QOS)
         self.create_subscription(JointState, ifc.TOPIC_CONTACT, self._set('_contact'), LOOP_QOS)
         self.create_subscription(WrenchStamped, ifc.TOPIC_COMMAND, self._set('_force'), LOOP_QOS)
         self.timer = self.create_timer(1.0 / p['rate'], self._draw)
         self.n_published = 0
+
+    def _publish_tissue(self, p: dict) -> None:
+        mesh = load_surface(self, p)
+        tissue = _marker(Marker.TRIANGLE_LIST, 0, self.frame_id, 'tissue',
+                         (1.0, 0.8, 0.7, p['mesh_alpha']), (1.0, 1.0, 1.0))
+        tissue.points = [Point(x=float(a), y=float(b), z=float(c))
+                         for a, b, c in mesh.vertices[mesh.faces.reshape(-1)]]
+        self.pub_tissue.publish(MarkerArray(markers=[tissue]))
+
+    def _tumour_markers(self, p: dict) -> list:
+        """Tumour spheres, only with ``show_tumours`` (hidden from the trainee otherwise)."""
+        out = []
+        if p['show_tumours']:
+            t = p['tumours']
+            for i in range(len(t) // 4):
+                x, y, z, r = t[4 * i:4 * i + 4]
+                m = _marker(Marker.SPHERE, 10 + i, self.frame_id, 'tumours', (0.6, 0.0, 0.6, 0.8),
+                            (2 * r, 2 * r, 2 * r))
+                m.pose.position.x, m.pose.position.y, m.pose.position.z = x, y, z
+                out.append(m)
+        return out
+
+    def switch_case(self, case) -> None:
+        """Show the surface (and, with ``show_tumours``, the lesions) of ``case``."""
+        params = apply_case(self.params, case, self.own_params)
+        self._publish_tissue(params)  # raises on a bad mesh: nothing changed
+        clear = Marker(action=Marker.DELETEALL)
+        clear.header.frame_id = self.frame_id
+        self.pub.publish(MarkerArray(markers=[clear]))  # drop the old case's tumour spheres
+        self.params, self.tumours = params, self._tumour_markers(params)
 
     def _set(self, attr):
         def cb(msg):
