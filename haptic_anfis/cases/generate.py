@@ -44,8 +44,8 @@ def sweep_case(case: Case, *, coarse: bool = False, workers: int = 2, executor: 
     work = case.work_dir.with_name(case.work_dir.name + ('-coarse' if coarse else ''))
     res = run_sweep(scene, work, coarse=coarse, workers=workers, executor=executor,
                     progress=progress)
-    out = GenerateResult(case.name, fe_elapsed_s=res.elapsed_s,
-                         fe_solver_s=float(res.dataset.provenance['wall_time_s']['sum_over_points']),
+    solver_s = float(res.dataset.provenance['wall_time_s']['sum_over_points'])
+    out = GenerateResult(case.name, fe_elapsed_s=res.elapsed_s, fe_solver_s=solver_s,
                          samples=len(res.dataset), failed=list(res.failed))
     if res.failed:
         raise CaseError(f'case {case.name!r}: FE failed at loading points {res.failed} (see '

@@ -52,8 +52,8 @@ def lesion_contrast(case: Case, model, ds: ForceDataset, depth: float = CONTRAST
     rows = []
     for t in scene.tumours:
         over, mirror = (t.centre[1], t.centre[2]), (-t.centre[1], -t.centre[2])
-        X = np.array([[float(surface_height(np.array(p[0]), np.array(p[1]), scene.radii)), *p, depth]
-                      for p in (over, mirror)])
+        X = np.array([[float(surface_height(np.array(q[0]), np.array(q[1]), scene.radii)), *q,
+                       depth] for q in (over, mirror)])
         m_over, m_mirror = model.predict(X)[:, 0]
         f_over, f_mirror = _fe_force(ds, over, depth), _fe_force(ds, mirror, depth)
         row = {'lesion': t.name, 'model_over_n': float(m_over), 'model_mirror_n': float(m_mirror),

@@ -19,7 +19,7 @@ from sensor_msgs.msg import JointState
 from ..contact import ContactDetector, ContactTracker, ellipsoid_dome
 from ..dataset import DATA_DIR
 from . import interfaces as ifc
-from ._case import CASE_PARAMS, apply_case, declare_case  # noqa: F401 (CASE_PARAMS: documented in config/)
+from ._case import CASE_PARAMS, apply_case, declare_case  # noqa: F401 (CASE_PARAMS: in config)
 from ._common import (LOOP_QOS, Param, declare_parameters, finite_vector, non_negative, one_of,
                       positive, run_node)
 

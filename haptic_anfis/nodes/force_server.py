@@ -21,7 +21,7 @@ from std_srvs.srv import Trigger
 from ..anfis import ForceModel
 from ..dataset import DATA_DIR
 from . import interfaces as ifc
-from ._case import CASE_PARAMS, apply_case, declare_case  # noqa: F401 (CASE_PARAMS: documented in config/)
+from ._case import CASE_PARAMS, apply_case, declare_case  # noqa: F401 (CASE_PARAMS: in config)
 from ._common import LOOP_QOS, Param, declare_parameters, positive, run_node
 
 DEFAULT_MODEL = DATA_DIR / 'default_model.json'

@@ -14,7 +14,7 @@ from sensor_msgs.msg import JointState
 from visualization_msgs.msg import Marker, MarkerArray
 
 from . import interfaces as ifc
-from ._case import CASE_PARAMS, apply_case, declare_case  # noqa: F401 (CASE_PARAMS: documented in config/)
+from ._case import CASE_PARAMS, apply_case, declare_case  # noqa: F401 (CASE_PARAMS: in config)
 from ._common import LOOP_QOS, Param, declare_parameters, positive, run_node
 from .contact_detector import MESH_PARAMS, load_surface
 
