@@ -200,3 +200,35 @@ def test_cli_list_json_and_errors(tiny, capsys, monkeypatch):
     assert set(d['lesions'][0]) >= {'center_mm', 'radius_mm', 'modulus_kpa', 'kind'}
     assert main(['cases', 'generate', 'no_such_case']) == 1
     assert "unknown case 'no_such_case'" in capsys.readouterr().err
+
+
+def test_lesion_case_reuses_the_lesion_free_solves_away_from_its_lesions(tmp_path):
+    from haptic_anfis.cases.generate import REUSE_MARGIN, base_case, reuse_plan
+
+    base_doc = {**json.loads(json.dumps(TINY)), 'name': 'base', 'tumours': []}
+    soft = json.loads(json.dumps(TINY))
+    soft['material']['youngs_kPa'] = 19  # a fatty breast: forces scale by 19 / 33 away from it
+    lib = _library(tmp_path, {'base': base_doc, 'soft': soft})
+    cases = lib.cases()
+    base, case = lib.get('base'), lib.get('soft')
+    assert base_case(case, cases).name == 'base' and base_case(base, cases) is None
+    plan, scale = reuse_plan(case, base)
+    assert scale == pytest.approx(19 / 33) and 0 < len(plan) < len(loading_points(case.scene))
+    t = case.scene.tumours[0]
+    pts = loading_points(case.scene)
+    for i in plan:  # only points well away from the lesion are reused
+        assert np.hypot(pts[i, 1] - t.centre[1], pts[i, 2] - t.centre[2]) > t.radius + REUSE_MARGIN
+    generate_case(base, coarse=True, train=False, progress=False, workers=2)
+    res = generate_case(case, coarse=True, train=False, progress=False, workers=2, cases=cases)
+    assert not res.failed
+    ds, bds = load_dataset(case.dataset_path), load_dataset(base.dataset_path)
+    assert sorted(ds.provenance['reused']['points']) == sorted(plan)
+    assert len(ds) == 3 * len(pts)
+    for i, j in plan.items():
+        np.testing.assert_allclose(ds.Y[ds.point == i], bds.Y[bds.point == j] * scale, rtol=1e-12)
+    solved = [i for i in range(len(pts)) if i not in plan]
+    assert sorted(ds.provenance['reused']['solved_points']) == solved
+    # and the solved points see the softer tissue and the lesion: the lesion point is stiffer
+    # than the base there times the modulus ratio
+    over = int(np.argmin(np.hypot(pts[:, 1] - t.centre[1], pts[:, 2] - t.centre[2])))
+    assert np.all(ds.Y[ds.point == over, 0] > scale * bds.Y[bds.point == over, 0])

@@ -114,7 +114,8 @@ def _generate(args: argparse.Namespace) -> int:
             print(f'[case {k}/{len(cases)}] {case.name}: {case.description}', flush=True)
             res = generate_case(case, coarse=args.coarse, workers=args.workers, executor=executor,
                                 sweep=not args.train_only, train=not args.no_train,
-                                train_params=params, progress=not args.quiet)
+                                train_params=params, progress=not args.quiet,
+                                cases=lib.cases())
             print(f'  {res.samples or "-"} samples, FE {res.fe_elapsed_s:.0f} s elapsed '
                   f'({res.fe_solver_s:.0f} s solver time), training {res.train_s:.1f} s; wrote '
                   f'{", ".join(res.written) or "nothing"}', flush=True)
