@@ -20,7 +20,7 @@ venv: $(STAMP)
 $(STAMP): setup.py setup.cfg package.xml
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install $(PIP_QUIET) --upgrade pip 2>&1 | grep -v '^WARNING: Location' || true
-	$(PY) -m pip install $(PIP_QUIET) -e '.[ros,fe,test,report]' 2>&1 | grep -v '^WARNING: Location' || true
+	$(PY) -m pip install $(PIP_QUIET) -e '.[ros,fe,test,report,dask]' 2>&1 | grep -v '^WARNING: Location' || true
 	$(PY) -c 'import haptic_anfis, numba, rclpy, trimesh, rosbags, matplotlib, sklearn' # fail here if the install did not
 	$(PYTHON) -m venv $(XVENV)
 	$(XVENV)/bin/python -m pip install $(PIP_QUIET) $(XANFIS_REQS) 2>&1 | grep -v '^WARNING: Location' || true
