@@ -44,19 +44,30 @@ def _fe_force(ds: ForceDataset, yz: tuple[float, float], depth: float) -> float 
 def lesion_contrast(case: Case, model, ds: ForceDataset, depth: float = CONTRAST_DEPTH
                     ) -> list[dict[str, Any]]:
     """Per lesion: FE and model Fx over the centre and at the mirror point, both contrasts, and
-    whether the model's is within ``CONTRAST_TOLERANCE`` of the FE's. FE values are None when the
-    dataset has no loading point there (a scene without refinement points)."""
+    whether the model's is within ``CONTRAST_TOLERANCE`` of the FE's. Without a loading point
+    over the centre (a scene without refinement) the nearest one with a mirror point is used
+    (``over_yz_mm``)."""
     from ..tissue.scene import surface_height
 
     scene = case.scene
     rows = []
+    yz = np.unique(np.round(ds.X[:, 1:3], 9), axis=0)
     for t in scene.tumours:
-        over, mirror = (t.centre[1], t.centre[2]), (-t.centre[1], -t.centre[2])
+        # over the centre (a refined case has a loading point there), else over the nearest
+        # loading point whose mirror point is in the data too (the default scene's grid)
+        d = np.hypot(yz[:, 0] - t.centre[1], yz[:, 1] - t.centre[2])
+        has_mirror = np.array([np.any(np.hypot(*(yz + q).T) < 1e-6) for q in yz])
+        d[~has_mirror] = np.inf
+        k = int(np.argmin(d))
+        over = ((float(yz[k, 0]), float(yz[k, 1])) if np.isfinite(d[k])
+                else (t.centre[1], t.centre[2]))
+        mirror = (-over[0], -over[1])
         X = np.array([[float(surface_height(np.array(q[0]), np.array(q[1]), scene.radii)), *q,
                        depth] for q in (over, mirror)])
         m_over, m_mirror = model.predict(X)[:, 0]
         f_over, f_mirror = _fe_force(ds, over, depth), _fe_force(ds, mirror, depth)
-        row = {'lesion': t.name, 'model_over_n': float(m_over), 'model_mirror_n': float(m_mirror),
+        row = {'lesion': t.name, 'over_yz_mm': [round(1e3 * v, 3) for v in over],
+               'model_over_n': float(m_over), 'model_mirror_n': float(m_mirror),
                'model_contrast': float(m_over / m_mirror - 1.0), 'fe_over_n': f_over,
                'fe_mirror_n': f_mirror, 'fe_contrast': None, 'contrast_error': None, 'ok': None}
         if f_over is not None and f_mirror is not None:
@@ -139,3 +150,28 @@ def format_table(rows: list[dict[str, Any]]) -> str:
     lines.append('lesions: kind (m = malignant, b = benign, u = unstated), diameter @ centre depth '
                  'under the skin [mm]')
     return '\n'.join(lines)
+
+
+def format_markdown(rows: list[dict[str, Any]]) -> str:
+    """The README's table: rules per case and each lesion's contrast, FE against model."""
+    out = ['| case | lesions | breast (mm) | E (kPa) | FE points (rows) | structure Fx / Fy / Fz '
+           '| rules | params | test RMSE N (% of range) | contrast at 8 mm: FE → model |',
+           '|---|---|---|---|---|---|---|---|---|---|']
+    for r in rows:
+        les = ', '.join(f'{l["kind"]} {2 * l["radius_mm"]:g} mm @ {l["depth_mm"]:.0f} mm'
+                        for l in r['lesions']) or 'none'
+        if not r['structures']:
+            out.append(f'| {r["name"]} | {les} | {"×".join(f"{v:g}" for v in r["breast_radii_mm"])} '
+                       f'| {r["glandular_kpa"]:g} | not generated | | | | | |')
+            continue
+        err = ', '.join(f'{v:.3f} ({p:.1f})' for v, p in zip(r['rmse_n'], r['rmse_pct_range'] or []))
+        con = '; '.join(
+            f'{c["lesion"]}: {100 * c["fe_contrast"]:+.1f} % → {100 * c["model_contrast"]:+.1f} % '
+            f'({"ok" if c["ok"] else "FAIL"})' if c['fe_contrast'] is not None else
+            f'{c["lesion"]}: model {100 * c["model_contrast"]:+.1f} % (no FE point)'
+            for c in (r['contrast'] or [])) or '–'
+        out.append(f'| {r["name"]} | {les} | {"×".join(f"{v:g}" for v in r["breast_radii_mm"])} '
+                   f'| {r["glandular_kpa"]:g} | {r["dataset_points"]} ({r["dataset_rows"]}) '
+                   f'| {" / ".join(r["structures"])} | {r["rules"]} | {r["parameters"]} | {err} '
+                   f'| {con} |')
+    return '\n'.join(out)

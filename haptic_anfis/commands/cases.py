@@ -20,6 +20,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     sub = p.add_subparsers(dest='action', metavar='ACTION')
     ls = sub.add_parser('list', help='one row per case: lesions, size, data, model, errors, speed')
     ls.add_argument('--json', action='store_true', help='a JSON list of objects instead')
+    ls.add_argument('--markdown', action='store_true',
+                    help="the README's table (rules and lesion contrast per case) instead")
     ls.add_argument('--no-timing', action='store_true', help='skip the evaluation-time measurement')
     gen = sub.add_parser('generate', help='FE sweep (resumable, parallel) then train, per case')
     gen.add_argument('names', nargs='*', help='cases to generate (default: every case but '
@@ -54,11 +56,13 @@ def run(args: argparse.Namespace) -> int:
 
 def _list(args: argparse.Namespace) -> int:
     from ..cases import library
-    from ..cases.summary import case_summary, format_table
+    from ..cases.summary import case_summary, format_markdown, format_table
 
     rows = [case_summary(c, timing=not args.no_timing) for c in library().cases()]
     if args.json:
         print(json.dumps(rows, indent=1))
+    elif args.markdown:
+        print(format_markdown(rows))
     else:
         print(format_table(rows))
     return 0
