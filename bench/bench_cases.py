@@ -1,6 +1,6 @@
 """Case library figures per case: FE time (recorded in each dataset's sidecar when the case was
 generated, and optionally re-measured for one loading point), training time (measured here:
-retraining with config/force_model.yaml), model size (rules, parameters, file bytes) and the
+retraining with config/case_model.yaml), model size (rules, parameters, file bytes) and the
 compiled evaluation time. Prints a table; asserts nothing. Timings on a shared machine are noisy:
 the load is printed with them.
 
@@ -31,7 +31,7 @@ def main() -> None:
                     help='also time one FE loading point (the apex) per case at its density')
     args = ap.parse_args()
     lib = library()
-    params = load_config(str(SCENE_DIR.parent / 'force_model.yaml'))
+    params = load_config(str(SCENE_DIR.parent / 'case_model.yaml'))
     print(f'load average at start: {os.getloadavg()[0]:.1f} (2 cores)')
     print(f'{"case":<24} {"points":>6} {"cells":>5} {"FE sum s":>9} {"FE wall s":>9} '
           f'{"s/point":>7} {"apex s":>6} {"train s":>7} {"rules":>5} {"params":>6} '

@@ -39,7 +39,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     mode.add_argument('--train-only', action='store_true',
                       help='train on the existing datasets (no FE)')
     gen.add_argument('--config', default=None,
-                     help='force-model hyper-parameters (default config/force_model.yaml)')
+                     help='force-model hyper-parameters (default config/case_model.yaml)')
     gen.add_argument('--work-root', type=Path, default=None,
                      help='per-case FE work directories for resuming (default .fe_work/cases)')
     gen.add_argument('--quiet', action='store_true', help='no progress line')
@@ -107,9 +107,9 @@ def _generate(args: argparse.Namespace) -> int:
     for c in cases:
         _ = c.scene  # and invalid scenes
     config = args.config
-    if config is None:  # config/force_model.yaml beside the scene files (source tree or share)
+    if config is None:  # config/case_model.yaml beside the scene files (source tree or share)
         from ..tissue.scene import SCENE_DIR
-        config = str(SCENE_DIR.parent / 'force_model.yaml')
+        config = str(SCENE_DIR.parent / 'case_model.yaml')
     params = load_config(config) if not args.no_train else {}
     executor, close = _executor(args) if not args.train_only else (None, lambda: None)
     t_all = time.time()
