@@ -88,6 +88,8 @@ class ForceServer(Node):
         fx, fy, fz, error = (force_from_contact(model, msg.position) if model is not None
                              else (0.0, 0.0, 0.0, None))  # no model: mid case switch
         if self._ramp_t0 is not None:  # after a case switch: ramp up from zero force
+            if self._ramp_t0 < 0.0:  # the first contact since the switch starts the ramp
+                self._ramp_t0 = time.monotonic()
             k = (time.monotonic() - self._ramp_t0) / self.params['case_ramp']
             if k >= 1.0:
                 self._ramp_t0 = None
@@ -130,7 +132,7 @@ class ForceServer(Node):
         params = apply_case(self.params, case, self.own_params)
         path, model = load_model(params)  # raises on a bad file: nothing changed
         self.model = None  # a contact arriving mid-swap (other thread) gets zero force
-        self._ramp_t0 = time.monotonic()
+        self._ramp_t0 = -1.0  # ramp from the next contact (a slow swap must not eat the ramp)
         self.params, self.model_path = params, path
         self.model = model
 
