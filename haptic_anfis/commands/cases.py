@@ -120,6 +120,9 @@ def _generate(args: argparse.Namespace) -> int:
                                 sweep=not args.train_only, train=not args.no_train,
                                 train_params=params, progress=not args.quiet,
                                 cases=lib.cases())
+            if res.failed:
+                print(f'  warning: the FE load path failed at loading points {res.failed}; their '
+                      'deepest depths are missing from the dataset', flush=True)
             print(f'  {res.samples or "-"} samples, FE {res.fe_elapsed_s:.0f} s elapsed '
                   f'({res.fe_solver_s:.0f} s solver time), training {res.train_s:.1f} s; wrote '
                   f'{", ".join(res.written) or "nothing"}', flush=True)

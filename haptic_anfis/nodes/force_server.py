@@ -87,14 +87,13 @@ class ForceServer(Node):
         model = self.model
         fx, fy, fz, error = (force_from_contact(model, msg.position) if model is not None
                              else (0.0, 0.0, 0.0, None))  # no model: mid case switch
-        if self._ramp_t0 is not None:  # after a case switch: ramp up from zero force
-            if self._ramp_t0 < 0.0:  # the first contact since the switch starts the ramp
+        if self._ramp_t0 is not None and (fx or fy or fz):  # after a case switch: ramp up
+            if self._ramp_t0 < 0.0:  # the first force since the switch starts the ramp
                 self._ramp_t0 = time.monotonic()
             k = (time.monotonic() - self._ramp_t0) / self.params['case_ramp']
             if k >= 1.0:
                 self._ramp_t0 = None
             else:
-                k = max(k, 0.0)
                 fx, fy, fz = k * fx, k * fy, k * fz
         if error is not None:
             self._bad(error)
