@@ -45,6 +45,7 @@ def main() -> None:
         wall = prov.get('wall_time_s', {})
         n_pts = prov.get('n_points', 0)
         fe_sum = wall.get('sum_over_points', float('nan'))
+        solved = n_pts - len((prov.get('reused') or {}).get('points', []))  # not reused
         apex_s = float('nan')
         if args.fe_point:
             from haptic_anfis.tissue.fe import solve_scene_point
@@ -66,13 +67,13 @@ def main() -> None:
         rules = sum(m.n_rules for m in model.models_)
         n_par = sum(m.n_params for m in model.models_)
         print(f'{case.name:<24} {n_pts:>6} {prov["mesh"]["probe_cells"]:>5} {fe_sum:>9.0f} '
-              f'{wall.get("this_run_elapsed", float("nan")):>9.0f} {fe_sum / max(n_pts, 1):>7.1f} '
+              f'{wall.get("this_run_elapsed", float("nan")):>9.0f} {fe_sum / max(solved, 1):>7.1f} '
               f'{apex_s:>6.1f} {train_s:>7.1f} {rules:>5} {n_par:>6} '
               f'{case.model_path.stat().st_size / 1e3:>8.1f} {eval_p50_us(model, ds):>6.2f}',
               flush=True)
     print(f'load average at end: {os.getloadavg()[0]:.1f}. FE sum = solver seconds summed over '
-          'points (one core each); FE wall = elapsed of the generating run (resumed runs: the last '
-          'part only).')
+          'the solved points (one core each; s/point over those, reused points cost none); '
+          'FE wall = elapsed of the generating run (resumed runs: the last part only).')
 
 
 if __name__ == '__main__':
