@@ -88,9 +88,10 @@ class ForceServer(Node):
         fx, fy, fz, error = (force_from_contact(model, msg.position) if model is not None
                              else (0.0, 0.0, 0.0, None))  # no model: mid case switch
         if self._ramp_t0 is not None and (fx or fy or fz):  # after a case switch: ramp up
-            if self._ramp_t0 < 0.0:  # the first force since the switch starts the ramp
-                self._ramp_t0 = time.monotonic()
-            k = (time.monotonic() - self._ramp_t0) / self.params['case_ramp']
+            now = time.monotonic()
+            if self._ramp_t0 < 0.0:  # the first force since the switch starts the ramp: 0 N
+                self._ramp_t0 = now
+            k = (now - self._ramp_t0) / self.params['case_ramp']
             if k >= 1.0:
                 self._ramp_t0 = None
             else:
