@@ -26,7 +26,10 @@ setup(
     name=PACKAGE,
     version='0.1.0',
     packages=find_packages(exclude=['test', 'test.*']),
-    package_data={PACKAGE: ['data/*.csv', 'data/*.json', 'data/*.stl']},
+    package_data={PACKAGE: ['data/*.csv', 'data/*.json', 'data/*.stl',
+                            # the case library (haptic-anfis cases list)
+                            'data/cases/*.stl', 'data/cases/*/*.csv', 'data/cases/*/*.json',
+                            'data/cases/*/*.npz']},
     data_files=[
         ('share/ament_index/resource_index/packages', [f'resource/{PACKAGE}']),
         (f'share/{PACKAGE}', ['package.xml']),
@@ -63,6 +66,10 @@ setup(
         # ~700 MB, x86-64 only). haptic_anfis.tissue uses it when importable.
         'fe-fast': [
             'pypardiso>=0.4',
+        ],
+        # `haptic-anfis cases generate --dask`: the FE points on a dask.distributed cluster.
+        'dask': [
+            'distributed>=2024.1',
         ],
         'fe': [
             'felupe==11.3.0',

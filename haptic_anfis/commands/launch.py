@@ -30,6 +30,8 @@ from pathlib import Path
 NAME = 'launch'
 HELP = 'run the haptic nodes as separate processes (falcon_driver, contact_detector, ...)'
 
+#: nodes that take the case parameters (--case / --random-case)
+CASE_NODES = ('contact_detector', 'force_server', 'visualizer')
 DEFAULT_NODES = 'falcon_driver,contact_detector,force_server,visualizer'
 #: start order: consumers before producers, the device last (it starts publishing poses at once)
 ORDER = ('recorder', 'trainer', 'force_server', 'contact_detector', 'visualizer', 'player',
@@ -54,6 +56,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help='ROS_DOMAIN_ID for the nodes (default: inherited)')
     p.add_argument('--localhost', action='store_true',
                    help='discovery on this machine only (ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST)')
+    from ..cases.library import add_case_arguments
+    add_case_arguments(p)
     p.add_argument('--log-dir', default=None,
                    help="write each node's output to DIR/<node>.log (default: this terminal)")
     p.add_argument('--no-respawn', action='store_true',
@@ -100,7 +104,10 @@ def run(args: argparse.Namespace) -> int:
 
     names = _check(args, node_names())
     ros_args = [a for f in args.params_file for a in ('--params-file', str(Path(f).resolve()))]
-    extra: dict[str, list[str]] = {n: [] for n in names}
+    from ..cases.library import case_node_arguments
+    case_args = case_node_arguments(args)
+    extra: dict[str, list[str]] = {n: (list(case_args) if n in CASE_NODES else [])
+                                   for n in names}
     if args.record:
         from ..bag.topics import DEFAULT_TOPICS
         from ..nodes.session import EVENTS_TOPIC, STATUS_TOPIC

@@ -31,6 +31,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument('--json', action='store_true',
                    help='end with one line of JSON: rate_hz, latency_p50_ms, latency_p99_ms, '
                         'latency_max_ms, deadline_misses, cycles, max_force_n, contact_s, ...')
+    from ..cases.library import add_case_arguments
+    add_case_arguments(p)
     p.add_argument('ros_args', nargs=argparse.REMAINDER,
                    help='--ros-args ... passed to rclpy (e.g. --ros-args -p rate:=500.0)')
 
@@ -46,11 +48,14 @@ def run(args: argparse.Namespace) -> int:
     ros_args = list(args.ros_args or [])
     if ros_args and ros_args[0] == '--':
         ros_args = ros_args[1:]
-    if args.params_file:
+    from ..cases.library import case_node_arguments
+    case_args = case_node_arguments(args)  # every node of the process gets case / seed
+    if args.params_file or case_args:
         if '--ros-args' not in ros_args:
             ros_args = ['--ros-args', *ros_args]
         for f in args.params_file:
             ros_args += ['--params-file', f]
+        ros_args += case_args
     try:
         extra = []
         if args.record:

@@ -40,7 +40,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 #: Keys of the config's "force_model" section: ForceModel arguments plus the test split.
-CONFIG_KEYS = {'structure', 'epochs', 'search_epochs', 'search_start', 'max_mfs', 'tol', 'ridge',
+CONFIG_KEYS = {'structure', 'candidates', 'epochs', 'search_epochs', 'search_start', 'max_mfs', 'tol', 'ridge',
                'step', 'val_fraction', 'split', 'search_folds', 'extrapolation', 'seed',
                'test_fraction', 'form', 'inputs'}
 
@@ -63,6 +63,8 @@ def load_config(path: str | None) -> dict:
     for key in ('structure', 'search_start', 'max_mfs', 'extrapolation', 'inputs'):
         if key in params:
             params[key] = tuple(params[key])
+    if 'candidates' in params:  # an explicit list of structures instead of the greedy search
+        params['candidates'] = [tuple(c) for c in params['candidates']]
     return params
 
 

@@ -19,6 +19,7 @@ from sensor_msgs.msg import JointState
 from ..contact import ContactDetector, ContactTracker, ellipsoid_dome
 from ..dataset import DATA_DIR
 from . import interfaces as ifc
+from ._case import CASE_PARAMS, apply_case, declare_case  # noqa: F401 (CASE_PARAMS: in config)
 from ._common import (LOOP_QOS, Param, declare_parameters, finite_vector, non_negative, one_of,
                       positive, run_node)
 
@@ -91,7 +92,8 @@ def contact_values(tracker: ContactTracker, frame_id: str, pose_frame: str, xyz)
 class ContactDetectorNode(Node):
     def __init__(self, name: str = 'contact_detector', **kw):
         super().__init__(name, **kw)
-        p = self.params = declare_parameters(self, PARAMS)
+        p = self.own_params = declare_parameters(self, PARAMS)
+        p = self.params = apply_case(p, declare_case(self, self.switch_case))
         self.frame_id = p['frame_id']
         self.tracker = make_tracker(p)
         self.detector = self.tracker.detector
@@ -107,6 +109,13 @@ class ContactDetectorNode(Node):
         self.get_logger().info(
             f"tissue mesh {p['mesh_path'] or DEFAULT_SURFACE}: "
             f'{self.detector.n_faces} faces; direction {d}')
+
+    def switch_case(self, case) -> None:
+        """Swap in the surface of ``case`` (None: the own mesh parameters). The new tracker starts
+        free, so a probe already inside the new surface makes no contact until it re-enters."""
+        params = apply_case(self.params, case, self.own_params)
+        tracker = make_tracker(params)  # raises on a bad mesh: nothing changed
+        self.params, self.tracker, self.detector = params, tracker, tracker.detector
 
     def _on_pose(self, msg: PoseStamped) -> None:
         self.n_poses += 1

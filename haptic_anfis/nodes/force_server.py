@@ -28,7 +28,8 @@ from ..anfis import ForceModel
 from ..dataset import DATA_DIR
 from ..device.local_model import contact_stiffness, force_and_jacobian
 from . import interfaces as ifc
-from ._common import LOOP_QOS, Param, declare_parameters, non_negative, run_node
+from ._case import CASE_PARAMS, apply_case, declare_case  # noqa: F401 (CASE_PARAMS: in config)
+from ._common import LOOP_QOS, Param, declare_parameters, non_negative, positive, run_node
 
 DEFAULT_MODEL = DATA_DIR / 'default_model.json'
 
@@ -40,6 +41,8 @@ PARAMS = [
           'falcon/servo_cf_local with every force (the driver renders it at every servo tick)'),
     Param('delay', 0.0, 'TESTS ONLY: hold every output this long [s] before publishing it (a slow '
           'or loaded force server); 0 = publish at once', non_negative),
+    Param('case_ramp', 0.5, 'after a case switch the force ramps from 0 to the model force over '
+          'this long [s] (the new surface may put the probe deeper at once)', positive),
 ]
 
 
@@ -114,7 +117,9 @@ def local_model_from_contact(model: ForceModel, v, jacobian=force_and_jacobian
 class ForceServer(Node):
     def __init__(self, name: str = 'force_server', **kw):
         super().__init__(name, **kw)
-        p = self.params = declare_parameters(self, PARAMS)
+        p = self.own_params = declare_parameters(self, PARAMS)
+        self._ramp_t0: float | None = None  # monotonic time of the last case switch
+        p = self.params = apply_case(p, declare_case(self, self.switch_case))
         self.model_path, self.model = load_model(p)  # ModelFileError (a ValueError) -> exit 1
         self.pub = self.create_publisher(WrenchStamped, ifc.TOPIC_COMMAND, LOOP_QOS)
         self.sub = self.create_subscription(JointState, ifc.TOPIC_CONTACT, self._on_contact,
@@ -149,15 +154,34 @@ class ForceServer(Node):
         out.header.frame_id = self.frame_id
         out.header.stamp = msg.header.stamp
         f = out.wrench.force
+        model = self.model
+        values = None
+        if model is None:  # mid case switch: no force (and a depth-0 model: the driver renders 0)
+            fx = fy = fz = 0.0
+            error = None
+            values = [0.0] * len(ifc.LOCAL_MODEL_FIELDS)
+        elif self.pub_lm is not None:
+            (fx, fy, fz), values, error = local_model_from_contact(model, msg.position)
+        else:
+            fx, fy, fz, error = force_from_contact(model, msg.position)
+        if self._ramp_t0 is not None and (fx or fy or fz):  # after a case switch: ramp up
+            now = time.monotonic()
+            if self._ramp_t0 < 0.0:  # the first force since the switch starts the ramp: 0 N
+                self._ramp_t0 = now
+            k = (now - self._ramp_t0) / self.params['case_ramp']
+            if k >= 1.0:
+                self._ramp_t0 = None
+            else:
+                fx, fy, fz = k * fx, k * fy, k * fz
+                if values is not None:  # the local model ramps with it: F0 and K scaled by k
+                    values[ifc.LM_F0] = [k * c for c in values[ifc.LM_F0]]
+                    values[ifc.LM_K] = [k * c for c in values[ifc.LM_K]]
         lm = None
         if self.pub_lm is not None:
-            (fx, fy, fz), values, error = local_model_from_contact(self.model, msg.position)
             lm = JointState(name=self._lm.name) if delayed else self._lm
             lm.header.frame_id = self.frame_id
             lm.header.stamp = msg.header.stamp
             lm.position = values
-        else:
-            fx, fy, fz, error = force_from_contact(self.model, msg.position)
         if error is not None:
             self._bad(error)
         elif fx or fy or fz:
@@ -220,6 +244,16 @@ class ForceServer(Node):
                f'{(time.perf_counter() - t0) * 1e3:.1f} ms')
         self.get_logger().info(msg)
         return True, msg
+
+    def switch_case(self, case) -> None:
+        """Swap in the model of ``case`` (None: the own ``model_path``); zero force while it is
+        swapped, then a ramp over ``case_ramp``. A bad model raises and keeps the old one."""
+        params = apply_case(self.params, case, self.own_params)
+        path, model = load_model(params)  # raises on a bad file: nothing changed
+        self.model = None  # a contact arriving mid-swap (other thread) gets zero force
+        self._ramp_t0 = -1.0  # ramp from the next contact (a slow swap must not eat the ramp)
+        self.params, self.model_path = params, path
+        self.model = model
 
     def _on_reload(self, request, response):
         response.success, response.message = self.reload()

@@ -25,6 +25,7 @@ from std_msgs.msg import ColorRGBA
 from visualization_msgs.msg import Marker, MarkerArray
 
 from . import interfaces as ifc
+from ._case import CASE_PARAMS, apply_case, declare_case  # noqa: F401 (CASE_PARAMS: in config)
 from ._common import LOOP_QOS, Param, declare_parameters, non_negative, positive, run_node
 from .contact_detector import MESH_PARAMS, load_surface
 
@@ -117,19 +118,14 @@ PROBE_LENGTH = 0.03  # drawn length of the probe cylinder [m]
 class Visualizer(Node):
     def __init__(self, name: str = 'visualizer', **kw):
         super().__init__(name, **kw)
-        p = self.params = declare_parameters(self, PARAMS)
+        p = self.own_params = declare_parameters(self, PARAMS)
+        p = self.params = apply_case(p, declare_case(self, self.switch_case))
         f = self.frame_id = p['frame_id']
-        mesh = load_surface(self, p)
         self.pub_tissue = self.create_publisher(MarkerArray, ifc.TOPIC_TISSUE, LATCHED)
         self.surface = None
-        if p['deform']:
-            self.surface = self._dent_surface(mesh, p)
-        if self.surface is None:
-            tissue = _marker(Marker.TRIANGLE_LIST, 0, f, 'tissue',
-                             (1.0, 0.8, 0.7, p['mesh_alpha']), (1.0, 1.0, 1.0))
-            tissue.points = _points(mesh.vertices[mesh.faces.reshape(-1)])
-            self.pub_tissue.publish(MarkerArray(markers=[tissue]))
+        self.n_dent_messages = 0
         self.pub = self.create_publisher(MarkerArray, ifc.TOPIC_MARKERS, 10)
+        self._publish_tissue(p)
         d = 2 * p['probe_radius']
         self.probe = _marker(Marker.CYLINDER, 0, f, 'probe', (0.2, 0.4, 1.0, 1.0),
                              (d, d, PROBE_LENGTH))
@@ -137,29 +133,19 @@ class Visualizer(Node):
                                (0.004, 0.004, 0.004))
         self.arrow = _marker(Marker.ARROW, 2, f, 'force', (0.1, 0.9, 0.1, 1.0), (0.002, 0.004, 0.004))
         self.arrow.points = [Point(), Point()]
-        self.tumours = []
-        if p['show_tumours']:
-            t = p['tumours']
-            for i in range(len(t) // 4):
-                x, y, z, r = t[4 * i:4 * i + 4]
-                m = _marker(Marker.SPHERE, 10 + i, f, 'tumours', (0.6, 0.0, 0.6, 0.8),
-                            (2 * r, 2 * r, 2 * r))
-                m.pose.position.x, m.pose.position.y, m.pose.position.z = x, y, z
-                self.tumours.append(m)
+        self.tumours = self._tumour_markers(p)
         self._pose = self._contact = self._force = None
         self.create_subscription(PoseStamped, ifc.TOPIC_POSE, self._set('_pose'), LOOP_QOS)
         self.create_subscription(JointState, ifc.TOPIC_CONTACT, self._set('_contact'), LOOP_QOS)
         self.create_subscription(WrenchStamped, ifc.TOPIC_COMMAND, self._set('_force'), LOOP_QOS)
         self.timer = self.create_timer(1.0 / p['rate'], self._draw)
         self.n_published = 0
-        self.n_dent_messages = 0
         # compute + publish time of the last dent frames [s] (bounded: a long session)
         self.dent_seconds: collections.deque = collections.deque(maxlen=10000)
         self.last_dent = None
         self._stop = threading.Event()
         self._thread = None
-        if self.surface is not None:
-            self._publish_patches(self.surface.all_patches())
+        if p['deform']:  # the dent thread (idle while the case has no displacement data)
             self._thread = threading.Thread(target=self._dent_loop, name='visualizer-dent',
                                             daemon=True)
             self._thread.start()
@@ -229,20 +215,26 @@ class Visualizer(Node):
         period = 1.0 / self.params['rate']
         last = None
         subscribers = self.pub_tissue.get_subscription_count()
+        shown = None
         while not self._stop.wait(period):
             try:
+                surface = self.surface  # swapped by a case switch
+                if surface is None:
+                    continue
+                if surface is not shown:  # a new surface: draw its first dent afresh
+                    shown, last = surface, None
                 state = self._contact_state()
                 key = None if state is None else np.concatenate([state[0], state[1],
                                                                   [state[2]]])
                 n_sub = self.pub_tissue.get_subscription_count()
                 if n_sub > subscribers:  # a late subscriber: send every patch as drawn now
-                    self._publish_patches(self.surface.all_patches())
+                    self._publish_patches(surface.all_patches())
                 subscribers = n_sub
                 if (key is None and last is None) or \
                         (key is not None and last is not None and np.array_equal(key, last)):
                     continue
                 t0 = time.perf_counter()
-                changed = self.surface.update(*(state or (None, None, 0.0)))
+                changed = surface.update(*(state or (None, None, 0.0)))
                 self._publish_patches(changed)
                 self.dent_seconds.append(time.perf_counter() - t0)
                 self.last_dent = state  # (point, direction, depth) the surface now shows
@@ -262,6 +254,48 @@ class Visualizer(Node):
         return super().destroy_node()
 
     # -- the 30 Hz markers -----------------------------------------------------------------
+
+    def _publish_tissue(self, p: dict) -> None:
+        """Publish the surface of ``p``'s mesh: as dent patches when ``deform`` and there is
+        displacement data, else as one static TRIANGLE_LIST. Raises on a bad mesh (nothing
+        changed then)."""
+        mesh = load_surface(self, p)
+        surface = self._dent_surface(mesh, p) if p['deform'] else None
+        if self.surface is not None:  # a case switch: drop the old surface's patches
+            clear = Marker(action=Marker.DELETEALL)
+            clear.header.frame_id = self.frame_id
+            clear.ns = 'tissue'
+            self.pub_tissue.publish(MarkerArray(markers=[clear]))
+        self.surface = surface  # one assignment: the dent thread sees the old or the new one
+        if surface is None:
+            tissue = _marker(Marker.TRIANGLE_LIST, 0, self.frame_id, 'tissue',
+                             (1.0, 0.8, 0.7, p['mesh_alpha']), (1.0, 1.0, 1.0))
+            tissue.points = _points(mesh.vertices[mesh.faces.reshape(-1)])
+            self.pub_tissue.publish(MarkerArray(markers=[tissue]))
+        else:
+            self._publish_patches(surface.all_patches())
+
+    def _tumour_markers(self, p: dict) -> list:
+        """Tumour spheres, only with ``show_tumours`` (hidden from the trainee otherwise)."""
+        out = []
+        if p['show_tumours']:
+            t = p['tumours']
+            for i in range(len(t) // 4):
+                x, y, z, r = t[4 * i:4 * i + 4]
+                m = _marker(Marker.SPHERE, 10 + i, self.frame_id, 'tumours', (0.6, 0.0, 0.6, 0.8),
+                            (2 * r, 2 * r, 2 * r))
+                m.pose.position.x, m.pose.position.y, m.pose.position.z = x, y, z
+                out.append(m)
+        return out
+
+    def switch_case(self, case) -> None:
+        """Show the surface (and, with ``show_tumours``, the lesions) of ``case``."""
+        params = apply_case(self.params, case, self.own_params)
+        self._publish_tissue(params)  # raises on a bad mesh: nothing changed
+        clear = Marker(action=Marker.DELETEALL)
+        clear.header.frame_id = self.frame_id
+        self.pub.publish(MarkerArray(markers=[clear]))  # drop the old case's tumour spheres
+        self.params, self.tumours = params, self._tumour_markers(params)
 
     def _set(self, attr):
         def cb(msg):

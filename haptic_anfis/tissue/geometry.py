@@ -13,18 +13,44 @@ import numpy as np
 from .scene import Scene, surface_height
 
 
+def _disc_grid(spacing: float, radius: float) -> np.ndarray:
+    """(K, 2) (y, z) points of a square grid of ``spacing`` through the origin inside the disc of
+    ``radius`` [m], ordered by y then z."""
+    half = int(np.floor(radius / spacing + 1e-9))
+    g = np.arange(-half, half + 1) * spacing
+    yy, zz = np.meshgrid(g, g, indexing='ij')
+    keep = yy ** 2 + zz ** 2 <= radius ** 2 * (1 + 1e-9)
+    return np.column_stack([yy[keep], zz[keep]])
+
+
 def loading_points(scene: Scene) -> np.ndarray:
     """Loading points on the undeformed surface: a square (y, z) grid of ``scene.spacing`` inside the
-    palpable disc, lifted onto the surface.
+    palpable disc, lifted onto the surface; then, if the scene asks for it
+    (``refine_spacing`` > 0), the points of a finer grid that lie within lesion radius +
+    ``refine_margin`` of a lesion's (y, z), each lesion's centre (y, z) and its mirror point
+    (-y, -z) (where the lesion contrast is measured), all that are not already base points.
 
     Returns:
-        (P, 3) array of surface points (x, y, z) [m], ordered by y then z (row-major grid).
+        (P, 3) array of surface points (x, y, z) [m]: the base grid first, ordered by y then z (so a
+        scene without refinement keeps its point ids), then the added points in the same order.
     """
-    half = int(np.floor(scene.palpable_radius / scene.spacing + 1e-9))
-    g = np.arange(-half, half + 1) * scene.spacing
-    yy, zz = np.meshgrid(g, g, indexing='ij')
-    keep = yy ** 2 + zz ** 2 <= scene.palpable_radius ** 2 * (1 + 1e-9)
-    y, z = yy[keep], zz[keep]
+    yz = _disc_grid(scene.spacing, scene.palpable_radius)
+    if scene.refine_spacing > 0 and scene.tumours:
+        fine = _disc_grid(scene.refine_spacing, scene.palpable_radius)
+        near = np.zeros(len(fine), dtype=bool)
+        for t in scene.tumours:
+            near |= np.hypot(fine[:, 0] - t.centre[1], fine[:, 1] - t.centre[2]) \
+                <= t.radius + scene.refine_margin + 1e-12
+        # every lesion's centre and its mirror point (-y, -z): the FE contrast the models must keep
+        marks = [(s * t.centre[1], s * t.centre[2]) for t in scene.tumours for s in (1.0, -1.0)]
+        marks = np.array([m for m in marks if np.hypot(*m) <= scene.palpable_radius + 1e-12])
+        fine = np.concatenate([fine[near], marks.reshape(-1, 2)])
+        fine = fine[np.unique(np.round(fine / 1e-9), axis=0, return_index=True)[1]]
+        fine = fine[np.lexsort((fine[:, 1], fine[:, 0]))]
+        dist = np.min(np.hypot(fine[:, None, 0] - yz[None, :, 0], fine[:, None, 1] - yz[None, :, 1]),
+                      axis=1) if len(fine) else np.zeros(0)
+        yz = np.concatenate([yz, fine[dist > 1e-9]])
+    y, z = yz[:, 0], yz[:, 1]
     return np.column_stack([surface_height(y, z, scene.radii), y, z])
 
 

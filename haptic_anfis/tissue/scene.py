@@ -56,6 +56,7 @@ class Tumour:
     radius: float
     youngs: float
     source: str = ''
+    kind: str = ''  # 'malignant' / 'benign' (a label: the FE sees only the modulus); '' = unstated
 
 
 @dataclass(frozen=True)
@@ -111,25 +112,43 @@ class Scene:
     max_step: float
     mesh: MeshSettings = field(default_factory=MeshSettings)
     source_sha256: str = ''
+    description: str = ''
+    #: loading-point refinement near lesions: extra points on a (y, z) grid of this spacing [m]
+    #: within lesion radius + ``refine_margin`` [m] of each lesion's (y, z); 0 = none
+    refine_spacing: float = 0.0
+    refine_margin: float = 0.0
 
     def to_dict(self) -> dict[str, Any]:
         """Plain-dict form in SI units (for provenance sidecars)."""
         return asdict(self)
 
     def sha256(self) -> str:
-        """Hash of the validated SI content (stable across YAML formatting)."""
+        """Hash of the validated SI content (stable across YAML formatting).
+
+        Labels that do not change the FE data (description, lesion kinds) are left out, and so
+        are fields added after the shipped default data while they hold their defaults: the
+        default scene's hash, recorded in its dataset, stays what it was.
+        """
         d = self.to_dict()
-        d.pop('source_sha256')
+        for key in ('source_sha256', 'description'):
+            d.pop(key)
+        for t in d['tumours']:
+            t.pop('kind')
+        for key in ('refine_spacing', 'refine_margin'):
+            if not d[key]:
+                d.pop(key)
         return hashlib.sha256(json.dumps(d, sort_keys=True).encode()).hexdigest()
 
 
 _KEYS: dict[str, set[str]] = {
-    '': {'name', 'breast', 'material', 'tumours', 'probe', 'loading', 'mesh'},
+    '': {'name', 'description', 'breast', 'material', 'tumours', 'probe', 'loading', 'mesh'},
     'breast': {'radii_mm'},
     'material': {'model', 'youngs_kPa', 'poisson', 'source'},
-    'tumour': {'name', 'centre_mm', 'radius_mm', 'youngs_kPa', 'source'},
+    'tumour': {'name', 'kind', 'centre_mm', 'position_mm', 'depth_mm', 'radius_mm', 'youngs_kPa',
+               'source'},
     'probe': {'diameter_mm', 'direction'},
-    'loading': {'spacing_mm', 'palpable_radius_mm', 'depths_mm', 'max_step_mm'},
+    'loading': {'spacing_mm', 'palpable_radius_mm', 'depths_mm', 'max_step_mm',
+                'refine_spacing_mm', 'refine_margin_mm'},
     'mesh': {'probe_cells', 'coarse_probe_cells', 'edge_refine', 'rim', 'edge_offset'},
 }
 
@@ -247,28 +266,79 @@ def parse_scene(data: Any, name: str = 'scene', source_sha256: str = '') -> Scen
                          f'80 % of the tissue thickness at the palpable edge '
                          f'({thinnest / MM:.1f} mm at {palp / MM:g} mm from the centre)')
 
-    tumours = []
-    for i, t in enumerate(top.get('tumours', []) or []):
-        where = f'tumours[{i}]'
+    tumours = _parse_lesions(top.get('tumours', []) or [], radii, str(top.get('name', name)))
+    refine_spacing = _num(load, 'refine_spacing_mm', 'loading', positive=False, default=0.0) * MM
+    refine_margin = _num(load, 'refine_margin_mm', 'loading', positive=False, default=0.0) * MM
+    if refine_spacing < 0 or refine_margin < 0 or (refine_spacing > 0) != (refine_margin > 0):
+        raise SceneError(f'loading.refine_spacing_mm / refine_margin_mm: both > 0 (extra loading '
+                         f'points near lesions) or both 0, got {refine_spacing / MM:g} / '
+                         f'{refine_margin / MM:g}')
+    if refine_spacing >= spacing:
+        raise SceneError(f'loading.refine_spacing_mm: {refine_spacing / MM:g} mm must be finer '
+                         f'than spacing_mm ({spacing / MM:g} mm)')
+    description = top.get('description', '')
+    if not isinstance(description, str) or '\n' in description.strip():
+        raise SceneError(f'{name}.description: expected one line of text, got {description!r}')
+    return Scene(name=str(top.get('name', name)), radii=radii, material=material,
+                 tumours=tuple(tumours), probe_radius=a, direction=direction, spacing=spacing,
+                 palpable_radius=palp, depths=depths, max_step=max_step, mesh=mesh,
+                 source_sha256=source_sha256, description=description.strip(),
+                 refine_spacing=refine_spacing, refine_margin=refine_margin)
+
+
+#: Lesion limits of the scene format (issue 14): at most 3 lesions of radius 5-15 mm. Below 5 mm a
+#: lesion spans only a few FE cells (~2-3 mm under the probe) and a 16 mm probe barely feels it.
+MAX_LESIONS = 3
+LESION_RADIUS_MM = (5.0, 15.0)
+LESION_KINDS = ('malignant', 'benign')
+
+
+def _parse_lesions(items: Any, radii: tuple[float, float, float], scene: str) -> tuple[Tumour, ...]:
+    """The ``tumours`` list: each lesion by ``centre_mm`` (x, y, z), or by ``position_mm`` (y, z)
+    over the chest wall plus ``depth_mm`` of its centre under the skin (along -x)."""
+    if not isinstance(items, list):
+        raise SceneError(f'{scene}: tumours: expected a list of lesions, got {type(items).__name__}')
+    if len(items) > MAX_LESIONS:
+        raise SceneError(f'{scene}: tumours: at most {MAX_LESIONS} lesions, got {len(items)}')
+    out: list[Tumour] = []
+    for i, t in enumerate(items):
+        where = f'{scene}: tumours[{i}]'
         t = _check_keys(t, 'tumour', where)
-        c = tuple(v * MM for v in _vec(t, 'centre_mm', where, 3))
+        if ('centre_mm' in t) == ('position_mm' in t or 'depth_mm' in t):
+            raise SceneError(f'{where}: give either centre_mm [x, y, z] or position_mm [y, z] with '
+                             'depth_mm (centre depth under the skin)')
+        if 'centre_mm' in t:
+            c = tuple(v * MM for v in _vec(t, 'centre_mm', where, 3))
+            given = f'centre {t["centre_mm"]} mm'
+        else:
+            y, z = (v * MM for v in _vec(t, 'position_mm', where, 2))
+            depth = _num(t, 'depth_mm', where) * MM
+            c = (float(surface_height(np.array(y), np.array(z), radii)) - depth, y, z)
+            given = f'position {t["position_mm"]} mm, depth {t["depth_mm"]} mm'
         r = _num(t, 'radius_mm', where) * MM
+        lo, hi = LESION_RADIUS_MM
+        if not lo <= r / MM <= hi:
+            raise SceneError(f'{where}.radius_mm: expected {lo:g} to {hi:g} mm, got {r / MM:g}')
         e = _num(t, 'youngs_kPa', where) * KPA
+        kind = t.get('kind', '')
+        if kind not in ('', *LESION_KINDS):
+            raise SceneError(f'{where}.kind: expected one of {LESION_KINDS}, got {kind!r}')
         # Sufficient test: the centre lies in the ellipsoid shrunk by r (which the inner
         # parallel body contains) and the sphere stays above the chest wall.
         shrunk = np.array(radii) - r
         inside = (np.all(shrunk > 0) and c[0] - r >= 0
                   and sum((ci / si) ** 2 for ci, si in zip(c, shrunk)) <= 1.0)
         if not inside:
-            raise SceneError(f'{where}: tumour (centre {t["centre_mm"]} mm, radius {t["radius_mm"]} '
-                             'mm) is not inside the tissue (it must clear the skin surface and the '
-                             'chest wall x = 0)')
-        tumours.append(Tumour(name=str(t.get('name', f'tumour{i}')), centre=c, radius=r,
-                              youngs=e, source=str(t.get('source', ''))))
-    return Scene(name=str(top.get('name', name)), radii=radii, material=material,
-                 tumours=tuple(tumours), probe_radius=a, direction=direction, spacing=spacing,
-                 palpable_radius=palp, depths=depths, max_step=max_step, mesh=mesh,
-                 source_sha256=source_sha256)
+            raise SceneError(f'{where}: tumour ({given}, radius {t["radius_mm"]} mm) is not inside '
+                             'the tissue (it must clear the skin surface and the chest wall x = 0)')
+        for j, other in enumerate(out):
+            gap = float(np.linalg.norm(np.subtract(c, other.centre))) - r - other.radius
+            if gap < 0:
+                raise SceneError(f'{where}: overlaps tumours[{j}] ({other.name}) by '
+                                 f'{-gap / MM:.1f} mm; lesions must be separate')
+        out.append(Tumour(name=str(t.get('name', f'tumour{i}')), centre=c, radius=r, youngs=e,
+                          source=str(t.get('source', '')), kind=kind))
+    return tuple(out)
 
 
 def load_scene(path: str | os.PathLike = DEFAULT_SCENE) -> Scene:

@@ -1,0 +1,12 @@
+"""The palpation case library (no ROS imports).
+
+- :mod:`.library`: what a case is (scene + dataset + mesh + model), lookup with clear errors,
+  random draw by seed, :func:`resolve_case` for the nodes' ``case`` parameters.
+- :mod:`.generate`: FE sweep -> dataset, surface mesh, trained model (resumable, any executor).
+- :mod:`.summary`: the listing's figures, including each lesion's FE-vs-model contrast.
+"""
+from .library import (DEFAULT_CASE, Case, CaseError, CaseLibrary, get_case, library, random_case,
+                      resolve_case)
+
+__all__ = ['DEFAULT_CASE', 'Case', 'CaseError', 'CaseLibrary', 'get_case', 'library',
+           'random_case', 'resolve_case']

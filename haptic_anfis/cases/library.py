@@ -1,0 +1,205 @@
+"""The case library: which cases exist, where their files are, lookup and random draw.
+
+A case is a scene file ``<scenes>/<name>.yaml`` (:mod:`haptic_anfis.tissue.scene`, with a one-line
+``description``) plus, under ``<data>/cases/<name>/``, its FE force dataset ``forces.csv`` (+ the
+JSON sidecar ``forces.json``) and its trained model ``model.json``, and the contact surface mesh of
+its breast size, ``<data>/cases/surface_<Rx>x<Ry>x<Rz>mm.stl`` (STL, in **millimetres**, the unit
+the contact detector's ``mesh_unit`` default expects; cases of one size share it).
+
+The case ``default`` is the default scene (``config/scenes/default.yaml``) with the package's
+default files (``default_forces.csv``, ``default_model.json``, ``default_surface.stl``), so choosing
+no case changes nothing. Pure Python, no ROS.
+"""
+from __future__ import annotations
+
+import os
+import random
+import re
+from dataclasses import dataclass
+from functools import cached_property
+from pathlib import Path
+
+from ..dataset import DATA_DIR
+from ..tissue.scene import SCENE_DIR, Scene, SceneError, load_scene
+
+DEFAULT_CASE = 'default'
+#: radii of the default scene's breast [mm]: its surface is the package's default_surface.stl
+_DEFAULT_RADII_MM = (45, 70, 70)
+_NAME = re.compile(r'^[a-z0-9][a-z0-9_-]{0,63}$')
+
+
+class CaseError(ValueError):
+    """A case name is unknown, or a case lacks a file it needs; the message names the case and
+    the field (scene, dataset_path, model_path, mesh_path)."""
+
+
+@dataclass(frozen=True)
+class Case:
+    """One case's files (absolute paths). ``scene`` loads and validates the scene file."""
+
+    name: str
+    scene_path: Path
+    dataset_path: Path
+    model_path: Path
+    mesh_path: Path
+    work_dir: Path
+
+    @cached_property
+    def scene(self) -> Scene:
+        try:
+            return load_scene(self.scene_path)
+        except SceneError as exc:
+            raise CaseError(f'case {self.name!r}: scene {str(self.scene_path)!r}: {exc}') from None
+
+    @property
+    def description(self) -> str:
+        return self.scene.description
+
+    def missing(self, fields: tuple[str, ...] = ('dataset_path', 'model_path', 'mesh_path')
+                ) -> list[str]:
+        """The fields among ``fields`` whose file does not exist."""
+        return [f for f in fields if not getattr(self, f).is_file()]
+
+    def require(self, fields: tuple[str, ...] = ('model_path', 'mesh_path')) -> 'Case':
+        """Self if the files of ``fields`` exist (and the scene is valid); else a CaseError."""
+        _ = self.scene
+        gone = self.missing(fields)
+        if gone:
+            what = ', '.join(f'{f} {str(getattr(self, f))!r}' for f in gone)
+            raise CaseError(f'case {self.name!r}: missing {what}; make it with '
+                            f'`haptic-anfis cases generate {self.name}`')
+        return self
+
+    def lesions_m(self) -> list[tuple[float, float, float, float]]:
+        """(x, y, z, radius) [m] of every lesion, tissue frame."""
+        return [(*t.centre, t.radius) for t in self.scene.tumours]
+
+
+def surface_file_name(radii_m: tuple[float, float, float]) -> str:
+    """'surface_45x70x70mm.stl' for radii (0.045, 0.07, 0.07) m."""
+    mm = [round(r * 1e3, 3) for r in radii_m]
+    return 'surface_' + 'x'.join(f'{v:g}' for v in mm) + 'mm.stl'
+
+
+class CaseLibrary:
+    """Cases found in ``scene_dir`` (one YAML file each) with files under ``data_dir``.
+
+    Args:
+        scene_dir: directory of scene files (default: the package's ``config/scenes``).
+        data_dir: the package data directory (default ``haptic_anfis/data``); case files live in
+            its ``cases/`` sub-directory, the default case's files in it directly.
+        work_root: per-case FE work directories for resuming sweeps (default ``.fe_work/cases``
+            in the current directory).
+    """
+
+    def __init__(self, scene_dir: str | os.PathLike = SCENE_DIR,
+                 data_dir: str | os.PathLike = DATA_DIR,
+                 work_root: str | os.PathLike | None = None) -> None:
+        self.scene_dir = Path(scene_dir).resolve()
+        self.data_dir = Path(data_dir).resolve()
+        self.case_dir = self.data_dir / 'cases'
+        self.work_root = Path(work_root if work_root is not None
+                              else Path('.fe_work') / 'cases').resolve()
+
+    def names(self) -> list[str]:
+        """Every case name (scene file stems), sorted, ``default`` first."""
+        names = sorted(p.stem for p in self.scene_dir.glob('*.yaml') if _NAME.match(p.stem))
+        return sorted(names, key=lambda n: n != DEFAULT_CASE)
+
+    def get(self, name: str) -> Case:
+        """The case called ``name`` (its files need not exist yet: see :meth:`Case.require`)."""
+        if not isinstance(name, str) or not _NAME.match(name):
+            raise CaseError(f'case name {name!r}: expected lower-case letters, digits, _ or -')
+        scene_path = self.scene_dir / f'{name}.yaml'
+        if not scene_path.is_file():
+            raise CaseError(f'unknown case {name!r} (no scene file {str(scene_path)!r}); known '
+                            f'cases: {", ".join(self.names()) or "none"}')
+        work = self.work_root / name
+        if name == DEFAULT_CASE:
+            return Case(name, scene_path, self.data_dir / 'default_forces.csv',
+                        self.data_dir / 'default_model.json',
+                        self.data_dir / 'default_surface.stl', work)
+        d = self.case_dir / name
+        case = Case(name, scene_path, d / 'forces.csv', d / 'model.json', d / 'surface.stl', work)
+        radii = case.scene.radii
+        if tuple(round(r * 1e3, 6) for r in radii) == _DEFAULT_RADII_MM:
+            mesh = self.data_dir / 'default_surface.stl'
+        else:
+            mesh = self.case_dir / surface_file_name(radii)
+        return Case(name, scene_path, case.dataset_path, case.model_path, mesh, work)
+
+    def cases(self) -> list[Case]:
+        return [self.get(n) for n in self.names()]
+
+    def ready(self) -> list[Case]:
+        """Cases whose model and mesh exist (what a session can run)."""
+        return [c for c in self.cases() if not c.missing(('model_path', 'mesh_path'))]
+
+    def random(self, seed: int, include_default: bool = True) -> Case:
+        """A ready case drawn by ``seed`` (the same seed draws the same case from the same library).
+
+        Raises:
+            CaseError: no case is ready.
+        """
+        pool = [c for c in self.ready() if include_default or c.name != DEFAULT_CASE]
+        if not pool:
+            raise CaseError('no case has a model and a mesh yet; run `haptic-anfis cases generate`')
+        return pool[random.Random(int(seed)).randrange(len(pool))]
+
+
+def library() -> CaseLibrary:
+    """The package's shipped library."""
+    return CaseLibrary()
+
+
+def get_case(name: str) -> Case:
+    """The shipped case ``name``, with its model and mesh present (else CaseError)."""
+    return library().get(name).require()
+
+
+def random_case(seed: int) -> Case:
+    """A shipped, ready case drawn by ``seed``."""
+    return library().random(seed)
+
+
+def resolve_case(case: str = '', random_seed: int = -1) -> Case | None:
+    """What a node's ``case`` / ``random_case_seed`` parameters select: a ready case, or None for
+    '' with seed < 0 (the node's own path parameters then apply).
+
+    Raises:
+        CaseError: unknown case, missing files, or both a name and a seed given.
+    """
+    if case and random_seed >= 0:
+        raise CaseError(f'give a case name ({case!r}) or a random-case seed ({random_seed}), '
+                        'not both')
+    if random_seed >= 0:
+        return random_case(random_seed)
+    return get_case(case) if case else None
+
+
+def add_case_arguments(parser) -> None:
+    """``--case NAME`` / ``--random-case --seed N`` for the commands that run the graph."""
+    g = parser.add_argument_group('case (haptic-anfis cases list)')
+    g.add_argument('--case', default='', metavar='NAME',
+                   help='run this case of the library (default: the default scene)')
+    g.add_argument('--random-case', action='store_true',
+                   help='draw a case with --seed; its name is not shown (for a blind session)')
+    g.add_argument('--seed', type=int, default=None, help='seed of --random-case')
+
+
+def case_node_arguments(args) -> list[str]:
+    """ROS arguments (``-p name:=value``) for the nodes from ``--case`` / ``--random-case``,
+    checked first (unknown case, missing files, --seed without --random-case: CaseError)."""
+    if args.random_case:
+        if args.case:
+            raise CaseError('give --case NAME or --random-case --seed N, not both')
+        if args.seed is None or args.seed < 0:
+            raise CaseError(f'--random-case needs --seed N with N >= 0, got {args.seed}')
+        random_case(args.seed)  # a ready case exists
+        return ['-p', f'random_case_seed:={int(args.seed)}']
+    if args.seed is not None:
+        raise CaseError('--seed is for --random-case')
+    if args.case:
+        get_case(args.case)
+        return ['-p', f'case:={args.case}']
+    return []

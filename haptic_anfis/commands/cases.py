@@ -1,0 +1,132 @@
+"""``haptic-anfis cases``: the palpation case library.
+
+    haptic-anfis cases list [--json] [--no-timing]
+    haptic-anfis cases generate [NAMES...] [--workers N] [--coarse] [--dask local|ADDRESS]
+                                [--no-train | --train-only] [--config config/force_model.yaml]
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+NAME = 'cases'
+HELP = 'list the palpation case library, or generate cases (FE sweep, mesh, model)'
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    sub = p.add_subparsers(dest='action', metavar='ACTION')
+    ls = sub.add_parser('list', help='one row per case: lesions, size, data, model, errors, speed')
+    ls.add_argument('--json', action='store_true', help='a JSON list of objects instead')
+    ls.add_argument('--markdown', action='store_true',
+                    help="the README's table (rules and lesion contrast per case) instead")
+    ls.add_argument('--no-timing', action='store_true', help='skip the evaluation-time measurement')
+    gen = sub.add_parser('generate', help='FE sweep (resumable, parallel) then train, per case')
+    gen.add_argument('names', nargs='*', help='cases to generate (default: every case but '
+                     '"default", whose files come with the package)')
+    gen.add_argument('--workers', type=int, default=2,
+                     help='FE worker processes, one math thread each (default 2)')
+    gen.add_argument('--coarse', action='store_true',
+                     help="the scenes' coarse mesh density (4 cells across the probe)")
+    gen.add_argument('--dask', metavar='local|ADDRESS', default=None,
+                     help="run the FE points on a dask.distributed cluster: 'local' starts a "
+                          'LocalCluster of --workers single-threaded processes; else the '
+                          "scheduler's address (needs `pip install distributed`)")
+    mode = gen.add_mutually_exclusive_group()
+    mode.add_argument('--no-train', action='store_true', help='FE sweep and mesh only')
+    mode.add_argument('--train-only', action='store_true',
+                      help='train on the existing datasets (no FE)')
+    gen.add_argument('--config', default=None,
+                     help='force-model hyper-parameters (default config/case_model.yaml)')
+    gen.add_argument('--work-root', type=Path, default=None,
+                     help='per-case FE work directories for resuming (default .fe_work/cases)')
+    gen.add_argument('--quiet', action='store_true', help='no progress line')
+
+
+def run(args: argparse.Namespace) -> int:
+    if args.action == 'list':
+        return _list(args)
+    if args.action == 'generate':
+        return _generate(args)
+    print('haptic-anfis cases: give an action: list or generate', file=sys.stderr)
+    return 2
+
+
+def _list(args: argparse.Namespace) -> int:
+    from ..cases import library
+    from ..cases.summary import case_summary, format_markdown, format_table
+
+    rows = [case_summary(c, timing=not args.no_timing) for c in library().cases()]
+    if args.json:
+        print(json.dumps(rows, indent=1))
+    elif args.markdown:
+        print(format_markdown(rows))
+    else:
+        print(format_table(rows))
+    return 0
+
+
+def _executor(args: argparse.Namespace):
+    """(executor or None, closer) for --dask."""
+    if not args.dask:
+        return None, lambda: None
+    try:
+        from distributed import Client, LocalCluster
+    except ImportError:
+        raise ValueError('--dask: the dask.distributed package is not installed '
+                         '(pip install distributed)') from None
+    if args.dask == 'local':
+        from ..tissue.sweep import limit_threads
+
+        limit_threads()  # the workers inherit one math thread each
+        cluster = LocalCluster(n_workers=args.workers, threads_per_worker=1, processes=True,
+                               dashboard_address=None)
+        client = Client(cluster)
+
+        def close():
+            client.close()
+            cluster.close()
+    else:
+        client = Client(args.dask)
+        close = client.close
+    return client.get_executor(), close
+
+
+def _generate(args: argparse.Namespace) -> int:
+    from ..cases import CaseLibrary
+    from ..cases.generate import generate_case
+    from .train import load_config
+
+    if args.workers < 1:
+        raise ValueError(f'--workers must be >= 1, got {args.workers}')
+    lib = CaseLibrary(work_root=args.work_root)
+    names = args.names or [n for n in lib.names() if n != 'default']
+    cases = [lib.get(n) for n in names]  # unknown names fail before any work
+    for c in cases:
+        _ = c.scene  # and invalid scenes
+    config = args.config
+    if config is None:  # config/case_model.yaml beside the scene files (source tree or share)
+        from ..tissue.scene import SCENE_DIR
+        config = str(SCENE_DIR.parent / 'case_model.yaml')
+    params = load_config(config) if not args.no_train else {}
+    executor, close = _executor(args) if not args.train_only else (None, lambda: None)
+    t_all = time.time()
+    try:
+        for k, case in enumerate(cases, 1):
+            print(f'[case {k}/{len(cases)}] {case.name}: {case.description}', flush=True)
+            res = generate_case(case, coarse=args.coarse, workers=args.workers, executor=executor,
+                                sweep=not args.train_only, train=not args.no_train,
+                                train_params=params, progress=not args.quiet,
+                                cases=lib.cases())
+            if res.failed:
+                print(f'  warning: the FE load path failed at loading points {res.failed}; their '
+                      'deepest depths are missing from the dataset', flush=True)
+            print(f'  {res.samples or "-"} samples, FE {res.fe_elapsed_s:.0f} s elapsed '
+                  f'({res.fe_solver_s:.0f} s solver time), training {res.train_s:.1f} s; wrote '
+                  f'{", ".join(res.written) or "nothing"}', flush=True)
+    finally:
+        close()
+    print(f'{len(cases)} case(s) in {time.time() - t_all:.0f} s', flush=True)
+    return 0
