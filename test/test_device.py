@@ -243,3 +243,26 @@ def test_servo_loop_thread_runs_and_stops_at_zero_force():
     assert len(calls) > 20 and loop.stats.ticks == len(calls)
     assert loop.stats.max_force == pytest.approx(2.0)
     assert dev._force == (0.0, 0.0, 0.0) and safety.output(time.monotonic()) == (0.0, 0.0, 0.0)
+
+
+def test_servo_loop_survives_a_failing_device_read_at_zero_force():
+    class Flaky(SimulatedFalcon):
+        n = 0
+
+        def read(self, now):
+            Flaky.n += 1
+            if Flaky.n == 10:
+                raise OSError('USB read failed')
+            return super().read(now)
+
+    dev = Flaky(one_press(loop=True), WorkspaceMapping())
+    safety = SafetyLayer()
+    loop = ServoLoop(dev, safety, rate=500.0,
+                     on_state=lambda state, force, now: safety.command((2.0, 0.0, 0.0), now,
+                                                                       'tissue'))
+    loop.start()
+    time.sleep(0.3)
+    assert loop.running and loop.errors == 1 and isinstance(loop.last_error, OSError)
+    assert Flaky.n > 20  # the thread went on after the failure
+    loop.stop()
+    assert dev._force == (0.0, 0.0, 0.0)

@@ -42,6 +42,22 @@ def test_held_script_waits_at_the_start_then_runs_from_its_own_zero():
     assert free.target(2.0) == s.target(2.0)
 
 
+def test_held_script_passes_the_scripts_buttons_through(tmp_path):
+    # the simulated Falcon reads the hand's grip buttons from the (held) script every tick
+    p = tmp_path / 'mark.yaml'
+    p.write_text('surface:\n  radii: [0.045, 0.070, 0.070]\nloop: false\npattern:\n'
+                 '  - mark: {points: [[0.0, 0.0]], depth: 0.008, hold: 1.0}\n')
+    s = PalpationScript.from_yaml(p)
+    ts = [0.01 * i for i in range(int(s.duration * 100))]
+    pressed = [t for t in ts if s.buttons(t)[1]]
+    assert pressed, 'the mark move presses button 1'
+    h = HeldScript(s)
+    assert h.buttons(pressed[0]) == (0, 0)  # held: the hand waits, nothing pressed
+    h.release()
+    h.target(10.0)  # the script's clock starts here
+    assert h.buttons(10.0 + pressed[0]) == s.buttons(pressed[0]) == (0, 1)
+
+
 def test_recorder_restart_writes_a_new_bag_directory():
     assert renamed_output(['-p', 'output:=/x/bag', '-p', 'a:=1'], 2) == \
         ['-p', 'output:=/x/bag.restart2', '-p', 'a:=1']

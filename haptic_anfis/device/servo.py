@@ -99,7 +99,17 @@ class ServoLoop:
             if now - deadline > period:
                 self.stats.deadline_misses += 1
                 deadline = now  # re-synchronise
-            self.tick(now)
+            try:
+                self.tick(now)
+            except Exception as exc:  # a device read/write failure: zero force, keep the period
+                self.errors += 1
+                self.last_error = exc
+                self.safety.stop()
+                self.safety.start(now)  # starts at zero; the watchdog needs a new command
+                try:
+                    self.device.write((0.0, 0.0, 0.0))
+                except Exception:
+                    pass
             deadline += period
             delay = deadline - clock()
             if delay > 0:

@@ -44,3 +44,10 @@ class HeldScript:
 
     def is_pressing(self, t: float) -> bool:
         return self.script.is_pressing(self._local(t))
+
+    def buttons(self, t: float) -> tuple[int, int]:
+        """The script's grip buttons (0/1, 0/1) at its own time (both up while held)."""
+        if self.held and not self._released:
+            return 0, 0
+        f = getattr(self.script, 'buttons', None)
+        return f(self._local(t)) if f is not None else (0, 0)
