@@ -54,7 +54,7 @@ def test_pairs_in_contact_samples_exactly(synthetic, tmp_path):
 def test_train_command_accepts_a_session_bag(synthetic, tmp_path, capsys):
     bag = _session_bag(tmp_path / 'bag', synthetic)
     out = tmp_path / 'model.json'
-    assert cli(['train', str(bag), '--out', str(out), '--structure', '2-2-2-2', '--epochs', '5']) == 0
+    assert cli(['train', str(bag), '--out', str(out), '--structure', '2-2-2', '--epochs', '5']) == 0
     assert 'recorded session' in capsys.readouterr().out
     doc = json.loads(out.read_text())
     assert doc['dataset']['kind'].startswith('recorded session')

@@ -26,7 +26,7 @@ TINY = {
                 'refine_margin_mm': 1, 'depths_mm': [2, 5, 8], 'max_step_mm': 3},
     'mesh': {'probe_cells': 4, 'coarse_probe_cells': 2, 'edge_offset': 0.2, 'edge_refine': 0},
 }
-PARAMS = {'structure': (2, 2, 2, 2), 'epochs': 10, 'search_folds': 1, 'seed': 0}
+PARAMS = {'structure': (2, 2, 2), 'epochs': 10, 'search_folds': 1, 'seed': 0}
 
 
 def _library(tmp_path, scenes: dict) -> CaseLibrary:
@@ -144,7 +144,7 @@ def test_generate_train_load_predict(tiny):
     F = model.predict_compiled(ds.X)
     assert np.all(np.isfinite(F)) and np.corrcoef(F[:, 0], ds.Y[:, 0])[0, 1] > 0.95
     row = case_summary(case, timing=False)
-    assert row['dataset_rows'] == len(ds) and row['rules'] == 3 * 16
+    assert row['dataset_rows'] == len(ds) and row['rules'] == 3 * 8  # 2-2-2 over (y, z, depth)
     assert len(row['rmse_n']) == 3 and len(row['rmse_pct_range']) == 3
     assert row['lesions'][0]['kind'] == 'malignant'
     assert row['lesions'][0]['depth_mm'] == pytest.approx(14.0)

@@ -14,12 +14,12 @@ def dataset_csv(synthetic, tmp_path):
 
 def test_train_then_evaluate(dataset_csv, tmp_path, capsys):
     out = tmp_path / 'model.json'
-    rc = main(['train', dataset_csv, '--out', str(out), '--structure', '2-2-2-2', '--epochs', '5'])
+    rc = main(['train', dataset_csv, '--out', str(out), '--structure', '2-2-2', '--epochs', '5'])
     assert rc == 0
     text = capsys.readouterr().out
     assert 'Fx' in text and 'test N' in text and 'wrote' in text
     doc = json.loads(out.read_text())
-    assert [o['structure'] for o in doc['outputs']] == [[2, 2, 2, 2]] * 3
+    assert [o['structure'] for o in doc['outputs']] == [[2, 2, 2]] * 3
     assert main(['evaluate', str(out), dataset_csv]) == 0
     text = capsys.readouterr().out
     assert 'RMSE N' in text and 'the dataset the model was trained on' in text
@@ -27,7 +27,7 @@ def test_train_then_evaluate(dataset_csv, tmp_path, capsys):
 
 def test_train_prints_every_candidate_of_the_search(dataset_csv, tmp_path, capsys):
     cfg = tmp_path / 'cfg.yaml'
-    cfg.write_text('force_model:\n  search_epochs: 3\n  epochs: 5\n  max_mfs: [3, 2, 2, 2]\n')
+    cfg.write_text('force_model:\n  search_epochs: 3\n  epochs: 5\n  max_mfs: [3, 2, 2]\n')
     assert main(['train', dataset_csv, '--out', str(tmp_path / 'm.json'), '--config', str(cfg)]) == 0
     text = capsys.readouterr().out
     assert text.count('structure search (2 candidates)') == 3
@@ -46,7 +46,9 @@ def test_shipped_config_is_valid():
 
     from haptic_anfis.commands.train import load_config
     params = load_config(str(Path(__file__).resolve().parents[1] / 'config' / 'force_model.yaml'))
-    assert params['extrapolation'] == (0.0, 0.0, 0.0, 0.25)
+    # the default the force server loads: depth-scaled over (y, z, depth), y/z band 15 %
+    assert params['form'] == 'depth_scaled' and tuple(params['inputs']) == ('y', 'z', 'depth')
+    assert params['extrapolation'] == (0.0, 0.15, 0.15, 0.0)
 
 
 def test_bad_inputs_give_one_line_errors(tmp_path, capsys):
@@ -57,7 +59,7 @@ def test_bad_inputs_give_one_line_errors(tmp_path, capsys):
     assert main(['evaluate', str(bad), str(tmp_path / 'x.csv')]) == 1
     assert 'not a haptic_anfis force-model file' in capsys.readouterr().err
     with pytest.raises(SystemExit):
-        main(['train', 'x.csv', '--out', 'm.json', '--structure', '3-3'])
+        main(['train', 'x.csv', '--out', 'm.json', '--structure', '3-3-3-3-3'])
 
 
 def test_no_command_prints_help(capsys):

@@ -165,7 +165,7 @@ def test_trainer_trains_writes_and_reloads(tmp_path):
     try:
         fs = ForceServer(context=ctx, parameter_overrides=[Parameter('model_path', value=str(model))])
         tr = Trainer(context=ctx, parameter_overrides=[
-            Parameter('model_path', value=str(model)), Parameter('structure', value='2-2-2-2'),
+            Parameter('model_path', value=str(model)), Parameter('structure', value='2-2-2'),
             Parameter('epochs', value=2)])
         progress = []
         tr.create_subscription(__import__('std_msgs.msg', fromlist=['String']).String,
@@ -183,7 +183,7 @@ def test_trainer_trains_writes_and_reloads(tmp_path):
             ex.spin_once(timeout_sec=0.05)
         assert tr.results and tr.results[-1][0], tr.results
         assert fs.reloads == 1 and model.stat().st_mtime_ns != before
-        assert fs.model.structures_ == [(2, 2, 2, 2)] * 3
+        assert fs.model.structures_ == [(2, 2, 2)] * 3
         end = time.monotonic() + 2
         while time.monotonic() < end:
             ex.spin_once(timeout_sec=0.05)

@@ -12,13 +12,16 @@ HELP = 'train the Fx/Fy/Fz ANFIS models on a force dataset (structure search, hy
 
 
 def parse_structure(text: str) -> tuple[int, ...]:
-    """'3-3-3-2' -> (3, 3, 3, 2)."""
+    """'5-5-2' -> (5, 5, 2): one MF count per ANFIS input (the model checks the count against its
+    inputs: 3 for the default depth-scaled form over (y, z, depth), 4 over (x, y, z, depth))."""
     try:
         st = tuple(int(v) for v in text.replace(',', '-').split('-'))
     except ValueError:
-        raise argparse.ArgumentTypeError(f'structure {text!r}: expected MF counts like 3-3-3-2') from None
-    if len(st) != 4 or min(st) < 1:
-        raise argparse.ArgumentTypeError(f'structure {text!r}: expected 4 MF counts >= 1, like 3-3-3-2')
+        raise argparse.ArgumentTypeError(f'structure {text!r}: expected MF counts like 5-5-2') from None
+    if not 1 <= len(st) <= 4 or min(st) < 1:
+        raise argparse.ArgumentTypeError(f'structure {text!r}: expected one MF count >= 1 per ANFIS '
+                                         'input (3 for the default (y, z, depth) inputs, 4 for '
+                                         'x, y, z, depth), like 5-5-2')
     return st
 
 
@@ -30,7 +33,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help='YAML with a "force_model" section of hyper-parameters '
                         '(see config/force_model.yaml); command-line flags override it')
     p.add_argument('--structure', type=parse_structure, default=None,
-                   help='fixed MF counts for all outputs, e.g. 3-3-3-2 (default: search per output)')
+                   help='fixed MF counts for all outputs, one per ANFIS input, e.g. 5-5-2 for the default '
+                        '(y, z, depth) inputs (default: search per output)')
     p.add_argument('--epochs', type=int, default=None, help='maximum epochs (default 60)')
     p.add_argument('--test-fraction', type=float, default=None,
                    help='held-out test part (default 0.2)')

@@ -290,11 +290,12 @@ class FalconDriver(Node):
         """Latency of every command (zoh) / model (local_model) answering a known pose, taken or
         refused as stale (so the figures are not cut at the age limit); the measurement window
         opens at the first one taken."""
+        script = getattr(self.device, 'script', None)
+        if isinstance(script, HeldScript) and script.held and (why == OK or why.endswith(STALE)):
+            script.release()  # a force source answers our poses (late or not): start the palpation
         if why == OK and self.first_command is None:
             now = time.monotonic()
             self.first_command = now
-            if isinstance(getattr(self.device, 'script', None), HeldScript):
-                self.device.script.release()  # a force source is up: start the palpation
             # the trace and the model statistics measure the loop from the first command on
             self.input.reset_stats()
             if self.servo.trace is not None:

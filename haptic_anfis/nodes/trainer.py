@@ -31,7 +31,8 @@ def _structure_check(v: str):
         st = tuple(int(c) for c in v.split('-'))
     except ValueError:
         st = ()
-    return None if len(st) == 4 and min(st) >= 1 else "expected '' or 4 MF counts like '3-3-3-2'"
+    return None if 1 <= len(st) <= 4 and min(st) >= 1 else (
+        "expected '' or one MF count per ANFIS input, like '5-5-2' (y, z, depth)")
 
 
 PARAMS = [
@@ -39,7 +40,8 @@ PARAMS = [
           "its in-contact contact/force-command pairs) ('' = the shipped default dataset)"),
     Param('model_path', 'haptic_anfis_model.json', 'model file to write (atomically)',
           lambda v: None if v else 'expected a file path'),
-    Param('structure', '', "MF counts for all outputs, e.g. '3-3-3-2' ('' = structure search)",
+    Param('structure', '', "MF counts for all outputs, one per ANFIS input, e.g. '5-5-2' for the "
+          "default (y, z, depth) inputs ('' = structure search)",
           _structure_check),
     Param('epochs', 60, 'maximum training epochs', lambda v: None if v >= 1 else 'expected >= 1'),
     Param('test_fraction', 0.2, 'held-out test part of the surface points',
