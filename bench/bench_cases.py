@@ -19,7 +19,7 @@ from haptic_anfis.anfis import ForceModel  # noqa: E402
 from haptic_anfis.cases import library  # noqa: E402
 from haptic_anfis.cases.summary import eval_p50_us  # noqa: E402
 from haptic_anfis.commands.train import load_config  # noqa: E402
-from haptic_anfis.dataset import load_dataset  # noqa: E402
+from haptic_anfis.tissue.dataset import load_dataset  # noqa: E402
 from haptic_anfis.tissue.scene import SCENE_DIR  # noqa: E402
 
 

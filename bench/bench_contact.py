@@ -22,7 +22,7 @@ import trimesh
 
 from haptic_anfis.contact import ContactDetector, ContactTracker, bvh, ellipsoid_dome
 from haptic_anfis.contact import detector as detector_module, proxy as proxy_module
-from haptic_anfis.synthetic_data import surface_x
+from haptic_anfis.tissue.synthetic import surface_x
 
 try:  # trimesh's proximity queries need rtree, which haptic_anfis itself does not
     import rtree  # noqa: F401  (only its presence matters)

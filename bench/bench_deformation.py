@@ -43,14 +43,14 @@ def load_data(args):
                 for f in sorted(glob.glob(os.path.join(args.work_dir, 'point_*.json')))]
         return displacements_from_records(recs, scene.depths, {
             'probe_radius_m': scene.probe_radius, 'dataset_sha256': 'work dir'})
-    from haptic_anfis.dataset import DEFAULT_DATASET
+    from haptic_anfis.tissue.dataset import DEFAULT_DATASET
 
     return load_displacements(args.data or displacement_path(DEFAULT_DATASET))
 
 
 def surface():
     from haptic_anfis.contact import load_mesh
-    from haptic_anfis.dataset import DATA_DIR
+    from haptic_anfis.tissue.dataset import DATA_DIR
 
     m = load_mesh(DATA_DIR / 'default_surface.stl', unit='mm')
     m.merge_vertices()

@@ -48,7 +48,7 @@ def one_process(seconds: float, mode: str, trace: Path) -> None:
 
 
 def multi_process(seconds: float, mode: str, trace: Path, busy: int = 0) -> None:
-    from haptic_anfis.launch import node_env, start_node, stop_node
+    from haptic_anfis.nodes.processes import node_env, start_node, stop_node
     env = node_env(150 + os.getpid() % 50, localhost=True)
     hogs = [subprocess.Popen([sys.executable, '-c', 'while True: pass']) for _ in range(busy)]
     helpers = [start_node(n, env=env, log=subprocess.DEVNULL)

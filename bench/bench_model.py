@@ -1,4 +1,4 @@
-"""Speed against error of the ANFIS force model on the shipped dataset (see haptic_anfis.model_bench).
+"""Speed against error of the ANFIS force model on the shipped dataset (see haptic_anfis.report.model_bench).
 
 Run: ``make bench`` or ``.venv/bin/python bench/bench_model.py [--structures 3-3-3-2 ...]``.
 """

@@ -134,7 +134,7 @@ def multi_process(minutes: float, interval: float, workdir: Path) -> None:
     from geometry_msgs.msg import PoseStamped, WrenchStamped
     from rclpy.context import Context
 
-    from haptic_anfis.launch import node_env
+    from haptic_anfis.nodes.processes import node_env
     from haptic_anfis.nodes import interfaces as ifc
     from haptic_anfis.nodes._common import LOOP_QOS, stamp_ns
     from haptic_anfis.nodes.graph import make_executor_for

@@ -66,7 +66,7 @@ def warm() -> dict[str, float]:
     out = {}
     t = time.perf_counter()
     from .anfis import ForceModel
-    from .dataset import DATA_DIR
+    from .tissue.dataset import DATA_DIR
     ForceModel.load(DATA_DIR / 'default_model.json')  # compiles and warms the real-time path
     out['force_model'] = time.perf_counter() - t
     t = time.perf_counter()

@@ -18,7 +18,7 @@ settings.load_profile('ci')
 
 @pytest.fixture(scope='session')
 def synthetic():
-    from haptic_anfis.synthetic_data import make_synthetic_dataset
+    from haptic_anfis.tissue.synthetic import make_synthetic_dataset
     return make_synthetic_dataset(seed=0)
 
 

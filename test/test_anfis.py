@@ -143,7 +143,7 @@ def test_constant_input_gives_a_clear_error(rng):
 def test_out_of_range_never_silent_zero_or_nan(small_model):
     lo, hi = small_model.input_range_
     span = hi - lo
-    from haptic_anfis.synthetic_data import surface_x
+    from haptic_anfis.tissue.synthetic import surface_x
     # Far outside every input, including impossible combinations: finite.
     far = np.array([lo - 10 * span, hi + 10 * span, [lo[0], hi[1], lo[2], hi[3] * 5]])
     assert np.all(np.isfinite(small_model.predict(far)))

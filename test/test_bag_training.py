@@ -62,7 +62,7 @@ def test_train_command_accepts_a_session_bag(synthetic, tmp_path, capsys):
 
 
 def test_bags_without_contact_samples_fail_clearly(tmp_path):
-    from haptic_anfis.dataset import ForceDataset
+    from haptic_anfis.tissue.dataset import ForceDataset
     # One "sample" at depth 0 plus free-space contacts: nothing in contact, so no samples.
     touching = ForceDataset(np.zeros((1, 4)), np.zeros((1, 3)), np.zeros(1))
     bag = _session_bag(tmp_path / 'bag', touching, extra_free=5)

@@ -17,7 +17,7 @@ from rclpy.parameter import Parameter  # noqa: E402
 from haptic_anfis.cases import CaseError, CaseLibrary  # noqa: E402
 library_module = importlib.import_module('haptic_anfis.cases.library')  # (the package's
 # `library` attribute is the function of that name)
-from haptic_anfis.dataset import DATA_DIR  # noqa: E402
+from haptic_anfis.tissue.dataset import DATA_DIR  # noqa: E402
 from haptic_anfis.nodes import interfaces as ifc  # noqa: E402
 from haptic_anfis.nodes._common import LOOP_QOS  # noqa: E402
 from haptic_anfis.nodes.graph import build_graph  # noqa: E402

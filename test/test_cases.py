@@ -10,7 +10,7 @@ import yaml
 from haptic_anfis.cases import CaseError, CaseLibrary, library
 from haptic_anfis.cases.generate import generate_case
 from haptic_anfis.cases.summary import case_summary, lesion_contrast
-from haptic_anfis.dataset import load_dataset
+from haptic_anfis.tissue.dataset import load_dataset
 from haptic_anfis.tissue.geometry import loading_points
 from haptic_anfis.tissue.scene import SCENE_DIR, SceneError, load_scene, parse_scene
 

@@ -4,7 +4,7 @@ import json
 import pytest
 
 from haptic_anfis.cli import main
-from haptic_anfis.dataset import save_dataset
+from haptic_anfis.tissue.dataset import save_dataset
 
 
 @pytest.fixture

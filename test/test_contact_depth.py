@@ -6,7 +6,7 @@ import pytest
 
 from contact_reference import dome
 from haptic_anfis.contact import ContactDetector, ContactTracker, MeshWarning
-from haptic_anfis.synthetic_data import surface_x
+from haptic_anfis.tissue.synthetic import surface_x
 
 RADII = (0.045, 0.070, 0.070)
 X_AXIS = (-1.0, 0.0, 0.0)  # the paper's indentation axis: into the body

@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from haptic_anfis.dataset import (DEFAULT_DATASET, DatasetError, ForceDataset, fold_indices,
+from haptic_anfis.tissue.dataset import (DEFAULT_DATASET, DatasetError, ForceDataset, fold_indices,
                                   load_dataset, save_dataset, split_indices)
 
 

@@ -197,7 +197,7 @@ def test_closed_loop_force_appears_and_vanishes():
     """Hand presses the dome, tracker + ANFIS render the force, the handle is pushed back."""
     from haptic_anfis.anfis import ForceModel
     from haptic_anfis.contact import ContactDetector, ContactTracker, ellipsoid_dome
-    from haptic_anfis.dataset import DATA_DIR
+    from haptic_anfis.tissue.dataset import DATA_DIR
     model = ForceModel.load(DATA_DIR / 'default_model.json')
     tracker = ContactTracker(ContactDetector(ellipsoid_dome(), direction=(-1, 0, 0)))
     mp = WorkspaceMapping()

@@ -180,7 +180,7 @@ def strip_samples(rng, spacing=0.008, depth=(0.009, 0.013)):
 
 def test_detector_finds_the_default_tumour_in_the_shipped_model():
     from haptic_anfis.anfis import ForceModel
-    from haptic_anfis.dataset import DATA_DIR
+    from haptic_anfis.tissue.dataset import DATA_DIR
     m = ForceModel.load(DATA_DIR / 'default_model.json')
     P, d = strip_samples(np.random.default_rng(0))
     F = np.linalg.norm(m.predict(np.c_[P, d]), axis=1)

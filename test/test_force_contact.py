@@ -5,7 +5,7 @@ import pytest
 from hypothesis import given, strategies as st
 
 from haptic_anfis.anfis import ForceModel
-from haptic_anfis.dataset import DATA_DIR, load_dataset
+from haptic_anfis.tissue.dataset import DATA_DIR, load_dataset
 from haptic_anfis.report.contact import contact_onset, outward_normals
 
 

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from haptic_anfis.anfis import FORMAT_VERSION, ForceModel, ModelFileError
-from haptic_anfis.dataset import DATA_DIR
+from haptic_anfis.tissue.dataset import DATA_DIR
 
 
 def test_save_load_round_trip_is_bit_exact(small_model, synthetic, tmp_path):

@@ -16,7 +16,7 @@ from rclpy.parameter import Parameter  # noqa: E402
 from sensor_msgs.msg import JointState  # noqa: E402
 from std_srvs.srv import Trigger  # noqa: E402
 
-from haptic_anfis.dataset import DATA_DIR  # noqa: E402
+from haptic_anfis.tissue.dataset import DATA_DIR  # noqa: E402
 from haptic_anfis.nodes import interfaces as ifc  # noqa: E402
 from haptic_anfis.nodes._common import LOOP_QOS, ParameterError, config_file  # noqa: E402
 from haptic_anfis.nodes.graph import build_graph  # noqa: E402

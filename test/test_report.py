@@ -11,11 +11,11 @@ import pytest
 pytest.importorskip('matplotlib')
 pytest.importorskip('sklearn')
 
-from haptic_anfis.dataset import save_dataset, split_indices  # noqa: E402
+from haptic_anfis.tissue.dataset import save_dataset, split_indices  # noqa: E402
 from haptic_anfis.report import peers as P  # noqa: E402
 from haptic_anfis.report.measure import make_probes  # noqa: E402
 from haptic_anfis.report.run import build_report, pareto_front  # noqa: E402
-from haptic_anfis.synthetic_data import make_synthetic_dataset  # noqa: E402
+from haptic_anfis.tissue.synthetic import make_synthetic_dataset  # noqa: E402
 
 FIGURES = ('speed_vs_error.png', 'pred_vs_fe.png', 'error_map.png', 'training_curves.png')
 
@@ -170,7 +170,7 @@ def test_report_has_group_cv_and_contact_onset(report):
 
 def test_group_cv_is_out_of_fold_by_point(small_ds):
     """Recompute one seed's out-of-fold RMSE by hand; no held-out point is ever trained on."""
-    from haptic_anfis.dataset import fold_indices
+    from haptic_anfis.tissue.dataset import fold_indices
     from haptic_anfis.report.cv import group_cv
 
     seen = []

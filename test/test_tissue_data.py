@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from haptic_anfis.dataset import DEFAULT_DATASET, load_dataset
+from haptic_anfis.tissue.dataset import DEFAULT_DATASET, load_dataset
 from haptic_anfis.tissue.geometry import loading_points
 from haptic_anfis.tissue.scene import load_scene
 

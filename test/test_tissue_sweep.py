@@ -7,7 +7,7 @@ import threading
 import numpy as np
 import pytest
 
-from haptic_anfis.dataset import load_dataset, save_dataset
+from haptic_anfis.tissue.dataset import load_dataset, save_dataset
 from haptic_anfis.tissue.geometry import loading_points
 from haptic_anfis.tissue.scene import load_scene
 from haptic_anfis.tissue.sweep import run_sweep

@@ -19,7 +19,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from .. import __version__
-from ..dataset import (INPUT_NAMES, OUTPUT_NAMES, DatasetError, ForceDataset, fold_indices,
+from ..tissue.dataset import (INPUT_NAMES, OUTPUT_NAMES, DatasetError, ForceDataset, fold_indices,
                        split_indices)
 from . import compiled
 from .model_file import (FORMAT, FORMAT_VERSION, ModelFileError, model_from_dict, model_to_dict,

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..dataset import DatasetError, ForceDataset, load_dataset
+from ..tissue.dataset import DatasetError, ForceDataset, load_dataset
 from .. import interfaces as ifc
 from .errors import BagError
 from .reader import check_bag_path, read_messages

@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from ..dataset import ForceDataset, load_dataset, save_dataset
+from ..tissue.dataset import ForceDataset, load_dataset, save_dataset
 from .library import Case, CaseError
 
 
@@ -210,7 +210,7 @@ def _package_relative(path) -> str:
     that does not record one machine's directories)."""
     from pathlib import Path
 
-    from ..dataset import DATA_DIR
+    from ..tissue.dataset import DATA_DIR
 
     p = Path(path).resolve()
     try:

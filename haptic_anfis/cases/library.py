@@ -19,7 +19,7 @@ from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
 
-from ..dataset import DATA_DIR
+from ..tissue.dataset import DATA_DIR
 from ..tissue.scene import SCENE_DIR, Scene, SceneError, load_scene
 
 DEFAULT_CASE = 'default'

@@ -13,8 +13,8 @@ from typing import Any
 
 import numpy as np
 
-from ..dataset import ForceDataset, load_dataset
-from ..timing import percentiles_us, time_calls
+from ..tissue.dataset import ForceDataset, load_dataset
+from ..anfis.timing import percentiles_us, time_calls
 from .library import Case
 
 CONTRAST_DEPTH = 0.008  # [m]

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import argparse
 
-from ..dataset import DEFAULT_DATASET, load_dataset
+from ..tissue.dataset import DEFAULT_DATASET, load_dataset
 from .train import parse_structure
 
 NAME = 'bench'
@@ -21,7 +21,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..model_bench import bench_structures, format_table
+    from ..report.model_bench import bench_structures, format_table
 
     ds = load_dataset(args.dataset)
     structures = [None] + [parse_structure(s) for s in args.structures]

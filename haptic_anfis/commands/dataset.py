@@ -39,7 +39,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..dataset import save_dataset
+    from ..tissue.dataset import save_dataset
     from ..tissue.scene import DEFAULT_SCENE, load_scene
 
     scene = load_scene(args.scene or DEFAULT_SCENE)

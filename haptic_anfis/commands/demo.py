@@ -12,8 +12,8 @@ from pathlib import Path
 import numpy as np
 
 from ..anfis import ForceModel, train_on_dataset
-from ..dataset import DEFAULT_DATASET, OUTPUT_NAMES, load_dataset
-from ..model_bench import throughput, time_single
+from ..tissue.dataset import DEFAULT_DATASET, OUTPUT_NAMES, load_dataset
+from ..report.model_bench import throughput, time_single
 
 NAME = 'demo'
 HELP = 'train the force models on the shipped dataset; print test RMSE and evaluation speed'

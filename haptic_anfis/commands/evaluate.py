@@ -6,7 +6,7 @@ import argparse
 import numpy as np
 
 from ..anfis import ForceModel, rmse
-from ..dataset import OUTPUT_NAMES, load_dataset
+from ..tissue.dataset import OUTPUT_NAMES, load_dataset
 
 NAME = 'evaluate'
 HELP = 'evaluate a model file on a force dataset (RMSE and max error per output)'

@@ -99,7 +99,7 @@ def _check(args: argparse.Namespace, known: tuple[str, ...]) -> list[str]:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..launch import Supervisor, node_env, node_names, renamed_output
+    from ..nodes.processes import Supervisor, node_env, node_names, renamed_output
     from .loop import launch_trace_path, print_launch_report
 
     names = _check(args, node_names())

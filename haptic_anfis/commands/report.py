@@ -4,7 +4,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from ..dataset import DEFAULT_DATASET, load_dataset
+from ..tissue.dataset import DEFAULT_DATASET, load_dataset
 
 NAME = 'report'
 HELP = ('speed-against-error report: our ANFIS models and peers (xanfis, RBF, k-NN, MLP, linear) '

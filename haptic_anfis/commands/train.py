@@ -5,7 +5,7 @@ import argparse
 
 from ..anfis import train_on_dataset
 from ..bag.training_data import load_training_data
-from ..dataset import OUTPUT_NAMES
+from ..tissue.dataset import OUTPUT_NAMES
 
 NAME = 'train'
 HELP = 'train the Fx/Fy/Fz ANFIS models on a force dataset (structure search, hybrid learning)'

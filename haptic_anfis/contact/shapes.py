@@ -10,7 +10,7 @@ def ellipsoid_dome(radii: tuple[float, float, float] = (0.045, 0.070, 0.070), n_
     """The breast as the semi-ellipsoid (x/rx)^2 + (y/ry)^2 + (z/rz)^2 = 1, x >= 0 [m].
 
     The chest wall is the plane x = 0 and +x points out of the body (the tissue frame of
-    :mod:`haptic_anfis.synthetic_data`). The dome is a (polar angle from +x) x (azimuth) grid with a
+    :mod:`haptic_anfis.tissue.synthetic`). The dome is a (polar angle from +x) x (azimuth) grid with a
     triangle fan at the nipple pole; ``closed`` adds the chest-wall disc as a fan of long thin
     triangles from the centre. Faces: ``2 * n_theta * n_phi`` (closed) or
     ``n_phi * (2 * n_theta - 1)`` (open). Normals point outwards.

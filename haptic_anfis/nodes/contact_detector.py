@@ -17,7 +17,7 @@ from rclpy.node import Node
 from sensor_msgs.msg import JointState
 
 from ..contact import ContactDetector, ContactTracker, ellipsoid_dome
-from ..dataset import DATA_DIR
+from ..tissue.dataset import DATA_DIR
 from . import interfaces as ifc
 from ._case import CASE_PARAMS, apply_case, declare_case  # noqa: F401 (CASE_PARAMS: in config)
 from ._common import (LOOP_QOS, Param, declare_parameters, finite_vector, non_negative, one_of,

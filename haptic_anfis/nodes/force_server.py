@@ -25,7 +25,7 @@ from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
 
 from ..anfis import ForceModel
-from ..dataset import DATA_DIR
+from ..tissue.dataset import DATA_DIR
 from ..device.local_model import contact_stiffness, force_and_jacobian
 from . import interfaces as ifc
 from ._case import CASE_PARAMS, apply_case, declare_case  # noqa: F401 (CASE_PARAMS: in config)

@@ -19,7 +19,7 @@ from std_srvs.srv import Trigger
 
 from ..anfis import train_on_dataset
 from ..bag.training_data import load_training_data
-from ..dataset import DEFAULT_DATASET
+from ..tissue.dataset import DEFAULT_DATASET
 from . import interfaces as ifc
 from ._common import Param, declare_parameters, positive, run_node
 

@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from ..dataset import ForceDataset
+from ..tissue.dataset import ForceDataset
 
 ONSET_EPS_M = 1e-4
 

@@ -1,6 +1,6 @@
 """Grouped cross-validation of force models: every depth of a surface point in the same fold.
 
-For each seed the surface points are shuffled into ``k`` folds (:func:`~haptic_anfis.dataset.fold_indices`);
+For each seed the surface points are shuffled into ``k`` folds (:func:`~haptic_anfis.tissue.dataset.fold_indices`);
 each fold is predicted by a model trained on the other folds, so every sample gets one out-of-fold
 prediction per seed. The score of a seed is the out-of-fold RMSE per output over the whole dataset;
 the table gives its mean ± standard deviation over the seeds (a model's own seed follows the CV seed).
@@ -12,7 +12,7 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
-from ..dataset import ForceDataset, fold_indices
+from ..tissue.dataset import ForceDataset, fold_indices
 
 #: The issue's protocol: 5 folds over loading points, 3 seeds.
 DEFAULT_FOLDS = 5

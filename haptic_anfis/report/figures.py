@@ -6,7 +6,7 @@ from typing import Any
 
 import numpy as np
 
-from ..dataset import OUTPUT_NAMES, ForceDataset
+from ..tissue.dataset import OUTPUT_NAMES, ForceDataset
 
 DPI = 100
 

@@ -12,7 +12,7 @@ from typing import Any
 
 import numpy as np
 
-from ..dataset import ForceDataset
+from ..tissue.dataset import ForceDataset
 
 JUMP_STEP_M = 1e-4          # neighbouring inputs 0.1 mm apart
 MONOTONE_TOL_N = 1e-5       # Fx may dip this much between 0.1 mm steps and still count as growing

@@ -25,7 +25,7 @@ from typing import Any
 
 import numpy as np
 
-from ..timing import throughput, time_calls
+from ..anfis.timing import throughput, time_calls
 
 
 def _rows(Q: np.ndarray) -> list[tuple[np.ndarray]]:

@@ -15,7 +15,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from .. import __version__
-from ..dataset import OUTPUT_NAMES, ForceDataset, split_indices
+from ..tissue.dataset import OUTPUT_NAMES, ForceDataset, split_indices
 from .measure import (JUMP_STEP_M, MONOTONE_TOL_N, data_jump_scale, make_probes, measure)
 from .peers import OursPeer, Peer, default_peers
 

@@ -128,7 +128,7 @@ class DeformationModel:
         """The shipped default scene's model, checked against the shipped force data's hash."""
         import json
 
-        from ..dataset import DEFAULT_DATASET, sidecar_path
+        from .dataset import DEFAULT_DATASET, sidecar_path
 
         sha = json.loads(sidecar_path(DEFAULT_DATASET).read_text()).get('sha256')
         return cls.load(displacement_path(DEFAULT_DATASET), dataset_sha256=sha, **params)
@@ -294,7 +294,7 @@ def holdout_errors(data: DisplacementSet, form: str = 'interpolant', folds: int 
     index out of the fit (tests the interpolation in depth). Returns the worst and the RMS over
     held-out fields of each ratio, and the footprint's largest deviation from the depth [m].
     """
-    from ..dataset import ForceDataset, fold_indices
+    from .dataset import ForceDataset, fold_indices
 
     ok = np.flatnonzero(np.all(np.isfinite(data.coeffs), axis=(1, 2, 3, 4)))
     stub = ForceDataset(X=np.zeros((len(ok), 4)), Y=np.zeros((len(ok), 3)), point=ok)

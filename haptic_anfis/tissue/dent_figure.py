@@ -130,7 +130,7 @@ def main(argv=None) -> int:
     p.add_argument('--yz', default='0,0', help='contact (y, z) in mm on the default dome')
     args = p.parse_args(argv)
     from ..contact import load_mesh
-    from ..dataset import DATA_DIR
+    from .dataset import DATA_DIR
 
     model = DeformationModel.load(args.data) if args.data else DeformationModel.load_default()
     mesh = load_mesh(DATA_DIR / 'default_surface.stl', unit='mm')

@@ -338,7 +338,7 @@ def ship_beside(new_csv: str | os.PathLike, old_csv: str | os.PathLike,
     Raises:
         DisplacementDataError: the samples differ, or the forces differ beyond ``rtol``.
     """
-    from ..dataset import load_dataset
+    from .dataset import load_dataset
 
     new, old = load_dataset(new_csv), load_dataset(old_csv)
     if len(new) != len(old) or not np.array_equal(new.point, old.point) \

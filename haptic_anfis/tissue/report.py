@@ -82,7 +82,7 @@ def write_report(scene: Scene, out_dir: str | os.PathLike, data: str | os.PathLi
     matplotlib.use('Agg')
     import matplotlib.pyplot as plt
 
-    from ..dataset import DEFAULT_DATASET, load_dataset
+    from .dataset import DEFAULT_DATASET, load_dataset
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)

@@ -4,7 +4,7 @@ A scene is a YAML file (see ``config/scenes/default.yaml``). Lengths are millime
 kilopascals at that edge, as people write them; :func:`load_scene` converts everything to SI
 (m, Pa) and validates it, raising :class:`SceneError` with the offending key named.
 
-Frame (same as :mod:`haptic_anfis.synthetic_data`): the chest wall is the plane x = 0, +x points out
+Frame (same as :mod:`haptic_anfis.tissue.synthetic`): the chest wall is the plane x = 0, +x points out
 of the body, the breast is the semi-ellipsoid (x/Rx)^2 + (y/Ry)^2 + (z/Rz)^2 <= 1, x >= 0.
 """
 from __future__ import annotations

@@ -21,7 +21,7 @@ from typing import Any, Callable, Iterable
 
 import numpy as np
 
-from ..dataset import ForceDataset
+from .dataset import ForceDataset
 from .displacement import DisplacementSet, displacements_from_records, record_is_current
 from .geometry import loading_points
 from .scene import Scene

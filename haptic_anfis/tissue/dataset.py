@@ -27,7 +27,7 @@ COLUMNS = ('point', *INPUT_COLUMNS, *OUTPUT_COLUMNS)
 INPUT_NAMES = ('x', 'y', 'z', 'depth')
 OUTPUT_NAMES = ('Fx', 'Fy', 'Fz')
 
-DATA_DIR = Path(__file__).resolve().parent / 'data'
+DATA_DIR = Path(__file__).resolve().parents[1] / 'data'  # haptic_anfis/data
 DEFAULT_DATASET = DATA_DIR / 'default_forces.csv'
 
 

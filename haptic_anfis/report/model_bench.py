@@ -11,9 +11,9 @@ from typing import Sequence
 
 import numpy as np
 
-from .anfis import ForceModel, rmse
-from .dataset import ForceDataset, split_indices
-from .timing import percentiles_us, throughput, time_calls
+from ..anfis import ForceModel, rmse
+from ..tissue.dataset import ForceDataset, split_indices
+from ..anfis.timing import percentiles_us, throughput, time_calls
 
 
 def time_single(fn, queries: np.ndarray, repeats: int) -> np.ndarray:

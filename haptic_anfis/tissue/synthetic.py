@@ -85,7 +85,7 @@ def make_synthetic_dataset(
     F *= 1.0 + noise * rng.standard_normal(F.shape)
     provenance = {
         'kind': 'SYNTHETIC PLACEHOLDER (closed-form approximation, no FE solve)',
-        'generator': 'haptic_anfis.synthetic_data.make_synthetic_dataset',
+        'generator': 'haptic_anfis.tissue.synthetic.make_synthetic_dataset',
         'seed': seed, 'radii_m': list(radii), 'spacing_m': spacing,
         'palpable_radius_m': palpable_radius, 'depths_m': list(depths),
         'probe_radius_m': probe_radius, 'youngs_modulus_Pa': youngs_modulus,

@@ -15,14 +15,15 @@ from typing import IO, Mapping, Sequence
 #: The nodes' console scripts sit next to the interpreter in a virtualenv (bin/); on a colcon
 #: install they are in lib/haptic_anfis/ instead, and nodes are started as modules.
 BIN = Path(sys.executable).parent
-NODES_DIR = Path(__file__).resolve().parent / 'nodes'
+NODES_DIR = Path(__file__).resolve().parent  # this module lives beside the nodes
 
 
 @functools.lru_cache(maxsize=1)
 def node_names() -> tuple[str, ...]:
     """The package's nodes: modules of haptic_anfis.nodes that run as ``python -m``."""
+    here = Path(__file__).name  # this module names the marker below: not a node itself
     return tuple(sorted(f.stem for f in NODES_DIR.glob('*.py')
-                        if "__name__ == '__main__'" in f.read_text()))
+                        if f.name != here and "__name__ == '__main__'" in f.read_text()))
 
 
 def node_env(domain_id: int | None = None, localhost: bool = True,
