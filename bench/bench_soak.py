@@ -54,10 +54,28 @@ HEADER = (f'{"min":>5} {"rate Hz":>8} {"p99 ms":>7} {"max ms":>7} {"misses":>7} 
 
 
 def row(t_min, rate, lat, misses, bag, rss: dict) -> str:
-    p99 = np.percentile(lat, 99) * 1e3 if len(lat) else float('nan')
-    mx = lat.max() * 1e3 if len(lat) else float('nan')
-    return (f'{t_min:5.1f} {rate:8.1f} {p99:7.3f} {mx:7.3f} {misses:7d} {len(lat):7d} {bag:7.1f}  '
+    """One interval's line; ``lat``: the interval's latencies [s] (an array), or (p99, max, n)
+    already computed (from the driver's histogram)."""
+    if isinstance(lat, tuple):
+        p99, mx, n = lat[0] * 1e3, lat[1] * 1e3, lat[2]
+    else:
+        p99 = np.percentile(lat, 99) * 1e3 if len(lat) else float('nan')
+        mx = lat.max() * 1e3 if len(lat) else float('nan')
+        n = len(lat)
+    return (f'{t_min:5.1f} {rate:8.1f} {p99:7.3f} {mx:7.3f} {misses:7d} {n:7d} {bag:7.1f}  '
             + ' '.join(f'{k} {v:.1f}' for k, v in rss.items()))
+
+
+def interval_latency(hist, counts_before: np.ndarray) -> tuple[tuple[float, float, int], np.ndarray]:
+    """(p99 [s], max [s], n) of the latencies the driver's histogram (device.stats) recorded since
+    ``counts_before`` (within its 0.5 % bins; the max is the top bin's value), and the counts now."""
+    now = hist.counts.copy()
+    d = now - counts_before
+    n = int(d.sum())
+    if n == 0:
+        return (float('nan'), float('nan'), 0), now
+    p99, mx = hist.quantile([0.99, 1.0], d)
+    return (float(p99), float(mx), n), now
 
 
 class GcPauses:
@@ -83,14 +101,17 @@ class GcPauses:
         return f'gc {"/".join(map(str, self.count))} max {self.max_pause * 1e3:.2f} ms'
 
 
-def one_process(minutes: float, interval: float, workdir: Path, freeze: bool = True) -> None:
+def one_process(minutes: float, interval: float, workdir: Path, freeze: bool = True,
+                force_mode: str | None = None) -> None:
     import gc
 
     from haptic_anfis.bag.topics import ALL_LOOP_TOPICS
     from haptic_anfis.nodes.graph import build_graph
     from haptic_anfis.nodes.recorder import Recorder
     bag = workdir / 'one_process_bag'
-    g = build_graph(None, visualizer=False,
+    from rclpy.parameter import Parameter
+    over = {'falcon_driver': [Parameter('force_mode', value=force_mode)]} if force_mode else None
+    g = build_graph(None, visualizer=False, overrides=over,
                     extra=[lambda ctx: Recorder(context=ctx, output=str(bag),
                                                 topics=ALL_LOOP_TOPICS)])
     try:
@@ -102,24 +123,27 @@ def one_process(minutes: float, interval: float, workdir: Path, freeze: bool = T
         if not freeze:  # for comparison: what build_graph's gc.freeze() avoids
             gc.unfreeze()
         pauses = GcPauses()
-        print(f'one process + recorder, {minutes:g} min, load {os.getloadavg()[0]:.2f}, gc '
+        print(f'one process + recorder, force_mode {g.driver.input.mode}, {minutes:g} min, '
+              f'load {os.getloadavg()[0]:.2f}, gc '
               f'{"frozen after start" if freeze else "not frozen"}')
         print(HEADER + ', gc collections (gen 0/1/2) and longest pause, recorder chunks flushed '
               '/ pending')
         t0 = time.monotonic()
-        ticks0 = misses0 = lat0 = 0
+        ticks0 = misses0 = 0
+        counts0 = st.latency_hist.counts.copy()
         tprev = t0
         while time.monotonic() - t0 < minutes * 60 - 1e-3:
             g.spin_for(min(interval, minutes * 60 - (time.monotonic() - t0)))
             now = time.monotonic()
-            ticks, misses, lats = st.ticks, st.deadline_misses, st.latencies
+            ticks, misses = st.ticks, st.deadline_misses
+            lat, counts0 = interval_latency(st.latency_hist, counts0)
             w = rec.writer.stats()
-            print(row((now - t0) / 60, (ticks - ticks0) / (now - tprev), lats[lat0:],
+            print(row((now - t0) / 60, (ticks - ticks0) / (now - tprev), lat,
                       misses - misses0, dir_mb(bag), {'sim': rss_mb()})
                   + f', {pauses.text()}, chunks {w["chunks_flushed"]} pending {w["pending"]}',
                   flush=True)
             pauses.reset()
-            ticks0, misses0, lat0, tprev = ticks, misses, len(lats), now
+            ticks0, misses0, tprev = ticks, misses, now
         s = g.driver.summary()
         print(f'whole run: {s["rate_hz"]:.1f} Hz, p99 {s["latency_p99_ms"]:.3f} ms, max '
               f'{s["latency_max_ms"]:.3f} ms, misses {s["deadline_misses"]} of {s["ticks"]} '
@@ -129,7 +153,8 @@ def one_process(minutes: float, interval: float, workdir: Path, freeze: bool = T
     print(f'bag {bag}: {dir_mb(bag):.1f} MB, recorded {rec.writer.stats()}', flush=True)
 
 
-def multi_process(minutes: float, interval: float, workdir: Path) -> None:
+def multi_process(minutes: float, interval: float, workdir: Path,
+                  force_mode: str | None = None) -> None:
     import rclpy
     from geometry_msgs.msg import PoseStamped, WrenchStamped
     from rclpy.context import Context
@@ -142,10 +167,16 @@ def multi_process(minutes: float, interval: float, workdir: Path) -> None:
     bag, out = workdir / 'multi_process_bag', workdir / 'launch.out'
     env = node_env(domain, localhost=True)
     env['PYTHONPATH'] = str(ROOT)
+    params = []
+    if force_mode:
+        f = workdir / 'force_mode.yaml'
+        f.write_text(f'falcon_driver:\n  ros__parameters:\n    force_mode: {force_mode}\n')
+        params = ['--params-file', str(f)]
+        print(f'separate processes: falcon_driver force_mode {force_mode}')
     launch = subprocess.Popen(
         [sys.executable, '-m', 'haptic_anfis.cli', 'launch', '--nodes',
          'falcon_driver,contact_detector,force_server', '--domain-id', str(domain), '--localhost',
-         '--record', str(bag), '--log-dir', str(workdir / 'logs')],
+         '--record', str(bag), '--log-dir', str(workdir / 'logs'), *params],
         cwd=ROOT, env=env, stdout=out.open('w'), stderr=subprocess.STDOUT)
     ctx = Context()
     rclpy.init(context=ctx, domain_id=domain)
@@ -201,6 +232,8 @@ def main() -> int:
                     help='minutes of the one-process run (0 = skip; default 10)')
     ap.add_argument('--multi-minutes', type=float, default=10.0,
                     help='minutes of the multi-process run (0 = skip; default 10)')
+    ap.add_argument('--force-mode', choices=('zoh', 'local_model'), default=None,
+                    help="the falcon driver's force_mode (default: its configured one)")
     ap.add_argument('--interval', type=float, default=60.0, help='seconds per row (default 60)')
     ap.add_argument('--no-freeze', action='store_true',
                     help='one process: undo the gc.freeze() done after start (for comparison)')
@@ -213,9 +246,10 @@ def main() -> int:
     print(f'soak: {os.cpu_count()} CPUs, load average {os.getloadavg()}')
     try:
         if a.one_minutes > 0:
-            one_process(a.one_minutes, a.interval, work, freeze=not a.no_freeze)
+            one_process(a.one_minutes, a.interval, work, freeze=not a.no_freeze,
+                        force_mode=a.force_mode)
         if a.multi_minutes > 0:
-            multi_process(a.multi_minutes, a.interval, work)
+            multi_process(a.multi_minutes, a.interval, work, force_mode=a.force_mode)
     finally:
         if not a.keep:
             shutil.rmtree(work, ignore_errors=True)
