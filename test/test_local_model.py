@@ -334,6 +334,21 @@ def test_trace_roundtrip(tmp_path):
         load_trace(tmp_path / 'bad.npz')
 
 
+def test_trace_keeps_the_newest_rows_within_its_bound():
+    # an hour-long session must not grow the driver without bound (issue 21): a ring of chunks
+    t = TickTrace(chunk=4, max_rows=10)
+    for i in range(103):
+        t.add(i * 1e-3, (i, 0, 0), (0, 0, 0), 0)
+    rows = t.arrays()
+    assert len(rows) <= 12 and len(t._chunks) <= 3  # max_rows rounded up to whole chunks
+    np.testing.assert_array_equal(rows[:, 1], np.arange(103 - len(rows), 103))  # newest, in order
+    assert t.dropped + t.rows == 103 and t.rows == len(rows)
+    unbounded = TickTrace(chunk=4, max_rows=0)
+    for i in range(103):
+        unbounded.add(i, (i, 0, 0), (0, 0, 0), 0)
+    assert len(unbounded.arrays()) == 103 and unbounded.dropped == 0
+
+
 @pytest.fixture(scope='module')
 def default_model():
     from haptic_anfis.nodes.force_server import load_model

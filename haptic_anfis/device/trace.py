@@ -16,27 +16,38 @@ COLUMNS = ('t', 'px', 'py', 'pz', 'fx', 'fy', 'fz', 'status')
 
 
 class TickTrace:
-    """Rows of :data:`COLUMNS`, appended by one thread (the servo loop).
+    """The newest rows of :data:`COLUMNS`, appended by one thread (the servo loop).
+
+    A ring of preallocated chunks: beyond ``max_rows`` the OLDEST chunk is dropped, so an
+    hour-long session keeps a bounded trace of its last minutes (the loop report then covers
+    those; :attr:`dropped` counts what fell out).
 
     Args:
         chunk: rows per preallocated chunk (at 1 kHz, 8192 = 8 s).
-        max_rows: rows kept at most (the newest ones are dropped beyond it; 0 = unbounded).
+        max_rows: rows kept at most, rounded up to whole chunks (default 600 000: the last ~10
+            minutes at 1 kHz, 8 float64 columns = ~39 MB); 0 = unbounded.
     """
 
-    def __init__(self, chunk: int = 8192, max_rows: int = 3_600_000) -> None:
+    def __init__(self, chunk: int = 8192, max_rows: int = 600_000) -> None:
+        if chunk < 1 or max_rows < 0:
+            raise ValueError(f'TickTrace: expected chunk >= 1 and max_rows >= 0, got {chunk}, '
+                             f'{max_rows}')
         self.chunk = int(chunk)
         self.max_rows = int(max_rows)
         self._chunks: list[np.ndarray] = [np.empty((self.chunk, len(COLUMNS)))]
         self._i = 0
-        self.rows = 0
-        self.dropped = 0
+        self.rows = 0  # rows held now
+        self.dropped = 0  # oldest rows dropped to stay within max_rows
 
     def add(self, t: float, p, f, status: int) -> None:
-        if self.max_rows and self.rows >= self.max_rows:
-            self.dropped += 1
-            return
         if self._i == self.chunk:
-            self._chunks.append(np.empty((self.chunk, len(COLUMNS))))
+            if self.max_rows and self.rows >= self.max_rows and len(self._chunks) > 1:
+                old = self._chunks.pop(0)  # reuse the oldest chunk's memory for the newest rows
+                self.rows -= self.chunk
+                self.dropped += self.chunk
+            else:
+                old = np.empty((self.chunk, len(COLUMNS)))
+            self._chunks.append(old)
             self._i = 0
         self._chunks[-1][self._i] = (t, p[0], p[1], p[2], f[0], f[1], f[2], status)
         self._i += 1
@@ -46,7 +57,7 @@ class TickTrace:
         self.__init__(self.chunk, self.max_rows)
 
     def arrays(self) -> np.ndarray:
-        """All rows (n, 8), in order."""
+        """The rows held (n, 8), oldest first."""
         parts = self._chunks[:-1] + [self._chunks[-1][:self._i]]
         return np.concatenate(parts, axis=0) if parts else np.empty((0, len(COLUMNS)))
 
