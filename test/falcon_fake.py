@@ -315,3 +315,17 @@ class FakeFtdi:
 def ftdi_class(device: FakeFalcon):
     """A fake ``Ftdi`` class talking to ``device``."""
     return type('FakeFtdi', (FakeFtdi,), {'device': device, 'custom_products': []})
+
+
+class Clock:
+    """A fake monotonic clock for the backend's ``clock`` / ``sleep`` hooks: time [s] moves only
+    when the code under test sleeps (at least 0.1 ms per sleep), so the tests never wait."""
+
+    def __init__(self, t: float = 100.0):
+        self.t = t
+
+    def __call__(self) -> float:
+        return self.t
+
+    def sleep(self, dt: float) -> None:
+        self.t += max(dt, 1e-4)

@@ -7,7 +7,7 @@ import re
 
 import pytest
 import yaml
-from falcon_fake import FakeFalcon, ftdi_class
+from falcon_fake import Clock, FakeFalcon, ftdi_class
 
 from haptic_anfis import cli
 from haptic_anfis.device import falcon_kinematics as k
@@ -15,17 +15,6 @@ from haptic_anfis.device.falcon_check import (calibrate, calibrated_counts_per_n
                                               write_counts_per_nm)
 from haptic_anfis.device.falcon_usb import FalconUSB, PyFtdiTransport
 from haptic_anfis.nodes._common import config_file
-
-
-class Clock:
-    def __init__(self, t=0.0):
-        self.t = t
-
-    def __call__(self):
-        return self.t
-
-    def sleep(self, dt):
-        self.t += max(dt, 1e-4)
 
 
 class MovedGrip(FakeFalcon):
@@ -52,7 +41,7 @@ def check(dev, out, clock):
 
 
 def test_check_passes_every_step_and_ends_at_zero_force():
-    clock = Clock()
+    clock = Clock(0.0)
     fake = MovedGrip(firmware_running=True, homed=False, homes_after=20)
     dev, out = make(fake, clock)
     assert check(dev, out, clock) == 0
@@ -72,7 +61,7 @@ def test_check_passes_every_step_and_ends_at_zero_force():
 
 
 def test_check_stops_at_the_failing_step_and_says_why(tmp_path):
-    clock = Clock()
+    clock = Clock(0.0)
     gone = FakeFalcon()
     gone.unplug()
     dev, out = make(gone, clock)
@@ -109,7 +98,7 @@ class HangingGrip(FakeFalcon):
 
 
 def test_calibration_recovers_the_true_motor_scale():
-    clock = Clock()
+    clock = Clock(0.0)
     fake = HangingGrip(firmware_running=True)
     dev, out = make(fake, clock)
     dev.connect()
@@ -151,7 +140,6 @@ def test_cli_check_without_usb_library_says_how_to_install(monkeypatch, capsys):
         cli.main(['falcon', 'check', '--spring-force', 'x'])
     assert cli.main(['falcon', 'check', '--spring-force', '5']) == 1
     assert 'at most 3 N' in capsys.readouterr().err
-
 
 
 def test_cli_check_runs_against_the_fake_device(monkeypatch, capsys, tmp_path):

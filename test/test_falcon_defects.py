@@ -7,7 +7,7 @@ import dataclasses
 import math
 
 import pytest
-from falcon_fake import FakeFalcon, ftdi_class
+from falcon_fake import Clock, FakeFalcon, ftdi_class
 
 from haptic_anfis.device import SafetyLayer, ServoLoop
 from haptic_anfis.device import falcon_kinematics as k
@@ -16,17 +16,6 @@ from haptic_anfis.device import falcon_usb
 from haptic_anfis.device.falcon_usb import FalconError, FalconUSB, PyFtdiTransport
 
 FIRMWARE = bytes(range(256)) * 4 + b'end'  # 1027 bytes: 16 chunks of 62 and a short one
-
-
-class Clock:
-    def __init__(self, t=100.0):
-        self.t = t
-
-    def __call__(self):
-        return self.t
-
-    def sleep(self, dt):
-        self.t += max(dt, 1e-4)
 
 
 def make(fake, firmware=None, tmp_path=None, clock=None, **kw):

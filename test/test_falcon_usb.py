@@ -10,7 +10,7 @@ import time
 
 import numpy as np
 import pytest
-from falcon_fake import FakeFalcon, Received, ftdi_class
+from falcon_fake import Clock, FakeFalcon, Received, ftdi_class
 
 from haptic_anfis.device import SafetyLayer, ServoLoop
 from haptic_anfis.device import falcon_kinematics as k
@@ -20,17 +20,6 @@ from haptic_anfis.device.falcon_usb import (FalconError, FalconUnavailableError,
                                             import_ftdi)
 
 FIRMWARE = bytes(range(256)) * 3 + b'tail'  # 772 bytes: 6 full chunks and a short one
-
-
-class Clock:
-    def __init__(self, t=100.0):
-        self.t = t
-
-    def __call__(self):
-        return self.t
-
-    def sleep(self, dt):
-        self.t += max(dt, 1e-4)
 
 
 def make(device: FakeFalcon, firmware: bytes | None = None, tmp_path=None, clock=None, **kw):
