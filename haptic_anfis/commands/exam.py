@@ -25,7 +25,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     sub = p.add_subparsers(dest='exam_command', metavar='{run,report}', required=True)
     r = sub.add_parser('run', help='run the graph with the examiner and a simulated trainee')
     r.add_argument('--case', default=None, metavar='NAME',
-                   help='scene name in config/scenes or a scene file (default: default)')
+                   help='case of the library (haptic-anfis cases list: its model, surface and '
+                        'lesions) or a scene file (its lesions, default model) (default: default)')
     r.add_argument('--trainee', default='systematic', metavar='systematic|careless|SCRIPT',
                    help='simulated trainee: systematic, careless or a palpation script (YAML)')
     r.add_argument('--speed', type=float, default=None,
@@ -39,7 +40,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     b = sub.add_parser('report', help='score a recorded session bag')
     b.add_argument('bag', metavar='BAG')
     b.add_argument('--case', default=None, metavar='NAME',
-                   help='scene name in config/scenes or a scene file (default: default)')
+                   help='case of the library (its surface and lesions) or a scene file (its '
+                        'lesions) the session is scored against (default: default)')
     _common(b)
 
 
@@ -51,19 +53,24 @@ def _common(p):
                    help='scoring settings (default config/exam.yaml)')
 
 
-def scene_for_case(case: str | None) -> str | None:
-    """--case NAME (a scene in config/scenes) or a scene file path -> path (None = default)."""
+def resolve_exam_case(case: str | None, need: tuple[str, ...] = ('model_path', 'mesh_path'),
+                      lib=None):
+    """``--case``: a case of the library (``haptic-anfis cases list``; its files ``need`` must
+    exist) or a scene file (``*.yaml``: its lesions are scored, the default model and surface
+    render) -> ``(Case | None, scene path | None)``; ``(None, None)`` = the default scene.
+
+    Raises:
+        CaseError (a ValueError): unknown case (the message lists the known ones), or a file it
+        needs is missing.
+    """
     if case is None:
-        return None
-    from ..tissue.scene import SCENE_DIR
+        return None, None
     p = Path(case)
     if p.suffix in ('.yaml', '.yml') and p.is_file():
-        return str(p)
-    q = SCENE_DIR / f'{case}.yaml'
-    if q.is_file():
-        return str(q)
-    have = ', '.join(sorted(f.stem for f in SCENE_DIR.glob('*.yaml')))
-    raise ValueError(f'--case {case!r}: no such case (have: {have}) and no such scene file')
+        return None, str(p)
+    from ..cases import library
+    c = (lib or library()).get(case).require(need)
+    return c, str(c.scene_path)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -96,11 +103,26 @@ def _run_sim(args):
         raise ValueError(f'--duration: expected > 0 s, got {args.duration}')
     if args.speed is not None and not (args.speed > 0 and math.isfinite(args.speed)):
         raise ValueError(f'--speed: expected > 0 m/s, got {args.speed}')
-    scene = scene_for_case(args.case)
+    from ..tissue.scene import load_scene
+    case, scene = resolve_exam_case(args.case)
     script = trainee_path(args.trainee)
-    controller = TraineeController.from_yaml(script, args.speed)
+    sc = load_scene(scene) if scene else None
+    # The trainee sees the breast (its size), never the lesions: scripts fit to the case's surface.
+    controller = TraineeController.from_yaml(
+        script, args.speed, breast=None if sc is None else (sc.radii, sc.palpable_radius))
+    import tempfile
+
+    import yaml
+    tmp = tempfile.TemporaryDirectory(prefix='haptic-anfis-exam-')
+    fitted = Path(tmp.name) / 'trainee.yaml'   # the driver starts the hand where it begins
+    fitted.write_text(yaml.safe_dump(controller.doc))
     ex_params = [Parameter('scene', value=scene or ''),
                  Parameter('exam_config', value=args.exam_config or '')]
+    overrides = {'falcon_driver': [Parameter('palpation_script', value=str(fitted))]}
+    if case is not None:   # model, surface and lesions of the case in every node
+        for node in ('contact_detector', 'force_server'):
+            overrides[node] = [Parameter('case', value=case.name)]
+        ex_params.append(Parameter('case', value=case.name))
     extra = [lambda ctx: Examiner(context=ctx, parameter_overrides=ex_params),
              lambda ctx: SimTrainee(controller, context=ctx)]
     if args.record:
@@ -109,15 +131,17 @@ def _run_sim(args):
         extra.append(lambda ctx: Recorder(context=ctx, output=args.record, topics=ALL_LOOP_TOPICS))
     try:
         graph = build_graph(['haptic-anfis-exam'], visualizer=False, extra=extra,
-                            overrides={'falcon_driver': [
-                                Parameter('palpation_script', value=str(script))]})
+                            overrides=overrides)
     except ParameterError as exc:
         raise ValueError(str(exc)) from None
+    finally:
+        tmp.cleanup()
     # The driver's simulated Falcon plays the trainee (same start point as the script it loaded).
     graph.driver.device.script = controller
     examiner = graph.extra[0]
     limit = args.duration if args.duration is not None else 300.0
-    print(f'exam: trainee {args.trainee} ({controller.search.duration:.0f} s search), lesions from '
+    print(f'exam: trainee {args.trainee} ({controller.search.duration:.0f} s search), case '
+          f'{case.name if case else "default (scene " + (scene or "default") + ")"}, lesions from '
           f'{examiner.subject.source}', flush=True)
     try:
         graph.spin_for(limit, lambda: controller.finished)
@@ -137,6 +161,7 @@ def _run_sim(args):
         for d in controller.detections or []], 'finished': controller.finished,
         'felt_samples': controller.felt}
     report['heat_maps_published'] = examiner.n_published
+    report['case'] = case.name if case else (scene or 'default')
     return report, examiner.session
 
 
@@ -149,8 +174,9 @@ def _report_bag(args):
     from ..bag.reader import bag_info
     from ..bag.topics import absolute
     cfg = load_exam_config(args.exam_config)
-    subject = subject_from_scene(scene_for_case(args.case))
-    mesh = load_mesh(DEFAULT_SURFACE, unit='mm')
+    case, scene = resolve_exam_case(args.case, need=('mesh_path',))
+    subject = subject_from_scene(scene)
+    mesh = load_mesh(case.mesh_path if case else DEFAULT_SURFACE, unit='mm')
     mesh.merge_vertices()
     session = ExamSession(Surface.from_mesh(mesh), subject, cfg)
     info = bag_info(args.bag)
@@ -193,6 +219,7 @@ def _report_bag(args):
     report = session.report()
     report['notes'] = notes + report['notes']
     report['bag'] = str(args.bag)
+    report['case'] = case.name if case else (scene or 'default')
     return report, session
 
 
