@@ -126,6 +126,70 @@ def test_no_contact_session_is_zero_coverage(surface, subject):
     assert any('never touched' in n for n in r['notes'])
 
 
+def test_marks_on_a_case_without_lesions_are_false_and_a_nan_mark_is_named(surface):
+    """Bad input: a case without lesions (every mark false, the note says why) and a mark whose
+    position is not finite (false, named) — a valid report, no crash."""
+    none = ExamSubject((), 0.042, 0.008, 'none.yaml')
+    marks = [(1.0, (skin(0.0, 0.0) - 0.004, 0.0, 0.0)), (2.0, (np.nan, 0.0, 0.0))]
+    r = session_with(surface, none, strips([0.0], 0.012), marks).report()
+    json.dumps(r)
+    assert r['hits'] == r['misses'] == 0 and r['false_marks'] == 2 and r['lesions'] == []
+    assert r['marks'][0]['reason'] == 'no lesion within radius + margin'
+    assert r['marks'][1]['reason'] == 'mark position is not finite'
+    assert r['marks'][1]['surface_mm'] is None
+    assert any('no lesion' in n for n in r['notes'])
+    assert r['verdict'] == 'retry' and '2 false mark(s)' in r['feedback']
+
+
+def test_exam_case_lookup_names_the_case_and_what_is_missing(tmp_path):
+    """--case: a library case needs its model and surface (the error names the case and the
+    missing file); an unknown name lists the known cases; a scene file is taken as is."""
+    from haptic_anfis.cases import CaseError, CaseLibrary
+    from haptic_anfis.commands.exam import resolve_exam_case
+    from haptic_anfis.tissue.scene import SCENE_DIR
+    scenes, data = tmp_path / 'scenes', tmp_path / 'data'
+    scenes.mkdir()
+    (data / 'cases').mkdir(parents=True)
+    (scenes / 'lumpy.yaml').write_text((SCENE_DIR / 'normal.yaml').read_text())
+    lib = CaseLibrary(scenes, data, tmp_path / 'work')
+    with pytest.raises(CaseError, match=r"case 'lumpy': missing model_path .*model\.json"):
+        resolve_exam_case('lumpy', lib=lib)
+    with pytest.raises(CaseError, match=r"unknown case 'nope'.*known cases: lumpy"):
+        resolve_exam_case('nope', lib=lib)
+    assert resolve_exam_case(None) == (None, None)
+    scene = scenes / 'lumpy.yaml'
+    assert resolve_exam_case(str(scene), lib=lib) == (None, str(scene))
+
+
+def test_trainee_fits_the_breast_it_sees():
+    """On a case of another size the trainee keeps its plan, scaled to the palpable region: the
+    systematic one still lays overlapping strips over all of it, the careless one half of it."""
+    from haptic_anfis.exam.trainee import TraineeController, trainee_path
+    for name, half in (('systematic', False), ('careless', True)):
+        base = TraineeController.from_yaml(trainee_path(name)).doc['pattern'][0]['strip']
+        for radii, region in (((0.035, 0.06, 0.06), 0.038), ((0.055, 0.08, 0.08), 0.048)):
+            c = TraineeController.from_yaml(trainee_path(name), breast=(radii, region))
+            assert c.doc['surface']['radii'] == list(radii)
+            st = c.doc['pattern'][0]['strip']
+            k = region / 0.042
+            assert st['y'] == pytest.approx([v * k for v in base['y']], abs=1e-6)
+            assert st['clip_radius'] == pytest.approx(base['clip_radius'] * k, abs=1e-6)
+            assert st['depths'] == base['depths']       # it presses as hard as before
+            gap = np.diff(st['y']).max()
+            assert (max(st['y']) + 0.008 < 0.8 * region) == half
+            if not half:   # overlapping lanes over the whole region
+                assert gap < 2 * 0.008 and max(st['y']) + 0.008 >= region
+            # every lane's hand target below the new skin at the lane's centre
+            y = st['y'][len(st['y']) // 2]
+            x = c.search.points[:, 0][np.isclose(c.search.points[:, 1], y)].min()
+            assert x < skin_of(radii, y, 0.0)
+
+
+def skin_of(radii, y, z):
+    rx, ry, rz = radii
+    return rx * np.sqrt(max(1 - (y / ry) ** 2 - (z / rz) ** 2, 0))
+
+
 def test_pattern_circles_and_spokes():
     a = np.linspace(0, 2 * np.pi, 400)
     circ = np.concatenate([np.c_[r * np.cos(a), r * np.sin(a)] for r in (0.01, 0.02, 0.03)])
