@@ -6,7 +6,10 @@ the one-process graph, and the examiner's per-update cost.
 2. The examiner's core, ROS-free: folding 200 ms of 1 kHz contact samples into the coverage grid
    (what one 5 Hz heat-map tick does) and the end-of-session report, on the shipped mesh.
 
-Run: ``.venv/bin/python bench/bench_exam.py [--quick]`` (``--quick`` skips the full exams).
+Run: ``.venv/bin/python bench/bench_exam.py [--quick]`` (``--quick`` skips the full exams);
+``--cases [NAME ...]``: the systematic trainee on every ready case of the library (or those named)
+and the careless one on the default case, one exam after the other, ending with the README's
+per-case Markdown table.
 The machine's load is printed with every figure: on a shared 2-core machine it dominates.
 """
 from __future__ import annotations
@@ -28,22 +31,60 @@ def load() -> str:
     return Path('/proc/loadavg').read_text().split()[0] if Path('/proc/loadavg').exists() else '?'
 
 
-def full_exam(trainee: str) -> None:
+def full_exam(trainee: str, case: str | None = None) -> dict | None:
+    """One ``exam run`` in a child process; prints a line and returns the report (+ ``wall_s``,
+    ``load``), or None when it failed."""
+    cmd = [sys.executable, '-m', 'haptic_anfis.cli', 'exam', 'run', '--trainee', trainee, '--json']
+    if case:
+        cmd += ['--case', case]
     t0 = time.perf_counter()
-    p = subprocess.run([sys.executable, '-m', 'haptic_anfis.cli', 'exam', 'run', '--trainee',
-                        trainee, '--json'], capture_output=True, text=True, cwd=ROOT,
-                       env=dict(os.environ), timeout=600)
+    p = subprocess.run(cmd, capture_output=True, text=True, cwd=ROOT, env=dict(os.environ),
+                       timeout=900)
     wall = time.perf_counter() - t0
+    name = f'{trainee}@{case or "default"}'
     if p.returncode != 0:
-        print(f'{trainee:10s} FAILED ({p.returncode}): {p.stderr.strip()[-300:]}')
-        return
+        print(f'{name:32s} FAILED ({p.returncode}): {p.stderr.strip()[-300:]}', flush=True)
+        return None
     r = json.loads(p.stdout.strip().splitlines()[-1])
+    r['wall_s'], r['load'] = wall, load()
     c = r['coverage_pct']
-    print(f"{trainee:10s} wall {wall:6.1f} s (session {r['duration_s']:.1f} s, in contact "
+    print(f"{name:32s} wall {wall:6.1f} s (session {r['duration_s']:.1f} s, in contact "
           f"{r['contact_s']:.1f} s) | coverage light/medium/deep {c['light']:.0f}/{c['medium']:.0f}/"
           f"{c['deep']:.0f} % | hits {r['hits']} misses {r['misses']} false {r['false_marks']} | "
-          f"score {r['score']:.1f} {r['verdict']} | felt {r['trainee'].get('felt_samples')} | "
-          f"load {load()}")
+          f"score {r['score']:.1f} {r['verdict']} | {r['pattern']} | felt "
+          f"{r['trainee'].get('felt_samples')} | load {r['load']}", flush=True)
+    return r
+
+
+def markdown_row(case: str, trainee: str, r: dict) -> str:
+    """One README table row: what the trainee found, from the forces alone, and why it missed."""
+    det = '; '.join(f"({d['y_mm']:.0f}, {d['z_mm']:.0f}) mm +{d['excess_pct']:.0f} % "
+                    f"({d['sigma']:.1f} σ)" for d in r['trainee']['detections']) or 'none'
+    why = '; '.join(f"{les['name']}: {les['missed']}" for les in r['lesions']
+                    if not les['found']) or '–'
+    return (f"| {case} | {trainee} | {len(r['lesions'])} | {r['hits']} | {r['misses']} | "
+            f"{r['false_marks']} | {r['coverage_pct']['deep']:.1f} | {r['score']:.1f} "
+            f"({r['verdict']}) | {r['pattern']} | {r['wall_s']:.0f} ({r['duration_s']:.0f}) | "
+            f"{r['load']} | {det} | {why} |")
+
+
+def all_cases(names: list[str]) -> None:
+    """The systematic trainee on every given (default: every ready) case, the careless one on the
+    default case; a Markdown table at the end."""
+    from haptic_anfis.cases import library
+    names = names or [c.name for c in library().ready()]
+    rows = []
+    for name in names:
+        r = full_exam('systematic', name)
+        if r is not None:
+            rows.append(markdown_row(name, 'systematic', r))
+    r = full_exam('careless', 'default')
+    if r is not None:
+        rows.append(markdown_row('default', 'careless', r))
+    print('\n| case | trainee | lesions | hits | misses | false marks | deep coverage % | score | '
+          'pattern | wall s (session s) | load | marked where the forces said (excess) | missed |')
+    print('|---|---|---|---|---|---|---|---|---|---|---|---|---|')
+    print('\n'.join(rows))
 
 
 def core_costs() -> None:
@@ -75,7 +116,13 @@ def core_costs() -> None:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split('\n')[0])
     ap.add_argument('--quick', action='store_true', help='skip the full simulated exams')
+    ap.add_argument('--cases', nargs='*', default=None, metavar='NAME',
+                    help='the systematic trainee on these cases (none given: every ready case) '
+                         'and the careless one on the default case, as a Markdown table')
     a = ap.parse_args()
+    if a.cases is not None:
+        all_cases(a.cases)
+        return
     core_costs()
     if not a.quick:
         for trainee in ('systematic', 'careless'):
