@@ -36,6 +36,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         'at most 300 s)')
     r.add_argument('--record', metavar='BAG', default=None,
                    help='record the session (loop topics + marks) to this new bag directory')
+    r.add_argument('--force-mode', choices=('zoh', 'local_model'), default='zoh',
+                   help="the falcon_driver's force_mode for the exam (default zoh: on the shared "
+                        '2-core machine the one-process exam graph in local_model mode fell to a '
+                        '~280 Hz servo and starved the examiner, see the README)')
+    r.add_argument('--params-file', action='append', default=[], metavar='YAML',
+                   help='ROS 2 parameter file for the nodes (repeatable; the exam sets the '
+                        "driver's palpation_script and force_mode itself)")
     _common(r)
     b = sub.add_parser('report', help='score a recorded session bag')
     b.add_argument('bag', metavar='BAG')
@@ -118,7 +125,8 @@ def _run_sim(args):
     fitted.write_text(yaml.safe_dump(controller.doc))
     ex_params = [Parameter('scene', value=scene or ''),
                  Parameter('exam_config', value=args.exam_config or '')]
-    overrides = {'falcon_driver': [Parameter('palpation_script', value=str(fitted))]}
+    overrides = {'falcon_driver': [Parameter('palpation_script', value=str(fitted)),
+                                   Parameter('force_mode', value=args.force_mode)]}
     if case is not None:   # model, surface and lesions of the case in every node
         for node in ('contact_detector', 'force_server'):
             overrides[node] = [Parameter('case', value=case.name)]
@@ -130,7 +138,9 @@ def _run_sim(args):
         from ..nodes.recorder import Recorder
         extra.append(lambda ctx: Recorder(context=ctx, output=args.record, topics=ALL_LOOP_TOPICS))
     try:
-        graph = build_graph(['haptic-anfis-exam'], visualizer=False, extra=extra,
+        ros_args = ['--ros-args', *[a for f in args.params_file for a in ('--params-file', f)]] \
+            if args.params_file else []
+        graph = build_graph(['haptic-anfis-exam', *ros_args], visualizer=False, extra=extra,
                             overrides=overrides)
     except ParameterError as exc:
         raise ValueError(str(exc)) from None
@@ -162,6 +172,7 @@ def _run_sim(args):
         'felt_samples': controller.felt}
     report['heat_maps_published'] = examiner.n_published
     report['case'] = case.name if case else (scene or 'default')
+    report['force_mode'] = args.force_mode
     return report, examiner.session
 
 
