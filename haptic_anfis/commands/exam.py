@@ -17,6 +17,9 @@ from pathlib import Path
 NAME = 'exam'
 HELP = 'examination mode: run a simulated trainee through an exam, or score a recorded session'
 
+#: [s] the longest ``exam run`` waits, after the trainee is done, for its marks to reach the examiner
+MARK_DRAIN_S = 10.0
+
 HEADLINE = ('coverage_pct', 'duration_s', 'contact_s', 'path_length_m', 'hits', 'misses',
             'false_marks', 'score', 'verdict', 'pattern')
 
@@ -81,8 +84,9 @@ def resolve_exam_case(case: str | None, need: tuple[str, ...] = ('model_path', '
 
 
 def run(args: argparse.Namespace) -> int:
+    felt = None
     if args.exam_command == 'run':
-        report, session = _run_sim(args)
+        report, session, felt = _run_sim(args)
     else:
         report, session = _report_bag(args)
     print_report(report)
@@ -90,6 +94,11 @@ def run(args: argparse.Namespace) -> int:
         from ..nodes.examiner import write_report
         write_report(session, args.out, report)
         print(f'report         {Path(args.out) / "report.json"}, {Path(args.out) / "report.png"}')
+        if felt is not None:   # what the simulated trainee felt: its detector can be re-run on it
+            import numpy as np
+            np.save(Path(args.out) / 'trainee_felt.npy', felt)
+            print(f'trainee felt   {Path(args.out) / "trainee_felt.npy"} ((n, 5): contact x, y, '
+                  'z [m], depth [m], |F| [N])')
     if args.json:
         print(json.dumps(report), flush=True)
     return 0
@@ -153,8 +162,12 @@ def _run_sim(args):
     print(f'exam: trainee {args.trainee} ({controller.search.duration:.0f} s search), case '
           f'{case.name if case else "default (scene " + (scene or "default") + ")"}, lesions from '
           f'{examiner.subject.source}', flush=True)
+    driver = graph.driver
     try:
         graph.spin_for(limit, lambda: controller.finished)
+        # The executor may run seconds behind the 1 kHz loop on a loaded machine: wait until the
+        # examiner has every mark the driver published (a stop right after the last click lost it).
+        graph.spin_for(MARK_DRAIN_S, lambda: len(examiner.session.marks) >= driver.clutch.marks)
         graph.spin_for(0.2)
     except KeyboardInterrupt:
         print('interrupted', flush=True)
@@ -173,7 +186,7 @@ def _run_sim(args):
     report['heat_maps_published'] = examiner.n_published
     report['case'] = case.name if case else (scene or 'default')
     report['force_mode'] = args.force_mode
-    return report, examiner.session
+    return report, examiner.session, controller.felt_array()
 
 
 def _report_bag(args):

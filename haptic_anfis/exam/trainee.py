@@ -157,6 +157,10 @@ class TraineeController:
         """Samples felt so far."""
         return len(self._samples)
 
+    def felt_array(self) -> np.ndarray:
+        """(n, 5): every felt sample's contact point x, y, z [m], depth [m], |F| [N]."""
+        return np.array(self._samples, float).reshape(-1, 5)
+
     @property
     def search_over(self) -> bool:
         return self.t_now >= self.search.duration
