@@ -87,6 +87,35 @@ def all_cases(names: list[str]) -> None:
     print('\n'.join(rows))
 
 
+def margins(seed: int = 0) -> None:
+    """How far each ready case's lesions stand out in its MODEL's forces, as the trainee's
+    detector sees them without dynamics: the top 3 bumps (no threshold) of ``detect_lumps`` on
+    ``ForceModel.predict`` along the trainee's strips fitted to the case (depth uniform 8-12 mm,
+    0.5 mm lateral jitter, seeded)."""
+    from haptic_anfis.anfis import ForceModel
+    from haptic_anfis.cases import library
+    from haptic_anfis.exam.detector import detect_lumps
+    rng = np.random.default_rng(seed)
+    for c in library().ready():
+        sc = c.scene
+        rx, ry, rz = sc.radii
+        k = sc.palpable_radius / 0.042
+        yz = []
+        for y in np.arange(-0.040, 0.0401, 0.008) * k:
+            h = np.sqrt(max((0.044 * k) ** 2 - y * y, 0))
+            yz += [(y + rng.normal(0, 0.0005), z) for z in np.arange(-h, h, 0.001)]
+        yz = np.array(yz)
+        x = rx * np.sqrt(np.clip(1 - (yz[:, 0] / ry) ** 2 - (yz[:, 1] / rz) ** 2, 0, None))
+        d = rng.uniform(0.008, 0.012, len(yz))
+        P = np.c_[x, yz]
+        F = np.linalg.norm(ForceModel.load(c.model_path).predict(np.c_[P, d]), axis=1)
+        les = ', '.join(f'({t.centre[1] * 1e3:.0f}, {t.centre[2] * 1e3:.0f}) mm r {t.radius * 1e3:.1f}'
+                        for t in sc.tumours) or 'none'
+        bumps = '; '.join(f'({b.y * 1e3:.1f}, {b.z * 1e3:.1f}) mm +{100 * b.excess:.1f} % '
+                          f'{b.sigma:.1f} σ' for b in detect_lumps(P, d, F, min_rel=0.0, k_sigma=0.0))
+        print(f'{c.name:24s} lesions {les} | bumps {bumps}', flush=True)
+
+
 def core_costs() -> None:
     from haptic_anfis.contact import load_mesh
     from haptic_anfis.exam import ExamConfig, ExamSession, Surface, subject_from_scene
@@ -119,7 +148,12 @@ def main() -> None:
     ap.add_argument('--cases', nargs='*', default=None, metavar='NAME',
                     help='the systematic trainee on these cases (none given: every ready case) '
                          'and the careless one on the default case, as a Markdown table')
+    ap.add_argument('--margins', action='store_true',
+                    help="each ready case's lesion bumps in its model's forces (no dynamics)")
     a = ap.parse_args()
+    if a.margins:
+        margins()
+        return
     if a.cases is not None:
         all_cases(a.cases)
         return
