@@ -33,6 +33,17 @@ def test_systematic_trainee_covers_and_finds_the_lesion_from_forces(tmp_path, ca
     pytest.systematic_score = r['score']
 
 
+def test_systematic_trainee_marks_nothing_on_the_lesion_free_case(capfd):
+    """The case library's 'normal' (no lesion) through its own model and surface: the same
+    force-only detector finds nothing, so no mark, and the exam passes."""
+    assert main(['exam', 'run', '--case', 'normal', '--trainee', 'systematic', '--json']) == 0
+    r = last_json(capfd.readouterr().out)
+    assert r['case'] == 'normal' and r['lesions'] == [] and r['coverage_pct']['deep'] >= 90, r
+    assert r['trainee']['finished'] and r['trainee']['detections'] == [], r
+    assert r['samples']['marks'] == 0 and r['false_marks'] == 0 and r['verdict'] == 'pass', r
+    assert any('no lesion' in n for n in r['notes'])
+
+
 def test_careless_trainee_scores_lower_and_misses_and_the_bag_says_the_same(tmp_path, capfd):
     bag = tmp_path / 'bag'
     assert main(['exam', 'run', '--trainee', 'careless', '--json', '--record', str(bag)]) == 0
