@@ -109,10 +109,11 @@ def margins(seed: int = 0) -> None:
         d = rng.uniform(0.008, 0.012, len(yz))
         P = np.c_[x, yz]
         F = np.linalg.norm(ForceModel.load(c.model_path).predict(np.c_[P, d]), axis=1)
-        les = ', '.join(f'({t.centre[1] * 1e3:.0f}, {t.centre[2] * 1e3:.0f}) mm r {t.radius * 1e3:.1f}'
-                        for t in sc.tumours) or 'none'
+        les = ', '.join(f'({t.centre[1] * 1e3:.0f}, {t.centre[2] * 1e3:.0f}) mm '
+                        f'r {t.radius * 1e3:.1f}' for t in sc.tumours) or 'none'
+        top = detect_lumps(P, d, F, min_rel=0.0, k_sigma=0.0)
         bumps = '; '.join(f'({b.y * 1e3:.1f}, {b.z * 1e3:.1f}) mm +{100 * b.excess:.1f} % '
-                          f'{b.sigma:.1f} σ' for b in detect_lumps(P, d, F, min_rel=0.0, k_sigma=0.0))
+                          f'{b.sigma:.1f} σ' for b in top)
         print(f'{c.name:24s} lesions {les} | bumps {bumps}', flush=True)
 
 

@@ -17,7 +17,8 @@ from pathlib import Path
 NAME = 'exam'
 HELP = 'examination mode: run a simulated trainee through an exam, or score a recorded session'
 
-#: [s] the longest ``exam run`` waits, after the trainee is done, for its marks to reach the examiner
+#: [s] the longest ``exam run`` waits, after the trainee is done, for its marks to reach the
+#: examiner
 MARK_DRAIN_S = 10.0
 
 HEADLINE = ('coverage_pct', 'duration_s', 'contact_s', 'path_length_m', 'hits', 'misses',
