@@ -1,6 +1,7 @@
 """haptic-anfis exam run / report end to end: the simulated trainees through the whole graph."""
 import json
 
+import numpy as np
 import pytest
 
 from pathlib import Path
@@ -24,10 +25,23 @@ def test_systematic_trainee_covers_and_finds_the_lesion_from_forces(tmp_path, ca
     assert r['hits'] == 1 and r['misses'] == 0 and r['false_marks'] == 0, r
     assert r['pattern'] == 'vertical_strip' and r['verdict'] == 'pass'
     assert r['trainee']['finished'] and len(r['trainee']['detections']) == 1
-    assert r['heat_maps_published'] >= 5 * r['duration_s'] * 0.5   # ~5 Hz (loaded machine)
+    # the 5 Hz heat map keeps coming (its rate under load is bench_exam's, not a test's: the
+    # loaded executor of this 2-core machine gave 2.6 Hz in one run)
+    assert r['heat_maps_published'] >= r['duration_s']
     assert (tmp_path / 'report.png').is_file()
     assert json.loads((tmp_path / 'report.json').read_text())['score'] == r['score']
     pytest.systematic_score = r['score']
+
+
+def test_systematic_trainee_marks_nothing_on_the_lesion_free_case(capfd):
+    """The case library's 'normal' (no lesion) through its own model and surface: the same
+    force-only detector finds nothing, so no mark, and the exam passes."""
+    assert main(['exam', 'run', '--case', 'normal', '--trainee', 'systematic', '--json']) == 0
+    r = last_json(capfd.readouterr().out)
+    assert r['case'] == 'normal' and r['lesions'] == [] and r['coverage_pct']['deep'] >= 90, r
+    assert r['trainee']['finished'] and r['trainee']['detections'] == [], r
+    assert r['samples']['marks'] == 0 and r['false_marks'] == 0 and r['verdict'] == 'pass', r
+    assert any('no lesion' in n for n in r['notes'])
 
 
 def test_careless_trainee_scores_lower_and_misses_and_the_bag_says_the_same(tmp_path, capfd):
@@ -64,6 +78,40 @@ def test_report_of_a_bag_without_the_topics_is_valid(tmp_path, capfd):
     r = last_json(capfd.readouterr().out)
     assert r['coverage_pct'] == {'light': 0.0, 'medium': 0.0, 'deep': 0.0}
     assert any('no /contact topic' in n for n in r['notes'])
+
+
+def test_report_of_a_session_that_never_touched_with_a_mark_in_the_air(tmp_path, capfd):
+    """Bad input: the probe hovered above the skin the whole session and the trainee marked in
+    the air — a valid report (zero coverage, the mark false 'outside the surface'), notes that
+    say so, exit 0."""
+    from haptic_anfis.bag import typestore
+    from haptic_anfis.bag.writer import BagWriter
+    from haptic_anfis.nodes import interfaces as ifc
+    ts = typestore()
+    T, H = ts.types['builtin_interfaces/msg/Time'], ts.types['std_msgs/msg/Header']
+    JS = ts.types['sensor_msgs/msg/JointState']
+    PS, P = ts.types['geometry_msgs/msg/PointStamped'], ts.types['geometry_msgs/msg/Point']
+    bag = tmp_path / 'hover'
+    with BagWriter(bag) as w:
+        w.add_topic('/contact', JS.__msgtype__)
+        w.add_topic('/exam/marks', PS.__msgtype__)
+        for k in range(200):   # 2 s above the skin: in_contact 0
+            js = JS(H(T(100 + k // 100, (k % 100) * 10_000_000), 'tissue'),
+                    list(ifc.CONTACT_FIELDS), np.zeros(len(ifc.CONTACT_FIELDS)), np.zeros(0),
+                    np.zeros(0))
+            w.write('/contact', ts.serialize_cdr(js, JS.__msgtype__), 100_000_000_000 + k * 10**7)
+        mark = PS(H(T(101, 0), 'tissue'), P(0.08, 0.0, 0.0))   # 35 mm above the nipple
+        w.write('/exam/marks', ts.serialize_cdr(mark, PS.__msgtype__), 101_000_000_000)
+    assert main(['exam', 'report', str(bag), '--json', '--out', str(tmp_path / 'out')]) == 0
+    out = capfd.readouterr().out
+    r = last_json(out)
+    assert r['coverage_pct'] == {'light': 0.0, 'medium': 0.0, 'deep': 0.0}
+    assert r['contact_s'] == 0 and r['pattern'] == 'none' and r['duration_s'] > 1.9
+    assert r['false_marks'] == 1 and 'outside the surface' in r['marks'][0]['reason']
+    assert r['misses'] == 1 and r['lesions'][0]['missed'] == 'never palpated deep'
+    assert any('never touched' in n for n in r['notes'])
+    assert any('outside the surface' in n for n in r['notes'])
+    assert (tmp_path / 'out' / 'report.png').is_file()
 
 
 def test_bad_inputs_are_named(tmp_path, capfd):

@@ -17,6 +17,10 @@ from pathlib import Path
 NAME = 'exam'
 HELP = 'examination mode: run a simulated trainee through an exam, or score a recorded session'
 
+#: [s] the longest ``exam run`` waits, after the trainee is done, for its marks to reach the
+#: examiner
+MARK_DRAIN_S = 10.0
+
 HEADLINE = ('coverage_pct', 'duration_s', 'contact_s', 'path_length_m', 'hits', 'misses',
             'false_marks', 'score', 'verdict', 'pattern')
 
@@ -25,7 +29,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     sub = p.add_subparsers(dest='exam_command', metavar='{run,report}', required=True)
     r = sub.add_parser('run', help='run the graph with the examiner and a simulated trainee')
     r.add_argument('--case', default=None, metavar='NAME',
-                   help='scene name in config/scenes or a scene file (default: default)')
+                   help='case of the library (haptic-anfis cases list: its model, surface and '
+                        'lesions) or a scene file (its lesions, default model) (default: default)')
     r.add_argument('--trainee', default='systematic', metavar='systematic|careless|SCRIPT',
                    help='simulated trainee: systematic, careless or a palpation script (YAML)')
     r.add_argument('--speed', type=float, default=None,
@@ -35,11 +40,19 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         'at most 300 s)')
     r.add_argument('--record', metavar='BAG', default=None,
                    help='record the session (loop topics + marks) to this new bag directory')
+    r.add_argument('--force-mode', choices=('zoh', 'local_model'), default='zoh',
+                   help="the falcon_driver's force_mode for the exam (default zoh: on the shared "
+                        '2-core machine the one-process exam graph in local_model mode fell to a '
+                        '~280 Hz servo and starved the examiner, see the README)')
+    r.add_argument('--params-file', action='append', default=[], metavar='YAML',
+                   help='ROS 2 parameter file for the nodes (repeatable; the exam sets the '
+                        "driver's palpation_script and force_mode itself)")
     _common(r)
     b = sub.add_parser('report', help='score a recorded session bag')
     b.add_argument('bag', metavar='BAG')
     b.add_argument('--case', default=None, metavar='NAME',
-                   help='scene name in config/scenes or a scene file (default: default)')
+                   help='case of the library (its surface and lesions) or a scene file (its '
+                        'lesions) the session is scored against (default: default)')
     _common(b)
 
 
@@ -51,24 +64,30 @@ def _common(p):
                    help='scoring settings (default config/exam.yaml)')
 
 
-def scene_for_case(case: str | None) -> str | None:
-    """--case NAME (a scene in config/scenes) or a scene file path -> path (None = default)."""
+def resolve_exam_case(case: str | None, need: tuple[str, ...] = ('model_path', 'mesh_path'),
+                      lib=None):
+    """``--case``: a case of the library (``haptic-anfis cases list``; its files ``need`` must
+    exist) or a scene file (``*.yaml``: its lesions are scored, the default model and surface
+    render) -> ``(Case | None, scene path | None)``; ``(None, None)`` = the default scene.
+
+    Raises:
+        CaseError (a ValueError): unknown case (the message lists the known ones), or a file it
+        needs is missing.
+    """
     if case is None:
-        return None
-    from ..tissue.scene import SCENE_DIR
+        return None, None
     p = Path(case)
     if p.suffix in ('.yaml', '.yml') and p.is_file():
-        return str(p)
-    q = SCENE_DIR / f'{case}.yaml'
-    if q.is_file():
-        return str(q)
-    have = ', '.join(sorted(f.stem for f in SCENE_DIR.glob('*.yaml')))
-    raise ValueError(f'--case {case!r}: no such case (have: {have}) and no such scene file')
+        return None, str(p)
+    from ..cases import library
+    c = (lib or library()).get(case).require(need)
+    return c, str(c.scene_path)
 
 
 def run(args: argparse.Namespace) -> int:
+    felt = None
     if args.exam_command == 'run':
-        report, session = _run_sim(args)
+        report, session, felt = _run_sim(args)
     else:
         report, session = _report_bag(args)
     print_report(report)
@@ -76,6 +95,11 @@ def run(args: argparse.Namespace) -> int:
         from ..nodes.examiner import write_report
         write_report(session, args.out, report)
         print(f'report         {Path(args.out) / "report.json"}, {Path(args.out) / "report.png"}')
+        if felt is not None:   # what the simulated trainee felt: its detector can be re-run on it
+            import numpy as np
+            np.save(Path(args.out) / 'trainee_felt.npy', felt)
+            print(f'trainee felt   {Path(args.out) / "trainee_felt.npy"} ((n, 5): contact x, y, '
+                  'z [m], depth [m], |F| [N])')
     if args.json:
         print(json.dumps(report), flush=True)
     return 0
@@ -96,11 +120,27 @@ def _run_sim(args):
         raise ValueError(f'--duration: expected > 0 s, got {args.duration}')
     if args.speed is not None and not (args.speed > 0 and math.isfinite(args.speed)):
         raise ValueError(f'--speed: expected > 0 m/s, got {args.speed}')
-    scene = scene_for_case(args.case)
+    from ..tissue.scene import load_scene
+    case, scene = resolve_exam_case(args.case)
     script = trainee_path(args.trainee)
-    controller = TraineeController.from_yaml(script, args.speed)
+    sc = load_scene(scene) if scene else None
+    # The trainee sees the breast (its size), never the lesions: scripts fit to the case's surface.
+    controller = TraineeController.from_yaml(
+        script, args.speed, breast=None if sc is None else (sc.radii, sc.palpable_radius))
+    import tempfile
+
+    import yaml
+    tmp = tempfile.TemporaryDirectory(prefix='haptic-anfis-exam-')
+    fitted = Path(tmp.name) / 'trainee.yaml'   # the driver starts the hand where it begins
+    fitted.write_text(yaml.safe_dump(controller.doc))
     ex_params = [Parameter('scene', value=scene or ''),
                  Parameter('exam_config', value=args.exam_config or '')]
+    overrides = {'falcon_driver': [Parameter('palpation_script', value=str(fitted)),
+                                   Parameter('force_mode', value=args.force_mode)]}
+    if case is not None:   # model, surface and lesions of the case in every node
+        for node in ('contact_detector', 'force_server'):
+            overrides[node] = [Parameter('case', value=case.name)]
+        ex_params.append(Parameter('case', value=case.name))
     extra = [lambda ctx: Examiner(context=ctx, parameter_overrides=ex_params),
              lambda ctx: SimTrainee(controller, context=ctx)]
     if args.record:
@@ -108,19 +148,27 @@ def _run_sim(args):
         from ..nodes.recorder import Recorder
         extra.append(lambda ctx: Recorder(context=ctx, output=args.record, topics=ALL_LOOP_TOPICS))
     try:
-        graph = build_graph(['haptic-anfis-exam'], visualizer=False, extra=extra,
-                            overrides={'falcon_driver': [
-                                Parameter('palpation_script', value=str(script))]})
+        ros_args = ['--ros-args', *[a for f in args.params_file for a in ('--params-file', f)]] \
+            if args.params_file else []
+        graph = build_graph(['haptic-anfis-exam', *ros_args], visualizer=False, extra=extra,
+                            overrides=overrides)
     except ParameterError as exc:
         raise ValueError(str(exc)) from None
+    finally:
+        tmp.cleanup()
     # The driver's simulated Falcon plays the trainee (same start point as the script it loaded).
     graph.driver.device.script = controller
     examiner = graph.extra[0]
     limit = args.duration if args.duration is not None else 300.0
-    print(f'exam: trainee {args.trainee} ({controller.search.duration:.0f} s search), lesions from '
+    print(f'exam: trainee {args.trainee} ({controller.search.duration:.0f} s search), case '
+          f'{case.name if case else "default (scene " + (scene or "default") + ")"}, lesions from '
           f'{examiner.subject.source}', flush=True)
+    driver = graph.driver
     try:
         graph.spin_for(limit, lambda: controller.finished)
+        # The executor may run seconds behind the 1 kHz loop on a loaded machine: wait until the
+        # examiner has every mark the driver published (a stop right after the last click lost it).
+        graph.spin_for(MARK_DRAIN_S, lambda: len(examiner.session.marks) >= driver.clutch.marks)
         graph.spin_for(0.2)
     except KeyboardInterrupt:
         print('interrupted', flush=True)
@@ -137,7 +185,9 @@ def _run_sim(args):
         for d in controller.detections or []], 'finished': controller.finished,
         'felt_samples': controller.felt}
     report['heat_maps_published'] = examiner.n_published
-    return report, examiner.session
+    report['case'] = case.name if case else (scene or 'default')
+    report['force_mode'] = args.force_mode
+    return report, examiner.session, controller.felt_array()
 
 
 def _report_bag(args):
@@ -149,8 +199,9 @@ def _report_bag(args):
     from ..bag.reader import bag_info
     from ..bag.topics import absolute
     cfg = load_exam_config(args.exam_config)
-    subject = subject_from_scene(scene_for_case(args.case))
-    mesh = load_mesh(DEFAULT_SURFACE, unit='mm')
+    case, scene = resolve_exam_case(args.case, need=('mesh_path',))
+    subject = subject_from_scene(scene)
+    mesh = load_mesh(case.mesh_path if case else DEFAULT_SURFACE, unit='mm')
     mesh.merge_vertices()
     session = ExamSession(Surface.from_mesh(mesh), subject, cfg)
     info = bag_info(args.bag)
@@ -193,6 +244,7 @@ def _report_bag(args):
     report = session.report()
     report['notes'] = notes + report['notes']
     report['bag'] = str(args.bag)
+    report['case'] = case.name if case else (scene or 'default')
     return report, session
 
 

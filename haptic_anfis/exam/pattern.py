@@ -1,11 +1,19 @@
 """Search pattern of a palpation path (no ROS): vertical strips, spiral / circles, radial spokes.
 
 The three patterns compared by Saunders, Pilgrim & Pennypacker (Cancer 1986) and taught by the
-MammaCare method (vertical strips). The in-contact path is resampled every ``step`` metres in the
-chest plane (y, z); each step's direction is compared with the vertical (z), the radial direction
-from the nipple axis and the tangential one. The pattern is the direction class holding the largest
-share of path length when that share is at least ``min_share``; else 'mixed' ('none' without
-contact).
+MammaCare method (vertical strips). A pattern is a property of the path at the scale of the search
+(the probe footprint), not of the millimetre motion under the finger: the rendered tissue force
+pushes the probe along the skin's normal, whose chest-plane part is *radial*, so every change of
+pressure (and any wobble of the hand against the tissue, which grows when the servo loop is
+starved on a loaded machine) moves the contact point radially by a millimetre or two. Sampled
+every 2 mm that motion alone made a vertical-strip exam come out 'radial'. So the in-contact path
+is first averaged over ``smooth`` seconds (when sample times are given), then resampled every
+``step`` metres (default: the footprint radius) in the chest plane (y, z); each step's direction
+is compared with the vertical (z), the radial direction from the nipple axis and the tangential
+one. A step along two of them (a vertical step near the z axis is also radial) is *ambiguous* and
+decides nothing: the pattern is the class with the largest share of path that only it explains,
+provided the class explains (alone or shared) at least ``min_share`` of the path; else 'mixed'
+('none' without contact).
 """
 from __future__ import annotations
 
@@ -14,6 +22,28 @@ import math
 import numpy as np
 
 COS = math.cos(math.radians(25.0))   # within 25 deg of a direction counts as along it
+CLASSES = ('vertical_strip', 'spiral_circular', 'radial')
+
+
+def smooth_path(yz: np.ndarray, t: np.ndarray, segment: np.ndarray, window: float) -> np.ndarray:
+    """``yz`` (n, 2) averaged over a centred ``window`` [s] of sample times ``t`` (n,) [s],
+    within each contact episode (``segment`` ids, n): removes motion faster than the search
+    (hand / tissue wobble of tens of Hz) whatever the sampling rate."""
+    yz = np.asarray(yz, float).reshape(-1, 2)
+    out = yz.copy()
+    if window <= 0 or len(yz) < 3:
+        return out
+    t = np.asarray(t, float)
+    cuts = np.flatnonzero(np.diff(segment)) + 1
+    for piece in np.split(np.arange(len(yz)), cuts):
+        if len(piece) < 3:
+            continue
+        tp = t[piece]
+        c = np.vstack([np.zeros((1, 2)), np.cumsum(yz[piece], axis=0)])
+        lo = np.searchsorted(tp, tp - window / 2, side='left')
+        hi = np.searchsorted(tp, tp + window / 2, side='right')
+        out[piece] = (c[hi] - c[lo]) / (hi - lo)[:, None]
+    return out
 
 
 def resample(yz: np.ndarray, segment: np.ndarray, step: float) -> list[np.ndarray]:
@@ -33,18 +63,30 @@ def resample(yz: np.ndarray, segment: np.ndarray, step: float) -> list[np.ndarra
     return out
 
 
-def classify(yz: np.ndarray, segment: np.ndarray, footprint_radius: float, step: float = 0.002,
-             min_share: float = 0.5) -> dict:
-    """Pattern of the in-contact path ``yz`` (n, 2) [m] with contact-episode ids ``segment`` (n,).
+def classify(yz: np.ndarray, segment: np.ndarray, footprint_radius: float,
+             step: float | None = None, min_share: float = 0.5, t: np.ndarray | None = None,
+             smooth: float = 0.1) -> dict:
+    """Pattern of the in-contact path ``yz`` (n, 2) [m] with contact-episode ids ``segment`` (n,)
+    and, optionally, sample times ``t`` (n,) [s] (then the path is averaged over ``smooth`` s
+    first). ``step`` [m] is the resampling distance (None = ``footprint_radius``).
 
-    Returns {pattern, shares: {vertical_strip, spiral_circular, radial}, strips: {count,
+    Returns {pattern, shares: {vertical_strip, spiral_circular, radial}: the share of the path
+    length along only that class, along: the same counting the ambiguous steps in every class
+    they fit, ambiguous: the share along more than one class, step_mm, strips: {count,
     spacing_mm, overlap, gaps}} where strips are vertical runs >= 10 mm grouped by y (within half
-    a footprint radius), spacing
-    the mean distance between neighbouring strips, overlap = 1 - spacing / footprint diameter
-    (negative = gaps) and gaps = neighbouring strips farther apart than the footprint diameter.
+    a footprint radius), spacing the mean distance between neighbouring strips, overlap = 1 -
+    spacing / footprint diameter (negative = gaps) and gaps = neighbouring strips farther apart
+    than the footprint diameter.
     """
-    pieces = resample(np.asarray(yz, float).reshape(-1, 2), np.asarray(segment), step)
-    tot = {'vertical_strip': 0.0, 'spiral_circular': 0.0, 'radial': 0.0}
+    step = float(footprint_radius if step is None else step)
+    yz = np.asarray(yz, float).reshape(-1, 2)
+    segment = np.asarray(segment)
+    if t is not None and len(yz):
+        yz = smooth_path(yz, t, segment, smooth)
+    pieces = resample(yz, segment, step)
+    only = dict.fromkeys(CLASSES, 0.0)
+    along = dict.fromkeys(CLASSES, 0.0)
+    ambiguous = 0.0
     length = 0.0
     runs = []   # (y, length) of vertical runs
     for pts in pieces:
@@ -58,9 +100,12 @@ def classify(yz: np.ndarray, segment: np.ndarray, footprint_radius: float, step:
         vert = np.abs(u[:, 1]) >= COS
         rad = far & (np.abs((u * rhat).sum(axis=1)) >= COS)
         tang = far & (np.abs(u[:, 0] * -rhat[:, 1] + u[:, 1] * rhat[:, 0]) >= COS)
-        tot['vertical_strip'] += L[vert].sum()
-        tot['radial'] += L[rad].sum()
-        tot['spiral_circular'] += L[tang].sum()
+        flags = {'vertical_strip': vert, 'spiral_circular': tang, 'radial': rad}
+        n_fit = vert.astype(int) + rad + tang
+        for k, f in flags.items():
+            along[k] += L[f].sum()
+            only[k] += L[f & (n_fit == 1)].sum()
+        ambiguous += L[n_fit > 1].sum()
         length += L.sum()
         # vertical runs: consecutive vertical steps
         start = None
@@ -72,12 +117,13 @@ def classify(yz: np.ndarray, segment: np.ndarray, footprint_radius: float, step:
                 if abs(seg[-1, 1] - seg[0, 1]) >= 0.010:
                     runs.append((float(np.median(seg[:, 0])), float(abs(seg[-1, 1] - seg[0, 1]))))
                 start = None
-    shares = {k: (v / length if length > 0 else 0.0) for k, v in tot.items()}
+    share = {k: (v / length if length > 0 else 0.0) for k, v in only.items()}
+    share_along = {k: (v / length if length > 0 else 0.0) for k, v in along.items()}
     if length <= 0:
         pattern = 'none'
     else:
-        best = max(shares, key=shares.get)
-        pattern = best if shares[best] >= min_share else 'mixed'
+        best = max(share, key=share.get)
+        pattern = best if share[best] > 0 and share_along[best] >= min_share else 'mixed'
     ys = sorted(y for y, _ in runs)
     strips = []
     for y in ys:  # group runs closer than half a footprint radius into one strip
@@ -88,7 +134,10 @@ def classify(yz: np.ndarray, segment: np.ndarray, footprint_radius: float, step:
     centres = [float(np.mean(s)) for s in strips]
     spacing = np.diff(centres)
     dia = 2 * footprint_radius
-    return {'pattern': pattern, 'shares': {k: round(v, 4) for k, v in shares.items()},
+    return {'pattern': pattern, 'shares': {k: round(float(v), 4) for k, v in share.items()},
+            'along': {k: round(float(v), 4) for k, v in share_along.items()},
+            'ambiguous': round(float(ambiguous / length), 4) if length > 0 else 0.0,
+            'step_mm': round(step * 1e3, 2),
             'strips': {'count': len(centres),
                        'spacing_mm': round(float(spacing.mean()) * 1e3, 2) if len(spacing) else None,
                        'overlap': round(float(1 - spacing.mean() / dia), 3) if len(spacing) else None,

@@ -86,6 +86,7 @@ class ExamSession:
         self.update_coverage()
         cfg = self.config
         c = np.array(self.contacts, float).reshape(-1, 6)
+        c = c[np.argsort(c[:, 0], kind='stable')]   # callbacks / bag order: by stamp
         p = np.array(self.poses, float).reshape(-1, 4)
         f = np.array(self.forces, float).reshape(-1, 4)
         times = np.concatenate([c[:, 0], p[:, 0], f[:, 0], [m[0] for m in self.marks]])
@@ -101,7 +102,7 @@ class ExamSession:
         path = p[:, 1:4] if len(p) else c[:, 1:4]
         path_len = _path_length(path)
         seg = np.cumsum(np.r_[0, np.diff(inside.astype(int)) != 0]) if len(c) else np.zeros(0)
-        pat = classify(c[inside, 2:4], seg[inside], cfg.footprint_radius)
+        pat = classify(c[inside, 2:4], seg[inside], cfg.footprint_radius, t=c[inside, 0])
         cov = self.grid.fraction()
         # depth and force per level (force samples matched to contact samples by time)
         depth_max = float(c[inside, 4].max()) if inside.any() else 0.0

@@ -43,18 +43,55 @@ def trainee_path(name: str) -> Path:
     return p
 
 
+def fit_to_breast(doc: dict, region_radius: float, radii, palpable_radius: float) -> dict:
+    """The palpation script ``doc``, laid out for a palpable region of ``region_radius`` [m], moved
+    onto a breast of ``radii`` (rx, ry, rz) [m] whose palpable region has ``palpable_radius`` [m].
+
+    A trainee sees the breast it examines (never its lesions): the hand aims from the new surface
+    (``surface.radii``) and every ``strip`` move's lanes, z ends and ``clip_radius`` scale by
+    ``palpable_radius / region_radius`` (so the shipped systematic trainee's 8 mm lanes over the
+    default 42 mm region become 7.2 mm over a 38 mm one and 9.1 mm over a 48 mm one: still
+    overlapping the 16 mm probe). Depths, speeds and other moves are kept. Returns a new dict.
+    """
+    if not (region_radius > 0 and palpable_radius > 0):
+        raise ValueError(f'region_radius {region_radius!r} / palpable radius {palpable_radius!r}: '
+                         'expected > 0 m')
+    k = palpable_radius / region_radius
+    out = dict(doc)
+    out['surface'] = {**(doc.get('surface') or {}), 'radii': [float(r) for r in radii]}
+    pattern = []
+    for move in doc.get('pattern') or []:
+        if isinstance(move, dict) and set(move) == {'strip'} and isinstance(move['strip'], dict):
+            st = dict(move['strip'])
+            st['y'] = [round(float(v) * k, 6) for v in st.get('y', [])]
+            st['z'] = [round(float(v) * k, 6) for v in st.get('z', [])]
+            if 'clip_radius' in st:
+                st['clip_radius'] = round(float(st['clip_radius']) * k, 6)
+            move = {'strip': st}
+        pattern.append(move)
+    out['pattern'] = pattern
+    return out
+
+
 class TraineeController:
     """The hand script of a simulated trainee (thread-safe between the servo thread, which calls
     ``target``/``buttons``, and the executor thread, which calls ``feel``/``decide``).
 
     Args:
         doc: the trainee YAML as a dict: a palpation script (``loop`` forced off) plus optional
-            ``mark: {depth, hold}`` (how to press a mark; no ``mark`` key = never marks).
+            ``mark: {depth, hold}`` (how to press a mark; no ``mark`` key = never marks) and
+            ``region_radius`` [m] (the palpable radius the script's strips were laid out for).
         speed: overrides the script's ``press_speed`` [m/s] (None = keep).
+        breast: ``(radii (3,) [m], palpable_radius [m])`` of the case's breast: a script with
+            ``region_radius`` is fitted to it (:func:`fit_to_breast`); None = as written.
     """
 
-    def __init__(self, doc: dict, speed: float | None = None, detector_kw: dict | None = None):
+    def __init__(self, doc: dict, speed: float | None = None, detector_kw: dict | None = None,
+                 breast: tuple | None = None):
         doc = dict(doc)
+        region = doc.pop('region_radius', None)
+        if breast is not None and region is not None:
+            doc = fit_to_breast(doc, float(region), *breast)
         doc['loop'] = False
         if speed is not None:
             doc['press_speed'] = float(speed)
@@ -70,13 +107,14 @@ class TraineeController:
         self.done_at: float | None = None
 
     @classmethod
-    def from_yaml(cls, path: str | os.PathLike, speed: float | None = None) -> 'TraineeController':
+    def from_yaml(cls, path: str | os.PathLike, speed: float | None = None,
+                  breast: tuple | None = None) -> 'TraineeController':
         path = Path(path)
         try:
             doc = yaml.safe_load(path.read_text())
             if not isinstance(doc, dict):
                 raise ValueError('expected a mapping (a palpation script)')
-            return cls(doc, speed)
+            return cls(doc, speed, breast=breast)
         except (OSError, yaml.YAMLError, ValueError, TypeError, KeyError) as exc:
             raise ValueError(f'trainee script {str(path)!r}: {exc}') from None
 
@@ -118,6 +156,10 @@ class TraineeController:
     def felt(self) -> int:
         """Samples felt so far."""
         return len(self._samples)
+
+    def felt_array(self) -> np.ndarray:
+        """(n, 5): every felt sample's contact point x, y, z [m], depth [m], |F| [N]."""
+        return np.array(self._samples, float).reshape(-1, 5)
 
     @property
     def search_over(self) -> bool:

@@ -1,7 +1,9 @@
 """``examiner``: watches a palpation session and scores it (:mod:`haptic_anfis.exam`).
 
 Subscribes to the probe pose, contact, force command, buttons and marks (``exam/marks``); knows the
-case's lesions from ``scene`` (:func:`lesion_source`, where a case library plugs in). Publishes a
+case — its surface and lesions — from ``case`` / ``random_case_seed`` (the case library, as the
+other case-aware nodes; setting either on a running examiner starts a new exam on that case) or,
+with no case, from ``scene`` and the mesh parameters (:func:`lesion_source`). Publishes a
 live coverage heat map on the mesh (``exam/coverage``, ``visualization_msgs/MarkerArray``: the
 palpable region's triangles coloured by the deepest level pressed — grey none, yellow light,
 orange medium, red deep — in ~16 mm patches, each sent when it changes and all every 2 s, plus a
@@ -24,6 +26,7 @@ from visualization_msgs.msg import Marker, MarkerArray
 from ..exam import ExamSession, Surface, load_exam_config, subject_from_scene
 from ..exam.lesions import ExamSubject
 from . import interfaces as ifc
+from ._case import CASE_PARAMS, apply_case, declare_case  # noqa: F401 (CASE_PARAMS: in config)
 from ._common import Param, declare_parameters, positive, run_node, stamp_ns
 from .contact_detector import MESH_PARAMS, load_surface
 
@@ -44,21 +47,42 @@ LEVEL_COLOURS = ((0.6, 0.6, 0.6, 0.5), (1.0, 0.9, 0.2, 0.8), (1.0, 0.55, 0.0, 0.
                  (0.85, 0.1, 0.1, 0.9))
 
 
-def lesion_source(p: dict) -> ExamSubject:
-    """The lesions to find from the node's parameters (today the scene file; a ``case``
-    parameter resolves to its scene here)."""
+def lesion_source(p: dict, case=None) -> ExamSubject:
+    """The lesions to find: the case's scene when a case is chosen, else the ``scene`` file."""
+    if case is not None:
+        return subject_from_scene(case.scene_path)
     return subject_from_scene(p['scene'] or None)
 
 
 class Examiner(Node):
     def __init__(self, name: str = 'examiner', **kw):
         super().__init__(name, **kw)
-        p = self.params = declare_parameters(self, PARAMS)
+        p = self.own_params = declare_parameters(self, PARAMS)
         self.config = load_exam_config(p['exam_config'] or None)   # ValueError -> exit 1
-        self.subject = lesion_source(p)
+        case = declare_case(self, self.switch_case)
+        self._start_exam(case)
+        self.pub = self.create_publisher(MarkerArray, ifc.TOPIC_COVERAGE, 1)
+        self.create_subscription(JointState, ifc.TOPIC_CONTACT, self._on_contact, SAMPLE_QOS)
+        self.create_subscription(WrenchStamped, ifc.TOPIC_COMMAND, self._on_force, SAMPLE_QOS)
+        self.create_subscription(PoseStamped, ifc.TOPIC_POSE, self._on_pose, SAMPLE_QOS)
+        self.create_subscription(PointStamped, ifc.TOPIC_MARKS, self._on_mark, 10)
+        self.create_subscription(Joy, ifc.TOPIC_BUTTONS, self._on_buttons, 10)
+        self.timer = self.create_timer(1.0 / p['rate'], self._publish)
+        self.n_published = 0
+
+    def switch_case(self, case) -> None:
+        """A new exam on ``case`` (None: the own scene / mesh parameters); the samples so far are
+        dropped (write the report first if it is wanted)."""
+        self._start_exam(case)
+        self.get_logger().warning('case switched: a new exam starts')
+
+    def _start_exam(self, case) -> None:
+        p = self.params = apply_case(self.own_params, case, self.own_params)
+        subject = lesion_source(p, case)
         mesh = load_surface(self, p)
-        self.session = ExamSession(Surface.from_mesh(mesh), self.subject, self.config)
-        s = self.session
+        session = ExamSession(Surface.from_mesh(mesh), subject, self.config)
+        self.subject, self.session = subject, session
+        s = session
         self._colours = [ColorRGBA(r=r, g=g, b=b, a=a) for r, g, b, a in LEVEL_COLOURS]
         self._patches, self._patch_faces = _patch_markers(s, p['frame_id'])
         self._text = Marker()
@@ -71,16 +95,10 @@ class Examiner(Node):
         t.color.r = t.color.g = t.color.b = t.color.a = 1.0
         self._last_levels = None
         self._last_full = -1e9
-        self.pub = self.create_publisher(MarkerArray, ifc.TOPIC_COVERAGE, 1)
-        self.create_subscription(JointState, ifc.TOPIC_CONTACT, self._on_contact, SAMPLE_QOS)
-        self.create_subscription(WrenchStamped, ifc.TOPIC_COMMAND, self._on_force, SAMPLE_QOS)
-        self.create_subscription(PoseStamped, ifc.TOPIC_POSE, self._on_pose, SAMPLE_QOS)
-        self.create_subscription(PointStamped, ifc.TOPIC_MARKS, self._on_mark, 10)
-        self.create_subscription(Joy, ifc.TOPIC_BUTTONS, self._on_buttons, 10)
-        self.timer = self.create_timer(1.0 / p['rate'], self._publish)
-        self.n_published = 0
-        self.get_logger().info(f'{len(self.subject.lesions)} lesion(s) from {self.subject.source}, '
-                               f'{len(s.grid.centroids)} surface cells in the palpable region')
+        blind = self.get_parameter('random_case_seed').value >= 0   # log no case name
+        self.get_logger().info(f'{len(subject.lesions)} lesion(s)'
+                               + ('' if blind else f' from {subject.source}')
+                               + f', {len(s.grid.centroids)} surface cells in the palpable region')
 
     def _on_contact(self, msg: JointState) -> None:
         v = msg.position

@@ -18,6 +18,11 @@ from ._common import stamp_ns
 from .examiner import SAMPLE_QOS
 
 
+#: contacts waiting for their force (stamp -> sample); the oldest go first past this many (5 s of
+#: 1 kHz contacts): a burst of late forces on a loaded machine used to clear them all
+MAX_PENDING = 5000
+
+
 class SimTrainee(Node):
     def __init__(self, controller, name: str = 'sim_trainee', **kw):
         super().__init__(name, **kw)
@@ -31,9 +36,10 @@ class SimTrainee(Node):
     def _on_contact(self, msg: JointState) -> None:
         v = msg.position
         if len(v) == len(ifc.CONTACT_FIELDS) and v[ifc.I_IN_CONTACT] > 0.5:
-            if len(self._pending) > 1000:  # forces lost: do not grow
-                self._pending.clear()
-            self._pending[stamp_ns(msg.header.stamp)] = (v[0], v[1], v[2], v[ifc.I_DEPTH])
+            pending = self._pending
+            while len(pending) >= MAX_PENDING:   # forces lost: forget the oldest, do not grow
+                del pending[next(iter(pending))]
+            pending[stamp_ns(msg.header.stamp)] = (v[0], v[1], v[2], v[ifc.I_DEPTH])
 
     def _on_force(self, msg: WrenchStamped) -> None:
         c = self._pending.pop(stamp_ns(msg.header.stamp), None)
