@@ -239,6 +239,7 @@ class ForceModel:
     def _compile(self) -> None:
         self._fp, self._ip = compiled.pack(self.models_, self.input_cols_, self.scale_col_, 4)
         compiled.warm_up(self._fp, self._ip)
+        self._eval_one, self._jac_one = compiled.entry_points(self._fp, self._ip)
 
     def predict(self, X: np.ndarray) -> np.ndarray:
         """Numpy batch path: X (n, 4) [m] -> (n, 3) [N]. Raises ValueError on NaN/Inf input."""
@@ -280,7 +281,7 @@ class ForceModel:
         Raises:
             ValueError: if any input is NaN or Inf.
         """
-        F, J, ok = compiled.jac_xyzd(x, y, z, depth, self._fp, self._ip)
+        F, J, ok = self._jac_one(x, y, z, depth, self._fp, self._ip)
         if not ok:
             raise ValueError(f'non-finite input to jacobian_one: x={x!r}, y={y!r}, z={z!r}, '
                              f'depth={depth!r}')
@@ -300,11 +301,11 @@ class ForceModel:
         Raises:
             ValueError: if any input is NaN or Inf (the caller decides the safe output, e.g. 0 N).
         """
-        fx, fy, fz, ok = compiled.eval_xyzd(x, y, z, depth, self._fp, self._ip)
-        if not ok:
+        try:
+            return self._eval_one(x, y, z, depth, self._fp, self._ip)
+        except ValueError:
             raise ValueError(f'non-finite input to predict_one: x={x!r}, y={y!r}, z={z!r}, '
-                             f'depth={depth!r}')
-        return fx, fy, fz
+                             f'depth={depth!r}') from None
 
     @property
     def kernel_params(self) -> tuple[np.ndarray, np.ndarray]:
