@@ -139,7 +139,8 @@ def _eval_point(q, fp, ip, out, J, want_jac, ws):
             elo = fp[base + 2 * d + i]
             ehi = fp[base + 3 * d + i]
             xe[i] = min(max(u, elo), ehi)
-            inb[i] = 1.0 if elo < u < ehi else 0.0
+            if want_jac:
+                inb[i] = 1.0 if elo < u < ehi else 0.0
             m = ip[h + i]
             # Interval [b_j, b_j+1] holding xm; only MFs j and j + 1 can be non-zero there.
             j = 0
@@ -156,11 +157,12 @@ def _eval_point(q, fp, ip, out, J, want_jac, ws):
                 if want_jac and lo < u < hi:
                     d0 = _dtri(xm, a0, b0, c0)
                     d1 = _dtri(xm, a1, b1, c1)
-            sg = g0 + g1
+            isg = 1.0 / (g0 + g1)
             rbase += j * ip[h + d + i]
-            mu0[i] = g0 / sg
-            mu1[i] = g1 / sg
-            dmu1[i] = (d1 * g0 - g1 * d0) / (sg * sg)
+            mu0[i] = g0 * isg
+            mu1[i] = g1 * isg
+            if want_jac:
+                dmu1[i] = (d1 * g0 - g1 * d0) * isg * isg
             mf += 3 * m
         acc = 0.0
         for i in range(d):
