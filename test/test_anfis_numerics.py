@@ -118,3 +118,51 @@ def test_training_is_deterministic_for_a_seed(synthetic):
     for ma, mb in zip(a.models_, b.models_):
         assert np.array_equal(ma.coef, mb.coef)
         assert all(np.array_equal(P, Q) for P, Q in zip(ma.mfs, mb.mfs))
+
+
+def test_single_query_path_takes_ints_and_numpy_scalars_and_rejects_the_rest(scaled):
+    """predict_one / jacobian_one call the compiled float signature directly (no type dispatch):
+    ints and numpy scalars convert to the same float query; a non-number raises TypeError (it never
+    compiles a new specialisation in the servo loop); NaN raises ValueError naming the input."""
+    ref = scaled.predict_one(0.04, 0.0, 0.0, 0.008)
+    assert scaled.predict_one(0.04, np.int64(0), 0, np.float64(0.008)) == ref
+    d32 = np.float32(0.008)
+    assert scaled.predict_one(0.04, 0.0, 0.0, d32) == scaled.predict_one(0.04, 0.0, 0.0, float(d32))
+    assert scaled.predict_one(0, 0, 0, 0) == (0.0, 0.0, 0.0)
+    F, J = scaled.jacobian_one(np.float64(0.04), 0, 0.0, 0.008)
+    np.testing.assert_array_equal(F, ref)
+    with pytest.raises(TypeError):
+        scaled.predict_one(0.04, object(), 0.0, 0.008)
+    with pytest.raises(TypeError):
+        scaled.jacobian_one(None, 0.0, 0.0, 0.008)
+    with pytest.raises(ValueError, match='depth=nan'):
+        scaled.predict_one(0.04, 0.0, 0.0, float('nan'))
+
+
+def test_pickled_model_predicts_the_same(scaled, synthetic):
+    import pickle
+    clone = pickle.loads(pickle.dumps(scaled))
+    X = synthetic.X[::7]
+    np.testing.assert_array_equal(clone.predict_compiled(X), scaled.predict_compiled(X))
+    assert [clone.predict_one(*x) for x in X] == [scaled.predict_one(*x) for x in X]
+    np.testing.assert_array_equal(clone.jacobian_one(*X[3])[1], scaled.jacobian_one(*X[3])[1])
+
+
+def test_no_hold_out_trains_every_output_on_all_the_data(synthetic, tmp_path):
+    """val_fraction 0: no epoch hold-out; each output is the hybrid rule run for ``epochs`` epochs
+    on all the data (its lowest-training-error epoch), and the model file still round-trips."""
+    from haptic_anfis.anfis import train_on_dataset
+    kw = dict(structure=(2, 3, 2), epochs=4, val_fraction=0)
+    m = ForceModel(**kw).fit(synthetic.X, synthetic.Y, groups=synthetic.point)
+    assert m.val_rmse_ == [None] * 3 and all(1 <= e <= 4 for e in m.best_epoch_)
+    X = synthetic.X[:, 1:]
+    lo, hi = X.min(0), X.max(0)
+    ref = train(X, synthetic.Y[:, 1], (2, 3, 2), 4, lo=lo, hi=hi, scale=synthetic.X[:, 3])
+    np.testing.assert_array_equal(m.models_[1].coef, ref.model.coef)
+    model, _ = train_on_dataset(synthetic, **kw)
+    model.save(tmp_path / 'm.json')
+    loaded = ForceModel.load(tmp_path / 'm.json')
+    np.testing.assert_array_equal(loaded.predict(synthetic.X), model.predict(synthetic.X))
+    with pytest.raises(ValueError, match='val_fraction 0'):
+        ForceModel(val_fraction=0, search_folds=1, epochs=2).fit(synthetic.X, synthetic.Y,
+                                                                  groups=synthetic.point)

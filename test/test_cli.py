@@ -65,3 +65,15 @@ def test_bad_inputs_give_one_line_errors(tmp_path, capsys):
 def test_no_command_prints_help(capsys):
     assert main([]) == 2
     assert 'train' in capsys.readouterr().out
+
+
+def test_bench_model_takes_per_output_structures(dataset_csv, tmp_path, capsys):
+    cfg = tmp_path / 'cfg.yaml'
+    cfg.write_text('force_model:\n  epochs: 3\n  structure: [3, 2, 2]\n')
+    assert main(['bench', 'model', '--dataset', dataset_csv, '--config', str(cfg), '--repeats', '50',
+                 '--structures', 'config', '2-2-2/3-2-2/2-3-2']) == 0
+    text = capsys.readouterr().out
+    assert '3-2-2/3-2-2/3-2-2' in text          # 'config' = the config's structure
+    assert '2-2-2/3-2-2/2-3-2' in text          # one structure per output (Fx/Fy/Fz)
+    with pytest.raises(SystemExit):
+        main(['bench', 'model', '--structures', '2-2-2/2-2-2'])

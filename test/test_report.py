@@ -187,3 +187,19 @@ def test_group_cv_is_out_of_fold_by_point(small_ds):
         m = P.LinearPeer().fit(small_ds.X[keep], small_ds.Y[keep])
         pred[held] = m.predict(small_ds.X[held])
     np.testing.assert_allclose(res['rmse'][0], np.sqrt(np.mean((pred - small_ds.Y) ** 2, axis=0)))
+
+
+def test_report_measures_the_shipped_model_as_configured():
+    """The report's default row retrains with the hyper-parameters the shipped model file records,
+    and those are config/force_model.yaml's (the file the README says made it)."""
+    from pathlib import Path
+
+    from haptic_anfis.commands.train import load_config
+    from haptic_anfis.report.run import cv_models, shipped_params
+    cfg = load_config(str(Path(__file__).resolve().parents[1] / 'config' / 'force_model.yaml'))
+    sp = shipped_params()
+    for key in ('form', 'inputs', 'extrapolation', 'ridge', 'epochs'):
+        assert tuple(sp[key]) == tuple(cfg[key]) if isinstance(sp[key], tuple) else sp[key] == cfg[key]
+    per_output = lambda st: [tuple(st)] * 3 if isinstance(st[0], int) else [tuple(s) for s in st]  # noqa: E731
+    assert per_output(sp['structure']) == per_output(cfg['structure'])
+    assert any(name.endswith('(shipped)') for name in cv_models(quick=False))

@@ -51,7 +51,8 @@ class ForceModel:
         ridge: relative ridge weight of the consequent least squares.
         step: initial gradient step (fraction of an input's range).
         val_fraction: part of the training data held out to choose the epoch count (and the
-            structure when ``search_folds`` is 1).
+            structure when ``search_folds`` is 1); 0 = no hold-out: train ``epochs`` epochs on
+            all the data and keep the lowest-training-error one.
         search_folds: k > 1 scores each structure candidate by k-fold validation over the
             training data (whole surface points per fold with ``split='point'``; k is capped at
             the number of points); 1 uses the single ``val_fraction`` hold-out. On the FE data
@@ -159,7 +160,15 @@ class ForceModel:
         by = self.split if groups is not None else 'sample'
         groups = np.arange(len(X)) if groups is None else np.asarray(groups)
         ds = ForceDataset(X4, Y, groups)
-        fit_idx, val_idx = split_indices(ds, self.val_fraction, self.seed, by=by)
+        if self.val_fraction == 0:
+            # No hold-out: every output trains exactly ``epochs`` epochs on all the data and keeps
+            # its lowest-training-error epoch (a fixed epoch count, itself chosen by grouped CV).
+            if any(s is None for s in self._structures()) and int(self.search_folds) < 2:
+                raise ValueError('val_fraction 0 (no hold-out) needs a fixed structure or '
+                                 'search_folds >= 2 to score the structure search')
+            fit_idx, val_idx = np.arange(len(X)), np.arange(0)
+        else:
+            fit_idx, val_idx = split_indices(ds, self.val_fraction, self.seed, by=by)
         if isinstance(self.search_folds, bool) or not isinstance(self.search_folds, (int, np.integer)) \
                 or self.search_folds < 1:
             raise ValueError(f'search_folds: expected an integer >= 1, got {self.search_folds!r}')
@@ -189,16 +198,20 @@ class ForceModel:
             else:
                 sr = None
                 structure = fixed
-            # Choose the epoch with the full epoch budget on the held-out part ...
-            chk = train(Xf, tf, structure, self.epochs, X_check=Xv, t_check=tv, lo=lo, hi=hi,
-                        scale=sub(fit_idx), scale_check=sub(val_idx), **kw)
-            # ... then retrain on all the training data for exactly that many epochs.
-            final = train(X, Y[:, o], structure, chk.best_epoch, lo=lo, hi=hi, scale=S, **kw)
+            if len(val_idx):
+                # Choose the epoch with the full epoch budget on the held-out part ...
+                chk = train(Xf, tf, structure, self.epochs, X_check=Xv, t_check=tv, lo=lo, hi=hi,
+                            scale=sub(fit_idx), scale_check=sub(val_idx), **kw)
+                # ... then retrain on all the training data for exactly that many epochs.
+                final = train(X, Y[:, o], structure, chk.best_epoch, lo=lo, hi=hi, scale=S, **kw)
+            else:
+                final = chk = train(X, Y[:, o], structure, self.epochs, lo=lo, hi=hi, scale=S, **kw)
             final.model.extrapolation = ext[list(cols)]
             self.models_.append(final.model)
             self.search_.append(sr)
             self.best_epoch_.append(chk.best_epoch)
-            self.val_rmse_.append(chk.check_rmse[chk.best_epoch - 1])
+            self.val_rmse_.append(chk.check_rmse[chk.best_epoch - 1] if chk.check_rmse
+                                  else None)  # no hold-out (val_fraction 0)
             pred = final.model.predict(X) * (1.0 if S is None else S)
             self.train_rmse_.append(float(np.sqrt(np.mean((pred - Y[:, o]) ** 2))))
             self.train_curves_.append({'train': chk.train_rmse, 'check': chk.check_rmse})
@@ -239,6 +252,17 @@ class ForceModel:
     def _compile(self) -> None:
         self._fp, self._ip = compiled.pack(self.models_, self.input_cols_, self.scale_col_, 4)
         compiled.warm_up(self._fp, self._ip)
+        self._eval_one, self._jac_one = compiled.entry_points(self._fp, self._ip)
+
+    def __getstate__(self) -> dict[str, Any]:
+        # The compiled entry points are not picklable; they are rebuilt from the packed arrays.
+        return {k: v for k, v in self.__dict__.items() if k not in ('_eval_one', '_jac_one')}
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        self.__dict__.update(state)
+        if '_fp' in state:
+            compiled.warm_up(self._fp, self._ip)
+            self._eval_one, self._jac_one = compiled.entry_points(self._fp, self._ip)
 
     def predict(self, X: np.ndarray) -> np.ndarray:
         """Numpy batch path: X (n, 4) [m] -> (n, 3) [N]. Raises ValueError on NaN/Inf input."""
@@ -280,7 +304,7 @@ class ForceModel:
         Raises:
             ValueError: if any input is NaN or Inf.
         """
-        F, J, ok = compiled.jac_xyzd(x, y, z, depth, self._fp, self._ip)
+        F, J, ok = self._jac_one(x, y, z, depth, self._fp, self._ip)
         if not ok:
             raise ValueError(f'non-finite input to jacobian_one: x={x!r}, y={y!r}, z={z!r}, '
                              f'depth={depth!r}')
@@ -300,11 +324,11 @@ class ForceModel:
         Raises:
             ValueError: if any input is NaN or Inf (the caller decides the safe output, e.g. 0 N).
         """
-        fx, fy, fz, ok = compiled.eval_xyzd(x, y, z, depth, self._fp, self._ip)
-        if not ok:
+        try:
+            return self._eval_one(x, y, z, depth, self._fp, self._ip)
+        except ValueError:
             raise ValueError(f'non-finite input to predict_one: x={x!r}, y={y!r}, z={z!r}, '
-                             f'depth={depth!r}')
-        return fx, fy, fz
+                             f'depth={depth!r}') from None
 
     @property
     def kernel_params(self) -> tuple[np.ndarray, np.ndarray]:
@@ -418,7 +442,7 @@ def _candidate_dict(c: Candidate) -> dict[str, Any]:
 
 
 def _print_output_summary(name: str, sr: SearchResult | None, structure: Structure, epoch: int,
-                          train_rmse: float, val_rmse: float, seconds: float) -> None:
+                          train_rmse: float, val_rmse: float | None, seconds: float) -> None:
     if sr is not None:
         print(f'{name}: structure search ({len(sr.candidates)} candidates)')
         print(f'  {"structure":<12} {"rules":>5} {"params":>6} {"train N":>9} {"val N":>9} '
@@ -427,8 +451,9 @@ def _print_output_summary(name: str, sr: SearchResult | None, structure: Structu
             mark = ' <- chosen' if c.structure == structure else ''
             print(f'  {"-".join(map(str, c.structure)):<12} {c.n_rules:>5} {c.n_params:>6} '
                   f'{c.train_rmse:>9.5f} {c.val_rmse:>9.5f} {c.best_epoch:>5} {c.seconds:>6.2f}{mark}')
+    val = 'n/a (no hold-out)' if val_rmse is None else f'{val_rmse:.5f} N'
     print(f'{name}: structure {"-".join(map(str, structure))}, best epoch {epoch}, '
-          f'train RMSE {train_rmse:.5f} N, validation RMSE {val_rmse:.5f} N ({seconds:.1f} s)')
+          f'train RMSE {train_rmse:.5f} N, validation RMSE {val} ({seconds:.1f} s)')
 
 
 def rmse(pred: np.ndarray, Y: np.ndarray) -> list[float]:

@@ -87,8 +87,10 @@ def run(args: argparse.Namespace) -> int:
     r = model.metadata_['rmse']
     print(f'\n{"output":<6} {"structure":<10} {"train N":>9} {"val N":>9} {"test N":>9}')
     for o, name in enumerate(OUTPUT_NAMES):
+        val = r['validation'][o]
+        val = f'{val:>9.5f}' if val is not None else f'{"n/a":>9}'  # val_fraction 0: no hold-out
         print(f'{name:<6} {"-".join(map(str, model.structures_[o])):<10} {r["train"][o]:>9.5f} '
-              f'{r["validation"][o]:>9.5f} {r["test"][o]:>9.5f}')
+              f'{val} {r["test"][o]:>9.5f}')
     print(f'trained in {model.fit_seconds_:.1f} s; test set: {len(test)} samples')
     model.save(args.out)
     print(f'wrote {args.out}')

@@ -7,7 +7,7 @@ Timings are printed, never asserted: the machines are shared and noisy.
 from __future__ import annotations
 
 import time
-from typing import Sequence
+from typing import Any, Sequence
 
 import numpy as np
 
@@ -21,9 +21,18 @@ def time_single(fn, queries: np.ndarray, repeats: int) -> np.ndarray:
     return time_calls(fn, [tuple(float(v) for v in q) for q in queries], repeats)
 
 
-def bench_structures(ds: ForceDataset, structures: Sequence[tuple[int, ...] | None], seed: int = 0,
-                     repeats: int = 20000, batch: int = 100_000) -> list[dict]:
-    """Train one ForceModel per structure (``None`` = structure search) and measure it."""
+def bench_structures(ds: ForceDataset, structures: Sequence[Any], seed: int = 0,
+                     repeats: int = 20000, batch: int = 100_000,
+                     params: dict[str, Any] | None = None) -> list[dict]:
+    """Train one ForceModel per structure and measure it.
+
+    Args:
+        structures: per entry ``None`` (structure search), one tuple for all outputs, or three
+            tuples (Fx, Fy, Fz).
+        params: further ForceModel keyword arguments (e.g. config/force_model.yaml's section
+            without its ``structure``, ``seed`` and ``test_fraction``).
+    """
+    params = dict(params or {})
     tr_idx, te_idx = split_indices(ds, 0.2, seed)
     tr, te = ds.subset(tr_idx), ds.subset(te_idx)
     rng = np.random.default_rng(seed)
@@ -32,15 +41,18 @@ def bench_structures(ds: ForceDataset, structures: Sequence[tuple[int, ...] | No
     rows = []
     for st in structures:
         t0 = time.perf_counter()
-        model = ForceModel(structure=st, seed=seed).fit(tr.X, tr.Y, groups=tr.point)
+        model = ForceModel(**{**params, 'structure': st, 'seed': seed}).fit(tr.X, tr.Y,
+                                                                          groups=tr.point)
         fit_s = time.perf_counter() - t0
         numpy_one = lambda x, y, z, d: model.predict(np.array([[x, y, z, d]]))  # noqa: E731
         c50, c99 = percentiles_us(time_single(model.predict_one, te.X, repeats))
         n50, n99 = percentiles_us(time_single(numpy_one, te.X, max(repeats // 10, 200)))
         j50, j99 = percentiles_us(time_single(model.jacobian_one, te.X, repeats))
+        structs = ['-'.join(map(str, s)) for s in model.structures_]
         rows.append({
-            'label': 'search' if st is None else '-'.join(map(str, st)),
-            'structures': ['-'.join(map(str, s)) for s in model.structures_],
+            'label': 'search' if st is None else ('/'.join(structs) if len(set(structs)) > 1
+                                                  else structs[0]),
+            'structures': structs,
             'rules': [m.n_rules for m in model.models_],
             'test_rmse': rmse(model.predict(te.X), te.Y),
             'fit_s': fit_s,
@@ -54,7 +66,7 @@ def bench_structures(ds: ForceDataset, structures: Sequence[tuple[int, ...] | No
 
 
 def format_table(rows: list[dict]) -> str:
-    head = (f'{"model":<8} {"structures (Fx/Fy/Fz)":<28} {"RMSE Fx":>8} {"Fy":>8} {"Fz":>8} '
+    head = (f'{"model":<20} {"structures (Fx/Fy/Fz)":<24} {"RMSE Fx":>8} {"Fy":>8} {"Fz":>8} '
             f'{"fit s":>6} {"jit p50":>8} {"p99 µs":>7} {"jac p50":>7} {"p99 µs":>7} '
             f'{"np p50":>7} {"p99 µs":>7} '
             f'{"jit eval/s":>11} {"np eval/s":>10}')
@@ -62,7 +74,7 @@ def format_table(rows: list[dict]) -> str:
     for r in rows:
         e = r['test_rmse']
         lines.append(
-            f'{r["label"]:<8} {"/".join(r["structures"]):<28} {e[0]:>8.4f} {e[1]:>8.4f} {e[2]:>8.4f} '
+            f'{r["label"]:<20} {"/".join(r["structures"]):<24} {e[0]:>8.4f} {e[1]:>8.4f} {e[2]:>8.4f} '
             f'{r["fit_s"]:>6.1f} {r["compiled_p50_us"]:>8.2f} {r["compiled_p99_us"]:>7.2f} '
             f'{r["jacobian_p50_us"]:>7.2f} {r["jacobian_p99_us"]:>7.2f} '
             f'{r["numpy_p50_us"]:>7.1f} {r["numpy_p99_us"]:>7.1f} '

@@ -76,6 +76,14 @@ class _Standardised(Peer):
 
 
 # ---- ours -----------------------------------------------------------------------------------
+def structure_label(structure: Any) -> str:
+    """'5-5-2' for one structure (all outputs), '7-7-2/5-5-2/5-5-2' for one per output."""
+    if len(structure) and all(isinstance(v, (int, np.integer)) for v in structure):
+        return '-'.join(map(str, structure))
+    labels = ['-'.join(map(str, s)) for s in structure]
+    return labels[0] if len(set(labels)) == 1 else '/'.join(labels)
+
+
 class OursPeer(Peer):
     """Our ANFIS (:class:`haptic_anfis.anfis.ForceModel`); ``structure=None`` = the structure search."""
 
@@ -86,8 +94,10 @@ class OursPeer(Peer):
         self.structure = structure
         self.params = params
         form = 'plain' if params.get('form') == 'plain' else 'depth·g'
+        if params.get('inputs') is not None and tuple(params['inputs']) != ('y', 'z', 'depth'):
+            form += '(' + ', '.join(params['inputs']) + ')'
         self.name = (f'ours {form}: search' if structure is None else
-                     f'ours {form} ' + '-'.join(map(str, structure)))
+                     f'ours {form} {structure_label(structure)}')
 
     def fit(self, X, Y, groups=None):
         from ..anfis import ForceModel

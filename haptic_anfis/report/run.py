@@ -26,16 +26,34 @@ PAPER_EVALS_PER_S = 1e5
 #: Plain-form (the paper's F = ANFIS(x, y, z, depth)) structures the report also trains.
 FULL_STRUCTURES: tuple[tuple[int, ...], ...] = ((3, 3, 3, 2), (4, 4, 4, 2))
 QUICK_STRUCTURES: tuple[tuple[int, ...], ...] = ((2, 2, 2, 2),)
-#: The shipped default (config/force_model.yaml): depth-scaled form over (y, z, depth).
-DEFAULT_STRUCTURE = (5, 5, 2)
-#: ... with its extrapolation (x, y, z, depth): consequents extend 15 % past the y, z range.
-DEFAULT_EXTRAPOLATION = (0.0, 0.15, 0.15, 0.0)
+def shipped_params(path: str | os.PathLike | None = None) -> dict[str, Any]:
+    """ForceModel keyword arguments that retrain the shipped default model (or the model file at
+    ``path``): read from the hyper-parameters the file records (its form, inputs, per-output
+    structures, extrapolation band, ridge, epochs, validation split), so that the report measures
+    exactly what the force server loads (config/force_model.yaml made it: ``haptic-anfis train``)."""
+    from ..tissue.dataset import DATA_DIR, INPUT_NAMES
+    doc = json.loads(Path(path or DATA_DIR / 'default_model.json').read_text())
+    tr = doc.get('training', {})
+    form = doc.get('form') or {'name': 'plain', 'inputs': list(INPUT_NAMES)}
+    cols = [INPUT_NAMES.index(n) for n in form['inputs']]
+    ext = np.zeros(len(INPUT_NAMES))
+    ext[cols] = doc['outputs'][0]['extrapolation']
+    structures = [tuple(o['structure']) for o in doc['outputs']]
+    params: dict[str, Any] = {
+        'form': form['name'], 'inputs': tuple(form['inputs']),
+        'structure': structures[0] if len(set(structures)) == 1 else structures,
+        'extrapolation': tuple(float(v) for v in ext)}
+    for key in ('ridge', 'epochs', 'val_fraction', 'split'):
+        if key in tr:
+            params[key] = tr[key]
+    return params
 
 
 def our_models(quick: bool, seed: int = 0,
                structures: Sequence[tuple[int, ...]] | None = None) -> list[OursPeer]:
-    """The shipped default first (depth-scaled 5-5-2), the depth-scaled structure search, then
-    plain-form fixed structures (the paper's 3-3-3-2 and 4-4-4-2)."""
+    """The shipped default first (its hyper-parameters read from the model file, see
+    :func:`shipped_params`), the depth-scaled structure search, then plain-form fixed structures
+    (the paper's 3-3-3-2 and 4-4-4-2)."""
     if structures is None:
         structures = QUICK_STRUCTURES if quick else FULL_STRUCTURES
     kw: dict[str, Any] = {'seed': seed}
@@ -44,21 +62,26 @@ def our_models(quick: bool, seed: int = 0,
         default = OursPeer((3, 3, 2), **kw)
         search = OursPeer(None, search_epochs=4, max_mfs=(3, 2, 2), **kw)
     else:
-        default = OursPeer(DEFAULT_STRUCTURE, extrapolation=DEFAULT_EXTRAPOLATION, **kw)
+        sp = shipped_params()
+        default = OursPeer(sp.pop('structure'), **sp, **kw)
+        default.name += ' (shipped)'
         search = OursPeer(None, **kw)
     return [default, search, *(OursPeer(tuple(s), form='plain', **kw) for s in structures)]
 
 
 def cv_models(quick: bool) -> dict[str, Any]:
-    """``name -> (seed -> model)`` of the grouped-CV table: our default and the paper's plain
-    form, and the best plain peers (compiled MLP has the MLP's errors, so it is not repeated)."""
+    """``name -> (seed -> model)`` of the grouped-CV table: the shipped default and the paper's
+    plain form, and the best plain peers (compiled MLP has the MLP's errors, so it is not
+    repeated)."""
     from .peers import LinearPeer, MlpPeer, RbfPeer
     if quick:
         return {'ours depth·g 3-3-2': lambda s: OursPeer((3, 3, 2), epochs=5, seed=s),
                 'RBF (thin plate spline)': lambda s: RbfPeer(),
                 'linear regression': lambda s: LinearPeer()}
-    return {'ours depth·g 5-5-2 (default)': lambda s: OursPeer(
-                DEFAULT_STRUCTURE, extrapolation=DEFAULT_EXTRAPOLATION, seed=s),
+    sp = shipped_params()
+    st = sp.pop('structure')
+    name = OursPeer(st, **sp).name + ' (shipped)'
+    return {name: lambda s: OursPeer(st, seed=s, **sp),
             'ours plain 3-3-3-2 (paper)': lambda s: OursPeer((3, 3, 3, 2), form='plain', seed=s),
             'RBF (thin plate spline)': lambda s: RbfPeer(),
             'MLP 32-32 (tanh)': lambda s: MlpPeer((32, 32), seed=s),
