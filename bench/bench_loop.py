@@ -14,11 +14,16 @@ configuration. Printed, never asserted: the machine is shared (the load average 
 Target (issue 17): local model, separate processes under load: RMS <= 2 % of the force, >= 5x
 better than the zero-order hold in the same run, no watchdog trip in contact.
 
-    .venv/bin/python bench/bench_loop.py [--seconds 10] [--json]
+    .venv/bin/python bench/bench_loop.py [--seconds 10] [--json] [--configs one,multi,busy]
+                                         [--keep DIR]
+
+Columns: ``miss`` = servo deadline misses (a tick started more than a period late), ``cpu%`` = the
+driver process's CPU over the run (all threads; in one process, the whole graph's).
 """
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import os
 import subprocess
@@ -42,6 +47,9 @@ def one_process(seconds: float, mode: str, trace: Path) -> None:
     try:
         if not g.spin_for(60.0, lambda: g.driver.first_command is not None):
             raise RuntimeError('no force command within 60 s')
+        # the window opens at the first command, as run_duration does across processes (the
+        # servo thread's misses while the other nodes were still loading do not count)
+        g.driver.servo.stats.reset()
         g.spin_for(seconds)
     finally:
         g.shutdown()  # the driver writes its trace
@@ -79,7 +87,8 @@ def row(name: str, r: dict) -> str:
             f'{r["ticks_fresh"]:>6} {r["ticks_extrapolated"]:>6} {r["ticks_expired"]:>5} '
             f'{r["watchdog_trips_in_contact"]:>4} {f(r["force_error_rms_pct"]):>7} '
             f'{f(r["force_error_rms_n"], 3):>7} {f(r["force_error_p99_n"], 3):>7} '
-            f'{r["contact_ticks"]:>7}')
+            f'{r["contact_ticks"]:>7} {r.get("deadline_misses") or 0:>5} '
+            f'{f(r.get("process_cpu_pct"), 0):>4}')
 
 
 def main() -> int:
@@ -89,6 +98,9 @@ def main() -> int:
     ap.add_argument('--configs', default='one,multi,busy',
                     help='comma-separated subset of one, multi, busy')
     ap.add_argument('--json', action='store_true', help='also print each run as a JSON line')
+    ap.add_argument('--keep', metavar='DIR', help='write the servo tick traces here (kept: '
+                    "read them with 'haptic-anfis loop DIR/<config>_<mode>.npz') instead of a "
+                    'temporary directory')
     a = ap.parse_args()
     configs = {'one': ('one process', lambda s, m, t: one_process(s, m, t)),
                'multi': ('separate processes', lambda s, m, t: multi_process(s, m, t)),
@@ -97,9 +109,12 @@ def main() -> int:
           f'load average {os.getloadavg()[0]:.2f} (1 min) at start')
     print(f'{"configuration":<30} {"mode":<11} {"rate Hz":>7} {"p50 ms":>6} {"p99 ms":>6} '
           f'{"max ms":>6} {"fresh":>6} {"extrap":>6} {"expir":>5} {"wdog":>4} {"err %":>7} '
-          f'{"RMS N":>7} {"p99 N":>7} {"contact":>7}')
+          f'{"RMS N":>7} {"p99 N":>7} {"contact":>7} {"miss":>5} {"cpu%":>4}')
     ratios = []
-    with tempfile.TemporaryDirectory(prefix='bench_loop_') as tmp:
+    if a.keep:
+        Path(a.keep).mkdir(parents=True, exist_ok=True)
+    with (contextlib.nullcontext(a.keep) if a.keep
+          else tempfile.TemporaryDirectory(prefix='bench_loop_')) as tmp:
         for key in a.configs.split(','):
             name, fn = configs[key]
             res = {}

@@ -11,7 +11,6 @@ takes them to the device frame for the safety layer.
 from __future__ import annotations
 
 import math
-from dataclasses import replace
 
 from .buttons import ClutchMark
 from .falcon import DeviceState, WorkspaceMapping
@@ -93,7 +92,11 @@ class ForceInput:
         stamp: zero is the safe state). Zoh mode: the safety layer's target, timed by its pose;
         local-model mode: the force itself comes with the model. Returns OK or why not."""
         self.commands_received += 1
-        bad = not all(math.isfinite(float(v)) for v in force)
+        try:
+            fx, fy, fz = force
+            bad = not math.isfinite(fx + fy + fz)  # NaN or Inf in any component (or overflow)
+        except (TypeError, ValueError):
+            bad = True
         sf = self.safety.frame_id
         if bad or (sf and frame_id is not None and frame_id != sf):
             self.renderer.clear()
@@ -113,7 +116,7 @@ class ForceInput:
 
     def model(self, m: LocalModel, stamp_ns: int, frame_id: str | None, now: float) -> str:
         """A local force model (tissue frame) answering the pose ``stamp_ns``, received at
-        ``now`` (``m.time`` is replaced by that pose's time). Returns OK or why it was refused:
+        ``now`` (the model's time is that pose's time; ``m.time`` is not used). Returns OK or why it was refused:
         a refused stamp is not taken (the current model keeps running until it expires); a
         malformed / non-finite model or a wrong frame zeroes the force at once."""
         self.models_received += 1
@@ -134,10 +137,10 @@ class ForceInput:
         why, t_pose = self._stamp(stamp_ns, now)
         if why != STAMP_OK:
             return f'rejected: stamp {why}'
-        cur = self.renderer.model
-        if cur is not None and t_pose < cur.time:
+        cur = self.renderer.time
+        if cur is not None and t_pose < cur:
             return 'ignored: older than the current model'
-        self.renderer.offer(replace(m, time=t_pose), checked=True)
+        self.renderer.offer(m, checked=True, time=t_pose)
         self.last_in_contact = m.in_contact
         return OK
 

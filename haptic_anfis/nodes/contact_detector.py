@@ -10,6 +10,7 @@ next good pose cannot start a contact from inside the tissue.
 from __future__ import annotations
 
 import math
+from array import array
 
 import numpy as np
 from geometry_msgs.msg import PoseStamped
@@ -122,8 +123,9 @@ class ContactDetectorNode(Node):
         q = msg.pose.position
         out = self._msg
         out.header.stamp = msg.header.stamp
-        out.position, c, error = contact_values(self.tracker, self.frame_id, msg.header.frame_id,
-                                                (q.x, q.y, q.z))
+        values, c, error = contact_values(self.tracker, self.frame_id, msg.header.frame_id,
+                                          (q.x, q.y, q.z))
+        out.position = array('d', values)  # an array skips the setter's per-element checks
         if error is not None:
             self._bad(error)
         else:

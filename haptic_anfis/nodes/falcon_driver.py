@@ -296,6 +296,7 @@ class FalconDriver(Node):
         if why == OK and self.first_command is None:
             now = time.monotonic()
             self.first_command = now
+            self._cpu0 = time.process_time()  # the process's CPU over the window (summary)
             # the trace and the model statistics measure the loop from the first command on
             self.input.reset_stats()
             if self.servo.trace is not None:
@@ -317,6 +318,10 @@ class FalconDriver(Node):
                  rejected_frame=ss.rejected_frame, watchdog_trips=ss.watchdog_trips,
                  watchdog_trips_in_contact=ss.watchdog_trips_in_contact,
                  clamped=ss.clamped, servo_errors=self.servo.errors, **self.input.summary())
+        if self.first_command is not None:  # CPU of this process (all its threads) / wall time
+            wall = time.monotonic() - self.first_command
+            s['process_cpu_pct'] = (round(100.0 * (time.process_time() - self._cpu0) / wall, 1)
+                                    if wall > 0 else None)
         return s
 
     def close(self) -> None:

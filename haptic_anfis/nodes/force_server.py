@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import math
 import queue
+from array import array
 import threading
 import time
 from pathlib import Path
@@ -80,11 +81,10 @@ def local_model_from_contact(model: ForceModel, v, jacobian=force_and_jacobian
     the depth is saturated, since the force then no longer grows with it). The older 9-value
     contact has no normal: the normal is then taken as -direction. Not in contact, or a bad
     contact: zero force and a model with depth 0 (the driver renders zero)."""
-    lm = [0.0] * len(ifc.LOCAL_MODEL_FIELDS)
     if not ifc.is_contact_values(v):
-        return (0.0, 0.0, 0.0), lm, force_from_contact(model, v)[3]
+        return (0.0, 0.0, 0.0), [0.0] * len(ifc.LOCAL_MODEL_FIELDS), force_from_contact(model, v)[3]
     if not (v[ifc.I_IN_CONTACT] > 0.5 and v[ifc.I_DEPTH] > 0.0):
-        return (0.0, 0.0, 0.0), lm, None
+        return (0.0, 0.0, 0.0), [0.0] * len(ifc.LOCAL_MODEL_FIELDS), None
     x, y, z, depth = float(v[0]), float(v[1]), float(v[2]), float(v[ifc.I_DEPTH])
     d = [float(v[ifc.I_DX]), float(v[ifc.I_DY]), float(v[ifc.I_DZ])]
     n = [float(c) for c in v[ifc.I_NX:ifc.I_NZ + 1]] if len(v) == len(ifc.CONTACT_FIELDS) else []
@@ -97,21 +97,25 @@ def local_model_from_contact(model: ForceModel, v, jacobian=force_and_jacobian
             for row in J:
                 row[3] = 0.0
         K = contact_stiffness(J, n, d)
-        F_surface = model.predict_one(x, y, z, 0.0)
+        zero = zero_at_surface(model, x, y, z)
     except ValueError as exc:
-        return (0.0, 0.0, 0.0), lm, str(exc)
+        return (0.0, 0.0, 0.0), [0.0] * len(ifc.LOCAL_MODEL_FIELDS), str(exc)
     if not math.isfinite(sum(K)):
-        return (0.0, 0.0, 0.0), lm, f'non-finite stiffness at contact ({x}, {y}, {z}, {depth})'
-    lm[ifc.LM_F0] = F
-    lm[ifc.LM_P0] = [x + depth * d[0], y + depth * d[1], z + depth * d[2]]
-    lm[ifc.LM_K] = K
-    lm[ifc.LM_C] = [x, y, z]
-    lm[ifc.LM_N] = n
-    lm[ifc.LM_D] = d
-    lm[ifc.LM_DEPTH] = depth
-    fs0, fs1, fs2 = F_surface
-    lm[ifc.LM_ZERO] = 1.0 if fs0 * fs0 + fs1 * fs1 + fs2 * fs2 < ifc.ZERO_FORCE_TOL ** 2 else 0.0
+        return ((0.0, 0.0, 0.0), [0.0] * len(ifc.LOCAL_MODEL_FIELDS),
+                f'non-finite stiffness at contact ({x}, {y}, {z}, {depth})')
+    lm = [*F, x + depth * d[0], y + depth * d[1], z + depth * d[2], *K, x, y, z, *n, *d, depth,
+          1.0 if zero else 0.0]  # the order of LOCAL_MODEL_FIELDS
     return F, lm, None
+
+
+def zero_at_surface(model: ForceModel, x: float, y: float, z: float) -> bool:
+    """The model's force at depth 0 at the contact point (x, y, z) [m] is below
+    :data:`~.interfaces.ZERO_FORCE_TOL`. The depth-scaled form (F = depth g(...)) is exactly zero
+    there by construction: no evaluation needed; any other form is evaluated."""
+    if getattr(model, 'form', None) == 'depth_scaled':
+        return True
+    f0, f1, f2 = model.predict_one(x, y, z, 0.0)
+    return f0 * f0 + f1 * f1 + f2 * f2 < ifc.ZERO_FORCE_TOL ** 2
 
 
 class ForceServer(Node):
@@ -181,7 +185,7 @@ class ForceServer(Node):
             lm = JointState(name=self._lm.name) if delayed else self._lm
             lm.header.frame_id = self.frame_id
             lm.header.stamp = msg.header.stamp
-            lm.position = values
+            lm.position = array('d', values)  # an array skips the setter's per-element checks
         if error is not None:
             self._bad(error)
         elif fx or fy or fz:
