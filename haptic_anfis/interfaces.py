@@ -38,6 +38,12 @@ stamp of the pose it was computed from, ``header.frame_id`` the tissue frame; ``
   depth then being held at that limit.
 - ``normal_x/y/z``: outward unit surface normal at the contact point (zeros when not in contact).
   Added after the first nine: readers accept the older 9-value messages (:data:`N_CONTACT_V1`).
+- ``effort`` (added with the approach; empty before, and whenever not free or nothing is near):
+  the approach fields :data:`APPROACH_FIELDS` — while the probe is free and a front surface lies
+  within the detector's ``approach_distance`` along the indentation direction, the surface point
+  the probe will touch [m] and the outward unit normal there (normal mode: the closest surface
+  point). The force server sends that tangent plane to the driver as a local model before contact
+  (below), so a press is rendered from its first tick. ``position`` is unchanged by it.
 
 Local force model message (``sensor_msgs/JointState`` on ``falcon/servo_cf_local``, published by
 the force server with every ``falcon/servo_cf``, same stamp: the contact's, i.e. the driver's pose
@@ -53,6 +59,11 @@ it answers; ``header.frame_id`` the tissue frame; ``name`` is exactly :data:`LOC
   message; depth 0 = no contact (the driver renders zero force).
 - ``zero_at_surface``: 1.0 when the model's force at depth 0 at the contact point is below
   :data:`ZERO_FORCE_TOL` (the driver then makes the local model zero on the surface).
+
+A model with depth 0 is "no contact": all zeros (zero force), or, when the contact carried the
+approach fields and the force is zero on the surface, an approach model: F0 = 0, p0 = contact =
+the surface point ahead, the normal there, K = dF/dp at depth 0+ through the geometry; the driver
+renders zero on the outer side of that plane and K (p - p0) once the probe is past it.
 """
 from __future__ import annotations
 
@@ -62,6 +73,10 @@ CONTACT_FIELDS = ('contact_x', 'contact_y', 'contact_z', 'depth', 'direction_x',
  I_NZ) = range(len(CONTACT_FIELDS))
 #: values in a contact message before the normal was added (still accepted by readers)
 N_CONTACT_V1 = 9
+
+
+#: the contact message's ``effort`` while free and near the surface (else empty)
+APPROACH_FIELDS = ('surface_x', 'surface_y', 'surface_z', 'normal_x', 'normal_y', 'normal_z')
 
 
 def is_contact_values(v) -> bool:

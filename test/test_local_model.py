@@ -484,3 +484,79 @@ def test_force_error_and_its_phases():
         == pytest.approx(15.0)
     with pytest.raises(ValueError, match='error_by_phase'):
         error_by_phase(applied, ideal, contact, t[:5])
+
+
+def test_approach_model_renders_from_the_plane_on():
+    """A model made while free, with the plane ahead (depth 0, unit normal): zero outside the
+    plane, K (p - s) past it at once, counted as approach ticks; a non-unit normal is refused."""
+    n = unit([1.0, 0.2, 0.0])
+    d = np.array([-1.0, 0.0, 0.0])
+    s = np.array([0.03, 0.001, 0.0])
+    g = depth_gradient(n, d)
+    kd = np.array([300.0, 20.0, 0.0])  # dF/d depth at 0+ [N/m]
+    K = np.outer(kd, g)  # the force grows with the depth past the plane
+    r = LocalModelRenderer(max_stiffness=1e5, validity_time=1.0, validity_radius=0.01)
+    m = make((0, 0, 0), s, K, s, n, d, 0.0, zero=True)
+    assert m.approach and not m.in_contact
+    r.offer(m)
+    assert r.render(tuple(s - 0.002 * d), 0.0) == ((0.0, 0.0, 0.0), FREE)  # still outside
+    p = s + 0.0005 * d + np.array([0.0, 0.0005, 0.0003])
+    f, st = r.render(tuple(p), 0.0)
+    assert st == FRESH and r.stats.ticks_approach == 1
+    depth = g @ (p - s)
+    assert depth > 0
+    np.testing.assert_allclose(f, condition_stiffness(K, 1e5) @ (p - s), atol=1e-12)
+    # the all-zero free model still renders nothing, and counts no approach tick
+    r.offer(make((0, 0, 0), (0, 0, 0), np.zeros((3, 3)), (0, 0, 0), (0, 0, 0), (0, 0, 0), 0.0))
+    assert r.render(tuple(p), 0.0) == ((0.0, 0.0, 0.0), FREE) and r.stats.ticks_approach == 1
+    with pytest.raises(ValueError, match='normal'):
+        r.offer(make((0, 0, 0), s, K, s, 2 * n, d, 0.0))
+
+
+def test_surface_ahead_of_a_free_probe():
+    """Fixed direction: the ray's first front-face crossing within the distance; normal mode:
+    the closest point; nothing beyond the distance or behind the probe."""
+    from haptic_anfis.contact import ContactDetector, ellipsoid_dome
+    from haptic_anfis.contact.approach import surface_ahead
+    mesh = ellipsoid_dome((0.045, 0.07, 0.07))
+    det = ContactDetector(mesh, direction=(-1.0, 0.0, 0.0))
+    top = np.array([0.045, 0.0, 0.0])
+    s, n, t = surface_ahead(det, top + [0.003, 0.001, 0.0], det.direction, 0.005)
+    assert t == pytest.approx(0.003, abs=2e-4) and s[0] == pytest.approx(0.045, abs=2e-4)
+    assert n[0] > 0.95 and np.linalg.norm(n) == pytest.approx(1.0)
+    assert surface_ahead(det, top + [0.006, 0.0, 0.0], det.direction, 0.005) is None
+    assert surface_ahead(det, top + [0.003, 0.0, 0.0], det.direction, 0.0) is None
+    assert surface_ahead(det, top + [0.003, 0.0, 0.0], (1.0, 0.0, 0.0), 0.005) is None  # away
+    free = ContactDetector(mesh, direction=None)
+    s, n, t = surface_ahead(free, top + [0.002, 0.0, 0.0], None, 0.005)
+    assert t == pytest.approx(0.002, abs=2e-4) and n[0] > 0.95
+
+
+def test_force_server_approach_model(default_model):
+    """Free probe with the approach fields: F0 = 0 at the surface point ahead, K = dF/dp at depth
+    0+; past the plane the rendered force follows the model's at small depths. Without the
+    fields, or with bad ones: the all-zero model."""
+    from haptic_anfis.nodes import interfaces as ifc
+    from haptic_anfis.nodes.force_server import local_model_from_contact
+    c = np.array([0.035, 0.004, -0.003])
+    n = unit([1.0, 0.1, -0.05])
+    d = np.array([-1.0, 0.0, 0.0])
+    free = [*(c - 0.002 * d), 0.0, *d, 0.0, 0.0, 0.0, 0.0, 0.0]
+    F, lm, err = local_model_from_contact(default_model, free, approach=[*c, *n])
+    assert F == (0.0, 0.0, 0.0) and err is None
+    m = ifc.local_model_from_values(lm)
+    assert m.approach and m.zero_at_surface and m.f0 == (0.0, 0.0, 0.0)
+    np.testing.assert_allclose(m.p0, c)
+    r = LocalModelRenderer(max_stiffness=1e6, validity_time=1.0, validity_radius=0.01)
+    r.offer(m)
+    for depth in (1e-5, 1e-4, 3e-4):
+        f, st = r.render(tuple(c + depth * d), 0.0)
+        assert st == FRESH
+        ref = np.array(default_model.predict_one(*c, depth))
+        # the normal force to 1 %; the tangential part is what the symmetric guard leaves of the
+        # rank-one K = J_depth g^T (measured 2-12 % of |F| on the shipped surface's slopes)
+        assert abs(f[0] - ref[0]) <= 0.01 * np.linalg.norm(ref), (depth, f, ref)
+        assert np.linalg.norm(f - ref) <= 0.15 * np.linalg.norm(ref), (depth, f, ref)
+    assert local_model_from_contact(default_model, free)[1] == [0.0] * len(lm)
+    for bad in ([math.nan, 0, 0, *n], [*c, 0.0, 0.0, 0.0], [*c, *n][:5]):
+        assert local_model_from_contact(default_model, free, approach=bad)[1] == [0.0] * len(lm)

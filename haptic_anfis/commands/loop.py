@@ -14,7 +14,8 @@ commands and local models it receives), ``latency_p50_ms``, ``latency_p99_ms``,
 ``watchdog_trips_in_contact``, ``force_error_rms_pct``, ``force_error_rms_n``,
 ``force_error_p99_n``, ``force_error_p99_pct``, ``contact_ticks``, ``force_mode``,
 ``deadline_misses``, ``rejected_stale``, ``rejected_future``, ``rejected_unknown_stamp``,
-``force_error_by_phase`` (onset / offset / steady: the first and last 20 ms of each contact and
+``ticks_approach`` (of the fresh and extrapolated ticks, those rendered from an approach model:
+the plane ahead of a free probe), ``force_error_by_phase`` (onset / offset / steady: the first and last 20 ms of each contact and
 the rest, each ``ticks``, ``rms_n``, ``share_pct`` of the squared error),
 ``process_cpu_pct`` (the driver process's CPU time over the window / its wall time, all threads:
 in one process, the whole graph's).
@@ -92,7 +93,8 @@ def trace_report(trace: str | Path, params_files=()) -> dict:
                                    'ticks_fresh', 'ticks_extrapolated', 'ticks_expired',
                                    'watchdog_trips', 'watchdog_trips_in_contact',
                                    'deadline_misses', 'rejected_stale', 'rejected_future',
-                                   'rejected_unknown_stamp', 'process_cpu_pct')},
+                                   'rejected_unknown_stamp', 'process_cpu_pct',
+                                   'ticks_approach')},
          **err, 'ticks': int(len(rows))}
     return {k: r[k] for k in KEYS if k in r} | {k: v for k, v in r.items() if k not in KEYS}
 

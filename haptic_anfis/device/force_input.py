@@ -149,7 +149,8 @@ class ForceInput:
         r, s = self.renderer.stats, self.stamps.stats
         return {'mode': self.mode, 'ticks_fresh': r.ticks_fresh,
                 'ticks_extrapolated': r.ticks_extrapolated, 'ticks_expired': r.ticks_expired,
-                'ticks_free': r.ticks_free, 'ticks_no_model': r.ticks_none, 'models': r.models,
+                'ticks_free': r.ticks_free, 'ticks_no_model': r.ticks_none,
+                'ticks_approach': r.ticks_approach, 'models': r.models,
                 'models_rejected': r.rejected, 'stiffness_clamped': r.stiffness_clamped,
                 'rejected_stale': s.rejected_stale, 'rejected_future': s.rejected_future,
                 'rejected_unknown_stamp': s.rejected_unknown,

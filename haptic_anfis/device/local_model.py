@@ -29,6 +29,11 @@ with these rules (:class:`LocalModelRenderer`):
   and 3000 N/m that asks 1.5 N s/m of mechanism damping. Tissue-frame stiffness maps to the
   device as ``force_scale * workspace_scale * K``, so the tissue-frame bound is
   ``max_stiffness / (force_scale * workspace_scale)`` (:func:`tissue_stiffness_limit`).
+- Before contact (:attr:`LocalModel.approach`). A model made while the probe was free has depth
+  0; with a normal it is the tangent plane of the surface ahead of the probe (p0 = the point it
+  will touch, F0 = 0, K the stiffness at depth 0+): zero force outside the plane, ``K (p - p0)``
+  the instant the probe is past it — so a press is rendered from its first tick instead of one
+  force-server latency late. Without a normal (all zeros) it renders zero force.
 - Non-finite F0, p0, K, normal or direction: the model is rejected (the caller zeroes the force).
 - Expiry: a model older than ``validity_time`` (measured from the time of the driver's own pose it
   answers, not from its arrival) or a probe further than ``validity_radius`` from ``p0`` is
@@ -263,6 +268,15 @@ class LocalModel:
     def in_contact(self) -> bool:
         return self.depth0 > 0.0
 
+    @property
+    def approach(self) -> bool:
+        """An approach model: made while the probe was free (depth 0) with the surface plane
+        ahead (a non-zero normal): zero force outside the plane, K (p - p0) past it."""
+        if self.depth0 != 0.0:
+            return False
+        x, y, z = self.normal
+        return x * x + y * y + z * z > 0.0
+
     def check(self) -> None:
         """Raises ValueError naming the first non-finite or malformed field (plain floats: the
         driver checks every model it receives)."""
@@ -284,7 +298,7 @@ class LocalModel:
         if not (math.isfinite(self.depth0) and self.depth0 >= 0.0):
             raise ValueError(f'local model depth0: expected a finite value >= 0, got '
                              f'{self.depth0!r}')
-        if self.in_contact:
+        if self.in_contact or self.approach:
             for name in ('normal', 'direction'):
                 x, y, z = getattr(self, name)
                 if abs(math.sqrt(x * x + y * y + z * z) - 1.0) > 1e-3:
@@ -300,6 +314,7 @@ class RenderStats:
     ticks_expired: int = 0
     ticks_free: int = 0
     ticks_none: int = 0
+    ticks_approach: int = 0  # of the fresh + extrapolated: from an approach model (contact onset)
     models: int = 0
     rejected: int = 0
     stiffness_clamped: int = 0
@@ -366,7 +381,7 @@ class LocalModelRenderer:
             self.stats.stiffness_clamped += 1
         f0x, f0y, f0z = m.f0
         p0x, p0y, p0z = m.p0
-        contact = m.depth0 > 0.0
+        contact = m.depth0 > 0.0 or m.approach  # an approach model renders past its plane
         if contact:
             nx, ny, nz = m.normal
             d = dx, dy, dz = float(m.direction[0]), float(m.direction[1]), float(m.direction[2])
@@ -412,6 +427,8 @@ class LocalModelRenderer:
             st.ticks_fresh += 1
         else:
             st.ticks_extrapolated += 1
+        if depth0 == 0.0:
+            st.ticks_approach += 1
         k0, k1, k2 = k
         fx = f0[0] + k0[0] * ex + k0[1] * ey + k0[2] * ez
         fy = f0[1] + k1[0] * ex + k1[1] * ey + k1[2] * ez

@@ -33,6 +33,9 @@ from ._case import CASE_PARAMS, apply_case, declare_case  # noqa: F401 (CASE_PAR
 from ._common import LOOP_QOS, Param, declare_parameters, non_negative, positive, run_node
 
 DEFAULT_MODEL = DATA_DIR / 'default_model.json'
+#: depth [m] the approach model's stiffness is taken at: 0+ (1 µm; at exactly 0 a depth-scaled
+#: model's kink max(depth, 0) may give the derivative of the zero side)
+APPROACH_DEPTH = 1e-6
 
 PARAMS = [
     Param('model_path', '', "ANFIS model file (JSON) ('' = the shipped default model); re-read "
@@ -70,7 +73,7 @@ def force_from_contact(model: ForceModel, v) -> tuple[float, float, float, str |
     return 0.0, 0.0, 0.0, None
 
 
-def local_model_from_contact(model: ForceModel, v, jacobian=force_and_jacobian
+def local_model_from_contact(model: ForceModel, v, jacobian=force_and_jacobian, approach=()
                              ) -> tuple[tuple[float, float, float], list[float], str | None]:
     """(force (3,) [N], local model message values (:data:`~.interfaces.LOCAL_MODEL_FIELDS`),
     error or None) for the contact message values ``v``.
@@ -80,11 +83,13 @@ def local_model_from_contact(model: ForceModel, v, jacobian=force_and_jacobian
     (:func:`~haptic_anfis.device.local_model.contact_jacobian`; the depth column is dropped when
     the depth is saturated, since the force then no longer grows with it). The older 9-value
     contact has no normal: the normal is then taken as -direction. Not in contact, or a bad
-    contact: zero force and a model with depth 0 (the driver renders zero)."""
+    contact: zero force and a model with depth 0 (the driver renders zero) — or, when the
+    contact message's ``approach`` fields (its ``effort``, :data:`~.interfaces.APPROACH_FIELDS`)
+    name the surface ahead of the free probe, the approach model there (:func:`approach_model`)."""
     if not ifc.is_contact_values(v):
         return (0.0, 0.0, 0.0), [0.0] * len(ifc.LOCAL_MODEL_FIELDS), force_from_contact(model, v)[3]
     if not (v[ifc.I_IN_CONTACT] > 0.5 and v[ifc.I_DEPTH] > 0.0):
-        return (0.0, 0.0, 0.0), [0.0] * len(ifc.LOCAL_MODEL_FIELDS), None
+        return (0.0, 0.0, 0.0), approach_model(model, v, approach, jacobian), None
     x, y, z, depth = float(v[0]), float(v[1]), float(v[2]), float(v[ifc.I_DEPTH])
     d = [float(v[ifc.I_DX]), float(v[ifc.I_DY]), float(v[ifc.I_DZ])]
     n = [float(c) for c in v[ifc.I_NX:ifc.I_NZ + 1]] if len(v) == len(ifc.CONTACT_FIELDS) else []
@@ -106,6 +111,35 @@ def local_model_from_contact(model: ForceModel, v, jacobian=force_and_jacobian
     lm = [*F, x + depth * d[0], y + depth * d[1], z + depth * d[2], *K, x, y, z, *n, *d, depth,
           1.0 if zero else 0.0]  # the order of LOCAL_MODEL_FIELDS
     return F, lm, None
+
+
+def approach_model(model: ForceModel, v, approach, jacobian=force_and_jacobian) -> list[float]:
+    """The local model message values for a free probe: the approach model when ``approach`` holds
+    the surface point s ahead and its outward normal n (:data:`~.interfaces.APPROACH_FIELDS`), the
+    force is zero there (a model with a force step at the surface cannot be rendered from before
+    contact) and everything is finite: F0 = 0, p0 = contact = s, depth 0, K = dF/dp at depth 0+
+    (J at (s, 0) through the geometry: the force the probe meets the instant it crosses the
+    plane); else all zeros (no contact). d: the contact's direction, or -n when it has none."""
+    none = [0.0] * len(ifc.LOCAL_MODEL_FIELDS)
+    if len(approach) != len(ifc.APPROACH_FIELDS):
+        return none
+    sx, sy, sz, nx, ny, nz = (float(c) for c in approach)
+    d = [float(v[ifc.I_DX]), float(v[ifc.I_DY]), float(v[ifc.I_DZ])]
+    nn = nx * nx + ny * ny + nz * nz
+    if not (math.isfinite(sx + sy + sz + sum(d)) and 0.25 < nn < 2.25):
+        return none
+    if not 0.25 < d[0] * d[0] + d[1] * d[1] + d[2] * d[2] < 2.25:
+        d = [-nx, -ny, -nz]
+    try:
+        if not zero_at_surface(model, sx, sy, sz):
+            return none
+        _, J = jacobian(model, sx, sy, sz, APPROACH_DEPTH)  # the one-sided derivative at 0+
+        K = contact_stiffness(J.tolist(), (nx, ny, nz), d)
+    except ValueError:
+        return none
+    if not math.isfinite(sum(K)):
+        return none
+    return [0.0, 0.0, 0.0, sx, sy, sz, *K, sx, sy, sz, nx, ny, nz, *d, 0.0, 1.0]
 
 
 def zero_at_surface(model: ForceModel, x: float, y: float, z: float) -> bool:
@@ -165,9 +199,15 @@ class ForceServer(Node):
             error = None
             values = [0.0] * len(ifc.LOCAL_MODEL_FIELDS)
         elif self.pub_lm is not None:
-            (fx, fy, fz), values, error = local_model_from_contact(model, msg.position)
+            (fx, fy, fz), values, error = local_model_from_contact(model, msg.position,
+                                                                   approach=msg.effort)
         else:
             fx, fy, fz, error = force_from_contact(model, msg.position)
+        if self._ramp_t0 is not None and values is not None and not (fx or fy or fz):
+            # an approach model (free probe) during a case ramp carries the ramp's factor so far
+            k = 0.0 if self._ramp_t0 < 0.0 else min(
+                1.0, (time.monotonic() - self._ramp_t0) / self.params['case_ramp'])
+            values[ifc.LM_K] = [k * c for c in values[ifc.LM_K]]
         if self._ramp_t0 is not None and (fx or fy or fz):  # after a case switch: ramp up
             now = time.monotonic()
             if self._ramp_t0 < 0.0:  # the first force since the switch starts the ramp: 0 N
