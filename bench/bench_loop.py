@@ -15,7 +15,7 @@ Target (issue 17): local model, separate processes under load: RMS <= 2 % of the
 better than the zero-order hold in the same run, no watchdog trip in contact.
 
     .venv/bin/python bench/bench_loop.py [--seconds 10] [--json] [--configs one,multi,busy]
-                                         [--keep DIR]
+                                         [--keep DIR] [--approach-distance M]
 
 Columns: ``miss`` = servo deadline misses (a tick started more than a period late), ``cpu%`` = the
 driver process's CPU over the run (all threads; in one process, the whole graph's).
@@ -38,12 +38,17 @@ sys.path.insert(0, str(ROOT))
 MODES = ('zoh', 'local_model')
 
 
+#: extra contact_detector parameters (name -> value), from the command line
+CONTACT_PARAMS: dict = {}
+
+
 def one_process(seconds: float, mode: str, trace: Path) -> None:
     from rclpy.parameter import Parameter
 
     from haptic_anfis.nodes.graph import build_graph
     g = build_graph(['bench'], visualizer=False, overrides={'falcon_driver': [
-        Parameter('force_mode', value=mode), Parameter('trace_path', value=str(trace))]})
+        Parameter('force_mode', value=mode), Parameter('trace_path', value=str(trace))],
+        'contact_detector': [Parameter(k, value=v) for k, v in CONTACT_PARAMS.items()]})
     try:
         if not g.spin_for(60.0, lambda: g.driver.first_command is not None):
             raise RuntimeError('no force command within 60 s')
@@ -59,8 +64,9 @@ def multi_process(seconds: float, mode: str, trace: Path, busy: int = 0) -> None
     from haptic_anfis.nodes.processes import node_env, start_node, stop_node
     env = node_env(150 + os.getpid() % 50, localhost=True)
     hogs = [subprocess.Popen([sys.executable, '-c', 'while True: pass']) for _ in range(busy)]
-    helpers = [start_node(n, env=env, log=subprocess.DEVNULL)
-               for n in ('force_server', 'contact_detector')]
+    cargs = [a for k, v in CONTACT_PARAMS.items() for a in ('-p', f'{k}:={v}')]
+    helpers = [start_node(n, cargs if n == 'contact_detector' else (), env=env,
+                          log=subprocess.DEVNULL) for n in ('force_server', 'contact_detector')]
     try:
         time.sleep(3.0)
         driver = start_node('falcon_driver', ['-p', f'run_duration:={float(seconds)}',
@@ -101,7 +107,12 @@ def main() -> int:
     ap.add_argument('--keep', metavar='DIR', help='write the servo tick traces here (kept: '
                     "read them with 'haptic-anfis loop DIR/<config>_<mode>.npz') instead of a "
                     'temporary directory')
+    ap.add_argument('--approach-distance', type=float, metavar='M',
+                    help="the contact detector's approach_distance [m] (0 = no approach model; "
+                         "default: the node's)")
     a = ap.parse_args()
+    if a.approach_distance is not None:
+        CONTACT_PARAMS['approach_distance'] = float(a.approach_distance)
     configs = {'one': ('one process', lambda s, m, t: one_process(s, m, t)),
                'multi': ('separate processes', lambda s, m, t: multi_process(s, m, t)),
                'busy': ('separate + 2 busy processes', lambda s, m, t: multi_process(s, m, t, 2))}

@@ -108,18 +108,25 @@ def main() -> int:
     # every message answers a recorded pose 1 ms old
     msgs = [deserialize_message(r, JointState) for r in raw_lm]
 
-    def on_lm(msg, i=[0]):
+    fast = hasattr(inp, 'model_values')  # the driver's path since the flat-values handler
+
+    def on_lm(msg, i=[0]):  # what FalconDriver._on_local_model does with a message
         i[0] += 1
         now[0] = i[0] * 1e-3
         inp.on_pose(i[0], now[0] - 1e-3)
-        m = ifc.local_model_from_values(msg.position)
-        inp.model(m, i[0], 'tissue', now[0])
+        if fast:
+            inp.model_values(msg.position, i[0], 'tissue', now[0])
+        else:
+            inp.model(ifc.local_model_from_values(msg.position), i[0], 'tissue', now[0])
     rows.append(('driver: servo_cf_local handler body', timed(on_lm, msgs)))
     rows.append(('driver: servo_cf handler body (local mode)', timed(
         lambda _: inp.command((0.1, 0.2, 0.3), 1, 'tissue', now[0]), lms)))
     models = [ifc.local_model_from_values(v) for v in lms]
     r = LocalModelRenderer()
     rows.append(('driver: LocalModelRenderer.offer', timed(lambda m: r.offer(m), models)))
+    if hasattr(r, 'offer_values'):
+        rows.append(('driver: LocalModelRenderer.offer_values', timed(
+            lambda v: r.offer_values(v, 0.0, checked=True), msgs and [m.position for m in msgs])))
     rows.append(('driver: LocalModel.check', timed(lambda m: m.check(), models)))
     rows.append(('driver: local_model_from_values', timed(ifc.local_model_from_values, lms)))
     zi = ForceInput(SafetyLayer(8.9, 1000.0, 0.01), WorkspaceMapping(1.5, (0.03, 0.0, 0.0)), 'zoh')

@@ -14,7 +14,7 @@ import math
 
 from .buttons import ClutchMark
 from .falcon import DeviceState, WorkspaceMapping
-from .local_model import (FALCON_MAX_STIFFNESS, LocalModel, LocalModelRenderer,
+from .local_model import (FALCON_MAX_STIFFNESS, LocalModel, LocalModelRenderer, check_values,
                           tissue_stiffness_limit)
 from .safety import OK, REJECTED_FRAME, SafetyLayer
 from .stamps import OK as STAMP_OK
@@ -116,9 +116,19 @@ class ForceInput:
 
     def model(self, m: LocalModel, stamp_ns: int, frame_id: str | None, now: float) -> str:
         """A local force model (tissue frame) answering the pose ``stamp_ns``, received at
-        ``now`` (the model's time is that pose's time; ``m.time`` is not used). Returns OK or why it was refused:
-        a refused stamp is not taken (the current model keeps running until it expires); a
-        malformed / non-finite model or a wrong frame zeroes the force at once."""
+        ``now`` (:meth:`model_values` of ``m.values()``; ``m.time`` is not used)."""
+        try:
+            v = m.values()
+        except ValueError:
+            v = [math.nan] * 26  # malformed: refused below like a non-finite one
+        return self.model_values(v, stamp_ns, frame_id, now)
+
+    def model_values(self, v, stamp_ns: int, frame_id: str | None, now: float) -> str:
+        """A local force model's flat values ``v`` (a message's ``position``: 26 values,
+        :data:`haptic_anfis.interfaces.LOCAL_MODEL_FIELDS`), tissue frame, answering the pose
+        ``stamp_ns``, received at ``now``; the model's time is that pose's time. Returns OK or
+        why it was refused: a refused stamp is not taken (the current model keeps running until
+        it expires); a malformed / non-finite model or a wrong frame zeroes the force at once."""
         self.models_received += 1
         if self.mode != 'local_model':
             return 'ignored: zoh mode'
@@ -128,7 +138,7 @@ class ForceInput:
             self.safety.reject(f'{REJECTED_FRAME} {frame_id!r} (expected {sf!r})')
             return REJECTED_FRAME
         try:
-            m.check()  # a malformed model zeroes the force whatever its stamp
+            check_values(v)  # a malformed model zeroes the force whatever its stamp
         except ValueError as exc:
             self.renderer.clear()
             self.renderer.stats.rejected += 1
@@ -140,8 +150,8 @@ class ForceInput:
         cur = self.renderer.time
         if cur is not None and t_pose < cur:
             return 'ignored: older than the current model'
-        self.renderer.offer(m, checked=True, time=t_pose)
-        self.last_in_contact = m.in_contact
+        self.renderer.offer_values(v, t_pose, checked=True)
+        self.last_in_contact = v[24] > 0.0  # depth0
         return OK
 
     # -- statistics ---------------------------------------------------------------------------

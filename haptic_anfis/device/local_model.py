@@ -193,14 +193,17 @@ def _rebuild_clipped(a00, a01, a02, a11, a12, a22, l1, l2, l3, lo) -> tuple[floa
         s = 1.0 / math.sqrt(uy * uy + uz * uz)
         vx, vy, vz = 0.0, uz * s, -uy * s
     wx, wy, wz = uy * vz - uz * vy, uz * vx - ux * vz, ux * vy - uy * vx
-
-    def quad(x0, x1, x2, y0, y1, y2):  # x^T S y
-        return (x0 * (a00 * y0 + a01 * y1 + a02 * y2) + x1 * (a01 * y0 + a11 * y1 + a12 * y2)
-                + x2 * (a02 * y0 + a12 * y1 + a22 * y2))
-    mu = _clip(quad(ux, uy, uz, ux, uy, uz), lo)
-    mvv = quad(vx, vy, vz, vx, vy, vz)
-    mww = quad(wx, wy, wz, wx, wy, wz)
-    mvw = quad(vx, vy, vz, wx, wy, wz)
+    # S u, S v, S w, then the Rayleigh quotient of u and the 2 x 2 block in (v, w)
+    su0, su1, su2 = a00 * ux + a01 * uy + a02 * uz, a01 * ux + a11 * uy + a12 * uz, \
+        a02 * ux + a12 * uy + a22 * uz
+    sv0, sv1, sv2 = a00 * vx + a01 * vy + a02 * vz, a01 * vx + a11 * vy + a12 * vz, \
+        a02 * vx + a12 * vy + a22 * vz
+    sw0, sw1, sw2 = a00 * wx + a01 * wy + a02 * wz, a01 * wx + a11 * wy + a12 * wz, \
+        a02 * wx + a12 * wy + a22 * wz
+    mu = _clip(ux * su0 + uy * su1 + uz * su2, lo)
+    mvv = vx * sv0 + vy * sv1 + vz * sv2
+    mww = wx * sw0 + wy * sw1 + wz * sw2
+    mvw = wx * sv0 + wy * sv1 + wz * sv2
     half, mean = 0.5 * (mvv - mww), 0.5 * (mvv + mww)
     rad = math.hypot(half, mvw)
     e1, e2 = _clip(mean + rad, lo), _clip(mean - rad, lo)
@@ -277,33 +280,66 @@ class LocalModel:
         x, y, z = self.normal
         return x * x + y * y + z * z > 0.0
 
-    def check(self) -> None:
-        """Raises ValueError naming the first non-finite or malformed field (plain floats: the
-        driver checks every model it receives)."""
-        vals = [*self.f0, *self.p0, *self.contact, *self.normal, *self.direction]
+    def values(self) -> list[float]:
+        """The model as the flat values of a local force model message
+        (:data:`haptic_anfis.interfaces.LOCAL_MODEL_FIELDS` order; ``time`` is not among them).
+
+        Raises:
+            ValueError: a field of the wrong length (named).
+        """
+        for name in ('f0', 'p0', 'contact', 'normal', 'direction'):
+            if len(getattr(self, name)) != 3:
+                raise ValueError(f'local model {name}: expected 3 finite numbers, got '
+                                 f'{getattr(self, name)!r}')
         try:
-            kv = stiffness_values(self.k)
-            ks = sum(kv)
+            k = stiffness_values(self.k)
         except (TypeError, ValueError):
-            kv, ks = [], math.nan
-        if len(vals) != 15 or not math.isfinite(sum(vals)):  # NaN/Inf anywhere: not finite
-            for name in ('f0', 'p0', 'contact', 'normal', 'direction'):
-                v = getattr(self, name)
-                if len(v) != 3 or not all(math.isfinite(float(c)) for c in v):
-                    raise ValueError(f'local model {name}: expected 3 finite numbers, got {v!r}')
-        if len(kv) != 9 or not math.isfinite(ks):
             k = self.k.tolist() if type(self.k) is np.ndarray else self.k
             raise ValueError(f'local model stiffness K: expected a finite (3, 3) matrix, got '
-                             f'{k!r}')
-        if not (math.isfinite(self.depth0) and self.depth0 >= 0.0):
-            raise ValueError(f'local model depth0: expected a finite value >= 0, got '
-                             f'{self.depth0!r}')
-        if self.in_contact or self.approach:
-            for name in ('normal', 'direction'):
-                x, y, z = getattr(self, name)
-                if abs(math.sqrt(x * x + y * y + z * z) - 1.0) > 1e-3:
-                    raise ValueError(f'local model {name}: expected a unit vector, got '
-                                     f'{(x, y, z)!r}')
+                             f'{k!r}') from None
+        return [*map(float, self.f0), *map(float, self.p0), *k, *map(float, self.contact),
+                *map(float, self.normal), *map(float, self.direction), float(self.depth0),
+                1.0 if self.zero_at_surface else 0.0]
+
+    def check(self) -> None:
+        """Raises ValueError naming the first non-finite or malformed field
+        (:func:`check_values`)."""
+        check_values(self.values())
+
+
+#: offsets of the fields in the flat values (haptic_anfis.interfaces.LOCAL_MODEL_FIELDS)
+_FIELDS = (('f0', 0, 3), ('p0', 3, 6), ('stiffness K', 6, 15), ('contact', 15, 18),
+           ('normal', 18, 21), ('direction', 21, 24))
+_N_VALUES = 26
+
+
+def check_values(v) -> None:
+    """Check a local force model's flat values (:meth:`LocalModel.values`; a message's
+    ``position``): 26 finite numbers, depth >= 0, and unit normal and direction in contact or in
+    an approach model (depth 0 with a non-zero normal). One sum tests finiteness in the common
+    case (the driver checks every model it receives).
+
+    Raises:
+        ValueError: naming the first malformed field.
+    """
+    if len(v) != _N_VALUES:
+        raise ValueError(f'local model: expected {_N_VALUES} values, got {len(v)}')
+    if not math.isfinite(sum(v)):  # NaN/Inf anywhere (or an overflow: then nothing is named)
+        for name, a, b in _FIELDS:
+            if not all(math.isfinite(c) for c in v[a:b]):
+                what = 'a finite (3, 3) matrix' if b - a == 9 else '3 finite numbers'
+                raise ValueError(f'local model {name}: expected {what}, got {list(v[a:b])!r}')
+    depth0 = v[24]
+    if not (math.isfinite(depth0) and depth0 >= 0.0):
+        raise ValueError(f'local model depth0: expected a finite value >= 0, got {depth0!r}')
+    nx, ny, nz = v[18], v[19], v[20]
+    nn = nx * nx + ny * ny + nz * nz
+    if depth0 > 0.0 or nn > 0.0:
+        dx, dy, dz = v[21], v[22], v[23]
+        for name, sq, vec in (('normal', nn, (nx, ny, nz)),
+                              ('direction', dx * dx + dy * dy + dz * dz, (dx, dy, dz))):
+            if abs(math.sqrt(sq) - 1.0) > 1e-3:
+                raise ValueError(f'local model {name}: expected a unit vector, got {vec!r}')
 
 
 @dataclass
@@ -347,7 +383,7 @@ class LocalModelRenderer:
         self.fresh_age = float(fresh_age)
         self.stats = RenderStats()
         self._m: tuple | None = None  # the prepared model (plain floats for the servo thread)
-        self.model: LocalModel | None = None
+        self._values = None  # the current model's flat values
         self.time: float | None = None  # the current model's time [s] (its pose's)
 
     def reset_stats(self) -> None:
@@ -356,45 +392,67 @@ class LocalModelRenderer:
     def clear(self) -> None:
         """Forget the model (the next ticks render nothing: status NONE)."""
         self._m = None
-        self.model = None
+        self._values = None
         self.time = None
 
     def offer(self, m: LocalModel, checked: bool = False, time: float | None = None) -> None:
-        """Accept ``m`` as the newest model: checked (unless ``checked``: the caller did),
-        K conditioned (counted when the guard changed it by more than 1e-6 N/m). ``time``: the
-        model's time [s] if not ``m.time`` (the driver gives its pose's time; kept in
-        :attr:`time`). Plain floats throughout: this runs once per received model on the thread
-        that shares the servo thread's GIL.
+        """Accept ``m`` as the newest model (:meth:`offer_values` of ``m.values()``); ``time``:
+        the model's time [s] if not ``m.time``.
 
         Raises:
             ValueError: a non-finite or malformed field (the model is not taken; the caller
             decides the safe output — zero force).
         """
+        try:
+            v = m.values()
+        except ValueError:
+            self.stats.rejected += 1
+            raise
+        self.offer_values(v, m.time if time is None else time, checked)
+
+    def offer_values(self, v, time: float, checked: bool = False) -> None:
+        """Accept the flat values ``v`` (26: :meth:`LocalModel.values`, a message's
+        ``position``) as the newest model, whose time is ``time`` [s] (the driver: the time of
+        its pose it answers; kept in :attr:`time`): checked (:func:`check_values`; unless
+        ``checked``: the caller did), K conditioned (counted when the guard changed it by more
+        than 1e-6 N/m). Plain floats throughout: this runs once per received model on the thread
+        that shares the servo thread's GIL.
+
+        Raises:
+            ValueError: a non-finite or malformed field (the model is not taken).
+        """
         if not checked:
             try:
-                m.check()
+                check_values(v)
             except ValueError:
                 self.stats.rejected += 1
                 raise
-        k, changed = condition_stiffness_values(stiffness_values(m.k), self.max_stiffness)
+        (f0x, f0y, f0z, p0x, p0y, p0z, _, _, _, _, _, _, _, _, _, _, _, _,
+         nx, ny, nz, dx, dy, dz, depth0, zero) = v
+        k, changed = condition_stiffness_values(v[6:15], self.max_stiffness)
         if changed:
             self.stats.stiffness_clamped += 1
-        f0x, f0y, f0z = m.f0
-        p0x, p0y, p0z = m.p0
-        contact = m.depth0 > 0.0 or m.approach  # an approach model renders past its plane
+        # in contact, or an approach model (free, with the plane ahead): renders past its plane
+        contact = depth0 > 0.0 or nx * nx + ny * ny + nz * nz > 0.0
         if contact:
-            nx, ny, nz = m.normal
-            d = dx, dy, dz = float(m.direction[0]), float(m.direction[1]), float(m.direction[2])
-            g = depth_gradient_values(float(nx), float(ny), float(nz), dx, dy, dz)
+            g = depth_gradient_values(nx, ny, nz, dx, dy, dz)
+            d = (dx, dy, dz)
         else:
             g = d = (0.0, 0.0, 0.0)
-        t = float(m.time if time is None else time)
-        self._m = ((float(f0x), float(f0y), float(f0z)), (float(p0x), float(p0y), float(p0z)),
-                   (k[0:3], k[3:6], k[6:9]), g, d, float(m.depth0),
-                   bool(m.zero_at_surface and contact), t, contact)
-        self.model = m
+        t = float(time)
+        self._m = ((f0x, f0y, f0z), (p0x, p0y, p0z), (k[0:3], k[3:6], k[6:9]), g, d,
+                   float(depth0), zero > 0.5 and contact, t, contact)
+        self._values = v
         self.time = t
         self.stats.models += 1
+
+    @property
+    def model(self) -> LocalModel | None:
+        """The current model (as received; its ``time`` is :attr:`time`), or None."""
+        if self._m is None:
+            return None
+        from ..interfaces import local_model_from_values
+        return local_model_from_values(self._values, self.time)
 
     def render(self, p, now: float) -> tuple[tuple[float, float, float] | None, int]:
         """(force (3,) [N] or None, status) for the probe at ``p`` (3,) [m] at time ``now``.

@@ -275,13 +275,14 @@ class FalconDriver(Node):
 
     def _on_local_model(self, msg: JointState) -> None:
         now = time.monotonic()
-        try:
-            m = ifc.local_model_from_values(msg.position)
-            why = self.input.model(m, stamp_ns(msg.header.stamp), msg.header.frame_id, now)
-        except ValueError as exc:  # wrong length: zero force, as for a non-finite model
+        v = msg.position  # flat values: no LocalModel object on this path (GIL time per message)
+        if len(v) == len(ifc.LOCAL_MODEL_FIELDS):
+            why = self.input.model_values(v, stamp_ns(msg.header.stamp), msg.header.frame_id, now)
+        else:  # wrong length: zero force, as for a non-finite model
+            why = (f'rejected: local force model message with {len(v)} values, expected '
+                   f'{len(ifc.LOCAL_MODEL_FIELDS)}')
             self.input.renderer.clear()
-            self.safety.reject(f'rejected: {exc}')
-            why = f'rejected: {exc}'
+            self.safety.reject(why)
         self._arrived(why, msg.header.stamp)
         if why != OK:
             self.get_logger().warning(f'local force model {why}', throttle_duration_sec=1.0)
