@@ -18,7 +18,9 @@ better than the zero-order hold in the same run, no watchdog trip in contact.
                                          [--keep DIR] [--approach-distance M]
 
 Columns: ``miss`` = servo deadline misses (a tick started more than a period late), ``cpu%`` = the
-driver process's CPU over the run (all threads; in one process, the whole graph's).
+driver process's CPU over the run (all threads; in one process, the whole graph's), ``µs/tick`` (one
+process) = the whole graph's CPU per servo tick, measured by the bench: on a shared machine the
+servo rate follows the load, the CPU each tick costs much less so.
 """
 from __future__ import annotations
 
@@ -40,12 +42,18 @@ MODES = ('zoh', 'local_model')
 
 #: extra contact_detector parameters (name -> value), from the command line
 CONTACT_PARAMS: dict = {}
+#: one process: CPU seconds of the process over the measurement window, by trace path
+CPU: dict = {}
 
 
 def one_process(seconds: float, mode: str, trace: Path) -> None:
     from rclpy.parameter import Parameter
 
     from haptic_anfis.nodes.graph import build_graph
+    # a domain of its own: another session's graph on the default domain would feed this driver
+    # its commands (refused as unknown / future stamps, but taking this process's time)
+    os.environ['ROS_DOMAIN_ID'] = str(100 + os.getpid() % 50)
+    os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
     g = build_graph(['bench'], visualizer=False, overrides={'falcon_driver': [
         Parameter('force_mode', value=mode), Parameter('trace_path', value=str(trace))],
         'contact_detector': [Parameter(k, value=v) for k, v in CONTACT_PARAMS.items()]})
@@ -55,7 +63,9 @@ def one_process(seconds: float, mode: str, trace: Path) -> None:
         # the window opens at the first command, as run_duration does across processes (the
         # servo thread's misses while the other nodes were still loading do not count)
         g.driver.servo.stats.reset()
+        cpu0 = time.process_time()
         g.spin_for(seconds)
+        CPU[trace] = time.process_time() - cpu0  # the whole graph's CPU over the window
     finally:
         g.shutdown()  # the driver writes its trace
 
@@ -94,7 +104,7 @@ def row(name: str, r: dict) -> str:
             f'{r["watchdog_trips_in_contact"]:>4} {f(r["force_error_rms_pct"]):>7} '
             f'{f(r["force_error_rms_n"], 3):>7} {f(r["force_error_p99_n"], 3):>7} '
             f'{r["contact_ticks"]:>7} {r.get("deadline_misses") or 0:>5} '
-            f'{f(r.get("process_cpu_pct"), 0):>4}')
+            f'{f(r.get("process_cpu_pct"), 0):>4} {f(r.get("cpu_us_per_tick"), 0):>6}')
 
 
 def main() -> int:
@@ -120,7 +130,7 @@ def main() -> int:
           f'load average {os.getloadavg()[0]:.2f} (1 min) at start')
     print(f'{"configuration":<30} {"mode":<11} {"rate Hz":>7} {"p50 ms":>6} {"p99 ms":>6} '
           f'{"max ms":>6} {"fresh":>6} {"extrap":>6} {"expir":>5} {"wdog":>4} {"err %":>7} '
-          f'{"RMS N":>7} {"p99 N":>7} {"contact":>7} {"miss":>5} {"cpu%":>4}')
+          f'{"RMS N":>7} {"p99 N":>7} {"contact":>7} {"miss":>5} {"cpu%":>4} {"µs/tick":>6}')
     ratios = []
     if a.keep:
         Path(a.keep).mkdir(parents=True, exist_ok=True)
@@ -135,6 +145,8 @@ def main() -> int:
                     load0 = os.getloadavg()[0]
                     fn(a.seconds, mode, trace)
                     r = trace_report(trace)
+                    if trace in CPU and r.get('ticks'):
+                        r['cpu_us_per_tick'] = 1e6 * CPU[trace] / r['ticks']
                     r['load_1min'] = round((load0 + os.getloadavg()[0]) / 2, 2)
                     res[mode] = r
                     print(row(name, r), f' load {r["load_1min"]:.1f}', flush=True)

@@ -6,7 +6,8 @@ server. Every microsecond those handlers hold the GIL per pose is taken from the
 thread's budget, so this bench times each step a pose causes, one at a time, on plain Python
 (no executor, no DDS): force server (force / local model from a contact, message fill,
 serialisation) and driver (deserialisation, the ``servo_cf`` and ``servo_cf_local`` handlers'
-bodies). The contacts are those of the shipped palpation script pressed into the shipped model.
+bodies), rclpy's (de)serialisation beside the raw CDR path the loop nodes use
+(:mod:`haptic_anfis.nodes.cdr`). The contacts are those of the shipped palpation script pressed into the shipped model.
 
     .venv/bin/python bench/bench_loop_messages.py [--n 2000]
 
@@ -101,6 +102,17 @@ def main() -> int:
     rows.append(('driver: deserialise servo_cf', timed(
         lambda _: deserialize_message(raw_w, WrenchStamped), lms)))
 
+    try:  # the raw path (nodes/cdr.py) that replaces rclpy's (de)serialisation on the loop
+        from haptic_anfis.nodes import cdr
+        jw = cdr.JointStateWriter('tissue', ifc.LOCAL_MODEL_FIELDS, len(ifc.LOCAL_MODEL_FIELDS))
+        rows.append(('server: cdr JointStateWriter.pack (servo_cf_local)', timed(
+            lambda v: jw.pack(1_763_900_000_123_456_789, v), lms)))
+        rows.append(('driver: cdr.read_joint_state (servo_cf_local)', timed(
+            cdr.read_joint_state, raw_lm)))
+        rows.append(('driver: cdr.read_wrench_stamped (servo_cf)', timed(
+            lambda _: cdr.read_wrench_stamped(raw_w), lms)))
+    except ImportError:
+        pass
     now = [0.0]
     inp = ForceInput(SafetyLayer(8.9, 1000.0, 0.01), WorkspaceMapping(1.5, (0.03, 0.0, 0.0)),
                      'local_model')
