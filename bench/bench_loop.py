@@ -15,7 +15,7 @@ Target (issue 17): local model, separate processes under load: RMS <= 2 % of the
 better than the zero-order hold in the same run, no watchdog trip in contact.
 
     .venv/bin/python bench/bench_loop.py [--seconds 10] [--json] [--configs one,multi,busy]
-                                         [--keep DIR] [--approach-distance M]
+                                         [--keep DIR] [--approach-distance M] [--executor-input]
 
 Columns: ``miss`` = servo deadline misses (a tick started more than a period late), ``cpu%`` = the
 driver process's CPU over the run (all threads; in one process, the whole graph's), ``µs/tick`` (one
@@ -42,6 +42,8 @@ MODES = ('zoh', 'local_model')
 
 #: extra contact_detector parameters (name -> value), from the command line
 CONTACT_PARAMS: dict = {}
+#: extra falcon_driver parameters (name -> value), from the command line
+DRIVER_PARAMS: dict = {}
 #: one process: CPU seconds of the process over the measurement window, by trace path
 CPU: dict = {}
 
@@ -55,7 +57,8 @@ def one_process(seconds: float, mode: str, trace: Path) -> None:
     os.environ['ROS_DOMAIN_ID'] = str(100 + os.getpid() % 50)
     os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
     g = build_graph(['bench'], visualizer=False, overrides={'falcon_driver': [
-        Parameter('force_mode', value=mode), Parameter('trace_path', value=str(trace))],
+        Parameter('force_mode', value=mode), Parameter('trace_path', value=str(trace)),
+        *(Parameter(k, value=v) for k, v in DRIVER_PARAMS.items())],
         'contact_detector': [Parameter(k, value=v) for k, v in CONTACT_PARAMS.items()]})
     try:
         if not g.spin_for(60.0, lambda: g.driver.first_command is not None):
@@ -81,7 +84,9 @@ def multi_process(seconds: float, mode: str, trace: Path, busy: int = 0) -> None
         time.sleep(3.0)
         driver = start_node('falcon_driver', ['-p', f'run_duration:={float(seconds)}',
                                               '-p', f'force_mode:={mode}',
-                                              '-p', f'trace_path:={trace}'],
+                                              '-p', f'trace_path:={trace}',
+                                              *(a for k, v in DRIVER_PARAMS.items()
+                                                for a in ('-p', f'{k}:={str(v).lower()}'))],
                             env=env, log=subprocess.PIPE)
         helpers.append(driver)  # stopped below if it outlives the timeout
         out = driver.communicate(timeout=seconds + 180)[0].decode(errors='replace')
@@ -120,7 +125,12 @@ def main() -> int:
     ap.add_argument('--approach-distance', type=float, metavar='M',
                     help="the contact detector's approach_distance [m] (0 = no approach model; "
                          "default: the node's)")
+    ap.add_argument('--executor-input', action='store_true',
+                    help="the driver takes its loop inputs in executor callbacks "
+                         "(take_in_servo_thread false), as before the servo thread took them")
     a = ap.parse_args()
+    if a.executor_input:
+        DRIVER_PARAMS['take_in_servo_thread'] = False
     if a.approach_distance is not None:
         CONTACT_PARAMS['approach_distance'] = float(a.approach_distance)
     configs = {'one': ('one process', lambda s, m, t: one_process(s, m, t)),
