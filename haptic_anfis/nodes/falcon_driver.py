@@ -13,7 +13,10 @@ zero-order hold). Either goes through the safety layer (:class:`haptic_anfis.dev
 clamp, rate limit, watchdog, NaN/wrong-frame rejection). A command or model is judged by the age
 of the driver's own pose it answers (its stamp), not by its arrival; stale, future and unknown
 stamps are refused and counted (:class:`haptic_anfis.device.force_input.ForceInput`). The servo
-thread is not a ROS timer: it keeps its period whatever the executor is doing. Pose -> command
+thread is not a ROS timer: it keeps its period whatever the executor is doing, and (by default,
+``take_in_servo_thread``) it takes the force command and the local model itself from their
+keep-last-1 readers at the start of each tick, as raw CDR (:mod:`.polled`, :mod:`.cdr`): no
+rclpy message objects and no GIL hand-over per message. Pose -> command
 latency (pose stamp to command arrival) and deadline misses are collected in
 :attr:`FalconDriver.servo` ``.stats``; ``trace_path`` writes every servo tick for the applied-force
 error (:mod:`haptic_anfis.device.force_error`).
