@@ -109,6 +109,8 @@ def main() -> int:
             lambda v: jw.pack(1_763_900_000_123_456_789, v), lms)))
         rows.append(('driver: cdr.read_joint_state (servo_cf_local)', timed(
             cdr.read_joint_state, raw_lm)))
+        raw_own = [jw.pack(1_763_900_000_123_456_789, v) for v in lms]
+        rows.append(('driver: JointStateWriter.read (own layout)', timed(jw.read, raw_own)))
         rows.append(('driver: cdr.read_wrench_stamped (servo_cf)', timed(
             lambda _: cdr.read_wrench_stamped(raw_w), lms)))
     except ImportError:

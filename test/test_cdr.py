@@ -67,3 +67,24 @@ def test_malformed_bytes_are_a_value_error():
     for bad in (w[:20], b'\x00\x01\x00\x00' + b'\xff' * 30):
         with pytest.raises(ValueError, match='WrenchStamped'):
             cdr.read_wrench_stamped(bad)
+
+
+@pytest.mark.parametrize('frame', FRAMES)
+def test_the_layout_reader_takes_its_own_and_any_other_message(frame):
+    """JointStateWriter.read: its own bytes at the known offset; rclpy's (other padding bytes),
+    other names, other frames, or non-empty effort through the general reader; same answers."""
+    names = list(ifc.LOCAL_MODEL_FIELDS)
+    w = cdr.JointStateWriter(frame, names, len(names))
+    pos = np.random.default_rng(1).normal(size=len(names)).tolist()
+    assert w.read(w.pack(42, pos)) == (42, frame, tuple(pos), ())
+    for m in (JointState(name=names, position=array('d', pos)),
+              JointState(name=names[:-1] + ['zz'], position=array('d', pos)),
+              JointState(name=names, position=array('d', pos), effort=array('d', [1.0])),
+              JointState(name=[], position=array('d', pos[:3]))):
+        m.header.frame_id = frame + 'x' if m.name == [] else frame
+        m.header.stamp.sec = 3
+        raw = serialize_message(m)
+        assert w.read(raw) == cdr.read_joint_state(raw)
+        assert w.read(raw)[2] == tuple(m.position)
+    with pytest.raises(ValueError, match='JointState'):
+        w.read(w.pack(42, pos)[:40])

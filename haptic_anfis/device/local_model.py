@@ -137,7 +137,8 @@ def condition_stiffness_values(k, max_stiffness: float) -> tuple[tuple[float, ..
     the spectrum's width), the other two come from the exact 2 x 2 problem in its orthogonal
     complement (a Jacobi rotation), and S is rebuilt from the clipped eigenvalues — the same
     construction as a robust 3 x 3 symmetric eigensolver (cf. Eberly, Geometric Tools), written
-    for this one job.
+    for this one job. The common case — one eigenvalue out of range, the other two in — is a
+    rank-one correction with that eigenvalue's eigenvector only (:func:`_clip_one`).
     """
     k00, k01, k02, k10, k11, k12, k20, k21, k22 = k
     a00, a11, a22 = k00, k11, k22
@@ -158,12 +159,50 @@ def condition_stiffness_values(k, max_stiffness: float) -> tuple[tuple[float, ..
         phi = math.acos(-1.0 if r < -1.0 else (1.0 if r > 1.0 else r)) / 3.0
         l1 = q + 2.0 * p * math.cos(phi)  # largest
         l3 = q + 2.0 * p * math.cos(phi + 2.0943951023931957)  # smallest (2 pi / 3)
+        l2 = 3.0 * q - l1 - l3
         if l1 <= 0.0 and l3 >= lo:
             out = (a00, a01, a02, a01, a11, a12, a02, a12, a22)
         else:
-            out = _rebuild_clipped(a00, a01, a02, a11, a12, a22, l1, 3.0 * q - l1 - l3, l3, lo)
+            out = None
+            if (l1 > 0.0) != (l3 < lo) and lo <= l2 <= 0.0:  # one eigenvalue out: rank one
+                out = _clip_one(a00, a01, a02, a11, a12, a22, l1 if l1 > 0.0 else l3,
+                                0.0 if l1 > 0.0 else lo)
+            if out is None:
+                out = _rebuild_clipped(a00, a01, a02, a11, a12, a22, l1, l2, l3, lo)
     changed = max(abs(out[i] - k[i]) for i in range(9)) > 1e-6
     return out, changed
+
+
+def _clip_one(a00, a01, a02, a11, a12, a22, la, target) -> tuple[float, ...] | None:
+    """S - (la - target) u u^T, u the unit eigenvector of the one eigenvalue ``la`` that is out
+    of range (the largest cross product of two rows of S - la I), or None when S - la I has
+    rank < 2 (a repeated eigenvalue: the general path). Accurate because the other two are in
+    range: |la - target| is at most la's gap to them, which bounds the eigenvector's error
+    times the correction by rounding."""
+    r0 = (a00 - la, a01, a02)
+    r1 = (a01, a11 - la, a12)
+    r2 = (a02, a12, a22 - la)
+    best, u = 0.0, None
+    for ra, rb in ((r0, r1), (r0, r2), (r1, r2)):
+        c = (ra[1] * rb[2] - ra[2] * rb[1], ra[2] * rb[0] - ra[0] * rb[2],
+             ra[0] * rb[1] - ra[1] * rb[0])
+        nn = c[0] * c[0] + c[1] * c[1] + c[2] * c[2]
+        if nn > best:
+            best, u = nn, c
+    scale = a00 * a00 + a11 * a11 + a22 * a22 + 2.0 * (a01 * a01 + a02 * a02 + a12 * a12)
+    if u is None or best <= 1e-24 * scale * scale:
+        return None
+    ux, uy, uz = u
+    # the Rayleigh quotient, not the closed-form la: exact to second order in u's error (the
+    # trigonometric eigenvalue carries ~sqrt(eps) of the spectrum's width near a double root)
+    rq = (ux * (a00 * ux + a01 * uy + a02 * uz) + uy * (a01 * ux + a11 * uy + a12 * uz)
+          + uz * (a02 * ux + a12 * uy + a22 * uz)) / best
+    if (rq <= target) if target == 0.0 else (rq >= target):  # in range after all: S as it is
+        return (a00, a01, a02, a01, a11, a12, a02, a12, a22)
+    w = (rq - target) / best  # (rq - target) u u^T / |u|^2
+    s00, s01, s02 = a00 - w * ux * ux, a01 - w * ux * uy, a02 - w * ux * uz
+    s11, s12, s22 = a11 - w * uy * uy, a12 - w * uy * uz, a22 - w * uz * uz
+    return (s00, s01, s02, s01, s11, s12, s02, s12, s22)
 
 
 def _rebuild_clipped(a00, a01, a02, a11, a12, a22, l1, l2, l3, lo) -> tuple[float, ...]:

@@ -167,6 +167,9 @@ class FalconDriver(Node):
         self.pub_applied = self.create_publisher(WrenchStamped, ifc.TOPIC_APPLIED, LOOP_QOS)
         self.pub_buttons = self.create_publisher(Joy, ifc.TOPIC_BUTTONS, 10)
         self.pub_mark = self.create_publisher(PointStamped, ifc.TOPIC_MARKS, 10)
+        # the force server's local model layout: read at a known offset (cdr.JointStateWriter)
+        self._lm_layout = cdr.JointStateWriter(self.frame_id, ifc.LOCAL_MODEL_FIELDS,
+                                               len(ifc.LOCAL_MODEL_FIELDS))
         self._polled: list[tuple[PolledSubscription, object]] = []
         loop_inputs = [(WrenchStamped, ifc.TOPIC_COMMAND, self._on_command)]
         if p['force_mode'] == 'local_model':
@@ -298,7 +301,7 @@ class FalconDriver(Node):
     def _on_local_model(self, raw: bytes) -> None:
         now = time.monotonic()
         try:
-            stamp, frame, v, _ = cdr.read_joint_state(raw)
+            stamp, frame, v, _ = self._lm_layout.read(raw)
         except ValueError as exc:
             self._malformed(f'local force model {exc}')
             return
