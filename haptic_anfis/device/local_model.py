@@ -167,18 +167,19 @@ def condition_stiffness_values(k, max_stiffness: float) -> tuple[tuple[float, ..
             if (l1 > 0.0) != (l3 < lo) and lo <= l2 <= 0.0:  # one eigenvalue out: rank one
                 out = _clip_one(a00, a01, a02, a11, a12, a22, l1 if l1 > 0.0 else l3,
                                 0.0 if l1 > 0.0 else lo)
+            elif l2 > 0.0 and lo <= l3 <= 0.0:  # two pull (tangential, the usual): keep l3
+                out = _keep_one(a00, a01, a02, a11, a12, a22, l3, 0.0, lo)
+            elif l2 < lo and lo <= l1 <= 0.0:  # two too stiff: keep l1
+                out = _keep_one(a00, a01, a02, a11, a12, a22, l1, lo, lo)
             if out is None:
                 out = _rebuild_clipped(a00, a01, a02, a11, a12, a22, l1, l2, l3, lo)
     changed = max(abs(out[i] - k[i]) for i in range(9)) > 1e-6
     return out, changed
 
 
-def _clip_one(a00, a01, a02, a11, a12, a22, la, target) -> tuple[float, ...] | None:
-    """S - (la - target) u u^T, u the unit eigenvector of the one eigenvalue ``la`` that is out
-    of range (the largest cross product of two rows of S - la I), or None when S - la I has
-    rank < 2 (a repeated eigenvalue: the general path). Accurate because the other two are in
-    range: |la - target| is at most la's gap to them, which bounds the eigenvector's error
-    times the correction by rounding."""
+def _eigenvector(a00, a01, a02, a11, a12, a22, la):
+    """(u, |u|^2) with u an unnormalised eigenvector of the simple eigenvalue ``la``: the largest
+    cross product of two rows of S - la I; None when all are ~0 (la repeated)."""
     r0 = (a00 - la, a01, a02)
     r1 = (a01, a11 - la, a12)
     r2 = (a02, a12, a22 - la)
@@ -192,7 +193,36 @@ def _clip_one(a00, a01, a02, a11, a12, a22, la, target) -> tuple[float, ...] | N
     scale = a00 * a00 + a11 * a11 + a22 * a22 + 2.0 * (a01 * a01 + a02 * a02 + a12 * a12)
     if u is None or best <= 1e-24 * scale * scale:
         return None
-    ux, uy, uz = u
+    return u, best
+
+
+def _keep_one(a00, a01, a02, a11, a12, a22, la, target, lo) -> tuple[float, ...] | None:
+    """t I + (clip(rq) - t) u u^T: the two eigenvalues other than ``la`` are both out of range on
+    the same side and go to ``target``; only la's eigenvector u is needed (rq its Rayleigh
+    quotient, clipped to [lo, 0]). Accurate for the same reason as :func:`_clip_one`: the
+    correction is at most la's gap to the other two. None: the general path."""
+    e = _eigenvector(a00, a01, a02, a11, a12, a22, la)
+    if e is None:
+        return None
+    (ux, uy, uz), nn = e
+    rq = (ux * (a00 * ux + a01 * uy + a02 * uz) + uy * (a01 * ux + a11 * uy + a12 * uz)
+          + uz * (a02 * ux + a12 * uy + a22 * uz)) / nn
+    w = (_clip(rq, lo) - target) / nn
+    s01, s02, s12 = w * ux * uy, w * ux * uz, w * uy * uz
+    s00, s11, s22 = target + w * ux * ux, target + w * uy * uy, target + w * uz * uz
+    return (s00, s01, s02, s01, s11, s12, s02, s12, s22)
+
+
+def _clip_one(a00, a01, a02, a11, a12, a22, la, target) -> tuple[float, ...] | None:
+    """S - (la - target) u u^T, u the unit eigenvector of the one eigenvalue ``la`` that is out
+    of range (the largest cross product of two rows of S - la I), or None when S - la I has
+    rank < 2 (a repeated eigenvalue: the general path). Accurate because the other two are in
+    range: |la - target| is at most la's gap to them, which bounds the eigenvector's error
+    times the correction by rounding."""
+    e = _eigenvector(a00, a01, a02, a11, a12, a22, la)
+    if e is None:
+        return None
+    (ux, uy, uz), best = e
     # the Rayleigh quotient, not the closed-form la: exact to second order in u's error (the
     # trigonometric eigenvalue carries ~sqrt(eps) of the spectrum's width near a double root)
     rq = (ux * (a00 * ux + a01 * uy + a02 * uz) + uy * (a01 * ux + a11 * uy + a12 * uz)
@@ -209,19 +239,11 @@ def _rebuild_clipped(a00, a01, a02, a11, a12, a22, l1, l2, l3, lo) -> tuple[floa
     """S (upper triangle) rebuilt with its eigenvalues clipped to [lo, 0]; l1 >= l2 >= l3 are
     its eigenvalues (see :func:`condition_stiffness_values`)."""
     la = l1 if l1 - l2 >= l2 - l3 else l3
-    r0 = (a00 - la, a01, a02)
-    r1 = (a01, a11 - la, a12)
-    r2 = (a02, a12, a22 - la)
-    best, u = 0.0, None
-    for ra, rb in ((r0, r1), (r0, r2), (r1, r2)):
-        c = (ra[1] * rb[2] - ra[2] * rb[1], ra[2] * rb[0] - ra[0] * rb[2],
-             ra[0] * rb[1] - ra[1] * rb[0])
-        nn = c[0] * c[0] + c[1] * c[1] + c[2] * c[2]
-        if nn > best:
-            best, u = nn, c
-    if u is None:  # S - la I = 0: S = la I
+    e = _eigenvector(a00, a01, a02, a11, a12, a22, la)
+    if e is None:  # S - la I ~ 0: S = la I
         w = _clip(la, lo)
         return (w, 0.0, 0.0, 0.0, w, 0.0, 0.0, 0.0, w)
+    u, best = e
     s = 1.0 / math.sqrt(best)
     ux, uy, uz = u[0] * s, u[1] * s, u[2] * s
     # an orthonormal basis (v, w) of u's complement
