@@ -119,9 +119,17 @@ class ForceInput:
         ``now`` (:meth:`model_values` of ``m.values()``; ``m.time`` is not used)."""
         try:
             v = m.values()
-        except ValueError:
-            v = [math.nan] * 26  # malformed: refused below like a non-finite one
+        except ValueError as exc:  # a malformed field: refused as model_values refuses one
+            self.models_received += 1
+            return 'ignored: zoh mode' if self.mode != 'local_model' else self._refuse(exc)
         return self.model_values(v, stamp_ns, frame_id, now)
+
+    def _refuse(self, exc: ValueError) -> str:
+        """A malformed / non-finite model: zero force at once, whatever its stamp."""
+        self.renderer.clear()
+        self.renderer.stats.rejected += 1
+        self.safety.reject(f'rejected: {exc}')
+        return f'rejected: {exc}'
 
     def model_values(self, v, stamp_ns: int, frame_id: str | None, now: float) -> str:
         """A local force model's flat values ``v`` (a message's ``position``: 26 values,
@@ -140,10 +148,7 @@ class ForceInput:
         try:
             check_values(v)  # a malformed model zeroes the force whatever its stamp
         except ValueError as exc:
-            self.renderer.clear()
-            self.renderer.stats.rejected += 1
-            self.safety.reject(f'rejected: {exc}')
-            return f'rejected: {exc}'
+            return self._refuse(exc)
         why, t_pose = self._stamp(stamp_ns, now)
         if why != STAMP_OK:
             return f'rejected: stamp {why}'
