@@ -14,11 +14,18 @@ configuration. Printed, never asserted: the machine is shared (the load average 
 Target (issue 17): local model, separate processes under load: RMS <= 2 % of the force, >= 5x
 better than the zero-order hold in the same run, no watchdog trip in contact.
 
-    .venv/bin/python bench/bench_loop.py [--seconds 10] [--json]
+    .venv/bin/python bench/bench_loop.py [--seconds 10] [--json] [--configs one,multi,busy]
+                                         [--keep DIR] [--approach-distance M] [--executor-input]
+
+Columns: ``miss`` = servo deadline misses (a tick started more than a period late), ``cpu%`` = the
+driver process's CPU over the run (all threads; in one process, the whole graph's), ``µs/tick`` (one
+process) = the whole graph's CPU per servo tick, measured by the bench: on a shared machine the
+servo rate follows the load, the CPU each tick costs much less so.
 """
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import os
 import subprocess
@@ -33,16 +40,35 @@ sys.path.insert(0, str(ROOT))
 MODES = ('zoh', 'local_model')
 
 
+#: extra contact_detector parameters (name -> value), from the command line
+CONTACT_PARAMS: dict = {}
+#: extra falcon_driver parameters (name -> value), from the command line
+DRIVER_PARAMS: dict = {}
+#: one process: CPU seconds of the process over the measurement window, by trace path
+CPU: dict = {}
+
+
 def one_process(seconds: float, mode: str, trace: Path) -> None:
     from rclpy.parameter import Parameter
 
     from haptic_anfis.nodes.graph import build_graph
+    # a domain of its own: another session's graph on the default domain would feed this driver
+    # its commands (refused as unknown / future stamps, but taking this process's time)
+    os.environ['ROS_DOMAIN_ID'] = str(100 + os.getpid() % 50)
+    os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
     g = build_graph(['bench'], visualizer=False, overrides={'falcon_driver': [
-        Parameter('force_mode', value=mode), Parameter('trace_path', value=str(trace))]})
+        Parameter('force_mode', value=mode), Parameter('trace_path', value=str(trace)),
+        *(Parameter(k, value=v) for k, v in DRIVER_PARAMS.items())],
+        'contact_detector': [Parameter(k, value=v) for k, v in CONTACT_PARAMS.items()]})
     try:
         if not g.spin_for(60.0, lambda: g.driver.first_command is not None):
             raise RuntimeError('no force command within 60 s')
+        # the window opens at the first command, as run_duration does across processes (the
+        # servo thread's misses while the other nodes were still loading do not count)
+        g.driver.servo.stats.reset()
+        cpu0 = time.process_time()
         g.spin_for(seconds)
+        CPU[trace] = time.process_time() - cpu0  # the whole graph's CPU over the window
     finally:
         g.shutdown()  # the driver writes its trace
 
@@ -51,13 +77,16 @@ def multi_process(seconds: float, mode: str, trace: Path, busy: int = 0) -> None
     from haptic_anfis.nodes.processes import node_env, start_node, stop_node
     env = node_env(150 + os.getpid() % 50, localhost=True)
     hogs = [subprocess.Popen([sys.executable, '-c', 'while True: pass']) for _ in range(busy)]
-    helpers = [start_node(n, env=env, log=subprocess.DEVNULL)
-               for n in ('force_server', 'contact_detector')]
+    cargs = [a for k, v in CONTACT_PARAMS.items() for a in ('-p', f'{k}:={v}')]
+    helpers = [start_node(n, cargs if n == 'contact_detector' else (), env=env,
+                          log=subprocess.DEVNULL) for n in ('force_server', 'contact_detector')]
     try:
         time.sleep(3.0)
         driver = start_node('falcon_driver', ['-p', f'run_duration:={float(seconds)}',
                                               '-p', f'force_mode:={mode}',
-                                              '-p', f'trace_path:={trace}'],
+                                              '-p', f'trace_path:={trace}',
+                                              *(a for k, v in DRIVER_PARAMS.items()
+                                                for a in ('-p', f'{k}:={str(v).lower()}'))],
                             env=env, log=subprocess.PIPE)
         helpers.append(driver)  # stopped below if it outlives the timeout
         out = driver.communicate(timeout=seconds + 180)[0].decode(errors='replace')
@@ -79,7 +108,8 @@ def row(name: str, r: dict) -> str:
             f'{r["ticks_fresh"]:>6} {r["ticks_extrapolated"]:>6} {r["ticks_expired"]:>5} '
             f'{r["watchdog_trips_in_contact"]:>4} {f(r["force_error_rms_pct"]):>7} '
             f'{f(r["force_error_rms_n"], 3):>7} {f(r["force_error_p99_n"], 3):>7} '
-            f'{r["contact_ticks"]:>7}')
+            f'{r["contact_ticks"]:>7} {r.get("deadline_misses") or 0:>5} '
+            f'{f(r.get("process_cpu_pct"), 0):>4} {f(r.get("cpu_us_per_tick"), 0):>6}')
 
 
 def main() -> int:
@@ -89,7 +119,20 @@ def main() -> int:
     ap.add_argument('--configs', default='one,multi,busy',
                     help='comma-separated subset of one, multi, busy')
     ap.add_argument('--json', action='store_true', help='also print each run as a JSON line')
+    ap.add_argument('--keep', metavar='DIR', help='write the servo tick traces here (kept: '
+                    "read them with 'haptic-anfis loop DIR/<config>_<mode>.npz') instead of a "
+                    'temporary directory')
+    ap.add_argument('--approach-distance', type=float, metavar='M',
+                    help="the contact detector's approach_distance [m] (0 = no approach model; "
+                         "default: the node's)")
+    ap.add_argument('--executor-input', action='store_true',
+                    help="the driver takes its loop inputs in executor callbacks "
+                         "(take_in_servo_thread false), as before the servo thread took them")
     a = ap.parse_args()
+    if a.executor_input:
+        DRIVER_PARAMS['take_in_servo_thread'] = False
+    if a.approach_distance is not None:
+        CONTACT_PARAMS['approach_distance'] = float(a.approach_distance)
     configs = {'one': ('one process', lambda s, m, t: one_process(s, m, t)),
                'multi': ('separate processes', lambda s, m, t: multi_process(s, m, t)),
                'busy': ('separate + 2 busy processes', lambda s, m, t: multi_process(s, m, t, 2))}
@@ -97,9 +140,12 @@ def main() -> int:
           f'load average {os.getloadavg()[0]:.2f} (1 min) at start')
     print(f'{"configuration":<30} {"mode":<11} {"rate Hz":>7} {"p50 ms":>6} {"p99 ms":>6} '
           f'{"max ms":>6} {"fresh":>6} {"extrap":>6} {"expir":>5} {"wdog":>4} {"err %":>7} '
-          f'{"RMS N":>7} {"p99 N":>7} {"contact":>7}')
+          f'{"RMS N":>7} {"p99 N":>7} {"contact":>7} {"miss":>5} {"cpu%":>4} {"µs/tick":>6}')
     ratios = []
-    with tempfile.TemporaryDirectory(prefix='bench_loop_') as tmp:
+    if a.keep:
+        Path(a.keep).mkdir(parents=True, exist_ok=True)
+    with (contextlib.nullcontext(a.keep) if a.keep
+          else tempfile.TemporaryDirectory(prefix='bench_loop_')) as tmp:
         for key in a.configs.split(','):
             name, fn = configs[key]
             res = {}
@@ -109,6 +155,8 @@ def main() -> int:
                     load0 = os.getloadavg()[0]
                     fn(a.seconds, mode, trace)
                     r = trace_report(trace)
+                    if trace in CPU and r.get('ticks'):
+                        r['cpu_us_per_tick'] = 1e6 * CPU[trace] / r['ticks']
                     r['load_1min'] = round((load0 + os.getloadavg()[0]) / 2, 2)
                     res[mode] = r
                     print(row(name, r), f' load {r["load_1min"]:.1f}', flush=True)

@@ -38,6 +38,12 @@ stamp of the pose it was computed from, ``header.frame_id`` the tissue frame; ``
   depth then being held at that limit.
 - ``normal_x/y/z``: outward unit surface normal at the contact point (zeros when not in contact).
   Added after the first nine: readers accept the older 9-value messages (:data:`N_CONTACT_V1`).
+- ``effort`` (added with the approach; empty before, and whenever not free or nothing is near):
+  the approach fields :data:`APPROACH_FIELDS` — while the probe is free and a front surface lies
+  within the detector's ``approach_distance`` along the indentation direction, the surface point
+  the probe will touch [m] and the outward unit normal there (normal mode: the closest surface
+  point). The force server sends that tangent plane to the driver as a local model before contact
+  (below), so a press is rendered from its first tick. ``position`` is unchanged by it.
 
 Local force model message (``sensor_msgs/JointState`` on ``falcon/servo_cf_local``, published by
 the force server with every ``falcon/servo_cf``, same stamp: the contact's, i.e. the driver's pose
@@ -53,6 +59,11 @@ it answers; ``header.frame_id`` the tissue frame; ``name`` is exactly :data:`LOC
   message; depth 0 = no contact (the driver renders zero force).
 - ``zero_at_surface``: 1.0 when the model's force at depth 0 at the contact point is below
   :data:`ZERO_FORCE_TOL` (the driver then makes the local model zero on the surface).
+
+A model with depth 0 is "no contact": all zeros (zero force), or, when the contact carried the
+approach fields and the force is zero on the surface, an approach model: F0 = 0, p0 = contact =
+the surface point ahead, the normal there, K = dF/dp at depth 0+ through the geometry; the driver
+renders zero on the outer side of that plane and K (p - p0) once the probe is past it.
 """
 from __future__ import annotations
 
@@ -62,6 +73,10 @@ CONTACT_FIELDS = ('contact_x', 'contact_y', 'contact_z', 'depth', 'direction_x',
  I_NZ) = range(len(CONTACT_FIELDS))
 #: values in a contact message before the normal was added (still accepted by readers)
 N_CONTACT_V1 = 9
+
+
+#: the contact message's ``effort`` while free and near the surface (else empty)
+APPROACH_FIELDS = ('surface_x', 'surface_y', 'surface_z', 'normal_x', 'normal_y', 'normal_z')
 
 
 def is_contact_values(v) -> bool:
@@ -107,7 +122,14 @@ def local_model_from_values(v, frame_time: float = 0.0):
     if len(v) != len(LOCAL_MODEL_FIELDS):
         raise ValueError(f'local force model message with {len(v)} values, expected '
                          f'{len(LOCAL_MODEL_FIELDS)} ({", ".join(LOCAL_MODEL_FIELDS)})')
-    v = [float(c) for c in v]
-    return LocalModel(f0=tuple(v[LM_F0]), p0=tuple(v[LM_P0]), k=v[LM_K], contact=tuple(v[LM_C]),
-                      normal=tuple(v[LM_N]), direction=tuple(v[LM_D]), depth0=v[LM_DEPTH],
-                      zero_at_surface=v[LM_ZERO] > 0.5, time=frame_time)
+    v = v.tolist() if hasattr(v, 'tolist') else [float(c) for c in v]  # array.array: floats
+    # Filled directly (no frozen-dataclass __init__: ~2 µs of setattr calls per message).
+    m = _object_new(LocalModel)
+    d = m.__dict__
+    d['f0'], d['p0'], d['k'] = tuple(v[LM_F0]), tuple(v[LM_P0]), v[LM_K]
+    d['contact'], d['normal'], d['direction'] = tuple(v[LM_C]), tuple(v[LM_N]), tuple(v[LM_D])
+    d['depth0'], d['zero_at_surface'], d['time'] = v[LM_DEPTH], v[LM_ZERO] > 0.5, frame_time
+    return m
+
+
+_object_new = object.__new__

@@ -11,7 +11,8 @@ from haptic_anfis.device import DeviceState, SafetyLayer, ServoLoop, WorkspaceMa
 from haptic_anfis.device.force_input import ForceInput
 from haptic_anfis.device.local_model import (EXPIRED, EXTRAPOLATED, FREE, FRESH, NONE,
                                              LocalModel, LocalModelRenderer, condition_stiffness,
-                                             contact_jacobian, depth_gradient)
+                                             condition_stiffness_values, contact_jacobian,
+                                             depth_gradient)
 from haptic_anfis.device.stamps import FUTURE, OK, STALE, UNKNOWN, StampBook
 from haptic_anfis.device.trace import TickTrace, load_trace, save_trace
 
@@ -130,6 +131,69 @@ def test_stiffness_guard():
     assert r.stats.stiffness_clamped == 1
     f, _ = r.render((-0.002, 0, 0), 0.0)
     assert f[0] == pytest.approx(1.0 + 2000.0 * 0.001)
+
+
+def eigh_reference(K, kmax):
+    """The guard by numpy's eigh: symmetrise, clip the eigenvalues to [-kmax, 0], rebuild."""
+    S = 0.5 * (K + K.T)
+    w, V = np.linalg.eigh(S)
+    return (V * np.clip(w, -kmax, 0.0)) @ V.T
+
+
+def rotation(rng):
+    Q, _ = np.linalg.qr(rng.normal(size=(3, 3)))
+    return Q
+
+
+def hard_stiffnesses(seed):
+    """Random and degenerate K [N/m]: indefinite, too stiff, repeated / zero eigenvalues,
+    diagonal, isotropic, rank one, nearly equal eigenvalues, tiny and huge scales."""
+    rng = np.random.default_rng(seed)
+    Q = rotation(rng)
+    s = 10.0 ** rng.uniform(-3, 6)
+    a, b, c = rng.uniform(-2, 1, 3) * s
+    yield rng.normal(size=(3, 3)) * s                      # asymmetric, indefinite
+    yield Q @ np.diag([a, a, b]) @ Q.T                      # a double eigenvalue
+    yield Q @ np.diag([a, b, b]) @ Q.T
+    yield Q @ np.diag([a, a, a]) @ Q.T                      # isotropic, rotated (rounding)
+    yield np.diag([a, b, c])                                # diagonal: no off-diagonal terms
+    yield a * np.eye(3)
+    yield np.zeros((3, 3))
+    v = rng.normal(size=3)
+    yield a * np.outer(v, v)                                # rank one
+    yield Q @ np.diag([a, a * (1 + 1e-9), a * (1 - 1e-9)]) @ Q.T  # nearly equal
+    yield Q @ np.diag([a, b, c]) @ Q.T + 1e-12 * s * rng.normal(size=(3, 3))
+    yield -np.outer([1.0, 0, 0], [1.0, 0, 0]) * 1e5         # one axis far too stiff
+
+
+@pytest.mark.parametrize('seed', range(40))
+def test_closed_form_guard_matches_eigh(seed):
+    """The driver's closed-form guard (no numpy) gives numpy eigh's answer on random and
+    degenerate stiffnesses, and says when it changed K."""
+    kmax = 3000.0
+    for K in hard_stiffnesses(seed):
+        ref = eigh_reference(K, kmax)
+        out, changed = condition_stiffness_values(K.ravel().tolist(), kmax)
+        got = np.array(out).reshape(3, 3)
+        scale = max(1.0, np.abs(K).max())
+        np.testing.assert_allclose(got, ref, atol=1e-9 * scale, rtol=0)
+        np.testing.assert_array_equal(got, got.T)
+        w = np.linalg.eigvalsh(got)
+        assert w.max() <= 1e-9 * scale and w.min() >= -kmax - 1e-9 * scale
+        diff = np.abs(ref - K).max()
+        if abs(diff - 1e-6) > 1e-8 * scale:  # not on the counting threshold itself
+            assert changed == (diff > 1e-6)
+
+
+def test_closed_form_guard_leaves_a_conforming_k_exactly():
+    rng = np.random.default_rng(7)
+    for _ in range(100):
+        S = spd_neg(rng, rng.uniform(10.0, 2900.0))
+        S = 0.5 * (S + S.T)
+        if np.linalg.eigvalsh(S).max() > -1e-3:  # too close to the boundary for "exactly"
+            continue
+        out, changed = condition_stiffness_values(S.ravel().tolist(), 3000.0)
+        assert out == tuple(S.ravel().tolist()) and not changed
 
 
 @pytest.mark.parametrize('field', ['f0', 'p0', 'k', 'normal'])
@@ -403,3 +467,111 @@ def test_force_server_local_model_without_contact_or_bad(default_model):
     assert F == (0.0, 0.0, 0.0) and 'expected 12' in err
     with pytest.raises(ValueError, match='expected 26'):
         ifc.local_model_from_values([0.0] * 3)
+
+
+def test_force_error_and_its_phases():
+    """Two contacts of 100 ticks at 1 kHz (the second runs to the trace's end); the applied force
+    is the ideal one except 3 ticks late at each onset (zero there) and one 0.1 N error in the
+    middle of the first: the squared error splits accordingly."""
+    from haptic_anfis.device.force_error import error_by_phase, force_error
+    t = np.arange(300) * 1e-3
+    contact = np.zeros(300, dtype=bool)
+    contact[50:150] = True
+    contact[200:300] = True
+    ideal = np.zeros((300, 3))
+    ideal[contact, 0] = 2.0
+    applied = ideal.copy()
+    applied[[50, 51, 52, 200, 201, 202], 0] = 0.0  # onset: one latency of zero force
+    applied[100, 0] = 2.1  # steady
+    applied[10, 0] = 5.0  # free: not counted
+    e = force_error(applied, ideal, contact)
+    assert e['contact_ticks'] == 200
+    assert e['force_error_rms_n'] == pytest.approx(math.sqrt((6 * 4 + 0.01) / 200))
+    assert e['force_error_rms_pct'] == pytest.approx(100 * e['force_error_rms_n'] / 2.0)
+    ph = error_by_phase(applied, ideal, contact, t, window=0.0195)  # 20 ticks each
+    assert ph['contacts'] == 2
+    assert (ph['onset']['ticks'], ph['offset']['ticks'], ph['steady']['ticks']) == (40, 20, 140)
+    assert ph['onset']['share_pct'] == pytest.approx(100 * 24 / 24.01)
+    assert ph['steady']['share_pct'] == pytest.approx(100 * 0.01 / 24.01)
+    assert ph['offset']['share_pct'] == 0.0
+    # the ideal force is clamped to the device limit before comparing
+    assert force_error(ideal * 10, ideal * 10, contact, max_force=5.0)['force_error_rms_n'] \
+        == pytest.approx(15.0)
+    with pytest.raises(ValueError, match='error_by_phase'):
+        error_by_phase(applied, ideal, contact, t[:5])
+
+
+def test_approach_model_renders_from_the_plane_on():
+    """A model made while free, with the plane ahead (depth 0, unit normal): zero outside the
+    plane, K (p - s) past it at once, counted as approach ticks; a non-unit normal is refused."""
+    n = unit([1.0, 0.2, 0.0])
+    d = np.array([-1.0, 0.0, 0.0])
+    s = np.array([0.03, 0.001, 0.0])
+    g = depth_gradient(n, d)
+    kd = np.array([300.0, 20.0, 0.0])  # dF/d depth at 0+ [N/m]
+    K = np.outer(kd, g)  # the force grows with the depth past the plane
+    r = LocalModelRenderer(max_stiffness=1e5, validity_time=1.0, validity_radius=0.01)
+    m = make((0, 0, 0), s, K, s, n, d, 0.0, zero=True)
+    assert m.approach and not m.in_contact
+    r.offer(m)
+    assert r.render(tuple(s - 0.002 * d), 0.0) == ((0.0, 0.0, 0.0), FREE)  # still outside
+    p = s + 0.0005 * d + np.array([0.0, 0.0005, 0.0003])
+    f, st = r.render(tuple(p), 0.0)
+    assert st == FRESH and r.stats.ticks_approach == 1
+    depth = g @ (p - s)
+    assert depth > 0
+    np.testing.assert_allclose(f, condition_stiffness(K, 1e5) @ (p - s), atol=1e-12)
+    # the all-zero free model still renders nothing, and counts no approach tick
+    r.offer(make((0, 0, 0), (0, 0, 0), np.zeros((3, 3)), (0, 0, 0), (0, 0, 0), (0, 0, 0), 0.0))
+    assert r.render(tuple(p), 0.0) == ((0.0, 0.0, 0.0), FREE) and r.stats.ticks_approach == 1
+    with pytest.raises(ValueError, match='normal'):
+        r.offer(make((0, 0, 0), s, K, s, 2 * n, d, 0.0))
+
+
+def test_surface_ahead_of_a_free_probe():
+    """Fixed direction: the ray's first front-face crossing within the distance; normal mode:
+    the closest point; nothing beyond the distance or behind the probe."""
+    from haptic_anfis.contact import ContactDetector, ellipsoid_dome
+    from haptic_anfis.contact.approach import surface_ahead
+    mesh = ellipsoid_dome((0.045, 0.07, 0.07))
+    det = ContactDetector(mesh, direction=(-1.0, 0.0, 0.0))
+    top = np.array([0.045, 0.0, 0.0])
+    s, n, t = surface_ahead(det, top + [0.003, 0.001, 0.0], det.direction, 0.005)
+    assert t == pytest.approx(0.003, abs=2e-4) and s[0] == pytest.approx(0.045, abs=2e-4)
+    assert n[0] > 0.95 and np.linalg.norm(n) == pytest.approx(1.0)
+    assert surface_ahead(det, top + [0.006, 0.0, 0.0], det.direction, 0.005) is None
+    assert surface_ahead(det, top + [0.003, 0.0, 0.0], det.direction, 0.0) is None
+    assert surface_ahead(det, top + [0.003, 0.0, 0.0], (1.0, 0.0, 0.0), 0.005) is None  # away
+    free = ContactDetector(mesh, direction=None)
+    s, n, t = surface_ahead(free, top + [0.002, 0.0, 0.0], None, 0.005)
+    assert t == pytest.approx(0.002, abs=2e-4) and n[0] > 0.95
+
+
+def test_force_server_approach_model(default_model):
+    """Free probe with the approach fields: F0 = 0 at the surface point ahead, K = dF/dp at depth
+    0+; past the plane the rendered force follows the model's at small depths. Without the
+    fields, or with bad ones: the all-zero model."""
+    from haptic_anfis.nodes import interfaces as ifc
+    from haptic_anfis.nodes.force_server import local_model_from_contact
+    c = np.array([0.035, 0.004, -0.003])
+    n = unit([1.0, 0.1, -0.05])
+    d = np.array([-1.0, 0.0, 0.0])
+    free = [*(c - 0.002 * d), 0.0, *d, 0.0, 0.0, 0.0, 0.0, 0.0]
+    F, lm, err = local_model_from_contact(default_model, free, approach=[*c, *n])
+    assert F == (0.0, 0.0, 0.0) and err is None
+    m = ifc.local_model_from_values(lm)
+    assert m.approach and m.zero_at_surface and m.f0 == (0.0, 0.0, 0.0)
+    np.testing.assert_allclose(m.p0, c)
+    r = LocalModelRenderer(max_stiffness=1e6, validity_time=1.0, validity_radius=0.01)
+    r.offer(m)
+    for depth in (1e-5, 1e-4, 3e-4):
+        f, st = r.render(tuple(c + depth * d), 0.0)
+        assert st == FRESH
+        ref = np.array(default_model.predict_one(*c, depth))
+        # the normal force to 1 %; the tangential part is what the symmetric guard leaves of the
+        # rank-one K = J_depth g^T (measured 2-12 % of |F| on the shipped surface's slopes)
+        assert abs(f[0] - ref[0]) <= 0.01 * np.linalg.norm(ref), (depth, f, ref)
+        assert np.linalg.norm(f - ref) <= 0.15 * np.linalg.norm(ref), (depth, f, ref)
+    assert local_model_from_contact(default_model, free)[1] == [0.0] * len(lm)
+    for bad in ([math.nan, 0, 0, *n], [*c, 0.0, 0.0, 0.0], [*c, *n][:5]):
+        assert local_model_from_contact(default_model, free, approach=bad)[1] == [0.0] * len(lm)

@@ -13,7 +13,12 @@ commands and local models it receives), ``latency_p50_ms``, ``latency_p99_ms``,
 ``ticks_extrapolated``, ``ticks_expired`` (local model), ``watchdog_trips``,
 ``watchdog_trips_in_contact``, ``force_error_rms_pct``, ``force_error_rms_n``,
 ``force_error_p99_n``, ``force_error_p99_pct``, ``contact_ticks``, ``force_mode``,
-``deadline_misses``, ``rejected_stale``, ``rejected_future``, ``rejected_unknown_stamp``.
+``deadline_misses``, ``rejected_stale``, ``rejected_future``, ``rejected_unknown_stamp``,
+``ticks_approach`` (of the fresh and extrapolated ticks, those rendered from an approach model:
+the plane ahead of a free probe), ``force_error_by_phase`` (onset / offset / steady: the first and last 20 ms of each contact and
+the rest, each ``ticks``, ``rms_n``, ``share_pct`` of the squared error),
+``process_cpu_pct`` (the driver process's CPU time over the window / its wall time, all threads:
+in one process, the whole graph's).
 """
 from __future__ import annotations
 
@@ -68,12 +73,15 @@ def ideal_forces(positions: np.ndarray, params_files=()) -> tuple[np.ndarray, np
 
 def trace_report(trace: str | Path, params_files=()) -> dict:
     """The report of one trace (keys in the module docstring)."""
-    from ..device.force_error import force_error
+    from ..device.force_error import error_by_phase, force_error
     from ..device.trace import load_trace
     rows, meta = load_trace(trace)
     st = meta.get('stats', {})
     F, contact = ideal_forces(rows[:, 1:4], params_files)
-    err = force_error(rows[:, 4:7], F, contact, max_force=meta.get('max_force', math.inf))
+    fmax = meta.get('max_force', math.inf)
+    err = force_error(rows[:, 4:7], F, contact, max_force=fmax)
+    err['force_error_by_phase'] = error_by_phase(rows[:, 4:7], F, contact, rows[:, 0],
+                                                 max_force=fmax)
     # the trace and the received counts start at the first command (the driver resets them)
     secs = float(rows[-1, 0] - rows[0, 0]) if len(rows) > 1 else 0.0
     rate = lambda k: round(st[k] / secs, 1) if secs > 0 and k in st else None  # noqa: E731
@@ -85,7 +93,8 @@ def trace_report(trace: str | Path, params_files=()) -> dict:
                                    'ticks_fresh', 'ticks_extrapolated', 'ticks_expired',
                                    'watchdog_trips', 'watchdog_trips_in_contact',
                                    'deadline_misses', 'rejected_stale', 'rejected_future',
-                                   'rejected_unknown_stamp')},
+                                   'rejected_unknown_stamp', 'process_cpu_pct',
+                                   'ticks_approach')},
          **err, 'ticks': int(len(rows))}
     return {k: r[k] for k in KEYS if k in r} | {k: v for k, v in r.items() if k not in KEYS}
 
@@ -106,7 +115,19 @@ def format_report(r: dict) -> str:
         f"  applied-force error over {r['contact_ticks']} contact ticks: RMS "
         f"{f(r['force_error_rms_n'], 3)} N = {f(r['force_error_rms_pct'])} % of the RMS force, "
         f"p99 {f(r['force_error_p99_n'], 3)} N ({f(r['force_error_p99_pct'])} % per tick, "
-        f"forces >= 0.5 N)"])
+        f"forces >= 0.5 N)",
+        _phase_line(r.get('force_error_by_phase'))])
+
+
+def _phase_line(ph: dict | None) -> str:
+    """Where the error is: onset / offset / steady (first / last 20 ms of each contact)."""
+    if not ph:
+        return '  error by phase: n/a'
+    f = lambda v, d: 'n/a' if v is None else f'{v:.{d}f}'  # noqa: E731
+    parts = [f"{k} {ph[k]['ticks']} ticks RMS {f(ph[k]['rms_n'], 3)} N "
+             f"({f(ph[k]['share_pct'], 0)} % of the squared error)" for k in ('onset', 'offset',
+                                                                            'steady')]
+    return f"  error by phase over {ph['contacts']} contacts (20 ms windows): " + '; '.join(parts)
 
 
 def run(args: argparse.Namespace) -> int:

@@ -15,6 +15,10 @@ Figures (:func:`force_error`):
 - ``force_error_p99_pct``: 99th percentile of the per-tick error as % of that tick's force, over
   ticks with |F_ideal| >= ``min_force`` (default 0.5 N; below it a % says little).
 - ``contact_ticks``: ticks in contact.
+
+Where the error is (:func:`error_by_phase`): the contact ticks split into onset (within a window
+after the ideal loop enters contact), offset (within the window before it leaves) and steady (the
+rest), each with its tick count, RMS error and share of the total squared error.
 """
 from __future__ import annotations
 
@@ -44,11 +48,7 @@ def force_error(applied: np.ndarray, ideal: np.ndarray, in_contact: np.ndarray,
             or mask.shape != (len(applied),):
         raise ValueError(f'force_error: expected applied and ideal (n, 3) and in_contact (n,), '
                          f'got {applied.shape}, {ideal.shape}, {mask.shape}')
-    n = np.linalg.norm(ideal, axis=1)
-    over = n > max_force
-    ideal = ideal.copy()
-    ideal[over] *= (max_force / n[over])[:, None]
-    n = np.minimum(n, max_force)
+    ideal, n = _clamped(ideal, max_force)
     e = np.linalg.norm(applied - ideal, axis=1)[mask]
     f = n[mask]
     out = {'contact_ticks': int(mask.sum())}
@@ -64,3 +64,58 @@ def force_error(applied: np.ndarray, ideal: np.ndarray, in_contact: np.ndarray,
             'force_error_p99_pct': (float(np.percentile(100.0 * e[big] / f[big], 99))
                                     if big.any() else None),
             'force_rms_n': rms_f}
+
+
+def _clamped(ideal: np.ndarray, max_force: float) -> tuple[np.ndarray, np.ndarray]:
+    """(ideal (n, 3) with magnitudes clamped to ``max_force`` [N], the clamped magnitudes (n,))."""
+    n = np.linalg.norm(ideal, axis=1)
+    over = n > max_force
+    ideal = ideal.copy()
+    ideal[over] *= (max_force / n[over])[:, None]
+    return ideal, np.minimum(n, max_force)
+
+
+PHASES = ('onset', 'offset', 'steady')
+
+
+def error_by_phase(applied: np.ndarray, ideal: np.ndarray, in_contact: np.ndarray,
+                   times: np.ndarray, window: float = 0.02, max_force: float = math.inf) -> dict:
+    """Where the applied-force error of :func:`force_error` lies in each contact.
+
+    A contact tick is ``onset`` when it is less than ``window`` [s] after the first tick of its
+    contact (a run of in-contact ticks), else ``offset`` when less than ``window`` before the
+    last tick of a contact that ends inside the trace, else ``steady``. Arguments as
+    :func:`force_error`, plus ``times`` (n,) [s], increasing.
+
+    Returns:
+        {phase: {'ticks', 'rms_n' (None without ticks), 'share_pct' (of the summed squared error
+        over all contact ticks; None when that is zero)}} for each of :data:`PHASES`, and
+        ``'contacts'``: the number of contacts (runs).
+    """
+    applied = np.asarray(applied, dtype=np.float64)
+    mask = np.asarray(in_contact, dtype=bool)
+    t = np.asarray(times, dtype=np.float64)
+    if applied.shape != np.shape(ideal) or t.shape != mask.shape or mask.shape != (len(applied),):
+        raise ValueError(f'error_by_phase: expected applied and ideal (n, 3), in_contact and '
+                         f'times (n,), got {applied.shape}, {np.shape(ideal)}, {mask.shape}, '
+                         f'{t.shape}')
+    ideal, _ = _clamped(np.asarray(ideal, dtype=np.float64), max_force)
+    e2 = np.sum((applied - ideal) ** 2, axis=1)
+    edges = np.diff(np.concatenate([[0], mask.astype(np.int8), [0]]))
+    starts, ends = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1) - 1  # inclusive
+    phase = np.full(len(mask), -1)
+    for a, b in zip(starts, ends):
+        tt = t[a:b + 1]
+        ph = np.full(len(tt), 2)
+        if b < len(mask) - 1:  # the contact ends inside the trace
+            ph[t[b] - tt < window] = 1
+        ph[tt - t[a] < window] = 0
+        phase[a:b + 1] = ph
+    total = float(e2[mask].sum())
+    out: dict = {'contacts': int(len(starts))}
+    for i, name in enumerate(PHASES):
+        sel = phase == i
+        k = int(sel.sum())
+        out[name] = {'ticks': k, 'rms_n': float(np.sqrt(e2[sel].mean())) if k else None,
+                     'share_pct': 100.0 * float(e2[sel].sum()) / total if total > 0 else None}
+    return out

@@ -11,11 +11,10 @@ takes them to the device frame for the safety layer.
 from __future__ import annotations
 
 import math
-from dataclasses import replace
 
 from .buttons import ClutchMark
 from .falcon import DeviceState, WorkspaceMapping
-from .local_model import (FALCON_MAX_STIFFNESS, LocalModel, LocalModelRenderer,
+from .local_model import (FALCON_MAX_STIFFNESS, LocalModel, LocalModelRenderer, check_values,
                           tissue_stiffness_limit)
 from .safety import OK, REJECTED_FRAME, SafetyLayer
 from .stamps import OK as STAMP_OK
@@ -93,7 +92,11 @@ class ForceInput:
         stamp: zero is the safe state). Zoh mode: the safety layer's target, timed by its pose;
         local-model mode: the force itself comes with the model. Returns OK or why not."""
         self.commands_received += 1
-        bad = not all(math.isfinite(float(v)) for v in force)
+        try:
+            fx, fy, fz = force
+            bad = not math.isfinite(fx + fy + fz)  # NaN or Inf in any component (or overflow)
+        except (TypeError, ValueError):
+            bad = True
         sf = self.safety.frame_id
         if bad or (sf and frame_id is not None and frame_id != sf):
             self.renderer.clear()
@@ -113,9 +116,27 @@ class ForceInput:
 
     def model(self, m: LocalModel, stamp_ns: int, frame_id: str | None, now: float) -> str:
         """A local force model (tissue frame) answering the pose ``stamp_ns``, received at
-        ``now`` (``m.time`` is replaced by that pose's time). Returns OK or why it was refused:
-        a refused stamp is not taken (the current model keeps running until it expires); a
-        malformed / non-finite model or a wrong frame zeroes the force at once."""
+        ``now`` (:meth:`model_values` of ``m.values()``; ``m.time`` is not used)."""
+        try:
+            v = m.values()
+        except ValueError as exc:  # a malformed field: refused as model_values refuses one
+            self.models_received += 1
+            return 'ignored: zoh mode' if self.mode != 'local_model' else self._refuse(exc)
+        return self.model_values(v, stamp_ns, frame_id, now)
+
+    def _refuse(self, exc: ValueError) -> str:
+        """A malformed / non-finite model: zero force at once, whatever its stamp."""
+        self.renderer.clear()
+        self.renderer.stats.rejected += 1
+        self.safety.reject(f'rejected: {exc}')
+        return f'rejected: {exc}'
+
+    def model_values(self, v, stamp_ns: int, frame_id: str | None, now: float) -> str:
+        """A local force model's flat values ``v`` (a message's ``position``: 26 values,
+        :data:`haptic_anfis.interfaces.LOCAL_MODEL_FIELDS`), tissue frame, answering the pose
+        ``stamp_ns``, received at ``now``; the model's time is that pose's time. Returns OK or
+        why it was refused: a refused stamp is not taken (the current model keeps running until
+        it expires); a malformed / non-finite model or a wrong frame zeroes the force at once."""
         self.models_received += 1
         if self.mode != 'local_model':
             return 'ignored: zoh mode'
@@ -125,20 +146,17 @@ class ForceInput:
             self.safety.reject(f'{REJECTED_FRAME} {frame_id!r} (expected {sf!r})')
             return REJECTED_FRAME
         try:
-            m.check()  # a malformed model zeroes the force whatever its stamp
+            check_values(v)  # a malformed model zeroes the force whatever its stamp
         except ValueError as exc:
-            self.renderer.clear()
-            self.renderer.stats.rejected += 1
-            self.safety.reject(f'rejected: {exc}')
-            return f'rejected: {exc}'
+            return self._refuse(exc)
         why, t_pose = self._stamp(stamp_ns, now)
         if why != STAMP_OK:
             return f'rejected: stamp {why}'
-        cur = self.renderer.model
-        if cur is not None and t_pose < cur.time:
+        cur = self.renderer.time
+        if cur is not None and t_pose < cur:
             return 'ignored: older than the current model'
-        self.renderer.offer(replace(m, time=t_pose), checked=True)
-        self.last_in_contact = m.in_contact
+        self.renderer.offer_values(v, t_pose, checked=True)
+        self.last_in_contact = v[24] > 0.0  # depth0
         return OK
 
     # -- statistics ---------------------------------------------------------------------------
@@ -146,7 +164,8 @@ class ForceInput:
         r, s = self.renderer.stats, self.stamps.stats
         return {'mode': self.mode, 'ticks_fresh': r.ticks_fresh,
                 'ticks_extrapolated': r.ticks_extrapolated, 'ticks_expired': r.ticks_expired,
-                'ticks_free': r.ticks_free, 'ticks_no_model': r.ticks_none, 'models': r.models,
+                'ticks_free': r.ticks_free, 'ticks_no_model': r.ticks_none,
+                'ticks_approach': r.ticks_approach, 'models': r.models,
                 'models_rejected': r.rejected, 'stiffness_clamped': r.stiffness_clamped,
                 'rejected_stale': s.rejected_stale, 'rejected_future': s.rejected_future,
                 'rejected_unknown_stamp': s.rejected_unknown,

@@ -29,6 +29,11 @@ with these rules (:class:`LocalModelRenderer`):
   and 3000 N/m that asks 1.5 N s/m of mechanism damping. Tissue-frame stiffness maps to the
   device as ``force_scale * workspace_scale * K``, so the tissue-frame bound is
   ``max_stiffness / (force_scale * workspace_scale)`` (:func:`tissue_stiffness_limit`).
+- Before contact (:attr:`LocalModel.approach`). A model made while the probe was free has depth
+  0; with a normal it is the tangent plane of the surface ahead of the probe (p0 = the point it
+  will touch, F0 = 0, K the stiffness at depth 0+): zero force outside the plane, ``K (p - p0)``
+  the instant the probe is past it — so a press is rendered from its first tick instead of one
+  force-server latency late. Without a normal (all zeros) it renders zero force.
 - Non-finite F0, p0, K, normal or direction: the model is rejected (the caller zeroes the force).
 - Expiry: a model older than ``validity_time`` (measured from the time of the driver's own pose it
   answers, not from its arrival) or a probe further than ``validity_radius`` from ``p0`` is
@@ -60,10 +65,15 @@ def depth_gradient(normal, direction) -> np.ndarray:
     the unit indentation ``direction`` d to the plane with outward unit ``normal`` n moves with the
     probe, ``g = n / (n . d)`` (= -n when d = -n). ``n . d`` is held at or below ``-MIN_COS`` so a
     grazing ray cannot make the gradient explode."""
-    n = np.asarray(normal, dtype=np.float64)
-    d = np.asarray(direction, dtype=np.float64)
-    c = min(float(n @ d), -MIN_COS)
-    return n / c
+    return np.array(depth_gradient_values(*(float(c) for c in normal),
+                                          *(float(c) for c in direction)))
+
+
+def depth_gradient_values(nx: float, ny: float, nz: float, dx: float, dy: float, dz: float
+                          ) -> tuple[float, float, float]:
+    """:func:`depth_gradient` on plain floats (the driver's per-model path)."""
+    c = min(nx * dx + ny * dy + nz * dz, -MIN_COS)
+    return nx / c, ny / c, nz / c
 
 
 def contact_jacobian(J, normal, direction) -> np.ndarray:
@@ -84,10 +94,8 @@ def contact_jacobian(J, normal, direction) -> np.ndarray:
 
 def contact_stiffness(J, normal, direction) -> list[float]:
     """:func:`contact_jacobian` on plain sequences: J 3 rows of 4, returns K row-major (9,)."""
-    nx, ny, nz = normal
     dx, dy, dz = direction
-    c = min(nx * dx + ny * dy + nz * dz, -MIN_COS)
-    gx, gy, gz = nx / c, ny / c, nz / c
+    gx, gy, gz = depth_gradient_values(*normal, dx, dy, dz)
     K = []
     for ja, jb, jc, jd in J:
         w = jd - (ja * dx + jb * dy + jc * dz)
@@ -95,8 +103,187 @@ def contact_stiffness(J, normal, direction) -> list[float]:
     return K
 
 
+def stiffness_values(k) -> list[float]:
+    """K's 9 values row-major as plain floats, from a (3, 3) array, 9 values, or 3 rows of 3.
+
+    Raises:
+        ValueError: not 9 values.
+    """
+    if type(k) is np.ndarray:
+        v = k.ravel().tolist()
+    else:
+        v = list(k)
+        if len(v) == 3 and all(hasattr(r, '__len__') for r in v):
+            v = [c for r in v for c in r]
+    if len(v) != 9:
+        raise ValueError(f'stiffness K: expected a finite (3, 3) matrix [N/m], got {k!r}')
+    return [float(c) for c in v]
+
+
+def _clip(w: float, lo: float) -> float:
+    return lo if w < lo else (0.0 if w > 0.0 else w)
+
+
+def condition_stiffness_values(k, max_stiffness: float) -> tuple[tuple[float, ...], bool]:
+    """:func:`condition_stiffness` on plain floats, in closed form (no numpy: ~10 µs instead of
+    ~40 µs per model, which the driver pays once per received model on the thread that shares the
+    servo thread's GIL). ``k``: 9 finite values row-major [N/m]. Returns (the conditioned K's 9
+    values row-major, whether it differs from ``k`` by more than 1e-6 N/m).
+
+    S = (K + K^T) / 2; its eigenvalues by the trigonometric closed form (Smith 1961). When they
+    all lie in [-max_stiffness, 0], S is the answer as it is (the common case). Otherwise the
+    eigenvector of the extreme eigenvalue with the larger gap to the middle one is taken from the
+    largest cross product of two rows of S - lambda I (well conditioned: the gap is at least half
+    the spectrum's width), the other two come from the exact 2 x 2 problem in its orthogonal
+    complement (a Jacobi rotation), and S is rebuilt from the clipped eigenvalues — the same
+    construction as a robust 3 x 3 symmetric eigensolver (cf. Eberly, Geometric Tools), written
+    for this one job. The common case — one eigenvalue out of range, the other two in — is a
+    rank-one correction with that eigenvalue's eigenvector only (:func:`_clip_one`).
+    """
+    k00, k01, k02, k10, k11, k12, k20, k21, k22 = k
+    a00, a11, a22 = k00, k11, k22
+    a01, a02, a12 = 0.5 * (k01 + k10), 0.5 * (k02 + k20), 0.5 * (k12 + k21)
+    lo = -max_stiffness
+    p1 = a01 * a01 + a02 * a02 + a12 * a12
+    q = (a00 + a11 + a22) / 3.0
+    b00, b11, b22 = a00 - q, a11 - q, a22 - q
+    p2 = b00 * b00 + b11 * b11 + b22 * b22 + 2.0 * p1
+    if p2 <= 0.0:  # S = q I
+        w = _clip(q, lo)
+        out = (w, 0.0, 0.0, 0.0, w, 0.0, 0.0, 0.0, w)
+    else:
+        p = math.sqrt(p2 / 6.0)
+        det = (b00 * (b11 * b22 - a12 * a12) - a01 * (a01 * b22 - a12 * a02)
+               + a02 * (a01 * a12 - b11 * a02))
+        r = det / (2.0 * p * p * p)
+        phi = math.acos(-1.0 if r < -1.0 else (1.0 if r > 1.0 else r)) / 3.0
+        l1 = q + 2.0 * p * math.cos(phi)  # largest
+        l3 = q + 2.0 * p * math.cos(phi + 2.0943951023931957)  # smallest (2 pi / 3)
+        l2 = 3.0 * q - l1 - l3
+        if l1 <= 0.0 and l3 >= lo:
+            out = (a00, a01, a02, a01, a11, a12, a02, a12, a22)
+        else:
+            out = None
+            if (l1 > 0.0) != (l3 < lo) and lo <= l2 <= 0.0:  # one eigenvalue out: rank one
+                out = _clip_one(a00, a01, a02, a11, a12, a22, l1 if l1 > 0.0 else l3,
+                                0.0 if l1 > 0.0 else lo)
+            elif l2 > 0.0 and lo <= l3 <= 0.0:  # two pull (tangential, the usual): keep l3
+                out = _keep_one(a00, a01, a02, a11, a12, a22, l3, 0.0, lo)
+            elif l2 < lo and lo <= l1 <= 0.0:  # two too stiff: keep l1
+                out = _keep_one(a00, a01, a02, a11, a12, a22, l1, lo, lo)
+            if out is None:
+                out = _rebuild_clipped(a00, a01, a02, a11, a12, a22, l1, l2, l3, lo)
+    changed = max(abs(out[i] - k[i]) for i in range(9)) > 1e-6
+    return out, changed
+
+
+def _eigenvector(a00, a01, a02, a11, a12, a22, la):
+    """(u, |u|^2) with u an unnormalised eigenvector of the simple eigenvalue ``la``: the largest
+    cross product of two rows of S - la I; None when all are ~0 (la repeated)."""
+    r0 = (a00 - la, a01, a02)
+    r1 = (a01, a11 - la, a12)
+    r2 = (a02, a12, a22 - la)
+    best, u = 0.0, None
+    for ra, rb in ((r0, r1), (r0, r2), (r1, r2)):
+        c = (ra[1] * rb[2] - ra[2] * rb[1], ra[2] * rb[0] - ra[0] * rb[2],
+             ra[0] * rb[1] - ra[1] * rb[0])
+        nn = c[0] * c[0] + c[1] * c[1] + c[2] * c[2]
+        if nn > best:
+            best, u = nn, c
+    scale = a00 * a00 + a11 * a11 + a22 * a22 + 2.0 * (a01 * a01 + a02 * a02 + a12 * a12)
+    if u is None or best <= 1e-24 * scale * scale:
+        return None
+    return u, best
+
+
+def _keep_one(a00, a01, a02, a11, a12, a22, la, target, lo) -> tuple[float, ...] | None:
+    """t I + (clip(rq) - t) u u^T: the two eigenvalues other than ``la`` are both out of range on
+    the same side and go to ``target``; only la's eigenvector u is needed (rq its Rayleigh
+    quotient, clipped to [lo, 0]). Accurate for the same reason as :func:`_clip_one`: the
+    correction is at most la's gap to the other two. None: the general path."""
+    e = _eigenvector(a00, a01, a02, a11, a12, a22, la)
+    if e is None:
+        return None
+    (ux, uy, uz), nn = e
+    rq = (ux * (a00 * ux + a01 * uy + a02 * uz) + uy * (a01 * ux + a11 * uy + a12 * uz)
+          + uz * (a02 * ux + a12 * uy + a22 * uz)) / nn
+    w = (_clip(rq, lo) - target) / nn
+    s01, s02, s12 = w * ux * uy, w * ux * uz, w * uy * uz
+    s00, s11, s22 = target + w * ux * ux, target + w * uy * uy, target + w * uz * uz
+    return (s00, s01, s02, s01, s11, s12, s02, s12, s22)
+
+
+def _clip_one(a00, a01, a02, a11, a12, a22, la, target) -> tuple[float, ...] | None:
+    """S - (la - target) u u^T, u the unit eigenvector of the one eigenvalue ``la`` that is out
+    of range (the largest cross product of two rows of S - la I), or None when S - la I has
+    rank < 2 (a repeated eigenvalue: the general path). Accurate because the other two are in
+    range: |la - target| is at most la's gap to them, which bounds the eigenvector's error
+    times the correction by rounding."""
+    e = _eigenvector(a00, a01, a02, a11, a12, a22, la)
+    if e is None:
+        return None
+    (ux, uy, uz), best = e
+    # the Rayleigh quotient, not the closed-form la: exact to second order in u's error (the
+    # trigonometric eigenvalue carries ~sqrt(eps) of the spectrum's width near a double root)
+    rq = (ux * (a00 * ux + a01 * uy + a02 * uz) + uy * (a01 * ux + a11 * uy + a12 * uz)
+          + uz * (a02 * ux + a12 * uy + a22 * uz)) / best
+    if (rq <= target) if target == 0.0 else (rq >= target):  # in range after all: S as it is
+        return (a00, a01, a02, a01, a11, a12, a02, a12, a22)
+    w = (rq - target) / best  # (rq - target) u u^T / |u|^2
+    s00, s01, s02 = a00 - w * ux * ux, a01 - w * ux * uy, a02 - w * ux * uz
+    s11, s12, s22 = a11 - w * uy * uy, a12 - w * uy * uz, a22 - w * uz * uz
+    return (s00, s01, s02, s01, s11, s12, s02, s12, s22)
+
+
+def _rebuild_clipped(a00, a01, a02, a11, a12, a22, l1, l2, l3, lo) -> tuple[float, ...]:
+    """S (upper triangle) rebuilt with its eigenvalues clipped to [lo, 0]; l1 >= l2 >= l3 are
+    its eigenvalues (see :func:`condition_stiffness_values`)."""
+    la = l1 if l1 - l2 >= l2 - l3 else l3
+    e = _eigenvector(a00, a01, a02, a11, a12, a22, la)
+    if e is None:  # S - la I ~ 0: S = la I
+        w = _clip(la, lo)
+        return (w, 0.0, 0.0, 0.0, w, 0.0, 0.0, 0.0, w)
+    u, best = e
+    s = 1.0 / math.sqrt(best)
+    ux, uy, uz = u[0] * s, u[1] * s, u[2] * s
+    # an orthonormal basis (v, w) of u's complement
+    if abs(ux) > abs(uy):
+        s = 1.0 / math.sqrt(ux * ux + uz * uz)
+        vx, vy, vz = -uz * s, 0.0, ux * s
+    else:
+        s = 1.0 / math.sqrt(uy * uy + uz * uz)
+        vx, vy, vz = 0.0, uz * s, -uy * s
+    wx, wy, wz = uy * vz - uz * vy, uz * vx - ux * vz, ux * vy - uy * vx
+    # S u, S v, S w, then the Rayleigh quotient of u and the 2 x 2 block in (v, w)
+    su0, su1, su2 = a00 * ux + a01 * uy + a02 * uz, a01 * ux + a11 * uy + a12 * uz, \
+        a02 * ux + a12 * uy + a22 * uz
+    sv0, sv1, sv2 = a00 * vx + a01 * vy + a02 * vz, a01 * vx + a11 * vy + a12 * vz, \
+        a02 * vx + a12 * vy + a22 * vz
+    sw0, sw1, sw2 = a00 * wx + a01 * wy + a02 * wz, a01 * wx + a11 * wy + a12 * wz, \
+        a02 * wx + a12 * wy + a22 * wz
+    mu = _clip(ux * su0 + uy * su1 + uz * su2, lo)
+    mvv = vx * sv0 + vy * sv1 + vz * sv2
+    mww = wx * sw0 + wy * sw1 + wz * sw2
+    mvw = wx * sv0 + wy * sv1 + wz * sv2
+    half, mean = 0.5 * (mvv - mww), 0.5 * (mvv + mww)
+    rad = math.hypot(half, mvw)
+    e1, e2 = _clip(mean + rad, lo), _clip(mean - rad, lo)
+    th = 0.5 * math.atan2(mvw, half)
+    c, s = math.cos(th), math.sin(th)
+    xx, xy, xz = c * vx + s * wx, c * vy + s * wy, c * vz + s * wz
+    yx, yy, yz = c * wx - s * vx, c * wy - s * vy, c * wz - s * vz
+    s00 = mu * ux * ux + e1 * xx * xx + e2 * yx * yx
+    s01 = mu * ux * uy + e1 * xx * xy + e2 * yx * yy
+    s02 = mu * ux * uz + e1 * xx * xz + e2 * yx * yz
+    s11 = mu * uy * uy + e1 * xy * xy + e2 * yy * yy
+    s12 = mu * uy * uz + e1 * xy * xz + e2 * yy * yz
+    s22 = mu * uz * uz + e1 * xz * xz + e2 * yz * yz
+    return (s00, s01, s02, s01, s11, s12, s02, s12, s22)
+
+
 def condition_stiffness(K, max_stiffness: float) -> np.ndarray:
-    """K (3, 3) made symmetric negative-semidefinite with eigenvalues in [-max_stiffness, 0] [N/m].
+    """K (3, 3) made symmetric negative-semidefinite with eigenvalues in [-max_stiffness, 0] [N/m]
+    (:func:`condition_stiffness_values`).
 
     Raises:
         ValueError: K is not a finite (3, 3) array, or max_stiffness is not > 0.
@@ -106,10 +293,7 @@ def condition_stiffness(K, max_stiffness: float) -> np.ndarray:
         raise ValueError(f'stiffness K: expected a finite (3, 3) matrix [N/m], got {K!r}')
     if not (math.isfinite(max_stiffness) and max_stiffness > 0):
         raise ValueError(f'max_stiffness: expected a finite value > 0 [N/m], got {max_stiffness}')
-    S = 0.5 * (K + K.T)
-    w, V = np.linalg.eigh(S)
-    w = np.clip(w, -max_stiffness, 0.0)
-    return (V * w) @ V.T
+    return np.array(condition_stiffness_values(K.ravel().tolist(), max_stiffness)[0]).reshape(3, 3)
 
 
 def tissue_stiffness_limit(max_device_stiffness: float, force_scale: float,
@@ -148,27 +332,75 @@ class LocalModel:
     def in_contact(self) -> bool:
         return self.depth0 > 0.0
 
-    def check(self) -> None:
-        """Raises ValueError naming the first non-finite or malformed field."""
-        vals = [*self.f0, *self.p0, *self.contact, *self.normal, *self.direction]
-        k = np.asarray(self.k, dtype=np.float64)
-        if len(vals) != 15 or not math.isfinite(sum(map(float, vals))):
-            for name in ('f0', 'p0', 'contact', 'normal', 'direction'):
-                v = getattr(self, name)
-                if len(v) != 3 or not all(math.isfinite(float(c)) for c in v):
-                    raise ValueError(f'local model {name}: expected 3 finite numbers, got {v!r}')
-        if k.size != 9 or not math.isfinite(float(k.sum())):
+    @property
+    def approach(self) -> bool:
+        """An approach model: made while the probe was free (depth 0) with the surface plane
+        ahead (a non-zero normal): zero force outside the plane, K (p - p0) past it."""
+        if self.depth0 != 0.0:
+            return False
+        x, y, z = self.normal
+        return x * x + y * y + z * z > 0.0
+
+    def values(self) -> list[float]:
+        """The model as the flat values of a local force model message
+        (:data:`haptic_anfis.interfaces.LOCAL_MODEL_FIELDS` order; ``time`` is not among them).
+
+        Raises:
+            ValueError: a field of the wrong length (named).
+        """
+        for name in ('f0', 'p0', 'contact', 'normal', 'direction'):
+            if len(getattr(self, name)) != 3:
+                raise ValueError(f'local model {name}: expected 3 finite numbers, got '
+                                 f'{getattr(self, name)!r}')
+        try:
+            k = stiffness_values(self.k)
+        except (TypeError, ValueError):
+            k = self.k.tolist() if type(self.k) is np.ndarray else self.k
             raise ValueError(f'local model stiffness K: expected a finite (3, 3) matrix, got '
-                             f'{k.tolist()!r}')
-        if not (math.isfinite(self.depth0) and self.depth0 >= 0.0):
-            raise ValueError(f'local model depth0: expected a finite value >= 0, got '
-                             f'{self.depth0!r}')
-        if self.in_contact:
-            for name in ('normal', 'direction'):
-                x, y, z = getattr(self, name)
-                if abs(math.sqrt(x * x + y * y + z * z) - 1.0) > 1e-3:
-                    raise ValueError(f'local model {name}: expected a unit vector, got '
-                                     f'{(x, y, z)!r}')
+                             f'{k!r}') from None
+        return [*map(float, self.f0), *map(float, self.p0), *k, *map(float, self.contact),
+                *map(float, self.normal), *map(float, self.direction), float(self.depth0),
+                1.0 if self.zero_at_surface else 0.0]
+
+    def check(self) -> None:
+        """Raises ValueError naming the first non-finite or malformed field
+        (:func:`check_values`)."""
+        check_values(self.values())
+
+
+#: offsets of the fields in the flat values (haptic_anfis.interfaces.LOCAL_MODEL_FIELDS)
+_FIELDS = (('f0', 0, 3), ('p0', 3, 6), ('stiffness K', 6, 15), ('contact', 15, 18),
+           ('normal', 18, 21), ('direction', 21, 24))
+_N_VALUES = 26
+
+
+def check_values(v) -> None:
+    """Check a local force model's flat values (:meth:`LocalModel.values`; a message's
+    ``position``): 26 finite numbers, depth >= 0, and unit normal and direction in contact or in
+    an approach model (depth 0 with a non-zero normal). One sum tests finiteness in the common
+    case (the driver checks every model it receives).
+
+    Raises:
+        ValueError: naming the first malformed field.
+    """
+    if len(v) != _N_VALUES:
+        raise ValueError(f'local model: expected {_N_VALUES} values, got {len(v)}')
+    if not math.isfinite(sum(v)):  # NaN/Inf anywhere (or an overflow: then nothing is named)
+        for name, a, b in _FIELDS:
+            if not all(math.isfinite(c) for c in v[a:b]):
+                what = 'a finite (3, 3) matrix' if b - a == 9 else '3 finite numbers'
+                raise ValueError(f'local model {name}: expected {what}, got {list(v[a:b])!r}')
+    depth0 = v[24]
+    if not (math.isfinite(depth0) and depth0 >= 0.0):
+        raise ValueError(f'local model depth0: expected a finite value >= 0, got {depth0!r}')
+    nx, ny, nz = v[18], v[19], v[20]
+    nn = nx * nx + ny * ny + nz * nz
+    if depth0 > 0.0 or nn > 0.0:
+        dx, dy, dz = v[21], v[22], v[23]
+        for name, sq, vec in (('normal', nn, (nx, ny, nz)),
+                              ('direction', dx * dx + dy * dy + dz * dz, (dx, dy, dz))):
+            if abs(math.sqrt(sq) - 1.0) > 1e-3:
+                raise ValueError(f'local model {name}: expected a unit vector, got {vec!r}')
 
 
 @dataclass
@@ -179,6 +411,7 @@ class RenderStats:
     ticks_expired: int = 0
     ticks_free: int = 0
     ticks_none: int = 0
+    ticks_approach: int = 0  # of the fresh + extrapolated: from an approach model (contact onset)
     models: int = 0
     rejected: int = 0
     stiffness_clamped: int = 0
@@ -211,7 +444,8 @@ class LocalModelRenderer:
         self.fresh_age = float(fresh_age)
         self.stats = RenderStats()
         self._m: tuple | None = None  # the prepared model (plain floats for the servo thread)
-        self.model: LocalModel | None = None
+        self._values = None  # the current model's flat values
+        self.time: float | None = None  # the current model's time [s] (its pose's)
 
     def reset_stats(self) -> None:
         self.stats = RenderStats()
@@ -219,37 +453,67 @@ class LocalModelRenderer:
     def clear(self) -> None:
         """Forget the model (the next ticks render nothing: status NONE)."""
         self._m = None
-        self.model = None
+        self._values = None
+        self.time = None
 
-    def offer(self, m: LocalModel, checked: bool = False) -> None:
-        """Accept ``m`` as the newest model: checked (unless ``checked``: the caller did),
-        K conditioned (counted when the guard changed it by more than 1e-6 N/m).
+    def offer(self, m: LocalModel, checked: bool = False, time: float | None = None) -> None:
+        """Accept ``m`` as the newest model (:meth:`offer_values` of ``m.values()``); ``time``:
+        the model's time [s] if not ``m.time``.
 
         Raises:
             ValueError: a non-finite or malformed field (the model is not taken; the caller
             decides the safe output — zero force).
         """
+        try:
+            v = m.values()
+        except ValueError:
+            self.stats.rejected += 1
+            raise
+        self.offer_values(v, m.time if time is None else time, checked)
+
+    def offer_values(self, v, time: float, checked: bool = False) -> None:
+        """Accept the flat values ``v`` (26: :meth:`LocalModel.values`, a message's
+        ``position``) as the newest model, whose time is ``time`` [s] (the driver: the time of
+        its pose it answers; kept in :attr:`time`): checked (:func:`check_values`; unless
+        ``checked``: the caller did), K conditioned (counted when the guard changed it by more
+        than 1e-6 N/m). Plain floats throughout: this runs once per received model on the thread
+        that shares the servo thread's GIL.
+
+        Raises:
+            ValueError: a non-finite or malformed field (the model is not taken).
+        """
         if not checked:
             try:
-                m.check()
+                check_values(v)
             except ValueError:
                 self.stats.rejected += 1
                 raise
-        k_in = np.asarray(m.k, dtype=np.float64).reshape(3, 3)
-        k = condition_stiffness(k_in, self.max_stiffness)
-        if float(np.abs(k - k_in).max()) > 1e-6:
+        (f0x, f0y, f0z, p0x, p0y, p0z, _, _, _, _, _, _, _, _, _, _, _, _,
+         nx, ny, nz, dx, dy, dz, depth0, zero) = v
+        k, changed = condition_stiffness_values(v[6:15], self.max_stiffness)
+        if changed:
             self.stats.stiffness_clamped += 1
-        f0 = tuple(float(v) for v in m.f0)
-        p0 = tuple(float(v) for v in m.p0)
-        if m.in_contact:
-            g = tuple(depth_gradient(m.normal, m.direction).tolist())
-            d = tuple(float(v) for v in m.direction)
+        # in contact, or an approach model (free, with the plane ahead): renders past its plane
+        contact = depth0 > 0.0 or nx * nx + ny * ny + nz * nz > 0.0
+        if contact:
+            g = depth_gradient_values(nx, ny, nz, dx, dy, dz)
+            d = (dx, dy, dz)
         else:
             g = d = (0.0, 0.0, 0.0)
-        self._m = (f0, p0, tuple(map(tuple, k.tolist())), g, d, float(m.depth0),
-                   bool(m.zero_at_surface and m.in_contact), float(m.time), m.in_contact)
-        self.model = m
+        t = float(time)
+        self._m = ((f0x, f0y, f0z), (p0x, p0y, p0z), (k[0:3], k[3:6], k[6:9]), g, d,
+                   float(depth0), zero > 0.5 and contact, t, contact)
+        self._values = v
+        self.time = t
         self.stats.models += 1
+
+    @property
+    def model(self) -> LocalModel | None:
+        """The current model (as received; its ``time`` is :attr:`time`), or None."""
+        if self._m is None:
+            return None
+        from ..interfaces import local_model_from_values
+        return local_model_from_values(self._values, self.time)
 
     def render(self, p, now: float) -> tuple[tuple[float, float, float] | None, int]:
         """(force (3,) [N] or None, status) for the probe at ``p`` (3,) [m] at time ``now``.
@@ -282,6 +546,8 @@ class LocalModelRenderer:
             st.ticks_fresh += 1
         else:
             st.ticks_extrapolated += 1
+        if depth0 == 0.0:
+            st.ticks_approach += 1
         k0, k1, k2 = k
         fx = f0[0] + k0[0] * ex + k0[1] * ey + k0[2] * ez
         fy = f0[1] + k1[0] * ex + k1[1] * ey + k1[2] * ez

@@ -10,6 +10,7 @@ next good pose cannot start a contact from inside the tissue.
 from __future__ import annotations
 
 import math
+from array import array
 
 import numpy as np
 from geometry_msgs.msg import PoseStamped
@@ -17,6 +18,8 @@ from rclpy.node import Node
 from sensor_msgs.msg import JointState
 
 from ..contact import ContactDetector, ContactTracker, ellipsoid_dome
+from ..contact.approach import surface_ahead
+from ..contact.proxy import FREE
 from ..tissue.dataset import DATA_DIR
 from . import interfaces as ifc
 from ._case import CASE_PARAMS, apply_case, declare_case  # noqa: F401 (CASE_PARAMS: in config)
@@ -44,6 +47,10 @@ PARAMS = MESH_PARAMS + [
           positive),
     Param('max_depth', 0.0, 'cap on the reported depth [m] (0 = only the tissue thickness caps it)',
           non_negative),
+    Param('approach_distance', 0.005, 'while the probe is free and a front surface lies at most '
+          'this far [m] ahead along the direction, the contact message carries that surface point '
+          'and its normal (the approach fields, in effort) so the force server can send the '
+          'plane before contact (0 = off)', non_negative),
 ]
 
 
@@ -89,6 +96,20 @@ def contact_values(tracker: ContactTracker, frame_id: str, pose_frame: str, xyz)
             float(nv[0]), float(nv[1]), float(nv[2])], c, None
 
 
+def approach_values(tracker: ContactTracker, c, p, max_distance: float) -> list[float]:
+    """The approach fields (:data:`~.interfaces.APPROACH_FIELDS`: surface point ahead [m], outward
+    normal there) for the tracker's answer ``c`` at the probe position ``p`` (3,) [m]: only while
+    free (not in contact, not rejected) and a front surface lies within ``max_distance`` [m] along
+    the indentation direction; else [] (:func:`~haptic_anfis.contact.approach.surface_ahead`)."""
+    if c is None or c.state != FREE or max_distance <= 0.0:
+        return []
+    a = surface_ahead(tracker.detector, p, tracker.detector.direction, max_distance)
+    if a is None:
+        return []
+    s, n, _ = a
+    return [float(s[0]), float(s[1]), float(s[2]), float(n[0]), float(n[1]), float(n[2])]
+
+
 class ContactDetectorNode(Node):
     def __init__(self, name: str = 'contact_detector', **kw):
         super().__init__(name, **kw)
@@ -103,6 +124,7 @@ class ContactDetectorNode(Node):
         self._msg = JointState()
         self._msg.name = list(ifc.CONTACT_FIELDS)
         self._msg.header.frame_id = self.frame_id
+        self.approach_distance = p['approach_distance']
         self.n_poses = self.n_contact = self.n_bad = 0
         self.max_depth_seen = 0.0
         self.last = None
@@ -122,8 +144,11 @@ class ContactDetectorNode(Node):
         q = msg.pose.position
         out = self._msg
         out.header.stamp = msg.header.stamp
-        out.position, c, error = contact_values(self.tracker, self.frame_id, msg.header.frame_id,
-                                                (q.x, q.y, q.z))
+        values, c, error = contact_values(self.tracker, self.frame_id, msg.header.frame_id,
+                                          (q.x, q.y, q.z))
+        out.position = array('d', values)  # an array skips the setter's per-element checks
+        out.effort = array('d', approach_values(self.tracker, c, (q.x, q.y, q.z),
+                                                self.approach_distance))
         if error is not None:
             self._bad(error)
         else:

@@ -13,7 +13,10 @@ zero-order hold). Either goes through the safety layer (:class:`haptic_anfis.dev
 clamp, rate limit, watchdog, NaN/wrong-frame rejection). A command or model is judged by the age
 of the driver's own pose it answers (its stamp), not by its arrival; stale, future and unknown
 stamps are refused and counted (:class:`haptic_anfis.device.force_input.ForceInput`). The servo
-thread is not a ROS timer: it keeps its period whatever the executor is doing. Pose -> command
+thread is not a ROS timer: it keeps its period whatever the executor is doing, and (by default,
+``take_in_servo_thread``) it takes the force command and the local model itself from their
+keep-last-1 readers at the start of each tick, as raw CDR (:mod:`.polled`, :mod:`.cdr`): no
+rclpy message objects and no GIL hand-over per message. Pose -> command
 latency (pose stamp to command arrival) and deadline misses are collected in
 :attr:`FalconDriver.servo` ``.stats``; ``trace_path`` writes every servo tick for the applied-force
 error (:mod:`haptic_anfis.device.force_error`).
@@ -39,9 +42,11 @@ from ..device.safety import OK
 from ..device.start_gate import HeldScript
 from ..device.stamps import STALE
 from ..device.trace import TickTrace, save_trace
+from . import cdr
 from . import interfaces as ifc
+from .polled import PolledSubscription
 from ._common import (LOOP_QOS, Param, config_file, declare_parameters, finite_vector,
-                      non_negative, one_of, positive, run_node, set_stamp, stamp_ns)
+                      non_negative, one_of, positive, run_node, set_stamp)
 
 BACKENDS = ('sim', 'falcon')
 
@@ -115,6 +120,9 @@ PARAMS = [
           'frame (3000.0: the Falcon figure CHAI3D uses); the model is clamped to it', positive),
     Param('trace_path', '', "write every servo tick (time, position, applied force, model status) "
           "and the loop statistics to this .npz file at shutdown ('' = no trace)"),
+    Param('take_in_servo_thread', True, 'take falcon/servo_cf and falcon/servo_cf_local from '
+          'their readers in the servo thread at the start of each tick (true), instead of in '
+          'executor callbacks (false): no GIL hand-over per message'),
     Param('gil_switch_interval', 0.0002, "this process's Python thread switch interval [s]: how "
           'long another thread may hold the GIL before the servo thread gets it back (Python '
           'default 0.005; 0 = leave it)', non_negative),
@@ -159,11 +167,19 @@ class FalconDriver(Node):
         self.pub_applied = self.create_publisher(WrenchStamped, ifc.TOPIC_APPLIED, LOOP_QOS)
         self.pub_buttons = self.create_publisher(Joy, ifc.TOPIC_BUTTONS, 10)
         self.pub_mark = self.create_publisher(PointStamped, ifc.TOPIC_MARKS, 10)
-        self.sub_cmd = self.create_subscription(WrenchStamped, ifc.TOPIC_COMMAND, self._on_command,
-                                                LOOP_QOS)
+        # the force server's local model layout: read at a known offset (cdr.JointStateWriter)
+        self._lm_layout = cdr.JointStateWriter(self.frame_id, ifc.LOCAL_MODEL_FIELDS,
+                                               len(ifc.LOCAL_MODEL_FIELDS))
+        self._polled: list[tuple[PolledSubscription, object]] = []
+        loop_inputs = [(WrenchStamped, ifc.TOPIC_COMMAND, self._on_command)]
         if p['force_mode'] == 'local_model':
-            self.sub_lm = self.create_subscription(JointState, ifc.TOPIC_LOCAL_MODEL,
-                                                   self._on_local_model, LOOP_QOS)
+            loop_inputs.append((JointState, ifc.TOPIC_LOCAL_MODEL, self._on_local_model))
+        for msg_type, topic, handler in loop_inputs:
+            if p['take_in_servo_thread']:  # read by the servo thread each tick (nodes/polled.py)
+                self._polled.append((PolledSubscription(self, msg_type, topic, LOOP_QOS),
+                                     handler))
+            else:
+                self.create_subscription(msg_type, topic, handler, LOOP_QOS, raw=True)
         self._pose, self._twist, self._applied = PoseStamped(), TwistStamped(), WrenchStamped()
         for m in (self._pose, self._twist, self._applied):
             m.header.frame_id = self.frame_id
@@ -220,6 +236,10 @@ class FalconDriver(Node):
 
     # -- servo thread ---------------------------------------------------------------------------
     def _publish_state(self, state, force, now) -> None:
+        for sub, handler in self._polled:  # the newest force command / local model first
+            raw = sub.take()
+            if raw is not None:
+                handler(raw)
         ns = time.time_ns()
         m = self.mapping
         (x, y, z), ev = self.clutch.update(state.buttons, m.to_tissue(state.position), now)
@@ -260,33 +280,50 @@ class FalconDriver(Node):
             self.finished = True
 
     # -- executor thread ------------------------------------------------------------------------
-    def _on_command(self, msg: WrenchStamped) -> None:
+    # Both loop inputs arrive as raw bytes (nodes/cdr.py): rclpy's own deserialisation of a
+    # message cost 25-100 µs of this process's GIL, which the servo thread needs every 1 ms.
+    # They run on the servo thread (take_in_servo_thread, the default) or the executor's.
+    def _on_command(self, raw: bytes) -> None:
         now = time.monotonic()
-        f = msg.wrench.force
-        why = self.input.command((f.x, f.y, f.z), stamp_ns(msg.header.stamp),
-                                 msg.header.frame_id, now)
+        try:
+            stamp, frame, f = cdr.read_wrench_stamped(raw)
+        except ValueError as exc:  # malformed: zero force, as for a non-finite command
+            self._malformed(f'force command {exc}')
+            return
+        why = self.input.command(f, stamp, frame, now)
         if self.input.mode == 'zoh':
-            self._arrived(why, msg.header.stamp)
+            self._arrived(why, stamp)
         if why != OK:
-            self.get_logger().warning(f'force command {why}: ({f.x}, {f.y}, {f.z}) in frame '
-                                      f'{msg.header.frame_id!r}; '
+            self.get_logger().warning(f'force command {why}: {f} in frame {frame!r}; '
                                       + ('not taken' if 'stamp' in why else 'applying zero force'),
                                       throttle_duration_sec=1.0)
 
-    def _on_local_model(self, msg: JointState) -> None:
+    def _on_local_model(self, raw: bytes) -> None:
         now = time.monotonic()
         try:
-            m = ifc.local_model_from_values(msg.position)
-            why = self.input.model(m, stamp_ns(msg.header.stamp), msg.header.frame_id, now)
-        except ValueError as exc:  # wrong length: zero force, as for a non-finite model
+            stamp, frame, v, _ = self._lm_layout.read(raw)
+        except ValueError as exc:
+            self._malformed(f'local force model {exc}')
+            return
+        # flat values: no LocalModel object on this path (GIL time per message)
+        if len(v) == len(ifc.LOCAL_MODEL_FIELDS):
+            why = self.input.model_values(v, stamp, frame, now)
+        else:  # wrong length: zero force, as for a non-finite model
+            why = (f'rejected: local force model message with {len(v)} values, expected '
+                   f'{len(ifc.LOCAL_MODEL_FIELDS)}')
             self.input.renderer.clear()
-            self.safety.reject(f'rejected: {exc}')
-            why = f'rejected: {exc}'
-        self._arrived(why, msg.header.stamp)
+            self.safety.reject(why)
+        self._arrived(why, stamp)
         if why != OK:
             self.get_logger().warning(f'local force model {why}', throttle_duration_sec=1.0)
 
-    def _arrived(self, why: str, stamp) -> None:
+    def _malformed(self, why: str) -> None:
+        """A loop message that cannot be read: zero force at once (as a non-finite one)."""
+        self.input.renderer.clear()
+        self.safety.reject(f'rejected: {why}')
+        self.get_logger().warning(f'{why}: applying zero force', throttle_duration_sec=1.0)
+
+    def _arrived(self, why: str, stamp: int) -> None:
         """Latency of every command (zoh) / model (local_model) answering a known pose, taken or
         refused as stale (so the figures are not cut at the age limit); the measurement window
         opens at the first one taken."""
@@ -296,6 +333,7 @@ class FalconDriver(Node):
         if why == OK and self.first_command is None:
             now = time.monotonic()
             self.first_command = now
+            self._cpu0 = time.process_time()  # the process's CPU over the window (summary)
             # the trace and the model statistics measure the loop from the first command on
             self.input.reset_stats()
             if self.servo.trace is not None:
@@ -303,7 +341,7 @@ class FalconDriver(Node):
             if self.run_duration > 0:  # so do the loop statistics
                 self.servo.stats.reset()
         if self.first_command is not None and (why == OK or why.endswith(STALE)):
-            self.servo.stats.latency((time.time_ns() - stamp_ns(stamp)) * 1e-9)
+            self.servo.stats.latency((time.time_ns() - stamp) * 1e-9)
 
     def ready_condition(self) -> tuple[bool, str]:
         """Ready (see nodes/session.py) once a valid force command arrived."""
@@ -317,12 +355,18 @@ class FalconDriver(Node):
                  rejected_frame=ss.rejected_frame, watchdog_trips=ss.watchdog_trips,
                  watchdog_trips_in_contact=ss.watchdog_trips_in_contact,
                  clamped=ss.clamped, servo_errors=self.servo.errors, **self.input.summary())
+        if self.first_command is not None:  # CPU of this process (all its threads) / wall time
+            wall = time.monotonic() - self.first_command
+            s['process_cpu_pct'] = (round(100.0 * (time.process_time() - self._cpu0) / wall, 1)
+                                    if wall > 0 else None)
         return s
 
     def close(self) -> None:
         """Stop the servo thread; the device is left at zero force."""
         if self.servo.running or self.safety.enabled:
             self.servo.stop()
+        for sub, _ in self._polled:
+            sub.destroy()
         if self.trace_path and self.servo.trace is not None:
             self._save_trace()
         if self.run_duration > 0:

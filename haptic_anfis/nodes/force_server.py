@@ -27,11 +27,16 @@ from std_srvs.srv import Trigger
 from ..anfis import ForceModel
 from ..tissue.dataset import DATA_DIR
 from ..device.local_model import contact_stiffness, force_and_jacobian
+from . import cdr
 from . import interfaces as ifc
 from ._case import CASE_PARAMS, apply_case, declare_case  # noqa: F401 (CASE_PARAMS: in config)
-from ._common import LOOP_QOS, Param, declare_parameters, non_negative, positive, run_node
+from ._common import (LOOP_QOS, Param, declare_parameters, non_negative, positive, run_node,
+                      set_stamp, stamp_ns)
 
 DEFAULT_MODEL = DATA_DIR / 'default_model.json'
+#: depth [m] the approach model's stiffness is taken at: 0+ (1 µm; at exactly 0 a depth-scaled
+#: model's kink max(depth, 0) may give the derivative of the zero side)
+APPROACH_DEPTH = 1e-6
 
 PARAMS = [
     Param('model_path', '', "ANFIS model file (JSON) ('' = the shipped default model); re-read "
@@ -69,7 +74,7 @@ def force_from_contact(model: ForceModel, v) -> tuple[float, float, float, str |
     return 0.0, 0.0, 0.0, None
 
 
-def local_model_from_contact(model: ForceModel, v, jacobian=force_and_jacobian
+def local_model_from_contact(model: ForceModel, v, jacobian=force_and_jacobian, approach=()
                              ) -> tuple[tuple[float, float, float], list[float], str | None]:
     """(force (3,) [N], local model message values (:data:`~.interfaces.LOCAL_MODEL_FIELDS`),
     error or None) for the contact message values ``v``.
@@ -79,12 +84,13 @@ def local_model_from_contact(model: ForceModel, v, jacobian=force_and_jacobian
     (:func:`~haptic_anfis.device.local_model.contact_jacobian`; the depth column is dropped when
     the depth is saturated, since the force then no longer grows with it). The older 9-value
     contact has no normal: the normal is then taken as -direction. Not in contact, or a bad
-    contact: zero force and a model with depth 0 (the driver renders zero)."""
-    lm = [0.0] * len(ifc.LOCAL_MODEL_FIELDS)
+    contact: zero force and a model with depth 0 (the driver renders zero) — or, when the
+    contact message's ``approach`` fields (its ``effort``, :data:`~.interfaces.APPROACH_FIELDS`)
+    name the surface ahead of the free probe, the approach model there (:func:`approach_model`)."""
     if not ifc.is_contact_values(v):
-        return (0.0, 0.0, 0.0), lm, force_from_contact(model, v)[3]
+        return (0.0, 0.0, 0.0), [0.0] * len(ifc.LOCAL_MODEL_FIELDS), force_from_contact(model, v)[3]
     if not (v[ifc.I_IN_CONTACT] > 0.5 and v[ifc.I_DEPTH] > 0.0):
-        return (0.0, 0.0, 0.0), lm, None
+        return (0.0, 0.0, 0.0), approach_model(model, v, approach, jacobian), None
     x, y, z, depth = float(v[0]), float(v[1]), float(v[2]), float(v[ifc.I_DEPTH])
     d = [float(v[ifc.I_DX]), float(v[ifc.I_DY]), float(v[ifc.I_DZ])]
     n = [float(c) for c in v[ifc.I_NX:ifc.I_NZ + 1]] if len(v) == len(ifc.CONTACT_FIELDS) else []
@@ -97,21 +103,54 @@ def local_model_from_contact(model: ForceModel, v, jacobian=force_and_jacobian
             for row in J:
                 row[3] = 0.0
         K = contact_stiffness(J, n, d)
-        F_surface = model.predict_one(x, y, z, 0.0)
+        zero = zero_at_surface(model, x, y, z)
     except ValueError as exc:
-        return (0.0, 0.0, 0.0), lm, str(exc)
+        return (0.0, 0.0, 0.0), [0.0] * len(ifc.LOCAL_MODEL_FIELDS), str(exc)
     if not math.isfinite(sum(K)):
-        return (0.0, 0.0, 0.0), lm, f'non-finite stiffness at contact ({x}, {y}, {z}, {depth})'
-    lm[ifc.LM_F0] = F
-    lm[ifc.LM_P0] = [x + depth * d[0], y + depth * d[1], z + depth * d[2]]
-    lm[ifc.LM_K] = K
-    lm[ifc.LM_C] = [x, y, z]
-    lm[ifc.LM_N] = n
-    lm[ifc.LM_D] = d
-    lm[ifc.LM_DEPTH] = depth
-    fs0, fs1, fs2 = F_surface
-    lm[ifc.LM_ZERO] = 1.0 if fs0 * fs0 + fs1 * fs1 + fs2 * fs2 < ifc.ZERO_FORCE_TOL ** 2 else 0.0
+        return ((0.0, 0.0, 0.0), [0.0] * len(ifc.LOCAL_MODEL_FIELDS),
+                f'non-finite stiffness at contact ({x}, {y}, {z}, {depth})')
+    lm = [*F, x + depth * d[0], y + depth * d[1], z + depth * d[2], *K, x, y, z, *n, *d, depth,
+          1.0 if zero else 0.0]  # the order of LOCAL_MODEL_FIELDS
     return F, lm, None
+
+
+def approach_model(model: ForceModel, v, approach, jacobian=force_and_jacobian) -> list[float]:
+    """The local model message values for a free probe: the approach model when ``approach`` holds
+    the surface point s ahead and its outward normal n (:data:`~.interfaces.APPROACH_FIELDS`), the
+    force is zero there (a model with a force step at the surface cannot be rendered from before
+    contact) and everything is finite: F0 = 0, p0 = contact = s, depth 0, K = dF/dp at depth 0+
+    (J at (s, 0) through the geometry: the force the probe meets the instant it crosses the
+    plane); else all zeros (no contact). d: the contact's direction, or -n when it has none."""
+    none = [0.0] * len(ifc.LOCAL_MODEL_FIELDS)
+    if len(approach) != len(ifc.APPROACH_FIELDS):
+        return none
+    sx, sy, sz, nx, ny, nz = (float(c) for c in approach)
+    d = [float(v[ifc.I_DX]), float(v[ifc.I_DY]), float(v[ifc.I_DZ])]
+    nn = nx * nx + ny * ny + nz * nz
+    if not (math.isfinite(sx + sy + sz + sum(d)) and 0.25 < nn < 2.25):
+        return none
+    if not 0.25 < d[0] * d[0] + d[1] * d[1] + d[2] * d[2] < 2.25:
+        d = [-nx, -ny, -nz]
+    try:
+        if not zero_at_surface(model, sx, sy, sz):
+            return none
+        _, J = jacobian(model, sx, sy, sz, APPROACH_DEPTH)  # the one-sided derivative at 0+
+        K = contact_stiffness(J.tolist(), (nx, ny, nz), d)
+    except ValueError:
+        return none
+    if not math.isfinite(sum(K)):
+        return none
+    return [0.0, 0.0, 0.0, sx, sy, sz, *K, sx, sy, sz, nx, ny, nz, *d, 0.0, 1.0]
+
+
+def zero_at_surface(model: ForceModel, x: float, y: float, z: float) -> bool:
+    """The model's force at depth 0 at the contact point (x, y, z) [m] is below
+    :data:`~.interfaces.ZERO_FORCE_TOL`. The depth-scaled form (F = depth g(...)) is exactly zero
+    there by construction: no evaluation needed; any other form is evaluated."""
+    if getattr(model, 'form', None) == 'depth_scaled':
+        return True
+    f0, f1, f2 = model.predict_one(x, y, z, 0.0)
+    return f0 * f0 + f1 * f1 + f2 * f2 < ifc.ZERO_FORCE_TOL ** 2
 
 
 class ForceServer(Node):
@@ -122,8 +161,9 @@ class ForceServer(Node):
         p = self.params = apply_case(p, declare_case(self, self.switch_case))
         self.model_path, self.model = load_model(p)  # ModelFileError (a ValueError) -> exit 1
         self.pub = self.create_publisher(WrenchStamped, ifc.TOPIC_COMMAND, LOOP_QOS)
+        # raw bytes in (nodes/cdr.py): rclpy's message objects cost tens of µs of GIL per contact
         self.sub = self.create_subscription(JointState, ifc.TOPIC_CONTACT, self._on_contact,
-                                            LOOP_QOS)
+                                            LOOP_QOS, raw=True)
         self.srv = self.create_service(Trigger, '~/reload', self._on_reload)
         self.frame_id = p['frame_id']
         self._msg = WrenchStamped()
@@ -131,9 +171,9 @@ class ForceServer(Node):
         self.pub_lm = None
         if p['publish_local_model']:
             self.pub_lm = self.create_publisher(JointState, ifc.TOPIC_LOCAL_MODEL, LOOP_QOS)
-            self._lm = JointState()
-            self._lm.name = list(ifc.LOCAL_MODEL_FIELDS)
-            self._lm.header.frame_id = p['frame_id']
+            # published as serialized bytes (the same JointState on the wire, ~10x cheaper)
+            self._lm = cdr.JointStateWriter(p['frame_id'], ifc.LOCAL_MODEL_FIELDS,
+                                            len(ifc.LOCAL_MODEL_FIELDS))
         self.delay = p['delay']
         self._delayed: queue.Queue | None = None
         if self.delay > 0:
@@ -147,12 +187,21 @@ class ForceServer(Node):
         st = '/'.join('-'.join(map(str, s)) for s in self.model.structures_)
         return f'structures {st}'
 
-    def _on_contact(self, msg: JointState) -> None:
+    def _on_contact(self, msg: bytes | JointState) -> None:
+        """One contact (serialized bytes from the subscription, or a JointState)."""
         self.n_contacts += 1
+        if isinstance(msg, bytes):
+            try:
+                stamp, _, position, effort = cdr.read_joint_state(msg)
+            except ValueError as exc:  # unreadable: nothing to answer (no stamp to answer it)
+                self._bad(str(exc))
+                return
+        else:
+            stamp, position, effort = stamp_ns(msg.header.stamp), msg.position, msg.effort
         delayed = self._delayed is not None
         out = WrenchStamped() if delayed else self._msg
         out.header.frame_id = self.frame_id
-        out.header.stamp = msg.header.stamp
+        set_stamp(out.header.stamp, stamp)
         f = out.wrench.force
         model = self.model
         values = None
@@ -161,9 +210,15 @@ class ForceServer(Node):
             error = None
             values = [0.0] * len(ifc.LOCAL_MODEL_FIELDS)
         elif self.pub_lm is not None:
-            (fx, fy, fz), values, error = local_model_from_contact(model, msg.position)
+            (fx, fy, fz), values, error = local_model_from_contact(model, position,
+                                                                   approach=effort)
         else:
-            fx, fy, fz, error = force_from_contact(model, msg.position)
+            fx, fy, fz, error = force_from_contact(model, position)
+        if self._ramp_t0 is not None and values is not None and not (fx or fy or fz):
+            # an approach model (free probe) during a case ramp carries the ramp's factor so far
+            k = 0.0 if self._ramp_t0 < 0.0 else min(
+                1.0, (time.monotonic() - self._ramp_t0) / self.params['case_ramp'])
+            values[ifc.LM_K] = [k * c for c in values[ifc.LM_K]]
         if self._ramp_t0 is not None and (fx or fy or fz):  # after a case switch: ramp up
             now = time.monotonic()
             if self._ramp_t0 < 0.0:  # the first force since the switch starts the ramp: 0 N
@@ -176,12 +231,7 @@ class ForceServer(Node):
                 if values is not None:  # the local model ramps with it: F0 and K scaled by k
                     values[ifc.LM_F0] = [k * c for c in values[ifc.LM_F0]]
                     values[ifc.LM_K] = [k * c for c in values[ifc.LM_K]]
-        lm = None
-        if self.pub_lm is not None:
-            lm = JointState(name=self._lm.name) if delayed else self._lm
-            lm.header.frame_id = self.frame_id
-            lm.header.stamp = msg.header.stamp
-            lm.position = values
+        lm = self._lm.pack(stamp, values) if self.pub_lm is not None else None
         if error is not None:
             self._bad(error)
         elif fx or fy or fz:

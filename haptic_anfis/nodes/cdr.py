@@ -1,0 +1,188 @@
+"""The haptic loop's hot messages on the wire (CDR), read and written with ``struct``.
+
+rclpy turns every received message into Python message objects (one per nested message, each
+field set through a checking setter) and back when publishing: measured here, 25-35 µs to
+serialise and 25-100 µs to deserialise a ``WrenchStamped`` or a ``JointState`` of 26 values, all
+of it holding the process's GIL. The falcon driver's servo thread needs that GIL every
+millisecond, so the driver takes ``falcon/servo_cf`` and ``falcon/servo_cf_local`` as raw bytes
+(``create_subscription(..., raw=True)``) and the force server publishes them as bytes
+(``Publisher.publish`` accepts serialized messages) through these few functions — plain CDR,
+little-endian (the encapsulation ROS 2 uses; XCDR1 alignment: each primitive aligned to its size
+from the start of the payload after the 4-byte encapsulation header). A message in any other
+encapsulation is read through rclpy's own deserialiser (:func:`rclpy.serialization.
+deserialize_message`), so nothing depends on the fast path being taken.
+
+Layouts (``std_msgs/Header`` = int32 sec, uint32 nanosec, string frame_id; a string is a uint32
+length counting its NUL, the bytes and the NUL; a sequence a uint32 count then its elements):
+``geometry_msgs/WrenchStamped`` = header, 3 float64 force, 3 float64 torque;
+``sensor_msgs/JointState`` = header, string[] name, float64[] position, velocity, effort.
+"""
+from __future__ import annotations
+
+import struct
+
+_LE = b'\x00\x01\x00\x00'  # CDR little-endian encapsulation, no options
+_HEAD = struct.Struct('<iII')  # sec, nanosec, frame_id length (payload offset 0)
+_U32 = struct.Struct('<I')
+_F3 = struct.Struct('<3d')
+
+
+def _frame(b: bytes, n: int) -> tuple[str, int]:
+    """(frame_id, payload offset after it) for a frame_id string of length field ``n``."""
+    if n < 1 or 16 + n > len(b):
+        raise struct.error(f'frame_id length {n} out of the message')  # reported by the caller
+    return b[16:15 + n].decode('utf-8', errors='replace'), 12 + n
+
+
+def read_wrench_stamped(b: bytes) -> tuple[int, str, tuple[float, float, float]]:
+    """(stamp [ns], frame_id, force (3,) [N]) of a serialized ``geometry_msgs/WrenchStamped``.
+
+    Raises:
+        ValueError: not a WrenchStamped (too short, bad lengths).
+    """
+    if b[:4] != _LE:
+        return _slow_wrench(b)
+    try:
+        sec, nsec, n = _HEAD.unpack_from(b, 4)
+        frame, o = _frame(b, n)
+        o = (o + 7) & ~7
+        f = _F3.unpack_from(b, 4 + o)
+    except struct.error as exc:
+        raise ValueError(f'malformed WrenchStamped ({len(b)} bytes): {exc}') from None
+    return sec * 1_000_000_000 + nsec, frame, f
+
+
+def read_joint_state(b: bytes) -> tuple[int, str, tuple[float, ...], tuple[float, ...]]:
+    """(stamp [ns], frame_id, position, effort) of a serialized ``sensor_msgs/JointState``
+    (names and velocities skipped).
+
+    Raises:
+        ValueError: not a JointState (too short, bad lengths).
+    """
+    if b[:4] != _LE:
+        return _slow_joint_state(b)
+    try:
+        sec, nsec, n = _HEAD.unpack_from(b, 4)
+        frame, o = _frame(b, n)
+        u32 = _U32.unpack_from
+        o = (o + 3) & ~3
+        count = u32(b, 4 + o)[0]
+        o += 4
+        for _ in range(count):  # skip the names: aligned uint32 length, bytes
+            o = (o + 3) & ~3
+            o += 4 + u32(b, 4 + o)[0]
+        seqs = []
+        for _ in range(3):  # position, velocity, effort
+            o = (o + 3) & ~3
+            m = u32(b, 4 + o)[0]
+            o += 4
+            if m:
+                o = (o + 7) & ~7
+                seqs.append(struct.unpack_from(f'<{m}d', b, 4 + o))
+                o += 8 * m
+            else:
+                seqs.append(())
+    except struct.error as exc:
+        raise ValueError(f'malformed JointState ({len(b)} bytes): {exc}') from None
+    return sec * 1_000_000_000 + nsec, frame, seqs[0], seqs[2]
+
+
+class WrenchStampedWriter:
+    """Serialized ``geometry_msgs/WrenchStamped`` with a fixed ``frame_id`` and zero torque."""
+
+    def __init__(self, frame_id: str) -> None:
+        fb = frame_id.encode('utf-8') + b'\x00'
+        o = 12 + len(fb)
+        pad = ((o + 7) & ~7) - o
+        self._fmt = struct.Struct(f'<4siII{len(fb)}s{pad}x6d')
+        self._fb, self._n = fb, len(fb)
+
+    def pack(self, stamp_ns: int, force) -> bytes:
+        """The message stamped ``stamp_ns`` [ns] with ``force`` (3,) [N]."""
+        sec, nsec = divmod(int(stamp_ns), 1_000_000_000)
+        fx, fy, fz = force
+        return self._fmt.pack(_LE, sec, nsec, self._n, self._fb, fx, fy, fz, 0.0, 0.0, 0.0)
+
+
+class JointStateWriter:
+    """Serialized ``sensor_msgs/JointState`` with a fixed ``frame_id`` and ``names``, ``n``
+    positions, empty velocity and effort; and the fast reader of that layout (:meth:`read`)."""
+
+    def __init__(self, frame_id: str, names, n: int) -> None:
+        fb = frame_id.encode('utf-8') + b'\x00'
+        parts = [_U32.pack(len(fb)), fb]
+        o = 12 + len(fb)
+        body = bytearray()
+
+        def align(a: int) -> None:
+            nonlocal o
+            k = ((o + a - 1) & ~(a - 1)) - o
+            body.extend(b'\x00' * k)
+            o += k
+        align(4)
+        body += _U32.pack(len(names))
+        o += 4
+        for name in names:
+            s = str(name).encode('utf-8') + b'\x00'
+            align(4)
+            body += _U32.pack(len(s)) + s
+            o += 4 + len(s)
+        align(4)
+        body += _U32.pack(n)
+        o += 4
+        if n:
+            align(8)
+        self._prefix = b''.join(parts) + bytes(body)
+        self._tail = _U32.pack(0) * 2  # velocity, effort: empty (8-aligned + 8n: 4-aligned)
+        self._fmt = struct.Struct(f'<4siI{len(self._prefix)}s{n}d8s')
+        self._pos = struct.Struct(f'<{n}d')
+        self._empty = struct.Struct('<II')
+        self.n, self.frame_id = n, frame_id
+
+    def read(self, b: bytes) -> tuple[int, str, tuple[float, ...], tuple[float, ...]]:
+        """:func:`read_joint_state` of ``b``, fast when ``b`` has exactly this layout: the bytes
+        from the frame_id to the positions (frame, every name, their padding) equal this
+        writer's, so the positions are at a known offset (one comparison instead of walking
+        the names); any other message takes the general path."""
+        p = self._prefix
+        if b[:4] == _LE and b[12:12 + len(p)] == p:
+            o = 12 + len(p)
+            try:
+                pos = self._pos.unpack_from(b, o)
+                if self._empty.unpack_from(b, o + 8 * self.n) == (0, 0):
+                    sec, nsec = _HEAD.unpack_from(b, 4)[:2]
+                    return sec * 1_000_000_000 + nsec, self.frame_id, pos, ()
+            except struct.error:
+                pass
+        return read_joint_state(b)
+
+    def pack(self, stamp_ns: int, position) -> bytes:
+        """The message stamped ``stamp_ns`` [ns] with ``position`` (exactly ``n`` values)."""
+        if len(position) != self.n:
+            raise ValueError(f'JointStateWriter: expected {self.n} positions, got '
+                             f'{len(position)}')
+        sec, nsec = divmod(int(stamp_ns), 1_000_000_000)
+        return self._fmt.pack(_LE, sec, nsec, self._prefix, *position, self._tail)
+
+
+def _slow_wrench(b: bytes):
+    from geometry_msgs.msg import WrenchStamped
+    from rclpy.serialization import deserialize_message
+    try:
+        m = deserialize_message(b, WrenchStamped)
+    except Exception as exc:  # the rmw's error type varies
+        raise ValueError(f'malformed WrenchStamped ({len(b)} bytes): {exc}') from None
+    f, s = m.wrench.force, m.header.stamp
+    return s.sec * 1_000_000_000 + s.nanosec, m.header.frame_id, (f.x, f.y, f.z)
+
+
+def _slow_joint_state(b: bytes):
+    from rclpy.serialization import deserialize_message
+    from sensor_msgs.msg import JointState
+    try:
+        m = deserialize_message(b, JointState)
+    except Exception as exc:  # the rmw's error type varies
+        raise ValueError(f'malformed JointState ({len(b)} bytes): {exc}') from None
+    s = m.header.stamp
+    return (s.sec * 1_000_000_000 + s.nanosec, m.header.frame_id, tuple(m.position),
+            tuple(m.effort))
