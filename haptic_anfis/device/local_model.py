@@ -196,6 +196,12 @@ def _eigenvector(a00, a01, a02, a11, a12, a22, la):
     return u, best
 
 
+def _rayleigh(a00, a01, a02, a11, a12, a22, ux, uy, uz) -> float:
+    """u^T S u for the symmetric S (its upper triangle) and u (not normalised)."""
+    return (ux * (a00 * ux + a01 * uy + a02 * uz) + uy * (a01 * ux + a11 * uy + a12 * uz)
+            + uz * (a02 * ux + a12 * uy + a22 * uz))
+
+
 def _keep_one(a00, a01, a02, a11, a12, a22, la, target, lo) -> tuple[float, ...] | None:
     """t I + (clip(rq) - t) u u^T: the two eigenvalues other than ``la`` are both out of range on
     the same side and go to ``target``; only la's eigenvector u is needed (rq its Rayleigh
@@ -205,8 +211,7 @@ def _keep_one(a00, a01, a02, a11, a12, a22, la, target, lo) -> tuple[float, ...]
     if e is None:
         return None
     (ux, uy, uz), nn = e
-    rq = (ux * (a00 * ux + a01 * uy + a02 * uz) + uy * (a01 * ux + a11 * uy + a12 * uz)
-          + uz * (a02 * ux + a12 * uy + a22 * uz)) / nn
+    rq = _rayleigh(a00, a01, a02, a11, a12, a22, ux, uy, uz) / nn
     w = (_clip(rq, lo) - target) / nn
     s01, s02, s12 = w * ux * uy, w * ux * uz, w * uy * uz
     s00, s11, s22 = target + w * ux * ux, target + w * uy * uy, target + w * uz * uz
@@ -225,8 +230,7 @@ def _clip_one(a00, a01, a02, a11, a12, a22, la, target) -> tuple[float, ...] | N
     (ux, uy, uz), best = e
     # the Rayleigh quotient, not the closed-form la: exact to second order in u's error (the
     # trigonometric eigenvalue carries ~sqrt(eps) of the spectrum's width near a double root)
-    rq = (ux * (a00 * ux + a01 * uy + a02 * uz) + uy * (a01 * ux + a11 * uy + a12 * uz)
-          + uz * (a02 * ux + a12 * uy + a22 * uz)) / best
+    rq = _rayleigh(a00, a01, a02, a11, a12, a22, ux, uy, uz) / best
     if (rq <= target) if target == 0.0 else (rq >= target):  # in range after all: S as it is
         return (a00, a01, a02, a01, a11, a12, a02, a12, a22)
     w = (rq - target) / best  # (rq - target) u u^T / |u|^2

@@ -214,23 +214,12 @@ class ForceServer(Node):
                                                                    approach=effort)
         else:
             fx, fy, fz, error = force_from_contact(model, position)
-        if self._ramp_t0 is not None and values is not None and not (fx or fy or fz):
-            # an approach model (free probe) during a case ramp carries the ramp's factor so far
-            k = 0.0 if self._ramp_t0 < 0.0 else min(
-                1.0, (time.monotonic() - self._ramp_t0) / self.params['case_ramp'])
-            values[ifc.LM_K] = [k * c for c in values[ifc.LM_K]]
-        if self._ramp_t0 is not None and (fx or fy or fz):  # after a case switch: ramp up
-            now = time.monotonic()
-            if self._ramp_t0 < 0.0:  # the first force since the switch starts the ramp: 0 N
-                self._ramp_t0 = now
-            k = (now - self._ramp_t0) / self.params['case_ramp']
-            if k >= 1.0:
-                self._ramp_t0 = None
-            else:
-                fx, fy, fz = k * fx, k * fy, k * fz
-                if values is not None:  # the local model ramps with it: F0 and K scaled by k
-                    values[ifc.LM_F0] = [k * c for c in values[ifc.LM_F0]]
-                    values[ifc.LM_K] = [k * c for c in values[ifc.LM_K]]
+        k = self._case_ramp(bool(fx or fy or fz))
+        if k is not None:  # after a case switch: force and local model (F0, K) scaled by k
+            fx, fy, fz = k * fx, k * fy, k * fz
+            if values is not None:
+                values[ifc.LM_F0] = [k * c for c in values[ifc.LM_F0]]
+                values[ifc.LM_K] = [k * c for c in values[ifc.LM_K]]
         lm = self._lm.pack(stamp, values) if self.pub_lm is not None else None
         if error is not None:
             self._bad(error)
@@ -246,6 +235,25 @@ class ForceServer(Node):
         self.pub.publish(out)
         if lm is not None:
             self.pub_lm.publish(lm)
+
+    def _case_ramp(self, in_force: bool) -> float | None:
+        """The factor in [0, 1) the output is scaled by while the force ramps up after a case
+        switch, or None (no ramp). The first non-zero force starts the ramp (0 N then); a free
+        probe's approach model (zero force) carries the factor reached so far, without starting
+        or ending the ramp."""
+        t0 = self._ramp_t0
+        if t0 is None:
+            return None
+        now = time.monotonic()
+        if not in_force:
+            return 0.0 if t0 < 0.0 else min(1.0, (now - t0) / self.params['case_ramp'])
+        if t0 < 0.0:
+            self._ramp_t0 = t0 = now
+        k = (now - t0) / self.params['case_ramp']
+        if k >= 1.0:
+            self._ramp_t0 = None
+            return None
+        return k
 
     def _delay_line(self) -> None:
         """TESTS ONLY (``delay`` > 0): publish each output ``delay`` seconds after it was made.
