@@ -176,6 +176,9 @@ class BagWriter:
                 chunk_since = None if seg is None or not seg.unflushed else time.monotonic()
         if seg is not None:
             try:
+                # the bag says what its recorder could not keep (queue full), for bag info and
+                # for a recorder that ran in another process (haptic-anfis sim --record)
+                seg.w.set_custom_data('dropped_messages', str(self.dropped))
                 seg.close()
             except Exception as exc:  # the summary did not fit: seal what is there
                 seg = self._failover(seg, exc)

@@ -1,9 +1,12 @@
 """``haptic-anfis sim``: the whole haptic graph in one process, with a simulated Falcon.
 
 falcon_driver (1 kHz servo thread, scripted virtual hand) -> contact_detector -> force_server ->
-falcon_driver, plus the visualizer, on one EventsExecutor. Prints the loop rate, pose -> wrench
-latency percentiles, deadline misses, the largest applied force and contact statistics; with
-``--json`` the last line of output is one JSON object (see ``json_summary``).
+falcon_driver on one EventsExecutor. The visualizer and (``--record``) the recorder run beside
+it, each in a process of its own (``nodes/side_nodes.py``: in the loop's process their Python work
+held the interpreter lock the servo thread needs; ``--in-process`` puts them back there). Prints
+the loop rate, pose -> wrench latency percentiles, deadline misses, the largest applied force and
+contact statistics; with ``--json`` the last line of output is one JSON object (see
+``json_summary``).
 """
 from __future__ import annotations
 
@@ -25,6 +28,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument('--record', metavar='BAG', default=None,
                    help='record every loop topic (pose, velocity, applied force, buttons, contact, '
                         'force command) to this new bag directory (rosbag2, MCAP)')
+    p.add_argument('--in-process', action='store_true',
+                   help='run the visualizer and the recorder in the haptic loop\'s process too '
+                        '(default: each in a process of its own, off the loop\'s interpreter '
+                        'lock)')
     p.add_argument('--ready-timeout', type=float, default=300.0,
                    help='seconds to wait for the graph to be ready (first force command at the '
                         'driver) before giving up (default 300)')
@@ -56,44 +63,116 @@ def run(args: argparse.Namespace) -> int:
         for f in args.params_file:
             ros_args += ['--params-file', f]
         ros_args += case_args
+    side = _side_nodes(args, ros_args, case_args)
+    extra = []
+    if args.record and args.in_process:
+        from ..bag.topics import ALL_LOOP_TOPICS
+        from ..nodes.recorder import Recorder
+        extra.append(lambda ctx: Recorder(context=ctx, output=args.record,
+                                          topics=ALL_LOOP_TOPICS))
     try:
-        extra = []
-        if args.record:
-            from ..bag.topics import ALL_LOOP_TOPICS
-            from ..nodes.recorder import Recorder
-            extra.append(lambda ctx: Recorder(context=ctx, output=args.record,
-                                              topics=ALL_LOOP_TOPICS))
-        graph = build_graph(['haptic-anfis-sim', *ros_args], visualizer=not args.no_viz,
-                            extra=extra)
+        graph = build_graph(['haptic-anfis-sim', *ros_args],
+                            visualizer=args.in_process and not args.no_viz, extra=extra)
     except ParameterError as exc:
         raise ValueError(str(exc)) from None
+    from ..nodes.side_nodes import SideNodeError
+    codes: dict[str, int] = {}
     try:
-        waited = graph.wait_ready(args.ready_timeout)
-        if waited is None:
-            print(f'not ready after {args.ready_timeout:g} s: no force command reached the driver',
-                  flush=True)
+        # the graph's parameters are valid: start the side nodes (the hand is held meanwhile)
+        side.start(args.ready_timeout)
+        if not _wait_ready(graph, side, args):
             return 1
         # Statistics cover the session, not the start (the hand waited, force zero, until now).
         graph.driver.servo.stats.reset()
         from ..nodes.session import process_age
+        where = ''.join(f', {n} in pid {pid}' for n, pid in side.pids.items())
         print(f'ready after {process_age():.1f} s; running the haptic graph for {args.duration:g} s '
-              '(one process, EventsExecutor)', flush=True)
+              f'(one process, EventsExecutor{where})', flush=True)
         graph.spin_for(args.duration)
+    except SideNodeError as exc:
+        print(f'not ready: {exc}', flush=True)
+        return 1
     except KeyboardInterrupt:
         print('interrupted', flush=True)
     finally:
-        graph.shutdown()
+        graph.shutdown()  # the device to zero force first
+        codes = side.stop()  # then the side nodes: the recorder has every message sent to it
     summary = graph.summary()
     print_summary(summary)
+    for name, code in codes.items():
+        print(f'{name:<14} own process, exit code {code}')
     recorded = None
     for n in graph.extra:
         if hasattr(n, 'writer'):
-            recorded = r = n.summary()
-            print(f"recorded       {r['written']} messages on {len(r['topics'])} topics to "
-                  f"{r['output']} (dropped {r['dropped']})")
+            recorded = n.summary()
+    if args.record and recorded is None:
+        recorded = _bag_summary(args.record)
+    if recorded is not None:
+        r = recorded
+        print(f"recorded       {r['written']} messages on {len(r['topics'])} topics to "
+              f"{r['output']} (dropped {r['dropped']})")
     if args.json:
         print(json.dumps(json_summary(summary, recorded)), flush=True)
     return 0
+
+
+def _side_nodes(args: argparse.Namespace, ros_args: list[str], case_args: list[str]):
+    """The visualizer and the recorder as processes of their own (unless ``--in-process``)."""
+    from ..nodes.side_nodes import SideNodes
+    common = [a for a in ros_args if a != '--ros-args']  # params files, case, the user's args
+    nodes: dict[str, list[str]] = {}
+    if not args.in_process and args.record:
+        from ..bag.topics import ALL_LOOP_TOPICS
+        nodes['recorder'] = [*common, '-p', f'output:={Path(args.record).resolve()}',
+                             '-p', f'topics:=[{",".join(ALL_LOOP_TOPICS)}]']
+    if not args.in_process and not args.no_viz:
+        nodes['visualizer'] = common
+    return SideNodes(nodes)
+
+
+def _wait_ready(graph, side, args: argparse.Namespace) -> bool:
+    """Spin the graph until a force command reached the driver and, with a recorder in its own
+    process, until that recorder subscribes to every loop topic (the hand is held until then, so
+    the bag has the session from its first move). False (said why) on ``--ready-timeout``."""
+    import time
+    end = time.monotonic() + args.ready_timeout
+    if 'recorder' in side.nodes:
+        import threading
+
+        from ..bag.topics import ALL_LOOP_TOPICS, absolute
+        from ..nodes.side_nodes import recorder_matched
+        topics = [absolute(t) for t in ALL_LOOP_TOPICS]
+        matched = threading.Event()
+        graph.driver.release_gate = matched.is_set  # before the executor first spins
+
+        def check() -> bool:
+            if recorder_matched(graph.driver, topics):
+                matched.set()
+            return matched.is_set()
+        if not graph.spin_for(args.ready_timeout, until=check):
+            print(f'not ready after {args.ready_timeout:g} s: the recorder has not subscribed '
+                  'to every loop topic' + ''.join(f'; {n} exited with code {c}'
+                                                   for n, c in side.dead()), flush=True)
+            return False
+    if graph.wait_ready(max(end - time.monotonic(), 0.0)) is None:
+        print(f'not ready after {args.ready_timeout:g} s: no force command reached the driver',
+              flush=True)
+        return False
+    return True
+
+
+def _bag_summary(path: str) -> dict:
+    """What the recorder in its own process wrote: from the bag it closed."""
+    from ..bag.reader import bag_info
+    try:
+        info = bag_info(path)
+    except Exception as exc:  # noqa: BLE001 (the recorder said why, on standard error)
+        return {'output': str(path), 'topics': [], 'written': 0, 'dropped': None,
+                'error': str(exc)}
+    dropped = info.custom_data.get('dropped_messages')
+    return {'output': str(path), 'topics': [t.topic for t in info.topics],
+            'written': info.message_count,
+            'dropped': int(dropped) if dropped is not None and dropped.isdigit() else None}
 
 
 def json_summary(s: dict, recorded: dict | None = None) -> dict:

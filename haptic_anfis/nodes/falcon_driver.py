@@ -27,6 +27,7 @@ import json
 import math
 import sys
 import time
+from typing import Callable
 
 import numpy as np
 from geometry_msgs.msg import PointStamped, PoseStamped, TwistStamped, WrenchStamped
@@ -189,6 +190,10 @@ class FalconDriver(Node):
         self._tick = 0
         self.run_duration = p['run_duration']
         self.first_command: float | None = None
+        #: sim: a further condition for releasing the held hand (e.g. ``haptic-anfis sim``: the
+        #: recorder in its own process has matched every loop topic); set it before the executor
+        #: first spins. None = the first force command alone releases it.
+        self.release_gate: Callable[[], bool] | None = None
         self.finished = False
         self.exit_code = 0
         self.trace_path = p['trace_path']
@@ -328,7 +333,8 @@ class FalconDriver(Node):
         refused as stale (so the figures are not cut at the age limit); the measurement window
         opens at the first one taken."""
         script = getattr(self.device, 'script', None)
-        if isinstance(script, HeldScript) and script.held and (why == OK or why.endswith(STALE)):
+        if isinstance(script, HeldScript) and script.held and (why == OK or why.endswith(STALE)) \
+                and (self.release_gate is None or self.release_gate()):
             script.release()  # a force source answers our poses (late or not): start the palpation
         if why == OK and self.first_command is None:
             now = time.monotonic()

@@ -37,6 +37,8 @@ class Graph:
 
     def spin_for(self, seconds: float, until=None) -> bool:
         """Spin for ``seconds`` or until ``until()`` is true (checked between callbacks)."""
+        if until is not None and until():
+            return True
         end = time.monotonic() + seconds
         while time.monotonic() < end:
             self.executor.spin_once(timeout_sec=0.01)

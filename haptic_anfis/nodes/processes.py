@@ -42,6 +42,17 @@ def node_env(domain_id: int | None = None, localhost: bool = True,
     return env
 
 
+def _stop_with_parent() -> None:
+    """In the child before exec (Linux): SIGINT when the starting process dies, so a node is
+    never left running (a recorder recording forever) after a launcher was killed with
+    ``kill -9``; SIGINT, as Ctrl-C, lets it zero the force / close its bag."""
+    try:
+        import ctypes
+        ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGINT)  # PR_SET_PDEATHSIG
+    except (OSError, AttributeError):  # not Linux: nodes outlive a killed launcher
+        pass
+
+
 def start_node(name: str, ros_args: Sequence[str] = (), env: Mapping[str, str] | None = None,
                log: IO | int | None = None, cwd: str | os.PathLike | None = None,
                own_session: bool = False) -> subprocess.Popen:
@@ -49,7 +60,8 @@ def start_node(name: str, ros_args: Sequence[str] = (), env: Mapping[str, str] |
     this interpreter, else ``python -m haptic_anfis.nodes.<name>``. Its stdout and stderr go to
     ``log`` (a file object, ``subprocess.DEVNULL``, or inherited). ``own_session``: in its own
     session, so a Ctrl-C at the terminal reaches only the launcher, which stops the nodes in
-    order (the driver first) instead of all at once."""
+    order (the driver first) instead of all at once; the node then also gets SIGINT if the
+    launcher dies (Linux), since no terminal signal would reach it."""
     if name not in node_names():
         raise ValueError(f'unknown node {name!r}; known: {", ".join(node_names())}')
     exe = BIN / name
@@ -57,6 +69,7 @@ def start_node(name: str, ros_args: Sequence[str] = (), env: Mapping[str, str] |
     cmd += ['--ros-args', *ros_args] if ros_args else []
     return subprocess.Popen(cmd, env=dict(env) if env is not None else node_env(), cwd=cwd,
                             start_new_session=own_session,
+                            preexec_fn=_stop_with_parent if own_session else None,
                             stdout=log, stderr=subprocess.STDOUT if log is not None else None)
 
 
@@ -83,14 +96,15 @@ class Supervisor:
     their own; :meth:`restart` starts one again with the same arguments (``rename`` may adjust
     them, e.g. a new bag directory for the recorder) while at most ``max_restarts`` restarts per
     node are allowed. ``log_dir``: each node's output goes to ``DIR/<node>.log`` (appended to on a
-    restart), else to this terminal.
+    restart), else to ``stream`` (a file object; None = this terminal's standard output).
     """
 
     def __init__(self, env: Mapping[str, str], log_dir: Path | None = None,
-                 max_restarts: int = 3):
+                 max_restarts: int = 3, stream: IO | None = None):
         if max_restarts < 0:
             raise ValueError(f'max_restarts: expected >= 0, got {max_restarts}')
         self.env, self.log_dir, self.max_restarts = dict(env), log_dir, max_restarts
+        self.stream = stream
         self.procs: dict[str, subprocess.Popen] = {}
         self.args: dict[str, list[str]] = {}
         self.started_at: dict[str, float] = {}
@@ -99,7 +113,7 @@ class Supervisor:
 
     def start(self, name: str, args: Sequence[str] = ()) -> subprocess.Popen:
         import time
-        log = None
+        log = self.stream
         if self.log_dir is not None:
             log = self.logs.get(name) or (self.log_dir / f'{name}.log').open('w')
             self.logs[name] = log

@@ -240,6 +240,8 @@ class Visualizer(Node):
                 self.last_dent = state  # (point, direction, depth) the surface now shows
                 last = key
             except Exception as exc:  # never let the drawing thread die silently
+                if not self.context.ok():  # Ctrl-C shut the context down under us: just stop
+                    return
                 self.get_logger().error(f'dent drawing failed: {exc!r}', throttle_duration_sec=5.0)
 
     def close(self) -> None:
