@@ -7,7 +7,8 @@ queues, memory growth). Usage: ``python bench/bench_soak.py [--one-minutes 10] [
 10] [--interval 60]`` (issue 20; issue 21 reads the RSS and bag size columns).
 
 - one process: ``haptic-anfis sim``'s graph (driver, contact detector, force server, no
-  visualizer) plus the recorder of every loop topic; figures from the driver's own statistics
+  visualizer) plus the recorder of every loop topic, in a process of its own as ``sim --record``
+  runs it (``--in-process``: in the loop's process, as before); figures from the driver's own statistics
   (latency = pose stamp -> command arrival at the driver; a miss = a servo tick more than one
   period late).
 - multi process: ``haptic-anfis launch --record`` (recorder, force server, contact detector,
@@ -102,28 +103,38 @@ class GcPauses:
 
 
 def one_process(minutes: float, interval: float, workdir: Path, freeze: bool = True,
-                force_mode: str | None = None) -> None:
+                force_mode: str | None = None, in_process: bool = False) -> None:
+    """``in_process``: the recorder in the loop's process (before); default: in a process of its
+    own, as ``haptic-anfis sim --record`` runs it."""
     import gc
 
+    from haptic_anfis.bag.reader import recorded_summary
     from haptic_anfis.bag.topics import ALL_LOOP_TOPICS
     from haptic_anfis.nodes.graph import build_graph
     from haptic_anfis.nodes.recorder import Recorder
+    from haptic_anfis.nodes.side_nodes import SideNodes, hold_until_recorded
     bag = workdir / 'one_process_bag'
     from rclpy.parameter import Parameter
     over = {'falcon_driver': [Parameter('force_mode', value=force_mode)]} if force_mode else None
-    g = build_graph(None, visualizer=False, overrides=over,
-                    extra=[lambda ctx: Recorder(context=ctx, output=str(bag),
-                                                topics=ALL_LOOP_TOPICS)])
+    extra = [lambda ctx: Recorder(context=ctx, output=str(bag), topics=ALL_LOOP_TOPICS)] \
+        if in_process else []
+    g = build_graph(None, visualizer=False, overrides=over, extra=extra)
+    side = SideNodes({} if in_process else {'recorder': [
+        '-p', f'output:={bag.resolve()}', '-p', f'topics:=[{",".join(ALL_LOOP_TOPICS)}]']})
     try:
+        side.start(300.0)
+        if side and not hold_until_recorded(g, 300.0):
+            raise RuntimeError('the recorder process did not subscribe within 300 s')
         if g.wait_ready(300.0) is None:
             raise RuntimeError('no force command within 300 s')
         st = g.driver.servo.stats
         st.reset()
-        rec = g.extra[0]
+        rec = g.extra[0] if in_process else None
         if not freeze:  # for comparison: what build_graph's gc.freeze() avoids
             gc.unfreeze()
         pauses = GcPauses()
-        print(f'one process + recorder, force_mode {g.driver.input.mode}, {minutes:g} min, '
+        print(f'one process + recorder ({"in the same process" if in_process else "own process"}), '
+              f'force_mode {g.driver.input.mode}, {minutes:g} min, '
               f'load {os.getloadavg()[0]:.2f}, gc '
               f'{"frozen after start" if freeze else "not frozen"}')
         print(HEADER + ', gc collections (gen 0/1/2) and longest pause, recorder chunks flushed '
@@ -137,10 +148,12 @@ def one_process(minutes: float, interval: float, workdir: Path, freeze: bool = T
             now = time.monotonic()
             ticks, misses = st.ticks, st.deadline_misses
             lat, counts0 = interval_latency(st.latency_hist, counts0)
-            w = rec.writer.stats()
+            rss = {'sim': rss_mb(), **{n: rss_mb(pid) for n, pid in side.pids.items()}}
+            w = rec.writer.stats() if rec is not None else None
             print(row((now - t0) / 60, (ticks - ticks0) / (now - tprev), lat,
-                      misses - misses0, dir_mb(bag), {'sim': rss_mb()})
-                  + f', {pauses.text()}, chunks {w["chunks_flushed"]} pending {w["pending"]}',
+                      misses - misses0, dir_mb(bag), rss)
+                  + f', {pauses.text()}'
+                  + (f', chunks {w["chunks_flushed"]} pending {w["pending"]}' if w else ''),
                   flush=True)
             pauses.reset()
             ticks0, misses0, tprev = ticks, misses, now
@@ -150,7 +163,9 @@ def one_process(minutes: float, interval: float, workdir: Path, freeze: bool = T
               f'ticks, watchdog trips {s["watchdog_trips"]}')
     finally:
         g.shutdown()
-    print(f'bag {bag}: {dir_mb(bag):.1f} MB, recorded {rec.writer.stats()}', flush=True)
+        side.stop()
+    done = rec.writer.stats() if in_process else recorded_summary(bag)
+    print(f'bag {bag}: {dir_mb(bag):.1f} MB, recorded {done}', flush=True)
 
 
 def multi_process(minutes: float, interval: float, workdir: Path,
@@ -235,6 +250,9 @@ def main() -> int:
     ap.add_argument('--force-mode', choices=('zoh', 'local_model'), default=None,
                     help="the falcon driver's force_mode (default: its configured one)")
     ap.add_argument('--interval', type=float, default=60.0, help='seconds per row (default 60)')
+    ap.add_argument('--in-process', action='store_true',
+                    help='one process: the recorder in the loop\'s process (before; default: in '
+                         'a process of its own, as haptic-anfis sim --record)')
     ap.add_argument('--no-freeze', action='store_true',
                     help='one process: undo the gc.freeze() done after start (for comparison)')
     ap.add_argument('--keep', metavar='DIR', default=None,
@@ -247,7 +265,7 @@ def main() -> int:
     try:
         if a.one_minutes > 0:
             one_process(a.one_minutes, a.interval, work, freeze=not a.no_freeze,
-                        force_mode=a.force_mode)
+                        force_mode=a.force_mode, in_process=a.in_process)
         if a.multi_minutes > 0:
             multi_process(a.multi_minutes, a.interval, work, force_mode=a.force_mode)
     finally:

@@ -165,6 +165,21 @@ def bag_info(path: str | Path) -> BagInfo:
                        start, end, n, topics, dict(meta.get('custom_data') or {}), kept)
 
 
+def recorded_summary(path: str | Path) -> dict:
+    """What a recorder (maybe in another process) wrote to the closed bag ``path``, in the shape of
+    the recorder's own summary: ``output``, ``topics``, ``written``, ``dropped`` (None if the
+    bag does not say; ``error`` when it cannot be opened)."""
+    try:
+        info = bag_info(path)
+    except Exception as exc:  # noqa: BLE001 (the recorder said why when it happened)
+        return {'output': str(path), 'topics': [], 'written': 0, 'dropped': None,
+                'error': str(exc)}
+    dropped = info.custom_data.get('dropped_messages', '')
+    return {'output': str(path), 'topics': [t.topic for t in info.topics],
+            'written': info.message_count,
+            'dropped': int(dropped) if dropped.isdigit() else None}
+
+
 def _metadata_yaml(p: Path) -> dict:
     if not p.is_dir():
         return {}

@@ -106,7 +106,8 @@ def run(args: argparse.Namespace) -> int:
         if hasattr(n, 'writer'):
             recorded = n.summary()
     if args.record and recorded is None:
-        recorded = _bag_summary(args.record)
+        from ..bag.reader import recorded_summary
+        recorded = recorded_summary(args.record)
     if recorded is not None:
         r = recorded
         print(f"recorded       {r['written']} messages on {len(r['topics'])} topics to "
@@ -137,19 +138,8 @@ def _wait_ready(graph, side, args: argparse.Namespace) -> bool:
     import time
     end = time.monotonic() + args.ready_timeout
     if 'recorder' in side.nodes:
-        import threading
-
-        from ..bag.topics import ALL_LOOP_TOPICS, absolute
-        from ..nodes.side_nodes import recorder_matched
-        topics = [absolute(t) for t in ALL_LOOP_TOPICS]
-        matched = threading.Event()
-        graph.driver.release_gate = matched.is_set  # before the executor first spins
-
-        def check() -> bool:
-            if recorder_matched(graph.driver, topics):
-                matched.set()
-            return matched.is_set()
-        if not graph.spin_for(args.ready_timeout, until=check):
+        from ..nodes.side_nodes import hold_until_recorded
+        if not hold_until_recorded(graph, args.ready_timeout):
             print(f'not ready after {args.ready_timeout:g} s: the recorder has not subscribed '
                   'to every loop topic' + ''.join(f'; {n} exited with code {c}'
                                                    for n, c in side.dead()), flush=True)
@@ -159,20 +149,6 @@ def _wait_ready(graph, side, args: argparse.Namespace) -> bool:
               flush=True)
         return False
     return True
-
-
-def _bag_summary(path: str) -> dict:
-    """What the recorder in its own process wrote: from the bag it closed."""
-    from ..bag.reader import bag_info
-    try:
-        info = bag_info(path)
-    except Exception as exc:  # noqa: BLE001 (the recorder said why, on standard error)
-        return {'output': str(path), 'topics': [], 'written': 0, 'dropped': None,
-                'error': str(exc)}
-    dropped = info.custom_data.get('dropped_messages')
-    return {'output': str(path), 'topics': [t.topic for t in info.topics],
-            'written': info.message_count,
-            'dropped': int(dropped) if dropped is not None and dropped.isdigit() else None}
 
 
 def json_summary(s: dict, recorded: dict | None = None) -> dict:

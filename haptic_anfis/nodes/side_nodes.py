@@ -96,3 +96,22 @@ def recorder_matched(node, topics: Sequence[str], recorder: str = 'recorder') ->
         if not any(i.node_name == recorder for i in node.get_subscriptions_info_by_topic(t)):
             return False
     return True
+
+
+def hold_until_recorded(graph, timeout: float, recorder: str = 'recorder') -> bool:
+    """Hold the simulated hand of ``graph`` (a :class:`~haptic_anfis.nodes.graph.Graph` whose
+    executor has not spun yet) until the node ``recorder`` (in another process) subscribes to
+    every loop topic, spinning the graph meanwhile: the bag then has the session from its first
+    move. False if that did not happen within ``timeout`` s."""
+    import threading
+
+    from ..bag.topics import ALL_LOOP_TOPICS, absolute
+    topics = [absolute(t) for t in ALL_LOOP_TOPICS]
+    matched = threading.Event()
+    graph.driver.release_gate = matched.is_set  # read by the driver when commands arrive
+
+    def check() -> bool:
+        if not matched.is_set() and recorder_matched(graph.driver, topics, recorder):
+            matched.set()
+        return matched.is_set()
+    return graph.spin_for(timeout, until=check)
