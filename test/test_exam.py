@@ -336,3 +336,50 @@ def test_detector_quiet_on_a_homogeneous_breast():
 def test_detector_with_too_few_samples_is_empty():
     assert detect_lumps(np.zeros((0, 3)), np.zeros(0), np.zeros(0)) == []
     assert detect_lumps(np.full((5, 3), np.nan), np.ones(5), np.ones(5)) == []
+
+
+def _homogeneous(rng, noise=0.02):
+    P, d = strip_samples(rng)
+    F = 900.0 * d ** 1.2 * (1 + 0.4 * 0.008 / P[:, 0]) * (1 + rng.normal(0, noise, len(d)))
+    return P, d, F
+
+
+def _bump(P, y, z, height, width=0.006):
+    return 1 + height * np.exp(-((P[:, 1] - y) ** 2 + (P[:, 2] - z) ** 2) / (2 * width ** 2))
+
+
+def test_detector_finds_two_lumps_the_robust_baseline_does_not_absorb():
+    """Two +15 % lumps on one breast, on strips: both found, each where it is (an ordinary
+    least-squares baseline bends towards both and lowers them)."""
+    P, d, F = _homogeneous(np.random.default_rng(2))
+    F = F * _bump(P, 0.016, 0.012, 0.15) * _bump(P, -0.024, -0.010, 0.15)
+    found = sorted(detect_lumps(P, d, F), key=lambda f: f.y)
+    assert len(found) == 2, found
+    assert np.hypot(found[0].y + 0.024, found[0].z + 0.010) < 0.005
+    assert np.hypot(found[1].y - 0.016, found[1].z - 0.012) < 0.005
+    assert all(0.08 < f.excess < 0.18 for f in found)
+
+
+def test_detector_ignores_the_rim_of_the_searched_region():
+    """A bump centred on the rim (where the quartic baseline is least constrained) is not a
+    candidate; the same bump 15 mm inside is found."""
+    P, d, F = _homogeneous(np.random.default_rng(3))
+    rim = np.percentile(np.hypot(P[:, 1], P[:, 2]), 99.5)
+    assert detect_lumps(P, d, F * _bump(P, 0.0, rim, 0.15, 0.004)) == []
+    found = detect_lumps(P, d, F * _bump(P, 0.0, rim - 0.015, 0.15, 0.004))
+    assert len(found) == 1 and abs(found[0].z - (rim - 0.015)) < 0.005
+
+
+def test_detector_on_degenerate_samples_neither_fails_nor_invents_lumps():
+    """Hard cases: noise-free forces (every residual ~0: MAD 0), samples on one strip (the
+    quartic in (y, z) is rank deficient), one depth only (log-depth columns collinear)."""
+    rng = np.random.default_rng(4)
+    P, d, _ = _homogeneous(rng)
+    exact = 900.0 * d ** 1.2
+    assert detect_lumps(P, d, exact) == []
+    line_P = P.copy()
+    line_P[:, 1] = 0.0
+    assert detect_lumps(line_P, d, exact * (1 + rng.normal(0, 0.02, len(d)))) == []
+    one_depth = np.full(len(d), 0.010)
+    found = detect_lumps(P, one_depth, 900.0 * one_depth ** 1.2 * _bump(P, 0.0, 0.0, 0.15))
+    assert len(found) == 1 and np.hypot(found[0].y, found[0].z) < 0.005
