@@ -143,6 +143,7 @@ class Visualizer(Node):
         # compute + publish time of the last dent frames [s] (bounded: a long session)
         self.dent_seconds: collections.deque = collections.deque(maxlen=10000)
         self.last_dent = None
+        self.n_dent_frames = 0
         self._stop = threading.Event()
         self._thread = None
         if p['deform']:  # the dent thread (idle while the case has no displacement data)
@@ -237,6 +238,7 @@ class Visualizer(Node):
                 changed = surface.update(*(state or (None, None, 0.0)))
                 self._publish_patches(changed)
                 self.dent_seconds.append(time.perf_counter() - t0)
+                self.n_dent_frames += 1
                 self.last_dent = state  # (point, direction, depth) the surface now shows
                 last = key
             except Exception as exc:  # never let the drawing thread die silently
@@ -245,11 +247,17 @@ class Visualizer(Node):
                 self.get_logger().error(f'dent drawing failed: {exc!r}', throttle_duration_sec=5.0)
 
     def close(self) -> None:
-        """Stop the dent thread (called before the node is destroyed)."""
+        """Stop the dent thread (called before the node is destroyed) and log what it drew."""
         self._stop.set()
         if self._thread is not None:
             self._thread.join(timeout=2.0)
             self._thread = None
+            if self.dent_seconds:
+                ms = np.percentile(np.asarray(self.dent_seconds) * 1e3, [50, 99])
+                self.get_logger().info(
+                    f'dent: {self.n_dent_frames} frames drawn, {self.n_dent_messages} messages, '
+                    f'compute + publish p50 {ms[0]:.1f} ms, p99 {ms[1]:.1f} ms (newest '
+                    f'{len(self.dent_seconds)} frames); {self.n_published} marker arrays')
 
     def destroy_node(self):
         self.close()
