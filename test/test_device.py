@@ -266,3 +266,33 @@ def test_servo_loop_survives_a_failing_device_read_at_zero_force():
     assert Flaky.n > 20  # the thread went on after the failure
     loop.stop()
     assert dev._force == (0.0, 0.0, 0.0)
+
+
+def test_servo_thread_real_time_priority_or_a_clear_refusal(monkeypatch):
+    """The servo thread asks for SCHED_FIFO: granted (it then runs FIFO), or refused with a
+    message naming how to allow it; priority 0 leaves the scheduler alone; bad values refused."""
+    import os
+    import threading
+
+    from haptic_anfis.device.servo import ServoLoop, set_realtime
+    assert set_realtime(0) == 'normal scheduler (priority 0)'
+    got = {}
+
+    def probe():
+        got['said'] = set_realtime(10)
+        got['policy'] = os.sched_getscheduler(0)
+    t = threading.Thread(target=probe)
+    t.start()
+    t.join()
+    if 'refused' in got['said']:
+        assert 'ulimit -r 10' in got['said'] and got['policy'] == os.SCHED_OTHER
+    else:
+        assert got['said'] == 'SCHED_FIFO priority 10' and got['policy'] == os.SCHED_FIFO
+
+    def refuse(*a):
+        raise PermissionError(1, 'Operation not permitted')
+    monkeypatch.setattr(os, 'sched_setscheduler', refuse)
+    said = set_realtime(50)
+    assert 'refused (Operation not permitted)' in said and 'ulimit -r 50' in said
+    with pytest.raises(ValueError, match='priority'):
+        ServoLoop(None, None, priority=100)

@@ -18,7 +18,8 @@ def test_sim_records_from_a_recorder_process_and_draws_from_a_visualizer_process
     from haptic_anfis.bag.topics import ALL_LOOP_TOPICS, absolute
     from haptic_anfis.cli import main
     bag = tmp_path / 'session'
-    assert main(['sim', '--duration', '3', '--record', str(bag), '--json']) == 0
+    assert main(['sim', '--duration', '3', '--record', str(bag), '--recorder-process',
+                 '--json']) == 0
     cap = capfd.readouterr()
     out = cap.out
     assert 'recorder in pid' in out and 'visualizer in pid' in out, out
@@ -35,6 +36,7 @@ def test_sim_records_from_a_recorder_process_and_draws_from_a_visualizer_process
 
 
 def test_sim_in_process_keeps_the_one_interpreter_layout(capfd, tmp_path):
+    """--in-process: the visualizer in the loop's process; the recorder is there by default."""
     from haptic_anfis.cli import main
     bag = tmp_path / 'session'
     assert main(['sim', '--duration', '2', '--in-process', '--record', str(bag), '--json']) == 0

@@ -1,9 +1,10 @@
 """``haptic-anfis sim``: the whole haptic graph in one process, with a simulated Falcon.
 
 falcon_driver (1 kHz servo thread, scripted virtual hand) -> contact_detector -> force_server ->
-falcon_driver on one EventsExecutor. The visualizer and (``--record``) the recorder run beside
-it, each in a process of its own (``nodes/side_nodes.py``: in the loop's process their Python work
-held the interpreter lock the servo thread needs; ``--in-process`` puts them back there). Prints
+falcon_driver on one EventsExecutor, with the recorder (``--record``). The visualizer runs beside
+it in a process of its own (``nodes/side_nodes.py``: in the loop's process its dent held the
+interpreter lock the servo thread needs; ``--in-process`` puts it back there), and so does the
+recorder with ``--recorder-process``. Prints
 the loop rate, pose -> wrench latency percentiles, deadline misses, the largest applied force and
 contact statistics; with ``--json`` the last line of output is one JSON object (see
 ``json_summary``).
@@ -29,9 +30,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help='record every loop topic (pose, velocity, applied force, buttons, contact, '
                         'force command) to this new bag directory (rosbag2, MCAP)')
     p.add_argument('--in-process', action='store_true',
-                   help='run the visualizer and the recorder in the haptic loop\'s process too '
-                        '(default: each in a process of its own, off the loop\'s interpreter '
-                        'lock)')
+                   help='run the visualizer in the haptic loop\'s process too (default: in a '
+                        'process of its own, off the loop\'s interpreter lock)')
+    p.add_argument('--recorder-process', action='store_true',
+                   help='with --record: the recorder in a process of its own (default: in the '
+                        'loop\'s process, which measured cheaper for the loop on 2 cores)')
     p.add_argument('--ready-timeout', type=float, default=300.0,
                    help='seconds to wait for the graph to be ready (first force command at the '
                         'driver) before giving up (default 300)')
@@ -65,7 +68,7 @@ def run(args: argparse.Namespace) -> int:
         ros_args += case_args
     side = _side_nodes(args, ros_args, case_args)
     extra = []
-    if args.record and args.in_process:
+    if args.record and not args.recorder_process:
         from ..bag.topics import ALL_LOOP_TOPICS
         from ..nodes.recorder import Recorder
         extra.append(lambda ctx: Recorder(context=ctx, output=args.record,
@@ -118,11 +121,12 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _side_nodes(args: argparse.Namespace, ros_args: list[str], case_args: list[str]):
-    """The visualizer and the recorder as processes of their own (unless ``--in-process``)."""
+    """The visualizer (unless ``--in-process``) and, with ``--recorder-process``, the recorder
+    as processes of their own."""
     from ..nodes.side_nodes import SideNodes
     common = [a for a in ros_args if a != '--ros-args']  # params files, case, the user's args
     nodes: dict[str, list[str]] = {}
-    if not args.in_process and args.record:
+    if args.record and args.recorder_process:
         from ..bag.topics import ALL_LOOP_TOPICS
         nodes['recorder'] = [*common, '-p', f'output:={Path(args.record).resolve()}',
                              '-p', f'topics:=[{",".join(ALL_LOOP_TOPICS)}]']
@@ -164,6 +168,7 @@ def json_summary(s: dict, recorded: dict | None = None) -> dict:
            'seconds': lp['seconds'], 'commands': lp['latency_n'],
            'watchdog_trips': lp['watchdog_trips'], 'clamped': lp['clamped'],
            'rejected': lp['rejected_nonfinite'] + lp['rejected_frame'],
+           'servo_scheduling': lp.get('servo_scheduling', ''),
            'max_depth_mm': c['max_depth_mm'], 'contact_fraction': c['contact_fraction']}
     if recorded is not None:
         out.update(recorded_messages=recorded['written'], dropped_messages=recorded['dropped'])

@@ -127,6 +127,10 @@ PARAMS = [
     Param('gil_switch_interval', 0.0002, "this process's Python thread switch interval [s]: how "
           'long another thread may hold the GIL before the servo thread gets it back (Python '
           'default 0.005; 0 = leave it)', non_negative),
+    Param('servo_priority', 50, 'real-time priority of the servo thread (SCHED_FIFO 1-99; 0 = '
+          'the normal scheduler). Needs CAP_SYS_NICE or an rtprio limit (ulimit -r); without it '
+          'the thread keeps the normal scheduler and a warning says how to allow it',
+          lambda v: None if 0 <= v <= 99 else 'expected 0 to 99'),
 ]
 
 
@@ -199,8 +203,13 @@ class FalconDriver(Node):
         self.trace_path = p['trace_path']
         self.servo = ServoLoop(self.device, self.safety, p['rate'], on_state=self._publish_state,
                                render=self.input.render,
-                               trace=TickTrace() if self.trace_path else None)
+                               trace=TickTrace() if self.trace_path else None,
+                               priority=p['servo_priority'])
         self.servo.start()
+        if 'refused' in self.servo.scheduling:  # one call site per severity (rclpy)
+            self.get_logger().warning(f'servo thread: {self.servo.scheduling}')
+        else:
+            self.get_logger().info(f'servo thread: {self.servo.scheduling}')
         self.get_logger().info(
             f"backend {p['backend']}, {p['rate']:.0f} Hz servo thread, max force "
             f"{p['max_force']} N, watchdog {p['watchdog_timeout'] * 1e3:.1f} ms, force "
@@ -360,7 +369,8 @@ class FalconDriver(Node):
         s.update(commands=ss.commands, rejected_nonfinite=ss.rejected_nonfinite,
                  rejected_frame=ss.rejected_frame, watchdog_trips=ss.watchdog_trips,
                  watchdog_trips_in_contact=ss.watchdog_trips_in_contact,
-                 clamped=ss.clamped, servo_errors=self.servo.errors, **self.input.summary())
+                 clamped=ss.clamped, servo_errors=self.servo.errors,
+                 servo_scheduling=self.servo.scheduling, **self.input.summary())
         if self.first_command is not None:  # CPU of this process (all its threads) / wall time
             wall = time.monotonic() - self.first_command
             s['process_cpu_pct'] = (round(100.0 * (time.process_time() - self._cpu0) / wall, 1)

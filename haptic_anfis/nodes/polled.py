@@ -36,14 +36,31 @@ class PolledSubscription:
         self.msg_type = msg_type
         self.topic = topic
 
-    def take(self) -> bytes | None:
-        """The oldest sample not yet taken (serialized), or None."""
+    def take(self, raw: bool = True):
+        """The oldest sample not yet taken — serialized bytes, or with ``raw=False`` the message
+        object — or None."""
         h = self._h
         if h is None:
             return None
         with h:
-            m = h.take_message(self.msg_type, True)
+            m = h.take_message(self.msg_type, raw)
         return None if m is None else m[0]
+
+    def take_with_info(self, raw: bool = True):
+        """``(sample, message_info)`` of the oldest sample not yet taken, or None; the info dict
+        has ``received_timestamp`` (system clock [ns], 0 if the middleware does not say)."""
+        h = self._h
+        if h is None:
+            return None
+        with h:
+            return h.take_message(self.msg_type, raw)
+
+    def take_newest(self, raw: bool = True):
+        """The newest sample waiting (older ones dropped), or None when none is waiting."""
+        newest = None
+        while (m := self.take(raw)) is not None:
+            newest = m
+        return newest
 
     def destroy(self) -> None:
         """Release the reader (before the node is destroyed)."""

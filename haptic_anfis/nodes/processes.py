@@ -53,15 +53,23 @@ def _stop_with_parent() -> None:
         pass
 
 
+def _in_child(stop_with_parent: bool, nice: int) -> None:
+    if stop_with_parent:
+        _stop_with_parent()
+    if nice:
+        os.nice(nice)
+
+
 def start_node(name: str, ros_args: Sequence[str] = (), env: Mapping[str, str] | None = None,
                log: IO | int | None = None, cwd: str | os.PathLike | None = None,
-               own_session: bool = False) -> subprocess.Popen:
+               own_session: bool = False, nice: int = 0) -> subprocess.Popen:
     """Start node ``name`` with ``--ros-args ros_args``: its console script when it sits next to
     this interpreter, else ``python -m haptic_anfis.nodes.<name>``. Its stdout and stderr go to
     ``log`` (a file object, ``subprocess.DEVNULL``, or inherited). ``own_session``: in its own
     session, so a Ctrl-C at the terminal reaches only the launcher, which stops the nodes in
     order (the driver first) instead of all at once; the node then also gets SIGINT if the
-    launcher dies (Linux), since no terminal signal would reach it."""
+    launcher dies (Linux), since no terminal signal would reach it. ``nice`` > 0 lowers the
+    node's CPU priority (a node off the haptic loop yields the cores to it)."""
     if name not in node_names():
         raise ValueError(f'unknown node {name!r}; known: {", ".join(node_names())}')
     exe = BIN / name
@@ -69,7 +77,8 @@ def start_node(name: str, ros_args: Sequence[str] = (), env: Mapping[str, str] |
     cmd += ['--ros-args', *ros_args] if ros_args else []
     return subprocess.Popen(cmd, env=dict(env) if env is not None else node_env(), cwd=cwd,
                             start_new_session=own_session,
-                            preexec_fn=_stop_with_parent if own_session else None,
+                            preexec_fn=functools.partial(_in_child, own_session, nice)
+                            if own_session or nice else None,
                             stdout=log, stderr=subprocess.STDOUT if log is not None else None)
 
 
@@ -96,15 +105,16 @@ class Supervisor:
     their own; :meth:`restart` starts one again with the same arguments (``rename`` may adjust
     them, e.g. a new bag directory for the recorder) while at most ``max_restarts`` restarts per
     node are allowed. ``log_dir``: each node's output goes to ``DIR/<node>.log`` (appended to on a
-    restart), else to ``stream`` (a file object; None = this terminal's standard output).
+    restart), else to ``stream`` (a file object; None = this terminal's standard output). ``nice``:
+    as :func:`start_node`'s, for every node.
     """
 
     def __init__(self, env: Mapping[str, str], log_dir: Path | None = None,
-                 max_restarts: int = 3, stream: IO | None = None):
+                 max_restarts: int = 3, stream: IO | None = None, nice: int = 0):
         if max_restarts < 0:
             raise ValueError(f'max_restarts: expected >= 0, got {max_restarts}')
         self.env, self.log_dir, self.max_restarts = dict(env), log_dir, max_restarts
-        self.stream = stream
+        self.stream, self.nice = stream, nice
         self.procs: dict[str, subprocess.Popen] = {}
         self.args: dict[str, list[str]] = {}
         self.started_at: dict[str, float] = {}
@@ -117,7 +127,7 @@ class Supervisor:
         if self.log_dir is not None:
             log = self.logs.get(name) or (self.log_dir / f'{name}.log').open('w')
             self.logs[name] = log
-        p = start_node(name, list(args), env=self.env, log=log, own_session=True)
+        p = start_node(name, list(args), env=self.env, log=log, own_session=True, nice=self.nice)
         self.procs[name], self.args[name] = p, list(args)
         self.started_at[name] = time.monotonic()
         self.restarts.setdefault(name, 0)

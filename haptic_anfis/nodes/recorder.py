@@ -1,8 +1,10 @@
 """``recorder``: record topics to a rosbag2 bag (MCAP storage, metadata version 9).
 
-Subscribes with ``raw=True`` (the serialized CDR bytes, no deserialisation) and hands each message
-with its receive time (system clock) to :class:`haptic_anfis.bag.BagWriter`, whose own thread
-writes the file: a callback costs a queue append, so a 1 kHz publisher is never held up.
+Reads its topics as serialized CDR bytes (no deserialisation) without an executor callback per
+message: a taker thread empties every subscription's reader each ``take_period`` and hands each
+message with its DDS receive time (system clock) to :class:`haptic_anfis.bag.BagWriter`, whose own
+thread writes the file. (Per-message callbacks on the executor thread cost the one-process haptic
+graph of ``haptic-anfis sim --record`` its rate: its executor thread ran at ~94 % of a core.)
 Types: the package's topics are known up front (subscribed at once, before their publishers
 appear); any other topic is subscribed once the graph shows its type (checked every
 ``discovery_period``). Ctrl-C / SIGTERM write everything received, the MCAP summary and
@@ -19,7 +21,6 @@ from __future__ import annotations
 import signal
 import threading
 import time
-from functools import partial
 
 from rclpy.node import Node
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
@@ -28,6 +29,7 @@ from ..bag import BagError, BagWriter
 from ..bag.segment import COMPRESSIONS
 from ..bag.topics import DEFAULT_TOPICS, KNOWN_TYPES
 from ._common import Param, declare_parameters, message_class, positive, run_node
+from .polled import PolledSubscription
 
 #: Topics never recorded with ``all_topics`` (ROS infrastructure, as ``ros2 bag record -a``).
 IGNORED = ('/rosout', '/parameter_events')
@@ -54,6 +56,9 @@ PARAMS = [
           f'expected one of {", ".join(COMPRESSIONS)}'),
     Param('discovery_period', 0.5, 'how often the graph is checked for topics still to subscribe '
           '[s]', positive),
+    Param('take_period', 0.005, 'how often the received messages are taken from the '
+          'subscriptions and queued for the writer [s] (each keeps its DDS receive time)',
+          positive),
 ]
 
 
@@ -85,10 +90,14 @@ class Recorder(Node):
                                 compression=p['compression'],
                                 fallback_dir=p['fallback_output_dir'] or None,
                                 on_error=self._on_write_error)
-        self.subs: dict[str, object] = {}
+        self.subs: dict[str, PolledSubscription] = {}
         self._closed = False
+        self._stop = threading.Event()
         self._discover()
         self.timer = self.create_timer(p['discovery_period'], self._discover)
+        self._taker = threading.Thread(target=self._take_loop, args=(p['take_period'],),
+                                       name='recorder-take', daemon=True)
+        self._taker.start()
         self.get_logger().info(f'recording to {self.output}: {", ".join(self.wanted)}'
                                + (' + every other topic' if self.all_topics else ''))
 
@@ -112,8 +121,34 @@ class Recorder(Node):
             except ValueError as exc:
                 self.get_logger().error(f'cannot record {topic}: {exc}', once=True)
                 continue
-            self.subs[topic] = self.create_subscription(
-                cls, topic, partial(self.writer.write, topic), self.qos, raw=True)
+            self.subs[topic] = PolledSubscription(self, cls, topic, self.qos)
+
+    def _take_loop(self, period: float) -> None:
+        while not self._stop.wait(period):
+            self._take_all()
+
+    def _take_all(self) -> None:
+        """Queue every message waiting in the subscriptions (taker thread, and once at close)."""
+        write = self.writer.write
+        for topic, sub in list(self.subs.items()):  # the executor thread may add topics
+            while True:
+                try:
+                    got = sub.take_with_info()
+                except Exception as exc:  # noqa: BLE001 (a reader gone at shutdown)
+                    self.get_logger().warning(f'taking {topic} failed: {exc!r}',
+                                              throttle_duration_sec=5.0)
+                    break
+                if got is None:
+                    break
+                data, info = got
+                write(topic, data, info.get('received_timestamp') or time.time_ns())
+
+    def ready_condition(self) -> tuple[bool, str]:
+        """Ready (nodes/session.py) once every wanted topic has a publisher."""
+        missing = [t for t in self.wanted if self.count_publishers(t) == 0]
+        if missing:
+            return False, f'no publisher on {", ".join(missing)}'
+        return True, 'inputs matched: ' + ', '.join(self.wanted)
 
     def _on_write_error(self, message: str) -> None:
         """From the writer thread, at the failure: say it now; stop if nothing continues."""
@@ -130,8 +165,12 @@ class Recorder(Node):
         if self._closed:
             return
         self._closed = True
+        self._stop.set()
+        if self._taker.is_alive():
+            self._taker.join(timeout=2.0)
+        self._take_all()  # what arrived since the last take
         for s in self.subs.values():
-            self.destroy_subscription(s)
+            s.destroy()
         try:
             self.writer.close()
         except BagError:  # a write failure, reported when it happened (ERROR log)

@@ -20,6 +20,10 @@ from typing import Mapping, Sequence
 from .processes import Supervisor, node_env
 
 
+#: CPU priority of the side nodes (nice): they yield the cores to the loop's threads
+SIDE_NICE = 10
+
+
 class SideNodeError(RuntimeError):
     """A side node exited or said nothing before the timeout (the message names it)."""
 
@@ -27,10 +31,11 @@ class SideNodeError(RuntimeError):
 class SideNodes:
     """``nodes``: {node name: its ``--ros-args`` arguments}, started in that order."""
 
-    def __init__(self, nodes: Mapping[str, Sequence[str]]):
+    def __init__(self, nodes: Mapping[str, Sequence[str]], nice: int = SIDE_NICE):
         self.nodes = {n: list(a) for n, a in nodes.items()}
         # the user's domain and discovery range: the side nodes join the graph the user sees
-        self.sup = Supervisor(node_env(localhost=False), max_restarts=0, stream=sys.stderr)
+        self.sup = Supervisor(node_env(localhost=False), max_restarts=0, stream=sys.stderr,
+                              nice=nice)
         self._mon = None
 
     def __bool__(self) -> bool:

@@ -6,7 +6,8 @@ probe dents the skin, only the patches whose drawing changed: the dent from the 
 displacements, ``haptic_anfis.tissue.deformation``) and ``visualization/markers`` (``MarkerArray``
 at ``rate`` Hz: the probe as a flat 16 mm cylinder whose face is at the probe position, the
 contact point on the undeformed surface, the force arrow, and the tumours when ``show_tumours``).
-Subscribes to the pose, contact and force command topics. The dent is computed and published on
+Reads the pose, contact and force command topics at the marker rate (newest sample, best effort;
+no callback per 1 kHz message). The dent is computed and published on
 the node's own thread, in messages of a bounded size, so the executor that carries the haptic
 loop (``haptic-anfis sim``) only stores the latest messages.
 """
@@ -19,18 +20,22 @@ import time
 import numpy as np
 from geometry_msgs.msg import Point, PoseStamped, WrenchStamped
 from rclpy.node import Node
-from rclpy.qos import DurabilityPolicy, QoSProfile
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
-from std_msgs.msg import ColorRGBA
 from visualization_msgs.msg import Marker, MarkerArray
 
+from . import cdr
 from . import interfaces as ifc
 from ._case import CASE_PARAMS, apply_case, declare_case  # noqa: F401 (CASE_PARAMS: in config)
-from ._common import LOOP_QOS, Param, declare_parameters, non_negative, positive, run_node
+from ._common import Param, declare_parameters, non_negative, positive, run_node
 from .contact_detector import MESH_PARAMS, load_surface
+from .polled import PolledSubscription
 
 # transient local, deep enough to hold the whole surface's messages for a late subscriber
 LATCHED = QoSProfile(depth=100, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+# the loop topics as drawn: the newest sample, best effort
+VIEW_QOS = QoSProfile(depth=1, history=HistoryPolicy.KEEP_LAST,
+                      reliability=ReliabilityPolicy.BEST_EFFORT)
 
 
 def _tumour_check(v):
@@ -87,16 +92,6 @@ def _points(xyz: np.ndarray) -> list:
     return out
 
 
-def _colours(rgba: np.ndarray) -> list:
-    new = ColorRGBA.__new__
-    out = []
-    for r, g, b, a in rgba.tolist():
-        c = new(ColorRGBA)
-        c._r, c._g, c._b, c._a = r, g, b, a
-        out.append(c)
-    return out
-
-
 def _direction_quaternion(d) -> tuple[float, float, float, float]:
     """(x, y, z, w) rotating the marker z axis onto -d (the cylinder stands out of the tissue)."""
     v = -np.asarray(d, dtype=float)
@@ -135,9 +130,13 @@ class Visualizer(Node):
         self.arrow.points = [Point(), Point()]
         self.tumours = self._tumour_markers(p)
         self._pose = self._contact = self._force = None
-        self.create_subscription(PoseStamped, ifc.TOPIC_POSE, self._set('_pose'), LOOP_QOS)
-        self.create_subscription(JointState, ifc.TOPIC_CONTACT, self._set('_contact'), LOOP_QOS)
-        self.create_subscription(WrenchStamped, ifc.TOPIC_COMMAND, self._set('_force'), LOOP_QOS)
+        # The 1 kHz loop topics are read at the marker rate, newest sample only, best effort: no
+        # callback per message (3 000/s) and no acknowledgements for the loop's publishers
+        # (nodes/polled.py); drawing a 30 Hz picture needs nothing older.
+        self._inputs = [(attr, PolledSubscription(self, t, topic, VIEW_QOS))
+                        for attr, t, topic in (('_pose', PoseStamped, ifc.TOPIC_POSE),
+                                               ('_contact', JointState, ifc.TOPIC_CONTACT),
+                                               ('_force', WrenchStamped, ifc.TOPIC_COMMAND))]
         self.timer = self.create_timer(1.0 / p['rate'], self._draw)
         self.n_published = 0
         # compute + publish time of the last dent frames [s] (bounded: a long session)
@@ -176,30 +175,23 @@ class Visualizer(Node):
                            patch_size=p['patch_size'], tolerance=p['dent_tolerance'],
                            alpha=p['mesh_alpha'])
 
-    def _patch_markers(self, patches) -> list:
-        """Markers for patches, split so no message exceeds max_points_per_message corners."""
-        out = []
-        for pt in patches:
-            m = _marker(Marker.TRIANGLE_LIST, pt.index, self.frame_id, 'tissue',
-                        (1.0, 1.0, 1.0, 1.0), (1.0, 1.0, 1.0))
-            m.points = _points(pt.corners)
-            m.colors = _colours(pt.colours)
-            out.append(m)
-        return out
-
     def _publish_patches(self, patches) -> None:
+        """Publish ``patches`` as TRIANGLE_LIST markers, in messages of at most
+        ``max_points_per_message`` corners, serialized straight from their arrays
+        (:func:`~haptic_anfis.nodes.cdr.triangle_markers`: rclpy's message objects cost ~17 ms
+        of the interpreter per frame)."""
         cap = self.params['max_points_per_message']
         batch, n = [], 0
-        for m in self._patch_markers(patches):
-            if batch and n + len(m.points) > cap:
-                self.pub_tissue.publish(MarkerArray(markers=batch))
+        for pt in patches:
+            if batch and n + len(pt.corners) > cap:
+                self.pub_tissue.publish(cdr.triangle_markers(self.frame_id, 'tissue', batch))
                 self.n_dent_messages += 1
                 batch, n = [], 0
-                time.sleep(0)  # let the executor thread run between messages
-            batch.append(m)
-            n += len(m.points)
+                time.sleep(0)  # let another thread of this process run between messages
+            batch.append((pt.index, pt.corners, pt.colours))
+            n += len(pt.corners)
         if batch:
-            self.pub_tissue.publish(MarkerArray(markers=batch))
+            self.pub_tissue.publish(cdr.triangle_markers(self.frame_id, 'tissue', batch))
             self.n_dent_messages += 1
 
     def _contact_state(self):
@@ -261,6 +253,8 @@ class Visualizer(Node):
 
     def destroy_node(self):
         self.close()
+        for _, sub in self._inputs:
+            sub.destroy()
         return super().destroy_node()
 
     # -- the 30 Hz markers -----------------------------------------------------------------
@@ -307,12 +301,21 @@ class Visualizer(Node):
         self.pub.publish(MarkerArray(markers=[clear]))  # drop the old case's tumour spheres
         self.params, self.tumours = params, self._tumour_markers(params)
 
-    def _set(self, attr):
-        def cb(msg):
-            setattr(self, attr, msg)
-        return cb
+    def ready_condition(self) -> tuple[bool, str]:
+        """Ready (nodes/session.py) once every loop topic it draws has a publisher."""
+        missing = [s.topic for _, s in self._inputs if self.count_publishers(s.topic) == 0]
+        return (not missing, f'no publisher on {", ".join(missing)}' if missing
+                else 'inputs matched: ' + ', '.join(s.topic for _, s in self._inputs))
+
+    def _take_inputs(self) -> None:
+        """The newest pose, contact and force command (kept when none arrived since)."""
+        for attr, sub in self._inputs:
+            m = sub.take_newest(raw=False)
+            if m is not None:
+                setattr(self, attr, m)
 
     def _draw(self) -> None:
+        self._take_inputs()  # the dent thread reads what this took
         markers = list(self.tumours)
         if self._pose is not None:
             q = self._pose.pose.position
