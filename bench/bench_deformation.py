@@ -95,6 +95,7 @@ def errors(data):
 
 
 def timing(data, n):
+    from haptic_anfis.nodes.cdr import triangle_markers
     from haptic_anfis.tissue.dent_display import DentSurface
 
     mesh = surface()
@@ -115,7 +116,7 @@ def timing(data, n):
     print(f'displace, every vertex          {pct(t)} wall; CPU mean {np.mean(cpu) * 1e3:.2f} ms')
     for reach in (9.0, 5.0):
         surf = DentSurface(V, F, DeformationModel(taper=reach - 1, reach=reach).fit(data))
-        t, cpu, corners = [], [], []
+        t, cpu, corners, ser = [], [], [], []
         # a press that moves: consecutive contacts 0.5 mm apart, depth ramping
         path = P[0] + np.linspace(0, 0.01, n)[:, None] * np.array([0.0, 1.0, 0.5])
         depth = np.linspace(0.002, 0.016, n)
@@ -125,10 +126,21 @@ def timing(data, n):
             t.append(time.perf_counter() - t0)
             cpu.append(time.process_time() - c0)
             corners.append(sum(len(c.corners) for c in ch))
+            t0 = time.perf_counter()  # the visualizer's messages: MarkerArray CDR, 1500 corners
+            batch, k = [], 0
+            for c in ch:
+                if batch and k + len(c.corners) > 1500:
+                    triangle_markers('tissue', 'tissue', batch)
+                    batch, k = [], 0
+                batch.append((c.index, c.corners, c.colours))
+                k += len(c.corners)
+            if batch:
+                triangle_markers('tissue', 'tissue', batch)
+            ser.append(time.perf_counter() - t0)
         print(f'DentSurface.update, reach {reach:.0f}a   {pct(t)} wall; CPU mean '
               f'{np.mean(cpu) * 1e3:.2f} ms; corners re-sent per frame '
               f'p50 {np.percentile(corners, 50):.0f}, max {max(corners)} '
-              f'(of {3 * len(F)})')
+              f'(of {3 * len(F)}); serialized as MarkerArray CDR {pct(ser)} wall')
 
 
 def drawn_error(data):

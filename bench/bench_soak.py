@@ -7,8 +7,8 @@ queues, memory growth). Usage: ``python bench/bench_soak.py [--one-minutes 10] [
 10] [--interval 60]`` (issue 20; issue 21 reads the RSS and bag size columns).
 
 - one process: ``haptic-anfis sim``'s graph (driver, contact detector, force server, no
-  visualizer) plus the recorder of every loop topic, in a process of its own as ``sim --record``
-  runs it (``--in-process``: in the loop's process, as before); figures from the driver's own statistics
+  visualizer) plus the recorder of every loop topic, in the same process as ``sim --record`` runs
+  it (``--recorder-process``: in a process of its own); figures from the driver's own statistics
   (latency = pose stamp -> command arrival at the driver; a miss = a servo tick more than one
   period late).
 - multi process: ``haptic-anfis launch --record`` (recorder, force server, contact detector,
@@ -103,9 +103,9 @@ class GcPauses:
 
 
 def one_process(minutes: float, interval: float, workdir: Path, freeze: bool = True,
-                force_mode: str | None = None, in_process: bool = False) -> None:
-    """``in_process``: the recorder in the loop's process (before); default: in a process of its
-    own, as ``haptic-anfis sim --record`` runs it."""
+                force_mode: str | None = None, in_process: bool = True) -> None:
+    """``in_process``: the recorder in the loop's process, as ``haptic-anfis sim --record`` runs
+    it; False: in a process of its own (``sim --recorder-process``)."""
     import gc
 
     from haptic_anfis.bag.reader import recorded_summary
@@ -159,7 +159,8 @@ def one_process(minutes: float, interval: float, workdir: Path, freeze: bool = T
             ticks0, misses0, tprev = ticks, misses, now
         s = g.driver.summary()
         print(f'whole run: {s["rate_hz"]:.1f} Hz, p99 {s["latency_p99_ms"]:.3f} ms, max '
-              f'{s["latency_max_ms"]:.3f} ms, misses {s["deadline_misses"]} of {s["ticks"]} '
+              f'{s["latency_max_ms"]:.3f} ms, {s["latency_next_tick_pct"]:.2f} % of the answers '
+              f'taken at the next tick, misses {s["deadline_misses"]} of {s["ticks"]} '
               f'ticks, watchdog trips {s["watchdog_trips"]}')
     finally:
         g.shutdown()
@@ -250,9 +251,9 @@ def main() -> int:
     ap.add_argument('--force-mode', choices=('zoh', 'local_model'), default=None,
                     help="the falcon driver's force_mode (default: its configured one)")
     ap.add_argument('--interval', type=float, default=60.0, help='seconds per row (default 60)')
-    ap.add_argument('--in-process', action='store_true',
-                    help='one process: the recorder in the loop\'s process (before; default: in '
-                         'a process of its own, as haptic-anfis sim --record)')
+    ap.add_argument('--recorder-process', action='store_true',
+                    help='one process: the recorder in a process of its own (as haptic-anfis sim '
+                         '--record --recorder-process; default: in the loop\'s process)')
     ap.add_argument('--no-freeze', action='store_true',
                     help='one process: undo the gc.freeze() done after start (for comparison)')
     ap.add_argument('--keep', metavar='DIR', default=None,
@@ -265,7 +266,7 @@ def main() -> int:
     try:
         if a.one_minutes > 0:
             one_process(a.one_minutes, a.interval, work, freeze=not a.no_freeze,
-                        force_mode=a.force_mode, in_process=a.in_process)
+                        force_mode=a.force_mode, in_process=not a.recorder_process)
         if a.multi_minutes > 0:
             multi_process(a.multi_minutes, a.interval, work, force_mode=a.force_mode)
     finally:

@@ -90,3 +90,18 @@ def test_a_long_session_allocates_no_growing_memory():
     grown = sum(st.size_diff for st in after.compare_to(before, 'filename'))
     assert grown < 64 * 1024, f'{grown} bytes allocated and kept over 200 k latencies'
     assert s.summary()['latency_n'] == len(values)
+
+
+def test_share_of_answers_taken_at_the_next_tick():
+    """fraction_at_most counts what lies at or below a bound (to a bin); the summary's
+    latency_next_tick_pct is that share at 1.25 periods; NaN when nothing was recorded."""
+    h = LatencyHistogram()
+    assert math.isnan(h.fraction_at_most(0.001))
+    for x in [0.00099, 0.00101, 0.00105, 0.00198, 0.00202]:
+        h.add(x)
+    assert h.fraction_at_most(0.00125) == pytest.approx(0.6)
+    assert h.fraction_at_most(1.0) == 1.0 and h.fraction_at_most(1e-7) == 0.0
+    st = LoopStats(period=0.001)
+    for x in [0.001] * 97 + [0.002] * 3:
+        st.latency(x)
+    assert st.summary()['latency_next_tick_pct'] == pytest.approx(97.0)

@@ -163,6 +163,7 @@ def json_summary(s: dict, recorded: dict | None = None) -> dict:
     lp, c = s['loop'], s['contact']
     out = {'rate_hz': lp['rate_hz'], 'latency_p50_ms': lp['latency_p50_ms'],
            'latency_p99_ms': lp['latency_p99_ms'], 'latency_max_ms': lp['latency_max_ms'],
+           'latency_next_tick_pct': lp.get('latency_next_tick_pct'),
            'deadline_misses': lp['deadline_misses'], 'cycles': lp['ticks'],
            'max_force_n': lp['max_force_N'], 'contact_s': contact_seconds(s),
            'seconds': lp['seconds'], 'commands': lp['latency_n'],
@@ -186,7 +187,8 @@ def print_summary(s: dict) -> None:
     print(f"servo loop     {lp['rate_hz']:8.1f} Hz over {lp['seconds']:.1f} s "
           f"({lp['ticks']} ticks), deadline misses {lp['deadline_misses']}")
     print(f"pose->wrench   p50 {lp['latency_p50_ms']:.3f} ms, p99 {lp['latency_p99_ms']:.3f} ms, "
-          f"max {lp['latency_max_ms']:.3f} ms ({lp['latency_n']} commands)")
+          f"max {lp['latency_max_ms']:.3f} ms ({lp['latency_n']} commands; "
+          f"{lp.get('latency_next_tick_pct', float('nan')):.1f} % taken at the next tick)")
     print(f"force          max applied {lp['max_force_N']:.2f} N, max model {f['max_model_force_N']:.2f} N, "
           f"clamped {lp['clamped']}, watchdog trips {lp['watchdog_trips']}, "
           f"rejected {lp['rejected_nonfinite'] + lp['rejected_frame']}")

@@ -101,9 +101,20 @@ class LatencyHistogram:
                 'min': self.min if n else math.nan, 'max': self.max if n else math.nan,
                 'p50': float(p50), 'p99': float(p99)}
 
+    def fraction_at_most(self, x: float) -> float:
+        """Share of the recorded values <= ``x`` [s] (to the bins' 0.5 %); NaN when empty."""
+        n = int(self.counts.sum())
+        if n == 0:
+            return math.nan
+        return float(self.counts[:self.bin_of(x) + 1].sum()) / n
+
     @property
     def nbytes(self) -> int:
         return int(self.counts.nbytes)
+
+
+#: a latency up to this many periods counts as "taken at the next tick" (tick start jitter)
+NEXT_TICK = 1.25
 
 
 @dataclass
@@ -153,5 +164,9 @@ class LoopStats:
             'latency_n': lat['n'],
             'latency_p50_ms': lat['p50'] * 1e3, 'latency_p99_ms': lat['p99'] * 1e3,
             'latency_max_ms': lat['max'] * 1e3,
+            # answers taken by the tick right after their pose's (the latency counts to the tick
+            # that takes the answer, so one period is the least it can be)
+            'latency_next_tick_pct': 100.0 * self.latency_hist.fraction_at_most(
+                NEXT_TICK * self.period),
             'max_force_N': self.max_force,
         }

@@ -145,10 +145,8 @@ class Recorder(Node):
 
     def ready_condition(self) -> tuple[bool, str]:
         """Ready (nodes/session.py) once every wanted topic has a publisher."""
-        missing = [t for t in self.wanted if self.count_publishers(t) == 0]
-        if missing:
-            return False, f'no publisher on {", ".join(missing)}'
-        return True, 'inputs matched: ' + ', '.join(self.wanted)
+        from .session import inputs_matched
+        return inputs_matched(self, self.wanted)
 
     def _on_write_error(self, message: str) -> None:
         """From the writer thread, at the failure: say it now; stop if nothing continues."""

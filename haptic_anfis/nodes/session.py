@@ -32,7 +32,7 @@ EVENTS_QOS = QoSProfile(depth=100, history=HistoryPolicy.KEEP_LAST,
                         reliability=ReliabilityPolicy.RELIABLE,
                         durability=DurabilityPolicy.TRANSIENT_LOCAL)
 #: Topics that never count for readiness (ROS infrastructure and these session topics).
-_INFRA = ('/parameter_events', '/rosout', STATUS_TOPIC, EVENTS_TOPIC)
+INFRA_TOPICS = ('/parameter_events', '/rosout', STATUS_TOPIC, EVENTS_TOPIC)
 
 
 def process_age() -> float:
@@ -99,14 +99,20 @@ class Readiness:
             self.announce('waiting', detail)
 
     def _inputs_matched(self) -> tuple[bool, str]:
-        topics = sorted({s.topic_name for s in self.node.subscriptions} - set(_INFRA))
-        missing = [t for t in topics if self.node.count_publishers(t) == 0]
-        if missing:
-            return False, f'no publisher on {", ".join(missing)}'
-        return True, ('inputs matched: ' + ', '.join(topics)) if topics else 'no inputs'
+        return inputs_matched(self.node, [s.topic_name for s in self.node.subscriptions])
 
     def destroy(self) -> None:
         self.node.destroy_timer(self.timer)
+
+
+def inputs_matched(node, topics) -> tuple[bool, str]:
+    """The default readiness condition: (every topic of ``topics`` but the session and ROS
+    infrastructure ones has a publisher, in words)."""
+    topics = sorted(set(topics) - set(INFRA_TOPICS))
+    missing = [t for t in topics if node.count_publishers(t) == 0]
+    if missing:
+        return False, f'no publisher on {", ".join(missing)}'
+    return True, ('inputs matched: ' + ', '.join(topics)) if topics else 'no inputs'
 
 
 def parse_status(data: str) -> dict | None:

@@ -303,9 +303,8 @@ class Visualizer(Node):
 
     def ready_condition(self) -> tuple[bool, str]:
         """Ready (nodes/session.py) once every loop topic it draws has a publisher."""
-        missing = [s.topic for _, s in self._inputs if self.count_publishers(s.topic) == 0]
-        return (not missing, f'no publisher on {", ".join(missing)}' if missing
-                else 'inputs matched: ' + ', '.join(s.topic for _, s in self._inputs))
+        from .session import inputs_matched
+        return inputs_matched(self, [self.resolve_topic_name(s.topic) for _, s in self._inputs])
 
     def _take_inputs(self) -> None:
         """The newest pose, contact and force command (kept when none arrived since)."""
