@@ -93,7 +93,8 @@ def detect_lumps(points: np.ndarray, depths: np.ndarray, forces: np.ndarray, *,
     count: the lump is felt at medium / deep pressure, and past 16 mm (the deepest FE sample) the
     force model extrapolates and then saturates, so force no longer says anything about the tissue.
     ``edge`` [m]: cells whose centre lies within this of the searched region's rim (the 99.5th
-    percentile of the samples' distance from the (y, z) origin) are not candidates.
+    percentile of the samples' distance from the (y, z) origin) are not candidates, nor a bump
+    whose centre of excess lies there.
     Returns [] when nothing stands out."""
     P = np.asarray(points, float).reshape(-1, 3)
     d = np.asarray(depths, float).reshape(-1)
@@ -139,6 +140,8 @@ def detect_lumps(points: np.ndarray, depths: np.ndarray, forces: np.ndarray, *,
         if near.sum() >= min_samples:
             w = res[near]
             yc, zc = float((y[near] * w).sum() / w.sum()), float((z[near] * w).sum() / w.sum())
+        # the rim rule holds for the bump's centre too (a cell just inside can centre outside)
+        lump = lump and np.hypot(yc, zc) <= rim - edge
         if lump:
             found.append(Detection(yc, zc, float(np.expm1(mean[i])), float(mean[i] / sig),
                                    int(sel.sum())))

@@ -209,7 +209,15 @@ class Visualizer(Node):
         last = None
         subscribers = self.pub_tissue.get_subscription_count()
         shown = None
-        while not self._stop.wait(period):
+        due = time.monotonic()
+        while True:
+            # to absolute deadlines: a frame's own time does not lower the rate below `rate`
+            due += period
+            now = time.monotonic()
+            if now - due > period:  # fell behind (a slow frame): start afresh, no burst
+                due = now
+            if self._stop.wait(max(due - now, 0.0)):
+                break
             try:
                 surface = self.surface  # swapped by a case switch
                 if surface is None:
