@@ -27,11 +27,13 @@ _U32 = struct.Struct('<I')
 _F3 = struct.Struct('<3d')
 
 
-def _frame(b: bytes, n: int) -> tuple[str, int]:
-    """(frame_id, payload offset after it) for a frame_id string of length field ``n``."""
+def _header(b: bytes) -> tuple[int, str, int]:
+    """(stamp [ns], frame_id, payload offset after it) of the ``std_msgs/Header`` a message
+    starts with."""
+    sec, nsec, n = _HEAD.unpack_from(b, 4)
     if n < 1 or 16 + n > len(b):
         raise struct.error(f'frame_id length {n} out of the message')  # reported by the caller
-    return b[16:15 + n].decode('utf-8', errors='replace'), 12 + n
+    return sec * 1_000_000_000 + nsec, b[16:15 + n].decode('utf-8', errors='replace'), 12 + n
 
 
 def read_wrench_stamped(b: bytes) -> tuple[int, str, tuple[float, float, float]]:
@@ -43,13 +45,12 @@ def read_wrench_stamped(b: bytes) -> tuple[int, str, tuple[float, float, float]]
     if b[:4] != _LE:
         return _slow_wrench(b)
     try:
-        sec, nsec, n = _HEAD.unpack_from(b, 4)
-        frame, o = _frame(b, n)
+        stamp, frame, o = _header(b)
         o = (o + 7) & ~7
         f = _F3.unpack_from(b, 4 + o)
     except struct.error as exc:
         raise ValueError(f'malformed WrenchStamped ({len(b)} bytes): {exc}') from None
-    return sec * 1_000_000_000 + nsec, frame, f
+    return stamp, frame, f
 
 
 def read_joint_state(b: bytes) -> tuple[int, str, tuple[float, ...], tuple[float, ...]]:
@@ -62,8 +63,7 @@ def read_joint_state(b: bytes) -> tuple[int, str, tuple[float, ...], tuple[float
     if b[:4] != _LE:
         return _slow_joint_state(b)
     try:
-        sec, nsec, n = _HEAD.unpack_from(b, 4)
-        frame, o = _frame(b, n)
+        stamp, frame, o = _header(b)
         u32 = _U32.unpack_from
         o = (o + 3) & ~3
         count = u32(b, 4 + o)[0]
@@ -84,7 +84,7 @@ def read_joint_state(b: bytes) -> tuple[int, str, tuple[float, ...], tuple[float
                 seqs.append(())
     except struct.error as exc:
         raise ValueError(f'malformed JointState ({len(b)} bytes): {exc}') from None
-    return sec * 1_000_000_000 + nsec, frame, seqs[0], seqs[2]
+    return stamp, frame, seqs[0], seqs[2]
 
 
 class WrenchStampedWriter:
