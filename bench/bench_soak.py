@@ -112,6 +112,7 @@ def one_process(minutes: float, interval: float, workdir: Path, freeze: bool = T
     from haptic_anfis.bag.topics import ALL_LOOP_TOPICS
     from haptic_anfis.nodes.graph import build_graph
     from haptic_anfis.nodes.recorder import Recorder
+    from haptic_anfis.nodes.processes import recorder_arguments
     from haptic_anfis.nodes.side_nodes import SideNodes, hold_until_recorded
     bag = workdir / 'one_process_bag'
     from rclpy.parameter import Parameter
@@ -119,8 +120,7 @@ def one_process(minutes: float, interval: float, workdir: Path, freeze: bool = T
     extra = [lambda ctx: Recorder(context=ctx, output=str(bag), topics=ALL_LOOP_TOPICS)] \
         if in_process else []
     g = build_graph(None, visualizer=False, overrides=over, extra=extra)
-    side = SideNodes({} if in_process else {'recorder': [
-        '-p', f'output:={bag.resolve()}', '-p', f'topics:=[{",".join(ALL_LOOP_TOPICS)}]']})
+    side = SideNodes({} if in_process else {'recorder': recorder_arguments(bag, ALL_LOOP_TOPICS)})
     try:
         side.start(300.0)
         if side and not hold_until_recorded(g, 300.0):

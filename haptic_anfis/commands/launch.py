@@ -99,7 +99,8 @@ def _check(args: argparse.Namespace, known: tuple[str, ...]) -> list[str]:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..nodes.processes import Supervisor, node_env, node_names, renamed_output
+    from ..nodes.processes import (Supervisor, node_env, node_names, recorder_arguments,
+                                   renamed_output)
     from .loop import launch_trace_path, print_launch_report
 
     names = _check(args, node_names())
@@ -111,9 +112,8 @@ def run(args: argparse.Namespace) -> int:
     if args.record:
         from ..bag.topics import DEFAULT_TOPICS
         from ..nodes.session import EVENTS_TOPIC, STATUS_TOPIC
-        topics = ','.join([*DEFAULT_TOPICS, STATUS_TOPIC, EVENTS_TOPIC])
         extra.setdefault('recorder', []).extend(
-            ['-p', f'output:={Path(args.record).resolve()}', '-p', f'topics:=[{topics}]'])
+            recorder_arguments(args.record, [*DEFAULT_TOPICS, STATUS_TOPIC, EVENTS_TOPIC]))
     if args.enclave_root:
         root = '/' + args.enclave_root.strip('/')
         for n in extra:

@@ -128,8 +128,8 @@ def _side_nodes(args: argparse.Namespace, ros_args: list[str], case_args: list[s
     nodes: dict[str, list[str]] = {}
     if args.record and args.recorder_process:
         from ..bag.topics import ALL_LOOP_TOPICS
-        nodes['recorder'] = [*common, '-p', f'output:={Path(args.record).resolve()}',
-                             '-p', f'topics:=[{",".join(ALL_LOOP_TOPICS)}]']
+        from ..nodes.processes import recorder_arguments
+        nodes['recorder'] = [*common, *recorder_arguments(args.record, ALL_LOOP_TOPICS)]
     if not args.in_process and not args.no_viz:
         nodes['visualizer'] = common
     return SideNodes(nodes)

@@ -39,11 +39,7 @@ class PolledSubscription:
     def take(self, raw: bool = True):
         """The oldest sample not yet taken — serialized bytes, or with ``raw=False`` the message
         object — or None."""
-        h = self._h
-        if h is None:
-            return None
-        with h:
-            m = h.take_message(self.msg_type, raw)
+        m = self.take_with_info(raw)
         return None if m is None else m[0]
 
     def take_with_info(self, raw: bool = True):

@@ -164,6 +164,12 @@ class Supervisor:
         return codes
 
 
+def recorder_arguments(output: str | os.PathLike, topics: Sequence[str]) -> list[str]:
+    """The recorder's ``--ros-args`` for a bag at ``output`` (made absolute: the node may run in
+    another working directory) holding ``topics``."""
+    return ['-p', f'output:={Path(output).resolve()}', '-p', f'topics:=[{",".join(topics)}]']
+
+
 def renamed_output(args: Sequence[str], n: int) -> list[str]:
     """The recorder's arguments for restart ``n``: ``output:=X`` becomes ``output:=X.restartN``
     (a bag directory is never reused; the killed one is salvaged by ``haptic-anfis bag recover``).

@@ -1,10 +1,11 @@
 """Nodes that run beside the one-process haptic graph, each in a process of its own
-(``haptic-anfis sim``: the visualizer and the recorder).
+(``haptic-anfis sim``: the visualizer; the recorder with ``--recorder-process``).
 
-Why: in the graph's process their Python work (the dent's ~10 ms per frame at 30 Hz; the
-recorder's 6 000 callbacks/s) holds the interpreter lock the 1 kHz servo thread needs, and the
-loop lost its rate (measured in the README, *Tissue deformation* and *Soak*). In a process of their
-own they only share the machine's cores.
+Why: in the graph's process their Python work (the dent's drawing at 30 Hz) holds the interpreter
+lock the 1 kHz servo thread needs, and the loop lost its rate (measured in the README, *Tissue
+deformation*). In a process of their own they only share the machine's cores — at the price of
+every loop message they read crossing to another process (why the recorder stays in the loop's
+process by default: *Long runs*).
 
 :class:`SideNodes` starts them (output to standard error, so ``--json``'s last line stays the
 JSON), waits until each has said ``started`` on ``session/status``, and stops them in order

@@ -71,12 +71,13 @@ class DentSurface:
         self.face_patch = label
         self.patch_faces = np.split(order, np.flatnonzero(np.diff(label[order])) + 1)
         counts = np.array([len(f) for f in self.patch_faces])
-        self._start = 3 * np.concatenate([[0], np.cumsum(counts)[:-1]])  # corner offsets
+        self._corners = 3 * counts  # corners per patch
+        self._start = np.concatenate([[0], np.cumsum(self._corners)[:-1]])  # corner offsets
         self._corner_vid = self.faces[order].reshape(-1)  # corners in patch order
         self._corner_xyz = self.vertices[self._corner_vid]
         self._sent = np.zeros_like(self._corner_xyz)  # displacement each corner is drawn with
         self._sent_moved = np.zeros(len(self._sent), bool)  # corners drawn displaced
-        self._corner_patch = np.repeat(np.arange(len(counts)), 3 * counts)
+        self._corner_patch = np.repeat(np.arange(len(counts)), self._corners)
         self.displacement = np.zeros_like(self.vertices)
 
     @property
@@ -85,7 +86,7 @@ class DentSurface:
 
     def patch(self, k: int) -> Patch:
         """Patch ``k`` as drawn now."""
-        sl = slice(self._start[k], self._start[k] + 3 * len(self.patch_faces[k]))
+        sl = slice(self._start[k], self._start[k] + self._corners[k])
         u = self._sent[sl]
         return Patch(k, self._corner_xyz[sl] + u, self._colours(u))
 
@@ -118,16 +119,17 @@ class DentSurface:
             err[face[vid] & (err > 0)] = np.inf
         worst = np.zeros(self.n_patches)
         np.maximum.at(worst, self._corner_patch[idx], err)
-        dirty = np.flatnonzero(worst > limit)
+        is_dirty = worst > limit
+        dirty = np.flatnonzero(is_dirty)
         if len(dirty) == 0:
             return []
         # every corner of the dirty patches at once (patches are contiguous runs of corners)
-        ci = np.flatnonzero((worst > limit)[self._corner_patch])
+        ci = np.flatnonzero(is_dirty[self._corner_patch])
         u = self.displacement[self._corner_vid[ci]]
         self._sent[ci] = u
         self._sent_moved[ci] = np.any(u != 0.0, axis=1)
         xyz, rgba = self._corner_xyz[ci] + u, self._colours(u)
-        ends = np.cumsum(3 * np.array([len(self.patch_faces[k]) for k in dirty]))
+        ends = np.cumsum(self._corners[dirty])
         starts = np.concatenate([[0], ends[:-1]])
         return [Patch(int(k), xyz[a:b], rgba[a:b]) for k, a, b in zip(dirty, starts, ends)]
 
