@@ -96,8 +96,12 @@ def test_force_follows_a_press_through_a_delayed_force_server(tmp_path, mode):
     err = np.linalg.norm(rows[:, 4:7] - F, axis=1)[ok]
     assert np.sqrt(np.mean(err ** 2)) < 0.1 * np.sqrt(np.mean(fi[ok] ** 2)), st
     assert st['ticks_extrapolated'] > 200, st
-    # the watchdog trips in contact only after a model expired (a stall), never otherwise
-    assert st['watchdog_trips_in_contact'] == 0 or len(drops) > 0, st
+    # the watchdog trips in contact only after a model expired (a stall), never otherwise; the
+    # trip may fall on a tick outside `held` (a light contact, fi <= 1 N, or before the force has
+    # risen), so look for an expired tick anywhere in contact, not only among the drops
+    expired_in_contact = np.count_nonzero(contact & (rows[:, 7] == EXPIRED))
+    assert st['watchdog_trips_in_contact'] == 0 or expired_in_contact > 0, \
+        (expired_in_contact, len(drops), st)
     assert st['ticks_fresh'] == 0  # every model was >= 20 ms old: all ticks extrapolated
 
 
