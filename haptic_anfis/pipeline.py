@@ -1,0 +1,254 @@
+"""The per-message pipeline of the haptic loop, ROS-free: pose -> contact values -> force and local
+force model values.
+
+One pose of the probe tip goes through two stages, each a plain function on plain Python values:
+
+1. **Contact** (what the ``contact_detector`` node runs per ``falcon/measured_cp``):
+   :func:`contact_values` advances a :class:`~haptic_anfis.contact.ContactTracker` to the pose and
+   returns the contact message's ``position`` values (:data:`~haptic_anfis.interfaces.
+   CONTACT_FIELDS`); :func:`approach_values` its ``effort`` values (the surface ahead of a free
+   probe, :data:`~haptic_anfis.interfaces.APPROACH_FIELDS`).
+2. **Force** (what the ``force_server`` node runs per ``contact``): :func:`force_from_contact`
+   (the ANFIS model's force, zero-order hold) or :func:`local_model_from_contact` (the force and
+   the local force model F0, p0, K = dF/dp the driver renders at every servo tick, as the
+   ``falcon/servo_cf_local`` message's values, encoded by
+   :func:`haptic_anfis.device.local_model.model_values`; free probe: :func:`approach_model`).
+
+:func:`pose_to_force` chains the two for offline users (the bag re-simulation
+:mod:`haptic_anfis.nodes.resim`, ``haptic-anfis loop`` replays, tests and benchmarks), so a replay
+runs exactly the nodes' code. The tracker and the model are built from the nodes' parameter values
+by :func:`make_tracker` and :func:`load_model` (a dict with the parameter names; the nodes declare
+and resolve them).
+
+Contact values are read in either layout, the current 12 values or the older 9 (no normal:
+:func:`contact_normal` then gives -direction), checked by
+:func:`haptic_anfis.interfaces.is_contact_values`.
+
+Units: metres, newtons, N/m; tissue frame. Bad input (a pose with NaN/Inf or in another frame, a
+malformed contact, a non-finite model output) never raises here: it gives "no contact" / zero
+force and the reason as a string, which the caller logs; the loop keeps running.
+"""
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+from . import interfaces as ifc
+from .anfis import ForceModel
+from .contact import ContactDetector, ContactTracker, ellipsoid_dome, load_mesh
+from .contact.approach import surface_ahead
+from .contact.proxy import FREE
+from .device.local_model import contact_stiffness, force_and_jacobian, model_values, no_model
+from .tissue.dataset import DATA_DIR
+
+__all__ = ['APPROACH_DEPTH', 'DEFAULT_MODEL', 'DEFAULT_SURFACE', 'approach_model',
+           'approach_values', 'contact_normal', 'contact_values', 'force_from_contact',
+           'load_model', 'load_surface', 'local_model_from_contact', 'make_tracker',
+           'pose_to_force', 'zero_at_surface']
+
+#: Surface mesh of the default FE scene (config/scenes/default.yaml), in millimetres.
+DEFAULT_SURFACE = DATA_DIR / 'default_surface.stl'
+#: The shipped force model (trained on the default scene's FE data).
+DEFAULT_MODEL = DATA_DIR / 'default_model.json'
+#: depth [m] the approach model's stiffness is taken at: 0+ (1 µm; at exactly 0 a depth-scaled
+#: model's kink max(depth, 0) may give the derivative of the zero side)
+APPROACH_DEPTH = 1e-6
+
+_N_CONTACT = len(ifc.CONTACT_FIELDS)
+
+
+# --- building the stages from the nodes' parameter values ----------------------------------------
+
+def load_surface(p: dict):
+    """The tissue mesh (a ``trimesh.Trimesh``, metres, tissue frame) named by the mesh parameter
+    values ``p`` (``mesh_path``: a file, '' = :data:`DEFAULT_SURFACE`, 'dome' = a semi-ellipsoid
+    with ``dome_radii`` [m]; ``mesh_unit``: 'mm' or 'm' of the file)."""
+    if p['mesh_path'] == 'dome':
+        return ellipsoid_dome(tuple(p['dome_radii']))
+    path, unit = (p['mesh_path'], p['mesh_unit']) if p['mesh_path'] else (DEFAULT_SURFACE, 'mm')
+    mesh = load_mesh(path, unit=unit)
+    # Files such as STL store every triangle's corners separately: join equal vertices so the
+    # surface is connected (same faces and coordinates, so the same contact answers).
+    mesh.merge_vertices()
+    return mesh
+
+
+def make_tracker(p: dict) -> ContactTracker:
+    """The contact tracker from the contact detector's parameter values ``p`` (mesh parameters,
+    ``direction`` (3,) (all zeros = along the surface normal), ``max_step`` [m], ``max_depth`` [m],
+    0 = no cap): the node and the re-simulation build it here, so a replay is configured exactly
+    like the node."""
+    mesh = load_surface(p)
+    d = p['direction']
+    detector = ContactDetector(mesh, direction=None if not any(d) else d)
+    return ContactTracker(detector, max_step=p['max_step'], max_depth=p['max_depth'] or None)
+
+
+def load_model(p: dict) -> tuple[Path, ForceModel]:
+    """(path, model) from the force server's parameter values ``p`` (``model_path``, '' =
+    :data:`DEFAULT_MODEL`). ``ForceModel.load`` compiles and warms the real-time path, so the first
+    contact pays no compilation.
+
+    Raises:
+        ModelFileError: (a ValueError) a bad model file.
+    """
+    path = Path(p['model_path']) if p['model_path'] else DEFAULT_MODEL
+    return path, ForceModel.load(path)
+
+
+# --- stage 1: pose -> contact values -------------------------------------------------------------
+
+def contact_values(tracker: ContactTracker, frame_id: str, pose_frame: str, xyz):
+    """One pose through the tracker: ``(position values of the contact message (12,), TrackedContact
+    or None, error or None)``. ``xyz`` (3,) [m] in ``pose_frame``, which must be the tissue frame
+    ``frame_id``. A pose in another frame or with NaN/Inf gives "no contact" (zeros) and resets
+    the tracker, so the next good pose cannot start a contact from inside."""
+    if pose_frame != frame_id:
+        tracker.reset()
+        return [0.0] * _N_CONTACT, None, f'pose in frame {pose_frame!r}, expected {frame_id!r}'
+    try:
+        c = tracker.update(xyz)
+    except ValueError as exc:  # NaN/Inf pose: tracker reset, no contact
+        tracker.reset()
+        return [0.0] * _N_CONTACT, None, str(exc)
+    cp, dv, nv = c.contact_point, c.direction, c.normal
+    return [float(cp[0]), float(cp[1]), float(cp[2]), float(c.depth),
+            float(dv[0]), float(dv[1]), float(dv[2]),
+            1.0 if c.in_contact else 0.0, 1.0 if c.saturated else 0.0,
+            float(nv[0]), float(nv[1]), float(nv[2])], c, None
+
+
+def approach_values(tracker: ContactTracker, c, p, max_distance: float) -> list[float]:
+    """The approach fields (:data:`~haptic_anfis.interfaces.APPROACH_FIELDS`: surface point ahead
+    [m], outward normal there) for the tracker's answer ``c`` at the probe position ``p`` (3,) [m]:
+    only while free (not in contact, not rejected) and a front surface lies within
+    ``max_distance`` [m] along the indentation direction; else [] (:func:`~haptic_anfis.contact.
+    approach.surface_ahead`)."""
+    if c is None or c.state != FREE or max_distance <= 0.0:
+        return []
+    a = surface_ahead(tracker.detector, p, tracker.detector.direction, max_distance)
+    if a is None:
+        return []
+    s, n, _ = a
+    return [float(s[0]), float(s[1]), float(s[2]), float(n[0]), float(n[1]), float(n[2])]
+
+
+# --- stage 2: contact values -> force / local model values ---------------------------------------
+
+def _bad_contact(v) -> str:
+    return (f'contact message with {len(v)} values, expected {_N_CONTACT} '
+            f'({", ".join(ifc.CONTACT_FIELDS)})')
+
+
+def contact_normal(v, d) -> list[float]:
+    """The outward unit normal of contact values ``v`` in either layout: its normal fields (12
+    values) when they hold a unit vector (within 0.5-1.5 in length), else -``d`` (the older
+    9-value layout has none; ``d`` the contact's direction (3,))."""
+    if len(v) == _N_CONTACT:
+        n = [float(v[ifc.I_NX]), float(v[ifc.I_NY]), float(v[ifc.I_NZ])]
+        if 0.25 < n[0] * n[0] + n[1] * n[1] + n[2] * n[2] < 2.25:
+            return n
+    return [-d[0], -d[1], -d[2]]
+
+
+def force_from_contact(model: ForceModel, v) -> tuple[float, float, float, str | None]:
+    """(fx, fy, fz [N], error or None) for the contact message values ``v``: the model's force in
+    contact, zero when not in contact or on a malformed / non-finite contact (with the reason)."""
+    if not ifc.is_contact_values(v):
+        return 0.0, 0.0, 0.0, _bad_contact(v)
+    if v[ifc.I_IN_CONTACT] > 0.5 and v[ifc.I_DEPTH] > 0.0:
+        try:
+            fx, fy, fz = model.predict_one(v[0], v[1], v[2], v[ifc.I_DEPTH])
+        except ValueError as exc:  # NaN/Inf in the contact: zero force
+            return 0.0, 0.0, 0.0, str(exc)
+        return fx, fy, fz, None
+    return 0.0, 0.0, 0.0, None
+
+
+def local_model_from_contact(model: ForceModel, v, jacobian=force_and_jacobian, approach=()
+                             ) -> tuple[tuple[float, float, float], list[float], str | None]:
+    """(force (3,) [N], local model message values (:data:`~haptic_anfis.interfaces.
+    LOCAL_MODEL_FIELDS`), error or None) for the contact message values ``v``.
+
+    In contact: F0 and J = dF/d(x, y, z, depth) from ``jacobian`` (the model's analytic one when
+    it has it), chained through the contact geometry into K = dF/dp
+    (:func:`~haptic_anfis.device.local_model.contact_jacobian`; the depth column is dropped when
+    the depth is saturated, since the force then no longer grows with it); the normal from
+    :func:`contact_normal`. Not in contact, or a bad contact: zero force and a model with depth 0
+    (the driver renders zero) — or, when the contact message's ``approach`` fields (its
+    ``effort``, :data:`~haptic_anfis.interfaces.APPROACH_FIELDS`) name the surface ahead of the
+    free probe, the approach model there (:func:`approach_model`)."""
+    if not ifc.is_contact_values(v):
+        return (0.0, 0.0, 0.0), no_model(), _bad_contact(v)
+    if not (v[ifc.I_IN_CONTACT] > 0.5 and v[ifc.I_DEPTH] > 0.0):
+        return (0.0, 0.0, 0.0), approach_model(model, v, approach, jacobian), None
+    x, y, z, depth = float(v[0]), float(v[1]), float(v[2]), float(v[ifc.I_DEPTH])
+    d = [float(v[ifc.I_DX]), float(v[ifc.I_DY]), float(v[ifc.I_DZ])]
+    n = contact_normal(v, d)
+    try:
+        F, J = jacobian(model, x, y, z, depth)
+        J = J.tolist()
+        if v[ifc.I_SATURATED] > 0.5:
+            for row in J:
+                row[3] = 0.0
+        K = contact_stiffness(J, n, d)
+        zero = zero_at_surface(model, x, y, z)
+    except ValueError as exc:
+        return (0.0, 0.0, 0.0), no_model(), str(exc)
+    if not math.isfinite(sum(K)):
+        return ((0.0, 0.0, 0.0), no_model(),
+                f'non-finite stiffness at contact ({x}, {y}, {z}, {depth})')
+    p0 = (x + depth * d[0], y + depth * d[1], z + depth * d[2])
+    return F, model_values(F, p0, K, (x, y, z), n, d, depth, zero), None
+
+
+def approach_model(model: ForceModel, v, approach, jacobian=force_and_jacobian) -> list[float]:
+    """The local model message values for a free probe: the approach model when ``approach`` holds
+    the surface point s ahead and its outward normal n (:data:`~haptic_anfis.interfaces.
+    APPROACH_FIELDS`), the force is zero there (a model with a force step at the surface cannot
+    be rendered from before contact) and everything is finite: F0 = 0, p0 = contact = s, depth 0,
+    K = dF/dp at depth 0+ (J at (s, 0) through the geometry: the force the probe meets the instant
+    it crosses the plane); else all zeros (no contact). d: the contact's direction, or -n when it
+    has none."""
+    if len(approach) != len(ifc.APPROACH_FIELDS):
+        return no_model()
+    sx, sy, sz, nx, ny, nz = (float(c) for c in approach)
+    d = [float(v[ifc.I_DX]), float(v[ifc.I_DY]), float(v[ifc.I_DZ])]
+    nn = nx * nx + ny * ny + nz * nz
+    if not (math.isfinite(sx + sy + sz + sum(d)) and 0.25 < nn < 2.25):
+        return no_model()
+    if not 0.25 < d[0] * d[0] + d[1] * d[1] + d[2] * d[2] < 2.25:
+        d = [-nx, -ny, -nz]
+    try:
+        if not zero_at_surface(model, sx, sy, sz):
+            return no_model()
+        _, J = jacobian(model, sx, sy, sz, APPROACH_DEPTH)  # the one-sided derivative at 0+
+        K = contact_stiffness(J.tolist(), (nx, ny, nz), d)
+    except ValueError:
+        return no_model()
+    if not math.isfinite(sum(K)):
+        return no_model()
+    s = (sx, sy, sz)
+    return model_values((0.0, 0.0, 0.0), s, K, s, (nx, ny, nz), d, 0.0, True)
+
+
+def zero_at_surface(model: ForceModel, x: float, y: float, z: float) -> bool:
+    """The model's force at depth 0 at the contact point (x, y, z) [m] is below
+    :data:`~haptic_anfis.interfaces.ZERO_FORCE_TOL`. The depth-scaled form (F = depth g(...)) is
+    exactly zero there by construction: no evaluation needed; any other form is evaluated."""
+    if getattr(model, 'form', None) == 'depth_scaled':
+        return True
+    f0, f1, f2 = model.predict_one(x, y, z, 0.0)
+    return f0 * f0 + f1 * f1 + f2 * f2 < ifc.ZERO_FORCE_TOL ** 2
+
+
+# --- both stages ---------------------------------------------------------------------------------
+
+def pose_to_force(tracker: ContactTracker, model: ForceModel, frame_id: str, pose_frame: str,
+                  xyz) -> tuple[list[float], object, tuple[float, float, float], str | None]:
+    """One pose through both stages as the two nodes run them (zero-order-hold force):
+    ``(contact values, TrackedContact or None, force (3,) [N], error or None)``
+    (:func:`contact_values`, then :func:`force_from_contact`)."""
+    values, c, error = contact_values(tracker, frame_id, pose_frame, xyz)
+    fx, fy, fz, ferr = force_from_contact(model, values)
+    return values, c, (fx, fy, fz), error or ferr
