@@ -35,6 +35,7 @@ from pathlib import Path
 
 from . import interfaces as ifc
 from .anfis import ForceModel
+from .interfaces import I_DEPTH, I_DX, I_DY, I_DZ, I_IN_CONTACT, I_NX, I_NY, I_NZ, I_SATURATED
 from .contact import ContactDetector, ContactTracker, ellipsoid_dome, load_mesh
 from .contact.approach import surface_ahead
 from .contact.proxy import FREE
@@ -145,7 +146,7 @@ def contact_normal(v, d) -> list[float]:
     values) when they hold a unit vector (within 0.5-1.5 in length), else -``d`` (the older
     9-value layout has none; ``d`` the contact's direction (3,))."""
     if len(v) == _N_CONTACT:
-        n = [float(v[ifc.I_NX]), float(v[ifc.I_NY]), float(v[ifc.I_NZ])]
+        n = [float(v[I_NX]), float(v[I_NY]), float(v[I_NZ])]
         if 0.25 < n[0] * n[0] + n[1] * n[1] + n[2] * n[2] < 2.25:
             return n
     return [-d[0], -d[1], -d[2]]
@@ -156,9 +157,9 @@ def force_from_contact(model: ForceModel, v) -> tuple[float, float, float, str |
     contact, zero when not in contact or on a malformed / non-finite contact (with the reason)."""
     if not ifc.is_contact_values(v):
         return 0.0, 0.0, 0.0, _bad_contact(v)
-    if v[ifc.I_IN_CONTACT] > 0.5 and v[ifc.I_DEPTH] > 0.0:
+    if v[I_IN_CONTACT] > 0.5 and v[I_DEPTH] > 0.0:
         try:
-            fx, fy, fz = model.predict_one(v[0], v[1], v[2], v[ifc.I_DEPTH])
+            fx, fy, fz = model.predict_one(v[0], v[1], v[2], v[I_DEPTH])
         except ValueError as exc:  # NaN/Inf in the contact: zero force
             return 0.0, 0.0, 0.0, str(exc)
         return fx, fy, fz, None
@@ -180,15 +181,15 @@ def local_model_from_contact(model: ForceModel, v, jacobian=force_and_jacobian, 
     free probe, the approach model there (:func:`approach_model`)."""
     if not ifc.is_contact_values(v):
         return (0.0, 0.0, 0.0), no_model(), _bad_contact(v)
-    if not (v[ifc.I_IN_CONTACT] > 0.5 and v[ifc.I_DEPTH] > 0.0):
+    if not (v[I_IN_CONTACT] > 0.5 and v[I_DEPTH] > 0.0):
         return (0.0, 0.0, 0.0), approach_model(model, v, approach, jacobian), None
-    x, y, z, depth = float(v[0]), float(v[1]), float(v[2]), float(v[ifc.I_DEPTH])
-    d = [float(v[ifc.I_DX]), float(v[ifc.I_DY]), float(v[ifc.I_DZ])]
+    x, y, z, depth = float(v[0]), float(v[1]), float(v[2]), float(v[I_DEPTH])
+    d = [float(v[I_DX]), float(v[I_DY]), float(v[I_DZ])]
     n = contact_normal(v, d)
     try:
         F, J = jacobian(model, x, y, z, depth)
         J = J.tolist()
-        if v[ifc.I_SATURATED] > 0.5:
+        if v[I_SATURATED] > 0.5:
             for row in J:
                 row[3] = 0.0
         K = contact_stiffness(J, n, d)
@@ -213,7 +214,7 @@ def approach_model(model: ForceModel, v, approach, jacobian=force_and_jacobian) 
     if len(approach) != len(ifc.APPROACH_FIELDS):
         return no_model()
     sx, sy, sz, nx, ny, nz = (float(c) for c in approach)
-    d = [float(v[ifc.I_DX]), float(v[ifc.I_DY]), float(v[ifc.I_DZ])]
+    d = [float(v[I_DX]), float(v[I_DY]), float(v[I_DZ])]
     nn = nx * nx + ny * ny + nz * nz
     if not (math.isfinite(sx + sy + sz + sum(d)) and 0.25 < nn < 2.25):
         return no_model()
