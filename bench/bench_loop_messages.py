@@ -173,7 +173,8 @@ def main() -> int:
             f'{len(cs)} in-contact messages of a press over the shipped surface; the median over '
             f'5 repeats of the mean µs per call, plain Python on one thread (no executor, no '
             f'DDS). Load average {load:.2f} (1 min) at the start: a shared machine, so compare '
-            'rows of one run, not runs.\n\n' + table))
+            'rows of one run, not runs.\n\n' + table),
+            command='.venv/bin/python bench/bench_loop_messages.py')
     return 0
 
 
