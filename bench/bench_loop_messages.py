@@ -1,14 +1,15 @@
 """Per-message cost of the haptic loop's Python work, zero-order hold vs local force model.
 
-The servo thread shares its process's GIL with the executor thread that handles the force
-server's messages; in one process it also shares it with the contact detector and the force
-server. Every microsecond those handlers hold the GIL per pose is taken from the 1 kHz servo
-thread's budget, so this bench times each step a pose causes, one at a time, on plain Python
-(no executor, no DDS): contact detector (one pose through the tracker,
-:func:`haptic_anfis.pipeline.contact_values`), force server (force / local model from a contact,
-:mod:`haptic_anfis.pipeline`; message fill, serialisation) and driver (deserialisation, the ``servo_cf`` and ``servo_cf_local`` handlers'
-bodies), rclpy's (de)serialisation beside the raw CDR path the loop nodes use
-(:mod:`haptic_anfis.nodes.cdr`). The contacts are those of the shipped palpation script pressed into the shipped model.
+The servo thread shares its process's GIL with the executor thread that handles the force server's
+messages; in one process it also shares it with the contact detector and the force server. Every
+microsecond those handlers hold the GIL per pose is taken from the 1 kHz servo thread's budget, so
+this bench times each step a pose causes, one at a time, on plain Python (no executor, no DDS):
+contact detector (one pose through the tracker,
+:func:`haptic_anfis.pipeline.contact.contact_values`), force server (force / local model from a
+contact, :mod:`haptic_anfis.pipeline.force`; message fill, serialisation) and driver
+(deserialisation, the ``servo_cf`` and ``servo_cf_local`` handlers' bodies), rclpy's
+(de)serialisation beside the raw CDR path the loop nodes use (:mod:`haptic_anfis.nodes.cdr`). The
+contacts are those of the shipped palpation script pressed into the shipped model.
 
     .venv/bin/python bench/bench_loop_messages.py [--n 2000] [--no-page]
 
@@ -50,12 +51,12 @@ def press_path(n: int) -> list[tuple[float, float, float]]:
 def contacts(n: int) -> list[list[float]]:
     """n in-contact contact message values: the press of :func:`press_path` through the contact
     detector's tracker (the tracker's answers)."""
-    from haptic_anfis import pipeline
+    from haptic_anfis.pipeline.contact import contact_values
     from haptic_anfis.nodes.resim import build_pipeline
     tracker = build_pipeline()[1]  # the contact detector's, from its default parameters
     out = []
     for p in press_path(4 * n):
-        v, c, _ = pipeline.contact_values(tracker, 'tissue', 'tissue', p)
+        v, c, _ = contact_values(tracker, 'tissue', 'tissue', p)
         if c is not None and c.in_contact:
             out.append(v)
     if len(out) < n // 4:
@@ -77,7 +78,7 @@ def main() -> int:
     from haptic_anfis.device import SafetyLayer, WorkspaceMapping
     from haptic_anfis.device.force_input import ForceInput
     from haptic_anfis import interfaces as ifc
-    from haptic_anfis import pipeline as pl
+    from haptic_anfis.pipeline import contact as pc, force as pf
     from haptic_anfis.device.local_model import LocalModel, LocalModelRenderer
     from haptic_anfis.nodes.resim import build_pipeline
 
@@ -89,12 +90,12 @@ def main() -> int:
     rows = []
     path = press_path(a.n)
     rows.append(('detector: contact_values (tracker step)', timed(
-        lambda p: pl.contact_values(tracker, 'tissue', 'tissue', p), path)))
+        lambda p: pc.contact_values(tracker, 'tissue', 'tissue', p), path)))
     rows.append(('server: force_from_contact (zoh)', timed(
-        lambda v: pl.force_from_contact(model, v), cs)))
+        lambda v: pf.force_from_contact(model, v), cs)))
     rows.append(('server: local_model_from_contact', timed(
-        lambda v: pl.local_model_from_contact(model, v), cs)))
-    lms = [pl.local_model_from_contact(model, v)[1] for v in cs]
+        lambda v: pf.local_model_from_contact(model, v), cs)))
+    lms = [pf.local_model_from_contact(model, v)[1] for v in cs]
     js = JointState(name=list(ifc.LOCAL_MODEL_FIELDS))
 
     def fill(v):

@@ -415,7 +415,7 @@ def test_trace_keeps_the_newest_rows_within_its_bound():
 
 @pytest.fixture(scope='module')
 def default_model():
-    from haptic_anfis.pipeline import load_model
+    from haptic_anfis.pipeline.force import load_model
     return load_model({'model_path': ''})[1]
 
 
@@ -425,7 +425,7 @@ def test_force_server_local_model_matches_finite_differences(default_model, seed
     the model through the same geometry; F0 is the model's force; p0 = contact + depth d."""
     from haptic_anfis.device.local_model import force_and_jacobian_fd
     from haptic_anfis import interfaces as ifc
-    from haptic_anfis.pipeline import local_model_from_contact
+    from haptic_anfis.pipeline.force import local_model_from_contact
     rng = np.random.default_rng(seed)
     c = np.array([0.035, *rng.uniform(-0.02, 0.02, 2)])
     n = unit([1.0, *rng.uniform(-0.4, 0.4, 2)])
@@ -455,7 +455,7 @@ def test_force_server_local_model_matches_finite_differences(default_model, seed
 
 def test_force_server_local_model_without_contact_or_bad(default_model):
     from haptic_anfis import interfaces as ifc
-    from haptic_anfis.pipeline import local_model_from_contact
+    from haptic_anfis.pipeline.force import local_model_from_contact
     free = [0.05, 0.0, 0.0, 0.0, -1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]
     F, lm, err = local_model_from_contact(default_model, free)
     assert F == (0.0, 0.0, 0.0) and err is None and lm[ifc.LM_DEPTH] == 0.0
@@ -551,7 +551,7 @@ def test_force_server_approach_model(default_model):
     """Free probe with the approach fields: F0 = 0 at the surface point ahead, K = dF/dp at depth
     0+; past the plane the rendered force follows the model's at small depths. Without the
     fields, or with bad ones: the all-zero model."""
-    from haptic_anfis.pipeline import local_model_from_contact
+    from haptic_anfis.pipeline.force import local_model_from_contact
     c = np.array([0.035, 0.004, -0.003])
     n = unit([1.0, 0.1, -0.05])
     d = np.array([-1.0, 0.0, 0.0])

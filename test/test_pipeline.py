@@ -56,7 +56,7 @@ def test_pipeline_answers_recorded_contacts_with_the_recorded_local_models(recor
     """The recorded contacts (both layouts, with and without approach fields) through today's
     pipeline give the recorded local models (to rounding of the compiled model)."""
     from haptic_anfis.nodes import cdr
-    from haptic_anfis.pipeline import load_model, local_model_from_contact
+    from haptic_anfis.pipeline.force import load_model, local_model_from_contact
     _, model = load_model({'model_path': ''})
     layouts = set()
     for _, position, effort, raw in recorded:
@@ -108,18 +108,23 @@ def test_core_imports_no_node_module_and_interfaces_imports_nothing():
     core rooms import no node module, at any level (function-level imports count)."""
     assert _imports(ROOT / 'haptic_anfis' / 'interfaces.py') == set()
     core = ['device', 'contact', 'anfis', 'tissue', 'exam', 'cases', 'bag']
-    files = [ROOT / 'haptic_anfis' / 'pipeline.py']
-    files += [f for room in core for f in sorted((ROOT / 'haptic_anfis' / room).glob('*.py'))]
+    files = [f for room in ['pipeline'] + core
+             for f in sorted((ROOT / 'haptic_anfis' / room).glob('*.py'))]
     bad = {str(f.relative_to(ROOT)): sorted(m for m in _imports(f)
                                             if m.startswith('haptic_anfis.nodes'))
            for f in files}
     assert not {k: v for k, v in bad.items() if v}
 
 
-def test_pipeline_loads_without_ros():
-    """Importing the pipeline (and what it imports) loads no rclpy and no node module."""
-    code = ('import sys, haptic_anfis.pipeline; '
-            'bad = [m for m in sys.modules if m.split(".")[0] in ("rclpy", "rosidl_runtime_py") '
-            'or m.startswith("haptic_anfis.nodes")]; print(bad); sys.exit(1 if bad else 0)')
+def test_pipeline_loads_without_ros_and_the_force_stage_without_the_mesh_library():
+    """The force stage (what the force server loads) loads no mesh library; all three pipeline
+    modules together load no rclpy and no node module."""
+    code = ('import sys\n'
+            'import haptic_anfis.pipeline.force\n'
+            'assert "trimesh" not in sys.modules, "the force stage loaded trimesh"\n'
+            'import haptic_anfis.pipeline.contact, haptic_anfis.pipeline.replay\n'
+            'bad = [m for m in sys.modules if m.split(".")[0] in ("rclpy", "rosidl_runtime_py")'
+            ' or m.startswith("haptic_anfis.nodes")]\n'
+            'assert not bad, bad\n')
     r = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True, timeout=120)
     assert r.returncode == 0, r.stdout + r.stderr

@@ -5,7 +5,7 @@ import numpy as np
 
 from haptic_anfis.contact import ContactDetector
 from haptic_anfis.tissue.dataset import DEFAULT_DATASET, load_dataset
-from haptic_anfis.pipeline import DEFAULT_SURFACE, load_surface
+from haptic_anfis.pipeline.contact import DEFAULT_SURFACE, load_surface
 
 PARAMS = {'mesh_path': '', 'mesh_unit': 'mm', 'dome_radii': [0.045, 0.07, 0.07]}
 

@@ -53,7 +53,7 @@ def ideal_forces(positions: np.ndarray, params_files=()) -> tuple[np.ndarray, np
     ``params_files`` as the contact_detector and force_server nodes are) over the probe
     ``positions`` (n, 3) [m], tissue frame, in order."""
     from ..nodes.resim import build_pipeline
-    from ..pipeline import pose_to_force
+    from ..pipeline.replay import pose_to_force
     cp, tracker, _, model = build_pipeline(params_files)
     n = len(positions)
     F = np.zeros((n, 3))

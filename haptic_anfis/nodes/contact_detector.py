@@ -7,8 +7,9 @@ start) and publishes ``contact`` (``sensor_msgs/JointState``, layout in
 another frame is logged (throttled) and answered with "no contact"; the tracker is reset so the
 next good pose cannot start a contact from inside the tissue.
 
-The per-message work is :mod:`haptic_anfis.pipeline` (``contact_values``, ``approach_values``,
-``make_tracker``); this node wires it to the topics, its parameters and the case switch.
+The per-message work is :mod:`haptic_anfis.pipeline.contact` (``contact_values``,
+``approach_values``, ``make_tracker``); this node wires it to the topics, its parameters and the
+case switch.
 """
 from __future__ import annotations
 
@@ -18,7 +19,7 @@ from geometry_msgs.msg import PoseStamped
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 
-from ..pipeline import DEFAULT_SURFACE, approach_values, contact_values, make_tracker
+from ..pipeline.contact import DEFAULT_SURFACE, approach_values, contact_values, make_tracker
 from . import interfaces as ifc
 from ._case import CASE_PARAMS, apply_case, declare_case  # noqa: F401 (CASE_PARAMS: in config)
 from ._common import (LOOP_QOS, Param, declare_parameters, finite_vector, non_negative, one_of,

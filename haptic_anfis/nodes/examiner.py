@@ -25,7 +25,7 @@ from visualization_msgs.msg import Marker, MarkerArray
 
 from ..exam import ExamSession, Surface, load_exam_config, subject_from_scene
 from ..exam.lesions import ExamSubject
-from ..pipeline import load_surface
+from ..pipeline.contact import load_surface
 from . import interfaces as ifc
 from ._case import CASE_PARAMS, apply_case, declare_case  # noqa: F401 (CASE_PARAMS: in config)
 from ._common import Param, declare_parameters, positive, run_node, stamp_ns

@@ -11,7 +11,7 @@ tick. The service ``~/reload`` (``std_srvs/Trigger``) re-reads ``model_path``: t
 replaces the old in one reference swap between two messages (a load takes ~1-2 ms); a bad file
 keeps the old model and the response says why.
 
-The per-message work is :mod:`haptic_anfis.pipeline` (``local_model_from_contact``,
+The per-message work is :mod:`haptic_anfis.pipeline.force` (``local_model_from_contact``,
 ``force_from_contact``, ``load_model``); this node wires it to the topics, the case switch, the
 ramp after a switch and the reload service.
 """
@@ -27,7 +27,7 @@ from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
 
 from ..device.local_model import no_model
-from ..pipeline import force_from_contact, load_model, local_model_from_contact
+from ..pipeline.force import force_from_contact, load_model, local_model_from_contact
 from . import cdr
 from . import interfaces as ifc
 from ._case import CASE_PARAMS, apply_case, declare_case  # noqa: F401 (CASE_PARAMS: in config)

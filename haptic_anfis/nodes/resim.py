@@ -3,14 +3,15 @@ the recorded force commands (offline, no ROS publishing). It lives with the node
 resolves their parameters (declarations, ``--params-file`` YAMLs); the bag layer imports no node.
 
 The tracker and model are built by the nodes' own construction code
-(:func:`haptic_anfis.pipeline.make_tracker`, :func:`haptic_anfis.pipeline.load_model`) from the
-same parameters (defaults, ``--params-file`` YAMLs, overrides), and each pose goes through the
-same per-message functions the nodes run (:func:`haptic_anfis.pipeline.pose_to_force`:
-``contact_values`` then ``force_from_contact``). The tracker is
-stateful, so it must see exactly the poses the recorded detector saw: the recorded contact messages
-carry their pose's stamp, so when the contact topic is in the bag only those poses are fed (a
-1 kHz detector that fell behind skipped some poses, keep-last-1 QoS); otherwise every pose.
-Identical code and parameters reproduce the recorded wrenches exactly (difference 0 N).
+(:func:`haptic_anfis.pipeline.contact.make_tracker`, :func:`haptic_anfis.pipeline.force.
+load_model`) from the same parameters (defaults, ``--params-file`` YAMLs, overrides), and each pose
+goes through the same per-message functions the nodes run
+(:func:`haptic_anfis.pipeline.replay.pose_to_force`: ``contact_values`` then
+``force_from_contact``). The tracker is stateful, so it must see exactly the poses the recorded
+detector saw: the recorded contact messages carry their pose's stamp, so when the contact topic is
+in the bag only those poses are fed (a 1 kHz detector that fell behind skipped some poses,
+keep-last-1 QoS); otherwise every pose. Identical code and parameters reproduce the recorded
+wrenches exactly (difference 0 N).
 """
 from __future__ import annotations
 
@@ -61,7 +62,8 @@ class ResimResult:
 
 def build_pipeline(params_files=(), contact_overrides=None, force_overrides=None):
     """(contact_detector params, tracker, model path, model) as the nodes would build them."""
-    from ..pipeline import load_model, make_tracker
+    from ..pipeline.contact import make_tracker
+    from ..pipeline.force import load_model
     from . import contact_detector as cd
     from . import force_server as fs
     from ._common import resolve_parameters
@@ -76,7 +78,7 @@ def resimulate(path: str | Path, params_files=(), contact_overrides=None, force_
                pose_topic: str = ifc.TOPIC_POSE, contact_topic: str = ifc.TOPIC_CONTACT,
                wrench_topic: str = ifc.TOPIC_COMMAND) -> ResimResult:
     """Feed the bag's poses through the current tracker and model; compare (see module doc)."""
-    from ..pipeline import pose_to_force
+    from ..pipeline.replay import pose_to_force
     p = Path(path)
     tp, tc, tw = absolute(pose_topic), absolute(contact_topic), absolute(wrench_topic)
     poses, contacts, wrenches = [], {}, {}
