@@ -11,10 +11,9 @@ contact, :mod:`haptic_anfis.pipeline.force`; message fill, serialisation) and dr
 (de)serialisation beside the raw CDR path the loop nodes use (:mod:`haptic_anfis.nodes.cdr`). The
 contacts are those of the shipped palpation script pressed into the shipped model.
 
-    .venv/bin/python bench/bench_loop_messages.py [--n 2000] [--no-page]
+    .venv/bin/python bench/bench_loop_messages.py [--n 2000]
 
-Printed: µs per message (median of 5 repeats of n calls), never asserted (shared machine); also
-written to docs/measurements/loop_messages.md (unless ``--no-page``).
+Printed: µs per message (median of 5 repeats of n calls), never asserted (shared machine).
 """
 from __future__ import annotations
 
@@ -67,8 +66,6 @@ def contacts(n: int) -> list[list[float]]:
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument('--n', type=int, default=2000, help='messages per timing')
-    ap.add_argument('--no-page', action='store_true',
-                    help='print only (do not write docs/measurements/loop_messages.md)')
     a = ap.parse_args()
     import rclpy  # noqa: F401 (message types need it loaded)
     from geometry_msgs.msg import WrenchStamped
@@ -84,9 +81,8 @@ def main() -> int:
 
     _, tracker, _, model = build_pipeline()  # as the nodes build them, default parameters
     cs = contacts(a.n)
-    load = os.getloadavg()[0]
     print(f'{len(cs)} in-contact messages, {os.cpu_count()} CPUs, load average '
-          f'{load:.2f} (1 min); µs per message, median of 5')
+          f'{os.getloadavg()[0]:.2f} (1 min); µs per message, median of 5')
     rows = []
     path = press_path(a.n)
     rows.append(('detector: contact_values (tracker step)', timed(
@@ -166,16 +162,6 @@ def main() -> int:
     rows.append(('driver: servo_cf handler body (zoh mode)', timed(on_cmd, lms)))
     for name, us in rows:
         print(f'  {name:<46} {us:8.2f}')
-    if not a.no_page:
-        from _page import write_page
-        table = '\n'.join(['| step (one message) | µs |', '|---|---:|']
-                          + [f'| {name} | {us:.2f} |' for name, us in rows])
-        write_page('loop_messages', 'Per-message cost of the haptic loop', (
-            f'{len(cs)} in-contact messages of a press over the shipped surface; the median over '
-            f'5 repeats of the mean µs per call, plain Python on one thread (no executor, no '
-            f'DDS). Load average {load:.2f} (1 min) at the start: a shared machine, so compare '
-            'rows of one run, not runs.\n\n' + table),
-            command='.venv/bin/python bench/bench_loop_messages.py')
     return 0
 
 
