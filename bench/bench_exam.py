@@ -120,7 +120,7 @@ def margins(seed: int = 0) -> None:
 def core_costs() -> None:
     from haptic_anfis.contact import load_mesh
     from haptic_anfis.exam import ExamConfig, ExamSession, Surface, subject_from_scene
-    from haptic_anfis.nodes.contact_detector import DEFAULT_SURFACE
+    from haptic_anfis.pipeline.contact import DEFAULT_SURFACE
     mesh = load_mesh(DEFAULT_SURFACE, unit='mm')
     mesh.merge_vertices()
     s = ExamSession(Surface.from_mesh(mesh), subject_from_scene(), ExamConfig())

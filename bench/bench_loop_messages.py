@@ -1,13 +1,15 @@
 """Per-message cost of the haptic loop's Python work, zero-order hold vs local force model.
 
-The servo thread shares its process's GIL with the executor thread that handles the force
-server's messages; in one process it also shares it with the contact detector and the force
-server. Every microsecond those handlers hold the GIL per pose is taken from the 1 kHz servo
-thread's budget, so this bench times each step a pose causes, one at a time, on plain Python
-(no executor, no DDS): force server (force / local model from a contact, message fill,
-serialisation) and driver (deserialisation, the ``servo_cf`` and ``servo_cf_local`` handlers'
-bodies), rclpy's (de)serialisation beside the raw CDR path the loop nodes use
-(:mod:`haptic_anfis.nodes.cdr`). The contacts are those of the shipped palpation script pressed into the shipped model.
+The servo thread shares its process's GIL with the executor thread that handles the force server's
+messages; in one process it also shares it with the contact detector and the force server. Every
+microsecond those handlers hold the GIL per pose is taken from the 1 kHz servo thread's budget, so
+this bench times each step a pose causes, one at a time, on plain Python (no executor, no DDS):
+contact detector (one pose through the tracker,
+:func:`haptic_anfis.pipeline.contact.contact_values`), force server (force / local model from a
+contact, :mod:`haptic_anfis.pipeline.force`; message fill, serialisation) and driver
+(deserialisation, the ``servo_cf`` and ``servo_cf_local`` handlers' bodies), rclpy's
+(de)serialisation beside the raw CDR path the loop nodes use (:mod:`haptic_anfis.nodes.cdr`). The
+contacts are those of the shipped palpation script pressed into the shipped model.
 
     .venv/bin/python bench/bench_loop_messages.py [--n 2000]
 
@@ -37,19 +39,23 @@ def timed(fn, items, repeats: int = 5) -> float:
     return runs[len(runs) // 2]
 
 
-def contacts(n: int) -> list[list[float]]:
-    """n in-contact contact message values: a press along the default direction over the
-    shipped surface (the tracker's answers)."""
+def press_path(n: int) -> list[tuple[float, float, float]]:
+    """n probe positions [m]: in from 2 cm out of the shipped surface to 12 mm in along the
+    default direction, sliding sideways."""
     import numpy as np
+    return [(0.035 + 0.02 - 0.032 * s, 0.01 * np.sin(6 * s), 0.01 * np.cos(5 * s))
+            for s in np.linspace(0.0, 1.0, n).tolist()]
 
-    from haptic_anfis.nodes import contact_detector as cd
-    from haptic_anfis.nodes._common import resolve_parameters
-    tracker = cd.make_tracker(resolve_parameters(cd.PARAMS, 'contact_detector'))
+
+def contacts(n: int) -> list[list[float]]:
+    """n in-contact contact message values: the press of :func:`press_path` through the contact
+    detector's tracker (the tracker's answers)."""
+    from haptic_anfis.pipeline.contact import contact_values
+    from haptic_anfis.nodes.resim import build_pipeline
+    tracker = build_pipeline()[1]  # the contact detector's, from its default parameters
     out = []
-    t = np.linspace(0.0, 1.0, 4 * n)
-    for s in t:  # in from 2 cm out of the surface to 12 mm in, sliding sideways
-        p = (0.035 + 0.02 - 0.032 * s, 0.01 * np.sin(6 * s), 0.01 * np.cos(5 * s))
-        v, c, _ = cd.contact_values(tracker, 'tissue', 'tissue', p)
+    for p in press_path(4 * n):
+        v, c, _ = contact_values(tracker, 'tissue', 'tissue', p)
         if c is not None and c.in_contact:
             out.append(v)
     if len(out) < n // 4:
@@ -68,21 +74,24 @@ def main() -> int:
 
     from haptic_anfis.device import SafetyLayer, WorkspaceMapping
     from haptic_anfis.device.force_input import ForceInput
-    from haptic_anfis.device.local_model import LocalModelRenderer
-    from haptic_anfis.nodes import force_server as fs
-    from haptic_anfis.nodes import interfaces as ifc
+    from haptic_anfis import interfaces as ifc
+    from haptic_anfis.pipeline import contact as pc, force as pf
+    from haptic_anfis.device.local_model import LocalModel, LocalModelRenderer
+    from haptic_anfis.nodes.resim import build_pipeline
 
-    from haptic_anfis.nodes._common import resolve_parameters
-    _, model = fs.load_model(resolve_parameters(fs.PARAMS, 'force_server'))
+    _, tracker, _, model = build_pipeline()  # as the nodes build them, default parameters
     cs = contacts(a.n)
     print(f'{len(cs)} in-contact messages, {os.cpu_count()} CPUs, load average '
           f'{os.getloadavg()[0]:.2f} (1 min); µs per message, median of 5')
     rows = []
+    path = press_path(a.n)
+    rows.append(('detector: contact_values (tracker step)', timed(
+        lambda p: pc.contact_values(tracker, 'tissue', 'tissue', p), path)))
     rows.append(('server: force_from_contact (zoh)', timed(
-        lambda v: fs.force_from_contact(model, v), cs)))
+        lambda v: pf.force_from_contact(model, v), cs)))
     rows.append(('server: local_model_from_contact', timed(
-        lambda v: fs.local_model_from_contact(model, v), cs)))
-    lms = [fs.local_model_from_contact(model, v)[1] for v in cs]
+        lambda v: pf.local_model_from_contact(model, v), cs)))
+    lms = [pf.local_model_from_contact(model, v)[1] for v in cs]
     js = JointState(name=list(ifc.LOCAL_MODEL_FIELDS))
 
     def fill(v):
@@ -131,18 +140,18 @@ def main() -> int:
         if fast:
             inp.model_values(msg.position, i[0], 'tissue', now[0])
         else:
-            inp.model(ifc.local_model_from_values(msg.position), i[0], 'tissue', now[0])
+            inp.model(LocalModel.from_values(msg.position), i[0], 'tissue', now[0])
     rows.append(('driver: servo_cf_local handler body', timed(on_lm, msgs)))
     rows.append(('driver: servo_cf handler body (local mode)', timed(
         lambda _: inp.command((0.1, 0.2, 0.3), 1, 'tissue', now[0]), lms)))
-    models = [ifc.local_model_from_values(v) for v in lms]
+    models = [LocalModel.from_values(v) for v in lms]
     r = LocalModelRenderer()
     rows.append(('driver: LocalModelRenderer.offer', timed(lambda m: r.offer(m), models)))
     if hasattr(r, 'offer_values'):
         rows.append(('driver: LocalModelRenderer.offer_values', timed(
             lambda v: r.offer_values(v, 0.0, checked=True), msgs and [m.position for m in msgs])))
     rows.append(('driver: LocalModel.check', timed(lambda m: m.check(), models)))
-    rows.append(('driver: local_model_from_values', timed(ifc.local_model_from_values, lms)))
+    rows.append(('driver: LocalModel.from_values', timed(LocalModel.from_values, lms)))
     zi = ForceInput(SafetyLayer(8.9, 1000.0, 0.01), WorkspaceMapping(1.5, (0.03, 0.0, 0.0)), 'zoh')
     zi.safety.start(0.0)
 

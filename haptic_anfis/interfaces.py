@@ -48,8 +48,9 @@ stamp of the pose it was computed from, ``header.frame_id`` the tissue frame; ``
 Local force model message (``sensor_msgs/JointState`` on ``falcon/servo_cf_local``, published by
 the force server with every ``falcon/servo_cf``, same stamp: the contact's, i.e. the driver's pose
 it answers; ``header.frame_id`` the tissue frame; ``name`` is exactly :data:`LOCAL_MODEL_FIELDS`,
-``position[i]`` holds that field). The driver renders F(p) = F0 + K (p - p0) at every servo tick
-(:mod:`haptic_anfis.device.local_model`):
+``position[i]`` holds that field; encoded and decoded beside ``LocalModel`` in
+:mod:`haptic_anfis.device.local_model`). The driver renders F(p) = F0 + K (p - p0) at every servo
+tick:
 
 - ``f0_x/y/z`` [N]: the model's force at the contact (= the servo_cf force).
 - ``p0_x/y/z`` [m]: probe position it was computed at (contact point + depth * direction).
@@ -109,27 +110,3 @@ TOPIC_COVERAGE = 'exam/coverage'
 TOPIC_EXAM_REPORT = 'exam/report'
 SERVICE_RELOAD = '/force_server/reload'
 
-
-def local_model_from_values(v, frame_time: float = 0.0):
-    """A :class:`haptic_anfis.device.local_model.LocalModel` from a local force model message's
-    ``position`` values (:data:`LOCAL_MODEL_FIELDS`); ``time`` is ``frame_time`` (the driver sets
-    the time of the pose it answers).
-
-    Raises:
-        ValueError: not exactly len(LOCAL_MODEL_FIELDS) values.
-    """
-    from .device.local_model import LocalModel
-    if len(v) != len(LOCAL_MODEL_FIELDS):
-        raise ValueError(f'local force model message with {len(v)} values, expected '
-                         f'{len(LOCAL_MODEL_FIELDS)} ({", ".join(LOCAL_MODEL_FIELDS)})')
-    v = v.tolist() if hasattr(v, 'tolist') else [float(c) for c in v]  # array.array: floats
-    # Filled directly (no frozen-dataclass __init__: ~2 µs of setattr calls per message).
-    m = _object_new(LocalModel)
-    d = m.__dict__
-    d['f0'], d['p0'], d['k'] = tuple(v[LM_F0]), tuple(v[LM_P0]), v[LM_K]
-    d['contact'], d['normal'], d['direction'] = tuple(v[LM_C]), tuple(v[LM_N]), tuple(v[LM_D])
-    d['depth0'], d['zero_at_surface'], d['time'] = v[LM_DEPTH], v[LM_ZERO] > 0.5, frame_time
-    return m
-
-
-_object_new = object.__new__

@@ -10,7 +10,7 @@ from haptic_anfis.exam import (ExamConfig, ExamSession, ExamSubject, Lesion, Sur
                                load_exam_config, subject_from_scene)
 from haptic_anfis.exam.detector import detect_lumps
 from haptic_anfis.exam.figure import save_figure
-from haptic_anfis.nodes.contact_detector import DEFAULT_SURFACE
+from haptic_anfis.pipeline.contact import DEFAULT_SURFACE
 
 RX, R = 0.045, 0.070
 

@@ -415,7 +415,7 @@ def test_trace_keeps_the_newest_rows_within_its_bound():
 
 @pytest.fixture(scope='module')
 def default_model():
-    from haptic_anfis.nodes.force_server import load_model
+    from haptic_anfis.pipeline.force import load_model
     return load_model({'model_path': ''})[1]
 
 
@@ -424,8 +424,8 @@ def test_force_server_local_model_matches_finite_differences(default_model, seed
     """The published K (analytic Jacobian through the geometry) equals central differences of
     the model through the same geometry; F0 is the model's force; p0 = contact + depth d."""
     from haptic_anfis.device.local_model import force_and_jacobian_fd
-    from haptic_anfis.nodes import interfaces as ifc
-    from haptic_anfis.nodes.force_server import local_model_from_contact
+    from haptic_anfis import interfaces as ifc
+    from haptic_anfis.pipeline.force import local_model_from_contact
     rng = np.random.default_rng(seed)
     c = np.array([0.035, *rng.uniform(-0.02, 0.02, 2)])
     n = unit([1.0, *rng.uniform(-0.4, 0.4, 2)])
@@ -439,7 +439,7 @@ def test_force_server_local_model_matches_finite_differences(default_model, seed
     _, Jfd = force_and_jacobian_fd(default_model, *c, depth)
     K = np.array(lm[ifc.LM_K]).reshape(3, 3)
     np.testing.assert_allclose(K, contact_jacobian(Jfd, n, d), rtol=1e-3, atol=0.5)
-    m = ifc.local_model_from_values(lm)
+    m = LocalModel.from_values(lm)
     assert m.in_contact and m.depth0 == depth
     # the older 9-value contact: normal taken as -direction
     F9, lm9, err9 = local_model_from_contact(default_model, v[:9])
@@ -454,19 +454,19 @@ def test_force_server_local_model_matches_finite_differences(default_model, seed
 
 
 def test_force_server_local_model_without_contact_or_bad(default_model):
-    from haptic_anfis.nodes import interfaces as ifc
-    from haptic_anfis.nodes.force_server import local_model_from_contact
+    from haptic_anfis import interfaces as ifc
+    from haptic_anfis.pipeline.force import local_model_from_contact
     free = [0.05, 0.0, 0.0, 0.0, -1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]
     F, lm, err = local_model_from_contact(default_model, free)
     assert F == (0.0, 0.0, 0.0) and err is None and lm[ifc.LM_DEPTH] == 0.0
-    assert not ifc.local_model_from_values(lm).in_contact
+    assert not LocalModel.from_values(lm).in_contact
     bad = [math.nan, 0.0, 0.0, 0.005, -1.0, 0.0, 0.0, 1.0, 0.0, 1.0, 0.0, 0.0]
     F, lm, err = local_model_from_contact(default_model, bad)
     assert F == (0.0, 0.0, 0.0) and 'non-finite' in err and lm[ifc.LM_DEPTH] == 0.0
     F, lm, err = local_model_from_contact(default_model, [1.0] * 5)
     assert F == (0.0, 0.0, 0.0) and 'expected 12' in err
     with pytest.raises(ValueError, match='expected 26'):
-        ifc.local_model_from_values([0.0] * 3)
+        LocalModel.from_values([0.0] * 3)
 
 
 def test_force_error_and_its_phases():
@@ -551,15 +551,14 @@ def test_force_server_approach_model(default_model):
     """Free probe with the approach fields: F0 = 0 at the surface point ahead, K = dF/dp at depth
     0+; past the plane the rendered force follows the model's at small depths. Without the
     fields, or with bad ones: the all-zero model."""
-    from haptic_anfis.nodes import interfaces as ifc
-    from haptic_anfis.nodes.force_server import local_model_from_contact
+    from haptic_anfis.pipeline.force import local_model_from_contact
     c = np.array([0.035, 0.004, -0.003])
     n = unit([1.0, 0.1, -0.05])
     d = np.array([-1.0, 0.0, 0.0])
     free = [*(c - 0.002 * d), 0.0, *d, 0.0, 0.0, 0.0, 0.0, 0.0]
     F, lm, err = local_model_from_contact(default_model, free, approach=[*c, *n])
     assert F == (0.0, 0.0, 0.0) and err is None
-    m = ifc.local_model_from_values(lm)
+    m = LocalModel.from_values(lm)
     assert m.approach and m.zero_at_surface and m.f0 == (0.0, 0.0, 0.0)
     np.testing.assert_allclose(m.p0, c)
     r = LocalModelRenderer(max_stiffness=1e6, validity_time=1.0, validity_radius=0.01)

@@ -195,7 +195,7 @@ def _report_bag(args):
     from ..contact import load_mesh
     from ..exam import ExamSession, Surface, load_exam_config, subject_from_scene
     from ..nodes import interfaces as ifc
-    from ..nodes.contact_detector import DEFAULT_SURFACE
+    from ..pipeline.contact import DEFAULT_SURFACE
     from ..bag.reader import bag_info
     from ..bag.topics import absolute
     cfg = load_exam_config(args.exam_config)

@@ -52,21 +52,15 @@ def ideal_forces(positions: np.ndarray, params_files=()) -> tuple[np.ndarray, np
     """(F (n, 3) [N], in_contact (n,) bool): the contact tracker and force model (configured from
     ``params_files`` as the contact_detector and force_server nodes are) over the probe
     ``positions`` (n, 3) [m], tissue frame, in order."""
-    from ..nodes import contact_detector as cd
-    from ..nodes import force_server as fs
-    from ..nodes._common import resolve_parameters
-    cp = resolve_parameters(cd.PARAMS, 'contact_detector', params_files)
-    fp = resolve_parameters(fs.PARAMS, 'force_server', params_files)
-    tracker = cd.make_tracker(cp)
-    _, model = fs.load_model(fp)
+    from ..nodes.resim import build_pipeline
+    from ..pipeline.replay import pose_to_force
+    cp, tracker, _, model = build_pipeline(params_files)
     n = len(positions)
     F = np.zeros((n, 3))
     contact = np.zeros(n, dtype=bool)
     frame = cp['frame_id']
     for i, p in enumerate(np.ascontiguousarray(positions, dtype=np.float64)):
-        values, c, _ = cd.contact_values(tracker, frame, frame, p)
-        fx, fy, fz, _ = fs.force_from_contact(model, values)
-        F[i] = (fx, fy, fz)
+        _, c, F[i], _ = pose_to_force(tracker, model, frame, frame, p)
         contact[i] = c is not None and c.in_contact
     return F, contact
 

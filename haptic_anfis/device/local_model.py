@@ -40,6 +40,12 @@ with these rules (:class:`LocalModelRenderer`):
   expired: the renderer stops extrapolating and the caller holds the last force and lets the
   watchdog ramp it to zero, as the zero-order hold does.
 
+The message (``falcon/servo_cf_local``, layout :data:`haptic_anfis.interfaces.LOCAL_MODEL_FIELDS`)
+is encoded and decoded here, beside :class:`LocalModel`: :func:`model_values` /
+:meth:`LocalModel.values` (encode), :func:`no_model` (the "no contact" model),
+:meth:`LocalModel.from_values` (decode), :func:`check_values` (validate); the driver renders the
+flat values directly (:meth:`LocalModelRenderer.offer_values`).
+
 Times are seconds on the caller's monotonic clock; lengths metres; forces newtons; tissue frame.
 """
 from __future__ import annotations
@@ -48,6 +54,8 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+
+from ..interfaces import LM_C, LM_D, LM_DEPTH, LM_F0, LM_K, LM_N, LM_P0, LM_ZERO, LOCAL_MODEL_FIELDS
 
 #: Falcon stiffness bound [N/m], device frame (CHAI3D's Falcon m_maxLinearStiffness; see above).
 FALCON_MAX_STIFFNESS = 3000.0
@@ -362,9 +370,32 @@ class LocalModel:
             k = self.k.tolist() if type(self.k) is np.ndarray else self.k
             raise ValueError(f'local model stiffness K: expected a finite (3, 3) matrix, got '
                              f'{k!r}') from None
-        return [*map(float, self.f0), *map(float, self.p0), *k, *map(float, self.contact),
-                *map(float, self.normal), *map(float, self.direction), float(self.depth0),
-                1.0 if self.zero_at_surface else 0.0]
+        return model_values(tuple(map(float, self.f0)), tuple(map(float, self.p0)), k,
+                            tuple(map(float, self.contact)), tuple(map(float, self.normal)),
+                            tuple(map(float, self.direction)), float(self.depth0),
+                            self.zero_at_surface)
+
+    @classmethod
+    def from_values(cls, v, time: float = 0.0) -> LocalModel:
+        """The model in a local force model message's ``position`` values ``v``
+        (:data:`~haptic_anfis.interfaces.LOCAL_MODEL_FIELDS`, as recorded in any bag); ``time``
+        [s] as given (the driver sets the time of the pose it answers). Not checked for
+        finiteness (:meth:`check`).
+
+        Raises:
+            ValueError: not exactly len(LOCAL_MODEL_FIELDS) values.
+        """
+        if len(v) != N_VALUES:
+            raise ValueError(f'local force model message with {len(v)} values, expected '
+                             f'{N_VALUES} ({", ".join(LOCAL_MODEL_FIELDS)})')
+        v = v.tolist() if hasattr(v, 'tolist') else [float(c) for c in v]  # array.array: floats
+        # Filled directly (no frozen-dataclass __init__: ~2 us of setattr calls per message).
+        m = _object_new(cls)
+        d = m.__dict__
+        d['f0'], d['p0'], d['k'] = tuple(v[LM_F0]), tuple(v[LM_P0]), v[LM_K]
+        d['contact'], d['normal'], d['direction'] = tuple(v[LM_C]), tuple(v[LM_N]), tuple(v[LM_D])
+        d['depth0'], d['zero_at_surface'], d['time'] = v[LM_DEPTH], v[LM_ZERO] > 0.5, time
+        return m
 
     def check(self) -> None:
         """Raises ValueError naming the first non-finite or malformed field
@@ -372,10 +403,32 @@ class LocalModel:
         check_values(self.values())
 
 
-#: offsets of the fields in the flat values (haptic_anfis.interfaces.LOCAL_MODEL_FIELDS)
-_FIELDS = (('f0', 0, 3), ('p0', 3, 6), ('stiffness K', 6, 15), ('contact', 15, 18),
-           ('normal', 18, 21), ('direction', 21, 24))
-_N_VALUES = 26
+_object_new = object.__new__
+
+#: values in a local force model message (:data:`haptic_anfis.interfaces.LOCAL_MODEL_FIELDS`)
+N_VALUES = len(LOCAL_MODEL_FIELDS)
+#: the fields of the flat values, for error messages: (name, start, stop)
+_FIELDS = tuple((name, s.start, s.stop) for name, s in (
+    ('f0', LM_F0), ('p0', LM_P0), ('stiffness K', LM_K), ('contact', LM_C), ('normal', LM_N),
+    ('direction', LM_D)))
+
+
+def model_values(f0, p0, k, contact, normal, direction, depth0: float, zero_at_surface: bool
+                 ) -> list[float]:
+    """Encode: a local force model message's ``position`` values (26, the order of
+    :data:`~haptic_anfis.interfaces.LOCAL_MODEL_FIELDS`) from f0 (3,) [N], p0 (3,) [m], K's 9
+    values row-major [N/m], contact (3,) [m], outward unit normal (3,), unit indentation
+    direction (3,), depth0 [m] and whether the force is zero at the surface. The parts must
+    already be floats (the force server's per-message path: no conversion, no check; the
+    receiver checks, :func:`check_values`)."""
+    return [*f0, *p0, *k, *contact, *normal, *direction, depth0,
+            1.0 if zero_at_surface else 0.0]
+
+
+def no_model() -> list[float]:
+    """The values of the "no contact" model (all zeros: depth 0, no normal; the driver renders
+    zero force), a new list each call (callers may scale it in place)."""
+    return [0.0] * N_VALUES
 
 
 def check_values(v) -> None:
@@ -387,14 +440,14 @@ def check_values(v) -> None:
     Raises:
         ValueError: naming the first malformed field.
     """
-    if len(v) != _N_VALUES:
-        raise ValueError(f'local model: expected {_N_VALUES} values, got {len(v)}')
+    if len(v) != N_VALUES:
+        raise ValueError(f'local model: expected {N_VALUES} values, got {len(v)}')
     if not math.isfinite(sum(v)):  # NaN/Inf anywhere (or an overflow: then nothing is named)
         for name, a, b in _FIELDS:
             if not all(math.isfinite(c) for c in v[a:b]):
                 what = 'a finite (3, 3) matrix' if b - a == 9 else '3 finite numbers'
                 raise ValueError(f'local model {name}: expected {what}, got {list(v[a:b])!r}')
-    depth0 = v[24]
+    depth0 = v[24]  # LM_DEPTH; 18-20: LM_N, 21-23: LM_D
     if not (math.isfinite(depth0) and depth0 >= 0.0):
         raise ValueError(f'local model depth0: expected a finite value >= 0, got {depth0!r}')
     nx, ny, nz = v[18], v[19], v[20]
@@ -516,8 +569,7 @@ class LocalModelRenderer:
         """The current model (as received; its ``time`` is :attr:`time`), or None."""
         if self._m is None:
             return None
-        from ..interfaces import local_model_from_values
-        return local_model_from_values(self._values, self.time)
+        return LocalModel.from_values(self._values, self.time)
 
     def render(self, p, now: float) -> tuple[tuple[float, float, float] | None, int]:
         """(force (3,) [N] or None, status) for the probe at ``p`` (3,) [m] at time ``now``.

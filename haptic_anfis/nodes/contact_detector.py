@@ -6,28 +6,24 @@ start) and publishes ``contact`` (``sensor_msgs/JointState``, layout in
 :mod:`haptic_anfis.nodes.interfaces`) stamped with the pose's stamp. A NaN/Inf pose or one in
 another frame is logged (throttled) and answered with "no contact"; the tracker is reset so the
 next good pose cannot start a contact from inside the tissue.
+
+The per-message work is :mod:`haptic_anfis.pipeline.contact` (``contact_values``,
+``approach_values``, ``make_tracker``); this node wires it to the topics, its parameters and the
+case switch.
 """
 from __future__ import annotations
 
-import math
 from array import array
 
-import numpy as np
 from geometry_msgs.msg import PoseStamped
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 
-from ..contact import ContactDetector, ContactTracker, ellipsoid_dome
-from ..contact.approach import surface_ahead
-from ..contact.proxy import FREE
-from ..tissue.dataset import DATA_DIR
+from ..pipeline.contact import DEFAULT_SURFACE, approach_values, contact_values, make_tracker
 from . import interfaces as ifc
 from ._case import CASE_PARAMS, apply_case, declare_case  # noqa: F401 (CASE_PARAMS: in config)
 from ._common import (LOOP_QOS, Param, declare_parameters, finite_vector, non_negative, one_of,
                       positive, run_node)
-
-#: Surface mesh of the default FE scene (config/scenes/default.yaml), in millimetres.
-DEFAULT_SURFACE = DATA_DIR / 'default_surface.stl'
 
 MESH_PARAMS = [
     Param('mesh_path', '', "tissue surface mesh file (STL, OBJ, PLY...; '' = the shipped surface "
@@ -52,62 +48,6 @@ PARAMS = MESH_PARAMS + [
           'and its normal (the approach fields, in effort) so the force server can send the '
           'plane before contact (0 = off)', non_negative),
 ]
-
-
-def load_surface(node, p: dict):
-    """The tissue mesh named by the mesh parameters (metres, tissue frame)."""
-    from ..contact import load_mesh
-    if p['mesh_path'] == 'dome':
-        return ellipsoid_dome(tuple(p['dome_radii']))
-    path, unit = (p['mesh_path'], p['mesh_unit']) if p['mesh_path'] else (DEFAULT_SURFACE, 'mm')
-    mesh = load_mesh(path, unit=unit)
-    # Files such as STL store every triangle's corners separately: join equal vertices so the
-    # surface is connected (same faces and coordinates, so the same contact answers).
-    mesh.merge_vertices()
-    return mesh
-
-
-def make_tracker(p: dict) -> ContactTracker:
-    """The node's contact tracker from its parameter values ``p`` (also used by the bag
-    re-simulation, so a replay is configured exactly like the node)."""
-    mesh = load_surface(None, p)
-    d = p['direction']
-    detector = ContactDetector(mesh, direction=None if not any(d) else d)
-    return ContactTracker(detector, max_step=p['max_step'], max_depth=p['max_depth'] or None)
-
-
-def contact_values(tracker: ContactTracker, frame_id: str, pose_frame: str, xyz):
-    """One pose through the tracker: ``(position list of the contact message, TrackedContact or
-    None, error or None)``. A pose in another frame or with NaN/Inf gives "no contact" (zeros)
-    and resets the tracker, so the next good pose cannot start a contact from inside."""
-    if pose_frame != frame_id:
-        tracker.reset()
-        return [0.0] * len(ifc.CONTACT_FIELDS), None, \
-            f'pose in frame {pose_frame!r}, expected {frame_id!r}'
-    try:
-        c = tracker.update(xyz)
-    except ValueError as exc:  # NaN/Inf pose: tracker reset, no contact
-        tracker.reset()
-        return [0.0] * len(ifc.CONTACT_FIELDS), None, str(exc)
-    cp, dv, nv = c.contact_point, c.direction, c.normal
-    return [float(cp[0]), float(cp[1]), float(cp[2]), float(c.depth),
-            float(dv[0]), float(dv[1]), float(dv[2]),
-            1.0 if c.in_contact else 0.0, 1.0 if c.saturated else 0.0,
-            float(nv[0]), float(nv[1]), float(nv[2])], c, None
-
-
-def approach_values(tracker: ContactTracker, c, p, max_distance: float) -> list[float]:
-    """The approach fields (:data:`~.interfaces.APPROACH_FIELDS`: surface point ahead [m], outward
-    normal there) for the tracker's answer ``c`` at the probe position ``p`` (3,) [m]: only while
-    free (not in contact, not rejected) and a front surface lies within ``max_distance`` [m] along
-    the indentation direction; else [] (:func:`~haptic_anfis.contact.approach.surface_ahead`)."""
-    if c is None or c.state != FREE or max_distance <= 0.0:
-        return []
-    a = surface_ahead(tracker.detector, p, tracker.detector.direction, max_distance)
-    if a is None:
-        return []
-    s, n, _ = a
-    return [float(s[0]), float(s[1]), float(s[2]), float(n[0]), float(n[1]), float(n[2])]
 
 
 class ContactDetectorNode(Node):

@@ -25,10 +25,11 @@ from visualization_msgs.msg import Marker, MarkerArray
 
 from ..exam import ExamSession, Surface, load_exam_config, subject_from_scene
 from ..exam.lesions import ExamSubject
+from ..pipeline.contact import load_surface
 from . import interfaces as ifc
 from ._case import CASE_PARAMS, apply_case, declare_case  # noqa: F401 (CASE_PARAMS: in config)
 from ._common import Param, declare_parameters, positive, run_node, stamp_ns
-from .contact_detector import MESH_PARAMS, load_surface
+from .contact_detector import MESH_PARAMS
 
 PARAMS = MESH_PARAMS + [
     Param('scene', '', "scene file whose tumours are the lesions to find ('' = "
@@ -79,7 +80,7 @@ class Examiner(Node):
     def _start_exam(self, case) -> None:
         p = self.params = apply_case(self.own_params, case, self.own_params)
         subject = lesion_source(p, case)
-        mesh = load_surface(self, p)
+        mesh = load_surface(p)
         session = ExamSession(Surface.from_mesh(mesh), subject, self.config)
         self.subject, self.session = subject, session
         s = session

@@ -6,37 +6,33 @@ loaded, before the first message) and publishes ``falcon/servo_cf`` (``geometry_
 WrenchStamped``, tissue frame) with the contact's stamp: zero when not in contact (or on a malformed
 contact / NaN input), and with it ``falcon/servo_cf_local`` (``sensor_msgs/JointState``, layout
 in :mod:`haptic_anfis.nodes.interfaces`): the local force model at the contact — F0, p0 and the
-stiffness K = dF/dp through the contact geometry (:func:`local_model_from_contact`) — that the
-falcon driver renders at every servo tick. The service ``~/reload`` (``std_srvs/Trigger``) re-reads ``model_path``: the
-new model replaces the old in one reference swap between two messages (a load takes ~1-2 ms); a
-bad file keeps the old model and the response says why.
+stiffness K = dF/dp through the contact geometry — that the falcon driver renders at every servo
+tick. The service ``~/reload`` (``std_srvs/Trigger``) re-reads ``model_path``: the new model
+replaces the old in one reference swap between two messages (a load takes ~1-2 ms); a bad file
+keeps the old model and the response says why.
+
+The per-message work is :mod:`haptic_anfis.pipeline.force` (``local_model_from_contact``,
+``force_from_contact``, ``load_model``); this node wires it to the topics, the case switch, the
+ramp after a switch and the reload service.
 """
 from __future__ import annotations
 
-import math
 import queue
 import threading
 import time
-from pathlib import Path
 
 from geometry_msgs.msg import WrenchStamped
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
 
-from ..anfis import ForceModel
-from ..tissue.dataset import DATA_DIR
-from ..device.local_model import contact_stiffness, force_and_jacobian
+from ..device.local_model import no_model
+from ..pipeline.force import force_from_contact, load_model, local_model_from_contact
 from . import cdr
 from . import interfaces as ifc
 from ._case import CASE_PARAMS, apply_case, declare_case  # noqa: F401 (CASE_PARAMS: in config)
 from ._common import (LOOP_QOS, Param, declare_parameters, non_negative, positive, run_node,
                       set_stamp, stamp_ns)
-
-DEFAULT_MODEL = DATA_DIR / 'default_model.json'
-#: depth [m] the approach model's stiffness is taken at: 0+ (1 µm; at exactly 0 a depth-scaled
-#: model's kink max(depth, 0) may give the derivative of the zero side)
-APPROACH_DEPTH = 1e-6
 
 PARAMS = [
     Param('model_path', '', "ANFIS model file (JSON) ('' = the shipped default model); re-read "
@@ -49,108 +45,6 @@ PARAMS = [
     Param('case_ramp', 0.5, 'after a case switch the force ramps from 0 to the model force over '
           'this long [s] (the new surface may put the probe deeper at once)', positive),
 ]
-
-
-def load_model(p: dict) -> tuple[Path, ForceModel]:
-    """(path, model) from the node's parameter values ``p`` (also used by the bag re-simulation and
-    the reload service). ``ForceModel.load`` compiles and warms the real-time path, so the first
-    contact pays no compilation. Raises ModelFileError (a ValueError) on a bad file."""
-    path = Path(p['model_path']) if p['model_path'] else DEFAULT_MODEL
-    return path, ForceModel.load(path)
-
-
-def force_from_contact(model: ForceModel, v) -> tuple[float, float, float, str | None]:
-    """(fx, fy, fz, error or None) for the contact message values ``v``: the model's force in
-    contact, zero when not in contact or on a malformed / non-finite contact (with the reason)."""
-    if not ifc.is_contact_values(v):
-        return 0.0, 0.0, 0.0, (f'contact message with {len(v)} values, expected '
-                               f'{len(ifc.CONTACT_FIELDS)} ({", ".join(ifc.CONTACT_FIELDS)})')
-    if v[ifc.I_IN_CONTACT] > 0.5 and v[ifc.I_DEPTH] > 0.0:
-        try:
-            fx, fy, fz = model.predict_one(v[0], v[1], v[2], v[ifc.I_DEPTH])
-        except ValueError as exc:  # NaN/Inf in the contact: zero force
-            return 0.0, 0.0, 0.0, str(exc)
-        return fx, fy, fz, None
-    return 0.0, 0.0, 0.0, None
-
-
-def local_model_from_contact(model: ForceModel, v, jacobian=force_and_jacobian, approach=()
-                             ) -> tuple[tuple[float, float, float], list[float], str | None]:
-    """(force (3,) [N], local model message values (:data:`~.interfaces.LOCAL_MODEL_FIELDS`),
-    error or None) for the contact message values ``v``.
-
-    In contact: F0 and J = dF/d(x, y, z, depth) from ``jacobian`` (the model's analytic one when
-    it has it), chained through the contact geometry into K = dF/dp
-    (:func:`~haptic_anfis.device.local_model.contact_jacobian`; the depth column is dropped when
-    the depth is saturated, since the force then no longer grows with it). The older 9-value
-    contact has no normal: the normal is then taken as -direction. Not in contact, or a bad
-    contact: zero force and a model with depth 0 (the driver renders zero) — or, when the
-    contact message's ``approach`` fields (its ``effort``, :data:`~.interfaces.APPROACH_FIELDS`)
-    name the surface ahead of the free probe, the approach model there (:func:`approach_model`)."""
-    if not ifc.is_contact_values(v):
-        return (0.0, 0.0, 0.0), [0.0] * len(ifc.LOCAL_MODEL_FIELDS), force_from_contact(model, v)[3]
-    if not (v[ifc.I_IN_CONTACT] > 0.5 and v[ifc.I_DEPTH] > 0.0):
-        return (0.0, 0.0, 0.0), approach_model(model, v, approach, jacobian), None
-    x, y, z, depth = float(v[0]), float(v[1]), float(v[2]), float(v[ifc.I_DEPTH])
-    d = [float(v[ifc.I_DX]), float(v[ifc.I_DY]), float(v[ifc.I_DZ])]
-    n = [float(c) for c in v[ifc.I_NX:ifc.I_NZ + 1]] if len(v) == len(ifc.CONTACT_FIELDS) else []
-    if len(n) != 3 or not 0.25 < n[0] * n[0] + n[1] * n[1] + n[2] * n[2] < 2.25:
-        n = [-c for c in d]
-    try:
-        F, J = jacobian(model, x, y, z, depth)
-        J = J.tolist()
-        if v[ifc.I_SATURATED] > 0.5:
-            for row in J:
-                row[3] = 0.0
-        K = contact_stiffness(J, n, d)
-        zero = zero_at_surface(model, x, y, z)
-    except ValueError as exc:
-        return (0.0, 0.0, 0.0), [0.0] * len(ifc.LOCAL_MODEL_FIELDS), str(exc)
-    if not math.isfinite(sum(K)):
-        return ((0.0, 0.0, 0.0), [0.0] * len(ifc.LOCAL_MODEL_FIELDS),
-                f'non-finite stiffness at contact ({x}, {y}, {z}, {depth})')
-    lm = [*F, x + depth * d[0], y + depth * d[1], z + depth * d[2], *K, x, y, z, *n, *d, depth,
-          1.0 if zero else 0.0]  # the order of LOCAL_MODEL_FIELDS
-    return F, lm, None
-
-
-def approach_model(model: ForceModel, v, approach, jacobian=force_and_jacobian) -> list[float]:
-    """The local model message values for a free probe: the approach model when ``approach`` holds
-    the surface point s ahead and its outward normal n (:data:`~.interfaces.APPROACH_FIELDS`), the
-    force is zero there (a model with a force step at the surface cannot be rendered from before
-    contact) and everything is finite: F0 = 0, p0 = contact = s, depth 0, K = dF/dp at depth 0+
-    (J at (s, 0) through the geometry: the force the probe meets the instant it crosses the
-    plane); else all zeros (no contact). d: the contact's direction, or -n when it has none."""
-    none = [0.0] * len(ifc.LOCAL_MODEL_FIELDS)
-    if len(approach) != len(ifc.APPROACH_FIELDS):
-        return none
-    sx, sy, sz, nx, ny, nz = (float(c) for c in approach)
-    d = [float(v[ifc.I_DX]), float(v[ifc.I_DY]), float(v[ifc.I_DZ])]
-    nn = nx * nx + ny * ny + nz * nz
-    if not (math.isfinite(sx + sy + sz + sum(d)) and 0.25 < nn < 2.25):
-        return none
-    if not 0.25 < d[0] * d[0] + d[1] * d[1] + d[2] * d[2] < 2.25:
-        d = [-nx, -ny, -nz]
-    try:
-        if not zero_at_surface(model, sx, sy, sz):
-            return none
-        _, J = jacobian(model, sx, sy, sz, APPROACH_DEPTH)  # the one-sided derivative at 0+
-        K = contact_stiffness(J.tolist(), (nx, ny, nz), d)
-    except ValueError:
-        return none
-    if not math.isfinite(sum(K)):
-        return none
-    return [0.0, 0.0, 0.0, sx, sy, sz, *K, sx, sy, sz, nx, ny, nz, *d, 0.0, 1.0]
-
-
-def zero_at_surface(model: ForceModel, x: float, y: float, z: float) -> bool:
-    """The model's force at depth 0 at the contact point (x, y, z) [m] is below
-    :data:`~.interfaces.ZERO_FORCE_TOL`. The depth-scaled form (F = depth g(...)) is exactly zero
-    there by construction: no evaluation needed; any other form is evaluated."""
-    if getattr(model, 'form', None) == 'depth_scaled':
-        return True
-    f0, f1, f2 = model.predict_one(x, y, z, 0.0)
-    return f0 * f0 + f1 * f1 + f2 * f2 < ifc.ZERO_FORCE_TOL ** 2
 
 
 class ForceServer(Node):
@@ -208,7 +102,7 @@ class ForceServer(Node):
         if model is None:  # mid case switch: no force (and a depth-0 model: the driver renders 0)
             fx = fy = fz = 0.0
             error = None
-            values = [0.0] * len(ifc.LOCAL_MODEL_FIELDS)
+            values = no_model()
         elif self.pub_lm is not None:
             (fx, fy, fz), values, error = local_model_from_contact(model, position,
                                                                    approach=effort)

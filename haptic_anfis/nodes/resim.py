@@ -1,15 +1,17 @@
 """Re-simulation: recorded poses through the CURRENT contact tracker and force model, compared with
-the recorded force commands (offline, no ROS publishing). It lives with the nodes because it runs
-their code (the bag layer itself imports no node).
+the recorded force commands (offline, no ROS publishing). It lives with the nodes because it
+resolves their parameters (declarations, ``--params-file`` YAMLs); the bag layer imports no node.
 
 The tracker and model are built by the nodes' own construction code
-(:func:`haptic_anfis.nodes.contact_detector.make_tracker`, :func:`...force_server.load_model`) from
-the same parameters (defaults, ``--params-file`` YAMLs, overrides), and each pose goes through the
-same per-message functions the nodes run (``contact_values``, ``force_from_contact``). The tracker is
-stateful, so it must see exactly the poses the recorded detector saw: the recorded contact messages
-carry their pose's stamp, so when the contact topic is in the bag only those poses are fed (a
-1 kHz detector that fell behind skipped some poses, keep-last-1 QoS); otherwise every pose.
-Identical code and parameters reproduce the recorded wrenches exactly (difference 0 N).
+(:func:`haptic_anfis.pipeline.contact.make_tracker`, :func:`haptic_anfis.pipeline.force.
+load_model`) from the same parameters (defaults, ``--params-file`` YAMLs, overrides), and each pose
+goes through the same per-message functions the nodes run
+(:func:`haptic_anfis.pipeline.replay.pose_to_force`: ``contact_values`` then
+``force_from_contact``). The tracker is stateful, so it must see exactly the poses the recorded
+detector saw: the recorded contact messages carry their pose's stamp, so when the contact topic is
+in the bag only those poses are fed (a 1 kHz detector that fell behind skipped some poses,
+keep-last-1 QoS); otherwise every pose. Identical code and parameters reproduce the recorded
+wrenches exactly (difference 0 N).
 """
 from __future__ import annotations
 
@@ -60,13 +62,15 @@ class ResimResult:
 
 def build_pipeline(params_files=(), contact_overrides=None, force_overrides=None):
     """(contact_detector params, tracker, model path, model) as the nodes would build them."""
+    from ..pipeline.contact import make_tracker
+    from ..pipeline.force import load_model
     from . import contact_detector as cd
     from . import force_server as fs
     from ._common import resolve_parameters
     pc = resolve_parameters(cd.PARAMS, 'contact_detector', params_files, contact_overrides)
     pf = resolve_parameters(fs.PARAMS, 'force_server', params_files, force_overrides)
-    tracker = cd.make_tracker(pc)
-    model_path, model = fs.load_model(pf)
+    tracker = make_tracker(pc)
+    model_path, model = load_model(pf)
     return pc, tracker, model_path, model
 
 
@@ -74,8 +78,7 @@ def resimulate(path: str | Path, params_files=(), contact_overrides=None, force_
                pose_topic: str = ifc.TOPIC_POSE, contact_topic: str = ifc.TOPIC_CONTACT,
                wrench_topic: str = ifc.TOPIC_COMMAND) -> ResimResult:
     """Feed the bag's poses through the current tracker and model; compare (see module doc)."""
-    from .contact_detector import contact_values
-    from .force_server import force_from_contact
+    from ..pipeline.replay import pose_to_force
     p = Path(path)
     tp, tc, tw = absolute(pose_topic), absolute(contact_topic), absolute(wrench_topic)
     poses, contacts, wrenches = [], {}, {}
@@ -108,8 +111,7 @@ def resimulate(path: str | Path, params_files=(), contact_overrides=None, force_
     sq = 0.0
     axis = [0.0, 0.0, 0.0]
     for stamp, frame, xyz in feed:
-        values, c, _ = contact_values(tracker, frame_id, frame, xyz)
-        fx, fy, fz, _ = force_from_contact(model, values)
+        values, c, (fx, fy, fz), _ = pose_to_force(tracker, model, frame_id, frame, xyz)
         r.fed += 1
         r.recomputed[stamp] = (fx, fy, fz)
         if c is not None and c.in_contact:

@@ -24,11 +24,12 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from sensor_msgs.msg import JointState
 from visualization_msgs.msg import Marker, MarkerArray
 
+from ..pipeline.contact import load_surface
 from . import cdr
 from . import interfaces as ifc
 from ._case import CASE_PARAMS, apply_case, declare_case  # noqa: F401 (CASE_PARAMS: in config)
 from ._common import Param, declare_parameters, non_negative, positive, run_node
-from .contact_detector import MESH_PARAMS, load_surface
+from .contact_detector import MESH_PARAMS
 from .polled import PolledSubscription
 
 # transient local, deep enough to hold the whole surface's messages for a late subscriber
@@ -271,7 +272,7 @@ class Visualizer(Node):
         """Publish the surface of ``p``'s mesh: as dent patches when ``deform`` and there is
         displacement data, else as one static TRIANGLE_LIST. Raises on a bad mesh (nothing
         changed then)."""
-        mesh = load_surface(self, p)
+        mesh = load_surface(p)
         surface = self._dent_surface(mesh, p) if p['deform'] else None
         if self.surface is not None:  # a case switch: drop the old surface's patches
             clear = Marker(action=Marker.DELETEALL)
