@@ -16,6 +16,10 @@ from typing import IO, Mapping, Sequence
 #: install they are in lib/haptic_anfis/ instead, and nodes are started as modules.
 BIN = Path(sys.executable).parent
 NODES_DIR = Path(__file__).resolve().parent  # this module lives beside the nodes
+#: Set by a session runner in its node processes' environment: the session checked the parameters
+#: against every one of its nodes (a global key only another node declares is then no error in
+#: the node's own check, ``haptic_anfis.nodes.runtime.check_node_arguments``).
+SESSION_CHECKED = 'HAPTIC_ANFIS_SESSION_CHECKED'
 
 
 @functools.lru_cache(maxsize=1)

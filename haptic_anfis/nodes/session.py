@@ -134,7 +134,7 @@ class SessionMonitor:
         import rclpy
         from rclpy.context import Context
 
-        from .graph import make_executor_for
+        from .executor import make_executor
         self.ctx = Context()
         from rclpy.signals import SignalHandlerOptions
 
@@ -151,7 +151,7 @@ class SessionMonitor:
                                       QoSProfile(depth=100, history=HistoryPolicy.KEEP_LAST,
                                                  reliability=ReliabilityPolicy.RELIABLE,
                                                  durability=DurabilityPolicy.TRANSIENT_LOCAL))
-        self.executor = make_executor_for(self.ctx)
+        self.executor = make_executor(self.ctx)
         self.executor.add_node(self.node)
 
     def _on_status(self, msg: String) -> None:

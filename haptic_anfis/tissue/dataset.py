@@ -20,6 +20,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from ..errors import HapticAnfisError
 
 INPUT_COLUMNS = ('x_m', 'y_m', 'z_m', 'depth_m')
 OUTPUT_COLUMNS = ('fx_N', 'fy_N', 'fz_N')
@@ -31,7 +32,7 @@ DATA_DIR = Path(__file__).resolve().parents[1] / 'data'  # haptic_anfis/data
 DEFAULT_DATASET = DATA_DIR / 'default_forces.csv'
 
 
-class DatasetError(ValueError):
+class DatasetError(HapticAnfisError, ValueError):
     """A dataset file is missing, malformed or holds non-finite numbers."""
 
 

@@ -18,6 +18,7 @@ from typing import Any
 
 import numpy as np
 import yaml
+from ..errors import HapticAnfisError
 
 MM = 1e-3
 KPA = 1e3
@@ -43,7 +44,7 @@ SCENE_DIR = _scene_dir()
 DEFAULT_SCENE = SCENE_DIR / 'default.yaml'
 
 
-class SceneError(ValueError):
+class SceneError(HapticAnfisError, ValueError):
     """A scene file is missing, malformed or physically inconsistent."""
 
 
