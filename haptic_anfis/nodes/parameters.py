@@ -245,6 +245,8 @@ def read_parameter_file(path: str | Path) -> list[Entry]:
             not ``node: {ros__parameters: {name: value}}``.
     """
     import yaml
+
+    from ..yamlfile import yaml_error
     path = Path(path)
     try:
         text = path.read_text()
@@ -254,10 +256,7 @@ def read_parameter_file(path: str | Path) -> list[Entry]:
     try:
         root = yaml.compose(text, Loader=yaml.SafeLoader)
     except yaml.YAMLError as exc:
-        mark = getattr(exc, 'problem_mark', None) or getattr(exc, 'context_mark', None)
-        line = f':{mark.line + 1}' if mark is not None else ''
-        problem = getattr(exc, 'problem', None) or str(exc).splitlines()[0]
-        raise ParameterError(f'{path}{line}: not valid YAML: {problem}') from None
+        raise ParameterError(str(yaml_error(path, exc))) from None
     out: list[Entry] = []
     if root is None:
         return out

@@ -3,7 +3,9 @@
 spins, shuts down quietly)."""
 from __future__ import annotations
 
+import os
 import sys
+import time
 from typing import Any, Callable
 
 import rclpy
@@ -12,10 +14,14 @@ from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from .executor import make_executor, settle_gc
 from .parameters import ParameterError
-from .processes import SESSION_CHECKED
+from .processes import HOLD_FOR_RECORDER, SESSION_CHECKED
 
 __all__ = ['LOOP_QOS', 'stamp_ns', 'set_stamp', 'interrupted', 'run_node', 'message_class',
-           'check_node_arguments']
+           'check_node_arguments', 'hold_until_recorder_matched', 'HOLD_TIMEOUT_S']
+
+#: [s] the longest a restarted node holds its output for the recorder (then it goes on, warned:
+#: a killed process's endpoints stay listed until their DDS lease runs out)
+HOLD_TIMEOUT_S = 3.0
 
 #: QoS of the 1 kHz loop topics: reliable, keep only the newest sample (a late one is useless).
 LOOP_QOS = QoSProfile(depth=1, history=HistoryPolicy.KEEP_LAST,
@@ -70,6 +76,9 @@ def run_node(factory: Callable[[], Any], args=None) -> int:
                 return _interrupted_while_starting()
             raise
         try:
+            recorder = os.environ.get(HOLD_FOR_RECORDER)
+            if recorder:  # a restart in a recording session: nothing unrecorded leaves this node
+                hold_until_recorder_matched(node, recorder)
             node.readiness = Readiness(node)
             executor = make_executor()
             executor.add_node(node)
@@ -128,6 +137,36 @@ def check_node_arguments(factory: Callable, args) -> list[str]:
     return check_parameter_sources({name: params}, files, overrides, nodes=[name],
                                    whole_session=False,
                                    strict_globals=not os.environ.get(SESSION_CHECKED))
+
+
+def hold_until_recorder_matched(node, recorder: str = 'recorder',
+                                timeout: float = HOLD_TIMEOUT_S, poll: float = 0.01) -> bool:
+    """Before ``node`` spins (so none of its callbacks publishes yet): wait until every
+    publisher of ``node`` on a topic the node ``recorder`` subscribes to has matched all the
+    subscriptions the graph shows on that topic, the recorder's among them. A node restarted
+    in a recording session would otherwise publish (force commands the driver applies) before
+    the recorder had matched it, and the bag would miss its first seconds. True when matched,
+    False (warned) after ``timeout`` s."""
+    from .session import INFRA_TOPICS
+    pubs = [p for p in node.publishers if p.topic_name not in INFRA_TOPICS]
+    end = time.monotonic() + timeout
+    pending: list[str] = []
+    while True:
+        if recorder in node.get_node_names():
+            pending = []
+            for p in pubs:
+                subs = node.get_subscriptions_info_by_topic(p.topic_name)
+                if any(i.node_name == recorder for i in subs) and \
+                        p.get_subscription_count() < len(subs):
+                    pending.append(p.topic_name)
+            if not pending:
+                return True
+        if time.monotonic() > end:
+            node.get_logger().warning(
+                f'publishing after {timeout:g} s although the {recorder} may not have matched '
+                + (', '.join(pending) if pending else 'this node (not seen in the graph)'))
+            return False
+        time.sleep(poll)
 
 
 def _interrupted_while_starting() -> int:

@@ -186,7 +186,7 @@ class ProcessSession:
 
     def _handle_deaths(self) -> bool:
         """Restart what died and may be restarted; False when the session must stop."""
-        from ..nodes.processes import renamed_output
+        from ..nodes.processes import HOLD_FOR_RECORDER, renamed_output
         s, sup = self.spec, self.sup
         for name, code in sup.dead():
             self.say('died', node=name, code=code)
@@ -197,7 +197,9 @@ class ProcessSession:
                 self.say('stopping', node=name, reason=why)
                 self.result.failed.append((name, code))
                 return False
-            p = sup.restart(name, renamed_output if name == 'recorder' else None)
+            hold = {HOLD_FOR_RECORDER: 'recorder'} if 'recorder' in self.extra and \
+                name != 'recorder' else None  # its output waits until the recorder matched it
+            p = sup.restart(name, renamed_output if name == 'recorder' else None, env=hold)
             self.say('restarted', node=name, pid=p.pid, restarts=sup.restarts[name])
             if name == 'recorder':
                 self._replay_pending, self._replay_known = True, self.mon.subscriber_gids()
