@@ -33,7 +33,8 @@ def run(args: argparse.Namespace) -> int:
     from ..nodes.side_nodes import SideNodeError
     from ..session import OneProcessSession, spec_from_args
     from ..session.spec import ONE_PROCESS_NODES
-    session = OneProcessSession(spec_from_args(args, NAME, nodes=ONE_PROCESS_NODES))
+    spec = spec_from_args(args, NAME, nodes=ONE_PROCESS_NODES)
+    session = OneProcessSession(spec)
     try:
         graph = session.start()
     except SideNodeError as exc:
@@ -43,8 +44,11 @@ def run(args: argparse.Namespace) -> int:
         if not session.wait_ready():
             return 1
         from ..nodes.session import process_age
+        model = getattr(graph.force, 'model_path', None)
         print(f'ready after {process_age():.1f} s; running the haptic graph for '
-              f'{args.duration:g} s (one process, EventsExecutor{session.where()})', flush=True)
+              f'{args.duration:g} s (one process, EventsExecutor{session.where()})'
+              + (f'; force model {model}' if model and not spec.random_case else ''),
+              flush=True)
         graph.spin_for(args.duration)
     except KeyboardInterrupt:
         print('interrupted', flush=True)

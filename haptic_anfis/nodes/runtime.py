@@ -58,7 +58,13 @@ def run_node(factory: Callable[[], Any], args=None) -> int:
         for e in errors:
             print(f'error: {e}', file=sys.stderr, flush=True)
         return 1
-    rclpy.init(args=args)
+    from rclpy.signals import SignalHandlerOptions
+
+    # SIGINT (Ctrl-C, a launcher's stop) raises KeyboardInterrupt here instead of shutting the
+    # context down under the node: its close() then still logs to /rosout (no "publisher's
+    # context is invalid") before the node and the context go, in that order. SIGTERM stays
+    # rclpy's (a quiet stop while still importing).
+    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.SIGTERM)
     node = executor = None
     code = 0
     try:

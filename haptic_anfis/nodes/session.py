@@ -84,11 +84,10 @@ class Readiness:
         self._msg.data = json.dumps(d)
         self.pub.publish(self._msg)
         text = f"{state} after {d['t']:.1f} s" + (f': {detail}' if detail else '')
-        # rclpy refuses one call site logging at two severities: one call per severity
-        if state == 'waiting':
-            self.node.get_logger().warning(text)
-        else:
-            self.node.get_logger().info(text)
+        # INFO, also for 'waiting': a session stopping in order (the driver first) takes the
+        # inputs of the nodes still running away, and a clean stop warns of nothing; a node
+        # that really died mid-session is reported by the launcher (session/events).
+        self.node.get_logger().info(text)
 
     def _check(self) -> None:
         cond: Callable | None = getattr(self.node, 'ready_condition', None)
