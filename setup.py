@@ -96,6 +96,9 @@ setup(
         ],
         'test': [
             'pytest>=8',
+            # test_wheel_resources builds the package's wheel offline (--no-build-isolation):
+            # bdist_wheel for the setuptools in this environment
+            'wheel==0.44.0',
             'pytest-timeout>=2.3',
             'hypothesis>=6.100',
             'colcon-common-extensions==0.3.0',

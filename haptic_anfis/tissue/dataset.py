@@ -28,7 +28,7 @@ COLUMNS = ('point', *INPUT_COLUMNS, *OUTPUT_COLUMNS)
 INPUT_NAMES = ('x', 'y', 'z', 'depth')
 OUTPUT_NAMES = ('Fx', 'Fy', 'Fz')
 
-DATA_DIR = Path(__file__).resolve().parents[1] / 'data'  # haptic_anfis/data
+from ..resources import DATA_DIR  # noqa: E402  (haptic_anfis/data, package data)
 DEFAULT_DATASET = DATA_DIR / 'default_forces.csv'
 
 
