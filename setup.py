@@ -26,7 +26,8 @@ setup(
     name=PACKAGE,
     version='0.1.0',
     packages=find_packages(exclude=['test', 'test.*']),
-    package_data={PACKAGE: ['data/*.csv', 'data/*.json', 'data/*.stl',
+    package_data={PACKAGE: ['py.typed',  # PEP 561: the package's type hints are for its users
+                            'data/*.csv', 'data/*.json', 'data/*.stl',
                             # the case library (haptic-anfis cases list)
                             'data/cases/*.stl', 'data/cases/*/*.csv', 'data/cases/*/*.json',
                             'data/cases/*/*.npz']},
