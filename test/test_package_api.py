@@ -20,10 +20,10 @@ def test_py_typed_ships_and_every_package_declares_all():
 
 
 def _error_classes():
-    """(module, class name) of every class named *Error defined in the package."""
+    """(module, class name) of every class named *Error / *Failed defined in the package."""
     for f in sorted(PKG.rglob('*.py')):
         for node in ast.walk(ast.parse(f.read_text())):
-            if isinstance(node, ast.ClassDef) and node.name.endswith('Error'):
+            if isinstance(node, ast.ClassDef) and node.name.endswith(('Error', 'Failed')):
                 mod = '.'.join(f.relative_to(PKG.parent).with_suffix('').parts)
                 yield mod.removesuffix('.__init__'), node.name
 
