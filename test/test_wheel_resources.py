@@ -48,11 +48,13 @@ def test_an_installed_wheel_finds_its_config_and_data(tmp_path):
     venv = tmp_path / 'venv'
     subprocess.run([sys.executable, '-m', 'venv', '--without-pip', str(venv)], check=True,
                    timeout=120)
-    subprocess.run([*pip, 'install', '--no-deps', '--prefix', str(venv), str(whl)], check=True,
-                   capture_output=True, timeout=300)
     py = venv / 'bin' / 'python'
     site = subprocess.run([str(py), '-c', 'import site; print(site.getsitepackages()[0])'],
                           check=True, capture_output=True, text=True).stdout.strip()
+    # Installed as pip lays a wheel out (purelib -> site-packages, .data/data -> the prefix), by
+    # hand: pip run from this environment would first UNINSTALL the package from this
+    # environment (it sees it installed here, even with --prefix).
+    _install_wheel(whl, Path(site), venv)
     deps = [p for p in sys.path if p.endswith('site-packages')]
     (Path(site) / 'deps.pth').write_text('\n'.join(deps) + '\n')  # numpy, yaml, ...
     env = {'PATH': '/usr/bin:/bin', 'HOME': str(tmp_path)}  # no PYTHONPATH, no ament prefix
@@ -63,3 +65,19 @@ def test_an_installed_wheel_finds_its_config_and_data(tmp_path):
     assert Path(r['package']).is_relative_to(venv), r
     for f in r['files']:
         assert Path(f).is_file() and Path(f).is_relative_to(venv), f  # not the source tree's
+
+
+def _install_wheel(whl: Path, site: Path, prefix: Path) -> None:
+    """Lay ``whl`` out like pip: its package into ``site``, ``*.data/data/...`` under ``prefix``
+    (``share/haptic_anfis/config`` ...), ``*.data/purelib`` into ``site``."""
+    import zipfile
+    with zipfile.ZipFile(whl) as z:
+        for name in z.namelist():
+            top, _, rest = name.partition('/')
+            if top.endswith('.data'):
+                kind, _, rel = rest.partition('/')
+                dest = (prefix if kind == 'data' else site) / rel
+            else:
+                dest = site / name
+            dest.parent.mkdir(parents=True, exist_ok=True)
+            dest.write_bytes(z.read(name))

@@ -153,9 +153,7 @@ def _run_sim(args):
         print('interrupted', flush=True)
     finally:
         session.stop()
-    r = session.recorded()
-    if r is not None:
-        print(f"recorded       {r['written']} messages to {r['output']} (dropped {r['dropped']})")
+    session.print_recorded()
     report = examiner.report()
     report['trainee'] = {'name': args.trainee, 'detections': [
         {'y_mm': round(d.y * 1e3, 2), 'z_mm': round(d.z * 1e3, 2),
