@@ -50,6 +50,8 @@ def test_rejected_value_and_overrides_are_checked_like_files():
         '-p max_force:=-1.0: falcon_driver: max_force: -1.0: expected a finite value > 0',
         "-p max_forse:=2.0: unknown parameter 'max_forse': no node of this session "
         "(falcon_driver, force_server) declares it (did you mean 'max_force'?)"]
+    # rcl reads 1e3 as a double (YAML 1.1 would say a string): accepted as rclpy would
+    assert check_parameter_sources(DECLARED, [], parse_overrides(['-p', 'rate:=1e3'])) == []
     with pytest.raises(ParameterError, match='expected -p name:=value'):
         parse_overrides(['-p', 'max_force'])
 

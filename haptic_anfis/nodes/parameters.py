@@ -233,6 +233,20 @@ def _nearest(word: str, known: Iterable[str], what: str = '') -> str:
 
 # -- parameter files ----------------------------------------------------------------------------
 
+def _loader():
+    """PyYAML's SafeLoader reading numbers as rcl does: ``1e3`` (no decimal point) is a double
+    there, a string for YAML 1.1."""
+    import re
+
+    import yaml
+
+    class RclLoader(yaml.SafeLoader):
+        pass
+    RclLoader.add_implicit_resolver('tag:yaml.org,2002:float',
+                                    re.compile(r'^[-+]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)[eE][-+]?[0-9]+$'),
+                                    list('-+0123456789.'))
+    return RclLoader
+
 Entry = tuple[str, str, Any, str]  # (node section, parameter name, value, 'file:line')
 
 
@@ -254,7 +268,7 @@ def read_parameter_file(path: str | Path) -> list[Entry]:
         raise ParameterError(f'{path}: cannot read the parameter file: '
                              f'{exc.strerror or exc}') from None
     try:
-        root = yaml.compose(text, Loader=yaml.SafeLoader)
+        root = yaml.compose(text, Loader=_loader())
     except yaml.YAMLError as exc:
         raise ParameterError(str(yaml_error(path, exc))) from None
     out: list[Entry] = []
@@ -267,7 +281,7 @@ def read_parameter_file(path: str | Path) -> list[Entry]:
     if not isinstance(root, yaml.MappingNode):
         raise ParameterError(f'{at(root)}: expected node names at the top level '
                              '(node_name: {ros__parameters: {...}})')
-    loader = yaml.SafeLoader('')
+    loader = _loader()('')
     for k, sec in root.value:
         section = str(loader.construct_object(k))
         if not isinstance(sec, yaml.MappingNode):
@@ -314,7 +328,7 @@ def parse_overrides(args: Sequence[str]) -> list[tuple[str, Any, str]]:
         if not sep or not name:
             raise ParameterError(f'-p {arg}: expected -p name:=value')
         try:
-            v = yaml.safe_load(text) if text.strip() else ''
+            v = yaml.load(text, Loader=_loader()) if text.strip() else ''
         except yaml.YAMLError:
             v = text
         out.append((name, v, f'-p {arg}'))
