@@ -31,24 +31,25 @@ def _candidates() -> list[Path]:
     return out
 
 
-def config_dir(sub: str = '') -> Path:
-    """The shipped ``config/`` directory (or its sub-directory ``sub``, e.g. 'scenes'): the first
-    candidate that has it; else the source tree's path (so a 'not found' names a real place)."""
+def _first(name: str, kind: str) -> Path:
+    """``name`` in the first candidate directory where it is a ``kind`` ('dir' / 'file'); else
+    in the source tree's (so a 'not found' names a real place)."""
     cands = _candidates()
     for c in cands:
-        if (c / sub).is_dir():
-            return c / sub
-    return cands[0] / sub
+        p = c / name
+        if (p.is_dir() if kind == 'dir' else p.is_file()):
+            return p
+    return cands[0] / name
+
+
+def config_dir(sub: str = '') -> Path:
+    """The shipped ``config/`` directory (or its sub-directory ``sub``, e.g. 'scenes')."""
+    return _first(sub, 'dir')
 
 
 def config_file(name: str) -> Path:
-    """A file shipped in ``config/`` (``name`` may hold a sub-directory: 'scenes/default.yaml'):
-    the first candidate directory that has it; else the source tree's path."""
-    cands = _candidates()
-    for c in cands:
-        if (c / name).is_file():
-            return c / name
-    return cands[0] / name
+    """A file shipped in ``config/`` (``name`` may hold a sub-directory: 'scenes/default.yaml')."""
+    return _first(name, 'file')
 
 
 def data_file(name: str) -> Path:

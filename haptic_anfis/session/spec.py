@@ -226,17 +226,10 @@ class SessionSpec:
         return self
 
     def _check_case(self) -> None:
-        from ..cases.library import CaseError, get_case, random_case
-        if self.random_case:
-            if self.case:
-                raise CaseError('give --case NAME or --random-case --seed N, not both')
-            if self.seed is None or self.seed < 0:
-                raise CaseError(f'--random-case needs --seed N with N >= 0, got {self.seed}')
-            random_case(self.seed)  # a ready case exists
-        elif self.seed is not None:
-            raise CaseError('--seed is for --random-case')
-        elif self.case and self.command != 'exam':
-            get_case(self.case)
+        if self.command == 'exam':  # exam run resolves its --case (a case or a scene file)
+            return
+        from ..cases.library import case_node_arguments
+        case_node_arguments(self)  # the spec has the case options' fields: the same checks
 
     def check_parameters(self, nodes: Sequence[str] | None = None) -> None:
         """The parameter files and the user's ``-p`` overrides against the declarations of
