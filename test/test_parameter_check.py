@@ -92,8 +92,9 @@ def test_read_parameter_file_flattens_nested_names_with_lines(tmp_path):
 def test_resolve_parameters_rejects_an_unknown_key_of_the_nodes_own_section(tmp_path):
     """bag resim / loop read the files without rclpy: a misspelling is no longer ignored."""
     f = _write(tmp_path, 'force_server:\n  ros__parameters:\n    case: ""\n    modle_path: x\n')
-    with pytest.raises(ParameterError, match=r":4: force_server: unknown parameter 'modle_path' "
-                                             r"\(did you mean 'model_path'\?\)"):
+    with pytest.raises(ParameterError, match=r"^force_server: bad parameters: .*:4: unknown "
+                                             r"parameter 'modle_path' \(did you mean "
+                                             r"'model_path'\?\)$"):
         resolve_parameters(DECLARED['force_server'][:1], 'force_server', [f])
     g = _write(tmp_path, 'force_server:\n  ros__parameters:\n    model_path: m.json\n', 'g.yaml')
     assert resolve_parameters(DECLARED['force_server'][:1], 'force_server', [g]) == \

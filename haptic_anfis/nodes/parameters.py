@@ -208,8 +208,7 @@ def resolve_parameters(params: list[Param], node_name: str, params_files=(),
         for section, key, v, where in read_parameter_file(f):
             if section in ('/**', node_name, '/' + node_name):
                 if section != '/**' and key not in allowed and not key.startswith('qos_overrides.'):
-                    errors.append(f'{where}: {node_name}: unknown parameter {key!r}'
-                                  + _nearest(key, allowed))
+                    errors.append(f'{where}: unknown parameter {key!r}' + _nearest(key, allowed))
                 given[key] = v
     given.update(overrides or {})
     for name, v in given.items():
