@@ -60,11 +60,13 @@ def run_node(factory: Callable[[], Any], args=None) -> int:
         return 1
     from rclpy.signals import SignalHandlerOptions
 
-    # SIGINT (Ctrl-C, a launcher's stop) raises KeyboardInterrupt here instead of shutting the
-    # context down under the node: its close() then still logs to /rosout (no "publisher's
-    # context is invalid") before the node and the context go, in that order. SIGTERM stays
-    # rclpy's (a quiet stop while still importing).
+    # SIGINT (Ctrl-C, a launcher's stop) is ours, not rclpy's: rclpy's handler shut the context
+    # down under the node, whose close() then failed to log ("publisher's context is invalid").
+    # While the node is being built it raises KeyboardInterrupt (a long compile stops at once);
+    # once it spins it only ends the spin loop (raised inside a callback it was logged FATAL),
+    # so close() logs and the node and the context go, in that order. SIGTERM stays rclpy's.
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.SIGTERM)
+    stop = _SigintStop()
     node = executor = None
     code = 0
     try:
@@ -89,7 +91,8 @@ def run_node(factory: Callable[[], Any], args=None) -> int:
             executor = make_executor()
             executor.add_node(node)
             settle_gc()
-            while rclpy.ok() and not getattr(node, 'finished', False):
+            stop.spinning = True
+            while rclpy.ok() and not stop.requested and not getattr(node, 'finished', False):
                 executor.spin_once(timeout_sec=0.05)
         except (KeyboardInterrupt, ExternalShutdownException):
             pass
@@ -102,12 +105,41 @@ def run_node(factory: Callable[[], Any], args=None) -> int:
     except KeyboardInterrupt:  # a second Ctrl-C while shutting down
         pass
     finally:
-        if node is not None:
-            if hasattr(node, 'close'):
-                node.close()
-            node.destroy_node()
-        rclpy.try_shutdown()
+        stop.spinning = False  # a second Ctrl-C while closing: KeyboardInterrupt, as before
+        try:
+            if node is not None:
+                if hasattr(node, 'close'):
+                    node.close()
+                node.destroy_node()
+            rclpy.try_shutdown()
+        finally:
+            stop.restore()
     return code
+
+
+class _SigintStop:
+    """run_node's SIGINT handler: KeyboardInterrupt unless ``spinning``, then only
+    ``requested`` (the spin loop checks it every 50 ms)."""
+
+    def __init__(self):
+        import signal
+        import threading
+        self.spinning = False
+        self.requested = False
+        self._previous = None
+        if threading.current_thread() is threading.main_thread():
+            self._previous = signal.signal(signal.SIGINT, self._on_sigint)
+
+    def _on_sigint(self, signum, frame) -> None:
+        if not self.spinning:
+            raise KeyboardInterrupt
+        self.requested = True
+
+    def restore(self) -> None:
+        if self._previous is not None:
+            import signal
+            signal.signal(signal.SIGINT, self._previous)
+            self._previous = None
 
 
 def check_node_arguments(factory: Callable, args) -> list[str]:
