@@ -49,3 +49,34 @@ def test_a_restarted_node_holds_its_output_until_the_recorder_matched_it():
     with _node('force_server') as alone:  # no recorder on the domain: gives up, warned
         alone.create_publisher(String, '/falcon/servo_cf_test', 10)
         assert not hold_until_recorder_matched(alone, 'recorder', timeout=0.3)
+
+
+def test_a_node_stopped_with_sigint_closes_without_a_warning(tmp_path):
+    """Issue 27.6: the visualizer (timers at 30 Hz) stopped as a session stops it: exit 0, no
+    warning, no FATAL callback exception, nothing about an invalid context."""
+    import os
+    import signal
+    import time
+    from pathlib import Path
+
+    from haptic_anfis.nodes.processes import node_env, start_node
+    root = Path(__file__).resolve().parents[1]
+    log = tmp_path / 'visualizer.log'
+    env = {**node_env(int(os.environ['ROS_DOMAIN_ID']) + 1, localhost=True),
+           'PYTHONPATH': str(root)}
+    p = start_node('visualizer', env=env, log=log.open('w'))
+    try:
+        end = time.monotonic() + 180
+        while 'started after' not in log.read_text() and time.monotonic() < end \
+                and p.poll() is None:
+            time.sleep(0.1)
+        time.sleep(1.0)  # its timers run
+        p.send_signal(signal.SIGINT)
+        assert p.wait(60) == 0, log.read_text()
+    finally:
+        if p.poll() is None:
+            p.kill()
+    text = log.read_text()
+    assert 'interrupted while starting' not in text, text  # it was running
+    for bad in ('[WARN]', '[ERROR]', '[FATAL]', 'Failed to publish', 'Traceback'):
+        assert bad not in text, text
