@@ -26,7 +26,8 @@ setup(
     name=PACKAGE,
     version='0.1.0',
     packages=find_packages(exclude=['test', 'test.*']),
-    package_data={PACKAGE: ['data/*.csv', 'data/*.json', 'data/*.stl',
+    package_data={PACKAGE: ['py.typed',  # PEP 561: the package's type hints are for its users
+                            'data/*.csv', 'data/*.json', 'data/*.stl',
                             # the case library (haptic-anfis cases list)
                             'data/cases/*.stl', 'data/cases/*/*.csv', 'data/cases/*/*.json',
                             'data/cases/*/*.npz']},
@@ -96,6 +97,9 @@ setup(
         ],
         'test': [
             'pytest>=8',
+            # test_wheel_resources builds the package's wheel offline (--no-build-isolation):
+            # bdist_wheel for the setuptools in this environment
+            'wheel==0.44.0',
             'pytest-timeout>=2.3',
             'hypothesis>=6.100',
             'colcon-common-extensions==0.3.0',

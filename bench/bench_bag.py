@@ -23,10 +23,10 @@ sys.path.insert(0, str(ROOT))
 
 def loop_run(seconds: float, bag: Path | None) -> tuple[dict, dict | None]:
     from haptic_anfis.bag.topics import ALL_LOOP_TOPICS
-    from haptic_anfis.nodes.graph import build_graph
+    from haptic_anfis.session import open_graph
     from haptic_anfis.nodes.recorder import Recorder
     extra = [lambda ctx: Recorder(context=ctx, output=str(bag), topics=ALL_LOOP_TOPICS)] if bag else []
-    g = build_graph(['bench'], visualizer=False, extra=extra)
+    g = open_graph(extra=extra, program='bench')
     try:
         if not g.spin_for(30.0, lambda: g.driver.first_command is not None):
             raise RuntimeError('no force command within 30 s')

@@ -56,8 +56,8 @@ def usb_gaps(seconds: float) -> np.ndarray:
 
 
 def graph_gaps(seconds: float) -> np.ndarray:
-    from haptic_anfis.nodes.graph import build_graph
-    g = build_graph(['bench_jitter'], visualizer=False)
+    from haptic_anfis.session import open_graph
+    g = open_graph(program='bench_jitter')
     stamps: list[float] = []
     dev = g.driver.device
     write = dev.write

@@ -51,12 +51,12 @@ CPU: dict = {}
 def one_process(seconds: float, mode: str, trace: Path) -> None:
     from rclpy.parameter import Parameter
 
-    from haptic_anfis.nodes.graph import build_graph
+    from haptic_anfis.session import open_graph
     # a domain of its own: another session's graph on the default domain would feed this driver
     # its commands (refused as unknown / future stamps, but taking this process's time)
     os.environ['ROS_DOMAIN_ID'] = str(100 + os.getpid() % 50)
     os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
-    g = build_graph(['bench'], visualizer=False, overrides={'falcon_driver': [
+    g = open_graph(program='bench', overrides={'falcon_driver': [
         Parameter('force_mode', value=mode), Parameter('trace_path', value=str(trace)),
         *(Parameter(k, value=v) for k, v in DRIVER_PARAMS.items())],
         'contact_detector': [Parameter(k, value=v) for k, v in CONTACT_PARAMS.items()]})

@@ -110,7 +110,7 @@ def one_process(minutes: float, interval: float, workdir: Path, freeze: bool = T
 
     from haptic_anfis.bag.reader import recorded_summary
     from haptic_anfis.bag.topics import ALL_LOOP_TOPICS
-    from haptic_anfis.nodes.graph import build_graph
+    from haptic_anfis.session import open_graph
     from haptic_anfis.nodes.recorder import Recorder
     from haptic_anfis.nodes.processes import recorder_arguments
     from haptic_anfis.nodes.side_nodes import SideNodes, hold_until_recorded
@@ -119,7 +119,7 @@ def one_process(minutes: float, interval: float, workdir: Path, freeze: bool = T
     over = {'falcon_driver': [Parameter('force_mode', value=force_mode)]} if force_mode else None
     extra = [lambda ctx: Recorder(context=ctx, output=str(bag), topics=ALL_LOOP_TOPICS)] \
         if in_process else []
-    g = build_graph(None, visualizer=False, overrides=over, extra=extra)
+    g = open_graph(overrides=over, extra=extra)
     side = SideNodes({} if in_process else {'recorder': recorder_arguments(bag, ALL_LOOP_TOPICS)})
     try:
         side.start(300.0)
@@ -130,7 +130,7 @@ def one_process(minutes: float, interval: float, workdir: Path, freeze: bool = T
         st = g.driver.servo.stats
         st.reset()
         rec = g.extra[0] if in_process else None
-        if not freeze:  # for comparison: what build_graph's gc.freeze() avoids
+        if not freeze:  # for comparison: what open_graph's gc.freeze() avoids
             gc.unfreeze()
         pauses = GcPauses()
         print(f'one process + recorder ({"in the same process" if in_process else "own process"}), '
@@ -178,7 +178,7 @@ def multi_process(minutes: float, interval: float, workdir: Path,
     from haptic_anfis.nodes.processes import node_env
     from haptic_anfis.nodes import interfaces as ifc
     from haptic_anfis.nodes._common import LOOP_QOS, stamp_ns
-    from haptic_anfis.nodes.graph import make_executor_for
+    from haptic_anfis.nodes.executor import make_executor
     domain = 170 + os.getpid() % 40
     bag, out = workdir / 'multi_process_bag', workdir / 'launch.out'
     env = node_env(domain, localhost=True)
@@ -204,7 +204,7 @@ def multi_process(minutes: float, interval: float, workdir: Path,
     node.create_subscription(WrenchStamped, ifc.TOPIC_COMMAND,
                              lambda m: lats.append((time.time_ns() - stamp_ns(m.header.stamp))
                                                    * 1e-9), LOOP_QOS)
-    ex = make_executor_for(ctx)
+    ex = make_executor(ctx)
     ex.add_node(node)
     try:
         end = time.monotonic() + 300

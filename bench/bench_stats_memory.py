@@ -31,7 +31,7 @@ def main() -> int:
     ap.add_argument('--list', action='store_true', help='also keep every latency in a list')
     a = ap.parse_args()
     from haptic_anfis.device.stats import LoopStats
-    from haptic_anfis.nodes.graph import build_graph
+    from haptic_anfis.session import open_graph
     if a.list:
         kept: list[float] = []
         real = LoopStats.latency
@@ -42,7 +42,7 @@ def main() -> int:
         LoopStats.latency = latency
     print(f'driver memory, {"with" if a.list else "without"} a latency list, {a.seconds:g} s, '
           f'load average {os.getloadavg()[0]:.2f}')
-    g = build_graph(['bench'], visualizer=False)
+    g = open_graph(program='bench')
     try:
         if not g.spin_for(60.0, lambda: g.driver.first_command is not None):
             raise RuntimeError('no force command within 60 s')

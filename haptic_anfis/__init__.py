@@ -18,4 +18,6 @@ from .numba_cache import configure as _configure_numba_cache  # noqa: E402
 
 _configure_numba_cache()
 
-__version__ = '0.1.0'
+from ._version import __version__  # noqa: E402
+
+__all__ = ['__version__']

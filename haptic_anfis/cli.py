@@ -13,6 +13,14 @@ import pkgutil
 import sys
 
 from . import __version__, commands
+from .errors import HapticAnfisError
+
+__all__ = ['build_parser', 'main', 'EXIT_ERROR']
+
+#: exit status of a command that failed on bad input or a failed operation (the package's
+#: HapticAnfisError, or a ValueError / OSError): one line on standard error, no traceback.
+#: (argparse's own usage errors exit with 2.)
+EXIT_ERROR = 1
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -41,9 +49,11 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print('interrupted', file=sys.stderr)
         return 130
-    except (ValueError, OSError) as exc:  # bad input: say what, no traceback
-        print(f'haptic-anfis {args.command}: error: {exc}', file=sys.stderr)
-        return 1
+    except (HapticAnfisError, ValueError, OSError) as exc:  # bad input: say what, no traceback
+        # one line per problem (a parameter check lists each bad file line / parameter)
+        for line in str(exc).splitlines() or [type(exc).__name__]:
+            print(f'haptic-anfis {args.command}: error: {line}', file=sys.stderr)
+        return EXIT_ERROR
 
 
 if __name__ == '__main__':

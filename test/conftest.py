@@ -8,9 +8,15 @@ import numpy as np
 import pytest
 from hypothesis import settings
 
-# Isolation for any test that touches ROS 2 (set before rclpy is imported anywhere).
-os.environ.setdefault('ROS_DOMAIN_ID', str(40 + os.getpid() % 50))
+# Isolation for any test that touches ROS 2 (set before rclpy is imported anywhere): ALWAYS a
+# domain of the test run's own, never an inherited ROS_DOMAIN_ID (a user's session on that domain
+# and the tests corrupted each other: issue 27.5), and discovery on this machine only. The id
+# comes from the pid, in 40-89 (the cross-process tests take theirs in 60-119 and 120-199); a
+# session started by a test refuses a domain where another session's driver already runs.
+TEST_DOMAIN_ID = 40 + os.getpid() % 50
+os.environ['ROS_DOMAIN_ID'] = str(TEST_DOMAIN_ID)
 os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+os.environ.pop('ROS_STATIC_PEERS', None)  # no discovery of peers outside this machine
 
 settings.register_profile('ci', derandomize=True, deadline=None, max_examples=60)
 settings.load_profile('ci')

@@ -1,7 +1,7 @@
 """A failing disk while recording (issue 21 item 2), emulated with a file-size limit (RLIMIT_FSIZE)
 in a child process: the failure is reported at once, the bag left behind opens with ``bag info`` and
 holds every message up to the failure, a fallback directory takes over without losing any, and the
-recorder node exits by itself with status 1 and a one-line ERROR."""
+recorder node says so in one ERROR line and stays up without recording (issue 27.1)."""
 from __future__ import annotations
 
 import json
@@ -99,7 +99,12 @@ rclpy = pytest.importorskip('rclpy')
 
 
 @pytest.mark.ros
-def test_recorder_node_stops_with_status_1_and_one_error_line(tmp_path):
+def test_recorder_node_says_so_once_and_stays_up_without_recording(tmp_path):
+    """Issue 27.1: a full disk never stops the session. The recorder seals its bag, says so in
+    one ERROR line, stays up (a launch has nothing to restart into the same full disk) and exits
+    with status 1 when the session stops it."""
+    import signal
+
     from geometry_msgs.msg import PoseStamped
 
     from test_bag import _pose_publisher
@@ -119,21 +124,54 @@ def test_recorder_node_stops_with_status_1_and_one_error_line(tmp_path):
         msg = PoseStamped()
         msg.header.frame_id = 'tissue'
         i = 0
+        failed_at = None
         end = time.monotonic() + 60
-        while proc.poll() is None and time.monotonic() < end:  # until the recorder gives up
+        while proc.poll() is None and time.monotonic() < end:
             msg.pose.position.x = float(i)
             pub.publish(msg)
             i += 1
             time.sleep(0.0005)
+            if failed_at is None and i % 200 == 0 and 'STOPPED' in logf.read_text():
+                failed_at = time.monotonic()
+            if failed_at is not None and time.monotonic() - failed_at > 1.0:
+                break
+        assert failed_at is not None, logf.read_text()
+        assert proc.poll() is None, 'the recorder stopped: ' + logf.read_text()
+        proc.send_signal(signal.SIGINT)
         code = proc.wait(20)
     text = logf.read_text()
     assert code == 1, text
-    errors = [ln for ln in text.splitlines() if '[ERROR]' in ln]
-    assert any('File too large' in ln and 'STOPPED' in ln for ln in errors), text
+    errors = [ln for ln in text.splitlines() if 'File too large' in ln]
+    assert len(errors) == 1 and 'STOPPED' in errors[0] and 'without recording' in errors[0], text
     assert 'Traceback' not in text
     xs = _xs(bag)
     assert len(xs) > 100 and xs == [float(k) for k in range(len(xs))]
     assert bag_info(bag).message_count == len(xs)
+
+
+def test_restart_names_do_not_nest(monkeypatch, tmp_path):
+    """The recorder's restarts write BAG.restart1, BAG.restart2 (not BAG.restart1.restart2)."""
+    from haptic_anfis.nodes import processes
+
+    started = []
+
+    class FakeProc:
+        pid, returncode = 1, None
+
+        def poll(self):
+            return None
+    monkeypatch.setattr(processes, 'start_node',
+                        lambda name, args, **kw: started.append((list(args), kw['env'])) or
+                        FakeProc())
+    sup = processes.Supervisor({'A': '1'}, max_restarts=3)
+    first = processes.recorder_arguments(tmp_path / 'bag', ['/contact'])
+    sup.start('recorder', first)
+    sup.restart('recorder', processes.renamed_output)
+    sup.restart('recorder', processes.renamed_output, env={'B': '2'})
+    outs = [next(a for a in args if a.startswith('output:=')) for args, _ in started]
+    assert outs == [f'output:={tmp_path / "bag"}', f'output:={tmp_path / "bag"}.restart1',
+                    f'output:={tmp_path / "bag"}.restart2']
+    assert started[2][1] == {'A': '1', 'B': '2'} and started[1][1] == {'A': '1'}
 
 
 @pytest.mark.ros

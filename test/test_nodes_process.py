@@ -146,11 +146,14 @@ def test_graph_across_processes(tmp_path):
 
 
 @pytest.mark.parametrize('node, args, match', [
-    ('falcon_driver', ['-p', 'max_force:=-1.0'], "'max_force' = -1.0: expected a finite value > 0"),
-    ('falcon_driver', ['-p', 'rate:=1000'], "'rate': expected a double"),
+    ('falcon_driver', ['-p', 'max_force:=-1.0'], 'max_force: -1.0: expected a finite value > 0'),
+    ('falcon_driver', ['-p', 'rate:=1000'], 'rate: got 1000 (an integer), expected a double'),
+    ('falcon_driver', ['-p', 'max_force:=lots'],
+     "max_force: got 'lots' (a string), expected a double such as 8.9"),
+    ('force_server', ['-p', 'modle_path:=x'], "unknown parameter 'modle_path'"),
     ('falcon_driver', ['-p', 'palpation_script:=/nonexistent.yaml'], 'nonexistent.yaml'),
     ('force_server', ['-p', 'model_path:=/nonexistent/model.json'], 'model.json'),
-    ('contact_detector', ['-p', 'mesh_unit:=cm'], "'mesh_unit' = 'cm'"),
+    ('contact_detector', ['-p', 'mesh_unit:=cm'], "mesh_unit: 'cm': expected one of"),
 ])
 def test_bad_parameters_exit_nonzero_with_clear_message(tmp_path, node, args, match):
     domain = next(_domains)

@@ -46,14 +46,28 @@ def test_sim_in_process_keeps_the_one_interpreter_layout(capfd, tmp_path):
     assert last['recorded_messages'] > 0 and last['dropped_messages'] == 0
 
 
-def test_a_side_node_that_fails_to_start_is_named_and_the_sim_stops(capfd):
+def test_a_side_node_that_fails_to_start_is_named_and_the_sim_stops(capfd, tmp_path):
     from haptic_anfis.cli import main
-    # mesh_alpha belongs to the visualizer alone (the in-process nodes do not declare it)
-    assert main(['sim', '--duration', '1', '--ready-timeout', '60', '--', '--ros-args',
-                 '-p', 'mesh_alpha:=5.0']) == 1
+    # a mesh for the visualizer alone (its own section); a missing file is found only when the
+    # node loads it (the parameter check before the start sees a string, as it should)
+    params = tmp_path / 'vis.yaml'
+    params.write_text(f"visualizer:\n  ros__parameters:\n    mesh_path: "
+                      f"'{tmp_path / 'no_such_mesh.stl'}'\n")
+    assert main(['sim', '--duration', '1', '--ready-timeout', '60', '--params-file',
+                 str(params)]) == 1
     cap = capfd.readouterr()
     assert 'not ready: visualizer exited with code 1 while starting' in cap.out, cap.out
-    assert 'mesh_alpha' in cap.err
+    assert 'no_such_mesh' in cap.err
+
+
+def test_a_bad_parameter_value_is_refused_before_any_node_starts(capfd):
+    from haptic_anfis.cli import main
+    assert main(['sim', '--duration', '1', '--', '--ros-args', '-p', 'mesh_alpha:=5.0']) == 1
+    cap = capfd.readouterr()
+    assert cap.err.strip().splitlines() == [
+        'haptic-anfis sim: error: -p mesh_alpha:=5.0: visualizer: mesh_alpha: 5.0: expected '
+        '0 <= value <= 1'], cap.err
+    assert 'started' not in cap.out + cap.err
 
 
 def test_the_release_gate_holds_the_hand_after_the_first_force_command():

@@ -18,7 +18,7 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from .. import __version__
+from .._version import __version__
 from ..tissue.dataset import (INPUT_NAMES, OUTPUT_NAMES, DatasetError, ForceDataset, fold_indices,
                        split_indices)
 from . import compiled

@@ -29,6 +29,7 @@ from typing import Any
 import numpy as np
 
 from .sugeno import SugenoModel
+from ..errors import HapticAnfisError
 
 FORMAT = 'haptic_anfis.force_model'
 FORMAT_VERSION = 2
@@ -39,7 +40,7 @@ READABLE_VERSIONS = (1, 2)
 MAX_ABS_INPUT_M = 1.0
 
 
-class ModelFileError(ValueError):
+class ModelFileError(HapticAnfisError, ValueError):
     """A model file is missing, of another format or version, malformed, or non-finite."""
 
 

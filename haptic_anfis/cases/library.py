@@ -21,6 +21,7 @@ from pathlib import Path
 
 from ..tissue.dataset import DATA_DIR
 from ..tissue.scene import SCENE_DIR, Scene, SceneError, load_scene
+from ..errors import HapticAnfisError
 
 DEFAULT_CASE = 'default'
 #: radii of the default scene's breast [mm]: its surface is the package's default_surface.stl
@@ -28,7 +29,7 @@ _DEFAULT_RADII_MM = (45, 70, 70)
 _NAME = re.compile(r'^[a-z0-9][a-z0-9_-]{0,63}$')
 
 
-class CaseError(ValueError):
+class CaseError(HapticAnfisError, ValueError):
     """A case name is unknown, or a case lacks a file it needs; the message names the case and
     the field (scene, dataset_path, model_path, mesh_path)."""
 

@@ -8,13 +8,15 @@ from typing import Any
 from ..tissue.dataset import DEFAULT_DATASET, load_dataset
 from .train import load_config, parse_structure
 
+from ..resources import config_file
+
 NAME = 'bench'
 HELP = 'benchmarks (printed, never asserted): "model" = speed against error of the ANFIS models'
 
 #: Structures of the default form (depth-scaled over y, z, depth); 'A/B/C' = one per output (Fx,
 #: Fy, Fz); 'search' = the structure search; 'config' = config/force_model.yaml's structure.
 DEFAULT_STRUCTURES = ('config', '3-3-2', '7-7-2')
-CONFIG = Path(__file__).resolve().parents[2] / 'config' / 'force_model.yaml'
+CONFIG = config_file('force_model.yaml')
 
 
 def parse_structures(text: str) -> Any:

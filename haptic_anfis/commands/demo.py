@@ -50,4 +50,10 @@ def run(args: argparse.Namespace) -> int:
           f'p99 {np.percentile(single, 99) * 1e6:.2f} µs')
     print(f'   batch: {rate:.3g} evaluations/s (paper: ~1e5/s)')
     print(f'== model written to {Path(path)}')
+    from ..tissue.dataset import DATA_DIR
+    print(f'   (a session runs the shipped model, {DATA_DIR / "default_model.json"}, unless '
+          f"given this one: haptic-anfis sim --ros-args -p model_path:={Path(path)})")
+    print('== next: haptic-anfis sim --duration 10 --record out/demo_session  (the haptic graph '
+          'with the simulated Falcon),\n   haptic-anfis exam run --trainee systematic  (a scored '
+          'examination), haptic-anfis cases list  (the case library)')
     return 0

@@ -28,25 +28,16 @@ HEADLINE = ('coverage_pct', 'duration_s', 'contact_s', 'path_length_m', 'hits', 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     sub = p.add_subparsers(dest='exam_command', metavar='{run,report}', required=True)
     r = sub.add_parser('run', help='run the graph with the examiner and a simulated trainee')
-    r.add_argument('--case', default=None, metavar='NAME',
-                   help='case of the library (haptic-anfis cases list: its model, surface and '
-                        'lesions) or a scene file (its lesions, default model) (default: default)')
+    from ..session import add_session_arguments
+    add_session_arguments(r, NAME)
     r.add_argument('--trainee', default='systematic', metavar='systematic|careless|SCRIPT',
                    help='simulated trainee: systematic, careless or a palpation script (YAML)')
     r.add_argument('--speed', type=float, default=None,
                    help="the trainee's speed along the tissue [m/s] (default: the script's)")
-    r.add_argument('--duration', type=float, default=None,
-                   help='stop after this many seconds (default: when the trainee is done, '
-                        'at most 300 s)')
-    r.add_argument('--record', metavar='BAG', default=None,
-                   help='record the session (loop topics + marks) to this new bag directory')
     r.add_argument('--force-mode', choices=('zoh', 'local_model'), default='zoh',
                    help="the falcon_driver's force_mode for the exam (default zoh: on the shared "
                         '2-core machine the one-process exam graph in local_model mode fell to a '
                         '~280 Hz servo and starved the examiner, see the README)')
-    r.add_argument('--params-file', action='append', default=[], metavar='YAML',
-                   help='ROS 2 parameter file for the nodes (repeatable; the exam sets the '
-                        "driver's palpation_script and force_mode itself)")
     _common(r)
     b = sub.add_parser('report', help='score a recorded session bag')
     b.add_argument('bag', metavar='BAG')
@@ -105,23 +96,24 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
+#: the nodes of an exam session (the simulated trainee is the driver's simulated hand)
+EXAM_NODES = ('falcon_driver', 'contact_detector', 'force_server', 'examiner')
+
+
 def _run_sim(args):
     from rclpy.parameter import Parameter
 
     from ..exam.trainee import TraineeController, trainee_path
-    from ..nodes._common import ParameterError
     from ..nodes.examiner import Examiner
-    from ..nodes.graph import build_graph
     from ..nodes.sim_trainee import SimTrainee
-    if args.record and Path(args.record).exists():
-        raise ValueError(f'--record {args.record}: exists already; a recording needs a new '
-                         'directory')
-    if args.duration is not None and not (args.duration > 0 and math.isfinite(args.duration)):
-        raise ValueError(f'--duration: expected > 0 s, got {args.duration}')
+    from ..session import OneProcessSession, spec_from_args
     if args.speed is not None and not (args.speed > 0 and math.isfinite(args.speed)):
         raise ValueError(f'--speed: expected > 0 m/s, got {args.speed}')
     from ..tissue.scene import load_scene
-    case, scene = resolve_exam_case(args.case)
+    case, scene = resolve_exam_case(args.case or None)
+    spec = spec_from_args(args, NAME, nodes=EXAM_NODES, case=case.name if case else '',
+                          scene=scene or '')
+    spec.check()
     script = trainee_path(args.trainee)
     sc = load_scene(scene) if scene else None
     # The trainee sees the breast (its size), never the lesions: scripts fit to the case's surface.
@@ -137,27 +129,14 @@ def _run_sim(args):
                  Parameter('exam_config', value=args.exam_config or '')]
     overrides = {'falcon_driver': [Parameter('palpation_script', value=str(fitted)),
                                    Parameter('force_mode', value=args.force_mode)]}
-    if case is not None:   # model, surface and lesions of the case in every node
-        for node in ('contact_detector', 'force_server'):
-            overrides[node] = [Parameter('case', value=case.name)]
-        ex_params.append(Parameter('case', value=case.name))
     extra = [lambda ctx: Examiner(context=ctx, parameter_overrides=ex_params),
              lambda ctx: SimTrainee(controller, context=ctx)]
-    if args.record:
-        from ..bag.topics import ALL_LOOP_TOPICS
-        from ..nodes.recorder import Recorder
-        extra.append(lambda ctx: Recorder(context=ctx, output=args.record, topics=ALL_LOOP_TOPICS))
+    session = OneProcessSession(spec, extra=extra, overrides=overrides, side=False,
+                                hand=controller)
     try:
-        ros_args = ['--ros-args', *[a for f in args.params_file for a in ('--params-file', f)]] \
-            if args.params_file else []
-        graph = build_graph(['haptic-anfis-exam', *ros_args], visualizer=False, extra=extra,
-                            overrides=overrides)
-    except ParameterError as exc:
-        raise ValueError(str(exc)) from None
+        graph = session.start()
     finally:
         tmp.cleanup()
-    # The driver's simulated Falcon plays the trainee (same start point as the script it loaded).
-    graph.driver.device.script = controller
     examiner = graph.extra[0]
     limit = args.duration if args.duration is not None else 300.0
     print(f'exam: trainee {args.trainee} ({controller.search.duration:.0f} s search), case '
@@ -173,11 +152,8 @@ def _run_sim(args):
     except KeyboardInterrupt:
         print('interrupted', flush=True)
     finally:
-        graph.shutdown()
-    for n in graph.extra:
-        if hasattr(n, 'writer'):
-            r = n.summary()
-            print(f"recorded       {r['written']} messages to {r['output']} (dropped {r['dropped']})")
+        session.stop()
+    session.print_recorded()
     report = examiner.report()
     report['trainee'] = {'name': args.trainee, 'detections': [
         {'y_mm': round(d.y * 1e3, 2), 'z_mm': round(d.z * 1e3, 2),

@@ -14,145 +14,54 @@ from __future__ import annotations
 import argparse
 import json
 import math
-from pathlib import Path
 
 NAME = 'sim'
 HELP = 'run the haptic node graph in one process with the simulated Falcon and print loop statistics'
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument('--duration', type=float, default=10.0, help='seconds to run (default 10)')
-    p.add_argument('--params-file', action='append', default=[], metavar='YAML',
-                   help='ROS 2 parameter file for the nodes (repeatable), e.g. '
-                        'config/falcon_driver.yaml')
-    p.add_argument('--no-viz', action='store_true', help='leave the visualizer out')
-    p.add_argument('--record', metavar='BAG', default=None,
-                   help='record every loop topic (pose, velocity, applied force, buttons, contact, '
-                        'force command) to this new bag directory (rosbag2, MCAP)')
-    p.add_argument('--in-process', action='store_true',
-                   help='run the visualizer in the haptic loop\'s process too (default: in a '
-                        'process of its own, off the loop\'s interpreter lock)')
-    p.add_argument('--recorder-process', action='store_true',
-                   help='with --record: the recorder in a process of its own (default: in the '
-                        'loop\'s process, which measured cheaper for the loop on 2 cores)')
-    p.add_argument('--ready-timeout', type=float, default=300.0,
-                   help='seconds to wait for the graph to be ready (first force command at the '
-                        'driver) before giving up (default 300)')
+    from ..session import add_session_arguments
+    add_session_arguments(p, NAME)
     p.add_argument('--json', action='store_true',
                    help='end with one line of JSON: rate_hz, latency_p50_ms, latency_p99_ms, '
                         'latency_max_ms, deadline_misses, cycles, max_force_n, contact_s, ...')
-    from ..cases.library import add_case_arguments
-    add_case_arguments(p)
     p.add_argument('ros_args', nargs=argparse.REMAINDER,
                    help='--ros-args ... passed to rclpy (e.g. --ros-args -p rate:=500.0)')
 
 
 def run(args: argparse.Namespace) -> int:
-    if args.record and Path(args.record).exists():
-        raise ValueError(f'--record {args.record}: exists already; a recording needs a new '
-                         'directory')
-    if not (args.duration > 0 and math.isfinite(args.duration)):
-        raise ValueError(f'--duration: expected > 0 s, got {args.duration}')
-    from ..nodes._common import ParameterError
-    from ..nodes.graph import build_graph
-    ros_args = list(args.ros_args or [])
-    if ros_args and ros_args[0] == '--':
-        ros_args = ros_args[1:]
-    from ..cases.library import case_node_arguments
-    case_args = case_node_arguments(args)  # every node of the process gets case / seed
-    if args.params_file or case_args:
-        if '--ros-args' not in ros_args:
-            ros_args = ['--ros-args', *ros_args]
-        for f in args.params_file:
-            ros_args += ['--params-file', f]
-        ros_args += case_args
-    side = _side_nodes(args, ros_args, case_args)
-    extra = []
-    if args.record and not args.recorder_process:
-        from ..bag.topics import ALL_LOOP_TOPICS
-        from ..nodes.recorder import Recorder
-        extra.append(lambda ctx: Recorder(context=ctx, output=args.record,
-                                          topics=ALL_LOOP_TOPICS))
-    try:
-        graph = build_graph(['haptic-anfis-sim', *ros_args],
-                            visualizer=args.in_process and not args.no_viz, extra=extra)
-    except ParameterError as exc:
-        raise ValueError(str(exc)) from None
     from ..nodes.side_nodes import SideNodeError
-    codes: dict[str, int] = {}
+    from ..session import OneProcessSession, spec_from_args
+    from ..session.spec import ONE_PROCESS_NODES
+    spec = spec_from_args(args, NAME, nodes=ONE_PROCESS_NODES)
+    session = OneProcessSession(spec)
     try:
-        # the graph's parameters are valid: start the side nodes (the hand is held meanwhile)
-        side.start(args.ready_timeout)
-        if not _wait_ready(graph, side, args):
-            return 1
-        # Statistics cover the session, not the start (the hand waited, force zero, until now).
-        graph.driver.servo.stats.reset()
-        from ..nodes.session import process_age
-        where = ''.join(f', {n} in pid {pid}' for n, pid in side.pids.items())
-        print(f'ready after {process_age():.1f} s; running the haptic graph for {args.duration:g} s '
-              f'(one process, EventsExecutor{where})', flush=True)
-        graph.spin_for(args.duration)
+        graph = session.start()
     except SideNodeError as exc:
         print(f'not ready: {exc}', flush=True)
         return 1
+    try:
+        if not session.wait_ready():
+            return 1
+        from ..nodes.session import process_age
+        model = getattr(graph.force, 'model_path', None)
+        print(f'ready after {process_age():.1f} s; running the haptic graph for '
+              f'{args.duration:g} s (one process, EventsExecutor{session.where()})'
+              + (f'; force model {model}' if model and not spec.random_case else ''),
+              flush=True)
+        graph.spin_for(args.duration)
     except KeyboardInterrupt:
         print('interrupted', flush=True)
     finally:
-        graph.shutdown()  # the device to zero force first
-        codes = side.stop()  # then the side nodes: the recorder has every message sent to it
+        codes = session.stop()
     summary = graph.summary()
     print_summary(summary)
     for name, code in codes.items():
         print(f'{name:<14} own process, exit code {code}')
-    recorded = None
-    for n in graph.extra:
-        if hasattr(n, 'writer'):
-            recorded = n.summary()
-    if args.record and recorded is None:
-        from ..bag.reader import recorded_summary
-        recorded = recorded_summary(args.record)
-    if recorded is not None:
-        r = recorded
-        print(f"recorded       {r['written']} messages on {len(r['topics'])} topics to "
-              f"{r['output']} (dropped {r['dropped']})")
+    recorded = session.print_recorded()
     if args.json:
         print(json.dumps(json_summary(summary, recorded)), flush=True)
     return 0
-
-
-def _side_nodes(args: argparse.Namespace, ros_args: list[str], case_args: list[str]):
-    """The visualizer (unless ``--in-process``) and, with ``--recorder-process``, the recorder
-    as processes of their own."""
-    from ..nodes.side_nodes import SideNodes
-    common = [a for a in ros_args if a != '--ros-args']  # params files, case, the user's args
-    nodes: dict[str, list[str]] = {}
-    if args.record and args.recorder_process:
-        from ..bag.topics import ALL_LOOP_TOPICS
-        from ..nodes.processes import recorder_arguments
-        nodes['recorder'] = [*common, *recorder_arguments(args.record, ALL_LOOP_TOPICS)]
-    if not args.in_process and not args.no_viz:
-        nodes['visualizer'] = common
-    return SideNodes(nodes)
-
-
-def _wait_ready(graph, side, args: argparse.Namespace) -> bool:
-    """Spin the graph until a force command reached the driver and, with a recorder in its own
-    process, until that recorder subscribes to every loop topic (the hand is held until then, so
-    the bag has the session from its first move). False (said why) on ``--ready-timeout``."""
-    import time
-    end = time.monotonic() + args.ready_timeout
-    if 'recorder' in side.nodes:
-        from ..nodes.side_nodes import hold_until_recorded
-        if not hold_until_recorded(graph, args.ready_timeout):
-            print(f'not ready after {args.ready_timeout:g} s: the recorder has not subscribed '
-                  'to every loop topic' + ''.join(f'; {n} exited with code {c}'
-                                                   for n, c in side.dead()), flush=True)
-            return False
-    if graph.wait_ready(max(end - time.monotonic(), 0.0)) is None:
-        print(f'not ready after {args.ready_timeout:g} s: no force command reached the driver',
-              flush=True)
-        return False
-    return True
 
 
 def json_summary(s: dict, recorded: dict | None = None) -> dict:

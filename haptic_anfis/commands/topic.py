@@ -86,13 +86,13 @@ class _Session:
         import rclpy
         from rclpy.context import Context
 
-        from ..nodes.graph import make_executor_for
+        from ..nodes.executor import make_executor
         self.rclpy = rclpy
         self.ctx = Context()
         rclpy.init(args=['haptic-anfis-topic'], context=self.ctx)
         self.node = rclpy.create_node(f'haptic_anfis_topic_{os.getpid()}', context=self.ctx,
                                       start_parameter_services=False)
-        self.ex = make_executor_for(self.ctx)
+        self.ex = make_executor(self.ctx)
         self.ex.add_node(self.node)
 
     def spin(self, seconds: float, until=None) -> bool:

@@ -53,10 +53,8 @@ def load_config(path: str | None) -> dict:
     """The "force_model" section of a YAML file, checked for unknown keys."""
     if path is None:
         return {}
-    import yaml
-
-    with open(path) as fh:
-        doc = yaml.safe_load(fh) or {}
+    from ..yamlfile import read_yaml
+    doc = read_yaml(path, 'config file') or {}
     section = doc.get('force_model', {}) if isinstance(doc, dict) else None
     if not isinstance(section, dict):
         raise ValueError(f'{path}: expected a mapping under "force_model"')

@@ -29,11 +29,12 @@ from typing import Callable
 
 from .falcon_kinematics import GEOMETRY, G
 from .falcon_usb import FalconError, FalconUSB
+from ..errors import HapticAnfisError
 
 Say = Callable[[str], None]
 
 
-class CheckFailed(Exception):
+class CheckFailed(HapticAnfisError):
     """A check step failed; ``step`` is its number (1-based), the message says why."""
 
     def __init__(self, step: int, message: str):

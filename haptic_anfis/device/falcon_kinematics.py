@@ -42,6 +42,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from ..errors import HapticAnfisError
 
 
 @dataclass(frozen=True)
@@ -80,7 +81,7 @@ G = 9.80665
 GRAVITY_DIRECTION = (0.0, -1.0, 0.0)
 
 
-class KinematicsError(ValueError):
+class KinematicsError(HapticAnfisError, ValueError):
     """A position the legs cannot reach, or angles no position matches."""
 
 

@@ -51,6 +51,7 @@ Normal-mode packets (both directions 16 bytes)
 from __future__ import annotations
 
 from dataclasses import dataclass
+from ..errors import HapticAnfisError
 
 #: FTDI vendor id, and the product id the Falcon's FTDI chip reports.
 VENDOR_ID = 0x0403
@@ -90,7 +91,7 @@ NORMAL_BAUD = 1_456_312
 NORMAL_LATENCY_MS = 1
 
 
-class PacketError(ValueError):
+class PacketError(HapticAnfisError, ValueError):
     """A byte string that is not a well-formed Falcon packet."""
 
 

@@ -50,6 +50,7 @@ from .falcon import Device, DeviceState
 from .falcon_kinematics import (GEOMETRY, WORKSPACE_CENTER, FalconGeometry, KinematicsError,
                                 force_to_torque, forward_kinematics, gravity_force,
                                 inverse_kinematics, ticks_to_angles, torques_to_commands)
+from ..errors import HapticAnfisError
 
 INSTALL_HINT = "pip install 'haptic_anfis[falcon]'"
 #: The force limit used by default [N]: Novint's published specification gives the Falcon's force
@@ -70,7 +71,7 @@ FIRMWARE_HINT = ("the Novint SDK ('nVent') firmware, nvent_firmware.bin — the 
 _log = logging.getLogger(__name__)
 
 
-class FalconError(OSError):
+class FalconError(HapticAnfisError, OSError):
     """The Falcon could not be opened, loaded with firmware, homed or driven (message says why)."""
 
 

@@ -11,8 +11,10 @@ from pathlib import Path
 
 import yaml
 
+from ..resources import config_file
+
 LEVELS = ('light', 'medium', 'deep')
-DEFAULT_CONFIG = Path(__file__).resolve().parents[2] / 'config' / 'exam.yaml'
+DEFAULT_CONFIG = config_file('exam.yaml')  # source tree or installed share dir (resources)
 
 
 @dataclass(frozen=True)

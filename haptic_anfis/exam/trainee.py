@@ -18,24 +18,17 @@ import numpy as np
 import yaml
 
 from ..device.palpation import PalpationScript
+from ..resources import config_dir, config_file
 from .detector import Detection, detect_lumps
 
-TRAINEE_DIR = Path(__file__).resolve().parents[2] / 'config' / 'trainees'
+TRAINEE_DIR = config_dir('trainees')
 TRAINEES = ('systematic', 'careless')
 
 
 def trainee_path(name: str) -> Path:
     """A shipped trainee name (systematic, careless) or a script path -> the YAML path."""
     if name in TRAINEES:
-        p = TRAINEE_DIR / f'{name}.yaml'
-        if not p.is_file():
-            try:
-                from ament_index_python.packages import get_package_share_directory
-                p = Path(get_package_share_directory('haptic_anfis')) / 'config' / 'trainees' / \
-                    f'{name}.yaml'
-            except Exception:
-                pass
-        return p
+        return config_file(f'trainees/{name}.yaml')
     p = Path(name)
     if not p.is_file():
         raise ValueError(f'--trainee {name!r}: expected systematic, careless or a palpation '

@@ -4,3 +4,5 @@ entry (a console script, ``ros2 run haptic_anfis <name>``); ``haptic-anfis sim``
 one process. Topic, message and parameter reference: the README's node table and
 :mod:`haptic_anfis.nodes.interfaces`.
 """
+
+__all__: list[str] = []  # a package of modules, imported by name (haptic_anfis.nodes.<module>)

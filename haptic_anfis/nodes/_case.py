@@ -15,16 +15,9 @@ from typing import Callable
 from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 
 from ..cases import Case, CaseError, resolve_case
-from ._common import Param
+from .parameters import CASE_PARAMS  # declared writable: setting one switches the case
 
-#: Declared writable (not with the read-only rest): setting one on a running node switches case.
-CASE_PARAMS = [
-    Param('case', '', "case of the case library (haptic-anfis cases list; '' = the node's own "
-          'mesh / model parameters, the default scene); writable: setting it on a running node '
-          'switches the case'),
-    Param('random_case_seed', -1, 'draw a ready case from the library with this seed (-1 = '
-          'off); the case name is not logged; writable like case'),
-]
+__all__ = ['CASE_PARAMS', 'declare_case', 'describe', 'apply_case']
 
 
 def declare_case(node, switch: Callable[[Case | None], None]) -> Case | None:

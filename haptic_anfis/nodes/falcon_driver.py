@@ -307,7 +307,8 @@ class FalconDriver(Node):
         why = self.input.command(f, stamp, frame, now)
         if self.input.mode == 'zoh':
             self._arrived(why, stamp)
-        if why != OK:
+        if why != OK and not (why.endswith(STALE) and self.first_command is None):
+            # (stale answers queued while the graph started are counted, not warned of)
             self.get_logger().warning(f'force command {why}: {f} in frame {frame!r}; '
                                       + ('not taken' if 'stamp' in why else 'applying zero force'),
                                       throttle_duration_sec=1.0)
@@ -328,7 +329,7 @@ class FalconDriver(Node):
             self.input.renderer.clear()
             self.safety.reject(why)
         self._arrived(why, stamp)
-        if why != OK:
+        if why != OK and not (why.endswith(STALE) and self.first_command is None):
             self.get_logger().warning(f'local force model {why}', throttle_duration_sec=1.0)
 
     def _malformed(self, why: str) -> None:

@@ -46,6 +46,11 @@ class Graph:
                 return True
         return False
 
+    def set_hand(self, script) -> None:
+        """The simulated Falcon's hand plays ``script`` (an object with the palpation script's
+        interface, e.g. :class:`~haptic_anfis.exam.trainee.TraineeController`) from now on."""
+        self.driver.device.script = script
+
     def summary(self) -> dict:
         s = {'loop': self.driver.summary(), 'contact': self.contact.summary(),
              'force': self.force.summary()}
@@ -76,7 +81,6 @@ def build_graph(args: list[str] | None = None, visualizer: bool = True,
     """
     from rclpy.context import Context
 
-    from ._common import make_executor
     from .contact_detector import ContactDetectorNode
     from .falcon_driver import FalconDriver
     from .force_server import ForceServer
@@ -109,9 +113,9 @@ def build_graph(args: list[str] | None = None, visualizer: bool = True,
             n.destroy_node()
         rclpy.try_shutdown(context=ctx)
         raise
-    from ._common import settle_gc
+    from .executor import make_executor, settle_gc
     from .session import Readiness
-    ex = make_executor_for(ctx)
+    ex = make_executor(ctx)
     for n in made:
         n.readiness = Readiness(n)
         ex.add_node(n)
@@ -119,6 +123,8 @@ def build_graph(args: list[str] | None = None, visualizer: bool = True,
     return Graph(ctx, ex, driver, contact, force, vis, extra=extra_nodes)
 
 
-def make_executor_for(context):
-    from rclpy.experimental import EventsExecutor
-    return EventsExecutor(context=context)
+
+
+#: the package's one executor factory (:func:`haptic_anfis.nodes.executor.make_executor`), under
+#: the name the tests and benchmarks used
+from .executor import make_executor as make_executor_for  # noqa: E402

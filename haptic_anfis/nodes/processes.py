@@ -16,6 +16,14 @@ from typing import IO, Mapping, Sequence
 #: install they are in lib/haptic_anfis/ instead, and nodes are started as modules.
 BIN = Path(sys.executable).parent
 NODES_DIR = Path(__file__).resolve().parent  # this module lives beside the nodes
+#: Set by a session runner in its node processes' environment: the session checked the parameters
+#: against every one of its nodes (a global key only another node declares is then no error in
+#: the node's own check, ``haptic_anfis.nodes.runtime.check_node_arguments``).
+SESSION_CHECKED = 'HAPTIC_ANFIS_SESSION_CHECKED'
+#: Set by a session runner for a RESTARTED node when the session records: the name of the
+#: recorder node; the node holds its output until the recorder has matched its publishers
+#: (``haptic_anfis.nodes.runtime.hold_until_recorder_matched``), so the bag misses none of it.
+HOLD_FOR_RECORDER = 'HAPTIC_ANFIS_HOLD_FOR_RECORDER'
 
 
 @functools.lru_cache(maxsize=1)
@@ -117,18 +125,22 @@ class Supervisor:
         self.stream, self.nice = stream, nice
         self.procs: dict[str, subprocess.Popen] = {}
         self.args: dict[str, list[str]] = {}
+        self.first_args: dict[str, list[str]] = {}
         self.started_at: dict[str, float] = {}
         self.restarts: dict[str, int] = {}
         self.logs: dict[str, IO] = {}
 
-    def start(self, name: str, args: Sequence[str] = ()) -> subprocess.Popen:
+    def start(self, name: str, args: Sequence[str] = (), env: Mapping[str, str] | None = None
+              ) -> subprocess.Popen:
         import time
         log = self.stream
         if self.log_dir is not None:
             log = self.logs.get(name) or (self.log_dir / f'{name}.log').open('w')
             self.logs[name] = log
-        p = start_node(name, list(args), env=self.env, log=log, own_session=True, nice=self.nice)
+        p = start_node(name, list(args), env={**self.env, **(env or {})}, log=log,
+                       own_session=True, nice=self.nice)
         self.procs[name], self.args[name] = p, list(args)
+        self.first_args.setdefault(name, list(args))
         self.started_at[name] = time.monotonic()
         self.restarts.setdefault(name, 0)
         return p
@@ -140,14 +152,18 @@ class Supervisor:
     def may_restart(self, name: str) -> bool:
         return self.restarts.get(name, 0) < self.max_restarts
 
-    def restart(self, name: str, rename=None) -> subprocess.Popen:
-        """Start ``name`` again (``rename(args, n) -> args`` for restart number ``n``)."""
+    def restart(self, name: str, rename=None, env: Mapping[str, str] | None = None
+                ) -> subprocess.Popen:
+        """Start ``name`` again (``rename(args, n) -> args`` for restart number ``n``, applied
+        to the FIRST start's arguments: names do not nest, ``X.restart2`` follows
+        ``X.restart1``); ``env``: variables added for this start."""
         self.restarts[name] = n = self.restarts.get(name, 0) + 1
-        args = self.args[name] if rename is None else rename(self.args[name], n)
+        first = self.first_args.get(name, self.args[name])
+        args = list(first) if rename is None else rename(first, n)
         if self.log_dir is not None:
             self.logs[name].write(f'\n--- restart {n} ---\n')
             self.logs[name].flush()
-        return self.start(name, args)
+        return self.start(name, args, env=env)
 
     def stop_all(self, order: Sequence[str], starting: Sequence[str] = ()) -> dict[str, int]:
         """Stop every node, in ``order`` first (SIGINT, then kill after a timeout); nodes in

@@ -14,7 +14,8 @@ metadata.yaml; after a crash at most ``flush_period`` s (plus the queue) are los
 A write failure (disk full, file-size limit, I/O error) is logged at ERROR the moment the writer
 thread meets it; the bag is sealed up to its last whole chunk (``bag info`` opens it). With
 ``fallback_output_dir`` the recording continues in a bag of the same name there; without, the node
-ends with exit status 1 (a launch sees it) after the one-line message.
+stays up without recording (the haptic session goes on; a restart would meet the same full disk)
+and exits with status 1 when stopped.
 """
 from __future__ import annotations
 
@@ -49,7 +50,8 @@ PARAMS = [
           'ones are dropped and counted', positive),
     Param('qos_depth', 1000, 'history depth of the (reliable) recording subscriptions', positive),
     Param('fallback_output_dir', '', "if writing the bag fails (disk full, I/O error): continue "
-          "in a new bag of the same name in this directory ('' = stop, exit status 1)"),
+          "in a new bag of the same name in this directory ('' = stop recording, stay up, exit "
+          'status 1 at the end)'),
     Param('compression', 'zstd', 'MCAP chunk compression: zstd (level 1; 3.6x smaller, releases '
           'the GIL), lz4 (2.9x; stalls other threads, the servo thread too, for much of its '
           'compress time) or none', lambda v: None if v in COMPRESSIONS else
@@ -149,11 +151,15 @@ class Recorder(Node):
         return inputs_matched(self, self.wanted)
 
     def _on_write_error(self, message: str) -> None:
-        """From the writer thread, at the failure: say it now; stop if nothing continues."""
-        self.get_logger().error(message)
+        """From the writer thread, at the failure: say it now, once. Without a fallback the
+        node stays up without recording (a recording failure never stops the haptic session,
+        and a restarted recorder would only meet the same full disk); it exits with status 1
+        when the session stops it."""
         if not hasattr(self, 'writer') or self.writer.failed:
             self.exit_code = 1
-            self.finished = True  # run_node stops spinning: the process exits with status 1
+            self._stop.set()  # no more taking: nothing can be written
+            message += '; the session goes on without recording'
+        self.get_logger().error(message)
 
     def summary(self) -> dict:
         return {'output': str(self.output), 'topics': sorted(self.subs), **self.writer.stats()}

@@ -84,11 +84,10 @@ class Readiness:
         self._msg.data = json.dumps(d)
         self.pub.publish(self._msg)
         text = f"{state} after {d['t']:.1f} s" + (f': {detail}' if detail else '')
-        # rclpy refuses one call site logging at two severities: one call per severity
-        if state == 'waiting':
-            self.node.get_logger().warning(text)
-        else:
-            self.node.get_logger().info(text)
+        # INFO, also for 'waiting': a session stopping in order (the driver first) takes the
+        # inputs of the nodes still running away, and a clean stop warns of nothing; a node
+        # that really died mid-session is reported by the launcher (session/events).
+        self.node.get_logger().info(text)
 
     def _check(self) -> None:
         cond: Callable | None = getattr(self.node, 'ready_condition', None)
@@ -134,7 +133,7 @@ class SessionMonitor:
         import rclpy
         from rclpy.context import Context
 
-        from .graph import make_executor_for
+        from .executor import make_executor
         self.ctx = Context()
         from rclpy.signals import SignalHandlerOptions
 
@@ -151,7 +150,7 @@ class SessionMonitor:
                                       QoSProfile(depth=100, history=HistoryPolicy.KEEP_LAST,
                                                  reliability=ReliabilityPolicy.RELIABLE,
                                                  durability=DurabilityPolicy.TRANSIENT_LOCAL))
-        self.executor = make_executor_for(self.ctx)
+        self.executor = make_executor(self.ctx)
         self.executor.add_node(self.node)
 
     def _on_status(self, msg: String) -> None:

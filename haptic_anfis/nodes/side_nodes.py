@@ -18,14 +18,15 @@ import sys
 import time
 from typing import Mapping, Sequence
 
-from .processes import Supervisor, node_env
+from .processes import SESSION_CHECKED, Supervisor, node_env
+from ..errors import HapticAnfisError
 
 
 #: CPU priority of the side nodes (nice): they yield the cores to the loop's threads
 SIDE_NICE = 10
 
 
-class SideNodeError(RuntimeError):
+class SideNodeError(HapticAnfisError, RuntimeError):
     """A side node exited or said nothing before the timeout (the message names it)."""
 
 
@@ -35,8 +36,9 @@ class SideNodes:
     def __init__(self, nodes: Mapping[str, Sequence[str]], nice: int = SIDE_NICE):
         self.nodes = {n: list(a) for n, a in nodes.items()}
         # the user's domain and discovery range: the side nodes join the graph the user sees
-        self.sup = Supervisor(node_env(localhost=False), max_restarts=0, stream=sys.stderr,
-                              nice=nice)
+        env = node_env(localhost=False)
+        env[SESSION_CHECKED] = '1'  # the session checked their parameters against all its nodes
+        self.sup = Supervisor(env, max_restarts=0, stream=sys.stderr, nice=nice)
         self._mon = None
 
     def __bool__(self) -> bool:

@@ -35,7 +35,7 @@ def _best_peer(res: dict[str, Any]) -> dict[str, Any] | None:
 
 
 def speed_vs_error(res: dict[str, Any], path: Path) -> str:
-    from .run import HAPTIC_BUDGET_US, PAPER_EVALS_PER_S
+    from .targets import HAPTIC_BUDGET_US, PAPER_EVALS_PER_S
     plt = _plt()
     fig, ax = plt.subplots(figsize=(7.5, 4.6))
     ok = [r for r in res['rows'] if r['status'] == 'ok']

@@ -7,3 +7,5 @@
 - :mod:`.sweep`: parallel, resumable sweep into a :class:`~haptic_anfis.tissue.dataset.ForceDataset`.
 - :mod:`.validation`: Sneddon and Hayes et al. flat-punch references; :mod:`.report`: plots.
 """
+
+__all__: list[str] = []  # a package of modules, imported by name (haptic_anfis.tissue.<module>)

@@ -20,6 +20,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from ..errors import HapticAnfisError
 
 INPUT_COLUMNS = ('x_m', 'y_m', 'z_m', 'depth_m')
 OUTPUT_COLUMNS = ('fx_N', 'fy_N', 'fz_N')
@@ -27,11 +28,11 @@ COLUMNS = ('point', *INPUT_COLUMNS, *OUTPUT_COLUMNS)
 INPUT_NAMES = ('x', 'y', 'z', 'depth')
 OUTPUT_NAMES = ('Fx', 'Fy', 'Fz')
 
-DATA_DIR = Path(__file__).resolve().parents[1] / 'data'  # haptic_anfis/data
+from ..resources import DATA_DIR  # noqa: E402  (haptic_anfis/data, package data)
 DEFAULT_DATASET = DATA_DIR / 'default_forces.csv'
 
 
-class DatasetError(ValueError):
+class DatasetError(HapticAnfisError, ValueError):
     """A dataset file is missing, malformed or holds non-finite numbers."""
 
 

@@ -31,6 +31,7 @@ from pathlib import Path
 from typing import Any, Sequence
 
 import numpy as np
+from ..errors import HapticAnfisError
 
 GRID_VERSION = 1
 #: sample radii over the probe radius: dense across the probe edge, geometric outside.
@@ -42,7 +43,7 @@ COMPONENTS = ('axial', 'radial', 'tangential')
 SUFFIX = '.displacement.npz'
 
 
-class DisplacementDataError(ValueError):
+class DisplacementDataError(HapticAnfisError, ValueError):
     """A displacement file is missing, malformed, or belongs to another dataset."""
 
 

@@ -20,9 +20,10 @@ import numpy as np
 
 from .mesh import Domain, HexMesh, build_mesh, tumour_fractions
 from .scene import Scene, surface_height
+from ..errors import HapticAnfisError
 
 
-class FESolveError(RuntimeError):
+class FESolveError(HapticAnfisError, RuntimeError):
     """The load path could not be followed even with the smallest allowed increment."""
 
 

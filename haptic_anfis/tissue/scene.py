@@ -19,31 +19,17 @@ from typing import Any
 import numpy as np
 import yaml
 
+from ..errors import HapticAnfisError
+from ..resources import config_dir
+
 MM = 1e-3
 KPA = 1e3
 
-
-
-def _scene_dir() -> Path:
-    """config/scenes of the source tree, else of the installed share dir (colcon / pip)."""
-    src = Path(__file__).resolve().parents[2] / 'config' / 'scenes'
-    if src.is_dir():
-        return src
-    try:
-        from ament_index_python.packages import get_package_share_directory
-
-        return Path(get_package_share_directory('haptic_anfis')) / 'config' / 'scenes'
-    except Exception:  # no ament index: fall back to the install prefix's share dir
-        import sys
-
-        return Path(sys.prefix) / 'share' / 'haptic_anfis' / 'config' / 'scenes'
-
-
-SCENE_DIR = _scene_dir()
+SCENE_DIR = config_dir('scenes')  # source tree or installed share dir (resources)
 DEFAULT_SCENE = SCENE_DIR / 'default.yaml'
 
 
-class SceneError(ValueError):
+class SceneError(HapticAnfisError, ValueError):
     """A scene file is missing, malformed or physically inconsistent."""
 
 

@@ -1,0 +1,163 @@
+"""Runner 1: the session's haptic graph in ONE process (``sim``, ``exam run``, the benchmarks).
+
+falcon_driver (1 kHz servo thread) -> contact_detector -> force_server -> falcon_driver on one
+EventsExecutor (:func:`haptic_anfis.nodes.graph.build_graph`), the recorder in the loop's process
+(or, ``recorder_process``, in one of its own) and the visualizer in a process of its own (or,
+``in_process``, in the loop's): :class:`OneProcessSession` starts them in that order, holds the
+simulated hand until everything is ready, and stops them with the device at zero force first.
+"""
+from __future__ import annotations
+
+import time
+from typing import Callable, Sequence
+
+from .spec import SessionSpec
+
+__all__ = ['OneProcessSession', 'open_graph', 'RECORDED_TOPICS']
+
+
+def _recorded_topics() -> tuple[str, ...]:
+    from ..bag.topics import ALL_LOOP_TOPICS
+    return tuple(ALL_LOOP_TOPICS)
+
+
+#: what the one-process recorder records: every loop topic (a function: no ROS import here)
+RECORDED_TOPICS = _recorded_topics
+
+
+def open_graph(spec: SessionSpec | None = None, *, overrides: dict | None = None, extra=(),
+               program: str = 'haptic-anfis', visualizer: bool | None = None):
+    """Build the one-process graph of ``spec`` (its parameter files, case and ``-p`` overrides;
+    default: a plain sim) and return the :class:`~haptic_anfis.nodes.graph.Graph`, not spinning
+    yet. ``overrides``: {node: [rclpy Parameter]}; ``extra``: factories ``f(context) -> Node``
+    built before the driver. The benchmarks and tests use this instead of ``build_graph``.
+
+    Raises:
+        ParameterError: a node rejected its parameters (nothing is left running).
+    """
+    from ..nodes.graph import build_graph
+    spec = spec or SessionSpec(nodes=('falcon_driver', 'contact_detector', 'force_server'))
+    args = [*spec.params_arguments(), *spec.user_ros_args(), *spec.case_arguments()]
+    return build_graph([program, '--ros-args', *args] if args else [program],
+                       visualizer=spec.visualizer and spec.in_process
+                       if visualizer is None else visualizer,
+                       overrides=overrides, extra=extra)
+
+
+class OneProcessSession:
+    """Start, hold until ready, and stop a one-process session.
+
+    ``hand``: a script object the simulated Falcon's hand plays instead of its
+    ``palpation_script`` (``exam run``: the simulated trainee). Use: ``s =
+    OneProcessSession(spec, extra=..., overrides=...)``; ``graph = s.start()``;
+    ``s.wait_ready()``; spin ``graph`` as the command needs; ``s.stop()`` (always, in a
+    ``finally``); then :meth:`recorded` for the recorder's summary.
+    """
+
+    def __init__(self, spec: SessionSpec, *, extra: Sequence[Callable] = (),
+                 overrides: dict | None = None, side: bool = True, hand=None):
+        self.spec, self.overrides, self.hand = spec, overrides, hand
+        self.extra = list(extra)
+        self.graph = None
+        self.codes: dict[str, int] = {}
+        if spec.record and not spec.recorder_process:
+            self.extra.append(self._recorder)
+        self.side = self._side_nodes() if side else None
+
+    def _recorder(self, ctx):
+        from ..nodes.recorder import Recorder
+        return Recorder(context=ctx, output=self.spec.record, topics=RECORDED_TOPICS())
+
+    def _side_nodes(self):
+        """The visualizer (unless ``in_process`` / ``no_viz``) and, with ``recorder_process``,
+        the recorder as processes of their own."""
+        from ..nodes.side_nodes import SideNodes
+        s = self.spec
+        common = [*s.params_arguments(), *s.user_ros_args()]
+        nodes: dict[str, list[str]] = {}
+        if s.record and s.recorder_process:
+            from ..nodes.processes import recorder_arguments
+            nodes['recorder'] = [*common, *recorder_arguments(s.record, RECORDED_TOPICS())]
+        if s.visualizer and not s.in_process:
+            nodes['visualizer'] = [*common, *s.case_arguments()]
+        return SideNodes(nodes)
+
+    def start(self):
+        """Check the spec, build the graph, start the side nodes; returns the graph.
+
+        Raises:
+            SessionError / CaseError / ParameterError: bad input (nothing started);
+            SideNodeError: a side node did not start (the graph is shut down).
+        """
+        self.spec.check()
+        from .domain import refuse_shared_domain
+        refuse_shared_domain(self.spec)
+        self.graph = open_graph(self.spec, overrides=self.overrides, extra=self.extra,
+                                program=f'haptic-anfis-{self.spec.command}')
+        if self.hand is not None:  # the simulated Falcon plays it (from the script's start)
+            self.graph.set_hand(self.hand)
+        if self.side:
+            try:
+                # the graph's parameters are valid: start the side nodes (the hand is held)
+                self.side.start(self.spec.ready_timeout)
+            except BaseException:
+                self.graph.shutdown()
+                self.graph = None
+                raise
+        return self.graph
+
+    def wait_ready(self) -> bool:
+        """Spin the graph until a force command reached the driver and, with a recorder in its
+        own process, until that recorder subscribes to every loop topic (the hand is held until
+        then, so the bag has the session from its first move). False (said why) on the
+        ready timeout. Resets the loop statistics: they cover the session, not the start."""
+        g, s = self.graph, self.spec
+        end = time.monotonic() + s.ready_timeout
+        if self.side and 'recorder' in self.side.nodes:
+            from ..nodes.side_nodes import hold_until_recorded
+            if not hold_until_recorded(g, s.ready_timeout):
+                print(f'not ready after {s.ready_timeout:g} s: the recorder has not subscribed '
+                      'to every loop topic' + ''.join(f'; {n} exited with code {c}'
+                                                       for n, c in self.side.dead()), flush=True)
+                return False
+        if g.wait_ready(max(end - time.monotonic(), 0.0)) is None:
+            print(f'not ready after {s.ready_timeout:g} s: no force command reached the driver',
+                  flush=True)
+            return False
+        g.driver.servo.stats.reset()
+        return True
+
+    def where(self) -> str:
+        """', visualizer in pid N, ...' for the side nodes."""
+        return ''.join(f', {n} in pid {pid}' for n, pid in (self.side.pids if self.side
+                                                             else {}).items())
+
+    def stop(self) -> dict[str, int]:
+        """The device to zero force and the graph down first, then the side nodes (the recorder
+        has every message sent to it); the side nodes' exit codes."""
+        try:
+            if self.graph is not None:
+                self.graph.shutdown()
+        finally:
+            if self.side:
+                self.codes = self.side.stop()
+        return self.codes
+
+    def recorded(self) -> dict | None:
+        """The recorder's summary (written, dropped, topics, output), None without recording."""
+        for n in (self.graph.extra if self.graph is not None else ()):
+            if hasattr(n, 'writer'):
+                return n.summary()
+        if self.spec.record:
+            from ..bag.reader import recorded_summary
+            return recorded_summary(self.spec.record)
+        return None
+
+    def print_recorded(self, recorded: dict | None = None) -> dict | None:
+        """Print the one ``recorded ...`` line; returns the summary."""
+        r = recorded if recorded is not None else self.recorded()
+        if r is not None:
+            print(f"recorded       {r['written']} messages on {len(r['topics'])} topics to "
+                  f"{r['output']} (dropped {r['dropped']})", flush=True)
+        return r
+
