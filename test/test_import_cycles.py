@@ -10,14 +10,9 @@ _spec = importlib.util.spec_from_file_location('import_cycles', ROOT / 'tools' /
 ic = importlib.util.module_from_spec(_spec)
 _spec.loader.exec_module(ic)
 
-#: Being removed by issue 28.2 (the local-model message codec beside LocalModel, another branch);
-#: delete this entry when that lands: the test then demands no cycle at all.
-PENDING = [['haptic_anfis.device.local_model', 'haptic_anfis.interfaces']]
-
-
 def test_the_package_has_no_import_cycle():
     g = ic.import_graph(ROOT / 'haptic_anfis')
-    found = [c for c in ic.cycles(g) if c not in PENDING]
+    found = ic.cycles(g)
     assert found == [], [' -> '.join(ic.cycle_path(g, c)) for c in found]
 
 
