@@ -221,9 +221,7 @@ def _report_bag(args):
     for topic, _, _, msg in read_messages(args.bag, sorted(wanted)) if wanted else ():
         t = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
         if topic == absolute(ifc.TOPIC_CONTACT):
-            v = msg.position
-            if len(v) == len(ifc.CONTACT_FIELDS):
-                session.add_contact(t, v[0:3], v[ifc.I_DEPTH], v[ifc.I_IN_CONTACT] > 0.5)
+            session.add_contact_values(t, msg.position)   # either layout; others counted
         elif topic == absolute(ifc.TOPIC_COMMAND):
             f = msg.wrench.force
             session.add_force(t, (f.x, f.y, f.z))

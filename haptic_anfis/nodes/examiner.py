@@ -101,10 +101,7 @@ class Examiner(Node):
                                + f', {len(s.grid.centroids)} surface cells in the palpable region')
 
     def _on_contact(self, msg: JointState) -> None:
-        v = msg.position
-        if len(v) == len(ifc.CONTACT_FIELDS):
-            self.session.add_contact(stamp_ns(msg.header.stamp) * 1e-9, v[0:3], v[ifc.I_DEPTH],
-                                     v[ifc.I_IN_CONTACT] > 0.5)
+        self.session.add_contact_values(stamp_ns(msg.header.stamp) * 1e-9, msg.position)
 
     def _on_force(self, msg: WrenchStamped) -> None:
         f = msg.wrench.force
