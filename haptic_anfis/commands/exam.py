@@ -12,6 +12,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import time
 from pathlib import Path
 
 NAME = 'exam'
@@ -40,10 +41,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         'at most 300 s)')
     r.add_argument('--record', metavar='BAG', default=None,
                    help='record the session (loop topics + marks) to this new bag directory')
-    r.add_argument('--force-mode', choices=('zoh', 'local_model'), default='zoh',
-                   help="the falcon_driver's force_mode for the exam (default zoh: on the shared "
-                        '2-core machine the one-process exam graph in local_model mode fell to a '
-                        '~280 Hz servo and starved the examiner, see the README)')
+    r.add_argument('--force-mode', choices=('zoh', 'local_model'), default='local_model',
+                   help="the falcon_driver's force_mode for the exam (default local_model, the "
+                        "driver's default)")
+    r.add_argument('--in-process', action='store_true',
+                   help="the examiner in the loop's process (default: in a process of its own, "
+                        "as sim's side nodes: off the servo thread's interpreter lock)")
     r.add_argument('--params-file', action='append', default=[], metavar='YAML',
                    help='ROS 2 parameter file for the nodes (repeatable; the exam sets the '
                         "driver's palpation_script and force_mode itself)")
@@ -93,7 +96,10 @@ def run(args: argparse.Namespace) -> int:
     print_report(report)
     if args.out:
         from ..nodes.examiner import write_report
-        write_report(session, args.out, report)
+        if session is not None:
+            write_report(session, args.out, report)
+        else:   # the side examiner drew report.png; the report gained the trainee's part here
+            (Path(args.out) / 'report.json').write_text(json.dumps(report, indent=1))
         print(f'report         {Path(args.out) / "report.json"}, {Path(args.out) / "report.png"}')
         if felt is not None:   # what the simulated trainee felt: its detector can be re-run on it
             import numpy as np
@@ -141,8 +147,19 @@ def _run_sim(args):
         for node in ('contact_detector', 'force_server'):
             overrides[node] = [Parameter('case', value=case.name)]
         ex_params.append(Parameter('case', value=case.name))
-    extra = [lambda ctx: Examiner(context=ctx, parameter_overrides=ex_params),
-             lambda ctx: SimTrainee(controller, context=ctx)]
+    # --- the examiner: in the loop's process (--in-process) or a process of its own (issue 26.4)
+    side, report_dir = None, None
+    if args.in_process:
+        extra = [lambda ctx: Examiner(context=ctx, parameter_overrides=ex_params)]
+    else:
+        from ..nodes.exam_side import CoverageWatch, examiner_arguments
+        from ..nodes.side_nodes import SideNodes
+        report_dir = tempfile.TemporaryDirectory(prefix='haptic-anfis-examiner-')
+        side = SideNodes({'examiner': examiner_arguments(
+            scene or '', args.exam_config or '', case.name if case else None, report_dir.name,
+            args.params_file)})
+        extra = [lambda ctx: CoverageWatch(context=ctx)]
+    extra.append(lambda ctx: SimTrainee(controller, context=ctx))
     if args.record:
         from ..bag.topics import ALL_LOOP_TOPICS
         from ..nodes.recorder import Recorder
@@ -160,34 +177,80 @@ def _run_sim(args):
     graph.driver.device.script = controller
     examiner = graph.extra[0]
     limit = args.duration if args.duration is not None else 300.0
-    print(f'exam: trainee {args.trainee} ({controller.search.duration:.0f} s search), case '
-          f'{case.name if case else "default (scene " + (scene or "default") + ")"}, lesions from '
-          f'{examiner.subject.source}', flush=True)
     driver = graph.driver
+    if side is not None:
+        from ..nodes.exam_side import hold_until_examiner
+        from ..nodes.side_nodes import SideNodeError
+        try:   # the graph's parameters are valid: start the examiner (the hand is held meanwhile)
+            side.start()
+            if not hold_until_examiner(graph, 60.0):
+                raise SideNodeError('the examiner did not subscribe to the loop topics in 60 s')
+        except (SideNodeError, KeyboardInterrupt) as exc:
+            graph.shutdown()
+            side.stop()
+            raise ValueError(f'exam: {exc}') from None
+    print(f'exam: trainee {args.trainee} ({controller.search.duration:.0f} s search), case '
+          f'{case.name if case else "default (scene " + (scene or "default") + ")"}, examiner '
+          + (f'in pid {side.pids["examiner"]}' if side else 'in this process'), flush=True)
+    t_start = time.monotonic()
     try:
         graph.spin_for(limit, lambda: controller.finished)
         # The executor may run seconds behind the 1 kHz loop on a loaded machine: wait until the
         # examiner has every mark the driver published (a stop right after the last click lost it).
-        graph.spin_for(MARK_DRAIN_S, lambda: len(examiner.session.marks) >= driver.clutch.marks)
-        graph.spin_for(0.2)
+        graph.spin_for(MARK_DRAIN_S, lambda: _examiner_marks(examiner) >= driver.clutch.marks)
+        if side is None:
+            graph.spin_for(0.2)
+        else:   # ... and every contact sample (it may run seconds behind: a 10 s deep queue)
+            graph.spin_for(MARK_DRAIN_S, lambda: examiner.samples >= graph.contact.n_poses)
     except KeyboardInterrupt:
         print('interrupted', flush=True)
     finally:
         graph.shutdown()
+        if side is not None:
+            side.stop()   # SIGINT: the examiner writes report.json / report.png
     for n in graph.extra:
         if hasattr(n, 'writer'):
             r = n.summary()
             print(f"recorded       {r['written']} messages to {r['output']} (dropped {r['dropped']})")
-    report = examiner.report()
+    if side is None:
+        report, session = examiner.report(), examiner.session
+        heat_maps = examiner.n_published
+    else:
+        report, session = _side_report(report_dir, args.out), None
+        heat_maps = len(examiner.times)
+        report['heat_map_hz'] = round(examiner.rate(t_start), 2)
+        report['examiner_lost_contacts'] = max(graph.contact.n_poses - examiner.samples, 0)
     report['trainee'] = {'name': args.trainee, 'detections': [
         {'y_mm': round(d.y * 1e3, 2), 'z_mm': round(d.z * 1e3, 2),
          'excess_pct': round(100 * d.excess, 1), 'sigma': round(d.sigma, 1)}
         for d in controller.detections or []], 'finished': controller.finished,
         'felt_samples': controller.felt}
-    report['heat_maps_published'] = examiner.n_published
+    report['heat_maps_published'] = heat_maps
     report['case'] = case.name if case else (scene or 'default')
     report['force_mode'] = args.force_mode
-    return report, examiner.session, controller.felt_array()
+    report['examiner_process'] = 'own' if side is not None else 'loop'
+    return report, session, controller.felt_array()
+
+
+def _examiner_marks(examiner) -> int:
+    """Marks the examiner has: the in-process node's session, or the side examiner's last heat
+    map text (:class:`~haptic_anfis.nodes.exam_side.CoverageWatch`)."""
+    return len(examiner.session.marks) if hasattr(examiner, 'session') else examiner.marks
+
+
+def _side_report(report_dir, out: str | None) -> dict:
+    """The side examiner's report.json (and report.png into ``out``)."""
+    import shutil
+    d = Path(report_dir.name)
+    try:
+        report = json.loads((d / 'report.json').read_text())
+    except (OSError, ValueError) as exc:
+        raise ValueError(f'exam: the examiner wrote no report ({exc})') from None
+    if out and (d / 'report.png').is_file():
+        Path(out).mkdir(parents=True, exist_ok=True)
+        shutil.copy(d / 'report.png', Path(out) / 'report.png')
+    report_dir.cleanup()
+    return report
 
 
 def _report_bag(args):
