@@ -17,10 +17,11 @@ searched region's rim are not candidates: there the quartic is least constrained
 strongest bumps, a lump or not, the fit is repeated without the samples within ``exclude`` of it
 (``max_lumps`` + 2 bumps examined); at most ``max_lumps`` are returned.
 
-Thresholds (``min_rel`` 9 %, ``k_sigma`` 3.5) from live sessions of the systematic trainee on the
-case library (README, *Examination mode*): the largest bump on lesion-free tissue was +8.0 % (the
-large breast's model at its rim; its FE grid is 14 mm) and +5.8 % (the small fatty breast); the
-weakest lesion felt live stood +10.1 %.
+Thresholds (``min_rel`` 9.5 %, ``k_sigma`` 1.0) chosen on a TUNING set of sessions (five cases of
+the library, three trainee paths each) and tested on a disjoint TEST set (the other five cases,
+three other paths): ``bench/bench_detector.py``, docs/exam_detector.md and
+docs/measurements/detector.md (the tuning grid, the margin, sensitivity and false marks per case);
+``test/test_detector_protocol.py`` checks them against test/data/detector_sessions.npz.
 """
 from __future__ import annotations
 
@@ -101,7 +102,7 @@ class Candidate:
 
 
 def detect_lumps(points: np.ndarray, depths: np.ndarray, forces: np.ndarray, *,
-                 min_rel: float = 0.09, k_sigma: float = 3.5, max_lumps: int = 3,
+                 min_rel: float = 0.095, k_sigma: float = 1.0, max_lumps: int = 3,
                  **kw) -> list[Detection]:
     """Suspected lumps from force samples; ``points`` (n, 3) contact points [m], ``depths`` (n,)
     [m], ``forces`` (n,) force magnitudes [N]: the first ``max_lumps`` of the
