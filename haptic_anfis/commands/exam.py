@@ -157,7 +157,7 @@ def _run_sim(args):
         report_dir = tempfile.TemporaryDirectory(prefix='haptic-anfis-examiner-')
         side = SideNodes({'examiner': examiner_arguments(
             scene or '', args.exam_config or '', case.name if case else None, report_dir.name,
-            args.params_file)})
+            args.params_file)}, nice=0)   # it scores every sample: not a view to starve
         extra = [lambda ctx: CoverageWatch(context=ctx)]
     extra.append(lambda ctx: SimTrainee(controller, context=ctx))
     if args.record:
