@@ -79,9 +79,14 @@ N_CONTACT_V1 = 9
 APPROACH_FIELDS = ('surface_x', 'surface_y', 'surface_z', 'normal_x', 'normal_y', 'normal_z')
 
 
+#: the lengths a contact message's ``position`` may have (current, older 9-value layout)
+CONTACT_LENGTHS = (len(CONTACT_FIELDS), N_CONTACT_V1)
+
+
 def is_contact_values(v) -> bool:
-    """``v`` has the length of a contact message (current or the older 9-value layout)."""
-    return len(v) in (len(CONTACT_FIELDS), N_CONTACT_V1)
+    """``v`` has the length of a contact message (current or the older 9-value layout); a
+    reader that must report what it skipped counts through :class:`ContactLayouts`."""
+    return len(v) in CONTACT_LENGTHS
 
 
 class ContactLayouts:
@@ -100,11 +105,11 @@ class ContactLayouts:
     def accept(self, v) -> bool:
         """True when ``v`` is a contact message's values (read it), False otherwise (counted)."""
         n = len(v)
-        if n == len(CONTACT_FIELDS):
-            self.current += 1
-            return True
-        if n == N_CONTACT_V1:
-            self.v1 += 1
+        if is_contact_values(v):
+            if n == N_CONTACT_V1:
+                self.v1 += 1
+            else:
+                self.current += 1
             return True
         self.other[n] = self.other.get(n, 0) + 1
         return False
