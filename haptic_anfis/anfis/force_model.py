@@ -3,7 +3,7 @@
 Scikit-learn conventions without the dependency: hyper-parameters in ``__init__``, ``fit`` returns
 ``self``, learned attributes end in ``_``. Inputs in metres, forces in newtons.
 
-    model = ForceModel().fit(X, Y, groups=point_ids)  # structure search per output, then retrain
+    model = ForceModel().fit(X, Y, groups=point_ids)  # the shipped configuration (defaults.SHIPPED)
     F = model.predict(X)                              # (n, 3) numpy batch path
     fx, fy, fz = model.predict_one(x, y, z, depth)    # compiled real-time path (~1 µs)
     model.save('model.json'); model = ForceModel.load('model.json')
