@@ -1,7 +1,9 @@
 """``haptic-anfis exam``: score a palpation session (examination mode).
 
-``exam run``: the one-process haptic graph (:func:`haptic_anfis.nodes.graph.build_graph`) with the
-examiner and a simulated trainee at the simulated Falcon's hand; ``exam report BAG``: the same
+``exam run``: the haptic graph (:func:`haptic_anfis.nodes.graph.build_graph`, the driver in its
+default ``local_model`` force mode) with a simulated trainee at the simulated Falcon's hand and the
+examiner in a process of its own, as ``sim``'s side nodes (:mod:`haptic_anfis.nodes.exam_side`;
+``--in-process``: in the loop's process); ``exam report BAG``: the same
 report from a recorded session. Both print the summary and, with ``--json``, end with one JSON
 line (``coverage_pct`` {light, medium, deep}, ``duration_s``, ``hits``, ``misses``,
 ``false_marks``, ``score``, ``pattern``, ``verdict`` and more); ``--out DIR`` writes report.json
