@@ -175,8 +175,15 @@ def _run_sim(args):
         raise ValueError(str(exc)) from None
     finally:
         tmp.cleanup()
-    # The driver's simulated Falcon plays the trainee (same start point as the script it loaded).
-    graph.driver.device.script = controller
+    # The driver's simulated Falcon plays the trainee (same start point as the script it loaded),
+    # inside the driver's start gate: held at its start until the force source (and a side
+    # examiner) is there, so no strip is skipped while waiting.
+    from ..device.start_gate import HeldScript
+    held = graph.driver.device.script
+    if isinstance(held, HeldScript):
+        held.script = controller
+    else:
+        graph.driver.device.script = controller
     examiner = graph.extra[0]
     limit = args.duration if args.duration is not None else 300.0
     driver = graph.driver
