@@ -24,6 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from haptic_anfis.anfis import ForceModel
+from haptic_anfis.anfis.defaults import AUTO, SHIPPED_STRUCTURE
 from haptic_anfis.commands.train import load_config
 from haptic_anfis.report.cv import group_cv
 from haptic_anfis.tissue.dataset import DEFAULT_DATASET, load_dataset
@@ -57,6 +58,8 @@ def ours(params: dict, outputs: str = 'xyz'):
         base['structure'] = tuple(st) if st and isinstance(st[0], int) else [tuple(s) for s in st]
     if outputs != 'xyz':
         st = base['structure']
+        if st == AUTO:   # the shipped structures (the default inputs of the shipped data)
+            st = [tuple(s) for s in SHIPPED_STRUCTURE]
         per = [tuple(st)] * 3 if isinstance(st[0], (int, np.integer)) else list(st)
         d = len(per[0])
         base['structure'] = [s if 'xyz'[o] in outputs else (1,) * d for o, s in enumerate(per)]

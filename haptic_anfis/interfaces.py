@@ -80,9 +80,62 @@ N_CONTACT_V1 = 9
 APPROACH_FIELDS = ('surface_x', 'surface_y', 'surface_z', 'normal_x', 'normal_y', 'normal_z')
 
 
+#: the lengths a contact message's ``position`` may have (current, older 9-value layout)
+CONTACT_LENGTHS = (len(CONTACT_FIELDS), N_CONTACT_V1)
+
+
 def is_contact_values(v) -> bool:
-    """``v`` has the length of a contact message (current or the older 9-value layout)."""
-    return len(v) in (len(CONTACT_FIELDS), N_CONTACT_V1)
+    """``v`` has the length of a contact message (current or the older 9-value layout); a
+    reader that must report what it skipped counts through :class:`ContactLayouts`."""
+    return len(v) in CONTACT_LENGTHS
+
+
+class ContactLayouts:
+    """The one reader check of contact messages: :meth:`accept` says whether a message's
+    ``position`` values ``v`` are a contact (current layout or the older 9-value one, whose first
+    nine fields mean the same) and counts each message by layout, so a reader reports what it
+    could not read instead of dropping it in silence (:meth:`note`, :meth:`as_dict`)."""
+
+    __slots__ = ('current', 'v1', 'other')
+
+    def __init__(self) -> None:
+        self.current = 0                 # messages of len(CONTACT_FIELDS) values
+        self.v1 = 0                      # messages of N_CONTACT_V1 values (older layout)
+        self.other: dict[int, int] = {}  # length -> messages of any other length (not read)
+
+    def accept(self, v) -> bool:
+        """True when ``v`` is a contact message's values (read it), False otherwise (counted)."""
+        n = len(v)
+        if is_contact_values(v):
+            if n == N_CONTACT_V1:
+                self.v1 += 1
+            else:
+                self.current += 1
+            return True
+        self.other[n] = self.other.get(n, 0) + 1
+        return False
+
+    @property
+    def rejected(self) -> int:
+        """Messages not read (any length but the two layouts)."""
+        return sum(self.other.values())
+
+    def as_dict(self) -> dict:
+        """JSON-able counts: ``{'current': n, 'v1_9_values': n, 'other': {length: n}}``."""
+        return {'current': self.current, 'v1_9_values': self.v1,
+                'other': {str(k): v for k, v in sorted(self.other.items())}}
+
+    def note(self) -> str | None:
+        """One line for a report when messages were skipped or read in the older layout."""
+        parts = []
+        if self.other:
+            lens = ', '.join(f'{v} of {k} values' for k, v in sorted(self.other.items()))
+            parts.append(f'{self.rejected} contact message(s) not read ({lens}; expected '
+                         f'{len(CONTACT_FIELDS)} or {N_CONTACT_V1} values)')
+        if self.v1:
+            parts.append(f'{self.v1} contact message(s) in the older {N_CONTACT_V1}-value layout '
+                         '(read, no surface normal)')
+        return '; '.join(parts) or None
 
 
 LOCAL_MODEL_FIELDS = ('f0_x', 'f0_y', 'f0_z', 'p0_x', 'p0_y', 'p0_z',

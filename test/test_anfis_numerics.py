@@ -164,5 +164,5 @@ def test_no_hold_out_trains_every_output_on_all_the_data(synthetic, tmp_path):
     loaded = ForceModel.load(tmp_path / 'm.json')
     np.testing.assert_array_equal(loaded.predict(synthetic.X), model.predict(synthetic.X))
     with pytest.raises(ValueError, match='val_fraction 0'):
-        ForceModel(val_fraction=0, search_folds=1, epochs=2).fit(synthetic.X, synthetic.Y,
+        ForceModel(structure=None, val_fraction=0, search_folds=1, epochs=2).fit(synthetic.X, synthetic.Y,
                                                                   groups=synthetic.point)

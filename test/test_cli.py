@@ -27,7 +27,8 @@ def test_train_then_evaluate(dataset_csv, tmp_path, capsys):
 
 def test_train_prints_every_candidate_of_the_search(dataset_csv, tmp_path, capsys):
     cfg = tmp_path / 'cfg.yaml'
-    cfg.write_text('force_model:\n  search_epochs: 3\n  epochs: 5\n  max_mfs: [3, 2, 2]\n')
+    cfg.write_text('force_model:\n  structure: null\n  search_epochs: 3\n  epochs: 5\n'
+                   '  max_mfs: [3, 2, 2]\n')
     assert main(['train', dataset_csv, '--out', str(tmp_path / 'm.json'), '--config', str(cfg)]) == 0
     text = capsys.readouterr().out
     assert text.count('structure search (2 candidates)') == 3
@@ -47,7 +48,7 @@ def test_shipped_config_is_valid():
     from haptic_anfis.commands.train import load_config
     params = load_config(str(Path(__file__).resolve().parents[1] / 'config' / 'force_model.yaml'))
     # the default the force server loads: depth-scaled over (y, z, depth), y/z band 15 %
-    assert params['form'] == 'depth_scaled' and tuple(params['inputs']) == ('y', 'z', 'depth')
+    assert params['form'] == 'depth_scaled' and params['inputs'] == 'auto'   # x checked
     assert params['extrapolation'] == (0.0, 0.15, 0.15, 0.0)
 
 

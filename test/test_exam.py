@@ -354,7 +354,9 @@ def test_detector_finds_two_lumps_the_robust_baseline_does_not_absorb():
     least-squares baseline bends towards both and lowers them)."""
     P, d, F = _homogeneous(np.random.default_rng(2))
     F = F * _bump(P, 0.016, 0.012, 0.15) * _bump(P, -0.024, -0.010, 0.15)
-    found = sorted(detect_lumps(P, d, F), key=lambda f: f.y)
+    # the baseline's robustness, not the thresholds (test_detector_protocol): a +15 % Gaussian
+    # bump reads 8-10 % as a 6 mm cell mean, so min_rel below that
+    found = sorted(detect_lumps(P, d, F, min_rel=0.07), key=lambda f: f.y)
     assert len(found) == 2, found
     assert np.hypot(found[0].y + 0.024, found[0].z + 0.010) < 0.005
     assert np.hypot(found[1].y - 0.016, found[1].z - 0.012) < 0.005

@@ -196,8 +196,12 @@ def test_report_measures_the_shipped_model_as_configured():
 
     from haptic_anfis.commands.train import load_config
     from haptic_anfis.report.run import cv_models, shipped_params
+    from haptic_anfis.anfis.defaults import AUTO, SHIPPED_INPUTS, SHIPPED_STRUCTURE
     cfg = load_config(str(Path(__file__).resolve().parents[1] / 'config' / 'force_model.yaml'))
     sp = shipped_params()
+    # 'auto' inputs and structure resolve, on the shipped data (x follows from (y, z)), to these
+    assert cfg['inputs'] == cfg['structure'] == AUTO
+    cfg['inputs'], cfg['structure'] = SHIPPED_INPUTS, [tuple(s) for s in SHIPPED_STRUCTURE]
     for key in ('form', 'inputs', 'extrapolation', 'ridge', 'epochs'):
         assert tuple(sp[key]) == tuple(cfg[key]) if isinstance(sp[key], tuple) else sp[key] == cfg[key]
     per_output = lambda st: [tuple(st)] * 3 if isinstance(st[0], int) else [tuple(s) for s in st]  # noqa: E731

@@ -3,7 +3,7 @@
 Scikit-learn conventions without the dependency: hyper-parameters in ``__init__``, ``fit`` returns
 ``self``, learned attributes end in ``_``. Inputs in metres, forces in newtons.
 
-    model = ForceModel().fit(X, Y, groups=point_ids)  # structure search per output, then retrain
+    model = ForceModel().fit(X, Y, groups=point_ids)  # the shipped configuration (defaults.SHIPPED)
     F = model.predict(X)                              # (n, 3) numpy batch path
     fx, fy, fz = model.predict_one(x, y, z, depth)    # compiled real-time path (~1 µs)
     model.save('model.json'); model = ForceModel.load('model.json')
@@ -22,12 +22,13 @@ from .._version import __version__
 from ..tissue.dataset import (INPUT_NAMES, OUTPUT_NAMES, DatasetError, ForceDataset, fold_indices,
                        split_indices)
 from . import compiled
+from .defaults import AUTO, SHIPPED, SHIPPED_INPUTS, SHIPPED_STRUCTURE, X_MFS, x_explained_by_yz
 from .model_file import (FORMAT, FORMAT_VERSION, ModelFileError, model_from_dict, model_to_dict,
                          read_model_doc, write_json_atomic)
 from .structure import Candidate, SearchResult, search_structure
 from .sugeno import (DEFAULT_EXTRAPOLATION, DEFAULT_EXTRAPOLATION_SCALED, SugenoModel,
                      check_finite_inputs)
-from .training import DEFAULT_RIDGE, train
+from .training import train
 
 INPUT_UNITS = ('m', 'm', 'm', 'm')
 OUTPUT_UNITS = ('N', 'N', 'N')
@@ -41,8 +42,13 @@ FORMS = ('plain', 'depth_scaled')
 class ForceModel:
     """Soft-tissue force model: (x, y, z, depth) [m] -> (Fx, Fy, Fz) [N].
 
+    The defaults are the shipped configuration (:data:`~.defaults.SHIPPED`, the same values as
+    config/force_model.yaml): ``ForceModel().fit`` trains the model the force server ships.
+
     Args:
-        structure: ``None`` to choose MF counts per output by validation (see
+        structure: ``'auto'`` (default): the shipped per-output structures 6-6-2 / 6-6-2 / 5-5-2
+            when the ANFIS inputs are (y, z, depth) and no ``candidates`` are given, else the
+            structure search; ``None`` to choose MF counts per output by validation (see
             :func:`~.structure.search_structure`); one tuple (e.g. ``(3, 3, 3, 2)``) for all three
             outputs; or a sequence of three tuples, one per output.
         epochs: maximum hybrid-learning epochs when training the final models.
@@ -66,19 +72,24 @@ class ForceModel:
         form: ``'plain'``: F = ANFIS(inputs) (the paper's form); ``'depth_scaled'``: F = depth ·
             g(inputs) with g a first-order Sugeno ANFIS per output trained by the same hybrid rule
             on the error of F: exactly 0 N at zero depth and continuous from contact (|F| ≤ c·depth).
-        inputs: names of the ANFIS inputs among (x, y, z, depth); default all four for ``'plain'``
-            and (y, z, depth) for ``'depth_scaled'`` (on the skin x is a function of y and z).
+        inputs: names of the ANFIS inputs among (x, y, z, depth), used exactly as given; or
+            ``'auto'`` (default): all four for ``'plain'``; for ``'depth_scaled'`` (y, z, depth)
+            when the data show x is a function of (y, z) (on one skin surface it is:
+            :func:`~.defaults.x_explained_by_yz`), else all four. The decision and its figure
+            are recorded in ``metadata_['training']['input_check']``.
             ``structure``, ``search_start``, ``max_mfs`` have one entry per ANFIS input;
             ``extrapolation`` one per column of (x, y, z, depth).
     """
 
-    def __init__(self, structure: Structure | Sequence[Structure] | None = None, epochs: int = 60,
-                 search_epochs: int = 10, search_start: Structure | None = None,
-                 max_mfs: Structure | None = None, candidates: list[Structure] | None = None,
-                 tol: float = 0.0, ridge: float = DEFAULT_RIDGE, step: float = 0.01,
-                 val_fraction: float = 0.2, split: str = 'point', search_folds: int = 3,
-                 extrapolation: Sequence[float] | None = None, seed: int = 0,
-                 form: str = 'depth_scaled', inputs: Sequence[str] | None = None) -> None:
+    def __init__(self, structure: Structure | Sequence[Structure] | str | None = SHIPPED['structure'],
+                 epochs: int = SHIPPED['epochs'], search_epochs: int = SHIPPED['search_epochs'],
+                 search_start: Structure | None = None, max_mfs: Structure | None = SHIPPED['max_mfs'],
+                 candidates: list[Structure] | None = None, tol: float = SHIPPED['tol'],
+                 ridge: float = SHIPPED['ridge'], step: float = 0.01,
+                 val_fraction: float = SHIPPED['val_fraction'], split: str = SHIPPED['split'],
+                 search_folds: int = SHIPPED['search_folds'],
+                 extrapolation: Sequence[float] | None = None, seed: int = SHIPPED['seed'],
+                 form: str = SHIPPED['form'], inputs: Sequence[str] | str = SHIPPED['inputs']) -> None:
         self.form = form
         self.inputs = inputs
         self.structure = structure
@@ -98,8 +109,16 @@ class ForceModel:
         self.metadata_: dict[str, Any] = {}
 
     # ---- training ---------------------------------------------------------------------------
-    def _structures(self) -> list[Structure | None]:
+    def _structures(self, names: Sequence[str] | None = None) -> list[Structure | None]:
+        """Per-output structure (None = search); ``names``: the resolved ANFIS inputs (for
+        ``structure='auto'``)."""
         s = self.structure
+        if isinstance(s, str):
+            if s != AUTO:
+                raise ValueError(f"structure: expected None, 'auto' or MF counts, got {s!r}")
+            if names is not None and tuple(names) == SHIPPED_INPUTS and self.candidates is None:
+                return [tuple(st) for st in SHIPPED_STRUCTURE]
+            return [None, None, None]
         if s is None:
             return [None, None, None]
         if len(s) and all(isinstance(v, (int, np.integer)) for v in s):
@@ -108,13 +127,27 @@ class ForceModel:
             raise ValueError(f'structure must be None, one tuple, or three tuples; got {s!r}')
         return [tuple(int(v) for v in st) for st in s]
 
-    def _form(self) -> tuple[tuple[int, ...], int, np.ndarray, Structure, Structure]:
-        """(input columns, scale column, extrapolation (4,), search start, max MFs), checked."""
+    def _form(self, X4: np.ndarray | None = None
+              ) -> tuple[tuple[int, ...], int, np.ndarray, Structure, Structure]:
+        """(input columns, scale column, extrapolation (4,), search start, max MFs), checked;
+        ``X4`` (n, 4): the training inputs ``inputs='auto'`` is decided on (sets
+        ``input_check_``)."""
         if self.form not in FORMS:
             raise ValueError(f'form: expected one of {FORMS}, got {self.form!r}')
         scaled = self.form == 'depth_scaled'
-        names = self.inputs if self.inputs is not None else (
-            ('y', 'z', 'depth') if scaled else INPUT_NAMES)
+        names = self.inputs
+        self.input_check_ = {'inputs': 'given'}
+        if names is None or (isinstance(names, str) and names == AUTO):
+            if not scaled:
+                names, self.input_check_ = INPUT_NAMES, {'inputs': 'auto (plain form: all four)'}
+            elif X4 is None:
+                names = SHIPPED_INPUTS
+            else:
+                chk = x_explained_by_yz(X4)
+                names = SHIPPED_INPUTS if chk['drop_x'] else INPUT_NAMES
+                self.input_check_ = {'inputs': 'auto', **chk}
+        elif isinstance(names, str):
+            raise ValueError(f"inputs: expected 'auto' or names among {INPUT_NAMES}, got {names!r}")
         unknown = [n for n in names if n not in INPUT_NAMES]
         if unknown or not names or len(set(names)) != len(names):
             raise ValueError(f'inputs: expected distinct names among {INPUT_NAMES}, got {names!r}')
@@ -125,7 +158,7 @@ class ForceModel:
         ext = np.broadcast_to(np.asarray(ext, dtype=np.float64), (4,)).copy()
         start = tuple(self.search_start) if self.search_start is not None else (2,) * d
         max_mfs = tuple(self.max_mfs) if self.max_mfs is not None else tuple(
-            3 if c == 3 else 5 for c in cols)
+            (X_MFS, 5, 5, 3)[c] for c in cols)
         if len(start) != d or len(max_mfs) != d:
             raise ValueError(f'search_start {start} and max_mfs {max_mfs} need one entry per ANFIS '
                              f'input {tuple(INPUT_NAMES[c] for c in cols)}')
@@ -145,7 +178,9 @@ class ForceModel:
             raise ValueError(f'fit needs X (n, 4) and Y (n, 3); got {X.shape} and {Y.shape}')
         if not np.all(np.isfinite(Y)):
             raise ValueError('fit: Y holds non-finite forces')
-        cols, scol, ext, search_start, max_mfs = self._form()
+        cols, scol, ext, search_start, max_mfs = self._form(X)
+        names = tuple(INPUT_NAMES[c] for c in cols)
+        structures = self._structures(names)
         if scol >= 0 and not np.all(X[:, scol] > 0):
             k = int(np.argmin(X[:, scol]))
             raise ValueError(f'fit: the depth-scaled form needs depths > 0; sample {k} has depth '
@@ -153,7 +188,7 @@ class ForceModel:
         X4, X = X, X[:, list(cols)]
         S = X4[:, scol] if scol >= 0 else None
         sub = (lambda idx: None) if S is None else (lambda idx: S[idx])  # noqa: E731
-        for o, st in enumerate(self._structures()):
+        for o, st in enumerate(structures):
             if st is not None and len(st) != len(cols):
                 raise ValueError(f'structure {st} of output {OUTPUT_NAMES[o]} needs one MF count '
                                  f'per ANFIS input {tuple(INPUT_NAMES[c] for c in cols)}')
@@ -163,7 +198,7 @@ class ForceModel:
         if self.val_fraction == 0:
             # No hold-out: every output trains exactly ``epochs`` epochs on all the data and keeps
             # its lowest-training-error epoch (a fixed epoch count, itself chosen by grouped CV).
-            if any(s is None for s in self._structures()) and int(self.search_folds) < 2:
+            if any(s is None for s in structures) and int(self.search_folds) < 2:
                 raise ValueError('val_fraction 0 (no hold-out) needs a fixed structure or '
                                  'search_folds >= 2 to score the structure search')
             fit_idx, val_idx = np.arange(len(X)), np.arange(0)
@@ -174,7 +209,7 @@ class ForceModel:
             raise ValueError(f'search_folds: expected an integer >= 1, got {self.search_folds!r}')
         k = min(int(self.search_folds), len(np.unique(ds.point)) if by == 'point' else len(ds))
         folds = (fold_indices(ds, k, self.seed, by=by)
-                 if k > 1 and any(s is None for s in self._structures()) else None)
+                 if k > 1 and any(s is None for s in structures) else None)
         lo, hi = X.min(axis=0), X.max(axis=0)  # of the ANFIS inputs
         kw = dict(ridge=self.ridge, step=self.step)
         t_start = time.perf_counter()
@@ -184,7 +219,7 @@ class ForceModel:
         self.val_rmse_: list[float] = []
         self.train_rmse_: list[float] = []
         self.train_curves_: list[dict[str, list[float]]] = []
-        for o, fixed in enumerate(self._structures()):
+        for o, fixed in enumerate(structures):
             t0 = time.perf_counter()
             Xf, tf, Xv, tv = X[fit_idx], Y[fit_idx, o], X[val_idx], Y[val_idx, o]
             if fixed is None:
@@ -225,7 +260,9 @@ class ForceModel:
             'form': self.form, 'inputs': [INPUT_NAMES[c] for c in cols], 'max_mfs': list(max_mfs),
             'epochs': self.epochs, 'search_epochs': self.search_epochs, 'tol': self.tol,
             'ridge': self.ridge, 'val_fraction': self.val_fraction, 'split': by,
-            'search_folds': self.search_folds,
+            'search_folds': self.search_folds, 'input_check': self.input_check_,
+            'structure': 'given' if not isinstance(self.structure, str) and self.structure is not None
+            else ('search' if all(s is None for s in structures) else 'shipped'),
             'seed': self.seed, 'seconds': round(self.fit_seconds_, 3),
             'n_samples': int(len(X)),
             'candidates': [[_candidate_dict(c) for c in sr.candidates] if sr else []
@@ -465,8 +502,9 @@ def train_on_dataset(ds: ForceDataset, test_fraction: float = 0.2, seed: int = 0
                      verbose: bool = False, dataset_path: str | None = None,
                      **params: Any) -> tuple[ForceModel, ForceDataset]:
     """The paper's protocol: hold out ``test_fraction`` (whole surface points) for the test, fit
-    on the rest (which itself holds out 20 % for structure/epoch selection), record RMSEs and the
-    dataset hash in the model. Returns (model, test set).
+    on the rest (ForceModel's defaults: the shipped configuration, :data:`.defaults.SHIPPED`;
+    ``params`` override them), record RMSEs and the dataset hash in the model. Returns (model,
+    test set).
     """
     by = params.get('split', 'point')
     if by == 'point' and len(np.unique(ds.point)) < 5:

@@ -37,12 +37,13 @@ def dataset_from_bag(path: str | Path, contact_topic: str = ifc.TOPIC_CONTACT,
     ct, wt = absolute(contact_topic), absolute(wrench_topic)
     contacts: dict[int, tuple] = {}
     wrenches: dict[int, tuple] = {}
+    layouts = ifc.ContactLayouts()   # either contact layout read; other lengths counted
     for topic, _, _, msg in read_messages(path, [ct, wt],
                                           expect_types={ct: JOINT_STATE_TYPE, wt: WRENCH_TYPE}):
         stamp = _ns(msg.header.stamp)
         if topic == ct:
             v = msg.position
-            if (ifc.is_contact_values(v) and v[ifc.I_IN_CONTACT] > 0.5
+            if (layouts.accept(v) and v[ifc.I_IN_CONTACT] > 0.5
                     and v[ifc.I_DEPTH] > 0.0):
                 contacts[stamp] = (v[ifc.I_X], v[ifc.I_Y], v[ifc.I_Z], v[ifc.I_DEPTH])
         else:
@@ -51,12 +52,14 @@ def dataset_from_bag(path: str | Path, contact_topic: str = ifc.TOPIC_CONTACT,
     stamps = sorted(set(contacts) & set(wrenches))
     if not stamps:
         raise BagError(f'{path}: no in-contact samples with a matching force command on '
-                       f'{ct} and {wt}; expected a session recorded with contact and force topics')
+                       f'{ct} and {wt}; expected a session recorded with contact and force topics'
+                       + (f' ({layouts.note()})' if layouts.note() else ''))
     X = np.array([contacts[s] for s in stamps], dtype=np.float64)
     Y = np.array([wrenches[s] for s in stamps], dtype=np.float64)
     cells = np.floor(X[:, 1:3] / cell).astype(np.int64)
     _, point = np.unique(cells, axis=0, return_inverse=True)
     provenance = {'kind': 'recorded session (force commands of the model that ran it)',
+                  'contact_messages': layouts.as_dict(),
                   'bag': str(path), 'contact_topic': ct, 'wrench_topic': wt,
                   'patch_cell_m': cell, 'n_samples': len(stamps)}
     return ForceDataset(X=X, Y=Y, point=point.ravel(), provenance=provenance)

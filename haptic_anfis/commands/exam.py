@@ -1,7 +1,9 @@
 """``haptic-anfis exam``: score a palpation session (examination mode).
 
-``exam run``: the one-process haptic graph (:func:`haptic_anfis.nodes.graph.build_graph`) with the
-examiner and a simulated trainee at the simulated Falcon's hand; ``exam report BAG``: the same
+``exam run``: the haptic graph (:func:`haptic_anfis.nodes.graph.build_graph`, the driver in its
+default ``local_model`` force mode) with a simulated trainee at the simulated Falcon's hand and the
+examiner in a process of its own, as ``sim``'s side nodes (:mod:`haptic_anfis.nodes.exam_side`;
+``--in-process``: in the loop's process); ``exam report BAG``: the same
 report from a recorded session. Both print the summary and, with ``--json``, end with one JSON
 line (``coverage_pct`` {light, medium, deep}, ``duration_s``, ``hits``, ``misses``,
 ``false_marks``, ``score``, ``pattern``, ``verdict`` and more); ``--out DIR`` writes report.json
@@ -12,6 +14,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import time
 from pathlib import Path
 
 NAME = 'exam'
@@ -34,10 +37,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help='simulated trainee: systematic, careless or a palpation script (YAML)')
     r.add_argument('--speed', type=float, default=None,
                    help="the trainee's speed along the tissue [m/s] (default: the script's)")
-    r.add_argument('--force-mode', choices=('zoh', 'local_model'), default='zoh',
-                   help="the falcon_driver's force_mode for the exam (default zoh: on the shared "
-                        '2-core machine the one-process exam graph in local_model mode fell to a '
-                        '~280 Hz servo and starved the examiner, see the README)')
+    r.add_argument('--force-mode', choices=('zoh', 'local_model'), default='local_model',
+                   help="the falcon_driver's force_mode for the exam (default local_model, the "
+                        "driver's default)")
     _common(r)
     b = sub.add_parser('report', help='score a recorded session bag')
     b.add_argument('bag', metavar='BAG')
@@ -84,7 +86,10 @@ def run(args: argparse.Namespace) -> int:
     print_report(report)
     if args.out:
         from ..nodes.examiner import write_report
-        write_report(session, args.out, report)
+        if session is not None:
+            write_report(session, args.out, report)
+        else:   # the side examiner drew report.png; the report gained the trainee's part here
+            (Path(args.out) / 'report.json').write_text(json.dumps(report, indent=1))
         print(f'report         {Path(args.out) / "report.json"}, {Path(args.out) / "report.png"}')
         if felt is not None:   # what the simulated trainee felt: its detector can be re-run on it
             import numpy as np
@@ -129,41 +134,98 @@ def _run_sim(args):
                  Parameter('exam_config', value=args.exam_config or '')]
     overrides = {'falcon_driver': [Parameter('palpation_script', value=str(fitted)),
                                    Parameter('force_mode', value=args.force_mode)]}
-    extra = [lambda ctx: Examiner(context=ctx, parameter_overrides=ex_params),
-             lambda ctx: SimTrainee(controller, context=ctx)]
+    if case is not None:   # the case's lesions for the examiner (the loop's nodes: the spec)
+        ex_params.append(Parameter('case', value=case.name))
+    # --- the examiner: in the loop's process (--in-process) or a process of its own (issue 26.4)
+    report_dir, side_nodes = None, None
+    if args.in_process:
+        extra = [lambda ctx: Examiner(context=ctx, parameter_overrides=ex_params)]
+    else:
+        from ..nodes.exam_side import CoverageWatch, examiner_arguments
+        report_dir = tempfile.TemporaryDirectory(prefix='haptic-anfis-examiner-')
+        side_nodes = {'examiner': examiner_arguments(
+            scene or '', args.exam_config or '', case.name if case else None, report_dir.name,
+            spec.params_arguments()[1::2])}
+        extra = [lambda ctx: CoverageWatch(context=ctx)]
+    extra.append(lambda ctx: SimTrainee(controller, context=ctx))
+    # the examiner scores every sample: not a view to starve (nice 0)
     session = OneProcessSession(spec, extra=extra, overrides=overrides, side=False,
-                                hand=controller)
+                                hand=controller, side_nodes=side_nodes, side_nice=0)
     try:
         graph = session.start()
     finally:
         tmp.cleanup()
     examiner = graph.extra[0]
     limit = args.duration if args.duration is not None else 300.0
-    print(f'exam: trainee {args.trainee} ({controller.search.duration:.0f} s search), case '
-          f'{case.name if case else "default (scene " + (scene or "default") + ")"}, lesions from '
-          f'{examiner.subject.source}', flush=True)
     driver = graph.driver
+    side = session.side
+    if side is not None:
+        from ..nodes.exam_side import hold_until_examiner
+        try:   # the examiner (another process) is up: hold the hand until it subscribed
+            if not hold_until_examiner(graph, 60.0):
+                raise ValueError('exam: the examiner did not subscribe to the loop topics in '
+                                 '60 s' + ''.join(f'; {n} exited with code {c}'
+                                                  for n, c in side.dead()))
+        except BaseException:
+            session.stop()
+            raise
+    print(f'exam: trainee {args.trainee} ({controller.search.duration:.0f} s search), case '
+          f'{case.name if case else "default (scene " + (scene or "default") + ")"}, examiner '
+          + (f'in pid {side.pids["examiner"]}' if side else 'in this process'), flush=True)
+    t_start = time.monotonic()
     try:
         graph.spin_for(limit, lambda: controller.finished)
         # The executor may run seconds behind the 1 kHz loop on a loaded machine: wait until the
         # examiner has every mark the driver published (a stop right after the last click lost it).
-        graph.spin_for(MARK_DRAIN_S, lambda: len(examiner.session.marks) >= driver.clutch.marks)
-        graph.spin_for(0.2)
+        graph.spin_for(MARK_DRAIN_S, lambda: _examiner_marks(examiner) >= driver.clutch.marks)
+        if side is None:
+            graph.spin_for(0.2)
+        else:   # ... and every contact sample (it may run seconds behind: a 10 s deep queue)
+            graph.spin_for(MARK_DRAIN_S, lambda: examiner.samples >= graph.contact.n_poses)
     except KeyboardInterrupt:
         print('interrupted', flush=True)
     finally:
-        session.stop()
+        session.stop()   # the device to zero force; SIGINT: the examiner writes its report
     session.print_recorded()
-    report = examiner.report()
+    if side is None:
+        report, exam_session = examiner.report(), examiner.session
+        heat_maps = examiner.n_published
+    else:
+        report, exam_session = _side_report(report_dir, args.out), None
+        heat_maps = len(examiner.times)
+        report['heat_map_hz'] = round(examiner.rate(t_start), 2)
+        report['examiner_lost_contacts'] = max(graph.contact.n_poses - examiner.samples, 0)
     report['trainee'] = {'name': args.trainee, 'detections': [
         {'y_mm': round(d.y * 1e3, 2), 'z_mm': round(d.z * 1e3, 2),
          'excess_pct': round(100 * d.excess, 1), 'sigma': round(d.sigma, 1)}
         for d in controller.detections or []], 'finished': controller.finished,
         'felt_samples': controller.felt}
-    report['heat_maps_published'] = examiner.n_published
+    report['heat_maps_published'] = heat_maps
     report['case'] = case.name if case else (scene or 'default')
     report['force_mode'] = args.force_mode
-    return report, examiner.session, controller.felt_array()
+    report['examiner_process'] = 'own' if side is not None else 'loop'
+    return report, exam_session, controller.felt_array()
+
+
+def _examiner_marks(examiner) -> int:
+    """Marks the examiner has: the in-process node's session, or the side examiner's last heat
+    map text (:class:`~haptic_anfis.nodes.exam_side.CoverageWatch`)."""
+    return len(examiner.session.marks) if hasattr(examiner, 'session') else examiner.marks
+
+
+def _side_report(report_dir, out: str | None) -> dict:
+    """The side examiner's report.json (and report.png into ``out``)."""
+    import shutil
+    d = Path(report_dir.name)
+    try:
+        report = json.loads((d / 'report.json').read_text())
+    except (OSError, ValueError) as exc:
+        raise ValueError(f'exam: the examiner wrote no report ({exc})') from None
+    if out and (d / 'report.png').is_file():
+        Path(out).mkdir(parents=True, exist_ok=True)
+        shutil.copy(d / 'report.png', Path(out) / 'report.png')
+    report_dir.cleanup()
+    return report
 
 
 def _report_bag(args):
@@ -197,9 +259,7 @@ def _report_bag(args):
     for topic, _, _, msg in read_messages(args.bag, sorted(wanted)) if wanted else ():
         t = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
         if topic == absolute(ifc.TOPIC_CONTACT):
-            v = msg.position
-            if len(v) == len(ifc.CONTACT_FIELDS):
-                session.add_contact(t, v[0:3], v[ifc.I_DEPTH], v[ifc.I_IN_CONTACT] > 0.5)
+            session.add_contact_values(t, msg.position)   # either layout; others counted
         elif topic == absolute(ifc.TOPIC_COMMAND):
             f = msg.wrench.force
             session.add_force(t, (f.x, f.y, f.z))

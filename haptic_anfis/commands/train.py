@@ -4,6 +4,7 @@ from __future__ import annotations
 import argparse
 
 from ..anfis import train_on_dataset
+from ..anfis.defaults import SHIPPED
 from ..bag.training_data import load_training_data
 from ..tissue.dataset import OUTPUT_NAMES
 
@@ -34,8 +35,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         '(see config/force_model.yaml); command-line flags override it')
     p.add_argument('--structure', type=parse_structure, default=None,
                    help='fixed MF counts for all outputs, one per ANFIS input, e.g. 5-5-2 for the default '
-                        '(y, z, depth) inputs (default: search per output)')
-    p.add_argument('--epochs', type=int, default=None, help='maximum epochs (default 60)')
+                        '(y, z, depth) inputs (default: the shipped 6-6-2/6-6-2/5-5-2 over (y, z, '
+                        'depth), a search per output when x is kept)')
+    p.add_argument('--epochs', type=int, default=None,
+                   help=f"epochs of the final models (default {SHIPPED['epochs']})")
     p.add_argument('--test-fraction', type=float, default=None,
                    help='held-out test part (default 0.2)')
     p.add_argument('--split', choices=('point', 'sample'), default=None,
@@ -61,9 +64,10 @@ def load_config(path: str | None) -> dict:
     unknown = sorted(set(section) - CONFIG_KEYS)
     if unknown:
         raise ValueError(f'{path}: unknown force_model key(s) {unknown}; known: {sorted(CONFIG_KEYS)}')
-    params = {k: v for k, v in section.items() if v is not None}
+    # null means "the default" except for the structure, where it means "search"
+    params = {k: v for k, v in section.items() if v is not None or k == 'structure'}
     for key in ('structure', 'search_start', 'max_mfs', 'extrapolation', 'inputs'):
-        if key in params:
+        if isinstance(params.get(key), list):   # a string ('auto') stays as it is
             params[key] = tuple(params[key])
     if 'candidates' in params:  # an explicit list of structures instead of the greedy search
         params['candidates'] = [tuple(c) for c in params['candidates']]
@@ -78,8 +82,8 @@ def run(args: argparse.Namespace) -> int:
     for key in ('structure', 'epochs', 'split', 'seed', 'test_fraction'):
         if getattr(args, key) is not None:
             params[key] = getattr(args, key)
-    test_fraction = params.pop('test_fraction', 0.2)
-    seed = params.pop('seed', 0)
+    test_fraction = params.pop('test_fraction', SHIPPED['test_fraction'])
+    seed = params.pop('seed', SHIPPED['seed'])
     model, test = train_on_dataset(ds, test_fraction=test_fraction, seed=seed, verbose=True,
                                    dataset_path=str(args.dataset), **params)
     r = model.metadata_['rmse']

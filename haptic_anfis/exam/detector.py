@@ -17,10 +17,11 @@ searched region's rim are not candidates: there the quartic is least constrained
 strongest bumps, a lump or not, the fit is repeated without the samples within ``exclude`` of it
 (``max_lumps`` + 2 bumps examined); at most ``max_lumps`` are returned.
 
-Thresholds (``min_rel`` 9 %, ``k_sigma`` 3.5) from live sessions of the systematic trainee on the
-case library (README, *Examination mode*): the largest bump on lesion-free tissue was +8.0 % (the
-large breast's model at its rim; its FE grid is 14 mm) and +5.8 % (the small fatty breast); the
-weakest lesion felt live stood +10.1 %.
+Thresholds (``min_rel`` 9.5 %, ``k_sigma`` 1.0) chosen on a TUNING set of sessions (five cases of
+the library, three trainee paths each) and tested on a disjoint TEST set (the other five cases,
+three other paths): ``bench/bench_detector.py``, docs/exam_detector.md and
+docs/measurements/detector.md (the tuning grid, the margin, sensitivity and false marks per case);
+``test/test_detector_protocol.py`` checks them against test/data/detector_sessions.npz.
 """
 from __future__ import annotations
 
@@ -83,30 +84,62 @@ def robust_fit(A: np.ndarray, b: np.ndarray, use: np.ndarray,
     return res
 
 
+@dataclass(frozen=True)
+class Candidate:
+    """One bump the detector examines (in order): centre (y, z) [m], mean log-force residual of
+    its peak cell (``excess`` = expm1 of it), that over the robust standard deviation of all cells
+    (``sigma``), samples in the cell, and whether its centre lies inside the rim rule."""
+    y: float
+    z: float
+    excess: float
+    sigma: float
+    samples: int
+    inside: bool
+
+    def passes(self, min_rel: float, k_sigma: float) -> bool:
+        """A lump under thresholds ``min_rel`` (relative excess) and ``k_sigma``."""
+        return self.inside and self.excess >= min_rel and self.sigma >= k_sigma
+
+
 def detect_lumps(points: np.ndarray, depths: np.ndarray, forces: np.ndarray, *,
-                 min_depth: float = 0.004, max_depth: float = 0.016, cell: float = 0.006,
-                 min_samples: int = 5, min_rel: float = 0.09, k_sigma: float = 3.5,
-                 exclude: float = 0.025, edge: float = 0.006,
-                 max_lumps: int = 3) -> list[Detection]:
+                 min_rel: float = 0.095, k_sigma: float = 1.0, max_lumps: int = 3,
+                 **kw) -> list[Detection]:
     """Suspected lumps from force samples; ``points`` (n, 3) contact points [m], ``depths`` (n,)
-    [m], ``forces`` (n,) force magnitudes [N]. Only samples ``min_depth`` to ``max_depth`` deep
+    [m], ``forces`` (n,) force magnitudes [N]: the first ``max_lumps`` of the
+    :func:`candidates` that stand out by ``min_rel`` AND ``k_sigma`` (``kw``: the candidates'
+    settings). Returns [] when nothing stands out."""
+    found = []
+    for c in candidates(points, depths, forces, n=max_lumps + CANDIDATES_BEYOND, **kw):
+        if c.passes(min_rel, k_sigma):
+            found.append(Detection(c.y, c.z, c.excess, c.sigma, c.samples))
+            if len(found) >= max_lumps:
+                break
+    return found
+
+
+def candidates(points: np.ndarray, depths: np.ndarray, forces: np.ndarray, *,
+               min_depth: float = 0.004, max_depth: float = 0.016, cell: float = 0.006,
+               min_samples: int = 5, exclude: float = 0.025, edge: float = 0.006,
+               n: int = 3 + CANDIDATES_BEYOND):
+    """The ``n`` strongest bumps, in the order the detector examines them (a generator; the
+    sequence does not depend on the thresholds, so thresholds can be applied afterwards:
+    :meth:`Candidate.passes`). Only samples ``min_depth`` to ``max_depth`` deep
     count: the lump is felt at medium / deep pressure, and past 16 mm (the deepest FE sample) the
     force model extrapolates and then saturates, so force no longer says anything about the tissue.
     ``edge`` [m]: cells whose centre lies within this of the searched region's rim (the 99.5th
-    percentile of the samples' distance from the (y, z) origin) are not candidates, nor a bump
-    whose centre of excess lies there.
-    Returns [] when nothing stands out."""
+    percentile of the samples' distance from the (y, z) origin) are not candidates, and a bump
+    whose centre of excess lies there is marked not ``inside``."""
     P = np.asarray(points, float).reshape(-1, 3)
     d = np.asarray(depths, float).reshape(-1)
     F = np.asarray(forces, float).reshape(-1)
-    n = min(len(P), len(d), len(F))
-    P, d, F = P[:n], d[:n], F[:n]
+    m = min(len(P), len(d), len(F))
+    P, d, F = P[:m], d[:m], F[:m]
     with np.errstate(invalid='ignore'):
         ok = np.isfinite(P).all(axis=1) & np.isfinite(d) & np.isfinite(F) \
             & (d >= min_depth) & (d <= max_depth) & (F > 0)
     y, z = P[ok, 1], P[ok, 2]
     if len(y) <= 40:
-        return []
+        return
     ld, lf = np.log(d[ok] / DEPTH_REF), np.log(F[ok])
     A = _design(y / LENGTH_SCALE, z / LENGTH_SCALE, ld)
     key = np.c_[np.floor(y / cell), np.floor(z / cell)].astype(np.int64)
@@ -114,15 +147,14 @@ def detect_lumps(points: np.ndarray, depths: np.ndarray, forces: np.ndarray, *,
     inv = inv.reshape(-1)
     good = counts >= min_samples
     if good.sum() < 10:
-        return []
+        return
     rim = float(np.percentile(np.hypot(y, z), 99.5))
     cy = np.bincount(inv, y, minlength=len(cells)) / counts
     cz = np.bincount(inv, z, minlength=len(cells)) / counts
     inside = good & (np.hypot(cy, cz) <= rim - edge)
-    found: list[Detection] = []
     use = np.ones(len(y), bool)
-    for _ in range(max_lumps + CANDIDATES_BEYOND):
-        if len(found) >= max_lumps or use.sum() <= 40:
+    for _ in range(n):
+        if use.sum() <= 40:
             break
         res = robust_fit(A, lf, use)
         mean = np.bincount(inv, res, minlength=len(cells)) / counts
@@ -132,7 +164,6 @@ def detect_lumps(points: np.ndarray, depths: np.ndarray, forces: np.ndarray, *,
         i = int(np.argmax(score))
         if not np.isfinite(score[i]):
             break
-        lump = mean[i] >= np.log1p(min_rel) and mean[i] >= k_sigma * sig
         sel = inv == i
         yc, zc = float(y[sel].mean()), float(z[sel].mean())
         # centre of mass of the excess around the peak cell (sharper than one cell)
@@ -141,11 +172,8 @@ def detect_lumps(points: np.ndarray, depths: np.ndarray, forces: np.ndarray, *,
             w = res[near]
             yc, zc = float((y[near] * w).sum() / w.sum()), float((z[near] * w).sum() / w.sum())
         # the rim rule holds for the bump's centre too (a cell just inside can centre outside)
-        lump = lump and np.hypot(yc, zc) <= rim - edge
-        if lump:
-            found.append(Detection(yc, zc, float(np.expm1(mean[i])), float(mean[i] / sig),
-                                   int(sel.sum())))
+        yield Candidate(yc, zc, float(np.expm1(mean[i])), float(mean[i] / sig), int(sel.sum()),
+                        bool(np.hypot(yc, zc) <= rim - edge))
         # found or not, the bump leaves the baseline: a sub-threshold lump still bends the fit
         # and can hide a stronger one elsewhere (two_lesions: 7 % then 10 %)
         use &= np.hypot(y - yc, z - zc) > exclude
-    return found

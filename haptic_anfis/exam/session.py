@@ -12,6 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..interfaces import I_DEPTH, I_IN_CONTACT, ContactLayouts
 from .config import LEVELS, ExamConfig
 from .coverage import CoverageGrid
 from .findings import match, project_marks
@@ -49,12 +50,22 @@ class ExamSession:
         self.forces: list[tuple] = []     # (t, fx, fy, fz)
         self.poses: list[tuple] = []      # (t, x, y, z)
         self.marks: list[tuple] = []      # (t, x, y, z)
+        self.contact_layouts = ContactLayouts()   # contact messages read / not read, by layout
         self.clutch_presses = 0
         self._buttons_prev: list[int] = []
         self._folded = 0
 
     def add_contact(self, t: float, point, depth: float, in_contact: bool) -> None:
         self.contacts.append((t, point[0], point[1], point[2], depth, 1.0 if in_contact else 0.0))
+
+    def add_contact_values(self, t: float, v) -> bool:
+        """A contact message's ``position`` values (current or older 9-value layout,
+        :class:`~haptic_anfis.interfaces.ContactLayouts`); a message of any other length is
+        counted (the report's ``contact_messages`` and a note) and not read. True when read."""
+        if not self.contact_layouts.accept(v):
+            return False
+        self.add_contact(t, v[0:3], v[I_DEPTH], v[I_IN_CONTACT] > 0.5)
+        return True
 
     def add_force(self, t: float, f) -> None:
         self.forces.append((t, f[0], f[1], f[2]))
@@ -93,6 +104,9 @@ class ExamSession:
         duration = float(times.max() - times.min()) if len(times) else 0.0
         notes = []
         inside = c[:, 5] > 0.5 if len(c) else np.zeros(0, bool)
+        layout_note = self.contact_layouts.note()
+        if layout_note:
+            notes.append(layout_note)
         if len(c) == 0:
             notes.append('no contact samples: nothing was palpated')
         elif not inside.any():
@@ -137,6 +151,7 @@ class ExamSession:
             'clutch_presses': self.clutch_presses,
             'samples': {'contact': len(c), 'force': len(f), 'pose': len(p),
                         'marks': len(self.marks)},
+            'contact_messages': self.contact_layouts.as_dict(),
             'case_source': self.subject.source, 'notes': notes,
         }
 

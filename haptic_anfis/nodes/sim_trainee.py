@@ -35,7 +35,7 @@ class SimTrainee(Node):
 
     def _on_contact(self, msg: JointState) -> None:
         v = msg.position
-        if len(v) == len(ifc.CONTACT_FIELDS) and v[ifc.I_IN_CONTACT] > 0.5:
+        if ifc.is_contact_values(v) and v[ifc.I_IN_CONTACT] > 0.5:
             pending = self._pending
             while len(pending) >= MAX_PENDING:   # forces lost: forget the oldest, do not grow
                 del pending[next(iter(pending))]

@@ -18,6 +18,7 @@ from std_msgs.msg import String
 from std_srvs.srv import Trigger
 
 from ..anfis import train_on_dataset
+from ..anfis.defaults import SHIPPED
 from ..bag.training_data import load_training_data
 from ..tissue.dataset import DEFAULT_DATASET
 from . import interfaces as ifc
@@ -25,14 +26,14 @@ from ._common import Param, declare_parameters, positive, run_node
 
 
 def _structure_check(v: str):
-    if not v:
+    if not v or v == 'search':
         return None
     try:
         st = tuple(int(c) for c in v.split('-'))
     except ValueError:
         st = ()
     return None if 1 <= len(st) <= 4 and min(st) >= 1 else (
-        "expected '' or one MF count per ANFIS input, like '5-5-2' (y, z, depth)")
+        "expected '', 'search' or one MF count per ANFIS input, like '5-5-2' (y, z, depth)")
 
 
 PARAMS = [
@@ -41,12 +42,13 @@ PARAMS = [
     Param('model_path', 'haptic_anfis_model.json', 'model file to write (atomically)',
           lambda v: None if v else 'expected a file path'),
     Param('structure', '', "MF counts for all outputs, one per ANFIS input, e.g. '5-5-2' for the "
-          "default (y, z, depth) inputs ('' = structure search)",
+          "default (y, z, depth) inputs ('' = the shipped configuration, 'search' = structure search)",
           _structure_check),
-    Param('epochs', 60, 'maximum training epochs', lambda v: None if v >= 1 else 'expected >= 1'),
-    Param('test_fraction', 0.2, 'held-out test part of the surface points',
+    Param('epochs', SHIPPED['epochs'], 'training epochs',
+          lambda v: None if v >= 1 else 'expected >= 1'),
+    Param('test_fraction', SHIPPED['test_fraction'], 'held-out test part of the surface points',
           lambda v: None if 0 < v < 1 else 'expected 0 < value < 1'),
-    Param('seed', 0, 'seed of the splits'),
+    Param('seed', SHIPPED['seed'], 'seed of the splits'),
     Param('train_at_start', False, 'train once when the node starts'),
     Param('reload_service', ifc.SERVICE_RELOAD, "the force server's reload service ('' = do not "
           'call it)'),
@@ -93,8 +95,10 @@ class Trainer(Node):
         try:
             ds = load_training_data(path)
             self.say(f'dataset {path}: {len(ds)} samples')
-            st = tuple(int(c) for c in p['structure'].split('-')) if p['structure'] else None
-            self.say(f"training: structure {p['structure'] or 'search'}, up to {p['epochs']} epochs")
+            st = (SHIPPED['structure'] if not p['structure'] else None
+                  if p['structure'] == 'search' else
+                  tuple(int(c) for c in p['structure'].split('-')))
+            self.say(f"training: structure {p['structure'] or 'shipped'}, {p['epochs']} epochs")
             t0 = time.perf_counter()
             model, _ = train_on_dataset(ds, test_fraction=p['test_fraction'], seed=p['seed'],
                                         dataset_path=path, structure=st, epochs=p['epochs'])

@@ -197,7 +197,7 @@ class Visualizer(Node):
 
     def _contact_state(self):
         c = self._contact
-        if c is None or len(c.position) != len(ifc.CONTACT_FIELDS) \
+        if c is None or not ifc.is_contact_values(c.position) \
                 or c.position[ifc.I_IN_CONTACT] < 0.5:
             return None
         v = np.asarray(c.position, dtype=float)

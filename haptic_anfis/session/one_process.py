@@ -9,7 +9,7 @@ simulated hand until everything is ready, and stops them with the device at zero
 from __future__ import annotations
 
 import time
-from typing import Callable, Sequence
+from typing import Callable, Mapping, Sequence
 
 from .spec import SessionSpec
 
@@ -55,23 +55,26 @@ class OneProcessSession:
     """
 
     def __init__(self, spec: SessionSpec, *, extra: Sequence[Callable] = (),
-                 overrides: dict | None = None, side: bool = True, hand=None):
+                 overrides: dict | None = None, side: bool = True, hand=None,
+                 side_nodes: Mapping[str, Sequence[str]] | None = None,
+                 side_nice: int | None = None):
         self.spec, self.overrides, self.hand = spec, overrides, hand
         self.extra = list(extra)
         self.graph = None
         self.codes: dict[str, int] = {}
         if spec.record and not spec.recorder_process:
             self.extra.append(self._recorder)
-        self.side = self._side_nodes() if side else None
+        self.side = self._side_nodes(side_nodes or {}, side_nice) if side or side_nodes else None
 
     def _recorder(self, ctx):
         from ..nodes.recorder import Recorder
         return Recorder(context=ctx, output=self.spec.record, topics=RECORDED_TOPICS())
 
-    def _side_nodes(self):
-        """The visualizer (unless ``in_process`` / ``no_viz``) and, with ``recorder_process``,
-        the recorder as processes of their own."""
-        from ..nodes.side_nodes import SideNodes
+    def _side_nodes(self, more: Mapping[str, Sequence[str]], nice: int | None):
+        """The visualizer (unless ``in_process`` / ``no_viz``), with ``recorder_process`` the
+        recorder, and ``more`` ({node: its ``--ros-args``}, e.g. ``exam run``'s examiner) as
+        processes of their own, at CPU priority ``nice`` (None: the side nodes' default)."""
+        from ..nodes.side_nodes import SIDE_NICE, SideNodes
         s = self.spec
         common = [*s.params_arguments(), *s.user_ros_args()]
         nodes: dict[str, list[str]] = {}
@@ -80,7 +83,8 @@ class OneProcessSession:
             nodes['recorder'] = [*common, *recorder_arguments(s.record, RECORDED_TOPICS())]
         if s.visualizer and not s.in_process:
             nodes['visualizer'] = [*common, *s.case_arguments()]
-        return SideNodes(nodes)
+        nodes.update({k: list(v) for k, v in more.items()})
+        return SideNodes(nodes, nice=SIDE_NICE if nice is None else nice)
 
     def start(self):
         """Check the spec, build the graph, start the side nodes; returns the graph.

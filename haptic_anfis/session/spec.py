@@ -90,7 +90,9 @@ OPTIONS: tuple[Option, ...] = (
     Option(('--in-process',), dict(action='store_true',
                                    help="run the visualizer in the haptic loop's process too "
                                         "(default: in a process of its own, off the loop's "
-                                        'interpreter lock)'), commands=('sim',)),
+                                        'interpreter lock)'), commands=('sim', 'exam'),
+           helps={'exam': "the examiner in the loop's process (default: in a process of its "
+                          "own, as sim's side nodes: off the servo thread's interpreter lock)"}),
     Option(('--recorder-process',), dict(action='store_true',
                                          help="with --record: the recorder in a process of its "
                                               "own (default: in the loop's process, which "

@@ -42,11 +42,14 @@ def make_synthetic_dataset(
     tumour_sigma: float = 0.010,
     tumour_gain: float = 0.20,
     noise: float = 0.005,
+    x_range: tuple[float, float] | None = None,
 ) -> ForceDataset:
     """Build the synthetic dataset (SI units; see the module docstring).
 
     Surface points lie on a square grid of ``spacing`` in the (y, z) chest plane, inside a disc of
-    ``palpable_radius``; every point is indented to every depth in ``depths``.
+    ``palpable_radius``; every point is indented to every depth in ``depths``. ``x_range`` (lo, hi) [m]: instead of the
+    skin height, each point's x (the layer thickness under the probe) is drawn uniformly from it,
+    independently of (y, z) — data not sampled on one skin surface (an indenter over slabs).
 
     Returns:
         ForceDataset with ``X`` (n, 4) = (x, y, z, depth) [m] and ``Y`` (n, 3) = (Fx, Fy, Fz) [N].
@@ -57,7 +60,7 @@ def make_synthetic_dataset(
     yy, zz = np.meshgrid(g, g, indexing='ij')
     keep = yy ** 2 + zz ** 2 <= palpable_radius ** 2 + 1e-12
     y, z = yy[keep], zz[keep]
-    x = surface_x(y, z, radii)
+    x = surface_x(y, z, radii) if x_range is None else rng.uniform(*x_range, len(y))
     rx, ry, rz = radii
     # Outward surface normal of the ellipsoid (gradient of its implicit function).
     n = np.stack([x / rx ** 2, y / ry ** 2, z / rz ** 2], axis=1)
@@ -90,5 +93,6 @@ def make_synthetic_dataset(
         'palpable_radius_m': palpable_radius, 'depths_m': list(depths),
         'probe_radius_m': probe_radius, 'youngs_modulus_Pa': youngs_modulus,
         'tumour_yz_m': list(tumour_yz), 'n_points': int(P), 'n_samples': int(P * D),
+        'x_range_m': None if x_range is None else list(x_range),
     }
     return ForceDataset(X=np.column_stack([xs, ys, zs, delta]), Y=F, point=pid, provenance=provenance)
