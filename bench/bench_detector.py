@@ -89,8 +89,8 @@ def felt_offline(case_name: str, seed: int) -> tuple[np.ndarray, float]:
     from haptic_anfis.cases import get_case
     from haptic_anfis.device.falcon import HandParams, SimulatedFalcon, WorkspaceMapping
     from haptic_anfis.exam.trainee import TraineeController, trainee_path
-    from haptic_anfis.nodes.contact_detector import contact_values
-    from haptic_anfis.nodes.force_server import force_from_contact
+    from haptic_anfis.pipeline.contact import contact_values
+    from haptic_anfis.pipeline.force import force_from_contact
     from haptic_anfis.nodes.resim import build_pipeline
     from haptic_anfis.tissue.scene import load_scene
     t0 = time.perf_counter()
