@@ -1,0 +1,514 @@
+"""The servo loop without the interpreter lock: the compiled tick on its own thread (no ROS).
+
+:class:`NativeServoLoop` runs :func:`haptic_anfis.device.native_tick.run` on a thread: the
+compiled loop releases the GIL once and keeps it released until it is told to stop, so nothing
+else in the process (executors, recorder, garbage collector, a view) can delay a tick. A second,
+ordinary Python thread, the *bridge*, does what needs the interpreter, at whatever pace it gets:
+it reads the newest published tick (a seqlock), hands it to ``on_state`` (the driver publishes
+the pose and takes the newest command / local model from its readers), and drains the tick
+trace. Commands and models go the other way through :class:`NativeSafety` and
+:class:`NativeRenderer`, which keep :class:`~.safety.SafetyLayer`'s and
+:class:`~.local_model.LocalModelRenderer`'s interfaces (so :class:`~.force_input.ForceInput`
+and the driver use them unchanged) and write the loop's input buffers.
+
+A stalled bridge (or a frozen process, short of SIGSTOP) no longer stops the ticks: the last model
+is rendered until it expires (``model_validity_time`` from its pose) and the watchdog then ramps
+the force to zero inside the compiled loop.
+
+Simulated Falcon only: the real USB backend is Python (pyusb / pyftdi) and keeps
+:class:`~.servo.ServoLoop` (see docs/servo_loop.md).
+"""
+from __future__ import annotations
+
+import math
+import threading
+import time
+from typing import Callable
+
+import numpy as np
+
+from . import native_tick as nt
+from .buttons import ButtonEvents
+from .falcon import DeviceState, HandParams, WorkspaceMapping
+from .local_model import FALCON_MAX_STIFFNESS, RenderStats, condition_stiffness_values, \
+    depth_gradient_values, tissue_stiffness_limit
+from .safety import IGNORED_DISABLED, OK, REJECTED_FRAME, REJECTED_NONFINITE, SafetyStats
+from .servo import request_short_slice, set_realtime
+from .stats import LoopStats
+from .trace import TickTrace
+
+__all__ = ['NativeServoLoop', 'NativeSafety', 'NativeRenderer', 'NativeState', 'NativeClutch',
+           'NativeLoopStats', 'script_arrays', 'FALCON_DAMPING']
+
+#: device damping b [N s/m] the passivity bound assumes: with CHAI3D's Falcon stiffness
+#: (3000 N/m) at T = 1 ms, b > K T / 2 asks 1.5 N s/m; the bound then only bites when a tick is
+#: late (K <= 2 b / T).
+FALCON_DAMPING = 1.5
+
+
+class NativeState(DeviceState):
+    """A published tick: :class:`DeviceState` plus the tick's wall-clock stamp [ns], its tissue
+    position with the clutch [m], and the tick's monotonic time [s]."""
+
+    def __init__(self, position, velocity, buttons, stamp_ns: int, tissue, t: float):
+        object.__setattr__(self, 'position', position)
+        object.__setattr__(self, 'velocity', velocity)
+        object.__setattr__(self, 'buttons', buttons)
+        object.__setattr__(self, 'stamp_ns', stamp_ns)
+        object.__setattr__(self, 'tissue', tissue)
+        object.__setattr__(self, 't', t)
+
+
+def _seq_write(buf: np.ndarray, values) -> None:
+    """Seqlock write from Python: odd, the values, even (one writer per buffer)."""
+    s = buf[0]
+    buf[0] = s + 1.0
+    buf[1:] = values
+    buf[0] = s + 2.0
+
+
+def _seq_read(buf: np.ndarray) -> np.ndarray | None:
+    """A consistent copy of a seqlock buffer the compiled loop writes (None after 100 tries)."""
+    for _ in range(100):
+        s1 = buf[0]
+        c = buf.copy()
+        if s1 % 2.0 == 0.0 and buf[0] == s1 and c[0] == s1:
+            return c
+    return None
+
+
+def script_arrays(script) -> tuple[np.ndarray, np.ndarray, np.ndarray, bool, bool]:
+    """(times (n,), points (n, 3) tissue frame, buttons (n - 1, 2) or (0, 2), loop, held) of a
+    :class:`~.palpation.PalpationScript` or a :class:`~.start_gate.HeldScript` around one."""
+    held = bool(getattr(script, 'held', False))
+    inner = getattr(script, 'script', script)
+    times = np.ascontiguousarray(inner.times, dtype=np.float64)
+    points = np.ascontiguousarray(inner.points, dtype=np.float64).reshape(-1, 3)
+    bs = inner.button_states
+    buttons = (np.zeros((0, 2), dtype=np.int64) if bs is None or not np.any(bs)
+               else np.ascontiguousarray(bs, dtype=np.int64).reshape(-1, 2))
+    return times, points, buttons, bool(inner.loop), held
+
+
+class NativeLoopStats(LoopStats):
+    """:class:`LoopStats` whose tick counters are the compiled loop's (``cnt``); :meth:`reset`
+    starts a new window by remembering the counters (the loop's own are never written here)."""
+
+    def __init__(self, cnt: np.ndarray, period: float):
+        super().__init__(period=period)
+        self._cnt = cnt
+        self._base = cnt.copy()
+
+    def reset(self) -> None:
+        super().reset()
+        self._base = self._cnt.copy()
+        self._base[nt.CNT.max_gap_ns] = 0
+        self._base[nt.CNT.max_force_un] = 0
+        self._cnt_max_gap = int(self._cnt[nt.CNT.max_gap_ns])
+
+    def summary(self) -> dict:
+        c, b = self._cnt.copy(), self._base
+        s = super().summary()
+        ticks = int(c[nt.CNT.ticks] - b[nt.CNT.ticks])
+        t0 = (b[nt.CNT.t_last_ns] if b[nt.CNT.ticks] else c[nt.CNT.t_first_ns]) * 1e-9
+        span = c[nt.CNT.t_last_ns] * 1e-9 - t0 if ticks > 0 else 0.0
+        s.update(ticks=ticks, seconds=span, rate_hz=ticks / span if span > 0 else 0.0,
+                 deadline_misses=int(c[nt.CNT.deadline_misses] - b[nt.CNT.deadline_misses]),
+                 periods_lost=int(c[nt.CNT.periods_lost] - b[nt.CNT.periods_lost]),
+                 # the largest gap since the loop started (the counter is not windowed)
+                 max_gap_ms=c[nt.CNT.max_gap_ns] * 1e-6,
+                 max_force_N=c[nt.CNT.max_force_un] * 1e-6,
+                 passivity_limited=int(c[nt.CNT.passivity_limited]
+                                       - b[nt.CNT.passivity_limited]),
+                 observer_active=int(c[nt.CNT.observer_active] - b[nt.CNT.observer_active]))
+        return s
+
+
+class NativeClutch:
+    """The driver's clutch view in native mode: the compiled tick runs the clutch / mark rules
+    (:class:`~.buttons.ClutchMark`'s); this reports what the newest published tick decided."""
+
+    def __init__(self, loop: 'NativeServoLoop'):
+        self._loop = loop
+        self._marks = 0
+        self.held = False
+
+    @property
+    def marks(self) -> int:
+        return int(self._loop.cnt[nt.CNT.marks])
+
+    @property
+    def clutches(self) -> int:
+        return int(self._loop.cnt[nt.CNT.clutches])
+
+    def update(self, buttons, mapped, now: float):
+        """(tissue position of the newest tick, events: a mark since the previous call)."""
+        st = self._loop.last_state
+        self.held = bool(self._loop.last_out[nt.OUT.held] > 0.5)
+        ev = ButtonEvents()
+        m = self.marks
+        if m != self._marks:
+            ev.mark = True
+            self._marks = m
+        return (st.tissue if st is not None else mapped), ev
+
+
+class NativeSafety:
+    """:class:`~.safety.SafetyLayer`'s interface over the compiled loop's safety state: commands
+    (device frame) go into the command buffer, faults zero the force at once in the next tick.
+    The clamp, rate limit and watchdog run in the compiled tick (same rules)."""
+
+    def __init__(self, loop: 'NativeServoLoop', max_force: float, max_force_rate: float,
+                 watchdog_timeout: float, frame_id: str = 'tissue', max_dt: float = 0.005):
+        for name, v in (('max_force', max_force), ('max_force_rate', max_force_rate),
+                        ('watchdog_timeout', watchdog_timeout), ('max_dt', max_dt)):
+            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
+                raise ValueError(f'{name}: expected a finite number > 0, got {v!r}')
+        self._loop = loop
+        self.max_force, self.max_force_rate = float(max_force), float(max_force_rate)
+        self.watchdog_timeout, self.max_dt, self.frame_id = float(watchdog_timeout), \
+            float(max_dt), frame_id
+        self._py = SafetyStats()  # the counts kept on the Python side
+        self._lock = threading.Lock()
+
+    @property
+    def enabled(self) -> bool:
+        return bool(self._loop.ctl[nt.CTL.enabled])
+
+    @property
+    def watchdog_tripped(self) -> bool:
+        return bool(self._loop.st[nt.S.tripped] > 0.5)
+
+    @property
+    def stats(self) -> SafetyStats:
+        c = self._loop.cnt
+        s = SafetyStats(**{k: getattr(self._py, k) for k in ('commands', 'rejected_frame',
+                                                             'last_reject')})
+        s.rejected_nonfinite = self._py.rejected_nonfinite + int(c[nt.CNT.rejected_nonfinite])
+        s.watchdog_trips = int(c[nt.CNT.watchdog_trips])
+        s.watchdog_trips_in_contact = int(c[nt.CNT.watchdog_trips_in_contact])
+        s.clamped = int(c[nt.CNT.clamped])
+        s.max_output = c[nt.CNT.max_force_un] * 1e-6
+        return s
+
+    def start(self, now: float = 0.0) -> None:
+        ctl = self._loop.ctl
+        ctl[nt.CTL.enabled] = 1
+        ctl[nt.CTL.enable_gen] += 1
+
+    def stop(self) -> None:
+        ctl = self._loop.ctl
+        ctl[nt.CTL.enabled] = 0
+        ctl[nt.CTL.enable_gen] += 1
+
+    def command(self, force, now: float, frame_id: str | None = None, count: bool = True) -> str:
+        try:
+            fx, fy, fz = (float(v) for v in force)
+        except (TypeError, ValueError):
+            fx = fy = fz = math.nan
+        with self._lock:
+            if not self.enabled:
+                return IGNORED_DISABLED
+            if count:
+                self._py.commands += 1
+            if not math.isfinite(fx + fy + fz):
+                self._fault(REJECTED_NONFINITE)
+                return REJECTED_NONFINITE
+            if self.frame_id and frame_id is not None and frame_id != self.frame_id:
+                self._py.rejected_frame += 1
+                self._loop.ctl[nt.CTL.fault] += 1
+                self._py.last_reject = f'{REJECTED_FRAME} {frame_id!r} (expected {self.frame_id!r})'
+                return REJECTED_FRAME
+            _seq_write(self._loop.cmd, (fx, fy, fz, float(now)))
+            return OK
+
+    def reject(self, why: str) -> None:
+        """A non-finite input from elsewhere: zero at once in the next tick."""
+        with self._lock:
+            if self.enabled:
+                self._fault(why)
+
+    def _fault(self, why: str) -> None:
+        self._py.rejected_nonfinite += 1
+        self._py.last_reject = why
+        self._loop.ctl[nt.CTL.fault] += 1
+
+
+class NativeRenderer:
+    """:class:`~.local_model.LocalModelRenderer`'s receiving side over the compiled loop: a model
+    is checked and conditioned here (once per model, as before) and written to the model buffer;
+    the compiled tick renders it. ``stats``: the tick counts by status come from the loop."""
+
+    def __init__(self, loop: 'NativeServoLoop', max_stiffness: float = FALCON_MAX_STIFFNESS / 1.5,
+                 validity_time: float = 0.05, validity_radius: float = 0.005,
+                 fresh_age: float = 0.0015) -> None:
+        for name, v in (('max_stiffness', max_stiffness), ('validity_time', validity_time),
+                        ('validity_radius', validity_radius), ('fresh_age', fresh_age)):
+            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
+                raise ValueError(f'{name}: expected a finite number > 0, got {v!r}')
+        self._loop = loop
+        self.max_stiffness, self.validity_time = float(max_stiffness), float(validity_time)
+        self.validity_radius, self.fresh_age = float(validity_radius), float(fresh_age)
+        self._py = RenderStats()
+        self._base = loop.cnt.copy()
+        self.time: float | None = None
+
+    @property
+    def stats(self) -> RenderStats:
+        c, b, C = self._loop.cnt, self._base, nt.CNT
+        s = RenderStats(models=self._py.models, rejected=self._py.rejected,
+                        stiffness_clamped=self._py.stiffness_clamped)
+        s.ticks_fresh = int(c[C.fresh] - b[C.fresh])
+        s.ticks_extrapolated = int(c[C.extrapolated] - b[C.extrapolated])
+        s.ticks_expired = int(c[C.expired] - b[C.expired])
+        s.ticks_free = int(c[C.free] - b[C.free])
+        s.ticks_none = int(c[C.none] - b[C.none])
+        s.ticks_approach = int(c[C.approach] - b[C.approach])
+        return s
+
+    def reset_stats(self) -> None:
+        self._py = RenderStats()
+        self._base = self._loop.cnt.copy()
+
+    def clear(self) -> None:
+        """Forget the model (the next ticks render nothing)."""
+        self.time = None
+        v = np.zeros(nt.MODEL_LEN - 1)
+        _seq_write(self._loop.model, v)
+
+    def offer_values(self, v, time: float, checked: bool = False) -> None:
+        """As :meth:`LocalModelRenderer.offer_values` (raises ValueError on a malformed model)."""
+        if not checked:
+            from .local_model import check_values
+            try:
+                check_values(v)
+            except ValueError:
+                self._py.rejected += 1
+                raise
+        (f0x, f0y, f0z, p0x, p0y, p0z, *_, nx, ny, nz, dx, dy, dz, depth0, zero) = v
+        k, changed = condition_stiffness_values(v[6:15], self.max_stiffness)
+        if changed:
+            self._py.stiffness_clamped += 1
+        contact = depth0 > 0.0 or nx * nx + ny * ny + nz * nz > 0.0
+        g = depth_gradient_values(nx, ny, nz, dx, dy, dz) if contact else (0.0, 0.0, 0.0)
+        d = (dx, dy, dz) if contact else (0.0, 0.0, 0.0)
+        # |K|: the largest absolute row sum bounds the spectral norm of the symmetric K
+        knorm = max(abs(k[0]) + abs(k[1]) + abs(k[2]), abs(k[3]) + abs(k[4]) + abs(k[5]),
+                    abs(k[6]) + abs(k[7]) + abs(k[8]))
+        t = float(time)
+        _seq_write(self._loop.model, (f0x, f0y, f0z, p0x, p0y, p0z, *k, *g, *d, float(depth0),
+                                      1.0 if (zero > 0.5 and contact) else 0.0,
+                                      1.0 if contact else 0.0, t, 1.0, knorm))
+        self.time = t
+        self._py.models += 1
+
+
+class NativeServoLoop:
+    """The simulated Falcon's servo loop, compiled and GIL-free (module docstring).
+
+    Args:
+        script: the hand's :class:`~.palpation.PalpationScript` (or a
+            :class:`~.start_gate.HeldScript` around one: held until :meth:`release`).
+        mapping, hand: as :class:`~.falcon.SimulatedFalcon`'s.
+        rate: servo rate [Hz].
+        max_force, max_force_rate, watchdog_timeout, frame_id: the safety layer's.
+        mode: ``'local_model'`` or ``'zoh'``.
+        max_stiffness: device-frame stiffness bound [N/m]; validity_time [s], validity_radius [m]:
+            the local model's (:class:`~.local_model.LocalModelRenderer`).
+        damping: device damping b [N s/m] of the passivity bound K <= 2 b / T.
+        observer: run the passivity observer / controller (Hannaford & Ryu 2002).
+        on_state: ``on_state(state: NativeState, force, now)`` on the bridge thread for the newest
+            tick (force: device frame).
+        trace: a :class:`~.trace.TickTrace` the bridge fills (tissue frame), or None.
+        priority: SCHED_FIFO priority of the tick thread (0: the normal scheduler, with a short
+            time slice requested); the bridge gets ``priority - 10`` (at least 1) when > 0.
+        ring: trace ring rows in the loop (the bridge must drain it within ``ring`` ticks).
+    """
+
+    def __init__(self, script, mapping: WorkspaceMapping = WorkspaceMapping(),
+                 hand: HandParams = HandParams(), rate: float = 1000.0, max_force: float = 8.9,
+                 max_force_rate: float = 1000.0, watchdog_timeout: float = 0.010,
+                 frame_id: str = 'tissue', mode: str = 'local_model',
+                 max_stiffness: float = FALCON_MAX_STIFFNESS, validity_time: float = 0.05,
+                 validity_radius: float = 0.005, damping: float = FALCON_DAMPING,
+                 observer: bool = False,
+                 on_state: Callable[[NativeState, tuple, float], None] | None = None,
+                 trace: TickTrace | None = None, priority: int = 0, ring: int = 1 << 16,
+                 half_extent: float = 0.05, device_max_force: float | None = None) -> None:
+        if not rate > 0:
+            raise ValueError(f'rate: expected > 0 Hz, got {rate!r}')
+        if not 0 <= priority <= 99:
+            raise ValueError(f'priority: expected 0 (normal scheduling) to 99, got {priority!r}')
+        if mode not in ('zoh', 'local_model'):
+            raise ValueError(f"mode: expected 'zoh' or 'local_model', got {mode!r}")
+        if not (math.isfinite(damping) and damping > 0):
+            raise ValueError(f'damping: expected a finite number > 0 N s/m, got {damping!r}')
+        self.period = 1.0 / rate
+        self.priority = int(priority)
+        self.mapping, self.on_state, self.trace = mapping, on_state, trace
+        self.times, points, self.buttons, loop, held = script_arrays(script)
+        self.points = points
+        self.script = script
+        C = nt.CFG
+        cfg = np.zeros(nt.CFG_LEN)
+        cfg[C.period] = self.period
+        cfg[C.max_force], cfg[C.max_force_rate] = max_force, max_force_rate
+        cfg[C.watchdog], cfg[C.max_dt] = watchdog_timeout, 0.005
+        cfg[C.validity_time], cfg[C.validity_radius] = validity_time, validity_radius
+        cfg[C.fresh_age] = 1.5 * self.period
+        cfg[C.max_stiffness] = tissue_stiffness_limit(max_stiffness, mapping.force_scale,
+                                                      mapping.scale)
+        cfg[C.scale], cfg[C.force_scale] = mapping.scale, mapping.force_scale
+        cfg[C.ox], cfg[C.oy], cfg[C.oz] = mapping.offset
+        cfg[C.hand_m], cfg[C.hand_k], cfg[C.hand_c] = hand.mass, hand.stiffness, hand.damping
+        cfg[C.half], cfg[C.dt_max], cfg[C.max_catch_up] = half_extent, 0.001, 0.05
+        cfg[C.ramp] = 0.005
+        cfg[C.damping] = damping
+        cfg[C.mode] = 1.0 if mode == 'local_model' else 0.0
+        cfg[C.observer] = 1.0 if observer else 0.0
+        cfg[C.loop] = 1.0 if loop else 0.0
+        cfg[C.dev_max_force] = max_force if device_max_force is None else device_max_force
+        self.cfg = cfg
+        self.st = nt.new_state()
+        x0 = [min(max((points[0, k] - mapping.offset[k]) / mapping.scale, -half_extent),
+                  half_extent) for k in range(3)]
+        self.st[nt.S.x0:nt.S.x0 + 3] = x0
+        self.cmd = np.zeros(nt.CMD_LEN)
+        self.model = np.zeros(nt.MODEL_LEN)
+        self.ctl = np.zeros(nt.CTL_LEN, dtype=np.int64)
+        self.ctl[nt.CTL.release] = 0 if held else 1
+        self.out = np.zeros(nt.OUT_LEN)
+        self.cnt = np.zeros(nt.CNT_LEN, dtype=np.int64)
+        self.ring = np.zeros((int(ring) if trace is not None else 0, nt.TRACE_COLS))
+        self._scratch = np.zeros(nt.SCRATCH_LEN)
+        self._ts = np.zeros(2, dtype=np.int64)
+        self.safety = NativeSafety(self, max_force, max_force_rate, watchdog_timeout, frame_id)
+        self.renderer = NativeRenderer(self, tissue_stiffness_limit(
+            max_stiffness, mapping.force_scale, mapping.scale), validity_time, validity_radius,
+            1.5 * self.period)
+        self.clutch = NativeClutch(self)
+        self.stats = NativeLoopStats(self.cnt, self.period)
+        self.scheduling = ''
+        self.errors = 0
+        self.last_error: BaseException | None = None
+        self.trace_lost = 0  # trace rows overwritten before the bridge drained them
+        self.bridge_gaps = LoopStats(period=self.period)  # the bridge's own pace
+        self.last_out = self.out.copy()
+        self.last_state: NativeState | None = None
+        self.force = (0.0, 0.0, 0.0)
+        self.status = -1
+        self._read = 0
+        self._stop = threading.Event()
+        self._tick_thread: threading.Thread | None = None
+        self._bridge: threading.Thread | None = None
+        self._scheduled = threading.Event()
+
+    # -- control --------------------------------------------------------------------------------
+    def release(self) -> None:
+        """Start the held script at the next tick (idempotent)."""
+        self.ctl[nt.CTL.release] = 1
+
+    @property
+    def held(self) -> bool:
+        return bool(self.ctl[nt.CTL.release] == 0)
+
+    def compile(self) -> None:
+        """Compile (or load from numba's cache) the loop: :func:`~.native_tick.run` on copies, told
+        to stop before its first tick."""
+        ctl = self.ctl.copy()
+        ctl[nt.CTL.stop] = 1  # run returns at once
+        nt.run(self.cfg, self.st.copy(), self.times, self.points, self.buttons, self.cmd.copy(),
+               self.model.copy(), ctl, self.out.copy(), self.cnt.copy(), self.ring[:0].copy(),
+               self._scratch.copy(), self._ts.copy())
+
+    def start(self) -> None:
+        self.compile()
+        self.safety.start()
+        self._tick_thread = threading.Thread(target=self._run_ticks, name='servo-native',
+                                             daemon=True)
+        self._bridge = threading.Thread(target=self._run_bridge, name='servo-bridge', daemon=True)
+        self._tick_thread.start()
+        self._scheduled.wait(1.0)
+        self._bridge.start()
+
+    def stop(self, timeout: float = 2.0) -> None:
+        self.safety.stop()
+        self.ctl[nt.CTL.stop] = 1
+        self._stop.set()
+        for th in (self._tick_thread, self._bridge):
+            if th is not None and th is not threading.current_thread():
+                th.join(timeout)
+        self._drain()
+        self.force = (0.0, 0.0, 0.0)
+
+    @property
+    def running(self) -> bool:
+        return self._tick_thread is not None and self._tick_thread.is_alive()
+
+    # -- threads --------------------------------------------------------------------------------
+    def _run_ticks(self) -> None:
+        self.scheduling = set_realtime(self.priority)
+        if self.priority <= 0:
+            self.scheduling += request_short_slice()
+        self.scheduling = 'compiled nogil tick; ' + self.scheduling
+        self._scheduled.set()
+        try:
+            nt.run(self.cfg, self.st, self.times, self.points, self.buttons, self.cmd, self.model,
+                   self.ctl, self.out, self.cnt, self.ring, self._scratch, self._ts)
+        except Exception as exc:  # cannot happen short of a bug; say so, the device is at 0 N
+            self.errors += 1
+            self.last_error = exc
+
+    def _run_bridge(self) -> None:
+        set_realtime(max(self.priority - 10, 1) if self.priority > 0 else 0)
+        if self.priority <= 0:
+            request_short_slice()
+        seen = -1.0
+        period = self.period
+        next_drain = 0
+        while not self._stop.is_set():
+            o = _seq_read(self.out)
+            if o is not None and o[0] != seen:
+                seen = o[0]
+                self._publish(o)
+            next_drain += 1
+            if next_drain >= 20:
+                next_drain = 0
+                self._drain()
+            time.sleep(period * 0.5)
+
+    def _publish(self, o: np.ndarray) -> None:
+        O = nt.OUT
+        self.last_out = o
+        t = float(o[O.t])
+        stamp = int(o[O.stamp_hi]) * 1_000_000_000 + int(o[O.stamp_lo])
+        state = NativeState((o[O.p0], o[O.p1], o[O.p2]), (o[O.v0], o[O.v1], o[O.v2]),
+                            (int(o[O.b0]), int(o[O.b1]), 0, 0), stamp,
+                            (o[O.q0], o[O.q1], o[O.q2]), t)
+        self.last_state = state
+        self.force = (o[O.f0], o[O.f1], o[O.f2])
+        self.status = int(o[O.status])
+        self.bridge_gaps.tick(t)
+        if self.on_state is not None:
+            try:
+                self.on_state(state, self.force, t)
+            except Exception as exc:  # a publishing hiccup must not stop the bridge
+                self.errors += 1
+                self.last_error = exc
+
+    def _drain(self) -> None:
+        """Move the trace rows the loop wrote since the last drain into :attr:`trace`."""
+        n = len(self.ring)
+        if not n or self.trace is None:
+            return
+        w = int(self.cnt[nt.CNT.trace_w])
+        if self.running:
+            w -= 1  # the newest row may still be in flight
+        r = self._read
+        if w - r > n:
+            self.trace_lost += w - r - n
+            r = w - n
+        if w > r:
+            idx = np.arange(r, w) % n
+            self.trace.extend(self.ring[idx])
+        self._read = max(w, self._read)
