@@ -42,7 +42,7 @@ from llvmlite import binding as llvm
 import numpy as np
 
 __all__ = ['CFG', 'CNT', 'OUT', 'CMD_LEN', 'MODEL_LEN', 'STATE_LEN', 'CTL', 'TRACE_COLS',
-           'CFG_LEN', 'CTL_LEN', 'OUT_LEN', 'CNT_LEN', 'SCRATCH_LEN',
+           'CFG_LEN', 'CTL_LEN', 'HAND_LEN', 'OUT_LEN', 'CNT_LEN', 'SCRATCH_LEN',
            'tick', 'run', 'clock_now', 'new_state']
 
 _libc = ctypes.CDLL(ctypes.util.find_library('c') or 'libc.so.6', use_errno=True)
@@ -90,7 +90,12 @@ CMD_LEN = 5
 MODEL_LEN = 1 + 3 + 3 + 9 + 3 + 3 + 6
 #: control (int64): stop, release (the held script), fault generation (zero at once),
 #: enable generation and enabled (SafetyLayer.start / stop)
-CTL = _index('CTL', 'stop release fault enable_gen enabled')
+CTL = _index('CTL', 'stop release fault enable_gen enabled external')
+#: external hand target (float64 seqlock; ``ctl[external]`` = 1): seq, its time [s], target (3,)
+#: device frame [m], its velocity (3,) [m/s], buttons 0 and 1 (a script only Python can play)
+HAND_LEN = 10
+#: the hand target is extrapolated from the newest one for at most this long [s], then held
+HAND_EXTRAPOLATE = 0.02
 #: published state (float64 seqlock): seq, t, device position, velocity, tissue position (with
 #: the clutch), applied force (device frame), status, clutch held, buttons 0..3, stamp [ns] as
 #: two int32 halves are not needed: the realtime stamp is published in :data:`CNT`'s ``stamp``
@@ -163,7 +168,7 @@ def _script_point(cfg, st, times, points, t):
 
 
 @nb.njit(nogil=True, cache=True)
-def _device_read(cfg, st, times, points, buttons, now, ctl):
+def _device_read(cfg, st, times, points, buttons, now, ctl, hand):
     """Advance the simulated handle to ``now``; returns (b0, b1) buttons."""
     if st[S.t_dev] != st[S.t_dev]:
         st[S.t_dev] = now
@@ -172,7 +177,15 @@ def _device_read(cfg, st, times, points, buttons, now, ctl):
         st[S.script_off] = now - st[S.t_open]
     span = min(max(now - st[S.t_dev], 0.0), cfg[CFG.max_catch_up])
     st[S.t_dev] = now
-    target, seg = _script_point(cfg, st, times, points, now - st[S.t_open])
+    if ctl[CTL.external] != 0:
+        target = np.empty(3)
+        dt = min(max(now - hand[1], 0.0), HAND_EXTRAPOLATE)
+        h = cfg[CFG.half]
+        for k in range(3):
+            target[k] = min(max(hand[2 + k] + hand[5 + k] * dt, -h), h)
+        hb0, hb1 = int(hand[8]), int(hand[9])
+    else:
+        target, seg = _script_point(cfg, st, times, points, now - st[S.t_open])
     if span > 0.0:
         n = max(1, int(np.ceil(span / cfg[CFG.dt_max] - 1e-9)))
         dt = span / n
@@ -188,6 +201,8 @@ def _device_read(cfg, st, times, points, buttons, now, ctl):
                 elif st[S.x0 + i] < -h:
                     st[S.x0 + i] = -h
                     st[S.v0 + i] = max(st[S.v0 + i], 0.0)
+    if ctl[CTL.external] != 0:
+        return hb0, hb1
     if st[S.script_off] != st[S.script_off] or buttons.shape[0] == 0:
         return 0, 0
     return int(buttons[seg, 0]), int(buttons[seg, 1])
@@ -404,7 +419,7 @@ def _render(cfg, st, cnt, qx, qy, qz, now, gap):
 
 
 @nb.njit(nogil=True, cache=True)
-def tick(now, cfg, st, times, points, buttons, cmd, model, ctl, out, cnt, trace, scratch,
+def tick(now, cfg, st, times, points, buttons, hand, cmd, model, ctl, out, cnt, trace, scratch,
          stamp_ns):
     """One servo tick at monotonic time ``now`` [s] (see the module docstring); ``stamp_ns``: the
     wall-clock stamp the published pose carries. Returns the applied force's magnitude [N]."""
@@ -434,7 +449,7 @@ def tick(now, cfg, st, times, points, buttons, cmd, model, ctl, out, cnt, trace,
                 _fault(st, cnt)
     gap = now - st[S.t_prev] if st[S.t_prev] == st[S.t_prev] else cfg[CFG.period]
     # 1. device
-    b0, b1 = _device_read(cfg, st, times, points, buttons, now, ctl)
+    b0, b1 = _device_read(cfg, st, times, points, buttons, now, ctl, hand)
     sc, fs = cfg[CFG.scale], cfg[CFG.force_scale]
     mx = cfg[CFG.ox] + sc * st[S.x0]
     my = cfg[CFG.oy] + sc * st[S.x1]
@@ -522,7 +537,7 @@ def tick(now, cfg, st, times, points, buttons, cmd, model, ctl, out, cnt, trace,
 
 
 @nb.njit(nogil=True, cache=True)
-def run(cfg, st, times, points, buttons, cmd, model, ctl, out, cnt, trace, scratch, ts):
+def run(cfg, st, times, points, buttons, hand, cmd, model, ctl, out, cnt, trace, scratch, ts):
     """The servo loop: :func:`tick` every ``period`` to absolute deadlines until ``ctl[stop]``;
     a tick more than one period late is a deadline miss and the schedule re-synchronises (the
     periods it lost are counted by :func:`tick`). Leaves the device at zero force. Returns the
@@ -539,8 +554,8 @@ def run(cfg, st, times, points, buttons, cmd, model, ctl, out, cnt, trace, scrat
             deadline = now_ns
         _clock_gettime(CLOCK_REALTIME, ts.ctypes.data)
         stamp = ts[0] * 1000000000 + ts[1]
-        tick(now_ns * 1e-9, cfg, st, times, points, buttons, cmd, model, ctl, out, cnt, trace,
-             scratch, stamp)
+        tick(now_ns * 1e-9, cfg, st, times, points, buttons, hand, cmd, model, ctl, out, cnt,
+             trace, scratch, stamp)
         deadline += period_ns
         ts[0] = deadline // 1000000000
         ts[1] = deadline % 1000000000

@@ -348,7 +348,8 @@ class NativeServoLoop:
         self.mapping, self.on_state, self.trace = mapping, on_state, trace
         self.times, points, self.buttons, loop, held = script_arrays(script)
         self.points = points
-        self.script = script
+        self._script = script
+        self.hand = np.zeros(nt.HAND_LEN)
         C = nt.CFG
         cfg = np.zeros(nt.CFG_LEN)
         cfg[C.period] = self.period
@@ -409,6 +410,33 @@ class NativeServoLoop:
         self.ctl[nt.CTL.release] = 1
 
     @property
+    def script(self):
+        """The hand's script. Setting one (e.g. ``exam run``'s simulated trainee, a script only
+        Python can play) makes the bridge play it: it writes the hand target (and its velocity)
+        at its pace and the compiled tick extrapolates it for at most
+        :data:`~.native_tick.HAND_EXTRAPOLATE`."""
+        return self._script
+
+    @script.setter
+    def script(self, script) -> None:
+        self._script = script
+        self._feed_hand()
+        self.ctl[nt.CTL.external] = 1
+
+    def _feed_hand(self) -> None:
+        """The external script's hand target at the bridge's time (device frame)."""
+        s = self._script
+        t0 = self.st[nt.S.t_open]
+        now = time.monotonic()
+        t = (now - t0) if t0 == t0 and t0 > 0 else 0.0
+        m, dt = self.mapping, 0.002
+        p = m.to_device(s.target(t))
+        p1 = m.to_device(s.target(t + dt))
+        b = s.buttons(t) if hasattr(s, 'buttons') else (0, 0)
+        _seq_write(self.hand, (now, *p, *((p1[k] - p[k]) / dt for k in range(3)),
+                               float(b[0]), float(b[1])))
+
+    @property
     def held(self) -> bool:
         return bool(self.ctl[nt.CTL.release] == 0)
 
@@ -417,7 +445,8 @@ class NativeServoLoop:
         to stop before its first tick."""
         ctl = self.ctl.copy()
         ctl[nt.CTL.stop] = 1  # run returns at once
-        nt.run(self.cfg, self.st.copy(), self.times, self.points, self.buttons, self.cmd.copy(),
+        nt.run(self.cfg, self.st.copy(), self.times, self.points, self.buttons, self.hand.copy(),
+               self.cmd.copy(),
                self.model.copy(), ctl, self.out.copy(), self.cnt.copy(), self.ring[:0].copy(),
                self._scratch.copy(), self._ts.copy())
 
@@ -453,8 +482,8 @@ class NativeServoLoop:
         self.scheduling = 'compiled nogil tick; ' + self.scheduling
         self._scheduled.set()
         try:
-            nt.run(self.cfg, self.st, self.times, self.points, self.buttons, self.cmd, self.model,
-                   self.ctl, self.out, self.cnt, self.ring, self._scratch, self._ts)
+            nt.run(self.cfg, self.st, self.times, self.points, self.buttons, self.hand, self.cmd,
+                   self.model, self.ctl, self.out, self.cnt, self.ring, self._scratch, self._ts)
         except Exception as exc:  # cannot happen short of a bug; say so, the device is at 0 N
             self.errors += 1
             self.last_error = exc
@@ -467,6 +496,12 @@ class NativeServoLoop:
         period = self.period
         next_drain = 0
         while not self._stop.is_set():
+            if self.ctl[nt.CTL.external]:
+                try:
+                    self._feed_hand()
+                except Exception as exc:  # the script's own error: counted, the hand holds
+                    self.errors += 1
+                    self.last_error = exc
             o = _seq_read(self.out)
             if o is not None and o[0] != seen:
                 seen = o[0]
