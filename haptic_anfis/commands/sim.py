@@ -40,7 +40,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         'driver) before giving up (default 300)')
     p.add_argument('--json', action='store_true',
                    help='end with one line of JSON: rate_hz, latency_p50_ms, latency_p99_ms, '
-                        'latency_max_ms, deadline_misses, cycles, max_force_n, contact_s, ...')
+                        'latency_max_ms, deadline_misses, periods_lost, cycles, max_force_n, '
+                        'contact_s, force_error_rms_pct, ripple_windows_pct, zero_force_ticks, '
+                        '... (the driver traces every tick for the error figures)')
     from ..cases.library import add_case_arguments
     add_case_arguments(p)
     p.add_argument('ros_args', nargs=argparse.REMAINDER,
@@ -66,6 +68,13 @@ def run(args: argparse.Namespace) -> int:
         for f in args.params_file:
             ros_args += ['--params-file', f]
         ros_args += case_args
+    trace = None
+    if args.json:  # the applied-force error needs every servo tick (commands/loop.py)
+        import tempfile
+        trace = Path(tempfile.mkdtemp(prefix='haptic-anfis-sim-')) / 'falcon_driver_trace.npz'
+        if '--ros-args' not in ros_args:
+            ros_args = ['--ros-args', *ros_args]
+        ros_args += ['-p', f'falcon_driver:trace_path:={trace}']
     side = _side_nodes(args, ros_args, case_args)
     extra = []
     if args.record and not args.recorder_process:
@@ -116,8 +125,32 @@ def run(args: argparse.Namespace) -> int:
         print(f"recorded       {r['written']} messages on {len(r['topics'])} topics to "
               f"{r['output']} (dropped {r['dropped']})")
     if args.json:
-        print(json.dumps(json_summary(summary, recorded)), flush=True)
+        out = json_summary(summary, recorded)
+        out.update(_trace_figures(trace, args.params_file))
+        print(json.dumps(out), flush=True)
     return 0
+
+
+#: the trace report's figures ``sim --json`` carries (commands/loop.py)
+TRACE_KEYS = ('force_error_rms_pct', 'force_error_rms_n', 'force_error_p99_n',
+              'force_error_p99_pct', 'contact_ticks', 'ripple_windows_pct',
+              'ripple_windows_ideal_pct', 'zero_force_ticks', 'longest_dropout_ms', 'force_mode',
+              'watchdog_trips_in_contact', 'ticks_expired', 'periods_lost', 'max_gap_ms')
+
+
+def _trace_figures(trace: Path | None, params_files) -> dict:
+    """The applied-force error, ripple and dropout figures of the driver's tick trace (the
+    temporary trace is removed); {} without one."""
+    if trace is None or not trace.is_file():
+        return {}
+    import shutil
+
+    from .loop import trace_report
+    try:
+        r = trace_report(trace, params_files)
+    finally:
+        shutil.rmtree(trace.parent, ignore_errors=True)
+    return {k: r.get(k) for k in TRACE_KEYS}
 
 
 def _side_nodes(args: argparse.Namespace, ros_args: list[str], case_args: list[str]):
@@ -165,6 +198,7 @@ def json_summary(s: dict, recorded: dict | None = None) -> dict:
            'latency_p99_ms': lp['latency_p99_ms'], 'latency_max_ms': lp['latency_max_ms'],
            'latency_next_tick_pct': lp.get('latency_next_tick_pct'),
            'deadline_misses': lp['deadline_misses'], 'cycles': lp['ticks'],
+           'periods_lost': lp.get('periods_lost'), 'max_gap_ms': lp.get('max_gap_ms'),
            'max_force_n': lp['max_force_N'], 'contact_s': contact_seconds(s),
            'seconds': lp['seconds'], 'commands': lp['latency_n'],
            'watchdog_trips': lp['watchdog_trips'], 'clamped': lp['clamped'],

@@ -293,13 +293,15 @@ def _command(st, fx, fy, fz, t):
 
 
 @nb.njit(nogil=True, cache=True)
-def _fault(st, cnt):
-    """A non-finite input: zero at once, the watchdog stays tripped until a valid command."""
+def _fault(st, cnt, count=True):
+    """A non-finite input: zero at once, the watchdog stays tripped until a valid command
+    (``count``: counted here; a fault Python reports is counted there)."""
     for i in range(3):
         st[S.target0 + i] = 0.0
         st[S.out0 + i] = 0.0
     st[S.last_cmd] = np.nan
-    cnt[CNT.rejected_nonfinite] += 1
+    if count:
+        cnt[CNT.rejected_nonfinite] += 1
 
 
 @nb.njit(nogil=True, cache=True)
@@ -433,7 +435,7 @@ def tick(now, cfg, st, times, points, buttons, hand, cmd, model, ctl, out, cnt, 
         st[S.fault_seen] = ctl[CTL.fault]
         st[S.m_valid] = 0.0
         if st[S.enabled] > 0.5:
-            _fault(st, cnt)
+            _fault(st, cnt, False)
     if _take(model, scratch, st[S.model_seen]):
         st[S.model_seen] = scratch[0]
         ok = True

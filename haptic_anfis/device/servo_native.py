@@ -38,7 +38,7 @@ from .stats import LoopStats
 from .trace import TickTrace
 
 __all__ = ['NativeServoLoop', 'NativeSafety', 'NativeRenderer', 'NativeState', 'NativeClutch',
-           'NativeLoopStats', 'script_arrays', 'FALCON_DAMPING']
+           'NativeLoopStats', 'script_arrays', 'spectral_norm_sym', 'FALCON_DAMPING']
 
 #: device damping b [N s/m] the passivity bound assumes: with CHAI3D's Falcon stiffness
 #: (3000 N/m) at T = 1 ms, b > K T / 2 asks 1.5 N s/m; the bound then only bites when a tick is
@@ -88,6 +88,26 @@ def script_arrays(script) -> tuple[np.ndarray, np.ndarray, np.ndarray, bool, boo
     buttons = (np.zeros((0, 2), dtype=np.int64) if bs is None or not np.any(bs)
                else np.ascontiguousarray(bs, dtype=np.int64).reshape(-1, 2))
     return times, points, buttons, bool(inner.loop), held
+
+
+def spectral_norm_sym(k) -> float:
+    """The largest |eigenvalue| of the symmetric 3 x 3 ``k`` (9 values row-major) [N/m], by the
+    trigonometric closed form (Smith 1961; plain floats, a few µs: once per received model)."""
+    a00, a01, a02, _, a11, a12, _, _, a22 = k
+    p1 = a01 * a01 + a02 * a02 + a12 * a12
+    q = (a00 + a11 + a22) / 3.0
+    b00, b11, b22 = a00 - q, a11 - q, a22 - q
+    p2 = b00 * b00 + b11 * b11 + b22 * b22 + 2.0 * p1
+    if p2 <= 0.0:
+        return abs(q)
+    p = math.sqrt(p2 / 6.0)
+    det = (b00 * (b11 * b22 - a12 * a12) - a01 * (a01 * b22 - a12 * a02)
+           + a02 * (a01 * a12 - b11 * a02))
+    r = max(-1.0, min(1.0, det / (2.0 * p * p * p)))
+    phi = math.acos(r) / 3.0
+    l1 = q + 2.0 * p * math.cos(phi)
+    l3 = q + 2.0 * p * math.cos(phi + 2.0943951023931957)
+    return max(abs(l1), abs(l3))
 
 
 class NativeLoopStats(LoopStats):
@@ -292,9 +312,7 @@ class NativeRenderer:
         contact = depth0 > 0.0 or nx * nx + ny * ny + nz * nz > 0.0
         g = depth_gradient_values(nx, ny, nz, dx, dy, dz) if contact else (0.0, 0.0, 0.0)
         d = (dx, dy, dz) if contact else (0.0, 0.0, 0.0)
-        # |K|: the largest absolute row sum bounds the spectral norm of the symmetric K
-        knorm = max(abs(k[0]) + abs(k[1]) + abs(k[2]), abs(k[3]) + abs(k[4]) + abs(k[5]),
-                    abs(k[6]) + abs(k[7]) + abs(k[8]))
+        knorm = spectral_norm_sym(k)
         t = float(time)
         _seq_write(self._loop.model, (f0x, f0y, f0z, p0x, p0y, p0z, *k, *g, *d, float(depth0),
                                       1.0 if (zero > 0.5 and contact) else 0.0,
@@ -449,6 +467,15 @@ class NativeServoLoop:
                self.cmd.copy(),
                self.model.copy(), ctl, self.out.copy(), self.cnt.copy(), self.ring[:0].copy(),
                self._scratch.copy(), self._ts.copy())
+
+    def tick(self, now: float, stamp_ns: int = 0) -> tuple[float, float, float]:
+        """One compiled tick at monotonic ``now`` [s] on this loop's state, without the thread
+        (tests); returns the force written to the device (device frame) [N]."""
+        nt.tick(float(now), self.cfg, self.st, self.times, self.points, self.buttons, self.hand,
+                self.cmd, self.model, self.ctl, self.out, self.cnt, self.ring, self._scratch,
+                int(stamp_ns))
+        S = nt.S
+        return float(self.st[S.f0]), float(self.st[S.f1]), float(self.st[S.f2])
 
     def start(self) -> None:
         self.compile()
