@@ -14,7 +14,7 @@ adds the same runs without busy processes. The 1-minute load average is printed 
 docs/measurements/servo_load.md.
 
 Usage: ``python bench/bench_servo_load.py [--duration 20] [--busy 8] [--quiet]
-[--configs sim:50,sim:0,launch:50,launch:0] [--loop native]``
+[--configs sim:50,sim:0,launch:50,launch:0] [--loops native,python]``
 """
 from __future__ import annotations
 
@@ -104,8 +104,9 @@ def main() -> int:
     ap.add_argument('--busy', type=int, default=8)
     ap.add_argument('--quiet', action='store_true', help='also run without busy processes')
     ap.add_argument('--configs', default='sim:50,sim:0,launch:50,launch:0')
-    ap.add_argument('--loop', default='native', choices=('native', 'python'),
-                    help="the driver's servo_loop (default native)")
+    ap.add_argument('--loops', default='native',
+                    help="the driver's servo_loop values to run, comma-separated (native, "
+                         "python; default native)")
     ap.add_argument('--no-page', action='store_true', help='print only')
     a = ap.parse_args()
     configs = [(c.split(':')[0], int(c.split(':')[1])) for c in a.configs.split(',')]
@@ -114,16 +115,17 @@ def main() -> int:
     with tempfile.TemporaryDirectory(prefix='bench-servo-') as td:
         d = Path(td)
         for nbusy in ([0] if a.quiet else []) + [a.busy]:
-            for kind, prio in configs:
+            for loop, kind, prio in [(lp, k, p) for lp in a.loops.split(',')
+                                     for k, p in configs]:
                 procs = busy(nbusy)
                 try:
                     time.sleep(1.0)
                     load0 = os.getloadavg()[0]
-                    j = run_one(kind, prio, a.duration, a.loop, d)
+                    j = run_one(kind, prio, a.duration, loop, d)
                     load = max(load0, os.getloadavg()[0])
                 finally:
                     stop(procs)
-                r = row(f'{kind} prio {prio} ({a.loop})', nbusy, load, j)
+                r = row(f'{kind} prio {prio} ({loop})', nbusy, load, j)
                 rows.append(r)
                 print(' '.join(f'{fmt(r[c]):>12}' for c in COLS), flush=True)
                 if r['error']:
