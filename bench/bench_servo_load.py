@@ -10,7 +10,9 @@ the applied-force RMS error vs the ideal loop (% of the RMS ideal force), the ri
 windows with > 0.1 N around the 50 ms mean; the ideal force's own share beside it), the dropout
 ticks (0 N applied in contact while the ideal is > 1 N) and watchdog trips in contact. ``--quiet``
 adds the same runs without busy processes. The 1-minute load average is printed with each row
-(other users of the machine add to it). Prints the table and writes
+(other users of the machine add to it), and ``rt_others``: the user-space SCHED_FIFO/RR threads
+already running when the run started (other users' servo threads, ahead of every normal-priority
+thread). Prints the table and writes
 docs/measurements/servo_load.md.
 
 Usage: ``python bench/bench_servo_load.py [--duration 20] [--busy 8] [--quiet]
@@ -32,9 +34,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _page import write_page  # noqa: E402
 
 CLI = [sys.executable, '-m', 'haptic_anfis.cli']
-COLS = ('config', 'busy', 'load', 'rate_hz', 'periods_lost', 'max_gap_ms', 'err_rms_pct',
+COLS = ('config', 'busy', 'load', 'rt_others', 'rate_hz', 'periods_lost', 'max_gap_ms', 'err_rms_pct',
         'ripple_pct', 'ripple_ideal_pct', 'zero_ticks', 'dropout_ms', 'trips_contact',
-        'lat_p99_ms')
+        'expired', 'lat_p99_ms', 'lat_max_ms')
 
 
 def busy(n: int) -> list[subprocess.Popen]:
@@ -47,6 +49,21 @@ def stop(procs: list[subprocess.Popen]) -> None:
         p.terminate()
     for p in procs:
         p.wait()
+
+
+def rt_threads() -> int:
+    """User-space threads scheduled SCHED_FIFO / SCHED_RR on the machine now (other users'
+    servo threads: they take the CPU before any normal-priority thread)."""
+    n = 0
+    for stat in Path('/proc').glob('[0-9]*/task/[0-9]*/stat'):
+        try:
+            f = stat.read_text().rsplit(')', 1)[1].split()
+            pid_stat = stat.parent.parent.parent / 'cmdline'
+            if int(f[38]) in (1, 2) and pid_stat.read_bytes():  # policy; kernel threads: no cmdline
+                n += 1
+        except (OSError, IndexError, ValueError):
+            pass
+    return n
 
 
 def params_file(d: Path, priority: int, loop: str) -> Path:
@@ -87,7 +104,8 @@ def row(name: str, nbusy: int, load: float, j: dict) -> dict:
             'err_rms_pct': f('force_error_rms_pct'), 'ripple_pct': f('ripple_windows_pct'),
             'ripple_ideal_pct': f('ripple_windows_ideal_pct'), 'zero_ticks': f('zero_force_ticks'),
             'dropout_ms': f('longest_dropout_ms'), 'trips_contact': f('watchdog_trips_in_contact'),
-            'lat_p99_ms': f('latency_p99_ms'), 'error': j.get('error')}
+            'expired': f('ticks_expired'), 'lat_p99_ms': f('latency_p99_ms'),
+            'lat_max_ms': f('latency_max_ms'), 'error': j.get('error')}
 
 
 def fmt(v) -> str:
@@ -121,11 +139,13 @@ def main() -> int:
                 try:
                     time.sleep(1.0)
                     load0 = os.getloadavg()[0]
+                    rt = rt_threads()
                     j = run_one(kind, prio, a.duration, loop, d)
                     load = max(load0, os.getloadavg()[0])
                 finally:
                     stop(procs)
                 r = row(f'{kind} prio {prio} ({loop})', nbusy, load, j)
+                r['rt_others'] = rt
                 rows.append(r)
                 print(' '.join(f'{fmt(r[c]):>12}' for c in COLS), flush=True)
                 if r['error']:
@@ -135,14 +155,17 @@ def main() -> int:
     notes = (f'\n{a.duration:g} s per run after the graph is ready, default force mode '
              f'(local_model), recorder running; `busy`: processes spinning beside it on the '
              f'machine\'s {os.cpu_count()} cores; `load`: the 1-minute load average (the machine '
-             'is shared: other users add to it). `rate_hz`: servo ticks per second; '
+             'is shared: other users add to it); `rt_others`: user-space real-time threads of other '
+             'processes at the start of the run (other sessions\' servo threads: they run before '
+             'any normal-priority thread, so the `prio 0` rows compete with them). `rate_hz`: servo ticks per second; '
              '`periods_lost`: 1 ms periods with no tick; `max_gap_ms`: the longest time between '
              'two ticks; `err_rms_pct`: applied-force RMS error vs the ideal loop, % of the RMS '
              'ideal force; `ripple_pct`: 200 ms windows with > 0.1 N around the 50 ms mean '
              '(`ripple_ideal_pct`: the same for the ideal force itself); `zero_ticks`: ticks in '
              'contact at 0 N while the ideal force is > 1 N (`dropout_ms`: the longest run); '
-             '`trips_contact`: watchdog trips in contact; `lat_p99_ms`: pose -> local model '
-             'latency, 99th percentile. Targets (issue 32): rate >= 995 Hz, zero_ticks 0, '
+             '`trips_contact`: watchdog trips in contact; `expired`: ticks whose local model had '
+             'expired (too old or too far); `lat_p99_ms`, `lat_max_ms`: pose -> local model '
+             'latency, 99th percentile and largest. Targets (issue 32): rate >= 995 Hz, zero_ticks 0, '
              'err_rms_pct <= 2, ripple_pct <= 1; quiet err_rms_pct <= 0.2.\n')
     if not a.no_page:
         p = write_page('servo_load', 'Servo loop under load', body + notes)
