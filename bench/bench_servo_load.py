@@ -36,7 +36,7 @@ from _page import write_page  # noqa: E402
 CLI = [sys.executable, '-m', 'haptic_anfis.cli']
 COLS = ('config', 'busy', 'load', 'rt_others', 'rate_hz', 'periods_lost', 'max_gap_ms', 'err_rms_pct',
         'ripple_pct', 'ripple_ideal_pct', 'zero_ticks', 'dropout_ms', 'trips_contact',
-        'expired', 'lat_p99_ms', 'lat_max_ms')
+        'expired', 'held', 'lat_p99_ms', 'lat_max_ms')
 
 
 def busy(n: int) -> list[subprocess.Popen]:
@@ -104,7 +104,7 @@ def row(name: str, nbusy: int, load: float, j: dict) -> dict:
             'err_rms_pct': f('force_error_rms_pct'), 'ripple_pct': f('ripple_windows_pct'),
             'ripple_ideal_pct': f('ripple_windows_ideal_pct'), 'zero_ticks': f('zero_force_ticks'),
             'dropout_ms': f('longest_dropout_ms'), 'trips_contact': f('watchdog_trips_in_contact'),
-            'expired': f('ticks_expired'), 'lat_p99_ms': f('latency_p99_ms'),
+            'expired': f('ticks_expired'), 'held': f('ticks_held'), 'lat_p99_ms': f('latency_p99_ms'),
             'lat_max_ms': f('latency_max_ms'), 'error': j.get('error')}
 
 
@@ -117,10 +117,13 @@ def fmt(v) -> str:
 
 
 def main() -> int:
+    import signal
+    signal.signal(signal.SIGTERM, lambda *_: sys.exit(1))  # run the finally blocks: no busy left
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument('--duration', type=float, default=20.0)
     ap.add_argument('--busy', type=int, default=8)
-    ap.add_argument('--quiet', action='store_true', help='also run without busy processes')
+    ap.add_argument('--quiet', action='store_true',
+                    help='also run without busy processes (the first of --loops only)')
     ap.add_argument('--configs', default='sim:50,sim:0,launch:50,launch:0')
     ap.add_argument('--loops', default='native',
                     help="the driver's servo_loop values to run, comma-separated (native, "
@@ -132,24 +135,25 @@ def main() -> int:
     print(' '.join(f'{c:>12}' for c in COLS), flush=True)
     with tempfile.TemporaryDirectory(prefix='bench-servo-') as td:
         d = Path(td)
-        for nbusy in ([0] if a.quiet else []) + [a.busy]:
-            for loop, kind, prio in [(lp, k, p) for lp in a.loops.split(',')
-                                     for k, p in configs]:
-                procs = busy(nbusy)
-                try:
-                    time.sleep(1.0)
-                    load0 = os.getloadavg()[0]
-                    rt = rt_threads()
-                    j = run_one(kind, prio, a.duration, loop, d)
-                    load = max(load0, os.getloadavg()[0])
-                finally:
-                    stop(procs)
-                r = row(f'{kind} prio {prio} ({loop})', nbusy, load, j)
-                r['rt_others'] = rt
-                rows.append(r)
-                print(' '.join(f'{fmt(r[c]):>12}' for c in COLS), flush=True)
-                if r['error']:
-                    print('  ', r['error'], flush=True)
+        loops = a.loops.split(',')
+        runs = ([(0, loops[0], k, p) for k, p in configs] if a.quiet else []) + \
+            [(a.busy, lp, k, p) for lp in loops for k, p in configs]
+        for nbusy, loop, kind, prio in runs:
+            procs = busy(nbusy)
+            try:
+                time.sleep(1.0)
+                load0 = os.getloadavg()[0]
+                rt = rt_threads()
+                j = run_one(kind, prio, a.duration, loop, d)
+                load = max(load0, os.getloadavg()[0])
+            finally:
+                stop(procs)
+            r = row(f'{kind} prio {prio} ({loop})', nbusy, load, j)
+            r['rt_others'] = rt
+            rows.append(r)
+            print(' '.join(f'{fmt(r[c]):>12}' for c in COLS), flush=True)
+            if r['error']:
+                print('  ', r['error'], flush=True)
     head = '| ' + ' | '.join(COLS) + ' |\n|' + '---|' * len(COLS) + '\n'
     body = head + ''.join('| ' + ' | '.join(fmt(r[c]) for c in COLS) + ' |\n' for r in rows)
     notes = (f'\n{a.duration:g} s per run after the graph is ready, default force mode '
@@ -164,7 +168,8 @@ def main() -> int:
              '(`ripple_ideal_pct`: the same for the ideal force itself); `zero_ticks`: ticks in '
              'contact at 0 N while the ideal force is > 1 N (`dropout_ms`: the longest run); '
              '`trips_contact`: watchdog trips in contact; `expired`: ticks whose local model had '
-             'expired (too old or too far); `lat_p99_ms`, `lat_max_ms`: pose -> local model '
+             'expired (too old or too far); `held`: ticks rendered from a model older than its '
+             'validity time, inside `model_hold_time` and its radius; `lat_p99_ms`, `lat_max_ms`: pose -> local model '
              'latency, 99th percentile and largest. Targets (issue 32): rate >= 995 Hz, zero_ticks 0, '
              'err_rms_pct <= 2, ripple_pct <= 1; quiet err_rms_pct <= 0.2.\n')
     if not a.no_page:

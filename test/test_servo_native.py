@@ -258,3 +258,26 @@ def test_spectral_norm_matches_numpy():
         K = -(A @ A.T) * 100.0
         assert spectral_norm_sym(K.ravel().tolist()) == pytest.approx(
             np.abs(np.linalg.eigvalsh(K)).max(), rel=1e-9)
+
+
+def test_an_old_model_is_held_inside_its_radius_then_expires():
+    lp = loop('local_model', max_force_rate=1e6, validity_time=0.05, hold_time=0.3)
+    lp.safety.start()
+    K = np.diag([-1000.0, 0.0, 0.0])
+    v = LocalModel((2.0, 0.0, 0.0), (0.05, 0.0, 0.0), K, (0.055, 0.0, 0.0), (1.0, 0.0, 0.0),
+                   (-1.0, 0.0, 0.0), 0.005, False, 0.0).values()
+    lp.renderer.offer_values(v, 0.0)
+    q = MAP.to_device((0.05, 0.0, 0.0))
+    for t in (0.0, 0.001, 0.1, 0.101):  # 100 ms old: past its validity, inside the hold
+        pin(lp, q, t)
+        f = lp.tick(t)
+    assert f[0] == pytest.approx(2.0)
+    assert lp.cnt[nt.CNT.held] == 2
+    pin(lp, MAP.to_device((0.05, 0.006, 0.0)), 0.102)  # 6 mm away: outside the radius
+    lp.tick(0.102)
+    assert int(lp.st[nt.S.status]) == EXPIRED
+    for t in np.arange(0.103, 0.32, 0.001):  # past the hold time: expired, watchdog -> 0 N
+        pin(lp, q, t)
+        f = lp.tick(t)
+    assert int(lp.st[nt.S.status]) == EXPIRED
+    assert f == (0.0, 0.0, 0.0)

@@ -12,7 +12,10 @@ It sleeps to absolute 1 ms deadlines with ``clock_nanosleep`` and reads the cloc
 2. The clutch / mark buttons (:class:`haptic_anfis.device.buttons.ClutchMark`'s rules).
 3. Render: the newest local model (:mod:`.local_model`'s rules: depth along the indentation
    direction, onset correction, expiry by age and radius) or the newest force command (zero-order
-   hold), in the device frame.
+   hold), in the device frame. A model older than its validity time but younger than
+   ``hold_time`` is still rendered while the probe is inside its validity radius (counted as
+   ``held``): the tissue does not move, so its local linearisation stays right near p0, and an
+   upstream stall (force server, contact detector, the bridge) no longer drops the force to 0 N.
 4. Passivity: the model's stiffness is limited by the MEASURED tick period ``T`` (the time the
    previous output was held): ``K <= 2 (b - |B|) / T`` with ``b`` the device's damping and ``B``
    the rendered damping (here 0) — Colgate & Schenkel 1997 (J. Robotic Systems 14(1):37-47),
@@ -74,7 +77,7 @@ def _index(name: str, names: str) -> type:
 #: configuration (float64), written once before the loop starts
 CFG = _index('CFG', 'period max_force max_force_rate watchdog max_dt validity_time validity_radius '
              'fresh_age max_stiffness scale ox oy oz force_scale hand_m hand_k hand_c half '
-             'dt_max max_catch_up ramp damping mode observer loop dev_max_force')
+             'dt_max max_catch_up ramp damping mode observer loop dev_max_force hold_time')
 #: the loop's own state (float64)
 S = _index('S', 'x0 x1 x2 v0 v1 v2 f0 f1 f2 t_dev t_open script_off '
            'enabled target0 target1 target2 out0 out1 out2 last_cmd last_out tripped '
@@ -105,7 +108,7 @@ OUT = _index('OUT', 'seq t p0 p1 p2 v0 v1 v2 q0 q1 q2 f0 f1 f2 status held b0 b1
 CNT = _index('CNT', 'ticks periods_lost deadline_misses watchdog_trips watchdog_trips_in_contact '
              'clamped rejected_nonfinite none fresh extrapolated expired free approach '
              'passivity_limited observer_active max_gap_ns max_force_un marks clutches '
-             'trace_w t_first_ns t_last_ns running')
+             'trace_w t_first_ns t_last_ns running held')
 #: trace row: t, device position (3,), applied force (3,) device frame, status (as TickTrace)
 TRACE_COLS = 8
 CFG_LEN, CTL_LEN, OUT_LEN, CNT_LEN = len(CFG), len(CTL), len(OUT), len(CNT)
@@ -373,7 +376,8 @@ def _render(cfg, st, cnt, qx, qy, qz, now, gap):
         return np.nan, np.nan, np.nan
     age = now - st[S.m_t0]
     ex, ey, ez = qx - st[S.m_p0], qy - st[S.m_p1], qz - st[S.m_p2]
-    if age > cfg[CFG.validity_time]:
+    held = age > cfg[CFG.validity_time]
+    if held and age > cfg[CFG.hold_time]:
         cnt[CNT.expired] += 1
         st[S.status] = EXPIRED
         return np.nan, np.nan, np.nan
@@ -388,6 +392,8 @@ def _render(cfg, st, cnt, qx, qy, qz, now, gap):
         cnt[CNT.expired] += 1
         st[S.status] = EXPIRED
         return np.nan, np.nan, np.nan
+    if held:  # older than its validity, inside the hold time and the radius: still the tissue
+        cnt[CNT.held] += 1
     if age <= cfg[CFG.fresh_age]:
         cnt[CNT.fresh] += 1
         st[S.status] = FRESH

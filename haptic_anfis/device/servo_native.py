@@ -140,7 +140,8 @@ class NativeLoopStats(LoopStats):
                  max_force_N=c[nt.CNT.max_force_un] * 1e-6,
                  passivity_limited=int(c[nt.CNT.passivity_limited]
                                        - b[nt.CNT.passivity_limited]),
-                 observer_active=int(c[nt.CNT.observer_active] - b[nt.CNT.observer_active]))
+                 observer_active=int(c[nt.CNT.observer_active] - b[nt.CNT.observer_active]),
+                 ticks_held=int(c[nt.CNT.held] - b[nt.CNT.held]))
         return s
 
 
@@ -335,6 +336,8 @@ class NativeServoLoop:
             the local model's (:class:`~.local_model.LocalModelRenderer`).
         damping: device damping b [N s/m] of the passivity bound K <= 2 b / T.
         observer: run the passivity observer / controller (Hannaford & Ryu 2002).
+        hold_time: a model older than ``validity_time`` but not than this [s] is still rendered
+            while the probe is within ``validity_radius`` (``held`` ticks; <= validity_time: off).
         on_state: ``on_state(state: NativeState, force, now)`` on the bridge thread for the newest
             tick (force: device frame).
         trace: a :class:`~.trace.TickTrace` the bridge fills (tissue frame), or None.
@@ -349,7 +352,7 @@ class NativeServoLoop:
                  frame_id: str = 'tissue', mode: str = 'local_model',
                  max_stiffness: float = FALCON_MAX_STIFFNESS, validity_time: float = 0.05,
                  validity_radius: float = 0.005, damping: float = FALCON_DAMPING,
-                 observer: bool = False,
+                 observer: bool = False, hold_time: float = 0.0,
                  on_state: Callable[[NativeState, tuple, float], None] | None = None,
                  trace: TickTrace | None = None, priority: int = 0, ring: int = 1 << 16,
                  half_extent: float = 0.05, device_max_force: float | None = None) -> None:
@@ -387,6 +390,7 @@ class NativeServoLoop:
         cfg[C.observer] = 1.0 if observer else 0.0
         cfg[C.loop] = 1.0 if loop else 0.0
         cfg[C.dev_max_force] = max_force if device_max_force is None else device_max_force
+        cfg[C.hold_time] = max(float(hold_time), validity_time)
         self.cfg = cfg
         self.st = nt.new_state()
         x0 = [min(max((points[0, k] - mapping.offset[k]) / mapping.scale, -half_extent),

@@ -134,6 +134,11 @@ PARAMS = [
     Param('passivity_damping', 1.5, 'native: device damping b [N s/m] of the passivity bound on '
           'the rendered stiffness, K <= 2 b / T with T the measured tick period (Colgate & '
           'Schenkel 1997; docs/servo_loop.md)', positive),
+    Param('model_hold_time', 0.5, 'native, local_model: a model older than model_validity_time '
+          'but not than this [s] is still rendered while the probe is within '
+          'model_validity_radius of it (the tissue does not move: an upstream stall no longer '
+          'drops the force to 0 N); then it expires and the watchdog ramps the force to zero. '
+          '<= model_validity_time: off', positive),
     Param('passivity_observer', False, 'native: run the passivity observer / controller '
           '(Hannaford & Ryu 2002) on the rendered port'),
     Param('servo_priority', 50, 'real-time priority of the servo thread (SCHED_FIFO 1-99; 0 = '
@@ -267,7 +272,8 @@ class FalconDriver(Node):
             p['rate'], p['max_force'], p['max_force_rate'], p['watchdog_timeout'],
             self.frame_id, p['force_mode'], p['max_stiffness'], p['model_validity_time'],
             p['model_validity_radius'], p['passivity_damping'], p['passivity_observer'],
-            trace=TickTrace() if p['trace_path'] else None, priority=p['servo_priority'])
+            p['model_hold_time'], trace=TickTrace() if p['trace_path'] else None,
+            priority=p['servo_priority'])
 
     def _device_lost(self, why: str) -> None:
         """The Falcon backend lost the device (servo thread): zero the force; without reconnect,
