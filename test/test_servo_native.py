@@ -281,3 +281,44 @@ def test_an_old_model_is_held_inside_its_radius_then_expires():
         f = lp.tick(t)
     assert int(lp.st[nt.S.status]) == EXPIRED
     assert f == (0.0, 0.0, 0.0)
+
+
+def test_passivity_observer_takes_back_energy_the_port_put_out():
+    """Hannaford & Ryu: a force pushing along the handle's motion puts energy out; the observer's
+    damping takes it back (here all of it: alpha = -E / (T v^2) cancels the 2 N)."""
+    for observer, want in ((False, 2.0), (True, 0.0)):
+        lp = loop(max_force_rate=1e6, observer=observer)
+        lp.safety.start()
+        t = 0.0
+        for _ in range(3):
+            lp.safety.command((2.0, 0.0, 0.0), t, 'tissue')
+            pin(lp, (0.0, 0.0, 0.0), t)
+            lp.st[nt.S.v0] = 0.1  # moving along +x at 0.1 m/s, as the force pushes
+            f = lp.tick(t)
+            t += 0.001
+        assert f[0] == pytest.approx(want, abs=1e-9)
+        assert (lp.cnt[nt.CNT.observer_active] > 0) == observer
+
+
+@pytest.mark.parametrize('process', [False, True])
+def test_loop_runs_on_its_thread_or_process_and_stops_at_zero_force(process):
+    """Started for real (thread, or a forked servo process on shared memory): it ticks, takes a
+    command, and leaves zero force when stopped. No timing asserted: only that ticks happened."""
+    import time
+    states = []
+    lp = loop(max_force_rate=1e6, process=process, on_state=lambda s, f, t: states.append(f))
+    lp.start()
+    try:
+        end = time.monotonic() + 20.0
+        while lp.cnt[nt.CNT.ticks] < 5 and time.monotonic() < end:
+            time.sleep(0.01)
+        lp.safety.command((1.0, 0.0, 0.0), time.monotonic(), 'tissue')
+        t0 = int(lp.cnt[nt.CNT.ticks])
+        while lp.cnt[nt.CNT.ticks] < t0 + 3 and time.monotonic() < end:
+            time.sleep(0.005)
+    finally:
+        lp.stop()
+    assert lp.cnt[nt.CNT.ticks] >= 5
+    assert tuple(lp.st[nt.S.f0:nt.S.f0 + 3]) == (0.0, 0.0, 0.0)
+    assert not lp.running
+    assert states  # the bridge published ticks

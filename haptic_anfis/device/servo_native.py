@@ -59,6 +59,30 @@ class NativeState(DeviceState):
         object.__setattr__(self, 't', t)
 
 
+class _SharedArrays:
+    """numpy arrays in anonymous shared memory (``mmap``, MAP_SHARED): a forked servo process
+    and this one see the same bytes. Kept alive as long as this object."""
+
+    def __init__(self) -> None:
+        self._maps: list = []
+
+    def zeros(self, shape, dtype=np.float64) -> np.ndarray:
+        import mmap
+        n = int(np.prod(shape)) * np.dtype(dtype).itemsize
+        m = mmap.mmap(-1, max(n, 8))  # anonymous, shared with children; zero-filled
+        self._maps.append(m)
+        return np.frombuffer(m, dtype=dtype, count=int(np.prod(shape))).reshape(shape)
+
+
+def _die_with_parent(sig: int) -> None:
+    """Linux prctl(PR_SET_PDEATHSIG): the calling process gets ``sig`` when its parent dies."""
+    import ctypes
+    try:
+        ctypes.CDLL(None, use_errno=True).prctl(1, sig, 0, 0, 0)
+    except (OSError, AttributeError):
+        pass
+
+
 def _seq_write(buf: np.ndarray, values) -> None:
     """Seqlock write from Python: odd, the values, even (one writer per buffer)."""
     s = buf[0]
@@ -344,6 +368,9 @@ class NativeServoLoop:
         priority: SCHED_FIFO priority of the tick thread (0: the normal scheduler, with a short
             time slice requested); the bridge gets ``priority - 10`` (at least 1) when > 0.
         ring: trace ring rows in the loop (the bridge must drain it within ``ring`` ticks).
+        process: run the compiled loop in a child process of its own session (``fork`` +
+            ``setsid``: its own scheduler autogroup, so the parent's busy threads do not share
+            its CPU time), on shared memory; else on a thread of this process.
     """
 
     def __init__(self, script, mapping: WorkspaceMapping = WorkspaceMapping(),
@@ -355,7 +382,8 @@ class NativeServoLoop:
                  observer: bool = False, hold_time: float = 0.0,
                  on_state: Callable[[NativeState, tuple, float], None] | None = None,
                  trace: TickTrace | None = None, priority: int = 0, ring: int = 1 << 16,
-                 half_extent: float = 0.05, device_max_force: float | None = None) -> None:
+                 half_extent: float = 0.05, device_max_force: float | None = None,
+                 process: bool = False) -> None:
         if not rate > 0:
             raise ValueError(f'rate: expected > 0 Hz, got {rate!r}')
         if not 0 <= priority <= 99:
@@ -370,7 +398,10 @@ class NativeServoLoop:
         self.times, points, self.buttons, loop, held = script_arrays(script)
         self.points = points
         self._script = script
-        self.hand = np.zeros(nt.HAND_LEN)
+        self.process = bool(process)
+        self._mem = _SharedArrays() if self.process else None
+        zeros = self._mem.zeros if self.process else np.zeros
+        self.hand = zeros(nt.HAND_LEN)
         C = nt.CFG
         cfg = np.zeros(nt.CFG_LEN)
         cfg[C.period] = self.period
@@ -392,17 +423,18 @@ class NativeServoLoop:
         cfg[C.dev_max_force] = max_force if device_max_force is None else device_max_force
         cfg[C.hold_time] = max(float(hold_time), validity_time)
         self.cfg = cfg
-        self.st = nt.new_state()
+        self.st = zeros(nt.STATE_LEN)
+        self.st[:] = nt.new_state()
         x0 = [min(max((points[0, k] - mapping.offset[k]) / mapping.scale, -half_extent),
                   half_extent) for k in range(3)]
         self.st[nt.S.x0:nt.S.x0 + 3] = x0
-        self.cmd = np.zeros(nt.CMD_LEN)
-        self.model = np.zeros(nt.MODEL_LEN)
-        self.ctl = np.zeros(nt.CTL_LEN, dtype=np.int64)
+        self.cmd = zeros(nt.CMD_LEN)
+        self.model = zeros(nt.MODEL_LEN)
+        self.ctl = zeros(nt.CTL_LEN, dtype=np.int64)
         self.ctl[nt.CTL.release] = 0 if held else 1
-        self.out = np.zeros(nt.OUT_LEN)
-        self.cnt = np.zeros(nt.CNT_LEN, dtype=np.int64)
-        self.ring = np.zeros((int(ring) if trace is not None else 0, nt.TRACE_COLS))
+        self.out = zeros(nt.OUT_LEN)
+        self.cnt = zeros(nt.CNT_LEN, dtype=np.int64)
+        self.ring = zeros((int(ring) if trace is not None else 0, nt.TRACE_COLS))
         self._scratch = np.zeros(nt.SCRATCH_LEN)
         self._ts = np.zeros(2, dtype=np.int64)
         self.safety = NativeSafety(self, max_force, max_force_rate, watchdog_timeout, frame_id)
@@ -423,6 +455,7 @@ class NativeServoLoop:
         self._read = 0
         self._stop = threading.Event()
         self._tick_thread: threading.Thread | None = None
+        self._pid = 0
         self._bridge: threading.Thread | None = None
         self._scheduled = threading.Event()
 
@@ -484,12 +517,53 @@ class NativeServoLoop:
     def start(self) -> None:
         self.compile()
         self.safety.start()
-        self._tick_thread = threading.Thread(target=self._run_ticks, name='servo-native',
-                                             daemon=True)
+        if self.process:
+            self._start_process()
+        else:
+            self._tick_thread = threading.Thread(target=self._run_ticks, name='servo-native',
+                                                 daemon=True)
+            self._tick_thread.start()
+            self._scheduled.wait(1.0)
         self._bridge = threading.Thread(target=self._run_bridge, name='servo-bridge', daemon=True)
-        self._tick_thread.start()
-        self._scheduled.wait(1.0)
         self._bridge.start()
+
+    def _start_process(self) -> None:
+        """Fork the servo process: it only runs the compiled loop (compiled before the fork) on
+        the shared arrays and exits with ``os._exit``; it dies with this process (PDEATHSIG)."""
+        import os
+        import signal
+        pid = os.fork()
+        if pid == 0:  # the child: no Python threads, no ROS; only the compiled loop
+            code = 0
+            try:
+                os.setsid()  # a session of its own: its own autogroup (fair share) on Linux
+                _die_with_parent(signal.SIGKILL)
+                set_realtime(self.priority)
+                if self.priority <= 0:
+                    request_short_slice()
+                nt.run(self.cfg, self.st, self.times, self.points, self.buttons, self.hand,
+                       self.cmd, self.model, self.ctl, self.out, self.cnt, self.ring,
+                       self._scratch, self._ts)
+            except BaseException:
+                code = 1
+            finally:
+                os._exit(code)
+        self._pid = pid
+        policy = ''
+        for _ in range(100):  # how the child is scheduled, once it has set itself up
+            try:
+                if os.sched_getscheduler(pid) == os.SCHED_FIFO or self.priority <= 0:
+                    break
+            except OSError:
+                break
+            time.sleep(0.01)
+        try:
+            fifo = os.sched_getscheduler(pid) == os.SCHED_FIFO
+            policy = (f'SCHED_FIFO priority {self.priority}' if fifo else
+                      'normal scheduler' + (' (SCHED_FIFO refused)' if self.priority > 0 else ''))
+        except OSError as exc:
+            policy = f'unknown ({exc})'
+        self.scheduling = f'compiled tick in servo process {pid} (own session); {policy}'
 
     def stop(self, timeout: float = 2.0) -> None:
         self.safety.stop()
@@ -498,11 +572,26 @@ class NativeServoLoop:
         for th in (self._tick_thread, self._bridge):
             if th is not None and th is not threading.current_thread():
                 th.join(timeout)
+        if self._pid:
+            import os
+            end = time.monotonic() + timeout
+            while time.monotonic() < end:
+                if os.waitpid(self._pid, os.WNOHANG)[0]:
+                    self._pid = 0
+                    break
+                time.sleep(0.005)
+            else:
+                os.kill(self._pid, 9)
+                os.waitpid(self._pid, 0)
+                self._pid = 0
+                self.st[nt.S.f0:nt.S.f0 + 3] = 0.0
         self._drain()
         self.force = (0.0, 0.0, 0.0)
 
     @property
     def running(self) -> bool:
+        if self._pid:
+            return bool(self.cnt[nt.CNT.running])
         return self._tick_thread is not None and self._tick_thread.is_alive()
 
     # -- threads --------------------------------------------------------------------------------

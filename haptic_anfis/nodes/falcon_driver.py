@@ -129,8 +129,10 @@ PARAMS = [
           'default 0.005; 0 = leave it)', non_negative),
     Param('servo_loop', 'native', "sim: 'native' runs the servo tick (device, local model, "
           'clutch, safety, passivity bound) compiled on its own thread without the interpreter '
-          "lock (haptic_anfis.device.servo_native); 'python' the Python tick (the 'falcon' "
-          'backend always uses it: its USB library is Python)', one_of('native', 'python')),
+          "lock (haptic_anfis.device.servo_native); 'native_process' the same compiled loop in a "
+          "servo process of its own session on shared memory; 'python' the Python tick (the "
+          "'falcon' backend always uses it: its USB library is Python)",
+          one_of('native', 'native_process', 'python')),
     Param('passivity_damping', 1.5, 'native: device damping b [N s/m] of the passivity bound on '
           'the rendered stiffness, K <= 2 b / T with T the measured tick period (Colgate & '
           'Schenkel 1997; docs/servo_loop.md)', positive),
@@ -175,7 +177,7 @@ class FalconDriver(Node):
                                           max_force=p['max_force'])
             what = f'script {script_path} ({script.duration:.1f} s)'
         self.native = None
-        if p['backend'] == 'sim' and p['servo_loop'] == 'native':
+        if p['backend'] == 'sim' and p['servo_loop'] != 'python':
             self.native = self._make_native(p, script)
             self.device, self.safety = self.native, self.native.safety
             self.clutch = self.native.clutch  # the clutch / mark rules run in the compiled tick
@@ -273,7 +275,7 @@ class FalconDriver(Node):
             self.frame_id, p['force_mode'], p['max_stiffness'], p['model_validity_time'],
             p['model_validity_radius'], p['passivity_damping'], p['passivity_observer'],
             p['model_hold_time'], trace=TickTrace() if p['trace_path'] else None,
-            priority=p['servo_priority'])
+            priority=p['servo_priority'], process=p['servo_loop'] == 'native_process')
 
     def _device_lost(self, why: str) -> None:
         """The Falcon backend lost the device (servo thread): zero the force; without reconnect,
