@@ -13,7 +13,7 @@ adds the same runs without busy processes. The 1-minute load average is printed 
 (other users of the machine add to it), and ``rt_others``: the user-space SCHED_FIFO/RR threads
 already running when the run started (other users' servo threads, ahead of every normal-priority
 thread). Prints the table and writes
-docs/measurements/servo_load.md.
+docs/measurements/servo_load.md (``--page``).
 
 Usage: ``python bench/bench_servo_load.py [--duration 20] [--busy 8] [--quiet]
 [--configs sim:50,sim:0,launch:50,launch:0] [--loops native,python]``
@@ -127,8 +127,10 @@ def main() -> int:
     ap.add_argument('--configs', default='sim:50,sim:0,launch:50,launch:0')
     ap.add_argument('--loops', default='native',
                     help="the driver's servo_loop values to run, comma-separated (native, "
-                         "python; default native)")
+                         "native_process, python; default native)")
     ap.add_argument('--no-page', action='store_true', help='print only')
+    ap.add_argument('--page', default='servo_load',
+                    help='page name: docs/measurements/<page>.md (default servo_load)')
     a = ap.parse_args()
     configs = [(c.split(':')[0], int(c.split(':')[1])) for c in a.configs.split(',')]
     rows = []
@@ -173,7 +175,7 @@ def main() -> int:
              'latency, 99th percentile and largest. Targets (issue 32): rate >= 995 Hz, zero_ticks 0, '
              'err_rms_pct <= 2, ripple_pct <= 1; quiet err_rms_pct <= 0.2.\n')
     if not a.no_page:
-        p = write_page('servo_load', 'Servo loop under load', body + notes)
+        p = write_page(a.page, f'Servo loop under load ({a.loops})', body + notes)
         print(f'page: {p}')
     return 0
 
