@@ -16,7 +16,9 @@ thread). Prints the table and writes
 docs/measurements/servo_load.md (``--page``).
 
 Usage: ``python bench/bench_servo_load.py [--duration 20] [--busy 8] [--quiet]
-[--configs sim:50,sim:0,launch:50,launch:0] [--loops native,python]``
+[--configs sim:50,sim:0,launch:50,launch:0,sim:50:10] [--loops native,python]``
+(``KIND:SERVO_PRIORITY[:GRAPH_PRIORITY]``: a graph priority runs the whole graph under
+``chrt -f``)
 """
 from __future__ import annotations
 
@@ -73,8 +75,11 @@ def params_file(d: Path, priority: int, loop: str) -> Path:
     return f
 
 
-def run_one(kind: str, priority: int, duration: float, loop: str, d: Path) -> dict:
-    """One run; the last JSON line of its output (or {'error': ...})."""
+def run_one(kind: str, priority: int, duration: float, loop: str, d: Path,
+            graph_priority: int = 0) -> dict:
+    """One run; the last JSON line of its output (or {'error': ...}). ``graph_priority`` > 0:
+    the whole graph (every process and thread) runs SCHED_FIFO at it (``chrt -f``), the servo
+    tick above it at ``priority``."""
     pf = params_file(d, priority, loop)
     bag = d / f'bag_{kind}_{priority}_{time.monotonic_ns()}'
     if kind == 'sim':
@@ -83,6 +88,8 @@ def run_one(kind: str, priority: int, duration: float, loop: str, d: Path) -> di
     else:
         cmd = [*CLI, 'launch', '--duration', str(duration), '--json', '--record', str(bag),
                '--params-file', str(pf), '--localhost', '--log-dir', str(d / f'log_{bag.name}')]
+    if graph_priority > 0:
+        cmd = ['chrt', '-f', str(graph_priority), *cmd]
     env = dict(os.environ, PYTHONPATH=str(ROOT))
     r = subprocess.run(cmd, capture_output=True, text=True, env=env, timeout=duration + 900)
     for line in reversed(r.stdout.splitlines()):
@@ -132,25 +139,27 @@ def main() -> int:
     ap.add_argument('--page', default='servo_load',
                     help='page name: docs/measurements/<page>.md (default servo_load)')
     a = ap.parse_args()
-    configs = [(c.split(':')[0], int(c.split(':')[1])) for c in a.configs.split(',')]
+    configs = [(c.split(':')[0], int(c.split(':')[1]),
+                int(c.split(':')[2]) if c.count(':') > 1 else 0) for c in a.configs.split(',')]
     rows = []
     print(' '.join(f'{c:>12}' for c in COLS), flush=True)
     with tempfile.TemporaryDirectory(prefix='bench-servo-') as td:
         d = Path(td)
         loops = a.loops.split(',')
-        runs = ([(0, loops[0], k, p) for k, p in configs] if a.quiet else []) + \
-            [(a.busy, lp, k, p) for lp in loops for k, p in configs]
-        for nbusy, loop, kind, prio in runs:
+        runs = ([(0, loops[0], *c) for c in configs] if a.quiet else []) + \
+            [(a.busy, lp, *c) for lp in loops for c in configs]
+        for nbusy, loop, kind, prio, gprio in runs:
             procs = busy(nbusy)
             try:
                 time.sleep(1.0)
                 load0 = os.getloadavg()[0]
                 rt = rt_threads()
-                j = run_one(kind, prio, a.duration, loop, d)
+                j = run_one(kind, prio, a.duration, loop, d, gprio)
                 load = max(load0, os.getloadavg()[0])
             finally:
                 stop(procs)
-            r = row(f'{kind} prio {prio} ({loop})', nbusy, load, j)
+            r = row(f'{kind} prio {prio}' + (f' graph {gprio}' if gprio else '') + f' ({loop})',
+                    nbusy, load, j)
             r['rt_others'] = rt
             rows.append(r)
             print(' '.join(f'{fmt(r[c]):>12}' for c in COLS), flush=True)

@@ -30,9 +30,10 @@ import numpy as np
 from . import native_tick as nt
 from .buttons import ButtonEvents
 from .falcon import DeviceState, HandParams, WorkspaceMapping
-from .local_model import FALCON_MAX_STIFFNESS, RenderStats, condition_stiffness_values, \
-    depth_gradient_values, tissue_stiffness_limit
-from .safety import IGNORED_DISABLED, OK, REJECTED_FRAME, REJECTED_NONFINITE, SafetyStats
+from .local_model import FALCON_MAX_STIFFNESS, LocalModelRenderer, RenderStats, \
+    condition_stiffness_values, depth_gradient_values, tissue_stiffness_limit
+from .safety import IGNORED_DISABLED, OK, REJECTED_FRAME, REJECTED_NONFINITE, SafetyLayer, \
+    SafetyStats
 from .servo import request_short_slice, set_realtime
 from .stats import LoopStats
 from .trace import TickTrace
@@ -145,10 +146,11 @@ class NativeLoopStats(LoopStats):
 
     def reset(self) -> None:
         super().reset()
+        # the two maxima restart with the window: the loop only ever raises them (a reset that
+        # races with a tick's update loses that one tick's value)
+        self._cnt[nt.CNT.max_gap_ns] = 0
+        self._cnt[nt.CNT.max_force_un] = 0
         self._base = self._cnt.copy()
-        self._base[nt.CNT.max_gap_ns] = 0
-        self._base[nt.CNT.max_force_un] = 0
-        self._cnt_max_gap = int(self._cnt[nt.CNT.max_gap_ns])
 
     def summary(self) -> dict:
         c, b = self._cnt.copy(), self._base
@@ -159,7 +161,6 @@ class NativeLoopStats(LoopStats):
         s.update(ticks=ticks, seconds=span, rate_hz=ticks / span if span > 0 else 0.0,
                  deadline_misses=int(c[nt.CNT.deadline_misses] - b[nt.CNT.deadline_misses]),
                  periods_lost=int(c[nt.CNT.periods_lost] - b[nt.CNT.periods_lost]),
-                 # the largest gap since the loop started (the counter is not windowed)
                  max_gap_ms=c[nt.CNT.max_gap_ns] * 1e-6,
                  max_force_N=c[nt.CNT.max_force_un] * 1e-6,
                  passivity_limited=int(c[nt.CNT.passivity_limited]
@@ -198,23 +199,15 @@ class NativeClutch:
         return (st.tissue if st is not None else mapped), ev
 
 
-class NativeSafety:
+class NativeSafety(SafetyLayer):
     """:class:`~.safety.SafetyLayer`'s interface over the compiled loop's safety state: commands
     (device frame) go into the command buffer, faults zero the force at once in the next tick.
     The clamp, rate limit and watchdog run in the compiled tick (same rules)."""
 
     def __init__(self, loop: 'NativeServoLoop', max_force: float, max_force_rate: float,
                  watchdog_timeout: float, frame_id: str = 'tissue', max_dt: float = 0.005):
-        for name, v in (('max_force', max_force), ('max_force_rate', max_force_rate),
-                        ('watchdog_timeout', watchdog_timeout), ('max_dt', max_dt)):
-            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
-                raise ValueError(f'{name}: expected a finite number > 0, got {v!r}')
         self._loop = loop
-        self.max_force, self.max_force_rate = float(max_force), float(max_force_rate)
-        self.watchdog_timeout, self.max_dt, self.frame_id = float(watchdog_timeout), \
-            float(max_dt), frame_id
-        self._py = SafetyStats()  # the counts kept on the Python side
-        self._lock = threading.Lock()
+        super().__init__(max_force, max_force_rate, watchdog_timeout, frame_id, max_dt)
 
     @property
     def enabled(self) -> bool:
@@ -226,6 +219,7 @@ class NativeSafety:
 
     @property
     def stats(self) -> SafetyStats:
+        """The Python-side counts with the compiled loop's (a new object each time)."""
         c = self._loop.cnt
         s = SafetyStats(**{k: getattr(self._py, k) for k in ('commands', 'rejected_frame',
                                                              'last_reject')})
@@ -235,6 +229,10 @@ class NativeSafety:
         s.clamped = int(c[nt.CNT.clamped])
         s.max_output = c[nt.CNT.max_force_un] * 1e-6
         return s
+
+    @stats.setter
+    def stats(self, value: SafetyStats) -> None:
+        self._py = value
 
     def start(self, now: float = 0.0) -> None:
         ctl = self._loop.ctl
@@ -279,7 +277,7 @@ class NativeSafety:
         self._loop.ctl[nt.CTL.fault] += 1
 
 
-class NativeRenderer:
+class NativeRenderer(LocalModelRenderer):
     """:class:`~.local_model.LocalModelRenderer`'s receiving side over the compiled loop: a model
     is checked and conditioned here (once per model, as before) and written to the model buffer;
     the compiled tick renders it. ``stats``: the tick counts by status come from the loop."""
@@ -287,16 +285,9 @@ class NativeRenderer:
     def __init__(self, loop: 'NativeServoLoop', max_stiffness: float = FALCON_MAX_STIFFNESS / 1.5,
                  validity_time: float = 0.05, validity_radius: float = 0.005,
                  fresh_age: float = 0.0015) -> None:
-        for name, v in (('max_stiffness', max_stiffness), ('validity_time', validity_time),
-                        ('validity_radius', validity_radius), ('fresh_age', fresh_age)):
-            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
-                raise ValueError(f'{name}: expected a finite number > 0, got {v!r}')
         self._loop = loop
-        self.max_stiffness, self.validity_time = float(max_stiffness), float(validity_time)
-        self.validity_radius, self.fresh_age = float(validity_radius), float(fresh_age)
-        self._py = RenderStats()
         self._base = loop.cnt.copy()
-        self.time: float | None = None
+        super().__init__(max_stiffness, validity_time, validity_radius, fresh_age)
 
     @property
     def stats(self) -> RenderStats:
@@ -310,6 +301,10 @@ class NativeRenderer:
         s.ticks_none = int(c[C.none] - b[C.none])
         s.ticks_approach = int(c[C.approach] - b[C.approach])
         return s
+
+    @stats.setter
+    def stats(self, value: RenderStats) -> None:
+        self._py = value
 
     def reset_stats(self) -> None:
         self._py = RenderStats()
