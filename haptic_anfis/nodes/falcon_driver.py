@@ -20,6 +20,12 @@ rclpy message objects and no GIL hand-over per message. Pose -> command
 latency (pose stamp to command arrival) and deadline misses are collected in
 :attr:`FalconDriver.servo` ``.stats``; ``trace_path`` writes every servo tick for the applied-force
 error (:mod:`haptic_anfis.device.force_error`).
+
+With the simulated Falcon the tick itself is compiled and never takes the interpreter lock
+(``servo_loop: native``, :mod:`haptic_anfis.device.servo_native`; ``native_process``: in a servo
+process of its own): device, local model, clutch, safety and the passivity bound run there, and
+the Python side above (publishing, taking commands and models) is a bridge thread that may fall
+behind without costing a tick (docs/servo_loop.md).
 """
 from __future__ import annotations
 
