@@ -165,6 +165,14 @@ def main() -> int:
             print(' '.join(f'{fmt(r[c]):>12}' for c in COLS), flush=True)
             if r['error']:
                 print('  ', r['error'], flush=True)
+            if not a.no_page:  # after every row: a run cut short keeps what it measured
+                _page(a, rows, len(runs))
+    if not a.no_page:
+        print(f'page: {_page(a, rows, len(runs))}')
+    return 0
+
+
+def _page(a, rows: list[dict], planned: int):
     head = '| ' + ' | '.join(COLS) + ' |\n|' + '---|' * len(COLS) + '\n'
     body = head + ''.join('| ' + ' | '.join(fmt(r[c]) for c in COLS) + ' |\n' for r in rows)
     notes = (f'\n{a.duration:g} s per run after the graph is ready, default force mode '
@@ -183,10 +191,9 @@ def main() -> int:
              'validity time, inside `model_hold_time` and its radius; `lat_p99_ms`, `lat_max_ms`: pose -> local model '
              'latency, 99th percentile and largest. Targets (issue 32): rate >= 995 Hz, zero_ticks 0, '
              'err_rms_pct <= 2, ripple_pct <= 1; quiet err_rms_pct <= 0.2.\n')
-    if not a.no_page:
-        p = write_page(a.page, f'Servo loop under load ({a.loops})', body + notes)
-        print(f'page: {p}')
-    return 0
+    if len(rows) < planned:
+        notes += f'\n({len(rows)} of {planned} planned runs so far.)\n'
+    return write_page(a.page, f'Servo loop under load ({a.loops})', body + notes)
 
 
 if __name__ == '__main__':
