@@ -476,7 +476,7 @@ class NativeServoLoop:
     def _feed_hand(self) -> None:
         """The external script's hand target at the bridge's time (device frame)."""
         s = self._script
-        t0 = self.st[nt.S.t_open]
+        t0 = float(self.st[nt.S.t_open])  # plain floats to the script (it keeps its time)
         now = time.monotonic()
         t = (now - t0) if t0 == t0 and t0 > 0 else 0.0
         m, dt = self.mapping, 0.002
