@@ -322,3 +322,30 @@ def test_loop_runs_on_its_thread_or_process_and_stops_at_zero_force(process):
     assert tuple(lp.st[nt.S.f0:nt.S.f0 + 3]) == (0.0, 0.0, 0.0)
     assert not lp.running
     assert states  # the bridge published ticks
+
+
+def test_an_external_script_is_played_through_the_hand_buffer():
+    """exam run swaps in a script only Python can play: the bridge feeds its target (plain float
+    times: a numpy time once leaked into the exam report as a numpy bool) and the tick follows."""
+    seen = []
+
+    class Script:
+        def target(self, t):
+            seen.append(type(t))
+            return (0.06, 0.02, 0.0)
+
+        def buttons(self, t):
+            return (0, 1)
+
+    lp = loop()
+    lp.tick(0.0)
+    lp.script = Script()
+    lp._feed_hand()
+    assert seen and all(t is float for t in seen)
+    assert lp.ctl[nt.CTL.external] == 1
+    t_feed = lp.hand[1]
+    for i in range(1, 2000):
+        lp.tick(t_feed + i * 0.001)
+    # the hand pulled the handle to the target (y = 0.02 m tissue = 0.0133 m device)
+    assert lp.st[nt.S.x1] == pytest.approx(0.02 / 1.5, abs=2e-3)
+    assert lp.last_out is not None and lp.cnt[nt.CNT.marks] == 1  # button 1 pressed once
