@@ -36,8 +36,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _page import write_page  # noqa: E402
 
 CLI = [sys.executable, '-m', 'haptic_anfis.cli']
-COLS = ('config', 'busy', 'load', 'rt_others', 'rate_hz', 'periods_lost', 'max_gap_ms', 'err_rms_pct',
-        'ripple_pct', 'ripple_ideal_pct', 'zero_ticks', 'dropout_ms', 'trips_contact',
+COLS = ('config', 'busy', 'load', 'rt_others', 'rate_hz', 'periods_lost', 'max_gap_ms',
+        'err_rms_pct', 'ripple_pct', 'ripple_ideal_pct', 'zero_ticks', 'dropout_ms', 'trips_contact',
         'expired', 'held', 'lat_p99_ms', 'lat_max_ms')
 
 
@@ -111,8 +111,8 @@ def row(name: str, nbusy: int, load: float, j: dict) -> dict:
             'err_rms_pct': f('force_error_rms_pct'), 'ripple_pct': f('ripple_windows_pct'),
             'ripple_ideal_pct': f('ripple_windows_ideal_pct'), 'zero_ticks': f('zero_force_ticks'),
             'dropout_ms': f('longest_dropout_ms'), 'trips_contact': f('watchdog_trips_in_contact'),
-            'expired': f('ticks_expired'), 'held': f('ticks_held'), 'lat_p99_ms': f('latency_p99_ms'),
-            'lat_max_ms': f('latency_max_ms'), 'error': j.get('error')}
+            'expired': f('ticks_expired'), 'held': f('ticks_held'),
+            'lat_p99_ms': f('latency_p99_ms'), 'lat_max_ms': f('latency_max_ms'), 'error': j.get('error')}
 
 
 def fmt(v) -> str:
