@@ -17,6 +17,9 @@ commands and local models it receives), ``latency_p50_ms``, ``latency_p99_ms``,
 ``ticks_approach`` (of the fresh and extrapolated ticks, those rendered from an approach model:
 the plane ahead of a free probe), ``force_error_by_phase`` (onset / offset / steady: the first and last 20 ms of each contact and
 the rest, each ``ticks``, ``rms_n``, ``share_pct`` of the squared error),
+``ripple_windows_pct``, ``ripple_windows_ideal_pct``, ``zero_force_ticks``, ``longest_dropout_ms``
+(:func:`haptic_anfis.device.force_error.ripple_and_dropouts`), ``periods_lost`` (servo periods
+with no tick), ``max_gap_ms`` (the longest time between two ticks),
 ``process_cpu_pct`` (the driver process's CPU time over the window / its wall time, all threads:
 in one process, the whole graph's).
 """
@@ -67,7 +70,7 @@ def ideal_forces(positions: np.ndarray, params_files=()) -> tuple[np.ndarray, np
 
 def trace_report(trace: str | Path, params_files=()) -> dict:
     """The report of one trace (keys in the module docstring)."""
-    from ..device.force_error import error_by_phase, force_error
+    from ..device.force_error import error_by_phase, force_error, ripple_and_dropouts
     from ..device.trace import load_trace
     rows, meta = load_trace(trace)
     st = meta.get('stats', {})
@@ -76,6 +79,7 @@ def trace_report(trace: str | Path, params_files=()) -> dict:
     err = force_error(rows[:, 4:7], F, contact, max_force=fmax)
     err['force_error_by_phase'] = error_by_phase(rows[:, 4:7], F, contact, rows[:, 0],
                                                  max_force=fmax)
+    err.update(ripple_and_dropouts(rows[:, 0], rows[:, 4:7], F, contact, max_force=fmax))
     # the trace and the received counts start at the first command (the driver resets them)
     secs = float(rows[-1, 0] - rows[0, 0]) if len(rows) > 1 else 0.0
     rate = lambda k: round(st[k] / secs, 1) if secs > 0 and k in st else None  # noqa: E731
@@ -86,7 +90,10 @@ def trace_report(trace: str | Path, params_files=()) -> dict:
          **{k: st.get(k) for k in ('latency_p50_ms', 'latency_p99_ms', 'latency_max_ms',
                                    'ticks_fresh', 'ticks_extrapolated', 'ticks_expired',
                                    'watchdog_trips', 'watchdog_trips_in_contact',
-                                   'deadline_misses', 'rejected_stale', 'rejected_future',
+                                   'deadline_misses', 'periods_lost', 'max_gap_ms',
+                                   'passivity_limited', 'servo_scheduling', 'trace_rows_lost',
+                                   'ticks_held',
+                                   'rejected_stale', 'rejected_future',
                                    'rejected_unknown_stamp', 'process_cpu_pct',
                                    'ticks_approach')},
          **err, 'ticks': int(len(rows))}
@@ -110,6 +117,10 @@ def format_report(r: dict) -> str:
         f"{f(r['force_error_rms_n'], 3)} N = {f(r['force_error_rms_pct'])} % of the RMS force, "
         f"p99 {f(r['force_error_p99_n'], 3)} N ({f(r['force_error_p99_pct'])} % per tick, "
         f"forces >= 0.5 N)",
+        f"  ripple: {f(r.get('ripple_windows_pct'))} % of 200 ms windows > 0.1 N around the "
+        f"50 ms mean (ideal force: {f(r.get('ripple_windows_ideal_pct'))} %); dropouts: "
+        f"{r.get('zero_force_ticks')} ticks at 0 N with the ideal > 1 N (longest "
+        f"{f(r.get('longest_dropout_ms'), 1)} ms); periods lost {r.get('periods_lost')}",
         _phase_line(r.get('force_error_by_phase'))])
 
 

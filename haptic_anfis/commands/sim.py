@@ -24,7 +24,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     add_session_arguments(p, NAME)
     p.add_argument('--json', action='store_true',
                    help='end with one line of JSON: rate_hz, latency_p50_ms, latency_p99_ms, '
-                        'latency_max_ms, deadline_misses, cycles, max_force_n, contact_s, ...')
+                        'latency_max_ms, deadline_misses, periods_lost, cycles, max_force_n, '
+                        'contact_s, force_error_rms_pct, ripple_windows_pct, zero_force_ticks, '
+                        '... (the driver traces every tick for the error figures)')
     p.add_argument('ros_args', nargs=argparse.REMAINDER,
                    help='--ros-args ... passed to rclpy (e.g. --ros-args -p rate:=500.0)')
 
@@ -34,6 +36,14 @@ def run(args: argparse.Namespace) -> int:
     from ..session import OneProcessSession, spec_from_args
     from ..session.spec import ONE_PROCESS_NODES
     spec = spec_from_args(args, NAME, nodes=ONE_PROCESS_NODES)
+    trace = None
+    if args.json:  # the applied-force error needs every servo tick (commands/loop.py)
+        import dataclasses
+        import tempfile
+        from pathlib import Path
+        trace = Path(tempfile.mkdtemp(prefix='haptic-anfis-sim-')) / 'falcon_driver_trace.npz'
+        spec = dataclasses.replace(spec, ros_args=(*spec.ros_args, '-p',
+                                                   f'falcon_driver:trace_path:={trace}'))
     session = OneProcessSession(spec)
     try:
         graph = session.start()
@@ -60,8 +70,33 @@ def run(args: argparse.Namespace) -> int:
         print(f'{name:<14} own process, exit code {code}')
     recorded = session.print_recorded()
     if args.json:
-        print(json.dumps(json_summary(summary, recorded)), flush=True)
+        out = json_summary(summary, recorded)
+        out.update(_trace_figures(trace, spec.params_files))
+        print(json.dumps(out), flush=True)
     return 0
+
+
+#: the trace report's figures ``sim --json`` carries (commands/loop.py)
+TRACE_KEYS = ('force_error_rms_pct', 'force_error_rms_n', 'force_error_p99_n',
+              'force_error_p99_pct', 'contact_ticks', 'ripple_windows_pct',
+              'ripple_windows_ideal_pct', 'zero_force_ticks', 'longest_dropout_ms', 'force_mode',
+              'watchdog_trips_in_contact', 'ticks_expired', 'ticks_held', 'periods_lost',
+              'max_gap_ms')
+
+
+def _trace_figures(trace, params_files) -> dict:
+    """The applied-force error, ripple and dropout figures of the driver's tick trace (the
+    temporary trace is removed); {} without one."""
+    if trace is None or not trace.is_file():
+        return {}
+    import shutil
+
+    from .loop import trace_report
+    try:
+        r = trace_report(trace, params_files)
+    finally:
+        shutil.rmtree(trace.parent, ignore_errors=True)
+    return {k: r.get(k) for k in TRACE_KEYS}
 
 
 def json_summary(s: dict, recorded: dict | None = None) -> dict:
@@ -74,6 +109,7 @@ def json_summary(s: dict, recorded: dict | None = None) -> dict:
            'latency_p99_ms': lp['latency_p99_ms'], 'latency_max_ms': lp['latency_max_ms'],
            'latency_next_tick_pct': lp.get('latency_next_tick_pct'),
            'deadline_misses': lp['deadline_misses'], 'cycles': lp['ticks'],
+           'periods_lost': lp.get('periods_lost'), 'max_gap_ms': lp.get('max_gap_ms'),
            'max_force_n': lp['max_force_N'], 'contact_s': contact_seconds(s),
            'seconds': lp['seconds'], 'commands': lp['latency_n'],
            'watchdog_trips': lp['watchdog_trips'], 'clamped': lp['clamped'],

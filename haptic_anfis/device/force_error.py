@@ -119,3 +119,65 @@ def error_by_phase(applied: np.ndarray, ideal: np.ndarray, in_contact: np.ndarra
         out[name] = {'ticks': k, 'rms_n': float(np.sqrt(e2[sel].mean())) if k else None,
                      'share_pct': 100.0 * float(e2[sel].sum()) / total if total > 0 else None}
     return out
+
+
+def ripple_and_dropouts(times: np.ndarray, applied: np.ndarray, ideal: np.ndarray,
+                        in_contact: np.ndarray, max_force: float = math.inf,
+                        mean_window: float = 0.05, window: float = 0.2, ripple: float = 0.1,
+                        dropout_ideal: float = 1.0) -> dict:
+    """The buzz and the dropouts a hand feels (issue 32), over the ticks in contact.
+
+    - ``ripple_windows_pct``: share of the ``window`` [s] (200 ms) windows of contact ticks in
+      which the applied force leaves its own centred ``mean_window`` (50 ms) moving mean by more
+      than ``ripple`` N (0.1 N) somewhere; ``ripple_windows_ideal_pct``: the same of the ideal
+      force (what the tissue itself varies at that scale: the floor for the applied figure).
+      A window counts when at least half its span is in contact.
+    - ``zero_force_ticks``: ticks in contact with exactly 0 N applied while the ideal force is
+      above ``dropout_ideal`` N (1 N): a dropout.
+    - ``longest_dropout_ms``: the longest run of such ticks, in time.
+
+    Arguments as :func:`error_by_phase` (times (n,) [s], increasing).
+    """
+    t = np.asarray(times, dtype=np.float64)
+    applied = np.asarray(applied, dtype=np.float64)
+    mask = np.asarray(in_contact, dtype=bool)
+    if applied.shape != np.shape(ideal) or t.shape != mask.shape or mask.shape != (len(applied),):
+        raise ValueError(f'ripple_and_dropouts: expected applied and ideal (n, 3), in_contact '
+                         f'and times (n,), got {applied.shape}, {np.shape(ideal)}, {mask.shape}, '
+                         f'{t.shape}')
+    ideal, n_ideal = _clamped(np.asarray(ideal, dtype=np.float64), max_force)
+    n_app = np.linalg.norm(applied, axis=1)
+    drop = mask & (n_app == 0.0) & (n_ideal > dropout_ideal)
+    longest = 0.0
+    if drop.any():
+        edges = np.diff(np.concatenate([[0], drop.astype(np.int8), [0]]))
+        for a, b in zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1) - 1):
+            longest = max(longest, float(t[b] - t[a]) + (float(np.median(np.diff(t)))
+                                                         if len(t) > 1 else 0.0))
+    out = {'zero_force_ticks': int(drop.sum()), 'longest_dropout_ms': 1e3 * longest}
+    for key, f in (('ripple_windows_pct', applied), ('ripple_windows_ideal_pct', ideal)):
+        out[key] = _ripple_share(t, f, mask, mean_window, window, ripple)
+    return out
+
+
+def _ripple_share(t, f, mask, mean_window, window, ripple) -> float | None:
+    """% of the windows (see :func:`ripple_and_dropouts`) whose deviation exceeds ``ripple``."""
+    if len(t) < 2:
+        return None
+    # centred moving mean of each component over mean_window, by time (cumulative sums)
+    c = np.vstack([np.zeros((1, 3)), np.cumsum(f, axis=0)])
+    lo = np.searchsorted(t, t - mean_window / 2, side='left')
+    hi = np.searchsorted(t, t + mean_window / 2, side='right')
+    mean = (c[hi] - c[lo]) / (hi - lo)[:, None]
+    dev = np.linalg.norm(f - mean, axis=1)
+    # ticks whose averaging window is not all in contact measure the contact's edge: skip them
+    cm = np.concatenate([[0], np.cumsum(mask)])
+    inner = mask & ((cm[hi] - cm[lo]) == (hi - lo))
+    k = np.floor((t - t[0]) / window).astype(np.int64)
+    nwin = int(k[-1]) + 1
+    dur = np.bincount(k, weights=mask.astype(np.float64), minlength=nwin)
+    per_tick = np.median(np.diff(t))
+    counted = dur * per_tick >= window / 2
+    bad = np.bincount(k[inner & (dev > ripple)], minlength=nwin) > 0
+    n = int(counted.sum())
+    return 100.0 * float((bad & counted).sum()) / n if n else None

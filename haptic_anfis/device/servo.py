@@ -100,6 +100,8 @@ class ServoLoop:
 
     def _run(self) -> None:
         self.scheduling = set_realtime(self.priority)
+        if self.priority <= 0:
+            self.scheduling += request_short_slice()
         self._scheduled.set()
         period, clock, stop = self.period, self.clock, self._stop
         deadline = clock()
@@ -150,3 +152,32 @@ def set_realtime(priority: int) -> str:
         return (f'normal scheduler: SCHED_FIFO {priority} refused ({why}); allow it with '
                 f'`ulimit -r {priority}` or an rtprio line in /etc/security/limits.conf')
     return f'SCHED_FIFO priority {priority}'
+
+
+def request_short_slice(slice_s: float = 0.0001) -> str:
+    """Ask the kernel's fair scheduler (EEVDF, Linux >= 6.12) for a short time slice for the
+    calling thread (``sched_setattr`` with SCHED_OTHER and ``sched_runtime``): a thread that
+    sleeps most of each period then gets an earlier virtual deadline and preempts busy
+    processes sooner when it wakes. Needs no privilege. Returns what was done, for the log
+    ('' when the kernel refused: older kernels ignore or reject it).
+
+    Measured (bench/bench_servo_load.py's prototype, 8 busy processes on 2 cores): a compiled
+    1 kHz loop ran 946 Hz with it, 564 Hz without (SCHED_FIFO: 998 Hz).
+    """
+    import ctypes
+    import struct
+    import sys
+    if not sys.platform.startswith('linux'):
+        return ''
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+        # struct sched_attr: size, policy, flags, nice, priority, runtime, deadline, period,
+        # util_min, util_max
+        attr = ctypes.create_string_buffer(struct.pack('IIQiIQQQII', 56, 0, 0, 0, 0,
+                                                       int(slice_s * 1e9), 0, 0, 0, 0), 56)
+        nr = {'x86_64': 314, 'aarch64': 274}.get(__import__('platform').machine())
+        if nr is None or libc.syscall(nr, 0, attr, 0) != 0:
+            return ''
+    except (OSError, AttributeError):
+        return ''
+    return f', time slice {slice_s * 1e3:g} ms requested'

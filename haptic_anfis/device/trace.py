@@ -53,6 +53,21 @@ class TickTrace:
         self._i += 1
         self.rows += 1
 
+    def extend(self, rows: np.ndarray) -> None:
+        """Append ``rows`` (k, 8) at once (the native loop's bridge drains its ring here)."""
+        rows = np.asarray(rows, dtype=np.float64).reshape(-1, len(COLUMNS))
+        i = 0
+        while i < len(rows):
+            if self._i == self.chunk:
+                self.add(*_split(rows[i]))
+                i += 1
+                continue
+            k = min(self.chunk - self._i, len(rows) - i)
+            self._chunks[-1][self._i:self._i + k] = rows[i:i + k]
+            self._i += k
+            self.rows += k
+            i += k
+
     def clear(self) -> None:
         self.__init__(self.chunk, self.max_rows)
 
@@ -60,6 +75,11 @@ class TickTrace:
         """The rows held (n, 8), oldest first."""
         parts = self._chunks[:-1] + [self._chunks[-1][:self._i]]
         return np.concatenate(parts, axis=0) if parts else np.empty((0, len(COLUMNS)))
+
+
+def _split(r: np.ndarray) -> tuple:
+    """One row as :meth:`TickTrace.add`'s arguments."""
+    return r[0], r[1:4], r[4:7], r[7]
 
 
 def save_trace(path: str | Path, rows: np.ndarray, **meta) -> Path:

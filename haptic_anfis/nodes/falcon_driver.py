@@ -20,6 +20,12 @@ rclpy message objects and no GIL hand-over per message. Pose -> command
 latency (pose stamp to command arrival) and deadline misses are collected in
 :attr:`FalconDriver.servo` ``.stats``; ``trace_path`` writes every servo tick for the applied-force
 error (:mod:`haptic_anfis.device.force_error`).
+
+With the simulated Falcon the tick itself is compiled and never takes the interpreter lock
+(``servo_loop: native``, :mod:`haptic_anfis.device.servo_native`; ``native_process``: in a servo
+process of its own): device, local model, clutch, safety and the passivity bound run there, and
+the Python side above (publishing, taking commands and models) is a bridge thread that may fall
+behind without costing a tick (docs/servo_loop.md).
 """
 from __future__ import annotations
 
@@ -127,6 +133,22 @@ PARAMS = [
     Param('gil_switch_interval', 0.0002, "this process's Python thread switch interval [s]: how "
           'long another thread may hold the GIL before the servo thread gets it back (Python '
           'default 0.005; 0 = leave it)', non_negative),
+    Param('servo_loop', 'native', "sim: 'native' runs the servo tick (device, local model, "
+          'clutch, safety, passivity bound) compiled on its own thread without the interpreter '
+          "lock (haptic_anfis.device.servo_native); 'native_process' the same compiled loop in a "
+          "servo process of its own session on shared memory; 'python' the Python tick (the "
+          "'falcon' backend always uses it: its USB library is Python)",
+          one_of('native', 'native_process', 'python')),
+    Param('passivity_damping', 1.5, 'native: device damping b [N s/m] of the passivity bound on '
+          'the rendered stiffness, K <= 2 b / T with T the measured tick period (Colgate & '
+          'Schenkel 1997; docs/servo_loop.md)', positive),
+    Param('model_hold_time', 0.5, 'native, local_model: a model older than model_validity_time '
+          'but not than this [s] is still rendered while the probe is within '
+          'model_validity_radius of it (the tissue does not move: an upstream stall no longer '
+          'drops the force to 0 N); then it expires and the watchdog ramps the force to zero. '
+          '<= model_validity_time: off', positive),
+    Param('passivity_observer', False, 'native: run the passivity observer / controller '
+          '(Hannaford & Ryu 2002) on the rendered port'),
     Param('servo_priority', 50, 'real-time priority of the servo thread (SCHED_FIFO 1-99; 0 = '
           'the normal scheduler). Needs CAP_SYS_NICE or an rtprio limit (ulimit -r); without it '
           'the thread keeps the normal scheduler and a warning says how to allow it',
@@ -160,13 +182,22 @@ class FalconDriver(Node):
                                                      p['hand_damping']),
                                           max_force=p['max_force'])
             what = f'script {script_path} ({script.duration:.1f} s)'
-        self.safety = SafetyLayer(p['max_force'], p['max_force_rate'], p['watchdog_timeout'],
-                                  frame_id=self.frame_id)
-        # Button 0 clutch (zero force, mapping follows the hand), button 1 mark (exam/marks).
-        self.clutch = ClutchMark()
+        self.native = None
+        if p['backend'] == 'sim' and p['servo_loop'] != 'python':
+            self.native = self._make_native(p, script)
+            self.device, self.safety = self.native, self.native.safety
+            self.clutch = self.native.clutch  # the clutch / mark rules run in the compiled tick
+        else:
+            self.safety = SafetyLayer(p['max_force'], p['max_force_rate'],
+                                      p['watchdog_timeout'], frame_id=self.frame_id)
+            # Button 0 clutch (zero force, mapping follows the hand), button 1 mark (exam/marks).
+            self.clutch = ClutchMark()
         self.input = ForceInput(self.safety, self.mapping, p['force_mode'], p['max_stiffness'],
                                 p['model_validity_time'], p['model_validity_radius'],
-                                1.0 / p['rate'], clutch=self.clutch)
+                                1.0 / p['rate'],
+                                clutch=None if self.native is not None else self.clutch)
+        if self.native is not None:
+            self.input.renderer = self.native.renderer
         self.pub_pose = self.create_publisher(PoseStamped, ifc.TOPIC_POSE, LOOP_QOS)
         self.pub_twist = self.create_publisher(TwistStamped, ifc.TOPIC_TWIST, LOOP_QOS)
         self.pub_applied = self.create_publisher(WrenchStamped, ifc.TOPIC_APPLIED, LOOP_QOS)
@@ -201,10 +232,15 @@ class FalconDriver(Node):
         self.finished = False
         self.exit_code = 0
         self.trace_path = p['trace_path']
-        self.servo = ServoLoop(self.device, self.safety, p['rate'], on_state=self._publish_state,
-                               render=self.input.render,
-                               trace=TickTrace() if self.trace_path else None,
-                               priority=p['servo_priority'])
+        if self.native is not None:
+            self.servo = self.native
+            self.native.on_state = self._publish_state
+            self.native.trace = TickTrace() if self.trace_path else None
+        else:
+            self.servo = ServoLoop(self.device, self.safety, p['rate'],
+                                   on_state=self._publish_state, render=self.input.render,
+                                   trace=TickTrace() if self.trace_path else None,
+                                   priority=p['servo_priority'])
         self.servo.start()
         if 'refused' in self.servo.scheduling:  # one call site per severity (rclpy)
             self.get_logger().warning(f'servo thread: {self.servo.scheduling}')
@@ -235,6 +271,18 @@ class FalconDriver(Node):
                          geometry=dataclasses.replace(GEOMETRY, counts_per_nm=p['counts_per_nm']),
                          on_disconnect=self._device_lost, on_reconnect=self._device_back)
 
+    def _make_native(self, p, script):
+        """The compiled, GIL-free servo loop with the simulated Falcon (device/servo_native.py)."""
+        from ..device.servo_native import NativeServoLoop
+        return NativeServoLoop(
+            script, self.mapping, HandParams(p['hand_mass'], p['hand_stiffness'],
+                                             p['hand_damping']),
+            p['rate'], p['max_force'], p['max_force_rate'], p['watchdog_timeout'],
+            self.frame_id, p['force_mode'], p['max_stiffness'], p['model_validity_time'],
+            p['model_validity_radius'], p['passivity_damping'], p['passivity_observer'],
+            p['model_hold_time'], trace=TickTrace() if p['trace_path'] else None,
+            priority=p['servo_priority'], process=p['servo_loop'] == 'native_process')
+
     def _device_lost(self, why: str) -> None:
         """The Falcon backend lost the device (servo thread): zero the force; without reconnect,
         stop the node with exit status 1."""
@@ -254,7 +302,7 @@ class FalconDriver(Node):
             raw = sub.take()
             if raw is not None:
                 handler(raw)
-        ns = time.time_ns()
+        ns = getattr(state, 'stamp_ns', 0) or time.time_ns()  # native: the tick's own stamp
         m = self.mapping
         (x, y, z), ev = self.clutch.update(state.buttons, m.to_tissue(state.position), now)
         pose = self._pose
@@ -343,9 +391,12 @@ class FalconDriver(Node):
         refused as stale (so the figures are not cut at the age limit); the measurement window
         opens at the first one taken."""
         script = getattr(self.device, 'script', None)
-        if isinstance(script, HeldScript) and script.held and (why == OK or why.endswith(STALE)) \
+        held = script.held if self.native is None else self.native.held
+        if isinstance(script, HeldScript) and held and (why == OK or why.endswith(STALE)) \
                 and (self.release_gate is None or self.release_gate()):
             script.release()  # a force source answers our poses (late or not): start the palpation
+            if self.native is not None:
+                self.native.release()
         if why == OK and self.first_command is None:
             now = time.monotonic()
             self.first_command = now
@@ -372,6 +423,9 @@ class FalconDriver(Node):
                  watchdog_trips_in_contact=ss.watchdog_trips_in_contact,
                  clamped=ss.clamped, servo_errors=self.servo.errors,
                  servo_scheduling=self.servo.scheduling, **self.input.summary())
+        if self.native is not None:
+            s.update(trace_rows_lost=self.native.trace_lost,
+                     bridge_rate_hz=self.native.bridge_gaps.summary()['rate_hz'])
         if self.first_command is not None:  # CPU of this process (all its threads) / wall time
             wall = time.monotonic() - self.first_command
             s['process_cpu_pct'] = (round(100.0 * (time.process_time() - self._cpu0) / wall, 1)

@@ -1,0 +1,574 @@
+"""The servo tick compiled with numba ``nogil``: device, local model, clutch, safety, passivity.
+
+One function, :func:`run`, is the whole servo loop: a Python thread calls it once and it returns
+only when told to stop, so the thread holds no interpreter lock (GIL) for the loop's whole life
+(issue 32: the executors, the recorder and the garbage collector held it for 14-169 ms).
+It sleeps to absolute 1 ms deadlines with ``clock_nanosleep`` and reads the clock with
+``clock_gettime`` (libc through ctypes: numba compiles those calls to plain C calls). Each tick
+(:func:`tick`, also called alone by the tests with a chosen time):
+
+1. Read the device: the simulated Falcon's handle (mass-spring-damper hand pulled to the scripted
+   target, semi-implicit Euler, at most ``dt_max`` steps; the script sampled into arrays).
+2. The clutch / mark buttons (:class:`haptic_anfis.device.buttons.ClutchMark`'s rules).
+3. Render: the newest local model (:mod:`.local_model`'s rules: depth along the indentation
+   direction, onset correction, expiry by age and radius) or the newest force command (zero-order
+   hold), in the device frame. A model older than its validity time but younger than
+   ``hold_time`` is still rendered while the probe is inside its validity radius (counted as
+   ``held``): the tissue does not move, so its local linearisation stays right near p0, and an
+   upstream stall (force server, contact detector, the bridge) no longer drops the force to 0 N.
+4. Passivity: the model's stiffness is limited by the MEASURED tick period ``T`` (the time the
+   previous output was held): ``K <= 2 (b - |B|) / T`` with ``b`` the device's damping and ``B``
+   the rendered damping (here 0) — Colgate & Schenkel 1997 (J. Robotic Systems 14(1):37-47),
+   the discrete-time passivity condition of a virtual wall, ``b > K T / 2 + |B|``. Optional
+   passivity observer / controller (Hannaford & Ryu 2002, IEEE T-RO 18(1):1-10): the energy the
+   rendered port put out so far; when it turns negative a damping force takes it back.
+5. Safety (:class:`haptic_anfis.device.safety.SafetyLayer`'s rules): non-finite -> zero at once,
+   watchdog on the command age (zero at once after a stall longer than the watchdog), rate limit,
+   clamp to ``max_force``.
+6. Write the device, the tick's trace row, the published state (a seqlock), the counters.
+
+Exchange with Python (:mod:`.servo_native`) is through numpy arrays only: seqlock buffers for the
+command, the model and the published state (the writer makes the sequence number odd, writes,
+makes it even; the reader retries when it changed), a ring for the trace, int64 counters. A libc
+``memcpy`` through ctypes is an opaque call the compiler can neither reorder stores across nor
+elide: it orders each seqlock. Times are seconds on CLOCK_MONOTONIC (Python's ``time.monotonic``),
+lengths metres, forces newtons.
+"""
+from __future__ import annotations
+
+import ctypes
+import ctypes.util
+import enum
+
+import numba as nb
+from llvmlite import binding as llvm
+import numpy as np
+
+__all__ = ['CFG', 'CNT', 'OUT', 'CMD_LEN', 'MODEL_LEN', 'STATE_LEN', 'CTL', 'TRACE_COLS',
+           'CFG_LEN', 'CTL_LEN', 'HAND_LEN', 'OUT_LEN', 'CNT_LEN', 'SCRATCH_LEN',
+           'tick', 'run', 'clock_now', 'new_state']
+
+_libc = ctypes.CDLL(ctypes.util.find_library('c') or 'libc.so.6', use_errno=True)
+
+
+def _external(name: str, sig) -> object:
+    """libc's ``name`` as a numba external function: the compiled code calls the symbol by name
+    (resolved through llvmlite's symbol table, so the kernel can be cached, unlike a ctypes
+    pointer). Pointer arguments are declared int64 (the same register on x86-64 / aarch64):
+    numba passes ``array.ctypes.data`` as an integer."""
+    sym = f'haptic_anfis_{name}'
+    llvm.add_symbol(sym, ctypes.cast(getattr(_libc, name), ctypes.c_void_p).value)
+    return nb.types.ExternalFunction(sym, sig)
+
+
+_i32, _i64 = nb.types.int32, nb.types.int64
+_clock_gettime = _external('clock_gettime', _i32(_i32, _i64))
+_clock_nanosleep = _external('clock_nanosleep', _i32(_i32, _i32, _i64, _i64))
+_memcpy = _external('memcpy', _i64(_i64, _i64, _i64))
+CLOCK_REALTIME, CLOCK_MONOTONIC, TIMER_ABSTIME = 0, 1, 1
+
+
+def _index(name: str, names: str) -> type:
+    """An IntEnum of consecutive indices 0, 1, ... for the space-separated ``names`` (numba reads
+    its members as integer constants)."""
+    return enum.IntEnum(name, names, start=0)
+
+
+#: configuration (float64), written once before the loop starts
+CFG = _index('CFG', 'period max_force max_force_rate watchdog max_dt validity_time validity_radius '
+             'fresh_age max_stiffness scale ox oy oz force_scale hand_m hand_k hand_c half '
+             'dt_max max_catch_up ramp damping mode observer loop dev_max_force hold_time')
+#: the loop's own state (float64)
+S = _index('S', 'x0 x1 x2 v0 v1 v2 f0 f1 f2 t_dev t_open script_off '
+           'enabled target0 target1 target2 out0 out1 out2 last_cmd last_out tripped '
+           'held frozen0 frozen1 frozen2 off0 off1 off2 wait_zero ramp_start mark_prev '
+           'energy t_prev cmd_seen model_seen fault_seen enable_seen status '
+           'm_f0 m_f1 m_f2 m_p0 m_p1 m_p2 m_k0 m_k1 m_k2 m_k3 m_k4 m_k5 m_k6 m_k7 m_k8 '
+           'm_g0 m_g1 m_g2 m_d0 m_d1 m_d2 m_depth0 m_zero m_contact m_t0 m_valid m_knorm')
+STATE_LEN = len(S)
+#: command buffer (float64 seqlock): seq, force (3,) device frame [N], its pose's time [s]
+CMD_LEN = 5
+#: model buffer (float64 seqlock): seq, f0 p0 K(9) g d (tissue), depth0, zero, contact, t0,
+#: valid (0 = cleared), |K| (an upper bound of its spectral norm, tissue frame [N/m])
+MODEL_LEN = 1 + 3 + 3 + 9 + 3 + 3 + 6
+#: control (int64): stop, release (the held script), fault generation (zero at once),
+#: enable generation and enabled (SafetyLayer.start / stop)
+CTL = _index('CTL', 'stop release fault enable_gen enabled external')
+#: external hand target (float64 seqlock; ``ctl[external]`` = 1): seq, its time [s], target (3,)
+#: device frame [m], its velocity (3,) [m/s], buttons 0 and 1 (a script only Python can play)
+HAND_LEN = 10
+#: the hand target is extrapolated from the newest one for at most this long [s], then held
+HAND_EXTRAPOLATE = 0.02
+#: published state (float64 seqlock): seq, t, device position, velocity, tissue position (with
+#: the clutch), applied force (device frame), status, clutch held, buttons 0..3, stamp [ns] as
+#: two int32 halves are not needed: the realtime stamp is published in :data:`CNT`'s ``stamp``
+OUT = _index('OUT', 'seq t p0 p1 p2 v0 v1 v2 q0 q1 q2 f0 f1 f2 status held b0 b1 b2 b3 stamp_hi '
+             'stamp_lo')
+#: counters (int64), written by the loop only
+CNT = _index('CNT', 'ticks periods_lost deadline_misses watchdog_trips watchdog_trips_in_contact '
+             'clamped rejected_nonfinite none fresh extrapolated expired free approach '
+             'passivity_limited observer_active max_gap_ns max_force_un marks clutches '
+             'trace_w t_first_ns t_last_ns running held')
+#: trace row: t, device position (3,), applied force (3,) device frame, status (as TickTrace)
+TRACE_COLS = 8
+CFG_LEN, CTL_LEN, OUT_LEN, CNT_LEN = len(CFG), len(CTL), len(OUT), len(CNT)
+#: scratch array length (the largest seqlock buffer)
+SCRATCH_LEN = max(CMD_LEN, MODEL_LEN, OUT_LEN)
+
+NONE, FRESH, EXTRAPOLATED, EXPIRED, FREE = 0, 1, 2, 3, 4  # local_model's status codes
+
+
+def new_state() -> np.ndarray:
+    """A fresh loop state (disabled safety, no model, no command)."""
+    st = np.zeros(STATE_LEN)
+    st[S.last_cmd] = np.nan
+    st[S.ramp_start] = np.nan
+    st[S.script_off] = np.nan
+    st[S.t_dev] = np.nan
+    st[S.t_prev] = np.nan
+    st[S.cmd_seen] = st[S.model_seen] = 0.0
+    return st
+
+
+@nb.njit(nogil=True, cache=True)
+def clock_now(ts) -> float:
+    """CLOCK_MONOTONIC [s] (``ts``: an int64 (2,) scratch array)."""
+    _clock_gettime(CLOCK_MONOTONIC, ts.ctypes.data)
+    return ts[0] + ts[1] * 1e-9
+
+
+@nb.njit(nogil=True, cache=True)
+def _script_point(cfg, st, times, points, t):
+    """The hand target (device frame, clipped to the workspace) and the segment index at device
+    time ``t`` [s] (script held at its start until released: ``script_off`` NaN)."""
+    off = st[S.script_off]
+    tl = 0.0 if off != off else max(t - off, 0.0)
+    n = times.shape[0]
+    dur = times[n - 1]
+    if cfg[CFG.loop] > 0.5 and dur > 0.0:
+        tl = tl % dur
+    else:
+        tl = min(max(tl, 0.0), dur)
+    i = np.searchsorted(times, tl, side='right') - 1
+    if i < 0:
+        i = 0
+    if i >= n - 1:
+        i = n - 1
+        a = 0.0
+        j = i
+    else:
+        t0, t1 = times[i], times[i + 1]
+        a = (tl - t0) / (t1 - t0) if t1 > t0 else 1.0
+        j = i + 1
+    h = cfg[CFG.half]
+    sc = cfg[CFG.scale]
+    out = np.empty(3)
+    for k in range(3):
+        p = points[i, k] + a * (points[j, k] - points[i, k])
+        d = (p - cfg[CFG.ox + k]) / sc
+        out[k] = min(max(d, -h), h)
+    return out, min(i, max(n - 2, 0))
+
+
+@nb.njit(nogil=True, cache=True)
+def _device_read(cfg, st, times, points, buttons, now, ctl, hand):
+    """Advance the simulated handle to ``now``; returns (b0, b1) buttons."""
+    if st[S.t_dev] != st[S.t_dev]:
+        st[S.t_dev] = now
+        st[S.t_open] = now
+    if st[S.script_off] != st[S.script_off] and ctl[CTL.release] != 0:
+        st[S.script_off] = now - st[S.t_open]
+    span = min(max(now - st[S.t_dev], 0.0), cfg[CFG.max_catch_up])
+    st[S.t_dev] = now
+    if ctl[CTL.external] != 0:
+        target = np.empty(3)
+        dt = min(max(now - hand[1], 0.0), HAND_EXTRAPOLATE)
+        h = cfg[CFG.half]
+        for k in range(3):
+            target[k] = min(max(hand[2 + k] + hand[5 + k] * dt, -h), h)
+        hb0, hb1 = int(hand[8]), int(hand[9])
+    else:
+        target, seg = _script_point(cfg, st, times, points, now - st[S.t_open])
+    if span > 0.0:
+        n = max(1, int(np.ceil(span / cfg[CFG.dt_max] - 1e-9)))
+        dt = span / n
+        m, k, c, h = cfg[CFG.hand_m], cfg[CFG.hand_k], cfg[CFG.hand_c], cfg[CFG.half]
+        for _ in range(n):
+            for i in range(3):
+                a = (k * (target[i] - st[S.x0 + i]) - c * st[S.v0 + i] + st[S.f0 + i]) / m
+                st[S.v0 + i] += a * dt
+                st[S.x0 + i] += st[S.v0 + i] * dt
+                if st[S.x0 + i] > h:
+                    st[S.x0 + i] = h
+                    st[S.v0 + i] = min(st[S.v0 + i], 0.0)
+                elif st[S.x0 + i] < -h:
+                    st[S.x0 + i] = -h
+                    st[S.v0 + i] = max(st[S.v0 + i], 0.0)
+    if ctl[CTL.external] != 0:
+        return hb0, hb1
+    if st[S.script_off] != st[S.script_off] or buttons.shape[0] == 0:
+        return 0, 0
+    return int(buttons[seg, 0]), int(buttons[seg, 1])
+
+
+@nb.njit(nogil=True, cache=True)
+def _device_write(cfg, st, fx, fy, fz):
+    """The motor force (device frame), clamped to the device's own limit, NaN -> 0."""
+    n = np.sqrt(fx * fx + fy * fy + fz * fz)
+    if not np.isfinite(n):
+        fx = fy = fz = 0.0
+    elif n > cfg[CFG.dev_max_force]:
+        s = cfg[CFG.dev_max_force] / n
+        fx, fy, fz = fx * s, fy * s, fz * s
+    st[S.f0], st[S.f1], st[S.f2] = fx, fy, fz
+
+
+@nb.njit(nogil=True, cache=True)
+def _clutch(st, cnt, b0, b1, m0, m1, m2):
+    """ClutchMark.update: the tissue position (3,) for ``m`` = mapped device position; counts
+    clutches and marks (a mark event: ``cnt[marks]`` goes up)."""
+    clutch = b0 != 0
+    mark = b1 != 0
+    if clutch and st[S.held] < 0.5:
+        st[S.held] = 1.0
+        cnt[CNT.clutches] += 1
+        st[S.frozen0] = m0 + st[S.off0]
+        st[S.frozen1] = m1 + st[S.off1]
+        st[S.frozen2] = m2 + st[S.off2]
+    elif not clutch and st[S.held] > 0.5:
+        st[S.held] = 0.0
+        st[S.off0] = st[S.frozen0] - m0
+        st[S.off1] = st[S.frozen1] - m1
+        st[S.off2] = st[S.frozen2] - m2
+        st[S.wait_zero] = 1.0
+        st[S.ramp_start] = np.nan
+    if mark and st[S.mark_prev] < 0.5 and st[S.held] < 0.5:
+        cnt[CNT.marks] += 1
+    st[S.mark_prev] = 1.0 if mark else 0.0
+    if st[S.held] > 0.5:
+        return st[S.frozen0], st[S.frozen1], st[S.frozen2]
+    return m0 + st[S.off0], m1 + st[S.off1], m2 + st[S.off2]
+
+
+@nb.njit(nogil=True, cache=True)
+def _gain(cfg, st, nonzero, now):
+    """ClutchMark.gain for this tick's force (``nonzero``: it is not exactly zero)."""
+    if st[S.held] > 0.5:
+        return 0.0
+    if st[S.wait_zero] > 0.5:
+        if nonzero:
+            return 0.0
+        st[S.wait_zero] = 0.0
+        st[S.ramp_start] = now
+        return 0.0
+    r = st[S.ramp_start]
+    if r != r:
+        return 1.0
+    a = (now - r) / cfg[CFG.ramp]
+    if a >= 1.0:
+        st[S.ramp_start] = np.nan
+        return 1.0
+    return max(a, 0.0)
+
+
+@nb.njit(nogil=True, cache=True)
+def _safety_reset(st, now, enabled):
+    st[S.enabled] = 1.0 if enabled else 0.0
+    for i in range(3):
+        st[S.target0 + i] = 0.0
+        st[S.out0 + i] = 0.0
+    st[S.last_cmd] = np.nan
+    st[S.last_out] = now
+    st[S.tripped] = 0.0
+
+
+@nb.njit(nogil=True, cache=True)
+def _command(st, fx, fy, fz, t):
+    """SafetyLayer.command for a finite force (device frame) whose time is ``t``."""
+    if st[S.enabled] < 0.5:
+        return
+    lc = st[S.last_cmd]
+    if lc == lc and t < lc:
+        return  # older than the current command
+    st[S.target0], st[S.target1], st[S.target2] = fx, fy, fz
+    st[S.last_cmd] = t
+    st[S.tripped] = 0.0
+
+
+@nb.njit(nogil=True, cache=True)
+def _fault(st, cnt, count=True):
+    """A non-finite input: zero at once, the watchdog stays tripped until a valid command
+    (``count``: counted here; a fault Python reports is counted there)."""
+    for i in range(3):
+        st[S.target0 + i] = 0.0
+        st[S.out0 + i] = 0.0
+    st[S.last_cmd] = np.nan
+    if count:
+        cnt[CNT.rejected_nonfinite] += 1
+
+
+@nb.njit(nogil=True, cache=True)
+def _safety_output(cfg, st, cnt, now):
+    """SafetyLayer.output: the force to apply now (device frame)."""
+    if st[S.enabled] < 0.5:
+        return 0.0, 0.0, 0.0
+    last = st[S.last_out]
+    if last != last:
+        last = now
+    gap = now - last
+    dt = min(max(gap, 0.0), cfg[CFG.max_dt])
+    st[S.last_out] = now
+    lc = st[S.last_cmd]
+    age = np.inf if lc != lc else now - lc
+    if age > cfg[CFG.watchdog]:
+        if st[S.tripped] < 0.5 and lc == lc:
+            cnt[CNT.watchdog_trips] += 1
+            if st[S.target0] != 0.0 or st[S.target1] != 0.0 or st[S.target2] != 0.0:
+                cnt[CNT.watchdog_trips_in_contact] += 1
+        st[S.tripped] = 1.0
+        st[S.target0] = st[S.target1] = st[S.target2] = 0.0
+        if gap > cfg[CFG.watchdog]:
+            st[S.out0] = st[S.out1] = st[S.out2] = 0.0
+    tx, ty, tz = st[S.target0], st[S.target1], st[S.target2]
+    tn = np.sqrt(tx * tx + ty * ty + tz * tz)
+    mf = cfg[CFG.max_force]
+    if tn > mf:
+        cnt[CNT.clamped] += 1
+        s = mf / tn
+        tx, ty, tz = tx * s, ty * s, tz * s
+    ox, oy, oz = st[S.out0], st[S.out1], st[S.out2]
+    dx, dy, dz = tx - ox, ty - oy, tz - oz
+    dn = np.sqrt(dx * dx + dy * dy + dz * dz)
+    step = cfg[CFG.max_force_rate] * dt
+    if dn > step:
+        s = step / dn
+        dx, dy, dz = dx * s, dy * s, dz * s
+    ox, oy, oz = ox + dx, oy + dy, oz + dz
+    on = np.sqrt(ox * ox + oy * oy + oz * oz)
+    if on > mf:
+        s = mf / on
+        ox, oy, oz = ox * s, oy * s, oz * s
+    if not np.isfinite(ox + oy + oz):
+        ox = oy = oz = 0.0
+    st[S.out0], st[S.out1], st[S.out2] = ox, oy, oz
+    return ox, oy, oz
+
+
+@nb.njit(nogil=True, cache=True)
+def _take(buf, scratch, seen):
+    """Seqlock read of ``buf`` into ``scratch``: True when a new, consistent copy was taken
+    (its sequence number differs from ``seen`` and did not change during the copy)."""
+    s1 = buf[0]
+    if s1 == seen or s1 % 2.0 != 0.0:
+        return False
+    _memcpy(scratch.ctypes.data, buf.ctypes.data, np.int64(buf.size * 8))
+    s2 = buf[0]
+    return s2 == s1 and scratch[0] == s1
+
+
+@nb.njit(nogil=True, cache=True)
+def _render(cfg, st, cnt, qx, qy, qz, now, gap):
+    """The local model's force (tissue frame) at the tissue position q, or NaN (nothing to offer:
+    expired / no model); sets the status."""
+    if st[S.m_valid] < 0.5:
+        cnt[CNT.none] += 1
+        st[S.status] = NONE
+        return np.nan, np.nan, np.nan
+    age = now - st[S.m_t0]
+    ex, ey, ez = qx - st[S.m_p0], qy - st[S.m_p1], qz - st[S.m_p2]
+    held = age > cfg[CFG.validity_time]
+    if held and age > cfg[CFG.hold_time]:
+        cnt[CNT.expired] += 1
+        st[S.status] = EXPIRED
+        return np.nan, np.nan, np.nan
+    depth0 = st[S.m_depth0]
+    depth = depth0 + st[S.m_g0] * ex + st[S.m_g1] * ey + st[S.m_g2] * ez
+    if st[S.m_contact] < 0.5 or depth <= 0.0:
+        cnt[CNT.free] += 1
+        st[S.status] = FREE
+        return 0.0, 0.0, 0.0
+    r = cfg[CFG.validity_radius]
+    if ex * ex + ey * ey + ez * ez > r * r:
+        cnt[CNT.expired] += 1
+        st[S.status] = EXPIRED
+        return np.nan, np.nan, np.nan
+    if held:  # older than its validity, inside the hold time and the radius: still the tissue
+        cnt[CNT.held] += 1
+    if age <= cfg[CFG.fresh_age]:
+        cnt[CNT.fresh] += 1
+        st[S.status] = FRESH
+    else:
+        cnt[CNT.extrapolated] += 1
+        st[S.status] = EXTRAPOLATED
+    if depth0 == 0.0:
+        cnt[CNT.approach] += 1
+    # passivity: the stiffness the device renders is limited by the measured period (module doc)
+    s = 1.0
+    kdev = st[S.m_knorm] * cfg[CFG.force_scale] * cfg[CFG.scale]
+    if kdev > 0.0 and gap > 0.0:
+        kmax = 2.0 * cfg[CFG.damping] / gap
+        if kdev > kmax:
+            s = kmax / kdev
+            cnt[CNT.passivity_limited] += 1
+    k = S.m_k0
+    f = np.empty(3)
+    for a in range(3):
+        f[a] = st[S.m_f0 + a] + s * (st[k + 3 * a] * ex + st[k + 3 * a + 1] * ey
+                                     + st[k + 3 * a + 2] * ez)
+    if st[S.m_zero] > 0.5 and depth < depth0:
+        sx = ex - depth * st[S.m_d0]
+        sy = ey - depth * st[S.m_d1]
+        sz = ez - depth * st[S.m_d2]
+        w = (1.0 - depth / depth0) ** 2
+        for a in range(3):
+            f[a] -= w * (st[S.m_f0 + a] + s * (st[k + 3 * a] * sx + st[k + 3 * a + 1] * sy
+                                               + st[k + 3 * a + 2] * sz))
+    return f[0], f[1], f[2]
+
+
+@nb.njit(nogil=True, cache=True)
+def tick(now, cfg, st, times, points, buttons, hand, cmd, model, ctl, out, cnt, trace, scratch,
+         stamp_ns):
+    """One servo tick at monotonic time ``now`` [s] (see the module docstring); ``stamp_ns``: the
+    wall-clock stamp the published pose carries. Returns the applied force's magnitude [N]."""
+    # inputs first: enable / disable, faults, the newest command and model
+    if ctl[CTL.enable_gen] != st[S.enable_seen]:
+        st[S.enable_seen] = ctl[CTL.enable_gen]
+        _safety_reset(st, now, ctl[CTL.enabled] != 0)
+    elif ctl[CTL.enabled] == 0 and st[S.enabled] > 0.5:
+        _safety_reset(st, now, False)
+    if ctl[CTL.fault] != st[S.fault_seen]:
+        st[S.fault_seen] = ctl[CTL.fault]
+        st[S.m_valid] = 0.0
+        if st[S.enabled] > 0.5:
+            _fault(st, cnt, False)
+    if _take(model, scratch, st[S.model_seen]):
+        st[S.model_seen] = scratch[0]
+        ok = True
+        for i in range(1, MODEL_LEN):
+            if not np.isfinite(scratch[i]):
+                ok = False
+        if ok:
+            for i in range(MODEL_LEN - 1):
+                st[S.m_f0 + i] = scratch[1 + i]
+        else:  # never render a non-finite model: zero at once
+            st[S.m_valid] = 0.0
+            if st[S.enabled] > 0.5:
+                _fault(st, cnt)
+    gap = now - st[S.t_prev] if st[S.t_prev] == st[S.t_prev] else cfg[CFG.period]
+    # 1. device
+    b0, b1 = _device_read(cfg, st, times, points, buttons, now, ctl, hand)
+    sc, fs = cfg[CFG.scale], cfg[CFG.force_scale]
+    mx = cfg[CFG.ox] + sc * st[S.x0]
+    my = cfg[CFG.oy] + sc * st[S.x1]
+    mz = cfg[CFG.oz] + sc * st[S.x2]
+    # 2. clutch / mark
+    qx, qy, qz = _clutch(st, cnt, b0, b1, mx, my, mz)
+    # 3. render (device frame)
+    if cfg[CFG.mode] > 0.5:
+        fx, fy, fz = _render(cfg, st, cnt, qx, qy, qz, now, gap)
+        if fx == fx:
+            if not np.isfinite(fx + fy + fz):
+                _fault(st, cnt)
+            else:
+                g = _gain(cfg, st, fx != 0.0 or fy != 0.0 or fz != 0.0, now)
+                _command(st, g * fs * fx, g * fs * fy, g * fs * fz, now)
+    else:
+        st[S.status] = -1.0
+        if _take(cmd, scratch, st[S.cmd_seen]):
+            st[S.cmd_seen] = scratch[0]
+            if np.isfinite(scratch[1] + scratch[2] + scratch[3] + scratch[4]):
+                g = _gain(cfg, st, scratch[1] != 0.0 or scratch[2] != 0.0 or scratch[3] != 0.0,
+                          now)
+                _command(st, g * scratch[1], g * scratch[2], g * scratch[3], scratch[4])
+            elif st[S.enabled] > 0.5:
+                _fault(st, cnt)
+    # 4. passivity observer / controller (optional): energy out of the rendered port
+    ox, oy, oz = _safety_output(cfg, st, cnt, now)
+    if cfg[CFG.observer] > 0.5 and st[S.enabled] > 0.5:
+        vx, vy, vz = st[S.v0], st[S.v1], st[S.v2]
+        e = st[S.energy] - (st[S.f0] * vx + st[S.f1] * vy + st[S.f2] * vz) * gap
+        vv = vx * vx + vy * vy + vz * vz
+        if e < 0.0 and vv > 1e-12 and gap > 0.0:
+            alpha = min(-e / (gap * vv), 2.0 * cfg[CFG.damping] + cfg[CFG.hand_c])
+            ox -= alpha * vx
+            oy -= alpha * vy
+            oz -= alpha * vz
+            e += alpha * vv * gap
+            cnt[CNT.observer_active] += 1
+        st[S.energy] = e
+    # 5./6. device, counters, trace, published state
+    _device_write(cfg, st, ox, oy, oz)
+    fx, fy, fz = st[S.f0], st[S.f1], st[S.f2]
+    n = np.sqrt(fx * fx + fy * fy + fz * fz)
+    if n * 1e6 > cnt[CNT.max_force_un]:
+        cnt[CNT.max_force_un] = int(n * 1e6)
+    w = cnt[CNT.trace_w]
+    if trace.shape[0] > 0:
+        row = w % trace.shape[0]
+        trace[row, 0] = now
+        trace[row, 1], trace[row, 2], trace[row, 3] = st[S.x0], st[S.x1], st[S.x2]
+        trace[row, 4], trace[row, 5], trace[row, 6] = fx, fy, fz
+        trace[row, 7] = st[S.status]
+    seq = out[OUT.seq]
+    scratch[0] = seq + 1.0
+    scratch[OUT.t] = now
+    for i in range(3):
+        scratch[OUT.p0 + i] = st[S.x0 + i]
+        scratch[OUT.v0 + i] = st[S.v0 + i]
+        scratch[OUT.f0 + i] = st[S.f0 + i]
+    scratch[OUT.q0], scratch[OUT.q1], scratch[OUT.q2] = qx, qy, qz
+    scratch[OUT.status] = st[S.status]
+    scratch[OUT.held] = st[S.held]
+    scratch[OUT.b0], scratch[OUT.b1], scratch[OUT.b2], scratch[OUT.b3] = b0, b1, 0.0, 0.0
+    scratch[OUT.stamp_hi] = float(stamp_ns // 1000000000)
+    scratch[OUT.stamp_lo] = float(stamp_ns % 1000000000)
+    out[OUT.seq] = seq + 1.0  # odd: being written
+    _memcpy(out.ctypes.data + 8, scratch.ctypes.data + 8, np.int64((OUT_LEN - 1) * 8))
+    out[OUT.seq] = seq + 2.0
+    cnt[CNT.trace_w] = w + 1
+    # timing counters: a gap of k periods lost k - 1 of them
+    period = cfg[CFG.period]
+    if st[S.t_prev] == st[S.t_prev]:
+        lost = int(np.floor(gap / period + 0.5)) - 1
+        if lost > 0:
+            cnt[CNT.periods_lost] += lost
+        g_ns = int(gap * 1e9)
+        if g_ns > cnt[CNT.max_gap_ns]:
+            cnt[CNT.max_gap_ns] = g_ns
+    else:
+        cnt[CNT.t_first_ns] = int(now * 1e9)
+    cnt[CNT.t_last_ns] = int(now * 1e9)
+    st[S.t_prev] = now
+    cnt[CNT.ticks] += 1
+    return n
+
+
+@nb.njit(nogil=True, cache=True)
+def run(cfg, st, times, points, buttons, hand, cmd, model, ctl, out, cnt, trace, scratch, ts):
+    """The servo loop: :func:`tick` every ``period`` to absolute deadlines until ``ctl[stop]``;
+    a tick more than one period late is a deadline miss and the schedule re-synchronises (the
+    periods it lost are counted by :func:`tick`). Leaves the device at zero force. Returns the
+    number of ticks."""
+    period_ns = int(cfg[CFG.period] * 1e9 + 0.5)
+    _clock_gettime(CLOCK_MONOTONIC, ts.ctypes.data)
+    deadline = ts[0] * 1000000000 + ts[1]
+    cnt[CNT.running] = 1
+    while ctl[CTL.stop] == 0:
+        _clock_gettime(CLOCK_MONOTONIC, ts.ctypes.data)
+        now_ns = ts[0] * 1000000000 + ts[1]
+        if now_ns - deadline > period_ns:
+            cnt[CNT.deadline_misses] += 1
+            deadline = now_ns
+        _clock_gettime(CLOCK_REALTIME, ts.ctypes.data)
+        stamp = ts[0] * 1000000000 + ts[1]
+        tick(now_ns * 1e-9, cfg, st, times, points, buttons, hand, cmd, model, ctl, out, cnt,
+             trace, scratch, stamp)
+        deadline += period_ns
+        ts[0] = deadline // 1000000000
+        ts[1] = deadline % 1000000000
+        _clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, ts.ctypes.data, 0)
+    _safety_reset(st, 0.0, False)
+    _device_write(cfg, st, 0.0, 0.0, 0.0)
+    cnt[CNT.running] = 0
+    return cnt[CNT.ticks]

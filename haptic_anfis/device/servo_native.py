@@ -1,0 +1,664 @@
+"""The servo loop without the interpreter lock: the compiled tick on its own thread (no ROS).
+
+:class:`NativeServoLoop` runs :func:`haptic_anfis.device.native_tick.run` on a thread: the
+compiled loop releases the GIL once and keeps it released until it is told to stop, so nothing
+else in the process (executors, recorder, garbage collector, a view) can delay a tick. A second,
+ordinary Python thread, the *bridge*, does what needs the interpreter, at whatever pace it gets:
+it reads the newest published tick (a seqlock), hands it to ``on_state`` (the driver publishes
+the pose and takes the newest command / local model from its readers), and drains the tick
+trace. Commands and models go the other way through :class:`NativeSafety` and
+:class:`NativeRenderer`, which keep :class:`~.safety.SafetyLayer`'s and
+:class:`~.local_model.LocalModelRenderer`'s interfaces (so :class:`~.force_input.ForceInput`
+and the driver use them unchanged) and write the loop's input buffers.
+
+A stalled bridge (or a frozen process, short of SIGSTOP) no longer stops the ticks: the last model
+is rendered until it expires (``model_validity_time`` from its pose) and the watchdog then ramps
+the force to zero inside the compiled loop.
+
+Simulated Falcon only: the real USB backend is Python (pyusb / pyftdi) and keeps
+:class:`~.servo.ServoLoop` (see docs/servo_loop.md).
+"""
+from __future__ import annotations
+
+import math
+import threading
+import time
+from typing import Callable
+
+import numpy as np
+
+from . import native_tick as nt
+from .buttons import ButtonEvents
+from .falcon import DeviceState, HandParams, WorkspaceMapping
+from .local_model import FALCON_MAX_STIFFNESS, LocalModelRenderer, RenderStats, \
+    condition_stiffness_values, depth_gradient_values, tissue_stiffness_limit
+from .safety import IGNORED_DISABLED, OK, REJECTED_FRAME, REJECTED_NONFINITE, SafetyLayer, \
+    SafetyStats
+from .servo import request_short_slice, set_realtime
+from .stats import LoopStats
+from .trace import TickTrace
+
+__all__ = ['NativeServoLoop', 'NativeSafety', 'NativeRenderer', 'NativeState', 'NativeClutch',
+           'NativeLoopStats', 'script_arrays', 'spectral_norm_sym', 'FALCON_DAMPING']
+
+#: device damping b [N s/m] the passivity bound assumes: with CHAI3D's Falcon stiffness
+#: (3000 N/m) at T = 1 ms, b > K T / 2 asks 1.5 N s/m; the bound then only bites when a tick is
+#: late (K <= 2 b / T).
+FALCON_DAMPING = 1.5
+
+
+class NativeState(DeviceState):
+    """A published tick: :class:`DeviceState` plus the tick's wall-clock stamp [ns], its tissue
+    position with the clutch [m], and the tick's monotonic time [s]."""
+
+    def __init__(self, position, velocity, buttons, stamp_ns: int, tissue, t: float):
+        object.__setattr__(self, 'position', position)
+        object.__setattr__(self, 'velocity', velocity)
+        object.__setattr__(self, 'buttons', buttons)
+        object.__setattr__(self, 'stamp_ns', stamp_ns)
+        object.__setattr__(self, 'tissue', tissue)
+        object.__setattr__(self, 't', t)
+
+
+class _SharedArrays:
+    """numpy arrays in anonymous shared memory (``mmap``, MAP_SHARED): a forked servo process
+    and this one see the same bytes. Kept alive as long as this object."""
+
+    def __init__(self) -> None:
+        self._maps: list = []
+
+    def zeros(self, shape, dtype=np.float64) -> np.ndarray:
+        import mmap
+        n = int(np.prod(shape)) * np.dtype(dtype).itemsize
+        m = mmap.mmap(-1, max(n, 8))  # anonymous, shared with children; zero-filled
+        self._maps.append(m)
+        return np.frombuffer(m, dtype=dtype, count=int(np.prod(shape))).reshape(shape)
+
+
+def _die_with_parent(sig: int) -> None:
+    """Linux prctl(PR_SET_PDEATHSIG): the calling process gets ``sig`` when its parent dies."""
+    import ctypes
+    try:
+        ctypes.CDLL(None, use_errno=True).prctl(1, sig, 0, 0, 0)
+    except (OSError, AttributeError):
+        pass
+
+
+def _seq_write(buf: np.ndarray, values) -> None:
+    """Seqlock write from Python: odd, the values, even (one writer per buffer)."""
+    s = buf[0]
+    buf[0] = s + 1.0
+    buf[1:] = values
+    buf[0] = s + 2.0
+
+
+def _seq_read(buf: np.ndarray) -> np.ndarray | None:
+    """A consistent copy of a seqlock buffer the compiled loop writes (None after 100 tries)."""
+    for _ in range(100):
+        s1 = buf[0]
+        c = buf.copy()
+        if s1 % 2.0 == 0.0 and buf[0] == s1 and c[0] == s1:
+            return c
+    return None
+
+
+def script_arrays(script) -> tuple[np.ndarray, np.ndarray, np.ndarray, bool, bool]:
+    """(times (n,), points (n, 3) tissue frame, buttons (n - 1, 2) or (0, 2), loop, held) of a
+    :class:`~.palpation.PalpationScript` or a :class:`~.start_gate.HeldScript` around one."""
+    held = bool(getattr(script, 'held', False))
+    inner = getattr(script, 'script', script)
+    times = np.ascontiguousarray(inner.times, dtype=np.float64)
+    points = np.ascontiguousarray(inner.points, dtype=np.float64).reshape(-1, 3)
+    bs = inner.button_states
+    buttons = (np.zeros((0, 2), dtype=np.int64) if bs is None or not np.any(bs)
+               else np.ascontiguousarray(bs, dtype=np.int64).reshape(-1, 2))
+    return times, points, buttons, bool(inner.loop), held
+
+
+def spectral_norm_sym(k) -> float:
+    """The largest |eigenvalue| of the symmetric 3 x 3 ``k`` (9 values row-major) [N/m], by the
+    trigonometric closed form (Smith 1961; plain floats, a few µs: once per received model)."""
+    a00, a01, a02, _, a11, a12, _, _, a22 = k
+    p1 = a01 * a01 + a02 * a02 + a12 * a12
+    q = (a00 + a11 + a22) / 3.0
+    b00, b11, b22 = a00 - q, a11 - q, a22 - q
+    p2 = b00 * b00 + b11 * b11 + b22 * b22 + 2.0 * p1
+    if p2 <= 0.0:
+        return abs(q)
+    p = math.sqrt(p2 / 6.0)
+    det = (b00 * (b11 * b22 - a12 * a12) - a01 * (a01 * b22 - a12 * a02)
+           + a02 * (a01 * a12 - b11 * a02))
+    r = max(-1.0, min(1.0, det / (2.0 * p * p * p)))
+    phi = math.acos(r) / 3.0
+    l1 = q + 2.0 * p * math.cos(phi)
+    l3 = q + 2.0 * p * math.cos(phi + 2.0943951023931957)
+    return max(abs(l1), abs(l3))
+
+
+class NativeLoopStats(LoopStats):
+    """:class:`LoopStats` whose tick counters are the compiled loop's (``cnt``); :meth:`reset`
+    starts a new window by remembering the counters (the loop's own are never written here)."""
+
+    def __init__(self, cnt: np.ndarray, period: float):
+        super().__init__(period=period)
+        self._cnt = cnt
+        self._base = cnt.copy()
+
+    def reset(self) -> None:
+        super().reset()
+        # the two maxima restart with the window: the loop only ever raises them (a reset that
+        # races with a tick's update loses that one tick's value)
+        self._cnt[nt.CNT.max_gap_ns] = 0
+        self._cnt[nt.CNT.max_force_un] = 0
+        self._base = self._cnt.copy()
+
+    def summary(self) -> dict:
+        c, b = self._cnt.copy(), self._base
+        s = super().summary()
+        ticks = int(c[nt.CNT.ticks] - b[nt.CNT.ticks])
+        t0 = (b[nt.CNT.t_last_ns] if b[nt.CNT.ticks] else c[nt.CNT.t_first_ns]) * 1e-9
+        span = c[nt.CNT.t_last_ns] * 1e-9 - t0 if ticks > 0 else 0.0
+        s.update(ticks=ticks, seconds=span, rate_hz=ticks / span if span > 0 else 0.0,
+                 deadline_misses=int(c[nt.CNT.deadline_misses] - b[nt.CNT.deadline_misses]),
+                 periods_lost=int(c[nt.CNT.periods_lost] - b[nt.CNT.periods_lost]),
+                 max_gap_ms=c[nt.CNT.max_gap_ns] * 1e-6,
+                 max_force_N=c[nt.CNT.max_force_un] * 1e-6,
+                 passivity_limited=int(c[nt.CNT.passivity_limited]
+                                       - b[nt.CNT.passivity_limited]),
+                 observer_active=int(c[nt.CNT.observer_active] - b[nt.CNT.observer_active]),
+                 ticks_held=int(c[nt.CNT.held] - b[nt.CNT.held]))
+        return s
+
+
+class NativeClutch:
+    """The driver's clutch view in native mode: the compiled tick runs the clutch / mark rules
+    (:class:`~.buttons.ClutchMark`'s); this reports what the newest published tick decided."""
+
+    def __init__(self, loop: 'NativeServoLoop'):
+        self._loop = loop
+        self._marks = 0
+        self.held = False
+
+    @property
+    def marks(self) -> int:
+        return int(self._loop.cnt[nt.CNT.marks])
+
+    @property
+    def clutches(self) -> int:
+        return int(self._loop.cnt[nt.CNT.clutches])
+
+    def update(self, buttons, mapped, now: float):
+        """(tissue position of the newest tick, events: a mark since the previous call)."""
+        st = self._loop.last_state
+        self.held = bool(self._loop.last_out[nt.OUT.held] > 0.5)
+        ev = ButtonEvents()
+        m = self.marks
+        if m != self._marks:
+            ev.mark = True
+            self._marks = m
+        return (st.tissue if st is not None else mapped), ev
+
+
+class NativeSafety(SafetyLayer):
+    """:class:`~.safety.SafetyLayer`'s interface over the compiled loop's safety state: commands
+    (device frame) go into the command buffer, faults zero the force at once in the next tick.
+    The clamp, rate limit and watchdog run in the compiled tick (same rules)."""
+
+    def __init__(self, loop: 'NativeServoLoop', max_force: float, max_force_rate: float,
+                 watchdog_timeout: float, frame_id: str = 'tissue', max_dt: float = 0.005):
+        self._loop = loop
+        super().__init__(max_force, max_force_rate, watchdog_timeout, frame_id, max_dt)
+
+    @property
+    def enabled(self) -> bool:
+        return bool(self._loop.ctl[nt.CTL.enabled])
+
+    @property
+    def watchdog_tripped(self) -> bool:
+        return bool(self._loop.st[nt.S.tripped] > 0.5)
+
+    @property
+    def stats(self) -> SafetyStats:
+        """The Python-side counts with the compiled loop's (a new object each time)."""
+        c = self._loop.cnt
+        s = SafetyStats(**{k: getattr(self._py, k) for k in ('commands', 'rejected_frame',
+                                                             'last_reject')})
+        s.rejected_nonfinite = self._py.rejected_nonfinite + int(c[nt.CNT.rejected_nonfinite])
+        s.watchdog_trips = int(c[nt.CNT.watchdog_trips])
+        s.watchdog_trips_in_contact = int(c[nt.CNT.watchdog_trips_in_contact])
+        s.clamped = int(c[nt.CNT.clamped])
+        s.max_output = c[nt.CNT.max_force_un] * 1e-6
+        return s
+
+    @stats.setter
+    def stats(self, value: SafetyStats) -> None:
+        self._py = value
+
+    def start(self, now: float = 0.0) -> None:
+        ctl = self._loop.ctl
+        ctl[nt.CTL.enabled] = 1
+        ctl[nt.CTL.enable_gen] += 1
+
+    def stop(self) -> None:
+        ctl = self._loop.ctl
+        ctl[nt.CTL.enabled] = 0
+        ctl[nt.CTL.enable_gen] += 1
+
+    def command(self, force, now: float, frame_id: str | None = None, count: bool = True) -> str:
+        try:
+            fx, fy, fz = (float(v) for v in force)
+        except (TypeError, ValueError):
+            fx = fy = fz = math.nan
+        with self._lock:
+            if not self.enabled:
+                return IGNORED_DISABLED
+            if count:
+                self._py.commands += 1
+            if not math.isfinite(fx + fy + fz):
+                self._fault(REJECTED_NONFINITE)
+                return REJECTED_NONFINITE
+            if self.frame_id and frame_id is not None and frame_id != self.frame_id:
+                self._py.rejected_frame += 1
+                self._loop.ctl[nt.CTL.fault] += 1
+                self._py.last_reject = f'{REJECTED_FRAME} {frame_id!r} (expected {self.frame_id!r})'
+                return REJECTED_FRAME
+            _seq_write(self._loop.cmd, (fx, fy, fz, float(now)))
+            return OK
+
+    def reject(self, why: str) -> None:
+        """A non-finite input from elsewhere: zero at once in the next tick."""
+        with self._lock:
+            if self.enabled:
+                self._fault(why)
+
+    def _fault(self, why: str) -> None:
+        self._py.rejected_nonfinite += 1
+        self._py.last_reject = why
+        self._loop.ctl[nt.CTL.fault] += 1
+
+
+class NativeRenderer(LocalModelRenderer):
+    """:class:`~.local_model.LocalModelRenderer`'s receiving side over the compiled loop: a model
+    is checked and conditioned here (once per model, as before) and written to the model buffer;
+    the compiled tick renders it. ``stats``: the tick counts by status come from the loop."""
+
+    def __init__(self, loop: 'NativeServoLoop', max_stiffness: float = FALCON_MAX_STIFFNESS / 1.5,
+                 validity_time: float = 0.05, validity_radius: float = 0.005,
+                 fresh_age: float = 0.0015) -> None:
+        self._loop = loop
+        self._base = loop.cnt.copy()
+        super().__init__(max_stiffness, validity_time, validity_radius, fresh_age)
+
+    @property
+    def stats(self) -> RenderStats:
+        c, b, C = self._loop.cnt, self._base, nt.CNT
+        s = RenderStats(models=self._py.models, rejected=self._py.rejected,
+                        stiffness_clamped=self._py.stiffness_clamped)
+        s.ticks_fresh = int(c[C.fresh] - b[C.fresh])
+        s.ticks_extrapolated = int(c[C.extrapolated] - b[C.extrapolated])
+        s.ticks_expired = int(c[C.expired] - b[C.expired])
+        s.ticks_free = int(c[C.free] - b[C.free])
+        s.ticks_none = int(c[C.none] - b[C.none])
+        s.ticks_approach = int(c[C.approach] - b[C.approach])
+        return s
+
+    @stats.setter
+    def stats(self, value: RenderStats) -> None:
+        self._py = value
+
+    def reset_stats(self) -> None:
+        self._py = RenderStats()
+        self._base = self._loop.cnt.copy()
+
+    def clear(self) -> None:
+        """Forget the model (the next ticks render nothing)."""
+        self.time = None
+        v = np.zeros(nt.MODEL_LEN - 1)
+        _seq_write(self._loop.model, v)
+
+    def offer_values(self, v, time: float, checked: bool = False) -> None:
+        """As :meth:`LocalModelRenderer.offer_values` (raises ValueError on a malformed model)."""
+        if not checked:
+            from .local_model import check_values
+            try:
+                check_values(v)
+            except ValueError:
+                self._py.rejected += 1
+                raise
+        (f0x, f0y, f0z, p0x, p0y, p0z, *_, nx, ny, nz, dx, dy, dz, depth0, zero) = v
+        k, changed = condition_stiffness_values(v[6:15], self.max_stiffness)
+        if changed:
+            self._py.stiffness_clamped += 1
+        contact = depth0 > 0.0 or nx * nx + ny * ny + nz * nz > 0.0
+        g = depth_gradient_values(nx, ny, nz, dx, dy, dz) if contact else (0.0, 0.0, 0.0)
+        d = (dx, dy, dz) if contact else (0.0, 0.0, 0.0)
+        knorm = spectral_norm_sym(k)
+        t = float(time)
+        _seq_write(self._loop.model, (f0x, f0y, f0z, p0x, p0y, p0z, *k, *g, *d, float(depth0),
+                                      1.0 if (zero > 0.5 and contact) else 0.0,
+                                      1.0 if contact else 0.0, t, 1.0, knorm))
+        self.time = t
+        self._py.models += 1
+
+
+class NativeServoLoop:
+    """The simulated Falcon's servo loop, compiled and GIL-free (module docstring).
+
+    Args:
+        script: the hand's :class:`~.palpation.PalpationScript` (or a
+            :class:`~.start_gate.HeldScript` around one: held until :meth:`release`).
+        mapping, hand: as :class:`~.falcon.SimulatedFalcon`'s.
+        rate: servo rate [Hz].
+        max_force, max_force_rate, watchdog_timeout, frame_id: the safety layer's.
+        mode: ``'local_model'`` or ``'zoh'``.
+        max_stiffness: device-frame stiffness bound [N/m]; validity_time [s], validity_radius [m]:
+            the local model's (:class:`~.local_model.LocalModelRenderer`).
+        damping: device damping b [N s/m] of the passivity bound K <= 2 b / T.
+        observer: run the passivity observer / controller (Hannaford & Ryu 2002).
+        hold_time: a model older than ``validity_time`` but not than this [s] is still rendered
+            while the probe is within ``validity_radius`` (``held`` ticks; <= validity_time: off).
+        on_state: ``on_state(state: NativeState, force, now)`` on the bridge thread for the newest
+            tick (force: device frame).
+        trace: a :class:`~.trace.TickTrace` the bridge fills (tissue frame), or None.
+        priority: SCHED_FIFO priority of the tick thread (0: the normal scheduler, with a short
+            time slice requested); the bridge gets ``priority - 10`` (at least 1) when > 0.
+        ring: trace ring rows in the loop (the bridge must drain it within ``ring`` ticks).
+        process: run the compiled loop in a child process of its own session (``fork`` +
+            ``setsid``: its own scheduler autogroup, so the parent's busy threads do not share
+            its CPU time), on shared memory; else on a thread of this process.
+    """
+
+    def __init__(self, script, mapping: WorkspaceMapping = WorkspaceMapping(),
+                 hand: HandParams = HandParams(), rate: float = 1000.0, max_force: float = 8.9,
+                 max_force_rate: float = 1000.0, watchdog_timeout: float = 0.010,
+                 frame_id: str = 'tissue', mode: str = 'local_model',
+                 max_stiffness: float = FALCON_MAX_STIFFNESS, validity_time: float = 0.05,
+                 validity_radius: float = 0.005, damping: float = FALCON_DAMPING,
+                 observer: bool = False, hold_time: float = 0.0,
+                 on_state: Callable[[NativeState, tuple, float], None] | None = None,
+                 trace: TickTrace | None = None, priority: int = 0, ring: int = 1 << 16,
+                 half_extent: float = 0.05, device_max_force: float | None = None,
+                 process: bool = False) -> None:
+        if not rate > 0:
+            raise ValueError(f'rate: expected > 0 Hz, got {rate!r}')
+        if not 0 <= priority <= 99:
+            raise ValueError(f'priority: expected 0 (normal scheduling) to 99, got {priority!r}')
+        if mode not in ('zoh', 'local_model'):
+            raise ValueError(f"mode: expected 'zoh' or 'local_model', got {mode!r}")
+        if not (math.isfinite(damping) and damping > 0):
+            raise ValueError(f'damping: expected a finite number > 0 N s/m, got {damping!r}')
+        self.period = 1.0 / rate
+        self.priority = int(priority)
+        self.mapping, self.on_state, self.trace = mapping, on_state, trace
+        self.times, points, self.buttons, loop, held = script_arrays(script)
+        self.points = points
+        self._script = script
+        self.process = bool(process)
+        self._mem = _SharedArrays() if self.process else None
+        zeros = self._mem.zeros if self.process else np.zeros
+        self.hand = zeros(nt.HAND_LEN)
+        C = nt.CFG
+        cfg = np.zeros(nt.CFG_LEN)
+        cfg[C.period] = self.period
+        cfg[C.max_force], cfg[C.max_force_rate] = max_force, max_force_rate
+        cfg[C.watchdog], cfg[C.max_dt] = watchdog_timeout, 0.005
+        cfg[C.validity_time], cfg[C.validity_radius] = validity_time, validity_radius
+        cfg[C.fresh_age] = 1.5 * self.period
+        cfg[C.max_stiffness] = tissue_stiffness_limit(max_stiffness, mapping.force_scale,
+                                                      mapping.scale)
+        cfg[C.scale], cfg[C.force_scale] = mapping.scale, mapping.force_scale
+        cfg[C.ox], cfg[C.oy], cfg[C.oz] = mapping.offset
+        cfg[C.hand_m], cfg[C.hand_k], cfg[C.hand_c] = hand.mass, hand.stiffness, hand.damping
+        cfg[C.half], cfg[C.dt_max], cfg[C.max_catch_up] = half_extent, 0.001, 0.05
+        cfg[C.ramp] = 0.005
+        cfg[C.damping] = damping
+        cfg[C.mode] = 1.0 if mode == 'local_model' else 0.0
+        cfg[C.observer] = 1.0 if observer else 0.0
+        cfg[C.loop] = 1.0 if loop else 0.0
+        cfg[C.dev_max_force] = max_force if device_max_force is None else device_max_force
+        cfg[C.hold_time] = max(float(hold_time), validity_time)
+        self.cfg = cfg
+        self.st = zeros(nt.STATE_LEN)
+        self.st[:] = nt.new_state()
+        x0 = [min(max((points[0, k] - mapping.offset[k]) / mapping.scale, -half_extent),
+                  half_extent) for k in range(3)]
+        self.st[nt.S.x0:nt.S.x0 + 3] = x0
+        self.cmd = zeros(nt.CMD_LEN)
+        self.model = zeros(nt.MODEL_LEN)
+        self.ctl = zeros(nt.CTL_LEN, dtype=np.int64)
+        self.ctl[nt.CTL.release] = 0 if held else 1
+        self.out = zeros(nt.OUT_LEN)
+        self.cnt = zeros(nt.CNT_LEN, dtype=np.int64)
+        self.ring = zeros((int(ring) if trace is not None else 0, nt.TRACE_COLS))
+        self._scratch = np.zeros(nt.SCRATCH_LEN)
+        self._ts = np.zeros(2, dtype=np.int64)
+        self.safety = NativeSafety(self, max_force, max_force_rate, watchdog_timeout, frame_id)
+        self.renderer = NativeRenderer(self, tissue_stiffness_limit(
+            max_stiffness, mapping.force_scale, mapping.scale), validity_time, validity_radius,
+            1.5 * self.period)
+        self.clutch = NativeClutch(self)
+        self.stats = NativeLoopStats(self.cnt, self.period)
+        self.scheduling = ''
+        self.errors = 0
+        self.last_error: BaseException | None = None
+        self.trace_lost = 0  # trace rows overwritten before the bridge drained them
+        self.bridge_gaps = LoopStats(period=self.period)  # the bridge's own pace
+        self.last_out = self.out.copy()
+        self.last_state: NativeState | None = None
+        self.force = (0.0, 0.0, 0.0)
+        self.status = -1
+        self._read = 0
+        self._stop = threading.Event()
+        self._tick_thread: threading.Thread | None = None
+        self._pid = 0
+        self._bridge: threading.Thread | None = None
+        self._scheduled = threading.Event()
+
+    # -- control --------------------------------------------------------------------------------
+    def release(self) -> None:
+        """Start the held script at the next tick (idempotent)."""
+        self.ctl[nt.CTL.release] = 1
+
+    @property
+    def script(self):
+        """The hand's script. Setting one (e.g. ``exam run``'s simulated trainee, a script only
+        Python can play) makes the bridge play it: it writes the hand target (and its velocity)
+        at its pace and the compiled tick extrapolates it for at most
+        :data:`~.native_tick.HAND_EXTRAPOLATE`."""
+        return self._script
+
+    @script.setter
+    def script(self, script) -> None:
+        self._script = script
+        self._feed_hand()
+        self.ctl[nt.CTL.external] = 1
+
+    def _feed_hand(self) -> None:
+        """The external script's hand target at the bridge's time (device frame)."""
+        s = self._script
+        t0 = float(self.st[nt.S.t_open])  # plain floats to the script (it keeps its time)
+        now = time.monotonic()
+        t = (now - t0) if t0 == t0 and t0 > 0 else 0.0
+        m, dt = self.mapping, 0.002
+        p = m.to_device(s.target(t))
+        p1 = m.to_device(s.target(t + dt))
+        b = s.buttons(t) if hasattr(s, 'buttons') else (0, 0)
+        _seq_write(self.hand, (now, *p, *((p1[k] - p[k]) / dt for k in range(3)),
+                               float(b[0]), float(b[1])))
+
+    @property
+    def held(self) -> bool:
+        return bool(self.ctl[nt.CTL.release] == 0)
+
+    def compile(self) -> None:
+        """Compile (or load from numba's cache) the loop: :func:`~.native_tick.run` on copies, told
+        to stop before its first tick."""
+        ctl = self.ctl.copy()
+        ctl[nt.CTL.stop] = 1  # run returns at once
+        nt.run(self.cfg, self.st.copy(), self.times, self.points, self.buttons, self.hand.copy(),
+               self.cmd.copy(),
+               self.model.copy(), ctl, self.out.copy(), self.cnt.copy(), self.ring[:0].copy(),
+               self._scratch.copy(), self._ts.copy())
+
+    def tick(self, now: float, stamp_ns: int = 0) -> tuple[float, float, float]:
+        """One compiled tick at monotonic ``now`` [s] on this loop's state, without the thread
+        (tests); returns the force written to the device (device frame) [N]."""
+        nt.tick(float(now), self.cfg, self.st, self.times, self.points, self.buttons, self.hand,
+                self.cmd, self.model, self.ctl, self.out, self.cnt, self.ring, self._scratch,
+                int(stamp_ns))
+        S = nt.S
+        return float(self.st[S.f0]), float(self.st[S.f1]), float(self.st[S.f2])
+
+    def start(self) -> None:
+        self.compile()
+        self.safety.start()
+        if self.process:
+            self._start_process()
+        else:
+            self._tick_thread = threading.Thread(target=self._run_ticks, name='servo-native',
+                                                 daemon=True)
+            self._tick_thread.start()
+            self._scheduled.wait(1.0)
+        self._bridge = threading.Thread(target=self._run_bridge, name='servo-bridge', daemon=True)
+        self._bridge.start()
+
+    def _start_process(self) -> None:
+        """Fork the servo process: it only runs the compiled loop (compiled before the fork) on
+        the shared arrays and exits with ``os._exit``; it dies with this process (PDEATHSIG)."""
+        import os
+        import signal
+        pid = os.fork()
+        if pid == 0:  # the child: no Python threads, no ROS; only the compiled loop
+            code = 0
+            try:
+                os.setsid()  # a session of its own: its own autogroup (fair share) on Linux
+                _die_with_parent(signal.SIGKILL)
+                set_realtime(self.priority)
+                if self.priority <= 0:
+                    request_short_slice()
+                nt.run(self.cfg, self.st, self.times, self.points, self.buttons, self.hand,
+                       self.cmd, self.model, self.ctl, self.out, self.cnt, self.ring,
+                       self._scratch, self._ts)
+            except BaseException:
+                code = 1
+            finally:
+                os._exit(code)
+        self._pid = pid
+        policy = ''
+        for _ in range(100):  # how the child is scheduled, once it has set itself up
+            try:
+                if os.sched_getscheduler(pid) == os.SCHED_FIFO or self.priority <= 0:
+                    break
+            except OSError:
+                break
+            time.sleep(0.01)
+        try:
+            fifo = os.sched_getscheduler(pid) == os.SCHED_FIFO
+            policy = (f'SCHED_FIFO priority {self.priority}' if fifo else
+                      'normal scheduler' + (' (SCHED_FIFO refused)' if self.priority > 0 else ''))
+        except OSError as exc:
+            policy = f'unknown ({exc})'
+        self.scheduling = f'compiled tick in servo process {pid} (own session); {policy}'
+
+    def stop(self, timeout: float = 2.0) -> None:
+        self.safety.stop()
+        self.ctl[nt.CTL.stop] = 1
+        self._stop.set()
+        for th in (self._tick_thread, self._bridge):
+            if th is not None and th is not threading.current_thread():
+                th.join(timeout)
+        if self._pid:
+            import os
+            end = time.monotonic() + timeout
+            while time.monotonic() < end:
+                if os.waitpid(self._pid, os.WNOHANG)[0]:
+                    self._pid = 0
+                    break
+                time.sleep(0.005)
+            else:
+                os.kill(self._pid, 9)
+                os.waitpid(self._pid, 0)
+                self._pid = 0
+                self.st[nt.S.f0:nt.S.f0 + 3] = 0.0
+        self._drain()
+        self.force = (0.0, 0.0, 0.0)
+
+    @property
+    def running(self) -> bool:
+        if self._pid:
+            return bool(self.cnt[nt.CNT.running])
+        return self._tick_thread is not None and self._tick_thread.is_alive()
+
+    # -- threads --------------------------------------------------------------------------------
+    def _run_ticks(self) -> None:
+        self.scheduling = set_realtime(self.priority)
+        if self.priority <= 0:
+            self.scheduling += request_short_slice()
+        self.scheduling = 'compiled nogil tick; ' + self.scheduling
+        self._scheduled.set()
+        try:
+            nt.run(self.cfg, self.st, self.times, self.points, self.buttons, self.hand, self.cmd,
+                   self.model, self.ctl, self.out, self.cnt, self.ring, self._scratch, self._ts)
+        except Exception as exc:  # cannot happen short of a bug; say so, the device is at 0 N
+            self.errors += 1
+            self.last_error = exc
+
+    def _run_bridge(self) -> None:
+        set_realtime(max(self.priority - 10, 1) if self.priority > 0 else 0)
+        if self.priority <= 0:
+            request_short_slice()
+        seen = -1.0
+        period = self.period
+        next_drain = 0
+        while not self._stop.is_set():
+            if self.ctl[nt.CTL.external]:
+                try:
+                    self._feed_hand()
+                except Exception as exc:  # the script's own error: counted, the hand holds
+                    self.errors += 1
+                    self.last_error = exc
+            o = _seq_read(self.out)
+            if o is not None and o[0] != seen:
+                seen = o[0]
+                self._publish(o)
+            next_drain += 1
+            if next_drain >= 20:
+                next_drain = 0
+                self._drain()
+            time.sleep(period * 0.5)
+
+    def _publish(self, o: np.ndarray) -> None:
+        O = nt.OUT
+        self.last_out = o
+        t = float(o[O.t])
+        stamp = int(o[O.stamp_hi]) * 1_000_000_000 + int(o[O.stamp_lo])
+        state = NativeState((o[O.p0], o[O.p1], o[O.p2]), (o[O.v0], o[O.v1], o[O.v2]),
+                            (int(o[O.b0]), int(o[O.b1]), 0, 0), stamp,
+                            (o[O.q0], o[O.q1], o[O.q2]), t)
+        self.last_state = state
+        self.force = (o[O.f0], o[O.f1], o[O.f2])
+        self.status = int(o[O.status])
+        self.bridge_gaps.tick(t)
+        if self.on_state is not None:
+            try:
+                self.on_state(state, self.force, t)
+            except Exception as exc:  # a publishing hiccup must not stop the bridge
+                self.errors += 1
+                self.last_error = exc
+
+    def _drain(self) -> None:
+        """Move the trace rows the loop wrote since the last drain into :attr:`trace`."""
+        n = len(self.ring)
+        if not n or self.trace is None:
+            return
+        w = int(self.cnt[nt.CNT.trace_w])
+        if self.running:
+            w -= 1  # the newest row may still be in flight
+        r = self._read
+        if w - r > n:
+            self.trace_lost += w - r - n
+            r = w - n
+        if w > r:
+            idx = np.arange(r, w) % n
+            self.trace.extend(self.ring[idx])
+        self._read = max(w, self._read)

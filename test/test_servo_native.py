@@ -1,0 +1,351 @@
+"""The compiled servo tick (device/native_tick.py, device/servo_native.py), driven tick by tick at
+chosen times (no thread, no timing asserts): safety, local model, passivity bound, counters, and
+the ripple / dropout figures (device/force_error.py)."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from haptic_anfis.device import HandParams, WorkspaceMapping
+from haptic_anfis.device import native_tick as nt
+from haptic_anfis.device.force_error import ripple_and_dropouts
+from haptic_anfis.device.local_model import (EXPIRED, FRESH, LocalModel, LocalModelRenderer,
+                                             tissue_stiffness_limit)
+from haptic_anfis.device.palpation import PalpationScript
+from haptic_anfis.device.servo_native import NativeServoLoop
+from haptic_anfis.device.start_gate import HeldScript
+from haptic_anfis.device.stats import LoopStats
+
+MAP = WorkspaceMapping(1.5, (0.03, 0.0, 0.0), 1.0)
+
+
+def still_script(point=(0.06, 0.0, 0.0), moved=(0.06, 0.01, 0.0)):
+    """A hand that waits 1 s at ``point`` then moves to ``moved`` within 1 s (tissue frame)."""
+    return PalpationScript(np.array([0.0, 1.0, 2.0]), np.array([point, point, moved]),
+                           np.array([False, False]), loop=False)
+
+
+def loop(mode='zoh', **kw) -> NativeServoLoop:
+    kw.setdefault('max_force', 8.9)
+    return NativeServoLoop(kw.pop('script', still_script()), MAP, HandParams(), mode=mode, **kw)
+
+
+def pin(lp: NativeServoLoop, x_dev, now: float):
+    """Put the handle at ``x_dev`` (device frame) at rest, without dynamics up to ``now``."""
+    S = nt.S
+    lp.st[S.x0:S.x0 + 3] = x_dev
+    lp.st[S.v0:S.v0 + 3] = 0.0
+    lp.st[S.t_dev] = now
+
+
+def test_command_is_rate_limited_then_clamped():
+    lp = loop(max_force_rate=1000.0)
+    lp.safety.start()
+    assert lp.safety.command((20.0, 0.0, 0.0), 0.0, 'tissue') == 'ok'
+    f = lp.tick(0.0)
+    assert f == (0.0, 0.0, 0.0)  # the first tick has no time to ramp
+    f = lp.tick(0.001)
+    assert f[0] == pytest.approx(1.0)  # 1000 N/s for 1 ms
+    t = 0.001
+    for _ in range(8):
+        t += 0.001
+        lp.safety.command((20.0, 0.0, 0.0), t, 'tissue')
+        f = lp.tick(t)
+    assert f[0] == pytest.approx(8.9)
+    assert lp.safety.stats.clamped > 0
+
+
+def test_watchdog_ramps_down_and_a_stall_zeroes_at_once():
+    lp = loop(max_force_rate=1e6, watchdog_timeout=0.010)
+    lp.safety.start()
+    lp.safety.command((3.0, 0.0, 0.0), 0.0, 'tissue')
+    lp.tick(0.0)
+    assert lp.tick(0.001)[0] == pytest.approx(3.0)
+    # no new command: after the watchdog time the force goes to zero and a trip is counted
+    f = lp.tick(0.0115)  # a gap of 10.5 ms > the watchdog: zero at once
+    assert f == (0.0, 0.0, 0.0)
+    assert lp.safety.stats.watchdog_trips == 1
+    assert lp.safety.stats.watchdog_trips_in_contact == 1
+
+
+def test_non_finite_inputs_zero_the_force_at_once():
+    lp = loop(max_force_rate=1e6)
+    lp.safety.start()
+    lp.safety.command((2.0, 0.0, 0.0), 0.0, 'tissue')
+    lp.tick(0.0)
+    assert lp.tick(0.001)[0] == pytest.approx(2.0)
+    assert lp.safety.command((math.nan, 0.0, 0.0), 0.001, 'tissue').startswith('rejected')
+    assert lp.tick(0.002) == (0.0, 0.0, 0.0)
+    # a NaN that bypassed the Python checks (written straight into the buffer): still zero
+    lp.safety.command((2.0, 0.0, 0.0), 0.003, 'tissue')
+    lp.tick(0.003)
+    assert lp.tick(0.004)[0] == pytest.approx(2.0)
+    s = lp.cmd[0]
+    lp.cmd[:] = (s + 2.0, math.inf, 0.0, 0.0, 0.005)
+    assert lp.tick(0.005) == (0.0, 0.0, 0.0)
+    assert lp.safety.stats.rejected_nonfinite == 2
+
+
+def test_wrong_frame_and_disabled_layer_give_zero():
+    lp = loop(max_force_rate=1e6)
+    assert lp.safety.command((1.0, 0.0, 0.0), 0.0, 'tissue') == 'ignored: disabled'
+    assert lp.tick(0.0) == (0.0, 0.0, 0.0)
+    lp.safety.start()
+    assert lp.safety.command((1.0, 0.0, 0.0), 0.0, 'world') == 'rejected: wrong frame'
+    lp.tick(0.001)
+    assert lp.tick(0.002) == (0.0, 0.0, 0.0)
+
+
+def test_a_torn_command_is_not_taken():
+    """An odd sequence number (a write in progress) is never read."""
+    lp = loop(max_force_rate=1e6)
+    lp.safety.start()
+    lp.cmd[:] = (1.0, 5.0, 0.0, 0.0, 0.0)  # odd: being written
+    lp.tick(0.0)
+    assert lp.tick(0.001) == (0.0, 0.0, 0.0)
+    lp.cmd[0] = 2.0  # the write finished
+    assert lp.tick(0.002)[0] == pytest.approx(5.0)
+
+
+def model_values(rng):
+    n = np.array([1.0, 0.0, 0.0])
+    d = -n
+    c0 = np.array([0.055, 0.0, 0.0])
+    depth0 = 0.004
+    p0 = c0 + depth0 * d
+    A = rng.normal(size=(3, 3))
+    K = -(A @ A.T) / np.linalg.norm(A @ A.T) * 800.0
+    F0 = -K @ (p0 - c0) * 0.5 + rng.normal(size=3) * 0.1
+    return LocalModel(tuple(F0), tuple(p0), K, tuple(c0), tuple(n), tuple(d), depth0, True,
+                      0.0).values()
+
+
+@pytest.mark.parametrize('seed', range(3))
+def test_local_model_renders_as_the_python_renderer(seed):
+    rng = np.random.default_rng(seed)
+    v = model_values(rng)
+    lp = loop('local_model', max_force_rate=1e6, validity_time=1.0)
+    ref = LocalModelRenderer(tissue_stiffness_limit(3000.0, 1.0, 1.5), 1.0, 0.005, 0.0015)
+    lp.safety.start()
+    lp.renderer.offer_values(v, 0.0)
+    ref.offer_values(v, 0.0)
+    p0 = np.array(v[3:6])
+    t = 0.0
+    for _ in range(20):
+        q = p0 + rng.normal(size=3) * 0.001
+        pin(lp, MAP.to_device(tuple(q)), t)
+        lp.tick(t)
+        want, status = ref.render(tuple(q), t)
+        S = nt.S
+        if want is None:
+            assert int(lp.st[nt.S.status]) in (EXPIRED, 0)
+        else:
+            got = lp.st[S.target0:S.target0 + 3]
+            np.testing.assert_allclose(got, want, atol=1e-9)
+        t += 0.001
+    assert lp.renderer.stats.ticks_fresh + lp.renderer.stats.ticks_extrapolated + \
+        lp.renderer.stats.ticks_free > 0
+
+
+def test_non_finite_model_is_never_rendered():
+    lp = loop('local_model', max_force_rate=1e6)
+    lp.safety.start()
+    v = list(model_values(np.random.default_rng(0)))
+    nt_values = [*v[:6], *v[6:15], 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, v[24], 1.0, 1.0, 0.0, 1.0, 1.0]
+    nt_values[0] = math.nan
+    from haptic_anfis.device.servo_native import _seq_write
+    _seq_write(lp.model, nt_values)
+    pin(lp, MAP.to_device(tuple(v[3:6])), 0.0)
+    assert lp.tick(0.0) == (0.0, 0.0, 0.0)
+    assert int(lp.st[nt.S.status]) == 0  # no model
+    assert lp.safety.stats.rejected_nonfinite == 1
+
+
+def test_stiffness_is_limited_by_the_measured_period():
+    """Colgate & Schenkel: K <= 2 b / T. A 5 ms gap with b = 1.5 N s/m allows 600 N/m."""
+    lp = loop('local_model', max_force_rate=1e6, validity_time=1.0, damping=1.5)
+    lp.safety.start()
+    n = (1.0, 0.0, 0.0)
+    K = np.diag([-1500.0, 0.0, 0.0])  # tissue frame; device frame 1.5 x 1500 = 2250 N/m
+    p0 = (0.05, 0.0, 0.0)
+    v = LocalModel((1.0, 0.0, 0.0), p0, K, (0.055, 0.0, 0.0), n, (-1.0, 0.0, 0.0), 0.005, False,
+                   0.0).values()
+    lp.renderer.offer_values(v, 0.0)
+    q = (0.049, 0.0, 0.0)  # 1 mm deeper
+    pin(lp, MAP.to_device(q), 0.0)
+    lp.tick(0.0)  # first tick: the nominal period
+    S = nt.S
+    assert lp.st[S.target0] == pytest.approx(1.0 + 1.5)  # 1 N + 1500 N/m x 1 mm, not limited
+    assert lp.cnt[nt.CNT.passivity_limited] == 0
+    pin(lp, MAP.to_device(q), 0.005)
+    lp.tick(0.005)  # 5 ms since the last tick
+    kdev_allowed = 2 * 1.5 / 0.005
+    s = kdev_allowed / (1500.0 * 1.5)
+    assert lp.st[S.target0] == pytest.approx(1.0 + s * 1.5)
+    assert lp.cnt[nt.CNT.passivity_limited] == 1
+
+
+def test_lost_periods_are_counted():
+    lp = loop()
+    for t in (0.0, 0.001, 0.002, 0.007, 0.008):
+        lp.tick(t)
+    assert lp.cnt[nt.CNT.periods_lost] == 4
+    assert lp.cnt[nt.CNT.ticks] == 5
+    s = LoopStats(period=0.001)
+    for t in (0.0, 0.001, 0.002, 0.007, 0.008):
+        s.tick(t)
+    assert s.summary()['periods_lost'] == 4
+    assert s.summary()['max_gap_ms'] == pytest.approx(5.0)
+
+
+def test_held_script_waits_for_release():
+    lp = loop(script=HeldScript(still_script(), held=True))
+    x = lp.st[nt.S.x0:nt.S.x0 + 3].copy()
+    for i in range(1500):
+        lp.tick(i * 0.001)
+    np.testing.assert_allclose(lp.st[nt.S.x0:nt.S.x0 + 3], x, atol=1e-9)
+    lp.release()
+    for i in range(1500, 4000):
+        lp.tick(i * 0.001)
+    assert lp.st[nt.S.x1] > 0.005 / 1.5 * 0.9  # the hand moved 1 cm (tissue) in y
+
+
+def test_stop_leaves_zero_force_and_trace_rows():
+    from haptic_anfis.device.trace import TickTrace
+    lp = loop(max_force_rate=1e6, trace=TickTrace())
+    lp.safety.start()
+    lp.safety.command((2.0, 0.0, 0.0), 0.0, 'tissue')
+    lp.tick(0.0)
+    assert lp.tick(0.001)[0] == pytest.approx(2.0)
+    lp.ctl[nt.CTL.stop] = 1
+    nt.run(lp.cfg, lp.st, lp.times, lp.points, lp.buttons, lp.hand, lp.cmd, lp.model, lp.ctl,
+           lp.out, lp.cnt, lp.ring, lp._scratch, lp._ts)
+    assert tuple(lp.st[nt.S.f0:nt.S.f0 + 3]) == (0.0, 0.0, 0.0)
+    lp._drain()
+    rows = lp.trace.arrays()
+    assert rows.shape == (2, 8)
+    assert rows[1, 4] == pytest.approx(2.0)
+
+
+def test_ripple_and_dropouts_on_known_signals():
+    t = np.arange(0, 2.0, 0.001)
+    n = len(t)
+    steady = np.tile([5.0, 0.0, 0.0], (n, 1))
+    contact = np.ones(n, bool)
+    r = ripple_and_dropouts(t, steady, steady, contact)
+    assert r['ripple_windows_pct'] == 0.0 and r['zero_force_ticks'] == 0
+    buzz = steady.copy()
+    buzz[:, 0] += 0.5 * np.sin(2 * np.pi * 25 * t)  # a 25 Hz buzz of +-0.5 N
+    r = ripple_and_dropouts(t, buzz, steady, contact)
+    assert r['ripple_windows_pct'] == 100.0
+    assert r['ripple_windows_ideal_pct'] == 0.0
+    drop = steady.copy()
+    drop[500:520] = 0.0
+    r = ripple_and_dropouts(t, drop, steady, contact)
+    assert r['zero_force_ticks'] == 20
+    assert r['longest_dropout_ms'] == pytest.approx(20.0)
+    r = ripple_and_dropouts(t, drop, steady * 0.1, contact)  # ideal 0.5 N: not a dropout
+    assert r['zero_force_ticks'] == 0
+
+
+def test_spectral_norm_matches_numpy():
+    from haptic_anfis.device.servo_native import spectral_norm_sym
+    rng = np.random.default_rng(3)
+    for _ in range(20):
+        A = rng.normal(size=(3, 3))
+        K = -(A @ A.T) * 100.0
+        assert spectral_norm_sym(K.ravel().tolist()) == pytest.approx(
+            np.abs(np.linalg.eigvalsh(K)).max(), rel=1e-9)
+
+
+def test_an_old_model_is_held_inside_its_radius_then_expires():
+    lp = loop('local_model', max_force_rate=1e6, validity_time=0.05, hold_time=0.3)
+    lp.safety.start()
+    K = np.diag([-1000.0, 0.0, 0.0])
+    v = LocalModel((2.0, 0.0, 0.0), (0.05, 0.0, 0.0), K, (0.055, 0.0, 0.0), (1.0, 0.0, 0.0),
+                   (-1.0, 0.0, 0.0), 0.005, False, 0.0).values()
+    lp.renderer.offer_values(v, 0.0)
+    q = MAP.to_device((0.05, 0.0, 0.0))
+    for t in (0.0, 0.001, 0.1, 0.101):  # 100 ms old: past its validity, inside the hold
+        pin(lp, q, t)
+        f = lp.tick(t)
+    assert f[0] == pytest.approx(2.0)
+    assert lp.cnt[nt.CNT.held] == 2
+    pin(lp, MAP.to_device((0.05, 0.006, 0.0)), 0.102)  # 6 mm away: outside the radius
+    lp.tick(0.102)
+    assert int(lp.st[nt.S.status]) == EXPIRED
+    for t in np.arange(0.103, 0.32, 0.001):  # past the hold time: expired, watchdog -> 0 N
+        pin(lp, q, t)
+        f = lp.tick(t)
+    assert int(lp.st[nt.S.status]) == EXPIRED
+    assert f == (0.0, 0.0, 0.0)
+
+
+def test_passivity_observer_takes_back_energy_the_port_put_out():
+    """Hannaford & Ryu: a force pushing along the handle's motion puts energy out; the observer's
+    damping takes it back (here all of it: alpha = -E / (T v^2) cancels the 2 N)."""
+    for observer, want in ((False, 2.0), (True, 0.0)):
+        lp = loop(max_force_rate=1e6, observer=observer)
+        lp.safety.start()
+        t = 0.0
+        for _ in range(3):
+            lp.safety.command((2.0, 0.0, 0.0), t, 'tissue')
+            pin(lp, (0.0, 0.0, 0.0), t)
+            lp.st[nt.S.v0] = 0.1  # moving along +x at 0.1 m/s, as the force pushes
+            f = lp.tick(t)
+            t += 0.001
+        assert f[0] == pytest.approx(want, abs=1e-9)
+        assert (lp.cnt[nt.CNT.observer_active] > 0) == observer
+
+
+@pytest.mark.parametrize('process', [False, True])
+def test_loop_runs_on_its_thread_or_process_and_stops_at_zero_force(process):
+    """Started for real (thread, or a forked servo process on shared memory): it ticks, takes a
+    command, and leaves zero force when stopped. No timing asserted: only that ticks happened."""
+    import time
+    states = []
+    lp = loop(max_force_rate=1e6, process=process, on_state=lambda s, f, t: states.append(f))
+    lp.start()
+    try:
+        end = time.monotonic() + 20.0
+        while lp.cnt[nt.CNT.ticks] < 5 and time.monotonic() < end:
+            time.sleep(0.01)
+        lp.safety.command((1.0, 0.0, 0.0), time.monotonic(), 'tissue')
+        t0 = int(lp.cnt[nt.CNT.ticks])
+        while lp.cnt[nt.CNT.ticks] < t0 + 3 and time.monotonic() < end:
+            time.sleep(0.005)
+    finally:
+        lp.stop()
+    assert lp.cnt[nt.CNT.ticks] >= 5
+    assert tuple(lp.st[nt.S.f0:nt.S.f0 + 3]) == (0.0, 0.0, 0.0)
+    assert not lp.running
+    assert states  # the bridge published ticks
+
+
+def test_an_external_script_is_played_through_the_hand_buffer():
+    """exam run swaps in a script only Python can play: the bridge feeds its target (plain float
+    times: a numpy time once leaked into the exam report as a numpy bool) and the tick follows."""
+    seen = []
+
+    class Script:
+        def target(self, t):
+            seen.append(type(t))
+            return (0.06, 0.02, 0.0)
+
+        def buttons(self, t):
+            return (0, 1)
+
+    lp = loop()
+    lp.tick(0.0)
+    lp.script = Script()
+    lp._feed_hand()
+    assert seen and all(t is float for t in seen)
+    assert lp.ctl[nt.CTL.external] == 1
+    t_feed = lp.hand[1]
+    for i in range(1, 2000):
+        lp.tick(t_feed + i * 0.001)
+    # the hand pulled the handle to the target (y = 0.02 m tissue = 0.0133 m device)
+    assert lp.st[nt.S.x1] == pytest.approx(0.02 / 1.5, abs=2e-3)
+    assert lp.last_out is not None and lp.cnt[nt.CNT.marks] == 1  # button 1 pressed once
