@@ -56,6 +56,15 @@ def test_rejected_value_and_overrides_are_checked_like_files():
         parse_overrides(['-p', 'max_force'])
 
 
+def test_node_targeted_overrides_are_checked_against_that_node():
+    ovs = parse_overrides(['-p', 'falcon_driver:rate:=500.0', '-p', 'force_server:rate:=1.0',
+                           '-p', 'falcon_driver:max_force:=-2.0'])
+    assert check_parameter_sources(DECLARED, [], ovs) == [
+        "-p force_server:rate:=1.0: force_server: unknown parameter 'rate'",
+        '-p falcon_driver:max_force:=-2.0: falcon_driver: max_force: -2.0: expected a finite '
+        'value > 0']
+
+
 def test_malformed_or_missing_file_is_one_line_with_its_line(tmp_path):
     f = _write(tmp_path, 'force_server:\n  ros__parameters:\n    model_path: [x\n')
     (err,) = check_parameter_sources(DECLARED, [f])

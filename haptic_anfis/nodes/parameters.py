@@ -418,7 +418,14 @@ def check_parameter_sources(declared: Mapping[str, Sequence[Param]], params_file
             else:
                 value_errors(where, [name], key, v)
     for key, v, where in overrides:
-        global_key(where, key, v)
+        node, sep, own = key.partition(':')   # rcl's node-targeted form: -p node:name:=value
+        if sep and node in full:
+            if own not in full[node]:
+                unknown(where, node, own)
+            else:
+                value_errors(where, [node], own, v)
+        else:
+            global_key(where, key, v)
     for n, ovs in (node_overrides or {}).items():
         for key, v, where in ovs:
             if n in full and key not in full[n]:
