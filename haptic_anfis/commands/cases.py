@@ -23,6 +23,20 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     ls.add_argument('--markdown', action='store_true',
                     help="the README's table (rules and lesion contrast per case) instead")
     ls.add_argument('--no-timing', action='store_true', help='skip the evaluation-time measurement')
+    sw = sub.add_parser('sweep', help='solve the missing FE points of cases into the committed '
+                        'per-point store (fe_store/; resumable, parallel, local or dask)')
+    sw.add_argument('names', nargs='*', help='cases (default: every lib_* case)')
+    sw.add_argument('--workers', type=int, default=2,
+                    help='local FE worker processes, one math thread each (default 2)')
+    sw.add_argument('--dask', metavar='local|ADDRESS', default=None,
+                    help="a dask.distributed scheduler's address (or 'local')")
+    sw.add_argument('--coarse', action='store_true', help='the coarse mesh (CI / quick looks)')
+    sw.add_argument('--store', type=Path, default=None,
+                    help='per-point store root (default fe_store/ in the source tree)')
+    sw.add_argument('--retry-failed', action='store_true',
+                    help='solve again the points recorded as failed')
+    sw.add_argument('--status', action='store_true', help='only print solved / missing per case')
+    sw.add_argument('--quiet', action='store_true', help='no progress bar')
     gen = sub.add_parser('generate', help='FE sweep (resumable, parallel) then train, per case')
     gen.add_argument('names', nargs='*', help='cases to generate (default: every case but '
                      '"default", whose files come with the package)')
@@ -50,7 +64,9 @@ def run(args: argparse.Namespace) -> int:
         return _list(args)
     if args.action == 'generate':
         return _generate(args)
-    print('haptic-anfis cases: give an action: list or generate', file=sys.stderr)
+    if args.action == 'sweep':
+        return _sweep(args)
+    print('haptic-anfis cases: give an action: list, sweep or generate', file=sys.stderr)
     return 2
 
 
@@ -92,6 +108,39 @@ def _executor(args: argparse.Namespace):
         client = Client(args.dask)
         close = client.close
     return client.get_executor(), close
+
+
+def _sweep(args: argparse.Namespace) -> int:
+    from ..cases import CaseLibrary
+    from ..cases.sweeps import case_stores, store_status, sweep_case_store
+
+    if args.workers < 1:
+        raise ValueError(f'--workers must be >= 1, got {args.workers}')
+    lib = CaseLibrary()
+    names = args.names or [n for n in lib.names() if n.startswith('lib_')]
+    cases = [lib.get(n) for n in names]
+    for c in cases:
+        _ = c.scene
+    if args.status:
+        for c in cases:
+            st = store_status(case_stores(c, args.store, args.coarse), with_cpu=True)
+            print(f'{c.name:<28} {st.solved:4d}/{st.total:<4d} solved, {len(st.failed)} failed, '
+                  f'{len(st.missing)} missing, {st.cpu_s / 3600:.2f} CPU-h'
+                  + (f'; failed: {", ".join(st.failed)}' if st.failed else ''), flush=True)
+        return 0
+    executor, close = _executor(args)
+    t0 = time.time()
+    try:
+        for k, case in enumerate(cases, 1):
+            st = sweep_case_store(case, root=args.store, coarse=args.coarse, executor=executor,
+                                  workers=args.workers, progress=not args.quiet,
+                                  retry_failed=args.retry_failed)
+            print(f'[case {k}/{len(cases)}] {case.name}: {st.solved}/{st.total} points solved'
+                  + (f', FAILED: {", ".join(st.failed)}' if st.failed else ''), flush=True)
+    finally:
+        close()
+    print(f'{len(cases)} case(s) swept in {time.time() - t0:.0f} s', flush=True)
+    return 0
 
 
 def _generate(args: argparse.Namespace) -> int:
