@@ -18,6 +18,7 @@ they complete). Progress: tqdm when importable, else one status line on stderr.
 from __future__ import annotations
 
 import concurrent.futures as cf
+import os
 import sys
 import time
 from dataclasses import dataclass, field
@@ -28,7 +29,11 @@ import numpy as np
 from .scene import Scene
 from .store import PointStore, point_key
 
-__all__ = ['ATTEMPTS', 'PointSweepResult', 'run_point_sweep', 'solve_point']
+__all__ = ['ATTEMPTS', 'JOURNAL_ENV', 'PointSweepResult', 'run_point_sweep', 'solve_point']
+
+#: when set (in the workers' environment), every finished solve appends '<store dir> <key>' to
+#: this file: a journal that shows no point was solved twice
+JOURNAL_ENV = 'HAPTIC_ANFIS_FE_JOURNAL'
 
 #: (fraction of the scene's max load step, max cut-backs) per attempt
 ATTEMPTS: tuple[tuple[float, int], ...] = ((1.0, 6), (0.5, 8), (0.25, 10))
@@ -97,6 +102,10 @@ def _store_task(scene: Scene, point: list[float], probe_cells: int, store_dir: s
         rec['stored_by_worker'] = True
     except OSError:  # the store is not reachable from this worker: the submitter writes it
         pass
+    journal = os.environ.get(JOURNAL_ENV)
+    if journal:  # one line per finished solve (tests prove no point is solved twice)
+        with open(journal, 'a', encoding='utf-8') as f:
+            f.write(f'{store_dir} {key}\n')
     return rec
 
 
@@ -199,6 +208,8 @@ def run_point_sweep(scene: Scene, store: PointStore, points: np.ndarray, probe_c
         bar.update('' if rec['status'] == 'ok' else f'{k} failed')
 
     own = executor is None
+    if _is_dask(executor) and not hasattr(executor, 'scheduler_info'):
+        executor = getattr(executor, '_client', executor)  # a ClientExecutor: use its Client
     try:
         if _is_dask(executor):
             from distributed import as_completed
