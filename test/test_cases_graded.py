@@ -7,9 +7,9 @@ import re
 
 import numpy as np
 import pytest
-import yaml
+from test_cases import _library  # the same throw-away library of scene files
 
-from haptic_anfis.cases import CaseError, CaseLibrary, library
+from haptic_anfis.cases import CaseError, library
 from haptic_anfis.cases import build as build_mod
 from haptic_anfis.cases.build import build_case, gate_failures
 from haptic_anfis.cases.grading import PALPABLE_PCT, case_level, difficulty
@@ -32,15 +32,6 @@ TINY = {
     'mesh': {'probe_cells': 4, 'coarse_probe_cells': 2, 'edge_offset': 0.2, 'edge_refine': 0},
 }
 PARAMS = {'structure': (2, 2, 2), 'epochs': 8, 'search_folds': 1, 'seed': 0}
-
-
-def _library(tmp_path, scenes):
-    sd, dd = tmp_path / 'scenes', tmp_path / 'data'
-    sd.mkdir(exist_ok=True)
-    dd.mkdir(exist_ok=True)
-    for name, doc in scenes.items():
-        (sd / f'{name}.yaml').write_text(yaml.safe_dump(doc))
-    return CaseLibrary(sd, dd, work_root=tmp_path / 'work')
 
 
 @pytest.fixture(scope='module')
