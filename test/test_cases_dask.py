@@ -4,6 +4,7 @@ mesh. One worker is killed mid-sweep: every point still ends up in the per-point
 solve journal shows no point solved twice."""
 import os
 import signal
+import threading
 import subprocess
 import sys
 import time
@@ -69,28 +70,29 @@ def test_generate_on_a_dask_cluster_survives_a_killed_worker(tmp_path, capsys):
         with Client(scheduler_file=str(sched_file), timeout=30) as client:
             client.wait_for_workers(2, timeout=60)
             address = client.scheduler.address
-            lib = CaseLibrary(scenes, data)
-            stores = case_stores(lib.get('tinydask'), store, coarse=True)
-            total = store_status(stores).total
-            import threading  # kills one worker once a few points are on disk
+        # the CLI opens its own client (one client at a time in this process)
+        lib = CaseLibrary(scenes, data)
+        stores = case_stores(lib.get('tinydask'), store, coarse=True)
+        total = store_status(stores).total
+        # kill one worker once a few points are on disk
 
-            killed = {}
+        killed = {}
 
-            def killer():
-                end = time.time() + 120
-                while time.time() < end:
-                    if len(stores.main.solved()) >= 3:
-                        os.killpg(procs[1].pid, signal.SIGKILL)
-                        killed['at'] = len(stores.main.solved())
-                        return
-                    time.sleep(0.05)
+        def killer():
+            end = time.time() + 120
+            while time.time() < end:
+                if len(stores.main.solved()) >= 3:
+                    os.killpg(procs[1].pid, signal.SIGKILL)
+                    killed['at'] = len(stores.main.solved())
+                    return
+                time.sleep(0.05)
 
-            th = threading.Thread(target=killer, daemon=True)
-            th.start()
-            rc = main(['cases', 'generate', 'tinydask', '--dask', address, '--coarse',
-                       '--no-train', '--quiet', '--scene-dir', str(scenes), '--data-dir', str(data),
-                       '--store', str(store)])
-            th.join(timeout=5)
+        th = threading.Thread(target=killer, daemon=True)
+        th.start()
+        rc = main(['cases', 'generate', 'tinydask', '--dask', address, '--coarse',
+                   '--no-train', '--quiet', '--scene-dir', str(scenes), '--data-dir', str(data),
+                   '--store', str(store)])
+        th.join(timeout=5)
         out = capsys.readouterr().out
         assert rc == 0, out
         assert killed, 'the sweep finished before a worker could be killed'

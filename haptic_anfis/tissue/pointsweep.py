@@ -217,8 +217,10 @@ def run_point_sweep(scene: Scene, store: PointStore, points: np.ndarray, probe_c
             futs = [executor.submit(_store_task, *a, pure=False,
                                     key=f'fe-{scene.name}-{k}-{time.time_ns()}')
                     for (k, _), a in zip(todo, args)]
-            for fut, rec in as_completed(futs, with_results=True):
-                take(rec)
+            # one result fetched at a time (with_results=True gathers every future in its own
+            # coroutine: under heavy load that tripped a tornado write assertion here)
+            for fut in as_completed(futs):
+                take(fut.result())
                 fut.release()
         else:
             if own:
