@@ -208,8 +208,8 @@ def test_build_grades_gates_and_ships(swept, monkeypatch):
     model = ForceModel.load(case.model_path)
     assert model.metadata_['dataset']['sha256'] == ds.sha256()
     assert len(np.unique(ds.point)) == len(loading_points(case.scene))
-    assert case.level == res.level and case.grading()['lesions'][0]['contrast_n'] == \
-        pytest.approx(g['contrast_n'])
+    assert case.level == res.level and lib.levels() == {'tinygraded': res.level}
+    assert case.grading()['lesions'][0]['contrast_n'] == pytest.approx(g['contrast_n'])
     from haptic_anfis.cases.summary import case_summary
 
     row = case_summary(case, timing=False, contrast=False)

@@ -155,6 +155,10 @@ class CaseLibrary:
     def cases(self) -> list[Case]:
         return [self.get(n) for n in self.names()]
 
+    def levels(self) -> dict[str, int | None]:
+        """{case name: difficulty level 1-5 from the FE (:attr:`Case.level`), None if ungraded}."""
+        return {c.name: c.level for c in self.cases()}
+
     def ready(self) -> list[Case]:
         """Cases whose model and mesh exist (what a session can run)."""
         return [c for c in self.cases() if not c.missing(('model_path', 'mesh_path'))]
