@@ -30,7 +30,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     ls.add_argument('--no-timing', action='store_true', help='skip the evaluation-time measurement')
     sw = sub.add_parser('sweep', help='solve the missing FE points of cases into the committed '
                         'per-point store (fe_store/; resumable, parallel, local or dask)')
-    sw.add_argument('names', nargs='*', help='cases (default: every lib_* case)')
+    sw.add_argument('names', nargs='*', help='cases (default: every lib_* case, the most '
+                    'advanced first)')
     sw.add_argument('--workers', type=int, default=2,
                     help='local FE worker processes, one math thread each (default 2)')
     sw.add_argument('--dask', metavar='local|ADDRESS', default=None,
@@ -145,6 +146,9 @@ def _sweep(args: argparse.Namespace) -> int:
     cases = [lib.get(n) for n in names]
     for c in cases:
         _ = c.scene
+    if not args.names:  # finish what is started first: a case ships only when complete
+        done = {c.name: store_status(case_stores(c, args.store, args.coarse)) for c in cases}
+        cases.sort(key=lambda c: (-done[c.name].solved / max(done[c.name].total, 1), c.name))
     if args.status:
         for c in cases:
             st = store_status(case_stores(c, args.store, args.coarse), with_cpu=True)
