@@ -64,8 +64,9 @@ setup(
         # Finite-element data generation (haptic_anfis.tissue). Optional for running the simulator.
         # Optional: Intel MKL PARDISO factorises the FE systems when importable (~700 MB,
         # x86-64 only). With the kept-factorisation solver (haptic_anfis.tissue.linsolve) it
-        # saved only ~20 % per point here (bench/bench_fe_point.py), so SciPy's SuperLU stays
-        # the default. Needs PYPARDISO_MKL_RT when mkl is installed outside the venv prefix.
+        # saved ~20 % of a point's wall time in one manual comparison under load (issue 29), so
+        # SciPy's SuperLU stays the default (bench/bench_fe_point.py times whichever is
+        # importable). Needs PYPARDISO_MKL_RT when mkl is installed outside the venv prefix.
         'fe-fast': [
             'pypardiso>=0.4',
         ],
