@@ -63,8 +63,11 @@ setup(
             'ros-jazzy-visualization-msgs==5.3.6',
         ],
         # Finite-element data generation (haptic_anfis.tissue). Optional for running the simulator.
-        # Optional: Intel MKL PARDISO for the FE solves (~5x faster than SciPy's SuperLU here;
-        # ~700 MB, x86-64 only). haptic_anfis.tissue uses it when importable.
+        # Optional: Intel MKL PARDISO factorises the FE systems when importable (~700 MB,
+        # x86-64 only). With the kept-factorisation solver (haptic_anfis.tissue.linsolve) it
+        # saved ~20 % of a point's wall time in one manual comparison under load (issue 29), so
+        # SciPy's SuperLU stays the default (bench/bench_fe_point.py times whichever is
+        # importable). Needs PYPARDISO_MKL_RT when mkl is installed outside the venv prefix.
         'fe-fast': [
             'pypardiso>=0.4',
         ],
@@ -74,6 +77,8 @@ setup(
         ],
         'fe': [
             'felupe==11.3.0',
+            'threadpoolctl>=3',  # one math thread per FE worker (haptic_anfis.tissue.pointsweep)
+            'tqdm>=4',  # the sweeps' progress bar (a plain status line without it)
             'matplotlib>=3.7',  # `haptic-anfis dataset --report` plots
         ],
         # A real Novint Falcon (falcon_driver backend 'falcon'): pure-Python FTDI access over

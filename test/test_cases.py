@@ -91,8 +91,10 @@ def test_lesion_outside_the_breast_names_case_and_field(tmp_path):
 
 
 @pytest.mark.parametrize('edit, message', [
-    (lambda t: t['tumours'][0].update(radius_mm=3), r'radius_mm: expected 5 to 15 mm'),
-    (lambda t: t['tumours'][0].update(radius_mm=16), r'radius_mm: expected 5 to 15 mm'),
+    (lambda t: t['tumours'][0].update(radius_mm=2), r'radius_mm: expected 2.5 to 12.5 mm'),
+    (lambda t: t['tumours'][0].update(radius_mm=13), r'radius_mm: expected 2.5 to 12.5 mm'),
+    (lambda t: t['loading'].update(ring_diameters=[1.0, 0.5]), r'ring_diameters: expected'),
+    (lambda t: t['loading'].update(ring_diameters=[1.0], ring_points=0), r'ring_points'),
     (lambda t: t['tumours'][0].update(kind='cyst'), r'kind: expected one of'),
     (lambda t: t['tumours'][0].update(centre_mm=[30, 15, 0]), r'either centre_mm'),
     (lambda t: t['tumours'][0].update(position_mm=[90, 0]), r'not inside the tissue'),

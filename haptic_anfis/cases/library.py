@@ -71,6 +71,30 @@ class Case:
                             f'`haptic-anfis cases generate {self.name}`')
         return self
 
+    def grading(self) -> dict | None:
+        """The FE grading of a graded-library case (:mod:`.grading`, written by
+        :func:`.build.build_case` into the dataset sidecar): ``level``, ``lesions`` (each with
+        ``contrast_n``, ``contrast_pct``, ``palpable``, ``difficulty``), ``threshold_pct``,
+        ``depth_m``; None for a case not built from the per-point store."""
+        import json
+
+        from ..tissue.dataset import sidecar_path
+
+        side = sidecar_path(self.dataset_path)
+        if not side.is_file():
+            return None
+        try:
+            return json.loads(side.read_text()).get('grading')
+        except (OSError, ValueError):
+            return None
+
+    @property
+    def level(self) -> int | None:
+        """Difficulty level 1 (easy) .. 5 (hard) from the FE (:mod:`.grading`); None when the case
+        is not graded."""
+        g = self.grading()
+        return None if g is None else int(g['level'])
+
     def lesions_m(self) -> list[tuple[float, float, float, float]]:
         """(x, y, z, radius) [m] of every lesion, tissue frame."""
         return [(*t.centre, t.radius) for t in self.scene.tumours]
@@ -131,6 +155,10 @@ class CaseLibrary:
 
     def cases(self) -> list[Case]:
         return [self.get(n) for n in self.names()]
+
+    def levels(self) -> dict[str, int | None]:
+        """{case name: difficulty level 1-5 from the FE (:attr:`Case.level`), None if ungraded}."""
+        return {c.name: c.level for c in self.cases()}
 
     def ready(self) -> list[Case]:
         """Cases whose model and mesh exist (what a session can run)."""

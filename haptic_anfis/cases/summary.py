@@ -22,8 +22,10 @@ CONTRAST_TOLERANCE = 0.25  # relative
 
 
 def lesion_rows(case: Case) -> list[dict[str, Any]]:
-    """Lesions of the case in the listing's units (mm, kPa)."""
+    """Lesions of the case in the listing's units (mm, kPa), with the FE grading of a graded case
+    (``contrast_n``, ``contrast_pct``, ``palpable``, ``difficulty``; None when not graded)."""
     out = []
+    graded = {g['lesion']: g for g in ((case.grading() or {}).get('lesions') or [])}
     for t in case.scene.tumours:
         from ..tissue.scene import surface_height
 
@@ -32,6 +34,9 @@ def lesion_rows(case: Case) -> list[dict[str, Any]]:
                     'center_mm': [round(c * 1e3, 3) for c in t.centre],
                     'depth_mm': round((skin - t.centre[0]) * 1e3, 3),
                     'radius_mm': round(t.radius * 1e3, 3), 'modulus_kpa': round(t.youngs / 1e3, 3)})
+        g = graded.get(t.name, {})
+        out[-1].update({k: g.get(k) for k in ('contrast_n', 'contrast_pct', 'palpable',
+                                              'difficulty')})
     return out
 
 
@@ -104,13 +109,16 @@ def case_summary(case: Case, timing: bool = True, contrast: bool = True) -> dict
         'missing': case.missing(), 'dataset_rows': None, 'dataset_points': None,
         'fe_probe_cells': None, 'structures': None, 'rules': None, 'rules_per_output': None,
         'parameters': None, 'rmse_n': None, 'rmse_pct_range': None, 'eval_p50_us': None,
-        'contrast': None}
+        'contrast': None, 'level': case.level, 'cv_rmse_n': None, 'cv_pct_range': None,
+        'fe_points': _store_progress(case)}
     ds = None
     if case.dataset_path.is_file():
         ds = load_dataset(case.dataset_path)
         row['dataset_rows'] = len(ds)
         row['dataset_points'] = int(len(np.unique(ds.point)))
         row['fe_probe_cells'] = ds.provenance.get('mesh', {}).get('probe_cells')
+        cv = ds.provenance.get('grouped_cv') or {}
+        row['cv_rmse_n'], row['cv_pct_range'] = cv.get('rmse_n'), cv.get('pct_range')
     if case.model_path.is_file():
         model = ForceModel.load(case.model_path)
         row['structures'] = ['-'.join(map(str, s)) for s in model.structures_]
@@ -130,25 +138,53 @@ def case_summary(case: Case, timing: bool = True, contrast: bool = True) -> dict
     return row
 
 
+def _store_progress(case: Case) -> dict[str, int] | None:
+    """{'solved', 'total', 'failed'} FE points of a graded-library case in the committed store
+    (None for a case whose scene has no lesion rings, i.e. not swept per point)."""
+    if not case.scene.ring_diameters:
+        return None
+    from .sweeps import case_stores, store_status
+
+    try:
+        st = store_status(case_stores(case))
+    except ValueError:  # a store of another scene version: the listing still works
+        return None
+    return {'solved': st.solved, 'total': st.total, 'failed': len(st.failed)}
+
+
+def _lesion_text(l: dict[str, Any]) -> str:
+    """'m25mm@15' plus, when graded, ' +12.3%/0.45N d3' (or ' +2.1% np': not palpable)."""
+    text = f'{l["kind"][0]}{2 * l["radius_mm"]:g}mm@{l["depth_mm"]:.0f}'
+    if l.get('contrast_pct') is not None:
+        text += (f' {l["contrast_pct"]:+.1f}%/{l["contrast_n"]:.2f}N '
+                 + (f'd{l["difficulty"]}' if l['palpable'] else 'np'))
+    return text
+
+
 def format_table(rows: list[dict[str, Any]]) -> str:
     """The human-readable listing."""
-    head = (f'{"case":<24} {"lesions":<30} {"breast mm":<10} {"E kPa":>5} {"rows":>5} '
+    head = (f'{"case":<24} {"lvl":>3} {"lesions":<30} {"breast mm":<10} {"E kPa":>5} {"rows":>5} '
             f'{"structure Fx/Fy/Fz":<24} {"rules":>5} {"params":>6} '
-            f'{"test RMSE N (% range) Fx, Fy, Fz":<42} {"p50 µs":>6}')
+            f'{"test RMSE N (% range) Fx, Fy, Fz":<42} {"CV % range":<16} {"p50 µs":>6}')
     lines = [head, '-' * len(head)]
     for r in rows:
-        les = ', '.join(f'{l["kind"][0]}{2 * l["radius_mm"]:g}mm@{l["depth_mm"]:.0f}'
-                        for l in r['lesions']) or 'none'
+        les = ', '.join(_lesion_text(l) for l in r['lesions']) or 'none'
+        lvl = '-' if r.get('level') is None else str(r['level'])
+        cv = ('/'.join(f'{v:.2f}' for v in r['cv_pct_range']) if r.get('cv_pct_range') else
+              (f'FE {r["fe_points"]["solved"]}/{r["fe_points"]["total"]}'
+               if r.get('fe_points') and not r['structures'] else '-'))
         size = 'x'.join(f'{v:g}' for v in r['breast_radii_mm'])
         st = '/'.join(r['structures']) if r['structures'] else '(no model)'
         err = (', '.join(f'{v:.3f} ({p:.1f}%)' for v, p in zip(r['rmse_n'], r['rmse_pct_range']))
                if r['rmse_n'] and r['rmse_pct_range'] else '-')
-        lines.append(f'{r["name"]:<24} {les:<30} {size:<10} {r["glandular_kpa"]:>5g} '
+        lines.append(f'{r["name"]:<24} {lvl:>3} {les:<30} {size:<10} {r["glandular_kpa"]:>5g} '
                      f'{r["dataset_rows"] or "-":>5} {st:<24} {r["rules"] or "-":>5} '
-                     f'{r["parameters"] or "-":>6} {err:<42} '
+                     f'{r["parameters"] or "-":>6} {err:<42} {cv:<16} '
                      f'{"-" if r["eval_p50_us"] is None else format(r["eval_p50_us"], ".2f"):>6}')
     lines.append('lesions: kind (m = malignant, b = benign, u = unstated), diameter @ centre depth '
-                 'under the skin [mm]')
+                 'under the skin [mm]; graded cases add the FE contrast at the deep level vs the '
+                 'lesion-free twin (% / N) and the difficulty dN (np = not palpable); lvl: case '
+                 'level 1-5; CV % range: grouped-CV RMSE Fx/Fy/Fz (or FE points solved so far)')
     return '\n'.join(lines)
 
 

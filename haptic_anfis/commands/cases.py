@@ -1,8 +1,13 @@
 """``haptic-anfis cases``: the palpation case library.
 
     haptic-anfis cases list [--json] [--no-timing]
+    haptic-anfis cases sweep [NAMES...] [--workers N] [--dask local|ADDRESS] [--status] [--coarse]
     haptic-anfis cases generate [NAMES...] [--workers N] [--coarse] [--dask local|ADDRESS]
                                 [--no-train | --train-only] [--config config/force_model.yaml]
+
+Graded-library cases (scenes with lesion rings, ``lib_*``) are solved per point into the
+committed store ``fe_store/`` (resumable across sessions) and shipped only when complete and
+passing the gates (haptic_anfis.cases.build); the older cases keep their work-dir sweep.
 """
 from __future__ import annotations
 
@@ -23,6 +28,22 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     ls.add_argument('--markdown', action='store_true',
                     help="the README's table (rules and lesion contrast per case) instead")
     ls.add_argument('--no-timing', action='store_true', help='skip the evaluation-time measurement')
+    sw = sub.add_parser('sweep', help='solve the missing FE points of cases into the committed '
+                        'per-point store (fe_store/; resumable, parallel, local or dask)')
+    sw.add_argument('names', nargs='*', help='cases (default: every lib_* case, the most '
+                    'advanced first)')
+    sw.add_argument('--workers', type=int, default=2,
+                    help='local FE worker processes, one math thread each (default 2)')
+    sw.add_argument('--dask', metavar='local|ADDRESS', default=None,
+                    help="a dask.distributed scheduler's address (or 'local')")
+    sw.add_argument('--coarse', action='store_true', help='the coarse mesh (CI / quick looks)')
+    sw.add_argument('--store', type=Path, default=None,
+                    help='per-point store root (default fe_store/ in the source tree)')
+    sw.add_argument('--retry-failed', action='store_true',
+                    help='solve again the points recorded as failed')
+    sw.add_argument('--status', action='store_true', help='only print solved / missing per case')
+    sw.add_argument('--quiet', action='store_true', help='no progress bar')
+    _library_arguments(sw)
     gen = sub.add_parser('generate', help='FE sweep (resumable, parallel) then train, per case')
     gen.add_argument('names', nargs='*', help='cases to generate (default: every case but '
                      '"default", whose files come with the package)')
@@ -43,6 +64,25 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     gen.add_argument('--work-root', type=Path, default=None,
                      help='per-case FE work directories for resuming (default .fe_work/cases)')
     gen.add_argument('--quiet', action='store_true', help='no progress line')
+    gen.add_argument('--store', type=Path, default=None,
+                     help='per-point FE store of the graded cases (default fe_store/ in the '
+                          'source tree)')
+    _library_arguments(gen)
+
+
+def _library_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument('--scene-dir', type=Path, default=None,
+                   help='scene files of another library (default config/scenes)')
+    p.add_argument('--data-dir', type=Path, default=None,
+                   help="that library's data directory (default the package's)")
+
+
+def _open_library(args: argparse.Namespace, **kw):
+    from ..cases import CaseLibrary
+    from ..tissue.dataset import DATA_DIR
+    from ..tissue.scene import SCENE_DIR
+
+    return CaseLibrary(args.scene_dir or SCENE_DIR, args.data_dir or DATA_DIR, **kw)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -50,7 +90,9 @@ def run(args: argparse.Namespace) -> int:
         return _list(args)
     if args.action == 'generate':
         return _generate(args)
-    print('haptic-anfis cases: give an action: list or generate', file=sys.stderr)
+    if args.action == 'sweep':
+        return _sweep(args)
+    print('haptic-anfis cases: give an action: list, sweep or generate', file=sys.stderr)
     return 2
 
 
@@ -91,17 +133,51 @@ def _executor(args: argparse.Namespace):
     else:
         client = Client(args.dask)
         close = client.close
-    return client.get_executor(), close
+    return client, close  # per-point tasks go to the Client itself (taken as they complete)
+
+
+def _sweep(args: argparse.Namespace) -> int:
+    from ..cases.sweeps import case_stores, store_status, sweep_case_store
+
+    if args.workers < 1:
+        raise ValueError(f'--workers must be >= 1, got {args.workers}')
+    lib = _open_library(args)
+    names = args.names or [n for n in lib.names() if n.startswith('lib_')]
+    cases = [lib.get(n) for n in names]
+    for c in cases:
+        _ = c.scene
+    if not args.names:  # finish what is started first: a case ships only when complete
+        done = {c.name: store_status(case_stores(c, args.store, args.coarse)) for c in cases}
+        cases.sort(key=lambda c: (-done[c.name].solved / max(done[c.name].total, 1), c.name))
+    if args.status:
+        for c in cases:
+            st = store_status(case_stores(c, args.store, args.coarse), with_cpu=True)
+            print(f'{c.name:<28} {st.solved:4d}/{st.total:<4d} solved, {len(st.failed)} failed, '
+                  f'{len(st.missing)} missing, {st.cpu_s / 3600:.2f} CPU-h'
+                  + (f'; failed: {", ".join(st.failed)}' if st.failed else ''), flush=True)
+        return 0
+    executor, close = _executor(args)
+    t0 = time.time()
+    try:
+        for k, case in enumerate(cases, 1):
+            st = sweep_case_store(case, root=args.store, coarse=args.coarse, executor=executor,
+                                  workers=args.workers, progress=not args.quiet,
+                                  retry_failed=args.retry_failed)
+            print(f'[case {k}/{len(cases)}] {case.name}: {st.solved}/{st.total} points solved'
+                  + (f', FAILED: {", ".join(st.failed)}' if st.failed else ''), flush=True)
+    finally:
+        close()
+    print(f'{len(cases)} case(s) swept in {time.time() - t0:.0f} s', flush=True)
+    return 0
 
 
 def _generate(args: argparse.Namespace) -> int:
-    from ..cases import CaseLibrary
     from ..cases.generate import generate_case
     from .train import load_config
 
     if args.workers < 1:
         raise ValueError(f'--workers must be >= 1, got {args.workers}')
-    lib = CaseLibrary(work_root=args.work_root)
+    lib = _open_library(args, work_root=args.work_root)
     names = args.names or [n for n in lib.names() if n != 'default']
     cases = [lib.get(n) for n in names]  # unknown names fail before any work
     for c in cases:
@@ -114,8 +190,12 @@ def _generate(args: argparse.Namespace) -> int:
     executor, close = _executor(args) if not args.train_only else (None, lambda: None)
     t_all = time.time()
     try:
+        refused = 0
         for k, case in enumerate(cases, 1):
             print(f'[case {k}/{len(cases)}] {case.name}: {case.description}', flush=True)
+            if case.scene.ring_diameters:  # a graded-library case: per-point store, gates
+                refused += not _generate_graded(case, args, executor, params)
+                continue
             res = generate_case(case, coarse=args.coarse, workers=args.workers, executor=executor,
                                 sweep=not args.train_only, train=not args.no_train,
                                 train_params=params, progress=not args.quiet,
@@ -128,5 +208,34 @@ def _generate(args: argparse.Namespace) -> int:
                   f'{", ".join(res.written) or "nothing"}', flush=True)
     finally:
         close()
-    print(f'{len(cases)} case(s) in {time.time() - t_all:.0f} s', flush=True)
-    return 0
+    print(f'{len(cases)} case(s) in {time.time() - t_all:.0f} s'
+          + (f'; {refused} refused' if refused else ''), flush=True)
+    return 1 if refused else 0
+
+
+def _generate_graded(case, args: argparse.Namespace, executor, params: dict) -> bool:
+    """Sweep the missing points of a graded case into the store, then build it (grading, model,
+    gates) unless --no-train; False (with one line naming the figure) when refused."""
+    from ..cases import CaseError
+    from ..cases.build import build_case
+    from ..cases.sweeps import sweep_case_store
+
+    if not args.train_only:
+        st = sweep_case_store(case, root=args.store, coarse=args.coarse, executor=executor,
+                              workers=args.workers, progress=not args.quiet)
+        print(f'  FE store: {st.solved}/{st.total} points solved'
+              + (f', failed: {", ".join(st.failed)}' if st.failed else ''), flush=True)
+    if args.no_train:
+        return True
+    try:
+        res = build_case(case, store_root=args.store, coarse=args.coarse, train_params=params)
+    except CaseError as exc:
+        print(f'  refused: {exc}', flush=True)
+        return False
+    les = '; '.join(f'{g["lesion"]} {g["contrast_pct"]:+.1f} % ({g["contrast_n"]:+.3f} N) '
+                    + (f'difficulty {g["difficulty"]}' if g['palpable'] else 'not palpable')
+                    for g in res.grades) or 'no lesion'
+    print(f'  level {res.level}: {les}; grouped-CV RMSE '
+          + ', '.join(f'{v:.3f} N ({p:.2f} %)' for v, p in zip(res.cv_rmse_n, res.cv_pct_range))
+          + f'; {res.bytes / 1024:.0f} KB; wrote {", ".join(res.written)}', flush=True)
+    return True

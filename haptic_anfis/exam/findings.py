@@ -30,7 +30,9 @@ def match(lesions, lesion_points: np.ndarray, mark_points: np.ndarray, invalid: 
     """Findings: each valid mark within lesion radius + ``margin`` of a lesion's surface point is
     a hit (on the nearest such lesion; more marks on a found lesion are 'repeat' marks, not false);
     other marks are false; each lesion not hit is a miss, 'missed although palpated deep' when
-    ``palpated_deep[k]`` else 'never palpated deep'."""
+    ``palpated_deep[k]`` else 'never palpated deep'. A lesion the FE says is not palpable
+    (``palpable`` False) is neither hit nor miss: it is reported 'not palpable here', and a mark
+    on it is neither a hit nor a false mark."""
     found = [None] * len(lesions)
     marks = []
     for i, (p, bad) in enumerate(zip(mark_points, invalid)):
@@ -47,6 +49,9 @@ def match(lesions, lesion_points: np.ndarray, mark_points: np.ndarray, invalid: 
                 best, bd = k, d
         if best is None:
             entry.update(result='false', reason='no lesion within radius + margin')
+        elif not getattr(lesions[best], 'palpable', True):
+            entry.update(result='not_palpable', lesion=lesions[best].name,
+                         distance_mm=round(bd * 1e3, 2))
         elif found[best] is None:
             found[best] = i
             entry.update(result='hit', lesion=lesions[best].name, distance_mm=round(bd * 1e3, 2))
@@ -58,12 +63,16 @@ def match(lesions, lesion_points: np.ndarray, mark_points: np.ndarray, invalid: 
         e = {'name': les.name, 'centre_mm': [round(c * 1e3, 2) for c in les.centre],
              'radius_mm': round(les.radius * 1e3, 2),
              'surface_mm': [round(float(c) * 1e3, 2) for c in lesion_points[k]],
-             'found': found[k] is not None, 'palpated_deep': bool(palpated_deep[k])}
-        if found[k] is None:
+             'found': found[k] is not None, 'palpated_deep': bool(palpated_deep[k]),
+             'palpable': bool(getattr(les, 'palpable', True))}
+        if not e['palpable']:
+            e['missed'] = 'not palpable here'
+        elif found[k] is None:
             e['missed'] = ('missed although palpated deep' if palpated_deep[k]
                            else 'never palpated deep')
         les_out.append(e)
     hits = sum(f is not None for f in found)
-    return {'hits': hits, 'misses': len(lesions) - hits,
+    n_palpable = sum(bool(getattr(les, 'palpable', True)) for les in lesions)
+    return {'hits': hits, 'misses': n_palpable - hits, 'palpable_lesions': n_palpable,
             'false_marks': sum(m['result'] == 'false' for m in marks),
             'marks': marks, 'lesions': les_out}

@@ -10,10 +10,13 @@ import numpy as np
 
 @dataclass(frozen=True)
 class Lesion:
-    """A lesion to find: ``name``, ``centre`` (3,) [m] tissue frame, ``radius`` [m]."""
+    """A lesion to find: ``name``, ``centre`` (3,) [m] tissue frame, ``radius`` [m]; ``palpable``
+    False when the case's FE says a probe cannot feel it (scored neither hit nor miss, reported
+    as 'not palpable here')."""
     name: str
     centre: tuple[float, float, float]
     radius: float
+    palpable: bool = True
 
 
 @dataclass(frozen=True)
@@ -35,9 +38,27 @@ def subject_from_scene(path: str | os.PathLike | None = None) -> ExamSubject:
     from ..tissue.scene import DEFAULT_SCENE, load_scene
     p = Path(path) if path else DEFAULT_SCENE
     sc = load_scene(p)
-    les = tuple(Lesion(t.name, tuple(float(c) for c in t.centre), float(t.radius))
+    palpable = _fe_palpable(p)
+    les = tuple(Lesion(t.name, tuple(float(c) for c in t.centre), float(t.radius),
+                       palpable.get(t.name, True))
                 for t in sc.tumours)
     return ExamSubject(les, float(sc.palpable_radius), float(sc.probe_radius), str(p))
+
+
+def _fe_palpable(scene_path: Path) -> dict[str, bool]:
+    """{lesion name: palpable} from the FE grading of the library case whose scene file this
+    is (haptic_anfis.cases.grading); {} (all palpable) for an ungraded scene."""
+    from ..cases import CaseError, library
+
+    lib = library()
+    try:
+        case = lib.get(scene_path.stem)
+    except CaseError:
+        return {}
+    if case.scene_path.resolve() != scene_path.resolve():
+        return {}
+    return {g['lesion']: bool(g['palpable'])
+            for g in ((case.grading() or {}).get('lesions') or [])}
 
 
 def lesion_surface_points(detector, lesions) -> np.ndarray:

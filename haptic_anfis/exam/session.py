@@ -133,7 +133,10 @@ class ExamSession:
         for m in fin['marks']:
             if m.get('reason') and 'outside the surface' in m['reason']:
                 notes.append(f"mark {m['index']}: {m['reason']}")
-        score, parts = score_of(cov, fin, pat['pattern'], len(lesions), cfg)
+        if any(not les.palpable for les in lesions):
+            notes.append('not palpable here (the FE contrast is below the force threshold): '
+                         + ', '.join(les.name for les in lesions if not les.palpable))
+        score, parts = score_of(cov, fin, pat['pattern'], fin['palpable_lesions'], cfg)
         verdict, reasons = verdict_of(cov, fin, cfg)
         return {
             'coverage_pct': {k: round(100 * v, 2) for k, v in cov.items()},
@@ -193,7 +196,7 @@ def verdict_of(cov: dict, fin: dict, cfg: ExamConfig) -> tuple[str, list[str]]:
         why.append(f"deep coverage {100 * cov['deep']:.0f} % < {100 * cfg.pass_deep_coverage:.0f} %:"
                    ' press to the chest wall over the whole breast')
     for les in fin['lesions']:
-        if not les['found']:
+        if not les['found'] and les.get('palpable', True):
             if les['palpated_deep']:
                 why.append(f"lesion {les['name']} missed although palpated deep: you pressed over "
                            'it; compare each spot with its neighbours')

@@ -58,15 +58,13 @@ class LoadPathResult:
 
 
 def default_linear_solver() -> tuple[str, Callable]:
-    """pypardiso's spsolve if installed (about 3.7x faster here), else scipy's SuperLU."""
-    try:
-        import pypardiso  # noqa: F401  (optional, x86-64 only, ~700 MB of MKL)
+    """A fresh :class:`~.linsolve.ReusedFactorSolver` (one per load path: it keeps the last
+    factorisation and preconditions the next Newton systems with it) and its name
+    ('reused-factor/pypardiso' with the optional pypardiso, else 'reused-factor/scipy-superlu-sym')."""
+    from .linsolve import ReusedFactorSolver
 
-        return 'pypardiso', pypardiso.spsolve
-    except ImportError:
-        from scipy.sparse.linalg import spsolve
-
-        return 'scipy-superlu', spsolve
+    solver = ReusedFactorSolver()
+    return f'reused-factor/{solver.backend}', solver
 
 
 def load_steps(depths: Sequence[float], max_step: float) -> list[float]:
@@ -100,7 +98,7 @@ def solve_load_path(mesh: HexMesh, shear: np.ndarray | float, bulk: np.ndarray |
 
     t0 = time.perf_counter()
     if solver is None:
-        solver = default_linear_solver()[1]
+        solver = default_linear_solver()[1]  # a new one per path: its factor belongs to this mesh
     direction = np.asarray(direction, dtype=float)
     direction = direction / np.linalg.norm(direction)
     fmesh = fem.Mesh(mesh.points, mesh.cells, 'hexahedron')
@@ -174,7 +172,13 @@ def solve_load_path(mesh: HexMesh, shear: np.ndarray | float, bulk: np.ndarray |
                           newton_iterations=iters, cutbacks=cutbacks,
                           wall_time=time.perf_counter() - t0,
                           skin_displacements=np.array(skin_u).reshape(len(recorded), -1, 3),
-                          mesh=mesh)
+                          mesh=mesh, info=_solver_info(solver))
+
+
+def _solver_info(solver: Callable) -> dict:
+    """Counters of a :class:`~.linsolve.ReusedFactorSolver` (empty for a plain function)."""
+    keys = ('factorisations', 'krylov_solves', 'krylov_iterations')
+    return {k: getattr(solver, k) for k in keys if hasattr(solver, k)}
 
 
 class _CellwiseScaled:
@@ -229,9 +233,10 @@ def scene_mesh(scene: Scene, centre_yz: Sequence[float], probe_cells: int) -> He
 
 
 def solve_scene_point(scene: Scene, point: Sequence[float], coarse: bool = False,
-                      probe_cells: int | None = None, solver: Callable | None = None
-                      ) -> LoadPathResult:
-    """Mesh and solve the load path at a surface point (x, y, z) [m] of ``scene``."""
+                      probe_cells: int | None = None, solver: Callable | None = None,
+                      max_step: float | None = None, max_cutbacks: int = 6) -> LoadPathResult:
+    """Mesh and solve the load path at a surface point (x, y, z) [m] of ``scene``
+    (load steps of at most ``max_step`` [m], default the scene's)."""
     from .geometry import indentation_direction
 
     n = probe_cells or (scene.mesh.coarse_probe_cells if coarse else scene.mesh.probe_cells)
@@ -239,7 +244,8 @@ def solve_scene_point(scene: Scene, point: Sequence[float], coarse: bool = False
     mesh = scene_mesh(scene, point[1:], n)
     mu, bulk = scene_moduli(scene, mesh)
     direction = indentation_direction(scene, point[None])[0]
-    res = solve_load_path(mesh, mu, bulk, direction, scene.depths, scene.max_step, solver=solver)
+    res = solve_load_path(mesh, mu, bulk, direction, scene.depths, max_step or scene.max_step,
+                          max_cutbacks=max_cutbacks, solver=solver)
     res.info.update(probe_cells=n, edge_refine=scene.mesh.edge_refine,
                     edge_offset=scene.mesh.edge_offset, direction=direction.tolist(),
                     footprint_radius=mesh.footprint_radius)

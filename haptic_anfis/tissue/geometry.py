@@ -28,7 +28,9 @@ def loading_points(scene: Scene) -> np.ndarray:
     palpable disc, lifted onto the surface; then, if the scene asks for it
     (``refine_spacing`` > 0), the points of a finer grid that lie within lesion radius +
     ``refine_margin`` of a lesion's (y, z), each lesion's centre (y, z) and its mirror point
-    (-y, -z) (where the lesion contrast is measured), all that are not already base points.
+    (-y, -z) (where the lesion contrast is measured), all that are not already base points;
+    then, with ``ring_diameters``, each lesion's centre, mirror point and rings
+    (:func:`_ring_points`).
 
     Returns:
         (P, 3) array of surface points (x, y, z) [m]: the base grid first, ordered by y then z (so a
@@ -50,8 +52,36 @@ def loading_points(scene: Scene) -> np.ndarray:
         dist = np.min(np.hypot(fine[:, None, 0] - yz[None, :, 0], fine[:, None, 1] - yz[None, :, 1]),
                       axis=1) if len(fine) else np.zeros(0)
         yz = np.concatenate([yz, fine[dist > 1e-9]])
+    if scene.ring_diameters and scene.tumours:
+        yz = np.concatenate([yz, _ring_points(scene, yz)])
     y, z = yz[:, 0], yz[:, 1]
     return np.column_stack([surface_height(y, z, scene.radii), y, z])
+
+
+#: ring points closer than this to an earlier point are dropped [m]
+RING_MIN_GAP = 1e-3
+
+
+def _ring_points(scene: Scene, existing: np.ndarray) -> np.ndarray:
+    """(K, 2) (y, z) lesion points in order: per lesion its centre, its mirror point (-y, -z),
+    then ``ring_points`` points on each ring of radius ``ring_diameters`` x the lesion diameter
+    (angles 2 pi j / n, offset by half a step on every other ring); points outside the palpable
+    disc or within :data:`RING_MIN_GAP` of an earlier point are left out."""
+    out = [p for p in existing]
+    for t in scene.tumours:
+        c = np.array([t.centre[1], t.centre[2]])
+        cand = [c, -c]
+        for k, rd in enumerate(scene.ring_diameters):
+            n = scene.ring_points
+            th = 2.0 * np.pi * (np.arange(n) + 0.5 * (k % 2)) / n
+            cand.extend(c + rd * 2.0 * t.radius * np.column_stack([np.cos(th), np.sin(th)]))
+        for q in cand:
+            if np.hypot(*q) > scene.palpable_radius + 1e-12:
+                continue
+            if out and np.min(np.hypot(*(np.asarray(out) - q).T)) < RING_MIN_GAP:
+                continue
+            out.append(np.asarray(q, dtype=float))
+    return np.asarray(out[len(existing):]).reshape(-1, 2)
 
 
 def surface_normals(points: np.ndarray, radii: tuple[float, float, float]) -> np.ndarray:

@@ -103,6 +103,10 @@ class Scene:
     #: within lesion radius + ``refine_margin`` [m] of each lesion's (y, z); 0 = none
     refine_spacing: float = 0.0
     refine_margin: float = 0.0
+    #: loading-point rings around each lesion: ring radii in lesion DIAMETERS (e.g. (0.5, 1, 1.5)),
+    #: ``ring_points`` points on each, plus the centre and its mirror point; () = none
+    ring_diameters: tuple[float, ...] = ()
+    ring_points: int = 0
 
     def to_dict(self) -> dict[str, Any]:
         """Plain-dict form in SI units (for provenance sidecars)."""
@@ -120,7 +124,7 @@ class Scene:
             d.pop(key)
         for t in d['tumours']:
             t.pop('kind')
-        for key in ('refine_spacing', 'refine_margin'):
+        for key in ('refine_spacing', 'refine_margin', 'ring_diameters', 'ring_points'):
             if not d[key]:
                 d.pop(key)
         return hashlib.sha256(json.dumps(d, sort_keys=True).encode()).hexdigest()
@@ -134,7 +138,7 @@ _KEYS: dict[str, set[str]] = {
                'source'},
     'probe': {'diameter_mm', 'direction'},
     'loading': {'spacing_mm', 'palpable_radius_mm', 'depths_mm', 'max_step_mm',
-                'refine_spacing_mm', 'refine_margin_mm'},
+                'refine_spacing_mm', 'refine_margin_mm', 'ring_diameters', 'ring_points'},
     'mesh': {'probe_cells', 'coarse_probe_cells', 'edge_refine', 'rim', 'edge_offset'},
 }
 
@@ -262,6 +266,18 @@ def parse_scene(data: Any, name: str = 'scene', source_sha256: str = '') -> Scen
     if refine_spacing >= spacing:
         raise SceneError(f'loading.refine_spacing_mm: {refine_spacing / MM:g} mm must be finer '
                          f'than spacing_mm ({spacing / MM:g} mm)')
+    rings_raw = load.get('ring_diameters', []) or []
+    if (not isinstance(rings_raw, (list, tuple))
+            or not all(isinstance(v, (int, float)) and not isinstance(v, bool) and 0 < v <= 3
+                       for v in rings_raw)
+            or any(np.diff(rings_raw) <= 0)):
+        raise SceneError(f'loading.ring_diameters: expected increasing ring radii in lesion '
+                         f'diameters, each in (0, 3], got {rings_raw!r}')
+    ring_points = load.get('ring_points', 8 if rings_raw else 0)
+    if isinstance(ring_points, bool) or not isinstance(ring_points, int) \
+            or not (0 <= ring_points <= 64) or (bool(rings_raw) != (ring_points > 0)):
+        raise SceneError(f'loading.ring_points: points per lesion ring, 1 to 64 with '
+                         f'ring_diameters (0 without), got {ring_points!r}')
     description = top.get('description', '')
     if not isinstance(description, str) or '\n' in description.strip():
         raise SceneError(f'{name}.description: expected one line of text, got {description!r}')
@@ -269,13 +285,16 @@ def parse_scene(data: Any, name: str = 'scene', source_sha256: str = '') -> Scen
                  tumours=tuple(tumours), probe_radius=a, direction=direction, spacing=spacing,
                  palpable_radius=palp, depths=depths, max_step=max_step, mesh=mesh,
                  source_sha256=source_sha256, description=description.strip(),
-                 refine_spacing=refine_spacing, refine_margin=refine_margin)
+                 refine_spacing=refine_spacing, refine_margin=refine_margin,
+                 ring_diameters=tuple(float(v) for v in rings_raw), ring_points=int(ring_points))
 
 
-#: Lesion limits of the scene format (issue 14): at most 3 lesions of radius 5-15 mm. Below 5 mm a
-#: lesion spans only a few FE cells (~2-3 mm under the probe) and a 16 mm probe barely feels it.
+#: Lesion limits of the scene format: at most 3 lesions of diameter 5-25 mm (issue 29: 5 mm is what
+#: clinical breast-exam training aims to find). A 5 mm lesion spans only a few FE cells (~2 mm
+#: under the probe, coarser away from it; its stiffness enters per cell by volume fraction) and a
+#: 16 mm probe may not feel it at all: the library decides palpability from the FE.
 MAX_LESIONS = 3
-LESION_RADIUS_MM = (5.0, 15.0)
+LESION_RADIUS_MM = (2.5, 12.5)
 LESION_KINDS = ('malignant', 'benign')
 
 
