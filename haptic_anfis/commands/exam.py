@@ -14,6 +14,8 @@ import json
 import math
 from pathlib import Path
 
+from ._record import add_record_arguments, prepare_record, store_report
+
 NAME = 'exam'
 HELP = 'examination mode: run a simulated trainee through an exam, or score a recorded session'
 
@@ -48,12 +50,14 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help='ROS 2 parameter file for the nodes (repeatable; the exam sets the '
                         "driver's palpation_script and force_mode itself)")
     _common(r)
+    add_record_arguments(r, run=True)
     b = sub.add_parser('report', help='score a recorded session bag')
     b.add_argument('bag', metavar='BAG')
     b.add_argument('--case', default=None, metavar='NAME',
                    help='case of the library (its surface and lesions) or a scene file (its '
                         'lesions) the session is scored against (default: default)')
     _common(b)
+    add_record_arguments(b)
 
 
 def _common(p):
@@ -86,6 +90,7 @@ def resolve_exam_case(case: str | None, need: tuple[str, ...] = ('model_path', '
 
 def run(args: argparse.Namespace) -> int:
     felt = None
+    prepare_record(args)
     if args.exam_command == 'run':
         report, session, felt = _run_sim(args)
     else:
@@ -100,9 +105,10 @@ def run(args: argparse.Namespace) -> int:
             np.save(Path(args.out) / 'trainee_felt.npy', felt)
             print(f'trainee felt   {Path(args.out) / "trainee_felt.npy"} ((n, 5): contact x, y, '
                   'z [m], depth [m], |F| [N])')
+    status = store_report(args, report)
     if args.json:
         print(json.dumps(report), flush=True)
-    return 0
+    return status
 
 
 def _run_sim(args):
@@ -160,10 +166,12 @@ def _run_sim(args):
     graph.driver.device.script = controller
     examiner = graph.extra[0]
     limit = args.duration if args.duration is not None else 300.0
+    shown = (f'{case.name if case else "default (scene " + (scene or "default") + ")"}, lesions '
+             f'from {examiner.subject.source}')
     print(f'exam: trainee {args.trainee} ({controller.search.duration:.0f} s search), case '
-          f'{case.name if case else "default (scene " + (scene or "default") + ")"}, lesions from '
-          f'{examiner.subject.source}', flush=True)
+          f'{"blind" if getattr(args, "blind", False) else shown}', flush=True)
     driver = graph.driver
+    interrupted = False   # the trainee record stores no half session
     try:
         graph.spin_for(limit, lambda: controller.finished)
         # The executor may run seconds behind the 1 kHz loop on a loaded machine: wait until the
@@ -172,6 +180,7 @@ def _run_sim(args):
         graph.spin_for(0.2)
     except KeyboardInterrupt:
         print('interrupted', flush=True)
+        interrupted = True
     finally:
         graph.shutdown()
     for n in graph.extra:
@@ -179,6 +188,7 @@ def _run_sim(args):
             r = n.summary()
             print(f"recorded       {r['written']} messages to {r['output']} (dropped {r['dropped']})")
     report = examiner.report()
+    report['interrupted'] = interrupted
     report['trainee'] = {'name': args.trainee, 'detections': [
         {'y_mm': round(d.y * 1e3, 2), 'z_mm': round(d.z * 1e3, 2),
          'excess_pct': round(100 * d.excess, 1), 'sigma': round(d.sigma, 1)}
