@@ -6,6 +6,8 @@ from __future__ import annotations
 
 import argparse
 import sys
+import time
+from datetime import datetime, timezone
 from pathlib import Path
 
 __all__ = ['add_record_arguments', 'prepare_record', 'store_report']
@@ -36,6 +38,7 @@ def prepare_record(args: argparse.Namespace) -> None:
     from ..record import check_trainee_id
     if args.trainee_id is not None:
         check_trainee_id(args.trainee_id)
+    args.record_started_utc = _utc(time.time())
     if not getattr(args, 'next', False):
         return
     if args.trainee_id is None:
@@ -47,6 +50,20 @@ def prepare_record(args: argparse.Namespace) -> None:
     args.case, args.blind = case.name, True
     print(f'record: trainee {args.trainee_id}, mastered level {m["mastered_level"] or "none"}: a '
           f'blind case of level {level}', flush=True)
+
+
+def _utc(t_s: float) -> str:
+    return datetime.fromtimestamp(t_s, timezone.utc).isoformat(timespec='seconds')
+
+
+def _bag_start_utc(bag) -> str | None:
+    """When the bag's first message was written (UTC), if its clock is wall time."""
+    from ..bag.reader import bag_info
+    try:
+        start = bag_info(bag).start_ns
+    except Exception:   # noqa: BLE001 (the report already read it; a time is optional)
+        return None
+    return _utc(start * 1e-9) if start > 1e18 else None   # after 2001: wall clock, not sim time
 
 
 def store_report(args: argparse.Namespace, report: dict) -> int:
@@ -61,8 +78,10 @@ def store_report(args: argparse.Namespace, report: dict) -> int:
         return 1
     bag = getattr(args, 'bag', None) or getattr(args, 'record', None)
     source = 'bag' if args.exam_command == 'report' else 'run'
+    started = (_bag_start_utc(args.bag) if source == 'bag' else None) or getattr(
+        args, 'record_started_utc', None)
     try:
-        sid = store_session(args.db, args.trainee_id, report, source=source,
+        sid = store_session(args.db, args.trainee_id, report, source=source, started_utc=started,
                             case_level=level_of_case_name(report.get('case')),
                             bag=str(Path(bag).resolve()) if bag else None)
     except RecordError as exc:
