@@ -104,6 +104,10 @@ def _progress(args, db) -> int:
     m = mastery(sessions, cfg)
     if args.figure:
         from ..record.figure import save_progress_figure
+        try:
+            import matplotlib  # noqa: F401
+        except ImportError:
+            raise ValueError('--figure needs matplotlib (pip install matplotlib)') from None
         deep = {100 * lv.min_deep_coverage for lv in cfg.levels.values()}
         save_progress_figure(args.id, sessions, args.figure, m,
                              pass_deep_pct=deep.pop() if len(deep) == 1 else None)
