@@ -23,8 +23,10 @@ def save_progress_figure(trainee_id: str, sessions: list[dict], path: str | os.P
     fig, axes = plt.subplots(5, 1, figsize=(8, 11), sharex=True,
                              gridspec_kw={'height_ratios': [2, 1, 1, 1, 1]})
     ax = axes[0]
-    for lev, col in _LEVEL_COLOURS.items():
-        ax.plot(x, [s['coverage_pct'][lev] for s in sessions], 'o-', color=col, label=lev)
+    for (lev, col), ms, ls in zip(_LEVEL_COLOURS.items(), (10, 7, 4), ('-', '--', '-')):
+        # equal levels overlap: decreasing markers keep all three visible
+        ax.plot(x, [s['coverage_pct'][lev] for s in sessions], 'o', ls=ls, ms=ms, color=col,
+                label=lev)
     if pass_deep_pct is not None:
         ax.axhline(pass_deep_pct, color='#08306b', ls=':', lw=1,
                    label=f'deep threshold {pass_deep_pct:.0f} %')
@@ -45,12 +47,14 @@ def save_progress_figure(trainee_id: str, sessions: list[dict], path: str | os.P
     ax.plot(none, [50] * len(none), 'x', color='grey', ls='none',
             label='no palpable lesion' if none else None)
     if none:
-        ax.legend(loc='lower right', fontsize=8)
+        ax.legend(loc='center left', fontsize=8)
     ax.set_ylim(-5, 105)
     ax.set_ylabel('sensitivity [%]\n(palpable found)')
 
     ax = axes[2]
-    ax.bar(x, [s['false_marks'] for s in sessions], color='#cb181d', width=0.6)
+    fm = [s['false_marks'] for s in sessions]
+    ax.bar(x, fm, color='#cb181d', width=0.6)
+    ax.set_ylim(0, max(fm + [1]) + 0.5)
     ax.set_ylabel('false marks')
     ax.yaxis.get_major_locator().set_params(integer=True)
 
