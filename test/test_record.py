@@ -337,7 +337,7 @@ def test_mastery_needs_n_consecutive_sessions_meeting_the_level():
 
 def test_mastery_config_from_exam_yaml(tmp_path):
     cfg = load_mastery_config()                     # the shipped config/exam.yaml
-    assert sorted(cfg.levels) == [1, 2, 3]
+    assert sorted(cfg.levels) == [1, 2, 3, 4, 5]
     from haptic_anfis.exam import load_exam_config
     load_exam_config()                              # the scorer still reads the same file
     bad = tmp_path / 'exam.yaml'
@@ -363,6 +363,14 @@ def test_next_case_climbs_a_level_after_mastery(db, rng):
         store_session(db, 'nia', fake_report(rng, deep=95, case=c.name), case_level=1)
     c2, level2, _ = next_case(db, 'nia', lib, cfg)
     assert level2 == 2 and case_level(c2) == 2
+    # a configured level above the hardest case in the library draws from the hardest
+    one = MasteryLevel(consecutive_sessions=1)
+    cfg5 = MasteryConfig({k: one for k in range(1, 6)})
+    top = max(case_level(c) for c in lib.ready())
+    for k in range(2, top + 1):
+        store_session(db, 'nia', fake_report(rng, deep=95), case_level=k)
+    c3, level3, m3 = next_case(db, 'nia', lib, cfg5)
+    assert m3['next_level'] == top + 1 and level3 == top and case_level(c3) == top
 
 
 def test_trainees_cli(db, tmp_path, rng, capsys):

@@ -20,7 +20,7 @@ __all__ = ['next_case']
 def next_case(db: str | os.PathLike | None, trainee_id: str, lib=None,
               config: MasteryConfig | None = None, exam_config: str | None = None):
     """``(case, level, mastery dict)`` for the trainee's next blind session; a trainee with no
-    record yet starts at level 1.
+    record yet starts at level 1; a next level above the hardest ready case draws from that.
 
     Raises:
         ValueError: no ready case of that level (names the level and the levels there are);
@@ -41,6 +41,8 @@ def next_case(db: str | os.PathLike | None, trainee_id: str, lib=None,
             by_level.setdefault(case_level(c), []).append(c)
         except (CaseError, ValueError):
             continue   # a broken scene is not drawn (cases list names it)
+    if by_level and level > max(by_level):   # past the hardest case there is: stay there
+        level = max(by_level)
     pool = by_level.get(level)
     if not pool:
         raise ValueError(f'--next: no ready case of level {level} for trainee {trainee_id!r} '
