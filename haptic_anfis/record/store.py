@@ -16,8 +16,9 @@ from typing import IO
 
 from .db import RecordError, connect, resolve_db_path, write
 
-__all__ = ['CSV_COLUMNS', 'UnknownTrainee', 'check_trainee_id', 'delete_trainee', 'export_csv', 'history',
-           'not_palpable_of', 'session_report', 'session_row', 'store_session', 'trainees']
+__all__ = ['CSV_COLUMNS', 'UnknownTrainee', 'check_trainee_id', 'delete_trainee', 'export_csv',
+           'history', 'not_palpable_of', 'session_report', 'session_row', 'store_session',
+           'trainees']
 
 _ID = re.compile(r'^[A-Za-z0-9][A-Za-z0-9._@+-]{0,63}$')
 
