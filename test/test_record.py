@@ -443,3 +443,13 @@ def test_exam_report_stores_the_full_report_and_a_bad_record_still_prints_it(db,
     assert 'trainee-id' in capfd.readouterr().err
     assert main(['exam', 'run', '--next']) == 1
     assert '--next needs --trainee-id' in capfd.readouterr().err
+
+
+def test_a_blind_case_goes_to_the_nodes_as_a_seed_that_draws_it():
+    from haptic_anfis.cases import library
+    from haptic_anfis.commands._record import case_parameter
+    lib = library()
+    c = lib.ready()[-1]     # one case: each draw re-reads the library (~0.1 s)
+    name, seed = case_parameter(SimpleNamespace(blind=True), c)
+    assert name == 'random_case_seed' and lib.random(seed).name == c.name
+    assert case_parameter(SimpleNamespace(), c) == ('case', c.name)

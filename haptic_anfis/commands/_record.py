@@ -10,7 +10,7 @@ import time
 from datetime import datetime, timezone
 from pathlib import Path
 
-__all__ = ['add_record_arguments', 'prepare_record', 'store_report']
+__all__ = ['add_record_arguments', 'case_parameter', 'prepare_record', 'store_report']
 
 
 def add_record_arguments(p: argparse.ArgumentParser, run: bool = False) -> None:
@@ -50,6 +50,24 @@ def prepare_record(args: argparse.Namespace) -> None:
     args.case, args.blind = case.name, True
     print(f'record: trainee {args.trainee_id}, mastered level {m["mastered_level"] or "none"}: a '
           f'blind case of level {level}', flush=True)
+
+
+def case_parameter(args: argparse.Namespace, case) -> tuple[str, str | int]:
+    """The nodes' case parameter for ``case``: ``('case', name)``, or for a blind session
+    (``--next``) ``('random_case_seed', seed)`` with a seed that draws this very case from the
+    library, so that no node logs its name (the nodes' blind mode).
+
+    Raises:
+        ValueError: no seed below 10000 draws it (the library changed under the exam).
+    """
+    if not getattr(args, 'blind', False):
+        return 'case', case.name
+    from ..cases import library
+    lib = library()
+    for seed in range(10000):
+        if lib.random(seed).name == case.name:
+            return 'random_case_seed', seed
+    raise ValueError('--next: no random-case seed draws the case chosen for the session')
 
 
 def _utc(t_s: float) -> str:

@@ -14,7 +14,7 @@ import json
 import math
 from pathlib import Path
 
-from ._record import add_record_arguments, prepare_record, store_report
+from ._record import add_record_arguments, case_parameter, prepare_record, store_report
 
 NAME = 'exam'
 HELP = 'examination mode: run a simulated trainee through an exam, or score a recorded session'
@@ -144,9 +144,10 @@ def _run_sim(args):
     overrides = {'falcon_driver': [Parameter('palpation_script', value=str(fitted)),
                                    Parameter('force_mode', value=args.force_mode)]}
     if case is not None:   # model, surface and lesions of the case in every node
+        name, value = case_parameter(args, case)   # blind (--next): a seed, no node names it
         for node in ('contact_detector', 'force_server'):
-            overrides[node] = [Parameter('case', value=case.name)]
-        ex_params.append(Parameter('case', value=case.name))
+            overrides[node] = [Parameter(name, value=value)]
+        ex_params.append(Parameter(name, value=value))
     extra = [lambda ctx: Examiner(context=ctx, parameter_overrides=ex_params),
              lambda ctx: SimTrainee(controller, context=ctx)]
     if args.record:
