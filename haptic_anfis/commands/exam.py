@@ -17,6 +17,8 @@ import math
 import time
 from pathlib import Path
 
+from ._record import add_record_arguments, case_parameter, prepare_record, store_report
+
 NAME = 'exam'
 HELP = 'examination mode: run a simulated trainee through an exam, or score a recorded session'
 
@@ -41,12 +43,14 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="the falcon_driver's force_mode for the exam (default local_model, the "
                         "driver's default)")
     _common(r)
+    add_record_arguments(r, run=True)
     b = sub.add_parser('report', help='score a recorded session bag')
     b.add_argument('bag', metavar='BAG')
     b.add_argument('--case', default=None, metavar='NAME',
                    help='case of the library (its surface and lesions) or a scene file (its '
                         'lesions) the session is scored against (default: default)')
     _common(b)
+    add_record_arguments(b)
 
 
 def _common(p):
@@ -79,6 +83,7 @@ def resolve_exam_case(case: str | None, need: tuple[str, ...] = ('model_path', '
 
 def run(args: argparse.Namespace) -> int:
     felt = None
+    prepare_record(args)
     if args.exam_command == 'run':
         report, session, felt = _run_sim(args)
     else:
@@ -96,9 +101,10 @@ def run(args: argparse.Namespace) -> int:
             np.save(Path(args.out) / 'trainee_felt.npy', felt)
             print(f'trainee felt   {Path(args.out) / "trainee_felt.npy"} ((n, 5): contact x, y, '
                   'z [m], depth [m], |F| [N])')
+    status = store_report(args, report)
     if args.json:
         print(json.dumps(report), flush=True)
-    return 0
+    return status
 
 
 #: the nodes of an exam session (the simulated trainee is the driver's simulated hand)
@@ -116,7 +122,12 @@ def _run_sim(args):
         raise ValueError(f'--speed: expected > 0 m/s, got {args.speed}')
     from ..tissue.scene import load_scene
     case, scene = resolve_exam_case(args.case or None)
-    spec = spec_from_args(args, NAME, nodes=EXAM_NODES, case=case.name if case else '',
+    # the case for every node: its name, or for a blind session (--next) a seed that draws it
+    # (no node then logs its name)
+    case_name, case_value = case_parameter(args, case) if case is not None else (None, None)
+    blind = case_name == 'random_case_seed'
+    spec = spec_from_args(args, NAME, nodes=EXAM_NODES, case=case.name if case and not blind
+                          else '', random_case=blind, seed=case_value if blind else None,
                           scene=scene or '')
     spec.check()
     script = trainee_path(args.trainee)
@@ -134,8 +145,8 @@ def _run_sim(args):
                  Parameter('exam_config', value=args.exam_config or '')]
     overrides = {'falcon_driver': [Parameter('palpation_script', value=str(fitted)),
                                    Parameter('force_mode', value=args.force_mode)]}
-    if case is not None:   # the case's lesions for the examiner (the loop's nodes: the spec)
-        ex_params.append(Parameter('case', value=case.name))
+    if case_name is not None:
+        ex_params.append(Parameter(case_name, value=case_value))
     # --- the examiner: in the loop's process (--in-process) or a process of its own (issue 26.4)
     report_dir, side_nodes = None, None
     if args.in_process:
@@ -144,8 +155,9 @@ def _run_sim(args):
         from ..nodes.exam_side import CoverageWatch, examiner_arguments
         report_dir = tempfile.TemporaryDirectory(prefix='haptic-anfis-examiner-')
         side_nodes = {'examiner': examiner_arguments(
-            scene or '', args.exam_config or '', case.name if case else None, report_dir.name,
-            spec.params_arguments()[1::2])}
+            scene or '', args.exam_config or '', None, report_dir.name,
+            spec.params_arguments()[1::2])
+            + (['-p', f'{case_name}:={case_value}'] if case_name else [])}
         extra = [lambda ctx: CoverageWatch(context=ctx)]
     extra.append(lambda ctx: SimTrainee(controller, context=ctx))
     # the examiner scores every sample: not a view to starve (nice 0)
@@ -169,9 +181,11 @@ def _run_sim(args):
         except BaseException:
             session.stop()
             raise
+    shown = (f'{case.name if case else "default (scene " + (scene or "default") + ")"}, examiner '
+             + (f'in pid {side.pids["examiner"]}' if side else 'in this process'))
     print(f'exam: trainee {args.trainee} ({controller.search.duration:.0f} s search), case '
-          f'{case.name if case else "default (scene " + (scene or "default") + ")"}, examiner '
-          + (f'in pid {side.pids["examiner"]}' if side else 'in this process'), flush=True)
+          f'{"blind" if getattr(args, "blind", False) else shown}', flush=True)
+    interrupted = False   # the trainee record stores no half session
     t_start = time.monotonic()
     try:
         graph.spin_for(limit, lambda: controller.finished)
@@ -184,6 +198,7 @@ def _run_sim(args):
             graph.spin_for(MARK_DRAIN_S, lambda: examiner.samples >= graph.contact.n_poses)
     except KeyboardInterrupt:
         print('interrupted', flush=True)
+        interrupted = True
     finally:
         session.stop()   # the device to zero force; SIGINT: the examiner writes its report
     session.print_recorded()
@@ -195,6 +210,7 @@ def _run_sim(args):
         heat_maps = len(examiner.times)
         report['heat_map_hz'] = round(examiner.rate(t_start), 2)
         report['examiner_lost_contacts'] = max(graph.contact.n_poses - examiner.samples, 0)
+    report['interrupted'] = interrupted
     report['trainee'] = {'name': args.trainee, 'detections': [
         {'y_mm': round(d.y * 1e3, 2), 'z_mm': round(d.z * 1e3, 2),
          'excess_pct': round(100 * d.excess, 1), 'sigma': round(d.sigma, 1)}

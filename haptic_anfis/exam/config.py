@@ -64,6 +64,7 @@ def load_exam_config(path: str | os.PathLike | None = None) -> ExamConfig:
         if not isinstance(doc, dict):
             raise ValueError('expected a mapping')
         kw = dict(doc)
+        kw.pop('mastery', None)   # the trainee record's (haptic_anfis.record.mastery)
         levels = kw.pop('levels', {}) or {}
         unknown = set(levels) - set(LEVELS)
         if unknown:

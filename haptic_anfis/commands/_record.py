@@ -1,0 +1,114 @@
+"""The trainee record's hooks in ``haptic-anfis exam`` (kept here so exam.py gains three calls):
+``--trainee-id`` / ``--db`` (and ``--next`` on ``exam run``), the blind draw of the next case,
+and storing the scored report. A record that cannot be written costs one line on stderr naming
+the file and exit status 1; the exam's report is printed all the same."""
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from datetime import datetime, timezone
+from pathlib import Path
+
+__all__ = ['add_record_arguments', 'case_parameter', 'prepare_record', 'store_report']
+
+
+def add_record_arguments(p: argparse.ArgumentParser, run: bool = False) -> None:
+    g = p.add_argument_group('trainee record (haptic-anfis trainees)')
+    g.add_argument('--trainee-id', default=None, metavar='ID',
+                   help='store the scored session in the trainee record under this id (a '
+                        'pseudonym; created on its first session)')
+    g.add_argument('--db', default=None, metavar='PATH',
+                   help='the trainee record file (default $HAPTIC_ANFIS_DB, else '
+                        '$XDG_DATA_HOME/haptic_anfis/trainees.sqlite)')
+    if run:
+        g.add_argument('--next', action='store_true',
+                       help="with --trainee-id: a blind case of the level after the trainee's "
+                            'mastered one (instead of --case)')
+
+
+def prepare_record(args: argparse.Namespace) -> None:
+    """Check ``--trainee-id`` before the exam; for ``--next``, choose the case (``args.case``)
+    and mark the session blind (``args.blind``: the case is named only in the report).
+
+    Raises:
+        ValueError: a bad id, ``--next`` without ``--trainee-id`` or with ``--case``, no case of
+        the next level, an unusable record file (for ``--next``, which reads it).
+    """
+    from ..record import check_trainee_id
+    if args.trainee_id is not None:
+        check_trainee_id(args.trainee_id)
+    args.record_started_utc = _utc(time.time())
+    if not getattr(args, 'next', False):
+        return
+    if args.trainee_id is None:
+        raise ValueError('--next needs --trainee-id ID (the record says which level is next)')
+    if args.case:
+        raise ValueError(f'--next draws the case: give it or --case {args.case}, not both')
+    from ..record.draw import next_case
+    case, level, m = next_case(args.db, args.trainee_id, exam_config=args.exam_config)
+    args.case, args.blind = case.name, True
+    print(f'record: trainee {args.trainee_id}, mastered level {m["mastered_level"] or "none"}: a '
+          f'blind case of level {level}', flush=True)
+
+
+def case_parameter(args: argparse.Namespace, case) -> tuple[str, str | int]:
+    """The nodes' case parameter for ``case``: ``('case', name)``, or for a blind session
+    (``--next``) ``('random_case_seed', seed)`` with a seed that draws this very case from the
+    library, so that no node logs its name (the nodes' blind mode).
+
+    Raises:
+        ValueError: no seed below 10000 draws it (the library changed under the exam).
+    """
+    if not getattr(args, 'blind', False):
+        return 'case', case.name
+    from ..cases import library
+    lib = library()
+    for seed in range(10000):
+        if lib.random(seed).name == case.name:
+            return 'random_case_seed', seed
+    raise ValueError('--next: no random-case seed draws the case chosen for the session')
+
+
+def _utc(t_s: float) -> str:
+    return datetime.fromtimestamp(t_s, timezone.utc).isoformat(timespec='seconds')
+
+
+def _bag_start_utc(bag) -> str | None:
+    """When the bag's first message was written (UTC), if its clock is wall time."""
+    from ..bag.reader import bag_info
+    try:
+        start = bag_info(bag).start_ns
+    except Exception:   # noqa: BLE001 (the report already read it; a time is optional)
+        return None
+    return _utc(start * 1e-9) if start > 1e18 else None   # after 2001: wall clock, not sim time
+
+
+def store_report(args: argparse.Namespace, report: dict) -> int:
+    """Store ``report`` for ``--trainee-id`` (nothing without it, nothing for an interrupted
+    exam); returns the exit status: 0, or 1 after one line on stderr naming the record file."""
+    if not getattr(args, 'trainee_id', None):
+        return 0
+    from ..record import RecordError, level_of_case_name, resolve_db_path, store_session
+    if report.get('interrupted'):
+        print(f'record: the exam was interrupted: nothing stored for trainee {args.trainee_id}',
+              file=sys.stderr)
+        return 1
+    bag = getattr(args, 'bag', None) or getattr(args, 'record', None)
+    source = 'bag' if args.exam_command == 'report' else 'run'
+    started = (_bag_start_utc(args.bag) if source == 'bag' else None) or getattr(
+        args, 'record_started_utc', None)
+    try:
+        sid = store_session(args.db, args.trainee_id, report, source=source, started_utc=started,
+                            case_level=level_of_case_name(report.get('case')),
+                            bag=str(Path(bag).resolve()) if bag else None)
+    except RecordError as exc:
+        print(f'record: {exc}', file=sys.stderr)
+        return 1
+    except OSError as exc:   # e.g. the data directory cannot be created
+        print(f'record: trainee record {str(resolve_db_path(args.db))!r}: {exc}',
+              file=sys.stderr)
+        return 1
+    print(f'record         session {sid} of trainee {args.trainee_id} stored in '
+          f'{resolve_db_path(args.db)}', flush=True)
+    return 0

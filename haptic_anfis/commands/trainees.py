@@ -1,0 +1,139 @@
+"""``haptic-anfis trainees``: the trainee record (sessions stored by ``exam run|report
+--trainee-id ID``).
+
+    haptic-anfis trainees list
+    haptic-anfis trainees show ID
+    haptic-anfis trainees progress ID [--json] [--figure PNG]
+    haptic-anfis trainees export ID --csv [-o FILE]
+    haptic-anfis trainees delete ID
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+
+NAME = 'trainees'
+HELP = 'the trainee record: list trainees, show sessions, progress and mastery, export, delete'
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument('--db', default=None, metavar='PATH',
+                   help='the record file (default $HAPTIC_ANFIS_DB, else '
+                        '$XDG_DATA_HOME/haptic_anfis/trainees.sqlite)')
+    sub = p.add_subparsers(dest='action', metavar='ACTION', required=True)
+    sub.add_parser('list', help='one row per trainee: sessions, last session, last score')
+    s = sub.add_parser('show', help="a trainee's sessions, one row each, and mastery")
+    s.add_argument('id', metavar='ID')
+    g = sub.add_parser('progress', help='the learning curve: table, --json, --figure PNG')
+    g.add_argument('id', metavar='ID')
+    g.add_argument('--json', action='store_true', help='one JSON object (sessions + mastery)')
+    g.add_argument('--figure', metavar='PNG', default=None, help='write the learning curve')
+    g.add_argument('--exam-config', metavar='YAML', default=None,
+                   help='mastery thresholds (default config/exam.yaml)')
+    e = sub.add_parser('export', help="a trainee's sessions as CSV")
+    e.add_argument('id', metavar='ID')
+    e.add_argument('--csv', action='store_true', required=True, help='CSV (the one format)')
+    e.add_argument('-o', '--output', metavar='FILE', default=None, help='file (default stdout)')
+    d = sub.add_parser('delete', help='remove a trainee and every session of it (privacy)')
+    d.add_argument('id', metavar='ID')
+    for q in (p, s, g, e, d):   # --db also after the action
+        if q is not p:
+            q.add_argument('--db', default=argparse.SUPPRESS, metavar='PATH',
+                           help=argparse.SUPPRESS)
+
+
+def run(args: argparse.Namespace) -> int:
+    from ..record import resolve_db_path
+    return {'list': _list, 'show': _show, 'progress': _progress, 'export': _export,
+            'delete': _delete}[args.action](args, resolve_db_path(args.db))
+
+
+def _list(args, db) -> int:
+    from ..record import trainees
+    rows = trainees(db)
+    if not rows:
+        print(f'no trainee in {db}')
+        return 0
+    print(f'{"trainee":<24} {"sessions":>8}  {"last session (UTC)":<26} {"score":>6}  verdict')
+    for r in rows:
+        score = '-' if r['last_score'] is None else f"{r['last_score']:.1f}"
+        print(f"{r['id']:<24} {r['sessions']:>8}  {r['last_utc'] or '-':<26} {score:>6}  "
+              f"{r['last_verdict'] or '-'}")
+    return 0
+
+
+def _table(sessions: list[dict]) -> None:
+    print(f'{"#":>4} {"started (UTC)":<25} {"case":<22} {"lvl":>3} {"light":>6} {"medium":>6} '
+          f'{"deep":>6} {"pattern":<15} {"hit":>3} {"miss":>4} {"false":>5} {"sens":>5} '
+          f'{"score":>6} {"verdict":<7} {"time s":>7}')
+    for s in sessions:
+        c = s['coverage_pct']
+        sens = '-' if s['sensitivity'] is None else f"{100 * s['sensitivity']:.0f}%"
+        case = (s['case'] or '-')[-22:]
+        print(f"{s['session']:>4} {s['started_utc']:<25} {case:<22} "
+              f"{s['case_level'] if s['case_level'] is not None else '-':>3} {c['light']:>6.1f} "
+              f"{c['medium']:>6.1f} {c['deep']:>6.1f} {s['pattern'] or '-':<15} {s['hits']:>3} "
+              f"{s['misses']:>4} {s['false_marks']:>5} {sens:>5} {s['score']:>6.1f} "
+              f"{s['verdict']:<7} {s['duration_s']:>7.1f}")
+
+
+def _mastery_lines(m: dict) -> None:
+    print(f"mastered level {m['mastered_level'] or 'none'}; next level {m['next_level']}")
+    for L, v in m['levels'].items():
+        print(f"  level {L}: {v['sessions']} session(s), {v['met']} met the thresholds, "
+              f"{v['best_streak']}/{v['needed']} in a row{' - mastered' if v['mastered'] else ''}")
+
+
+def _show(args, db) -> int:
+    from ..record import history, load_mastery_config, mastery
+    sessions = history(db, args.id)
+    print(f'trainee {args.id}: {len(sessions)} session(s) in {db}')
+    _table(sessions)
+    _mastery_lines(mastery(sessions, load_mastery_config()))
+    for s in sessions:
+        if s['bag']:
+            print(f"  session {s['session']}: bag {s['bag']}")
+    return 0
+
+
+def _progress(args, db) -> int:
+    from ..record import history, load_mastery_config, mastery
+    cfg = load_mastery_config(args.exam_config)
+    sessions = history(db, args.id)
+    m = mastery(sessions, cfg)
+    if args.figure:
+        from ..record.figure import save_progress_figure
+        try:
+            import matplotlib  # noqa: F401
+        except ImportError:
+            raise ValueError('--figure needs matplotlib (pip install matplotlib)') from None
+        deep = {100 * lv.min_deep_coverage for lv in cfg.levels.values()}
+        save_progress_figure(args.id, sessions, args.figure, m,
+                             pass_deep_pct=deep.pop() if len(deep) == 1 else None)
+    if args.json:
+        print(json.dumps({'trainee': args.id, 'sessions': sessions, 'mastery': m}))
+        return 0
+    _table(sessions)
+    _mastery_lines(m)
+    if args.figure:
+        print(f'figure {args.figure}')
+    return 0
+
+
+def _export(args, db) -> int:
+    from ..record import export_csv
+    if args.output:
+        with open(args.output, 'w', newline='') as f:
+            n = export_csv(db, args.id, f)
+        print(f'{n} session(s) of {args.id} written to {args.output}', file=sys.stderr)
+    else:
+        export_csv(db, args.id, sys.stdout)
+    return 0
+
+
+def _delete(args, db) -> int:
+    from ..record import delete_trainee
+    n = delete_trainee(db, args.id)
+    print(f'trainee {args.id} deleted from {db}: {n} session(s) removed')
+    return 0

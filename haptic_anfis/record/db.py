@@ -1,0 +1,241 @@
+"""The trainee record's SQLite file: where it lives, opening it, its schema and migrations.
+
+One file (default ``$XDG_DATA_HOME/haptic_anfis/trainees.sqlite``, else
+``~/.local/share/haptic_anfis/trainees.sqlite``; the environment variable ``HAPTIC_ANFIS_DB`` or
+``--db PATH`` chooses another). Opened in WAL mode (readers never block the one writer) with a
+busy timeout, every write in ONE ``BEGIN IMMEDIATE`` transaction (it takes the write lock first,
+so the busy handler applies and a reader-turned-writer never dead-locks), retried while the file
+is busy. ``PRAGMA user_version`` is the schema version: an older file is migrated in place, a
+newer one refused. ``PRAGMA application_id`` marks the file as ours.
+
+Every failure (not a database, corrupt, locked past the retries, disk full, newer schema) is a
+:class:`RecordError` whose message is one line naming the file. Pure Python (``sqlite3``), no ROS.
+"""
+from __future__ import annotations
+
+import os
+import sqlite3
+import time
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from pathlib import Path
+from typing import TypeVar
+
+__all__ = ['APPLICATION_ID', 'DB_ENV', 'RecordError', 'SCHEMA_VERSION', 'connect',
+           'default_db_path', 'migrate', 'resolve_db_path', 'write']
+
+#: the environment variable naming the record file
+DB_ENV = 'HAPTIC_ANFIS_DB'
+#: ``PRAGMA application_id`` of a trainee record ('HAnR')
+APPLICATION_ID = 0x48416E52
+#: [s] SQLite's own wait for a lock, per attempt
+BUSY_TIMEOUT_S = 5.0
+#: attempts of one transaction while the file stays busy (``BUSY_TIMEOUT_S`` each)
+RETRIES = 6
+
+T = TypeVar('T')
+
+
+class RecordError(ValueError):
+    """The trainee record cannot be used: one line naming the file and what is wrong."""
+
+
+# --- schema -------------------------------------------------------------------------------------
+# MIGRATIONS[k] takes a file from user_version k to k + 1. Never edit a released step: add one.
+_V1 = """
+CREATE TABLE trainees (
+    id          TEXT PRIMARY KEY,
+    created_utc TEXT NOT NULL
+);
+CREATE TABLE sessions (
+    id             INTEGER PRIMARY KEY AUTOINCREMENT,
+    trainee_id     TEXT NOT NULL REFERENCES trainees(id) ON DELETE CASCADE,
+    started_utc    TEXT NOT NULL,
+    stored_utc     TEXT NOT NULL,
+    source         TEXT NOT NULL,
+    case_name      TEXT,
+    case_level     INTEGER,
+    bag_path       TEXT,
+    coverage_light REAL NOT NULL,
+    coverage_medium REAL NOT NULL,
+    coverage_deep  REAL NOT NULL,
+    pattern        TEXT,
+    lesions        INTEGER NOT NULL,
+    hits           INTEGER NOT NULL,
+    misses         INTEGER NOT NULL,
+    false_marks    INTEGER NOT NULL,
+    score          REAL NOT NULL,
+    verdict        TEXT NOT NULL,
+    duration_s     REAL NOT NULL,
+    contact_s      REAL,
+    report_json    TEXT NOT NULL
+);
+CREATE INDEX sessions_by_trainee ON sessions(trainee_id, id);
+"""
+# v2: lesions the FE grades not palpable (the graded library, issue 29): a miss of one is not held
+# against the trainee; and the misses that count.
+_V2 = """
+ALTER TABLE sessions ADD COLUMN not_palpable TEXT NOT NULL DEFAULT '[]';
+ALTER TABLE sessions ADD COLUMN palpable_missed INTEGER;
+UPDATE sessions SET palpable_missed = misses;
+"""
+MIGRATIONS: tuple[str, ...] = (_V1, _V2)
+SCHEMA_VERSION = len(MIGRATIONS)
+
+
+def default_db_path() -> Path:
+    """``$XDG_DATA_HOME/haptic_anfis/trainees.sqlite`` (``~/.local/share`` when unset)."""
+    base = os.environ.get('XDG_DATA_HOME') or str(Path.home() / '.local' / 'share')
+    return Path(base) / 'haptic_anfis' / 'trainees.sqlite'
+
+
+def resolve_db_path(db: str | os.PathLike | None = None) -> Path:
+    """``db`` if given, else ``$HAPTIC_ANFIS_DB``, else :func:`default_db_path`."""
+    if db:
+        return Path(db)
+    env = os.environ.get(DB_ENV)
+    return Path(env) if env else default_db_path()
+
+
+def _fail(path: Path, exc: BaseException) -> RecordError:
+    msg = str(exc)
+    low = msg.lower()
+    if 'locked' in low or 'busy' in low:
+        why = (f'locked by another process (still busy after {RETRIES} tries of '
+               f'{BUSY_TIMEOUT_S:g} s)')
+    elif 'full' in low:
+        why = f'disk full, nothing stored ({msg})'
+    elif 'not a database' in low or 'malformed' in low or 'corrupt' in low:
+        why = f'not a readable SQLite trainee record ({msg})'
+    elif 'readonly' in low or 'unable to open' in low or 'permission' in low:
+        why = f'cannot be written ({msg})'
+    else:
+        why = msg
+    return RecordError(f'trainee record {str(path)!r}: {why}')
+
+
+def _busy(exc: sqlite3.Error) -> bool:
+    return isinstance(exc, sqlite3.OperationalError) and (
+        'locked' in str(exc).lower() or 'busy' in str(exc).lower())
+
+
+def _retrying(path: Path, fn: Callable[[], T]) -> T:
+    """``fn()``, again while SQLite says the file is busy; any sqlite/OS error -> RecordError."""
+    for attempt in range(RETRIES):
+        try:
+            return fn()
+        except sqlite3.Error as exc:
+            if _busy(exc) and attempt < RETRIES - 1:
+                time.sleep(0.05 * (attempt + 1))
+                continue
+            raise _fail(path, exc) from None
+        except OSError as exc:
+            raise _fail(path, exc) from None
+    raise AssertionError('unreachable')
+
+
+def _open(path: Path, create: bool) -> sqlite3.Connection:
+    if not create and not path.is_file():
+        raise RecordError(f'trainee record {str(path)!r}: no such file (nothing stored yet)')
+    if create:
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise _fail(path, exc) from None
+    # isolation_level=None: we issue BEGIN / COMMIT ourselves (one transaction per session)
+    conn = sqlite3.connect(str(path), timeout=BUSY_TIMEOUT_S, isolation_level=None)
+    try:
+        conn.execute(f'PRAGMA busy_timeout = {int(BUSY_TIMEOUT_S * 1000)}')
+        if conn.execute('PRAGMA journal_mode').fetchone()[0].lower() != 'wal':
+            conn.execute('PRAGMA journal_mode = WAL')
+        conn.execute('PRAGMA foreign_keys = ON')
+        conn.execute('PRAGMA synchronous = NORMAL')   # WAL: durable at checkpoints, never corrupt
+        _check_and_migrate(path, conn)
+    except BaseException:
+        conn.close()
+        raise
+    return conn
+
+
+def _check_and_migrate(path: Path, conn: sqlite3.Connection) -> None:
+    app = conn.execute('PRAGMA application_id').fetchone()[0]
+    version = conn.execute('PRAGMA user_version').fetchone()[0]
+    if version > SCHEMA_VERSION:
+        raise RecordError(f'trainee record {str(path)!r}: schema version {version} is newer than '
+                          f'this haptic_anfis understands ({SCHEMA_VERSION}); upgrade haptic_anfis '
+                          'to use it (the file is left untouched)')
+    if app not in (0, APPLICATION_ID):
+        raise RecordError(f'trainee record {str(path)!r}: not a trainee record (application_id '
+                          f'{app:#x}, expected {APPLICATION_ID:#x})')
+    if version < SCHEMA_VERSION:
+        migrate(conn, path=path)
+
+
+def migrate(conn: sqlite3.Connection, to: int = SCHEMA_VERSION,
+            path: Path | None = None) -> int:
+    """Bring the file up to schema version ``to`` in one transaction; returns the old version.
+
+    Raises:
+        RecordError: a version-0 file that already has tables (someone else's database).
+    """
+    conn.execute('BEGIN IMMEDIATE')
+    try:
+        old = conn.execute('PRAGMA user_version').fetchone()[0]   # again, under the write lock
+        if old == 0:
+            tables = conn.execute("SELECT count(*) FROM sqlite_master WHERE type = 'table'"
+                                  ).fetchone()[0]
+            if tables:
+                raise RecordError(f'trainee record {str(path)!r}: not a trainee record (it has '
+                                  f'{tables} table(s) but no schema version)')
+        for step in MIGRATIONS[old:to]:
+            for stmt in filter(str.strip, step.split(';')):
+                conn.execute(stmt)
+        conn.execute(f'PRAGMA user_version = {int(max(old, to))}')
+        conn.execute(f'PRAGMA application_id = {APPLICATION_ID}')
+        conn.execute('COMMIT')
+        return old
+    except BaseException:
+        conn.execute('ROLLBACK')
+        raise
+
+
+@contextmanager
+def connect(db: str | os.PathLike | None = None, create: bool = False
+            ) -> Iterator[sqlite3.Connection]:
+    """An open, migrated connection to the record (``db`` as in :func:`resolve_db_path`).
+
+    ``create=False`` (readers): a missing file is a RecordError, nothing is created.
+
+    Raises:
+        RecordError: missing / corrupt / locked / newer-schema / full file, naming it.
+    """
+    path = resolve_db_path(db)
+    conn = _retrying(path, lambda: _open(path, create))
+    try:
+        yield conn
+    except sqlite3.Error as exc:
+        raise _fail(path, exc) from None
+    finally:
+        conn.close()
+
+
+def write(db: str | os.PathLike | None, fn: Callable[[sqlite3.Connection], T]) -> T:
+    """Run ``fn(conn)`` in ONE ``BEGIN IMMEDIATE`` transaction on the record (created if
+    missing), committed whole or not at all; retried while another process holds the lock."""
+    path = resolve_db_path(db)
+
+    def attempt():
+        conn = _open(path, create=True)
+        try:
+            conn.execute('BEGIN IMMEDIATE')
+            try:
+                out = fn(conn)
+                conn.execute('COMMIT')
+            except BaseException:
+                if conn.in_transaction:
+                    conn.execute('ROLLBACK')
+                raise
+            return out
+        finally:
+            conn.close()
+    return _retrying(path, attempt)

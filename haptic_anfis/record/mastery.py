@@ -1,0 +1,136 @@
+"""Mastery levels: which case level a trainee has mastered, and which level comes next.
+
+The thresholds live in ``config/exam.yaml`` under ``mastery`` (documented there). A session
+*meets* level L when its case is of level L and its deep coverage, palpable lesions found and
+false marks meet L's thresholds; level L is *mastered* once ``consecutive_sessions`` of the
+trainee's level-L sessions in a row meet it (a pass standard with retry: a later weak session
+does not take a mastered level away). The trainee's mastered level is the highest L with every
+level 1..L mastered; the next level is one above (the top level stays the top). Pure, no ROS.
+"""
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass, fields
+from pathlib import Path
+
+import yaml
+
+__all__ = ['MasteryConfig', 'MasteryLevel', 'load_mastery_config', 'mastery', 'meets']
+
+
+@dataclass(frozen=True)
+class MasteryLevel:
+    """Thresholds of one case level: deep coverage (fraction of the region, 0-1), whether every
+    palpable lesion must be found, the most false marks allowed, sessions in a row needed."""
+    min_deep_coverage: float = 0.9
+    all_palpable_found: bool = True
+    max_false_marks: int = 1
+    consecutive_sessions: int = 3
+
+    def __post_init__(self):
+        c = self.min_deep_coverage
+        if isinstance(c, bool) or not isinstance(c, (int, float)) or not (
+                math.isfinite(c) and 0 <= c <= 1):
+            raise ValueError(f'min_deep_coverage: expected a fraction 0-1, got {c!r}')
+        if not isinstance(self.all_palpable_found, bool):
+            raise ValueError(f'all_palpable_found: expected true/false, got '
+                             f'{self.all_palpable_found!r}')
+        for name, low in (('max_false_marks', 0), ('consecutive_sessions', 1)):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int) or v < low:
+                raise ValueError(f'{name}: expected an integer >= {low}, got {v!r}')
+
+
+@dataclass(frozen=True)
+class MasteryConfig:
+    """Thresholds per case level (1, 2, ... contiguous)."""
+    levels: dict[int, MasteryLevel]
+
+    @property
+    def top(self) -> int:
+        return max(self.levels)
+
+
+#: used when config/exam.yaml has no ``mastery`` section (the same values as the shipped file)
+DEFAULT = MasteryConfig({1: MasteryLevel(), 2: MasteryLevel(), 3: MasteryLevel(max_false_marks=0)})
+
+
+def load_mastery_config(path: str | os.PathLike | None = None) -> MasteryConfig:
+    """The ``mastery`` section of ``path`` (default ``config/exam.yaml``); :data:`DEFAULT` when
+    the file or the section is absent.
+
+    Raises:
+        ValueError: naming the file and the bad key.
+    """
+    from ..exam.config import DEFAULT_CONFIG
+    path = Path(path) if path else DEFAULT_CONFIG
+    if not path.is_file():
+        if path == DEFAULT_CONFIG:
+            return DEFAULT
+        raise ValueError(f'exam config {str(path)!r}: no such file')
+    try:
+        doc = yaml.safe_load(path.read_text()) or {}
+        sec = doc.get('mastery') if isinstance(doc, dict) else None
+        if sec is None:
+            return DEFAULT
+        if not isinstance(sec, dict):
+            raise ValueError('mastery: expected a mapping')
+        common = dict(sec)
+        levels = common.pop('levels', None)
+        known = {f.name for f in fields(MasteryLevel)}
+        bad = set(common) - known
+        if bad:
+            raise ValueError(f'mastery: unknown key(s) {sorted(bad)}')
+        if not isinstance(levels, dict) or not levels:
+            raise ValueError('mastery.levels: expected a mapping level -> thresholds')
+        out = {}
+        for k, v in levels.items():
+            if isinstance(k, bool) or not isinstance(k, int) or k < 1:
+                raise ValueError(f'mastery.levels: level {k!r}: expected an integer >= 1')
+            v = v or {}
+            if not isinstance(v, dict) or set(v) - known:
+                raise ValueError(f'mastery.levels.{k}: expected keys among {sorted(known)}')
+            try:
+                out[k] = MasteryLevel(**{**common, **v})
+            except ValueError as exc:
+                raise ValueError(f'mastery.levels.{k}.{exc}') from None
+        if sorted(out) != list(range(1, len(out) + 1)):
+            raise ValueError(f'mastery.levels: expected levels 1..N, got {sorted(out)}')
+        return MasteryConfig(out)
+    except (OSError, yaml.YAMLError, ValueError, TypeError) as exc:
+        raise ValueError(f'exam config {str(path)!r}: {exc}') from None
+
+
+def meets(session: dict, level: MasteryLevel) -> bool:
+    """Whether one session (a :func:`~haptic_anfis.record.history` dict) meets ``level``."""
+    return (session['coverage_pct']['deep'] >= 100 * level.min_deep_coverage - 1e-9
+            and (not level.all_palpable_found or session['palpable_missed'] == 0)
+            and session['false_marks'] <= level.max_false_marks)
+
+
+def mastery(sessions: list[dict], config: MasteryConfig = DEFAULT) -> dict:
+    """Mastery of a trainee from its sessions (oldest first, :func:`history` dicts).
+
+    Returns ``{'mastered_level': int (0 = none), 'next_level': int, 'levels': {L: {'sessions',
+    'met', 'streak' (current run), 'best_streak', 'needed', 'mastered'}}}``; sessions with no
+    case level are not counted.
+    """
+    per = {}
+    for L, th in sorted(config.levels.items()):
+        mine = [s for s in sessions if s.get('case_level') == L]
+        streak = best = met = 0
+        for s in mine:
+            ok = meets(s, th)
+            met += ok
+            streak = streak + 1 if ok else 0
+            best = max(best, streak)
+        per[L] = {'sessions': len(mine), 'met': met, 'streak': streak, 'best_streak': best,
+                  'needed': th.consecutive_sessions, 'mastered': best >= th.consecutive_sessions}
+    mastered = 0
+    for L in sorted(per):
+        if not per[L]['mastered']:
+            break
+        mastered = L
+    return {'mastered_level': mastered, 'next_level': min(mastered + 1, config.top),
+            'levels': per}

@@ -1,0 +1,239 @@
+"""Store scored exam sessions in the trainee record and read them back.
+
+A session row keeps the headline figures as columns (for queries, progress and mastery) and the
+full exam report as JSON (``report_json``: coverage per level, pattern, marks, lesions, feedback,
+notes...). Each :func:`store_session` is ONE transaction: the trainee row (created on its first
+session) and the session row are committed together or not at all. Pure Python, no ROS.
+"""
+from __future__ import annotations
+
+import csv
+import json
+import os
+import re
+from datetime import datetime, timezone
+from typing import IO
+
+from .db import RecordError, connect, resolve_db_path, write
+
+__all__ = ['CSV_COLUMNS', 'UnknownTrainee', 'check_trainee_id', 'delete_trainee', 'export_csv',
+           'history', 'not_palpable_of', 'session_report', 'session_row', 'store_session',
+           'trainees']
+
+_ID = re.compile(r'^[A-Za-z0-9][A-Za-z0-9._@+-]{0,63}$')
+
+#: the columns of ``trainees export --csv`` (one row per session, oldest first)
+CSV_COLUMNS = ('session', 'started_utc', 'source', 'case', 'case_level', 'coverage_light_pct',
+               'coverage_medium_pct', 'coverage_deep_pct', 'pattern', 'lesions', 'hits',
+               'misses', 'palpable_missed', 'not_palpable', 'false_marks', 'sensitivity',
+               'score', 'verdict', 'duration_s', 'contact_s', 'bag')
+
+
+class UnknownTrainee(RecordError):
+    """The trainee id has no row in the record (the message names the file)."""
+
+
+def check_trainee_id(trainee_id: str) -> str:
+    """``trainee_id`` if it is 1-64 letters, digits or ``._@+-`` (starting with a letter or
+    digit); else ValueError naming it. Use a pseudonym: the record needs no real name."""
+    if not isinstance(trainee_id, str) or not _ID.match(trainee_id):
+        raise ValueError(f'--trainee-id {trainee_id!r}: expected 1-64 letters, digits or ._@+- '
+                         '(starting with a letter or digit)')
+    return trainee_id
+
+
+def _now() -> str:
+    return datetime.now(timezone.utc).isoformat(timespec='seconds')
+
+
+def not_palpable_of(report: dict) -> list[str]:
+    """Names of the lesions the report says cannot be felt: ``report['not_palpable']`` (names or
+    dicts with ``name``) when the exam gives it, else lesions with ``palpable: false``; [] when
+    the exam does not grade palpability."""
+    given = report.get('not_palpable')
+    if given is None:
+        return [str(les.get('name')) for les in report.get('lesions', ())
+                if les.get('palpable') is False]
+    return [str(x.get('name') if isinstance(x, dict) else x) for x in given]
+
+
+def session_row(report: dict, *, source: str, case_level: int | None = None,
+                bag: str | None = None, started_utc: str | None = None) -> dict:
+    """The column values of one session from an exam ``report`` (``ExamSession.report()`` plus
+    ``case`` / ``bag``). Pure.
+
+    Raises:
+        ValueError: the report lacks a headline field (it is not a scored exam report).
+    """
+    try:
+        cov = report['coverage_pct']
+        lesions = list(report.get('lesions', ()))
+        hidden = not_palpable_of(report)
+        palpable_missed = sum(1 for les in lesions
+                              if not les.get('found') and str(les.get('name')) not in hidden)
+        return {
+            'started_utc': started_utc or _now(), 'stored_utc': _now(), 'source': source,
+            'case_name': report.get('case'), 'case_level': case_level,
+            'bag_path': bag if bag is not None else report.get('bag'),
+            'coverage_light': float(cov['light']), 'coverage_medium': float(cov['medium']),
+            'coverage_deep': float(cov['deep']), 'pattern': report.get('pattern'),
+            'lesions': len(lesions), 'hits': int(report['hits']),
+            'misses': int(report['misses']), 'false_marks': int(report['false_marks']),
+            'score': float(report['score']), 'verdict': str(report['verdict']),
+            'duration_s': float(report['duration_s']),
+            'contact_s': float(report.get('contact_s', 0.0)),
+            'not_palpable': json.dumps(hidden), 'palpable_missed': palpable_missed,
+            'report_json': json.dumps(report, allow_nan=False, default=str),
+        }
+    except (KeyError, TypeError) as exc:
+        raise ValueError(f'exam report: missing or bad field {exc}') from None
+
+
+def store_session(db: str | os.PathLike | None, trainee_id: str, report: dict, *,
+                  source: str = 'run', case_level: int | None = None, bag: str | None = None,
+                  started_utc: str | None = None) -> int:
+    """Store one scored session for ``trainee_id`` (created on its first session) in ONE
+    transaction; returns the session id.
+
+    Raises:
+        ValueError: bad trainee id or report; RecordError (a ValueError): the file.
+    """
+    check_trainee_id(trainee_id)
+    row = session_row(report, source=source, case_level=case_level, bag=bag,
+                      started_utc=started_utc)
+    cols = ', '.join(row)
+    marks = ', '.join(f':{k}' for k in row)
+
+    def tx(conn):
+        conn.execute('INSERT OR IGNORE INTO trainees (id, created_utc) VALUES (?, ?)',
+                     (trainee_id, row['stored_utc']))
+        cur = conn.execute(f'INSERT INTO sessions (trainee_id, {cols}) VALUES (:trainee_id, '
+                           f'{marks})', {'trainee_id': trainee_id, **row})
+        return int(cur.lastrowid)
+    return write(db, tx)
+
+
+def trainees(db: str | os.PathLike | None = None) -> list[dict]:
+    """One dict per trainee: ``id``, ``created_utc``, ``sessions``, ``last_utc``, ``last_score``,
+    ``last_verdict``; [] when the record file does not exist yet."""
+    if not resolve_db_path(db).is_file():
+        return []
+    with connect(db) as conn:
+        rows = conn.execute(
+            'SELECT t.id, t.created_utc, count(s.id), max(s.started_utc), '
+            '(SELECT score FROM sessions WHERE trainee_id = t.id ORDER BY id DESC LIMIT 1), '
+            '(SELECT verdict FROM sessions WHERE trainee_id = t.id ORDER BY id DESC LIMIT 1) '
+            'FROM trainees t LEFT JOIN sessions s ON s.trainee_id = t.id '
+            'GROUP BY t.id ORDER BY t.id').fetchall()
+    return [dict(zip(('id', 'created_utc', 'sessions', 'last_utc', 'last_score',
+                      'last_verdict'), r)) for r in rows]
+
+
+_HISTORY_COLS = ('id', 'started_utc', 'source', 'case_name', 'case_level', 'bag_path',
+                 'coverage_light', 'coverage_medium', 'coverage_deep', 'pattern', 'lesions',
+                 'hits', 'misses', 'palpable_missed', 'not_palpable', 'false_marks', 'score',
+                 'verdict', 'duration_s', 'contact_s')
+
+
+def _known(conn, db, trainee_id: str) -> None:
+    if conn.execute('SELECT 1 FROM trainees WHERE id = ?', (trainee_id,)).fetchone() is None:
+        known = [r[0] for r in conn.execute('SELECT id FROM trainees ORDER BY id LIMIT 20')]
+        raise UnknownTrainee(f'unknown trainee id {trainee_id!r} in trainee record '
+                          f'{str(resolve_db_path(db))!r} (known: {", ".join(known) or "none"})')
+
+
+def history(db: str | os.PathLike | None, trainee_id: str, full: bool = False) -> list[dict]:
+    """The sessions of ``trainee_id``, oldest first, one dict each (the browser view's call):
+
+    ``session`` (id), ``started_utc`` (ISO 8601, UTC), ``source`` ('run' / 'bag'), ``case``,
+    ``case_level``, ``bag``, ``coverage_pct`` {light, medium, deep} [%], ``pattern``,
+    ``lesions``, ``hits``, ``misses``, ``palpable_missed``, ``not_palpable`` (names),
+    ``false_marks``, ``sensitivity`` (found / palpable lesions, None without one), ``score``,
+    ``verdict``, ``duration_s``, ``contact_s`` [s]; with ``full``, ``report`` (the stored exam
+    report).
+
+    Raises:
+        RecordError: no record file, unknown trainee (the message names the file), bad file.
+    """
+    check_trainee_id(trainee_id)
+    with connect(db) as conn:
+        _known(conn, db, trainee_id)
+        extra = ', report_json' if full else ''
+        rows = conn.execute(f'SELECT {", ".join(_HISTORY_COLS)}{extra} FROM sessions '
+                            'WHERE trainee_id = ? ORDER BY id', (trainee_id,)).fetchall()
+    out = []
+    for r in rows:
+        d = dict(zip(_HISTORY_COLS, r))
+        hidden = json.loads(d['not_palpable'] or '[]')
+        palpable = d['lesions'] - len(hidden)
+        missed = d['palpable_missed'] if d['palpable_missed'] is not None else d['misses']
+        h = {'session': d['id'], 'started_utc': d['started_utc'], 'source': d['source'],
+             'case': d['case_name'], 'case_level': d['case_level'], 'bag': d['bag_path'],
+             'coverage_pct': {'light': d['coverage_light'], 'medium': d['coverage_medium'],
+                              'deep': d['coverage_deep']},
+             'pattern': d['pattern'], 'lesions': d['lesions'], 'hits': d['hits'],
+             'misses': d['misses'], 'palpable_missed': missed, 'not_palpable': hidden,
+             'false_marks': d['false_marks'],
+             'sensitivity': round((palpable - missed) / palpable, 4) if palpable > 0 else None,
+             'score': d['score'], 'verdict': d['verdict'], 'duration_s': d['duration_s'],
+             'contact_s': d['contact_s']}
+        if full:
+            h['report'] = json.loads(r[-1])
+        out.append(h)
+    return out
+
+
+def session_report(db: str | os.PathLike | None, session_id: int) -> dict:
+    """The full stored exam report of session ``session_id``.
+
+    Raises:
+        RecordError: no such session (naming the file), bad file.
+    """
+    with connect(db) as conn:
+        row = conn.execute('SELECT report_json FROM sessions WHERE id = ?',
+                           (int(session_id),)).fetchone()
+    if row is None:
+        raise RecordError(f'no session {session_id} in trainee record '
+                          f'{str(resolve_db_path(db))!r}')
+    return json.loads(row[0])
+
+
+def delete_trainee(db: str | os.PathLike | None, trainee_id: str) -> int:
+    """Remove ``trainee_id`` and every one of its sessions (privacy), in one transaction, with
+    ``secure_delete`` (freed pages zeroed) and the WAL checkpointed and truncated afterwards so
+    no copy of the rows stays in the file; returns the number of sessions removed.
+
+    Raises:
+        RecordError: unknown trainee / bad file.
+    """
+    check_trainee_id(trainee_id)
+    if not resolve_db_path(db).is_file():
+        with connect(db):   # raises: no such file
+            pass
+
+    def tx(conn):
+        _known(conn, db, trainee_id)
+        conn.execute('PRAGMA secure_delete = ON')
+        n = conn.execute('DELETE FROM sessions WHERE trainee_id = ?', (trainee_id,)).rowcount
+        conn.execute('DELETE FROM trainees WHERE id = ?', (trainee_id,))
+        return n
+    n = write(db, tx)
+    with connect(db) as conn:
+        conn.execute('PRAGMA wal_checkpoint(TRUNCATE)')
+    return n
+
+
+def export_csv(db: str | os.PathLike | None, trainee_id: str, out: IO[str]) -> int:
+    """Write ``trainee_id``'s sessions as CSV (:data:`CSV_COLUMNS`, a header row first) to
+    ``out``; returns the number of sessions."""
+    rows = history(db, trainee_id)
+    w = csv.writer(out, lineterminator='\n')
+    w.writerow(CSV_COLUMNS)
+    for h in rows:
+        c = h['coverage_pct']
+        w.writerow([h['session'], h['started_utc'], h['source'], h['case'], h['case_level'],
+                    c['light'], c['medium'], c['deep'], h['pattern'], h['lesions'], h['hits'],
+                    h['misses'], h['palpable_missed'], ';'.join(h['not_palpable']),
+                    h['false_marks'], '' if h['sensitivity'] is None else h['sensitivity'],
+                    h['score'], h['verdict'], h['duration_s'], h['contact_s'], h['bag'] or ''])
+    return len(rows)
