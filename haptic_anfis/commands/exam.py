@@ -48,6 +48,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help='ROS 2 parameter file for the nodes (repeatable; the exam sets the '
                         "driver's palpation_script and force_mode itself)")
     _common(r)
+    from .view import add_view_arguments
+    add_view_arguments(r, hold=True)
     b = sub.add_parser('report', help='score a recorded session bag')
     b.add_argument('bag', metavar='BAG')
     b.add_argument('--case', default=None, metavar='NAME',
@@ -66,22 +68,10 @@ def _common(p):
 
 def resolve_exam_case(case: str | None, need: tuple[str, ...] = ('model_path', 'mesh_path'),
                       lib=None):
-    """``--case``: a case of the library (``haptic-anfis cases list``; its files ``need`` must
-    exist) or a scene file (``*.yaml``: its lesions are scored, the default model and surface
-    render) -> ``(Case | None, scene path | None)``; ``(None, None)`` = the default scene.
-
-    Raises:
-        CaseError (a ValueError): unknown case (the message lists the known ones), or a file it
-        needs is missing.
-    """
-    if case is None:
-        return None, None
-    p = Path(case)
-    if p.suffix in ('.yaml', '.yml') and p.is_file():
-        return None, str(p)
-    from ..cases import library
-    c = (lib or library()).get(case).require(need)
-    return c, str(c.scene_path)
+    """:func:`haptic_anfis.exam.from_bag.resolve_exam_case` (imported when called: the CLI
+    builds every parser at start)."""
+    from ..exam.from_bag import resolve_exam_case as resolve
+    return resolve(case, need, lib)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -102,6 +92,9 @@ def run(args: argparse.Namespace) -> int:
                   'z [m], depth [m], |F| [N])')
     if args.json:
         print(json.dumps(report), flush=True)
+    if args.exam_command == 'run':   # --view: the page turns into the debrief
+        from .view import exam_debrief
+        exam_debrief(args, report, session, getattr(args, 'view_side', None))
     return 0
 
 
@@ -156,6 +149,12 @@ def _run_sim(args):
         raise ValueError(str(exc)) from None
     finally:
         tmp.cleanup()
+    from .view import start_side_view   # --view: the live page, in a process of its own
+    try:
+        args.view_side = start_side_view(args, ['-p', f'case:={case.name}'] if case else [])
+    except BaseException:
+        graph.shutdown()
+        raise
     # The driver's simulated Falcon plays the trainee (same start point as the script it loaded).
     graph.driver.device.script = controller
     examiner = graph.extra[0]
@@ -191,61 +190,8 @@ def _run_sim(args):
 
 
 def _report_bag(args):
-    from ..bag.reader import read_messages
-    from ..contact import load_mesh
-    from ..exam import ExamSession, Surface, load_exam_config, subject_from_scene
-    from ..nodes import interfaces as ifc
-    from ..nodes.contact_detector import DEFAULT_SURFACE
-    from ..bag.reader import bag_info
-    from ..bag.topics import absolute
-    cfg = load_exam_config(args.exam_config)
-    case, scene = resolve_exam_case(args.case, need=('mesh_path',))
-    subject = subject_from_scene(scene)
-    mesh = load_mesh(case.mesh_path if case else DEFAULT_SURFACE, unit='mm')
-    mesh.merge_vertices()
-    session = ExamSession(Surface.from_mesh(mesh), subject, cfg)
-    info = bag_info(args.bag)
-    have = {t.topic for t in info.topics}
-    need = [absolute(ifc.TOPIC_CONTACT)]
-    missing = [t for t in need if t not in have]
-    wanted = {absolute(t) for t in (ifc.TOPIC_CONTACT, ifc.TOPIC_COMMAND, ifc.TOPIC_POSE,
-                                    ifc.TOPIC_MARKS, ifc.TOPIC_BUTTONS)} & have
-    notes = []
-    if missing:
-        notes.append(f'{args.bag}: no {", ".join(missing)} topic (it has '
-                     f'{", ".join(sorted(have)) or "none"}): nothing to score, zero coverage')
-    marks_topic = absolute(ifc.TOPIC_MARKS) in have
-    if not marks_topic:
-        notes.append('no exam/marks topic: marks taken from button 1 presses at the probe pose')
-    last_pose, b1 = None, 0
-    for topic, _, _, msg in read_messages(args.bag, sorted(wanted)) if wanted else ():
-        t = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
-        if topic == absolute(ifc.TOPIC_CONTACT):
-            v = msg.position
-            if len(v) == len(ifc.CONTACT_FIELDS):
-                session.add_contact(t, v[0:3], v[ifc.I_DEPTH], v[ifc.I_IN_CONTACT] > 0.5)
-        elif topic == absolute(ifc.TOPIC_COMMAND):
-            f = msg.wrench.force
-            session.add_force(t, (f.x, f.y, f.z))
-        elif topic == absolute(ifc.TOPIC_POSE):
-            q = msg.pose.position
-            last_pose = (q.x, q.y, q.z)
-            session.add_pose(t, last_pose)
-        elif topic == absolute(ifc.TOPIC_MARKS):
-            q = msg.point
-            session.add_mark(t, (q.x, q.y, q.z))
-        elif topic == absolute(ifc.TOPIC_BUTTONS):
-            b = list(msg.buttons)
-            session.add_buttons(t, b)
-            now = b[1] if len(b) > 1 else 0
-            if not marks_topic and now and not b1 and last_pose is not None:
-                session.add_mark(t, last_pose)
-            b1 = now
-    report = session.report()
-    report['notes'] = notes + report['notes']
-    report['bag'] = str(args.bag)
-    report['case'] = case.name if case else (scene or 'default')
-    return report, session
+    from ..exam.from_bag import session_from_bag
+    return session_from_bag(args.bag, args.case, args.exam_config)
 
 
 def print_report(r: dict) -> None:

@@ -31,11 +31,11 @@ NAME = 'launch'
 HELP = 'run the haptic nodes as separate processes (falcon_driver, contact_detector, ...)'
 
 #: nodes that take the case parameters (--case / --random-case)
-CASE_NODES = ('contact_detector', 'force_server', 'visualizer')
+CASE_NODES = ('contact_detector', 'force_server', 'visualizer', 'web_view')
 DEFAULT_NODES = 'falcon_driver,contact_detector,force_server,visualizer'
 #: start order: consumers before producers, the device last (it starts publishing poses at once)
-ORDER = ('recorder', 'trainer', 'force_server', 'contact_detector', 'visualizer', 'player',
-         'falcon_driver')
+ORDER = ('recorder', 'trainer', 'force_server', 'contact_detector', 'visualizer', 'web_view',
+         'player', 'falcon_driver')
 #: never restarted: the device owner (a restart would re-home a real Falcon mid-session)
 NO_RESPAWN = ('falcon_driver',)
 

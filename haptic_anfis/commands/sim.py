@@ -43,6 +43,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         'latency_max_ms, deadline_misses, cycles, max_force_n, contact_s, ...')
     from ..cases.library import add_case_arguments
     add_case_arguments(p)
+    from .view import add_view_arguments
+    add_view_arguments(p)
     p.add_argument('ros_args', nargs=argparse.REMAINDER,
                    help='--ros-args ... passed to rclpy (e.g. --ros-args -p rate:=500.0)')
 
@@ -132,6 +134,9 @@ def _side_nodes(args: argparse.Namespace, ros_args: list[str], case_args: list[s
         nodes['recorder'] = [*common, *recorder_arguments(args.record, ALL_LOOP_TOPICS)]
     if not args.in_process and not args.no_viz:
         nodes['visualizer'] = common
+    from .view import web_view_arguments
+    if (wv := web_view_arguments(args, common)) is not None:   # --view: the browser page
+        nodes['web_view'] = wv
     return SideNodes(nodes)
 
 
