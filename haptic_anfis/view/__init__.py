@@ -8,7 +8,7 @@ debrief of a session (lesions revealed, marks, path, score, a replay scrubber), 
 - :mod:`.debrief`: a scored session as the page shows it at any replay time.
 - :mod:`.app`: :class:`ViewApp`, the viser page.
 - :mod:`.build`: a case's or a bag's page.
-- :mod:`.browser`: headless chromium (screenshots, the page's text) for tests and benches.
+- :mod:`.browser`: headless chromium screenshots for tests, benches and the docs.
 """
 from .app import BLIND, ViewApp, ViewError, check_port, trainee_history
 from .debrief import Debrief, lesion_status, panel_numbers

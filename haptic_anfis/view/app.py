@@ -119,6 +119,11 @@ class ViewApp:
         self._light_since = None
         self.server = viser.ViserServer(host=host, port=self.port, label=title, verbose=False)
         s = self.server
+        self.n_connects = 0   # pages that connected (a reconnect counts again)
+
+        @s.on_client_connect
+        def _(client) -> None:
+            self.n_connects += 1
         s.scene.set_up_direction('+z')
         self._gui(controls, cases or [])
         self.set_surface(vertices, faces, region_faces)
