@@ -23,7 +23,8 @@ import numpy as np
 
 from ..exam.config import LEVELS
 from .gauge import DEVICE_MAX_FORCE, gauge
-from .scene import LESION_RGB, LEVEL_RGB, MARK_RGB, SkinPaint, frame_camera, probe_quaternion
+from .scene import (LESION_RGB, MARK_RGB, SkinPaint, SkinTiles, frame_camera,
+                    probe_quaternion)
 
 __all__ = ['BLIND', 'PROBE_LENGTH', 'ViewApp', 'ViewError', 'check_port', 'trainee_history']
 
@@ -221,8 +222,14 @@ class ViewApp:
             self.vertices = np.asarray(vertices, float)
             self.faces = np.asarray(faces, np.int64)
             self.paint = SkinPaint(self.vertices, self.faces, region_faces)
+            old = getattr(self, 'tiles', None)
+            self.tiles = SkinTiles(self.vertices, self.faces)
+            if old is not None:
+                for k in range(len(self.tiles), len(old)):   # a smaller new mesh
+                    self.server.scene.remove_by_name(f'/skin/{k}')
             self.vertex_levels = np.zeros(len(self.vertices), np.int64)
             self.displacement = None
+            self._moved = np.zeros(len(self.vertices), bool)   # drawn displaced
             fr = frame_camera(self.vertices)
             cam = self.server.initial_camera
             cam.position, cam.look_at, cam.up = fr.position, fr.look_at, fr.up
@@ -233,13 +240,20 @@ class ViewApp:
             self.framing = fr
             self._send_skin()
 
-    def _send_skin(self) -> None:
+    def _send_skin(self, changed: np.ndarray | None = None) -> None:
+        """Send the tiles holding a vertex of ``changed`` (v,) bool (None: every tile)."""
         t0 = time.perf_counter()
-        v = self.vertices if self.displacement is None else self.vertices + self.displacement
-        m = self._trimesh.Trimesh(v, self.faces, process=False,
-                                  vertex_colors=self.paint.colours(self.vertex_levels,
-                                                                   self.displacement))
-        self.server.scene.add_mesh_trimesh('/skin', m)
+        u = self.displacement
+        ids = range(len(self.tiles)) if changed is None else self.tiles.touched(changed)
+        if len(ids) == 0:
+            return
+        rgba = self.paint.colours(self.vertex_levels, u)
+        v = self.vertices if u is None else self.vertices + u
+        for k in ids:
+            vid, f = self.tiles.tiles[k]
+            m = self._trimesh.Trimesh(v[vid], f, process=False, vertex_colors=rgba[vid])
+            self.server.scene.add_mesh_trimesh(f'/skin/{k}', m)
+        self._moved = np.zeros(len(v), bool) if u is None else np.any(u != 0.0, axis=1)
         st = self.stats
         st.skin_frames += 1
         st.frame_times.append(time.monotonic())
@@ -250,12 +264,12 @@ class ViewApp:
         0..1} for the panel line."""
         with self._lock:
             lv = self.paint.vertex_levels(face_levels)
-            changed = not np.array_equal(lv, self.vertex_levels)
+            changed = lv != self.vertex_levels
             self.vertex_levels = lv
             if fractions is not None:
                 self.g_cov.content = self._coverage_text(fractions)
-            if changed:
-                self._send_skin()
+            if changed.any():
+                self._send_skin(changed)
 
     # -- live -------------------------------------------------------------------------------
 
@@ -302,16 +316,24 @@ class ViewApp:
             self._dent(contact if in_contact else None)
 
     def _dent(self, contact) -> None:
+        """Dent the skin for ``contact`` (None: lifted); re-sends the tiles it moves or moved,
+        nothing when the contact is the one drawn."""
         if self.deformation is None:
             return
+        key = None if contact is None else np.concatenate([contact[0], contact[1],
+                                                            [contact[2]]])
+        last = getattr(self, '_dent_key', None)
+        if (key is None and last is None) or (key is not None and last is not None
+                                              and np.array_equal(key, last)):
+            return
+        self._dent_key = key
         if contact is None:
-            if self.displacement is not None:
-                self.displacement = None
-                self._send_skin()
+            self.displacement = None
+            self._send_skin(self._moved.copy())
             return
         u = self.deformation.displacement(self.vertices, contact[0], contact[1], contact[2])
         self.displacement = u
-        self._send_skin()
+        self._send_skin(self._moved | np.any(u != 0.0, axis=1))
 
     # -- debrief ----------------------------------------------------------------------------
 
@@ -333,7 +355,7 @@ class ViewApp:
         with self._lock:
             self._clear_debrief()
             self.mode, self.debrief = 'debrief', debrief
-            self.displacement = None
+            self.displacement, self._dent_key = None, None
             self.probe.visible = False
             if self.arrow is not None:
                 self.arrow.visible = False
@@ -375,9 +397,11 @@ class ViewApp:
             lv = d.face_levels(None) if end else d.face_levels(t)
             if end:   # exactly the report's grid
                 lv = d.session.grid.level_per_face()
-            self.vertex_levels = self.paint.vertex_levels(lv)
+            new = self.paint.vertex_levels(lv)
+            changed = (new != self.vertex_levels) | self._moved
+            self.vertex_levels = new
             self.g_cov.content = self._coverage_text(_fractions(d.session.grid, lv))
-            self._send_skin()
+            self._send_skin(changed)
             p = d.path(None if end else t)
             if self._path is not None:
                 self._path.remove()
