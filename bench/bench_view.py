@@ -25,7 +25,6 @@ import os
 import subprocess
 import sys
 import tempfile
-import threading
 import time
 from pathlib import Path
 
@@ -37,14 +36,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from _page import write_page  # noqa: E402
 
-
-def _free_port() -> int:
-    import socket
-    s = socket.socket()
-    s.bind(('127.0.0.1', 0))
-    p = s.getsockname()[1]
-    s.close()
-    return p
+from haptic_anfis.view.browser import free_port  # noqa: E402
 
 
 def open_browser(url: str) -> subprocess.Popen:
@@ -52,7 +44,10 @@ def open_browser(url: str) -> subprocess.Popen:
     from haptic_anfis.view.browser import CHROMIUM_FLAGS, chromium
     profile = tempfile.mkdtemp(prefix='bench-view-chromium-')
     return subprocess.Popen([chromium(), *CHROMIUM_FLAGS, f'--user-data-dir={profile}',
-                             '--window-size=1280,800', '--remote-debugging-port=0', url],
+                             '--window-size=1280,800', '--remote-debugging-port=0',
+                             '--disable-renderer-backgrounding',
+                             '--disable-background-timer-throttling',
+                             '--disable-backgrounding-occluded-windows', url],
                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
 
 
@@ -69,30 +64,16 @@ def pose_to_pixel(steps: int) -> dict:
     """Latency [ms] from a pose publish to the first render showing the probe moved."""
     os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
     os.environ['ROS_DOMAIN_ID'] = str(60 + os.getpid() % 30)
-    import rclpy
     from geometry_msgs.msg import PoseStamped
-    from rclpy.context import Context
-    from rclpy.executors import SingleThreadedExecutor
-    from rclpy.parameter import Parameter
 
     from haptic_anfis import interfaces as ifc
-    from haptic_anfis.nodes.web_view import WebView
-    ctx = Context()
-    rclpy.init(context=ctx)
-    node = WebView(context=ctx, parameter_overrides=[Parameter('port', value=_free_port()),
-                                                     Parameter('dent', value=False)])
-    pub_node = rclpy.create_node('bench_pose', context=ctx)
-    pub = pub_node.create_publisher(PoseStamped, ifc.TOPIC_POSE, 10)
-    ex = SingleThreadedExecutor(context=ctx)
-    ex.add_node(node)
-    stop = threading.Event()
+    from haptic_anfis.nodes.web_view import web_view_in_thread
+    with web_view_in_thread({'port': free_port(), 'dent': False}, 'bench_pose') as (node, feeder):
+        pub = feeder.create_publisher(PoseStamped, ifc.TOPIC_POSE, 10)
+        return _steps(node, pub, steps)
 
-    def spin():
-        while not stop.is_set():
-            ex.spin_once(timeout_sec=0.01)
 
-    th = threading.Thread(target=spin, daemon=True)
-    th.start()
+def _steps(node, pub, steps: int) -> dict:
     browser = open_browser(node.app.url)
     lat, rtt = [], []
 
@@ -112,17 +93,17 @@ def pose_to_pixel(steps: int) -> dict:
         for _ in range(3):   # the probe drawn before the first step
             publish(y)
             time.sleep(0.3)
-            client.get_render(400, 640, timeout=30)
+            client.get_render(240, 384, timeout=120)
         for k in range(steps):
-            before = _blue_centre(client.get_render(400, 640, timeout=30))
+            before = _blue_centre(client.get_render(240, 384, timeout=120))
             y = -y
             t0 = time.perf_counter()
             publish(y)
             for _ in range(200):
                 ta = time.perf_counter()
-                c = _blue_centre(client.get_render(400, 640, timeout=30))
+                c = _blue_centre(client.get_render(240, 384, timeout=120))
                 tb = time.perf_counter()
-                if c is not None and before is not None and np.linalg.norm(c - before) > 10:
+                if c is not None and before is not None and np.linalg.norm(c - before) > 6:
                     lat.append(((ta + tb) / 2 - t0) * 1e3)
                     rtt.append((tb - ta) * 1e3)
                     break
@@ -130,13 +111,6 @@ def pose_to_pixel(steps: int) -> dict:
     finally:
         browser.kill()
         browser.wait()
-        stop.set()
-        th.join(timeout=2)
-        node.close()
-        ex.shutdown(timeout_sec=1.0)
-        node.destroy_node()
-        pub_node.destroy_node()
-        rclpy.try_shutdown(context=ctx)
     lat, rtt = np.array(lat), np.array(rtt)
     return {'n': len(lat), 'p50': float(np.percentile(lat, 50)) if len(lat) else None,
             'p95': float(np.percentile(lat, 95)) if len(lat) else None,
@@ -161,7 +135,7 @@ def loop_runs(seconds: float, configs: list[str]) -> list[dict]:
                 load0 = os.getloadavg()[0]
                 try:
                     if view:
-                        port = _free_port()
+                        port = free_port()
                         log = open(Path(tmp) / f'web_view_{key}.log', 'w')
                         wv = start_node('web_view', ['-p', f'port:={port}'],
                                         env=node_env(dom, localhost=True), log=log)

@@ -11,16 +11,9 @@ pytest.importorskip('viser', reason='the view extra (pip install .[view]) is not
 from haptic_anfis.cli import main  # noqa: E402
 from haptic_anfis.exam.config import ExamConfig  # noqa: E402
 from haptic_anfis.view import frame_camera, gauge, lesion_status, probe_quaternion  # noqa: E402
+from haptic_anfis.view.browser import free_port  # noqa: E402
 
 from _view_bag import write_session_bag  # noqa: E402
-
-
-def free_port() -> int:
-    s = socket.socket()
-    s.bind(('127.0.0.1', 0))
-    p = s.getsockname()[1]
-    s.close()
-    return p
 
 
 @pytest.fixture(scope='module')

@@ -3,8 +3,6 @@ check on the debrief of a recorded session and on a live page fed by ROS topics.
 
 Skipped, saying why, where chromium or viser is absent (.ci/run installs chromium)."""
 import json
-import socket
-import threading
 import time
 
 import numpy as np
@@ -12,7 +10,7 @@ import pytest
 
 pytest.importorskip('viser', reason='the view extra (pip install .[view]) is not installed')
 
-from haptic_anfis.view.browser import chromium, screenshot  # noqa: E402
+from haptic_anfis.view.browser import chromium, free_port, screenshot  # noqa: E402
 
 from _view_bag import write_session_bag  # noqa: E402
 
@@ -21,14 +19,6 @@ pytestmark = pytest.mark.skipif(chromium() is None,
 
 #: the scene's part of the 1280 x 800 window: left of the GUI panel, clear of the axes gizmo
 SCENE = (slice(100, 700), slice(150, 900))   # rows, columns
-
-
-def free_port() -> int:
-    s = socket.socket()
-    s.bind(('127.0.0.1', 0))
-    p = s.getsockname()[1]
-    s.close()
-    return p
 
 
 def pixels(png):
@@ -75,66 +65,43 @@ def test_live_page_from_ros_topics_draws_probe_and_dent_and_hides_lesions(tmp_pa
                                                                           monkeypatch):
     monkeypatch.setenv('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
     monkeypatch.setenv('ROS_DOMAIN_ID', '116')
-    import rclpy
+    from haptic_anfis.nodes.web_view import web_view_in_thread
+    with web_view_in_thread({'port': free_port()}, 'fake_loop') as (node, feeder):
+        held_press(node, feeder, tmp_path)
+
+
+def held_press(node, feeder, tmp_path):
+    """Publish a held press (pose, contact, force) at 100 Hz for 3 s, then look at the page."""
     from geometry_msgs.msg import PoseStamped, WrenchStamped
-    from rclpy.context import Context
-    from rclpy.executors import SingleThreadedExecutor
-    from rclpy.parameter import Parameter
     from sensor_msgs.msg import JointState
 
     from haptic_anfis import interfaces as ifc
-    from haptic_anfis.nodes.web_view import WebView
-    ctx = Context()
-    rclpy.init(context=ctx)
-    port = free_port()
-    node = WebView(context=ctx, parameter_overrides=[Parameter('port', value=port),
-                                                     Parameter('random_case_seed', value=-1)])
-    pub_node = rclpy.create_node('fake_loop', context=ctx)
-    pubs = {t: pub_node.create_publisher(m, t, 10) for t, m in (
+    pubs = {t: feeder.create_publisher(m, t, 10) for t, m in (
         (ifc.TOPIC_POSE, PoseStamped), (ifc.TOPIC_CONTACT, JointState),
         (ifc.TOPIC_COMMAND, WrenchStamped))}
-    ex = SingleThreadedExecutor(context=ctx)
-    ex.add_node(node)
-    stop = threading.Event()
-
-    def spin():
-        while not stop.is_set():
-            ex.spin_once(timeout_sec=0.02)
-
-    th = threading.Thread(target=spin, daemon=True)
-    th.start()
     y, z, depth = 0.02, 0.01, 0.006
     x = 0.045 * np.sqrt(1 - (y / 0.07) ** 2 - (z / 0.07) ** 2)
-    try:
-        end = time.monotonic() + 3.0
-        while time.monotonic() < end:   # a held press, 100 Hz
-            p = PoseStamped()
-            p.header.frame_id = 'tissue'
-            p.pose.position.x, p.pose.position.y, p.pose.position.z = x - depth, y, z
-            c = JointState(name=list(ifc.CONTACT_FIELDS))
-            v = [0.0] * len(ifc.CONTACT_FIELDS)
-            v[0:3], v[ifc.I_DEPTH], v[ifc.I_DX], v[ifc.I_IN_CONTACT] = [x, y, z], depth, -1.0, 1.0
-            c.position = v
-            w = WrenchStamped()
-            w.wrench.force.x = 4.0
-            for t, m in ((ifc.TOPIC_POSE, p), (ifc.TOPIC_CONTACT, c), (ifc.TOPIC_COMMAND, w)):
-                pubs[t].publish(m)
-            time.sleep(0.01)
-        s = node.app.state()
-        assert s['mode'] == 'live' and not s['lesions_visible']
-        assert node.app.stats.probe_position is not None
-        np.testing.assert_allclose(node.app.stats.probe_position, (x - depth, y, z), atol=1e-9)
-        assert node.app.displacement is not None   # the dent is drawn
-        px = pixels(screenshot(node.app.url, tmp_path / 'live.png', app=node.app))
-        assert px['drawn'] > 0.15 * px['total'], px
-        assert px['blue'] > 300, px   # the probe
-        assert px['green'] < 50, px   # no lesion marker
-        assert 'pressure: **medium**' in s['gauge_text'] and 'force **4.0 N**' in s['gauge_text']
-    finally:
-        stop.set()
-        th.join(timeout=2)
-        node.close()
-        ex.shutdown(timeout_sec=1.0)
-        node.destroy_node()
-        pub_node.destroy_node()
-        rclpy.try_shutdown(context=ctx)
+    end = time.monotonic() + 3.0
+    while time.monotonic() < end:   # a held press, 100 Hz
+        p = PoseStamped()
+        p.header.frame_id = 'tissue'
+        p.pose.position.x, p.pose.position.y, p.pose.position.z = x - depth, y, z
+        c = JointState(name=list(ifc.CONTACT_FIELDS))
+        v = [0.0] * len(ifc.CONTACT_FIELDS)
+        v[0:3], v[ifc.I_DEPTH], v[ifc.I_DX], v[ifc.I_IN_CONTACT] = [x, y, z], depth, -1.0, 1.0
+        c.position = v
+        w = WrenchStamped()
+        w.wrench.force.x = 4.0
+        for t, m in ((ifc.TOPIC_POSE, p), (ifc.TOPIC_CONTACT, c), (ifc.TOPIC_COMMAND, w)):
+            pubs[t].publish(m)
+        time.sleep(0.01)
+    s = node.app.state()
+    assert s['mode'] == 'live' and not s['lesions_visible']
+    assert node.app.stats.probe_position is not None
+    np.testing.assert_allclose(node.app.stats.probe_position, (x - depth, y, z), atol=1e-9)
+    assert node.app.displacement is not None   # the dent is drawn
+    px = pixels(screenshot(node.app.url, tmp_path / 'live.png', app=node.app))
+    assert px['drawn'] > 0.15 * px['total'], px
+    assert px['blue'] > 300, px   # the probe
+    assert px['green'] < 50, px   # no lesion marker
+    assert 'pressure: **medium**' in s['gauge_text'] and 'force **4.0 N**' in s['gauge_text']

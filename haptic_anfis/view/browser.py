@@ -13,7 +13,7 @@ import subprocess
 import tempfile
 from pathlib import Path
 
-__all__ = ['CHROMIUM_FLAGS', 'chromium', 'screenshot']
+__all__ = ['CHROMIUM_FLAGS', 'chromium', 'free_port', 'screenshot']
 
 CHROMIUM_FLAGS = ('--headless=new', '--no-sandbox', '--use-angle=swiftshader',
                   '--enable-unsafe-swiftshader', '--disable-gpu-sandbox',
@@ -31,6 +31,14 @@ def chromium() -> str | None:
         if p:
             return p
     return None
+
+
+def free_port(host: str = '127.0.0.1') -> int:
+    """A TCP port free on ``host`` now (the OS's choice)."""
+    import socket
+    with socket.socket() as s:
+        s.bind((host, 0))
+        return s.getsockname()[1]
 
 
 def _run(url: str, extra: list[str], budget_ms: int, size: tuple[int, int],

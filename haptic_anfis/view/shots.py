@@ -54,12 +54,14 @@ def main(argv: list[str] | None = None) -> int:
             print(f'screenshots: the exam did not open its page (see {log})', file=sys.stderr)
             return 1
         time.sleep(0.4 * a.duration)   # mid-exam: probe on the skin, coverage painted
-        print('live     ', screenshot(url, out / 'view_live.png', budget_ms=4000), flush=True)
+        print('live     ', screenshot(url, out / 'view_live.png', budget_ms=4000, timeout=300),
+              flush=True)
         if not _wait_for(proc, log, 'debrief at', a.duration + 200):
             print(f'screenshots: no debrief (see {log})', file=sys.stderr)
             return 1
         time.sleep(2.0)
-        print('debrief  ', screenshot(url, out / 'view_debrief.png', budget_ms=6000), flush=True)
+        print('debrief  ', screenshot(url, out / 'view_debrief.png', budget_ms=6000, timeout=300),
+              flush=True)
     finally:
         if proc.poll() is None:
             proc.send_signal(2)
