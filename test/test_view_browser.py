@@ -21,6 +21,13 @@ pytestmark = pytest.mark.skipif(chromium() is None,
 SCENE = (slice(100, 700), slice(150, 900))   # rows, columns
 
 
+def drawn(png) -> bool:
+    """The scene arrived: the breast covers a fifth of the scene part of the window (a capture
+    before the page received it is white there)."""
+    px = pixels(png)
+    return px['drawn'] > 0.2 * px['total']
+
+
 def pixels(png):
     from PIL import Image
     a = np.asarray(Image.open(png).convert('RGB')).astype(int)[SCENE]
@@ -42,7 +49,7 @@ def test_debrief_page_shows_the_report_heat_map_and_lesions(tmp_path, capfd):
     want = json.loads(capfd.readouterr().out.strip().splitlines()[-1])
     app = open_bag_view(bag, port=free_port())
     try:
-        px = pixels(screenshot(app.url, tmp_path / 'debrief.png', app=app))
+        px = pixels(screenshot(app.url, tmp_path / 'debrief.png', app=app, ready=drawn))
         assert px['drawn'] > 0.15 * px['total'], px   # the breast fills the middle of the view
         assert px['red'] > 2000 and px['yellow'] > 1000, px   # deep and light coverage painted
         assert px['green'] > 200, px   # the lesion found, revealed
@@ -54,7 +61,7 @@ def test_debrief_page_shows_the_report_heat_map_and_lesions(tmp_path, capfd):
                            ('coverage light %', want['coverage_pct']['light'])):
             assert f'{key}: **{value}**' in n, (key, value)
         app.scrub(0.0)   # the instructor drags the replay to the start; a page (re)connecting
-        px0 = pixels(screenshot(app.url, tmp_path / 'start.png', app=app))   # now gets that state
+        px0 = pixels(screenshot(app.url, tmp_path / 'start.png', app=app, ready=drawn))   # now gets that state
         assert px0['red'] < 0.05 * px['red'] and px0['drawn'] > 0.15 * px0['total'], px0
         assert px0['green'] > 200, px0   # the lesions stay revealed over the replay
     finally:
@@ -100,7 +107,7 @@ def held_press(node, feeder, tmp_path):
     assert node.app.stats.probe_position is not None
     np.testing.assert_allclose(node.app.stats.probe_position, (x - depth, y, z), atol=1e-9)
     assert node.app.displacement is not None   # the dent is drawn
-    px = pixels(screenshot(node.app.url, tmp_path / 'live.png', app=node.app))
+    px = pixels(screenshot(node.app.url, tmp_path / 'live.png', app=node.app, ready=drawn))
     assert px['drawn'] > 0.15 * px['total'], px
     assert px['blue'] > 300, px   # the probe
     assert px['green'] < 50, px   # no lesion marker

@@ -55,12 +55,15 @@ def _run(url: str, extra: list[str], budget_ms: int, size: tuple[int, int],
 
 def screenshot(url: str, out: str | os.PathLike, budget_ms: int = 5000,
                size: tuple[int, int] = (1280, 800), timeout: float = 90.0, app=None,
-               tries: int = 4) -> Path:
+               tries: int = 4, ready=None) -> Path:
     """Load ``url`` and write a PNG of it to ``out``. With ``app`` (the
     :class:`~haptic_anfis.view.app.ViewApp` serving ``url``) the capture is repeated, up to
     ``tries`` times, until the page connected to it during the capture: chromium's virtual time
     runs ahead of a websocket connecting on a loaded machine, and the page then shows only its
-    empty shell ("Inactive").
+    empty shell ("Inactive"); ``ready(png_path) -> bool`` (e.g. "the breast is drawn") also
+    repeats a capture taken before the scene arrived. Each retry doubles the budget. Meant for
+    a page whose scene stands still while it is captured (a page streaming frames keeps
+    chromium's virtual time from running out).
 
     Raises:
         FileNotFoundError: no chromium; RuntimeError: it wrote no picture (its stderr's end), or
@@ -73,7 +76,8 @@ def screenshot(url: str, out: str | os.PathLike, budget_ms: int = 5000,
         r = _run(url, [f'--screenshot={out}'], budget_ms, size, timeout)
         if not out.is_file():
             raise RuntimeError(f'chromium wrote no screenshot of {url}: {r.stderr[-500:]}')
-        if app is None or app.n_connects > before:
+        if (app is None or app.n_connects > before) and (ready is None or ready(out)):
             return out
         budget_ms *= 2
-    raise RuntimeError(f'the page at {url} did not connect in {tries} captures')
+    raise RuntimeError(f'the page at {url} did not connect, or was not ready, in {tries} '
+                       'captures')

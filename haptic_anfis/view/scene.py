@@ -10,7 +10,7 @@ from dataclasses import dataclass
 import numpy as np
 
 __all__ = ['DEEP_DARK', 'LESION_RGB', 'LEVEL_RGB', 'MARK_RGB', 'SKIN_RGB', 'Framing', 'SkinPaint',
-           'SkinTiles', 'frame_camera', 'probe_quaternion']
+           'frame_camera', 'probe_quaternion']
 
 #: untouched skin (RGB 0..255)
 SKIN_RGB = (236, 196, 178)
@@ -63,42 +63,6 @@ class SkinPaint:
         out[:, :3] = np.round(rgb)
         out[:, 3] = 255
         return out
-
-
-class SkinTiles:
-    """The skin cut into square (y, z) tiles, each drawn as a mesh of its own, so a frame re-sends
-    only the tiles the dent or the coverage changed (the whole 10 k-vertex skin is ~400 kB per
-    frame; a dent touches a few tiles). Tiles share their border vertices (each has its own copy,
-    moved alike), so the drawn surface has no cracks.
-
-    Args:
-        vertices: (v, 3) [m]; faces: (f, 3) int; size: tile edge [m].
-    """
-
-    def __init__(self, vertices: np.ndarray, faces: np.ndarray, size: float = 0.02) -> None:
-        v = np.asarray(vertices, float)
-        f = np.asarray(faces, np.int64)
-        cen = v[f].mean(axis=1)
-        key = np.floor(cen[:, 1:] / size).astype(np.int64)
-        _, label = np.unique(key, axis=0, return_inverse=True)
-        label = label.ravel()
-        #: per tile: (global vertex ids (k,), faces in local ids (m, 3))
-        self.tiles: list[tuple[np.ndarray, np.ndarray]] = []
-        for t in range(label.max() + 1):
-            ft = f[label == t]
-            vid, local = np.unique(ft, return_inverse=True)
-            self.tiles.append((vid, local.reshape(-1, 3)))
-        # vertex -> tiles (a border vertex is in several)
-        pairs = np.concatenate([np.c_[vid, np.full(len(vid), t)]
-                                for t, (vid, _) in enumerate(self.tiles)])
-        self._pairs = pairs
-
-    def __len__(self) -> int:
-        return len(self.tiles)
-
-    def touched(self, vertex_mask: np.ndarray) -> np.ndarray:
-        """Indices of the tiles holding any vertex of ``vertex_mask`` (v,) bool."""
-        return np.unique(self._pairs[vertex_mask[self._pairs[:, 0]], 1])
 
 
 @dataclass(frozen=True)
