@@ -76,6 +76,7 @@ def pose_to_pixel(steps: int) -> dict:
 
 
 def _steps(node, pub, steps: int) -> dict:
+    from geometry_msgs.msg import PoseStamped
     browser = open_browser(node.app.url)
     lat, rtt = [], []
 
