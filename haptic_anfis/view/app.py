@@ -25,7 +25,8 @@ from ..exam.config import LEVELS
 from .gauge import DEVICE_MAX_FORCE, gauge
 from .scene import LESION_RGB, MARK_RGB, SkinPaint, frame_camera, probe_quaternion
 
-__all__ = ['BLIND', 'PROBE_LENGTH', 'ViewApp', 'ViewError', 'check_port', 'trainee_history']
+__all__ = ['BLIND', 'PROBE_LENGTH', 'ViewApp', 'ViewError', 'check_port', 'coverage_fractions',
+           'trainee_history']
 
 #: the dropdown's entry for a blind random case
 BLIND = 'blind random case'
@@ -394,7 +395,7 @@ class ViewApp:
             new = self.paint.vertex_levels(lv)
             changed = (new != self.vertex_levels) | self._moved
             self.vertex_levels = new
-            self.g_cov.content = self._coverage_text(_fractions(d.session.grid, lv))
+            self.g_cov.content = self._coverage_text(coverage_fractions(d.session.grid, lv))
             self._send_skin(changed)
             p = d.path(None if end else t)
             if self._path is not None:
@@ -451,7 +452,9 @@ def history_markdown(trainee: str, rows: list[dict]) -> str:
         '\n| ' + ' | '.join(str(r.get(k, '')) for k in keys) + ' |' for r in rows[-10:])
 
 
-def _fractions(grid, face_levels) -> dict:
+def coverage_fractions(grid, face_levels) -> dict:
+    """{level: area share 0..1} of the coverage ``grid``'s region pressed at that level or
+    deeper, from ``face_levels`` (m,) 0..3 (as ``CoverageGrid.fraction`` for its own state)."""
     a = grid.areas / grid.areas.sum()
     return {k: float(a[face_levels > i].sum()) for i, k in enumerate(LEVELS)}
 

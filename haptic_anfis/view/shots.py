@@ -45,8 +45,8 @@ def live_at(app, debrief, t: float) -> None:
     f = np.array(s.forces, float).reshape(-1, 4)
     f = f[f[:, 0] <= t_abs]
     lv = debrief.face_levels(t)
-    from .app import _fractions
-    app.set_coverage(lv, _fractions(s.grid, lv))
+    from .app import coverage_fractions
+    app.set_coverage(lv, coverage_fractions(s.grid, lv))
     app.show_live(p[-1, 1:4] if len(p) else None, contact, f[-1, 1:4] if len(f) else None, t)
 
 
