@@ -13,14 +13,14 @@ export AMENT_PREFIX_PATH := $(abspath $(VENV))
 unexport _ROS_WHEELS_BOOTSTRAP_COMPLETE
 PIP_QUIET := --quiet --disable-pip-version-check
 
-.PHONY: venv demo test bench clean
+.PHONY: venv demo test bench screenshots clean
 
 venv: $(STAMP)
 
 $(STAMP): setup.py setup.cfg package.xml
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install $(PIP_QUIET) --upgrade pip 2>&1 | grep -v '^WARNING: Location' || true
-	$(PY) -m pip install $(PIP_QUIET) -e '.[ros,fe,test,report,dask]' 2>&1 | grep -v '^WARNING: Location' || true
+	$(PY) -m pip install $(PIP_QUIET) -e '.[ros,fe,test,report,dask,view]' 2>&1 | grep -v '^WARNING: Location' || true
 	$(PY) -c 'import haptic_anfis, numba, rclpy, trimesh, rosbags, matplotlib, sklearn' # fail here if the install did not
 	$(VENV)/bin/haptic-anfis warmup # compile the nodes' numba kernels now, not at the first session
 	$(PYTHON) -m venv $(XVENV)
@@ -44,6 +44,11 @@ test: venv
 # Every bench/bench_*.py script prints its own table (ratios and percentiles, never asserted).
 bench: venv
 	@set -e; for f in bench/bench_*.py; do echo "== $$f"; $(PY) $$f; done
+
+# The browser view's pictures for the docs (docs/view_live.png, docs/view_debrief.png): an exam
+# with the page open, captured by headless chromium (apt-get install chromium).
+screenshots: venv
+	$(PY) -m haptic_anfis.view.shots --out docs
 
 clean:
 	rm -rf $(VENV) $(XVENV) build install log *.egg-info

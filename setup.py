@@ -20,6 +20,7 @@ NODES: dict[str, str] = {
     'recorder': 'haptic_anfis.nodes.recorder:main',
     'player': 'haptic_anfis.nodes.player:main',
     'examiner': 'haptic_anfis.nodes.examiner:main',
+    'web_view': 'haptic_anfis.nodes.web_view:main',
 }
 
 setup(
@@ -74,6 +75,11 @@ setup(
         # `haptic-anfis cases generate --dask`: the FE points on a dask.distributed cluster.
         'dask': [
             'distributed>=2024.1',
+        ],
+        # The trainee's screen in a browser (haptic-anfis view, --view, the web_view node): a
+        # Python server with a bundled three.js client (haptic_anfis.view).
+        'view': [
+            'viser==1.1.1',
         ],
         'fe': [
             'felupe==11.3.0',

@@ -45,7 +45,8 @@ def open_bag(path: str | Path):
         raise
     except Exception as exc:  # ReaderError, yaml errors, truncated files, ...
         hint = _recover_hint(p) if p.is_dir() else 'is the file complete?'
-        raise BagError(f'{p}: cannot open the bag: {exc}; {hint}') from None
+        why = ' '.join(str(exc).split())  # one line: yaml errors quote the file over several
+        raise BagError(f'{p}: cannot open the bag: {why}; {hint}') from None
     try:
         yield reader
     finally:

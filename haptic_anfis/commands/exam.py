@@ -63,22 +63,10 @@ def _common(p):
 
 def resolve_exam_case(case: str | None, need: tuple[str, ...] = ('model_path', 'mesh_path'),
                       lib=None):
-    """``--case``: a case of the library (``haptic-anfis cases list``; its files ``need`` must
-    exist) or a scene file (``*.yaml``: its lesions are scored, the default model and surface
-    render) -> ``(Case | None, scene path | None)``; ``(None, None)`` = the default scene.
-
-    Raises:
-        CaseError (a ValueError): unknown case (the message lists the known ones), or a file it
-        needs is missing.
-    """
-    if case is None:
-        return None, None
-    p = Path(case)
-    if p.suffix in ('.yaml', '.yml') and p.is_file():
-        return None, str(p)
-    from ..cases import library
-    c = (lib or library()).get(case).require(need)
-    return c, str(c.scene_path)
+    """:func:`haptic_anfis.exam.from_bag.resolve_exam_case` (imported when called: the CLI
+    builds every parser at start)."""
+    from ..exam.from_bag import resolve_exam_case as resolve
+    return resolve(case, need, lib)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -104,6 +92,9 @@ def run(args: argparse.Namespace) -> int:
     status = store_report(args, report)
     if args.json:
         print(json.dumps(report), flush=True)
+    if args.exam_command == 'run' and getattr(args, 'view', False):   # the page: the debrief
+        from .view import exam_debrief
+        exam_debrief(args, report, session)
     return status
 
 
@@ -206,7 +197,7 @@ def _run_sim(args):
         report, exam_session = examiner.report(), examiner.session
         heat_maps = examiner.n_published
     else:
-        report, exam_session = _side_report(report_dir, args.out), None
+        report, exam_session = _side_report(report_dir, args.out, args if args.view else None)
         heat_maps = len(examiner.times)
         report['heat_map_hz'] = round(examiner.rate(t_start), 2)
         report['examiner_lost_contacts'] = max(graph.contact.n_poses - examiner.samples, 0)
@@ -229,9 +220,13 @@ def _examiner_marks(examiner) -> int:
     return len(examiner.session.marks) if hasattr(examiner, 'session') else examiner.marks
 
 
-def _side_report(report_dir, out: str | None) -> dict:
-    """The side examiner's report.json (and report.png into ``out``)."""
+def _side_report(report_dir, out: str | None, view_args=None):
+    """The side examiner's report.json (and report.png into ``out``); with ``view_args`` (``exam
+    run --view``) also its session rebuilt from the raw samples it saved (for the debrief), else
+    None."""
     import shutil
+
+    from ..nodes.examiner import SAMPLES_FILE
     d = Path(report_dir.name)
     try:
         report = json.loads((d / 'report.json').read_text())
@@ -240,64 +235,18 @@ def _side_report(report_dir, out: str | None) -> dict:
     if out and (d / 'report.png').is_file():
         Path(out).mkdir(parents=True, exist_ok=True)
         shutil.copy(d / 'report.png', Path(out) / 'report.png')
+    session = None
+    if view_args is not None:
+        from ..exam.from_bag import new_session
+        session = new_session(view_args.case or None, view_args.exam_config)
+        session.load_samples(d / SAMPLES_FILE)
     report_dir.cleanup()
-    return report
+    return report, session
 
 
 def _report_bag(args):
-    from ..bag.reader import read_messages
-    from ..contact import load_mesh
-    from ..exam import ExamSession, Surface, load_exam_config, subject_from_scene
-    from ..nodes import interfaces as ifc
-    from ..pipeline.contact import DEFAULT_SURFACE
-    from ..bag.reader import bag_info
-    from ..bag.topics import absolute
-    cfg = load_exam_config(args.exam_config)
-    case, scene = resolve_exam_case(args.case, need=('mesh_path',))
-    subject = subject_from_scene(scene)
-    mesh = load_mesh(case.mesh_path if case else DEFAULT_SURFACE, unit='mm')
-    mesh.merge_vertices()
-    session = ExamSession(Surface.from_mesh(mesh), subject, cfg)
-    info = bag_info(args.bag)
-    have = {t.topic for t in info.topics}
-    need = [absolute(ifc.TOPIC_CONTACT)]
-    missing = [t for t in need if t not in have]
-    wanted = {absolute(t) for t in (ifc.TOPIC_CONTACT, ifc.TOPIC_COMMAND, ifc.TOPIC_POSE,
-                                    ifc.TOPIC_MARKS, ifc.TOPIC_BUTTONS)} & have
-    notes = []
-    if missing:
-        notes.append(f'{args.bag}: no {", ".join(missing)} topic (it has '
-                     f'{", ".join(sorted(have)) or "none"}): nothing to score, zero coverage')
-    marks_topic = absolute(ifc.TOPIC_MARKS) in have
-    if not marks_topic:
-        notes.append('no exam/marks topic: marks taken from button 1 presses at the probe pose')
-    last_pose, b1 = None, 0
-    for topic, _, _, msg in read_messages(args.bag, sorted(wanted)) if wanted else ():
-        t = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
-        if topic == absolute(ifc.TOPIC_CONTACT):
-            session.add_contact_values(t, msg.position)   # either layout; others counted
-        elif topic == absolute(ifc.TOPIC_COMMAND):
-            f = msg.wrench.force
-            session.add_force(t, (f.x, f.y, f.z))
-        elif topic == absolute(ifc.TOPIC_POSE):
-            q = msg.pose.position
-            last_pose = (q.x, q.y, q.z)
-            session.add_pose(t, last_pose)
-        elif topic == absolute(ifc.TOPIC_MARKS):
-            q = msg.point
-            session.add_mark(t, (q.x, q.y, q.z))
-        elif topic == absolute(ifc.TOPIC_BUTTONS):
-            b = list(msg.buttons)
-            session.add_buttons(t, b)
-            now = b[1] if len(b) > 1 else 0
-            if not marks_topic and now and not b1 and last_pose is not None:
-                session.add_mark(t, last_pose)
-            b1 = now
-    report = session.report()
-    report['notes'] = notes + report['notes']
-    report['bag'] = str(args.bag)
-    report['case'] = case.name if case else (scene or 'default')
-    return report, session
+    from ..exam.from_bag import session_from_bag
+    return session_from_bag(args.bag, args.case, args.exam_config)
 
 
 def print_report(r: dict) -> None:

@@ -59,6 +59,8 @@ def run(args: argparse.Namespace) -> int:
               f'{args.duration:g} s (one process, EventsExecutor{session.where()})'
               + (f'; force model {model}' if model and not spec.random_case else ''),
               flush=True)
+        if session.view_url():
+            print(f'view: open {session.view_url()} in a browser', flush=True)
         graph.spin_for(args.duration)
     except KeyboardInterrupt:
         print('interrupted', flush=True)

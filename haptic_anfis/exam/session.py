@@ -83,6 +83,32 @@ class ExamSession:
             self.clutch_presses += 1
         self._buttons_prev = b
 
+    #: the raw samples :meth:`save_samples` writes (name: columns)
+    SAMPLES = {'contacts': 6, 'forces': 4, 'poses': 4, 'marks': 4}
+
+    def save_samples(self, path) -> None:
+        """The raw samples (contacts, forces, poses, marks; times in s, SI) to ``path``
+        (``.npz``), for :meth:`load_samples` in another process (``exam run``'s examiner runs in
+        one of its own; the debrief replays its samples)."""
+        np.savez(path, **{k: np.array(getattr(self, k), float).reshape(-1, n)
+                          for k, n in self.SAMPLES.items()})
+
+    def load_samples(self, path) -> None:
+        """Append the samples :meth:`save_samples` wrote and fold them into the coverage.
+
+        Raises:
+            ValueError: ``path`` is not such a file (the message names it).
+        """
+        try:
+            with np.load(path) as z:
+                arrays = {k: np.asarray(z[k], float).reshape(-1, n)
+                          for k, n in self.SAMPLES.items()}
+        except (OSError, KeyError, ValueError) as exc:
+            raise ValueError(f'{path}: not a samples file of an exam session ({exc})') from None
+        for k, a in arrays.items():
+            getattr(self, k).extend(map(tuple, a.tolist()))
+        self.update_coverage()
+
     def update_coverage(self) -> None:
         n = len(self.contacts)
         if n > self._folded:

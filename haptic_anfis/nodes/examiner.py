@@ -158,8 +158,12 @@ class Examiner(Node):
         """Write the report into ``report_dir`` (when set)."""
         if self.params['report_dir']:
             write_report(self.session, self.params['report_dir'])
+            # the raw samples too: exam run --view replays them in its debrief
+            self.session.save_samples(Path(self.params['report_dir']) / SAMPLES_FILE)
 
 
+#: the raw samples' file in ``report_dir`` (:meth:`ExamSession.save_samples`)
+SAMPLES_FILE = 'samples.npz'
 FULL_REFRESH = 2.0   # [s] between heat maps carrying every patch
 PATCH = 0.016        # [m] patch size: ~30 patches over the default region
 

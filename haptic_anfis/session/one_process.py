@@ -64,7 +64,8 @@ class OneProcessSession:
         self.codes: dict[str, int] = {}
         if spec.record and not spec.recorder_process:
             self.extra.append(self._recorder)
-        self.side = self._side_nodes(side_nodes or {}, side_nice) if side or side_nodes else None
+        self.side = (self._side_nodes(side_nodes or {}, side_nice)
+                     if side or side_nodes or spec.view else None)
 
     def _recorder(self, ctx):
         from ..nodes.recorder import Recorder
@@ -83,6 +84,9 @@ class OneProcessSession:
             nodes['recorder'] = [*common, *recorder_arguments(s.record, RECORDED_TOPICS())]
         if s.visualizer and not s.in_process:
             nodes['visualizer'] = [*common, *s.case_arguments()]
+        if s.view:   # the browser page (exam: no session buttons, the exam drives the hand)
+            nodes['web_view'] = [*common, *s.case_arguments(),
+                                 *s.view_arguments(controls=s.command != 'exam')]
         nodes.update({k: list(v) for k, v in more.items()})
         return SideNodes(nodes, nice=SIDE_NICE if nice is None else nice)
 
@@ -130,6 +134,10 @@ class OneProcessSession:
             return False
         g.driver.servo.stats.reset()
         return True
+
+    def view_url(self) -> str | None:
+        """The page's address with ``view`` (None without)."""
+        return f'http://127.0.0.1:{int(self.spec.view_port)}/' if self.spec.view else None
 
     def where(self) -> str:
         """', visualizer in pid N, ...' for the side nodes."""

@@ -23,8 +23,8 @@ from .spec import CASE_NODES, SessionSpec, recorder_settings
 __all__ = ['ProcessSession', 'ProcessResult', 'ORDER', 'NO_RESPAWN', 'recorded_topics']
 
 #: start order: consumers before producers, the device last (it starts publishing poses at once)
-ORDER = ('recorder', 'trainer', 'force_server', 'contact_detector', 'visualizer', 'player',
-         'examiner', 'falcon_driver')
+ORDER = ('recorder', 'trainer', 'force_server', 'contact_detector', 'visualizer', 'web_view',
+         'player', 'examiner', 'falcon_driver')
 #: never restarted: the device owner (a restart would re-home a real Falcon mid-session)
 NO_RESPAWN = ('falcon_driver',)
 
@@ -58,6 +58,9 @@ class ProcessSession:
                                                 else []) for n in spec.nodes}
         for n, a in (node_args or {}).items():
             self.extra.setdefault(n, []).extend(a)
+        if spec.view:   # --view: the browser page as one more node
+            self.extra.setdefault('web_view', spec.case_arguments()).extend(
+                spec.view_arguments(controls=True))
         self.notes: list[str] = []
         if spec.record:
             from ..nodes.processes import recorder_arguments

@@ -31,7 +31,7 @@ COMMANDS = ('sim', 'launch', 'exam')
 #: the nodes of the one-process graph (sim, exam run): the loop and its visualizer
 ONE_PROCESS_NODES = ('falcon_driver', 'contact_detector', 'force_server', 'visualizer')
 #: nodes that take the case parameters (--case / --random-case)
-CASE_NODES = ('contact_detector', 'force_server', 'visualizer', 'examiner')
+CASE_NODES = ('contact_detector', 'force_server', 'visualizer', 'examiner', 'web_view')
 DEFAULT_LAUNCH_NODES = 'falcon_driver,contact_detector,force_server,visualizer'
 
 
@@ -58,6 +58,7 @@ class Option:
 
 
 _CASE = 'case (haptic-anfis cases list)'
+_VIEW = "the trainee's screen in a browser (haptic-anfis view)"
 
 #: The session commands' options, in help order.
 OPTIONS: tuple[Option, ...] = (
@@ -136,6 +137,16 @@ OPTIONS: tuple[Option, ...] = (
                                           'ENCLAVE/launch_monitor); security itself is switched '
                                           'on by ROS_SECURITY_KEYSTORE / ROS_SECURITY_ENABLE / '
                                           'ROS_SECURITY_STRATEGY'), commands=('launch',)),
+    Option(('--view',), dict(action='store_true',
+                             help="open the trainee's screen in a browser (the web_view node in "
+                                  'a process of its own)'), group=_VIEW),
+    Option(('--view-port',), dict(type=int, default=8080,
+                                  help='TCP port of the page with --view (default 8080)'),
+           group=_VIEW),
+    Option(('--view-hold',), dict(type=float, default=None, metavar='S',
+                                  help='with --view: serve the debrief this many seconds after '
+                                       'the exam (default: until Ctrl-C)'),
+           commands=('exam',), group=_VIEW),
     Option(('--ready-timeout',), dict(type=float, default=300.0,
                                       help='seconds to wait for the nodes to start and the first '
                                            'force command to reach the driver (default 300: a '
@@ -173,6 +184,9 @@ class SessionSpec:
     no_respawn: bool = False
     max_restarts: int = 3
     enclave_root: str | None = None
+    view: bool = False
+    view_port: int = 8080
+    view_hold: float | None = None
 
     # -- derived ------------------------------------------------------------------------------
     @property
@@ -185,6 +199,12 @@ class SessionSpec:
         if self.random_case:
             return ['-p', f'random_case_seed:={int(self.seed)}']
         return ['-p', f'case:={self.case}'] if self.case else []
+
+    def view_arguments(self, controls: bool) -> list[str]:
+        """The web_view node's own ``-p`` arguments (its port; ``controls``: the session's
+        buttons on the page)."""
+        return ['-p', f'port:={int(self.view_port)}',
+                '-p', f"controls:={'true' if controls else 'false'}"]
 
     def params_arguments(self) -> list[str]:
         """``--params-file ABS`` for every parameter file (absolute: a node may run elsewhere)."""
@@ -223,6 +243,9 @@ class SessionSpec:
             raise SessionError(f'--record {self.record}: exists already; a recording needs a new '
                                'directory')
         self._check_case()
+        if self.view:   # viser would move to the next free port and the URL shown be wrong
+            from ..view.app import check_port
+            check_port(self.view_port, flag='--view-port')
         if check_parameters:
             self.check_parameters()
         return self

@@ -1,0 +1,118 @@
+"""Score a recorded session: a bag's loop topics into an :class:`ExamSession` and its report
+(no ROS; ``haptic-anfis exam report`` and the browser view's debrief share it).
+
+Times in seconds (message stamps), lengths in metres.
+"""
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+from .. import interfaces as ifc
+from .config import load_exam_config
+from .lesions import subject_from_scene
+from .session import ExamSession, Surface
+
+__all__ = ['new_session', 'resolve_exam_case', 'session_from_bag']
+
+
+def resolve_exam_case(case: str | None, need: tuple[str, ...] = ('model_path', 'mesh_path'),
+                      lib=None):
+    """``--case``: a case of the library (``haptic-anfis cases list``; its files ``need`` must
+    exist) or a scene file (``*.yaml``: its lesions are scored, the default model and surface
+    render) -> ``(Case | None, scene path | None)``; ``(None, None)`` = the default scene.
+
+    Raises:
+        CaseError (a ValueError): unknown case (the message lists the known ones), or a file it
+        needs is missing.
+    """
+    if case is None:
+        return None, None
+    p = Path(case)
+    if p.suffix in ('.yaml', '.yml') and p.is_file():
+        return None, str(p)
+    from ..cases import library
+    c = (lib or library()).get(case).require(need)
+    return c, str(c.scene_path)
+
+
+def _new_session(c, subject, cfg) -> ExamSession:
+    from ..cases import DEFAULT_CASE, library
+    from ..contact import load_mesh
+    mesh = load_mesh(c.mesh_path if c else library().get(DEFAULT_CASE).mesh_path, unit='mm')
+    mesh.merge_vertices()
+    return ExamSession(Surface.from_mesh(mesh), subject, cfg)
+
+
+def new_session(case: str | None = None, exam_config: str | os.PathLike | None = None
+                ) -> ExamSession:
+    """An empty :class:`ExamSession` of ``case`` (a library case or a scene file; None = the
+    default scene) with the scoring settings ``exam_config`` (None = config/exam.yaml)."""
+    c, scene = resolve_exam_case(case, need=('mesh_path',))
+    return _new_session(c, subject_from_scene(scene), load_exam_config(exam_config))
+
+
+def session_from_bag(bag: str | os.PathLike, case: str | None = None,
+                     exam_config: str | os.PathLike | None = None,
+                     require_contact: bool = False) -> tuple[dict, ExamSession]:
+    """``(report, session)`` of the session recorded in ``bag``, scored against ``case`` (a
+    library case or a scene file; None = the default scene) with the scoring settings
+    ``exam_config`` (None = config/exam.yaml).
+
+    The report carries ``notes`` on what the bag lacks (no contact topic: zero coverage; no
+    ``exam/marks``: marks from button 1 presses at the probe pose), ``bag`` and ``case``.
+
+    Raises:
+        BagError (a ValueError): missing or unreadable bag; or, with ``require_contact``, a bag
+        without the contact topic (the message names it and lists the topics it has).
+        CaseError / ValueError: unknown case, bad exam config.
+    """
+    from ..bag.reader import bag_info, read_messages
+    from ..bag.topics import absolute
+    cfg = load_exam_config(exam_config)
+    c, scene = resolve_exam_case(case, need=('mesh_path',))
+    subject = subject_from_scene(scene)
+    info = bag_info(bag)   # BagError on a missing / corrupt bag, before the mesh is loaded
+    have = {t.topic for t in info.topics}
+    missing = [t for t in (absolute(ifc.TOPIC_CONTACT),) if t not in have]
+    if missing and require_contact:
+        from ..bag.errors import BagError
+        raise BagError(f'{bag}: no {", ".join(missing)} topic (it has '
+                       f'{", ".join(sorted(have)) or "none"}): nothing to show')
+    session = _new_session(c, subject, cfg)
+    wanted = {absolute(t) for t in (ifc.TOPIC_CONTACT, ifc.TOPIC_COMMAND, ifc.TOPIC_POSE,
+                                    ifc.TOPIC_MARKS, ifc.TOPIC_BUTTONS)} & have
+    notes = []
+    if missing:
+        notes.append(f'{bag}: no {", ".join(missing)} topic (it has '
+                     f'{", ".join(sorted(have)) or "none"}): nothing to score, zero coverage')
+    marks_topic = absolute(ifc.TOPIC_MARKS) in have
+    if not marks_topic:
+        notes.append('no exam/marks topic: marks taken from button 1 presses at the probe pose')
+    last_pose, b1 = None, 0
+    for topic, _, _, msg in read_messages(bag, sorted(wanted)) if wanted else ():
+        t = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
+        if topic == absolute(ifc.TOPIC_CONTACT):
+            session.add_contact_values(t, msg.position)   # either layout; others counted
+        elif topic == absolute(ifc.TOPIC_COMMAND):
+            f = msg.wrench.force
+            session.add_force(t, (f.x, f.y, f.z))
+        elif topic == absolute(ifc.TOPIC_POSE):
+            q = msg.pose.position
+            last_pose = (q.x, q.y, q.z)
+            session.add_pose(t, last_pose)
+        elif topic == absolute(ifc.TOPIC_MARKS):
+            q = msg.point
+            session.add_mark(t, (q.x, q.y, q.z))
+        elif topic == absolute(ifc.TOPIC_BUTTONS):
+            b = list(msg.buttons)
+            session.add_buttons(t, b)
+            now = b[1] if len(b) > 1 else 0
+            if not marks_topic and now and not b1 and last_pose is not None:
+                session.add_mark(t, last_pose)
+            b1 = now
+    report = session.report()
+    report['notes'] = notes + report['notes']
+    report['bag'] = str(bag)
+    report['case'] = c.name if c else (scene or 'default')
+    return report, session

@@ -1,0 +1,290 @@
+"""``web_view``: the trainee's screen in a browser (``haptic_anfis.view``), in a process of its own.
+
+Reads the loop topics at its own ``rate`` (default 30 Hz), best effort, polled from their DDS
+readers (``nodes/polled.py``): the newest pose and force command, and every contact sample still
+held (a bounded best-effort queue: the coverage map needs the path, not just the newest point) —
+no callback per 1 kHz message and no acknowledgement the loop's publishers would wait for. It
+draws the probe, the force, the dent from the FE skin displacements, the coverage painted per
+pressure level (folded at ``coverage_rate``), the gauge and cue, the exam clock; lesions stay
+hidden until the debrief. ``exam/marks`` is a plain subscription (rare, must not be lost).
+
+The instructor's controls on the page: a case or a blind random one (set on the loop nodes'
+writable ``case`` / ``random_case_seed`` parameters, and on this node), start (a fresh session,
+the clock from zero) and stop (the session scored as ``exam report`` scores it, the debrief
+shown). The page's URL: ``http://host:port/``.
+"""
+from __future__ import annotations
+
+import collections
+import contextlib
+import random
+import time
+
+import numpy as np
+from geometry_msgs.msg import PointStamped, PoseStamped, WrenchStamped
+from rclpy.node import Node
+from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import JointState
+
+from . import interfaces as ifc
+from ._case import declare_case
+from ._common import Param, declare_parameters, positive, run_node
+from .polled import PolledSubscription
+
+#: newest sample, best effort
+NEWEST = QoSProfile(depth=1, history=HistoryPolicy.KEEP_LAST,
+                    reliability=ReliabilityPolicy.BEST_EFFORT)
+#: the contact samples since the last frame (1 kHz / 30 Hz ~ 33), best effort; older ones drop
+CONTACT_QUEUE = QoSProfile(depth=200, history=HistoryPolicy.KEEP_LAST,
+                           reliability=ReliabilityPolicy.BEST_EFFORT)
+#: nodes whose case the instructor's choice switches (those that are running)
+CASE_NODES = ('contact_detector', 'force_server', 'visualizer')
+
+
+def _port(v):
+    return None if 0 < v < 65536 else 'expected 1..65535'
+
+
+PARAMS = [
+    Param('port', 8080, 'TCP port of the page (http://host:port/)', _port),
+    Param('host', '127.0.0.1', "address the page listens on ('0.0.0.0': every interface)"),
+    Param('rate', 30.0, 'frame rate of the page [Hz]: pose, force, dent, gauge', positive),
+    Param('coverage_rate', 5.0, 'coverage map repaint rate [Hz]', positive),
+    Param('exam_config', '', "scoring settings ('' = config/exam.yaml)"),
+    Param('dent', True, 'draw the dent under the probe (FE skin displacements)'),
+    Param('controls', True, "show the instructor's panel (case, trainee id, start / stop)"),
+    Param('trainee', '', 'trainee id shown in the instructor panel'),
+]
+
+
+class WebView(Node):
+    def __init__(self, name: str = 'web_view', **kw):
+        super().__init__(name, **kw)
+        p = self.params = declare_parameters(self, PARAMS)
+        self._requests: collections.deque = collections.deque()
+        case = declare_case(self, lambda c: self._requests.append(('switched', c)))
+        self.blind = self.get_parameter('random_case_seed').value >= 0
+        from ..cases import library
+        from ..view.build import case_view
+        self.cv = case_view(case.name if case else None, p['exam_config'] or None, p['dent'])
+        from ..view.app import ViewApp
+        self.app = ViewApp(self.cv.vertices, self.cv.faces, self.cv.region_faces,
+                           self.cv.config.thresholds, port=p['port'], host=p['host'],
+                           title='haptic_anfis', deformation=self.cv.deformation,
+                           controls=p['controls'], cases=[c.name for c in library().ready()])
+        if p['controls']:
+            self.app.g_trainee.value = p['trainee']
+            if case is not None and not self.blind:
+                self.app.g_case.value = case.name
+        self.app.on_start = lambda: self._requests.append(('start', None))
+        self.app.on_stop = lambda: self._requests.append(('stop', None))
+        self.app.on_case = lambda name: self._requests.append(('case', name))
+        self._inputs = {k: PolledSubscription(self, t, topic, q) for k, t, topic, q in (
+            ('pose', PoseStamped, ifc.TOPIC_POSE, NEWEST),
+            ('force', WrenchStamped, ifc.TOPIC_COMMAND, NEWEST),
+            ('contact', JointState, ifc.TOPIC_CONTACT, CONTACT_QUEUE))}
+        self.create_subscription(PointStamped, ifc.TOPIC_MARKS, self._on_mark, 10)
+        self._pose = self._force = self._contact = None
+        self.t_start = time.monotonic()
+        self.running = True   # the session collects from the start; "start" begins afresh
+        self._param_clients: dict = {}
+        self.timer = self.create_timer(1.0 / p['rate'], self._frame)
+        self.cov_timer = self.create_timer(1.0 / p['coverage_rate'], self._coverage)
+        self.app.set_exam_running(True, self.blind, self.cv.name or '')
+        self.get_logger().info(f'page at {self.app.url}')
+        print(f'web_view: open {self.app.url} in a browser', flush=True)
+
+    # -- inputs -----------------------------------------------------------------------------
+
+    def _on_mark(self, m: PointStamped) -> None:
+        if self.running:
+            q = m.point
+            self.cv.session.add_mark(_stamp(m), (q.x, q.y, q.z))
+
+    def _take(self) -> None:
+        for k in ('pose', 'force'):
+            m = self._inputs[k].take_newest(raw=False)
+            if m is not None:
+                setattr(self, '_' + k, m)
+        sub = self._inputs['contact']
+        while (m := sub.take(raw=False)) is not None:
+            self._contact = m
+            v = m.position
+            if self.running and len(v) == len(ifc.CONTACT_FIELDS):
+                self.cv.session.add_contact(_stamp(m), v[0:3], v[ifc.I_DEPTH],
+                                            v[ifc.I_IN_CONTACT] > 0.5)
+        if self.running and self._pose is not None:
+            q = self._pose.pose.position
+            self.cv.session.add_pose(_stamp(self._pose), (q.x, q.y, q.z))
+
+    def _contact_state(self):
+        c = self._contact
+        if c is None or not ifc.is_contact_values(c.position) \
+                or c.position[ifc.I_IN_CONTACT] < 0.5:
+            return None
+        v = np.asarray(c.position, float)
+        if not np.isfinite(v[:ifc.I_IN_CONTACT]).all():
+            return None
+        return v[0:3], v[ifc.I_DX:ifc.I_DZ + 1], float(v[ifc.I_DEPTH])
+
+    # -- frames -----------------------------------------------------------------------------
+
+    def _frame(self) -> None:
+        while self._requests:
+            self._handle(*self._requests.popleft())
+        self._take()
+        pose = None
+        if self._pose is not None:
+            q = self._pose.pose.position
+            pose = np.array([q.x, q.y, q.z])
+        force = None
+        if self._force is not None:
+            f = self._force.wrench.force
+            force = np.array([f.x, f.y, f.z])
+        if self.app.mode == 'live':
+            try:
+                self.app.show_live(pose, self._contact_state(), force,
+                                   time.monotonic() - self.t_start if self.running else None)
+            except ValueError as exc:   # a bad sample: skip the frame, keep drawing
+                self.get_logger().warning(f'frame skipped: {exc}', throttle_duration_sec=5.0)
+
+    def _coverage(self) -> None:
+        if self.running and self.app.mode == 'live':
+            s = self.cv.session
+            s.update_coverage()
+            self.app.set_coverage(s.grid.level_per_face(), s.grid.fraction())
+
+    # -- the instructor's requests (queued by the page's threads, handled here) -------------
+
+    def _handle(self, what: str, arg) -> None:
+        try:
+            if what == 'start':
+                self._restart()
+                self.app.set_exam_running(True, self.blind, self.cv.name or '')
+                self.app.message('exam started')
+            elif what == 'stop':
+                self.running = False
+                self.app.set_exam_running(False)
+                from ..view.debrief import Debrief
+                report = self.cv.session.report()
+                report['case'] = 'blind case' if self.blind else (self.cv.name or 'default')
+                trainee = self.app.g_trainee.value if self.app.g_instructor is not None else ''
+                self.app.show_debrief(Debrief(report, self.cv.session), trainee)
+                self.app.message('exam stopped: debrief below')
+            elif what == 'case':
+                self._choose_case(arg)
+            elif what == 'switched':   # our own case parameter was set
+                self._load_case(arg)
+        except Exception as exc:   # keep serving: say it on the page
+            self.get_logger().error(f'{what}: {exc}')
+            self.app.message(f'{what} failed: {exc}')
+
+    def _restart(self) -> None:
+        from ..exam import ExamSession
+        s = self.cv.session
+        self.cv.session = ExamSession(s.surface, s.subject, s.config)
+        self.t_start = time.monotonic()
+        self.running = True
+        self.app.set_coverage(self.cv.session.grid.level_per_face(),
+                              self.cv.session.grid.fraction())
+
+    def _choose_case(self, name: str) -> None:
+        """The instructor chose ``name`` (or the blind entry): switch the loop nodes, then us."""
+        from rclpy.parameter import Parameter
+
+        from ..view.app import BLIND
+        if name == BLIND:
+            params = [Parameter('random_case_seed', value=random.SystemRandom().randrange(2**31))]
+        else:
+            params = [Parameter('case', value=name)]
+        from rcl_interfaces.srv import SetParameters
+        for node in CASE_NODES:
+            cli = self._param_clients.get(node)
+            if cli is None:
+                cli = self._param_clients[node] = self.create_client(
+                    SetParameters, f'/{node}/set_parameters')
+            if cli.service_is_ready():
+                cli.call_async(SetParameters.Request(
+                    parameters=[p.to_parameter_msg() for p in params]))
+        res = self.set_parameters(params)[0]   # our own: switches via declare_case's callback
+        if not res.successful:
+            raise ValueError(res.reason)
+        self.blind = name == BLIND
+        self.app.message('blind random case chosen' if self.blind else f'case {name}')
+
+    def _load_case(self, case) -> None:
+        from ..view.build import case_view
+        self.cv = case_view(case.name if case else None, self.params['exam_config'] or None,
+                            self.params['dent'])
+        self.app.deformation = self.cv.deformation
+        self.app.set_surface(self.cv.vertices, self.cv.faces, self.cv.region_faces)
+        self._restart()
+        self.app.set_exam_running(True, self.blind, self.cv.name or '')
+
+    def ready_condition(self) -> tuple[bool, str]:
+        from .session import inputs_matched
+        return inputs_matched(self, [self.resolve_topic_name(s.topic)
+                                     for s in self._inputs.values()])
+
+    def close(self) -> None:
+        st = self.app.stats
+        self.get_logger().info(f'{st.skin_frames} skin frames, {st.probe_updates} probe updates')
+        for s in self._inputs.values():
+            s.destroy()
+        self.app.close()
+
+
+def _stamp(m) -> float:
+    return m.header.stamp.sec + m.header.stamp.nanosec * 1e-9
+
+
+@contextlib.contextmanager
+def web_view_in_thread(parameters: dict, other: str = 'view_feeder'):
+    """A :class:`WebView` with ``parameters`` ({name: value}) on an rclpy context of its own,
+    spun by a thread, and a plain node ``other`` on that context (to publish the loop topics
+    to it): yields ``(web_view, other)``; everything is shut down on exit. For tests and
+    benches (the node's real home is its own process)."""
+    import threading
+
+    import rclpy
+    from rclpy.context import Context
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.parameter import Parameter
+    ctx = Context()
+    rclpy.init(context=ctx)
+    node = feeder = ex = th = None
+    stop = threading.Event()
+    try:
+        node = WebView(context=ctx, parameter_overrides=[Parameter(k, value=v)
+                                                         for k, v in parameters.items()])
+        feeder = rclpy.create_node(other, context=ctx)
+        ex = SingleThreadedExecutor(context=ctx)
+        ex.add_node(node)
+
+        def spin():
+            while not stop.is_set():
+                ex.spin_once(timeout_sec=0.01)
+
+        th = threading.Thread(target=spin, daemon=True)
+        th.start()
+        yield node, feeder
+    finally:
+        stop.set()
+        if th is not None:
+            th.join(timeout=2)
+        if node is not None:
+            node.close()
+        if ex is not None:
+            ex.shutdown(timeout_sec=1.0)
+        for n in (node, feeder):
+            if n is not None:
+                n.destroy_node()
+        rclpy.try_shutdown(context=ctx)
+
+
+def main(args=None) -> None:
+    raise SystemExit(run_node(WebView, args))
+
+
+if __name__ == '__main__':
+    main()

@@ -1,0 +1,479 @@
+"""The browser page: a viser server drawing the breast, the probe, the coverage and the debrief,
+with the trainee's gauges and the instructor's controls (no ROS).
+
+Why viser (PyPI ``viser``): a Python server with a bundled three.js client — meshes with vertex
+colours, GUI panels, a scene a browser reconnecting later receives whole (the server replays its
+current state) — so no hand-written WebGL and no RViz, which the ROS wheels here do not include.
+
+One :class:`ViewApp` serves one port. The caller feeds it: :meth:`ViewApp.show_live` at its own
+rate (the web_view node: newest pose / contact / force, ~30 Hz) and :meth:`ViewApp.show_debrief`
+with a :class:`~haptic_anfis.view.debrief.Debrief`. The instructor's controls call back
+``on_start`` / ``on_stop`` / ``on_case`` (set by the owner; run on viser's threads).
+Tissue frame, metres.
+"""
+from __future__ import annotations
+
+import socket
+import threading
+import time
+from collections import deque
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..exam.config import LEVELS
+from .gauge import DEVICE_MAX_FORCE, gauge
+from .scene import LESION_RGB, MARK_RGB, SkinPaint, frame_camera, probe_quaternion
+
+__all__ = ['BLIND', 'PROBE_LENGTH', 'ViewApp', 'ViewError', 'check_port', 'coverage_fractions',
+           'trainee_history']
+
+#: the dropdown's entry for a blind random case
+BLIND = 'blind random case'
+PROBE_LENGTH = 0.03  # [m] drawn length of the probe cylinder
+FORCE_SCALE = 0.004  # [m/N] force arrow length
+
+
+class ViewError(ValueError):
+    """Bad input for the view (a port in use, a bag it cannot show): one line naming it."""
+
+
+def check_port(port: int, host: str = '127.0.0.1', flag: str = '--port') -> None:
+    """Raise :class:`ViewError` when ``port`` is not a free TCP port on ``host`` (viser would
+    silently move to the next free port, and the URL printed would be wrong); ``flag``: the
+    option the message names."""
+    if not 0 < int(port) < 65536:
+        raise ViewError(f'{flag} {port}: expected 1..65535')
+    s = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+    s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)   # as the server binds it
+    try:
+        s.bind((host, int(port)))
+    except OSError as exc:
+        raise ViewError(f'{flag} {port}: in use or not available on {host} ({exc.strerror}); '
+                        f'choose another with {flag}') from None
+    finally:
+        s.close()
+
+
+def trainee_history(trainee: str, db=None) -> list[dict]:
+    """The trainee's sessions from the trainee record (:func:`haptic_anfis.record.history`,
+    oldest first; ``db``: the record file, None = its default). A record that cannot be read
+    gives one row ``{'error': ...}`` naming it: the page shows it and goes on."""
+    from ..record import RecordError, history
+    try:
+        return history(db, trainee)
+    except (RecordError, OSError) as exc:
+        return [{'error': str(exc)}]
+
+
+@dataclass
+class ViewStats:
+    """What the page was sent: skin frames (dent / coverage), their times (monotonic [s]),
+    compute time per frame [s], the newest probe position drawn and when."""
+    skin_frames: int = 0
+    frame_times: deque = field(default_factory=lambda: deque(maxlen=600))
+    frame_seconds: deque = field(default_factory=lambda: deque(maxlen=600))
+    probe_updates: int = 0
+    probe_position: tuple | None = None
+    probe_at: float = 0.0
+
+    def skin_rate(self) -> float:
+        """Skin frames per second over the newest frames (0 with fewer than 2)."""
+        t = list(self.frame_times)
+        return (len(t) - 1) / (t[-1] - t[0]) if len(t) > 1 and t[-1] > t[0] else 0.0
+
+
+class ViewApp:
+    """The page on ``host:port``.
+
+    Args:
+        vertices, faces: the skin mesh [m] (tissue frame); region_faces: the coverage grid's
+            faces (indices into ``faces``); thresholds: (light, medium, deep) [m].
+        deformation: a :class:`~haptic_anfis.tissue.deformation.DeformationModel` for the dent
+            (None: no dent drawn).
+        controls: show the instructor's panel (case, trainee id, start / stop).
+        cases: the case names for the instructor's dropdown.
+    """
+
+    def __init__(self, vertices, faces, region_faces, thresholds, port: int = 8080,
+                 host: str = '127.0.0.1', title: str = 'haptic_anfis', deformation=None,
+                 controls: bool = False, cases: list[str] | None = None,
+                 max_force: float = DEVICE_MAX_FORCE) -> None:
+        check_port(port, host)
+        import trimesh
+        import viser
+        self._trimesh = trimesh
+        self.port, self.host = int(port), host
+        self.thresholds = tuple(float(t) for t in thresholds)
+        self.max_force = float(max_force)
+        self.deformation = deformation
+        self.stats = ViewStats()
+        self.mode = 'live'
+        self.debrief = None
+        self.on_start = self.on_stop = self.on_case = None
+        self._lock = threading.RLock()
+        self._light_since = None
+        self.server = viser.ViserServer(host=host, port=self.port, label=title, verbose=False)
+        s = self.server
+        self.n_connects = 0   # pages that connected (a reconnect counts again)
+
+        @s.on_client_connect
+        def _(client) -> None:
+            self.n_connects += 1
+        s.scene.set_up_direction('+z')
+        self._gui(controls, cases or [])
+        self.set_surface(vertices, faces, region_faces)
+        probe = trimesh.creation.cylinder(radius=0.008, height=PROBE_LENGTH, sections=32)
+        probe.apply_translation((0, 0, PROBE_LENGTH / 2))   # face at z = 0, body along +z
+        self.probe = s.scene.add_mesh_simple('/probe', probe.vertices, probe.faces,
+                                             color=(60, 110, 240), visible=False)
+        self.arrow = None
+        self._lesion_nodes: list = []
+        self._mark_nodes: list = []
+        self._path = None
+
+    @property
+    def url(self) -> str:
+        return f'http://{self.host}:{self.port}/'
+
+    # -- GUI --------------------------------------------------------------------------------
+
+    def _gui(self, controls: bool, cases: list[str]) -> None:
+        g = self.server.gui
+        self.g_status = g.add_markdown('**live** — waiting for the probe')
+        with g.add_folder('Exam'):
+            self.g_clock = g.add_markdown('clock 0:00')
+            self.g_bar = g.add_progress_bar(0.0, color='gray')
+            self.g_gauge = g.add_markdown(self._gauge_text(None))
+            self.g_cue = g.add_markdown('')
+            self.g_cov = g.add_markdown(self._coverage_text({k: 0.0 for k in LEVELS}))
+        self.g_instructor = None
+        if controls:
+            with g.add_folder('Instructor') as f:
+                self.g_instructor = f
+                self.g_case = g.add_dropdown('case', [BLIND, *cases],
+                                             initial_value=cases[0] if cases else BLIND)
+                self.g_trainee = g.add_text('trainee id', '')
+                self.g_start = g.add_button('start exam', color='green')
+                self.g_stop = g.add_button('stop exam', color='red', disabled=True)
+                self.g_msg = g.add_markdown('')
+            self.g_start.on_click(lambda _: self._call(self.on_start))
+            self.g_stop.on_click(lambda _: self._call(self.on_stop))
+            self.g_case.on_update(lambda _: self._call(self.on_case, self.g_case.value))
+        with g.add_folder('Debrief', visible=False) as f:
+            self.g_debrief = f
+            self.g_numbers = g.add_markdown('')
+            self.g_time = g.add_slider('replay time [s]', min=0.0, max=1.0, step=0.1,
+                                       initial_value=1.0)
+            self.g_lesions = g.add_markdown('')
+            self.g_feedback = g.add_markdown('')
+        self.g_time.on_update(lambda _: self.scrub(self.g_time.value))
+        self.g_history = g.add_folder('Trainee history', visible=False)
+        with self.g_history:
+            self.g_history_md = g.add_markdown('')
+
+    def _call(self, fn, *a) -> None:
+        if fn is None:
+            return
+        try:
+            fn(*a)
+        except Exception as exc:  # a control must not kill viser's thread: say it on the page
+            self.message(f'error: {exc}')
+
+    def message(self, text: str) -> None:
+        """A line under the instructor's controls (and in the status when there are none)."""
+        if self.g_instructor is not None:
+            self.g_msg.content = text
+        else:
+            self.g_status.content = text
+
+    def set_exam_running(self, running: bool, blind: bool = False, case_name: str = '') -> None:
+        """The live state of an exam: start / stop buttons, lesions hidden, status line."""
+        with self._lock:
+            if self.g_instructor is not None:
+                self.g_start.disabled, self.g_stop.disabled = running, not running
+            if running:
+                self.mode = 'live'
+                self._clear_debrief()
+                shown = 'blind case' if blind else (case_name or 'default case')
+                self.g_status.content = f'**exam running** — {shown}; lesions hidden'
+
+    def _gauge_text(self, gg) -> str:
+        lv = ' | '.join(f'{k} >= {t * 1e3:.0f} mm' for k, t in zip(LEVELS, self.thresholds))
+        if gg is None:
+            return f'pressure: — (bands: {lv})'
+        return (f'pressure: **{gg.level}** ({gg.depth_mm:.1f} mm) · force **{gg.force_n:.1f} N**'
+                f' of {self.max_force:.0f} N  \nbands: {lv}')
+
+    @staticmethod
+    def _coverage_text(cov: dict) -> str:
+        return 'coverage: ' + ', '.join(f'{k} {100 * cov[k]:.1f} %' for k in LEVELS)
+
+    # -- the skin ---------------------------------------------------------------------------
+
+    def set_surface(self, vertices, faces, region_faces) -> None:
+        """A (new) skin mesh: repaint it, frame the camera on it."""
+        with self._lock:
+            self.vertices = np.asarray(vertices, float)
+            self.faces = np.asarray(faces, np.int64)
+            self.paint = SkinPaint(self.vertices, self.faces, region_faces)
+            self.vertex_levels = np.zeros(len(self.vertices), np.int64)
+            self.displacement = None
+            self._moved = np.zeros(len(self.vertices), bool)   # drawn displaced
+            fr = frame_camera(self.vertices)
+            cam = self.server.initial_camera
+            cam.position, cam.look_at, cam.up = fr.position, fr.look_at, fr.up
+            cam.fov, cam.near, cam.far = fr.fov, fr.near, fr.far
+            for client in self.server.get_clients().values():   # the open pages too
+                client.camera.position, client.camera.look_at = fr.position, fr.look_at
+                client.camera.fov = fr.fov
+            self.framing = fr
+            self._send_skin()
+
+    def _send_skin(self, changed: np.ndarray | None = None) -> None:
+        """Send the skin when a vertex of ``changed`` (v,) bool changed (None: always). One mesh
+        for the whole skin: measured, re-sending only the changed pieces of a tiled skin cost
+        ~20x more CPU per dent frame (viser's per-node overhead, ~3 ms a node) than one glTF of
+        the 10 k-vertex skin (~4 ms), and the dent reaches a third of the breast."""
+        if changed is not None and not changed.any():
+            return
+        t0 = time.perf_counter()
+        u = self.displacement
+        v = self.vertices if u is None else self.vertices + u
+        m = self._trimesh.Trimesh(v, self.faces, process=False,
+                                  vertex_colors=self.paint.colours(self.vertex_levels, u))
+        self.server.scene.add_mesh_trimesh('/skin', m)
+        self._moved = np.zeros(len(v), bool) if u is None else np.any(u != 0.0, axis=1)
+        st = self.stats
+        st.skin_frames += 1
+        st.frame_times.append(time.monotonic())
+        st.frame_seconds.append(time.perf_counter() - t0)
+
+    def set_coverage(self, face_levels: np.ndarray, fractions: dict | None = None) -> None:
+        """Paint the coverage: ``face_levels`` (m,) 0..3 per region face; ``fractions`` {level:
+        0..1} for the panel line."""
+        with self._lock:
+            lv = self.paint.vertex_levels(face_levels)
+            changed = lv != self.vertex_levels
+            self.vertex_levels = lv
+            if fractions is not None:
+                self.g_cov.content = self._coverage_text(fractions)
+            if changed.any():
+                self._send_skin(changed)
+
+    # -- live -------------------------------------------------------------------------------
+
+    def show_live(self, pose, contact=None, force=None, clock_s: float | None = None) -> None:
+        """One live frame: probe tip ``pose`` (3,) [m] or None; ``contact`` None or (point (3,),
+        direction (3,), depth [m]) while in contact; ``force`` (3,) [N] or None; the exam clock
+        [s]. Re-sends the skin only when the dent changed."""
+        with self._lock:
+            now = time.monotonic()
+            fvec = np.zeros(3) if force is None else np.asarray(force, float)
+            fn = float(np.linalg.norm(fvec)) if np.isfinite(fvec).all() else 0.0
+            if pose is not None and np.isfinite(pose).all():
+                d = contact[1] if contact is not None else (-1.0, 0.0, 0.0)
+                self.probe.position = tuple(float(x) for x in pose)
+                self.probe.wxyz = probe_quaternion(d)
+                self.probe.visible = True
+                self.stats.probe_updates += 1
+                self.stats.probe_position = tuple(float(x) for x in pose)
+                self.stats.probe_at = now
+                tip = np.asarray(pose, float)
+                pts = np.array([[tip, tip + FORCE_SCALE * fvec]]) if fn > 1e-3 else None
+                if pts is not None:
+                    self.arrow = self.server.scene.add_arrows(
+                        '/force', pts, (30, 160, 30), shaft_radius=0.0012, head_radius=0.003,
+                        head_length=0.005)
+                elif self.arrow is not None:
+                    self.arrow.visible = False
+            in_contact = contact is not None and contact[2] > 0
+            depth = contact[2] if in_contact else 0.0
+            if in_contact and depth < self.thresholds[-1]:
+                self._light_since = self._light_since or now
+            else:
+                self._light_since = None
+            gg = gauge(depth, fn, self.thresholds, in_contact,
+                       0.0 if self._light_since is None else now - self._light_since,
+                       self.max_force)
+            self.g_bar.value = gg.percent
+            self.g_bar.color = {'none': 'gray', 'light': 'yellow', 'medium': 'orange',
+                                'deep': 'red'}[gg.level]
+            self.g_gauge.content = self._gauge_text(gg)
+            self.g_cue.content = f'**{gg.cue}**' if gg.cue else ''
+            if clock_s is not None:
+                self.g_clock.content = f'clock {int(clock_s) // 60}:{int(clock_s) % 60:02d}'
+            self._dent(contact if in_contact else None)
+
+    def _dent(self, contact) -> None:
+        """Dent the skin for ``contact`` (None: lifted); re-sends the skin when it moves or moved,
+        nothing when the contact is the one drawn."""
+        if self.deformation is None:
+            return
+        key = None if contact is None else np.concatenate([contact[0], contact[1],
+                                                            [contact[2]]])
+        last = getattr(self, '_dent_key', None)
+        if (key is None and last is None) or (key is not None and last is not None
+                                              and np.array_equal(key, last)):
+            return
+        self._dent_key = key
+        if contact is None:
+            self.displacement = None
+            self._send_skin(self._moved.copy())
+            return
+        u = self.deformation.displacement(self.vertices, contact[0], contact[1], contact[2])
+        self.displacement = u
+        self._send_skin(self._moved | np.any(u != 0.0, axis=1))
+
+    # -- debrief ----------------------------------------------------------------------------
+
+    def _clear_debrief(self) -> None:
+        for n in self._lesion_nodes + self._mark_nodes:
+            n.remove()
+        self._lesion_nodes, self._mark_nodes = [], []
+        if self._path is not None:
+            self._path.remove()
+            self._path = None
+        self.g_debrief.visible = False
+        self.g_history.visible = False
+        self.debrief = None
+
+    def show_debrief(self, debrief, trainee: str = '', db=None) -> None:
+        """Reveal the lesions (hit / missed / not palpable), the marks, the search path and the
+        report's numbers; the scrubber replays the session. ``trainee``: show the trainee's
+        history (from the trainee record ``db``, None = its default file) beside it."""
+        with self._lock:
+            self._clear_debrief()
+            self.mode, self.debrief = 'debrief', debrief
+            self.displacement, self._dent_key = None, None
+            self.probe.visible = False
+            if self.arrow is not None:
+                self.arrow.visible = False
+            n = debrief.numbers()
+            r = debrief.report
+            self.g_numbers.content = numbers_markdown(n)
+            sc = self.server.scene
+            for k, les in enumerate(debrief.lesions):
+                rgb = LESION_RGB[les.status]
+                self._lesion_nodes.append(sc.add_icosphere(
+                    f'/lesions/{k}', radius=max(les.radius, 0.003), color=rgb,
+                    position=les.surface, opacity=0.85))
+                self._lesion_nodes.append(sc.add_label(
+                    f'/lesions/{k}_label', f'{les.name}: {les.status}',
+                    position=tuple(np.asarray(les.surface) + (0.012, 0, 0.006))))
+            self.g_lesions.content = '\n'.join(
+                f'- lesion **{les.name}**: {les.status}' + (f' ({les.why})' if les.why else '')
+                for les in debrief.lesions) or '- the case has no lesion'
+            self.g_feedback.content = '\n'.join(f'- {line}' for line in r['feedback']) \
+                or '- pass: every lesion found, deep coverage met'
+            self.g_time.max = max(round(debrief.duration, 1), 0.1)
+            self.g_time.value = self.g_time.max
+            self.g_debrief.visible = True
+            hist = trainee_history(trainee, db) if trainee else None
+            if hist is not None:
+                self.g_history_md.content = history_markdown(trainee, hist)
+                self.g_history.visible = True
+            self.g_status.content = (f"**debrief** — score {r['score']:.1f} ({r['verdict']}); "
+                                     'drag the replay time to replay the session')
+            self.scrub(debrief.duration)
+
+    def scrub(self, t: float) -> None:
+        """Show the debrief as it was ``t`` [s] into the session: coverage, path, marks."""
+        with self._lock:
+            d = self.debrief
+            if d is None:
+                return
+            end = t >= d.duration - 1e-9
+            lv = d.face_levels(None) if end else d.face_levels(t)
+            if end:   # exactly the report's grid
+                lv = d.session.grid.level_per_face()
+            new = self.paint.vertex_levels(lv)
+            changed = (new != self.vertex_levels) | self._moved
+            self.vertex_levels = new
+            self.g_cov.content = self._coverage_text(coverage_fractions(d.session.grid, lv))
+            self._send_skin(changed)
+            p = d.path(None if end else t)
+            if self._path is not None:
+                self._path.remove()
+                self._path = None
+            seg = _segments(p, lift=0.0015)
+            if len(seg):
+                self._path = self.server.scene.add_line_segments(
+                    '/path', seg, (40, 40, 120), thickness=2.0, thickness_units='screen')
+            for node in self._mark_nodes:
+                node.remove()
+            self._mark_nodes = [self.server.scene.add_icosphere(
+                f'/marks/{i}', radius=0.0025, color=MARK_RGB.get(res, MARK_RGB['false']),
+                position=tuple(map(float, pt + np.array([0.002, 0, 0]))))
+                for i, (pt, res) in enumerate(d.marks(None if end else t))]
+            self.g_clock.content = f'replay {t:.1f} s of {d.duration:.1f} s'
+
+    # -- for tests and benches --------------------------------------------------------------
+
+    def state(self) -> dict:
+        """What the page shows now, as the server holds it (tests compare it with the report)."""
+        return {'mode': self.mode, 'url': self.url,
+                'numbers': self.debrief.numbers() if self.debrief is not None else None,
+                'numbers_text': self.g_numbers.content,
+                'coverage_text': self.g_cov.content, 'gauge_text': self.g_gauge.content,
+                'cue': self.g_cue.content, 'status': self.g_status.content,
+                'lesions': [(le.name, le.status) for le in self.debrief.lesions]
+                if self.debrief is not None else [],
+                'lesions_visible': bool(self._lesion_nodes),
+                'skin_frames': self.stats.skin_frames, 'clients': len(self.server.get_clients())}
+
+    def close(self) -> None:
+        self.server.stop()
+
+
+def numbers_markdown(n: dict) -> str:
+    """The debrief's headline numbers as the panel shows them (one ``key: value`` per line, the
+    values printed as the report has them)."""
+    rows = [('score', n['score']), ('verdict', n['verdict']), ('hits', n['hits']),
+            ('misses', n['misses']), ('false marks', n['false_marks']),
+            ('coverage light %', n['coverage_light_pct']),
+            ('coverage medium %', n['coverage_medium_pct']),
+            ('coverage deep %', n['coverage_deep_pct']), ('pattern', n['pattern']),
+            ('duration s', n['duration_s'])]
+    return '\n'.join(f'- {k}: **{v}**' for k, v in rows)
+
+
+#: the history table's columns: (heading, the row's value)
+_HISTORY_COLUMNS = (
+    ('session', lambda r: r['session']), ('date (UTC)', lambda r: (r['started_utc'] or '')[:16]),
+    ('case', lambda r: r['case']), ('level', lambda r: r['case_level'] or ''),
+    ('deep %', lambda r: f"{r['coverage_pct']['deep']:.0f}"),
+    ('found', lambda r: f"{r['hits']}/{r['hits'] + r['misses']}"),
+    ('false marks', lambda r: r['false_marks']), ('score', lambda r: f"{r['score']:.0f}"),
+    ('verdict', lambda r: r['verdict']))
+
+
+def history_markdown(trainee: str, rows: list[dict]) -> str:
+    """The trainee's last ten sessions as a Markdown table (:func:`trainee_history` rows)."""
+    if rows and 'error' in rows[0]:
+        return f"trainee record: {rows[0]['error']}"
+    if not rows:
+        return f'no earlier session of **{trainee}**'
+    head = '| ' + ' | '.join(h for h, _ in _HISTORY_COLUMNS) + ' |\n|' + '---|' * len(
+        _HISTORY_COLUMNS)
+    return f'**{trainee}**: {len(rows)} sessions\n\n' + head + ''.join(
+        '\n| ' + ' | '.join(str(f(r)) for _, f in _HISTORY_COLUMNS) + ' |' for r in rows[-10:])
+
+
+def coverage_fractions(grid, face_levels) -> dict:
+    """{level: area share 0..1} of the coverage ``grid``'s region pressed at that level or
+    deeper, from ``face_levels`` (m,) 0..3 (as ``CoverageGrid.fraction`` for its own state)."""
+    a = grid.areas / grid.areas.sum()
+    return {k: float(a[face_levels > i].sum()) for i, k in enumerate(LEVELS)}
+
+
+def _segments(path: np.ndarray, lift: float) -> np.ndarray:
+    """(n, 2, 3) segments of a NaN-split polyline, each point moved ``lift`` [m] outward (away
+    from the chest-wall centre) so the line is drawn above the skin."""
+    if len(path) < 2:
+        return np.zeros((0, 2, 3))
+    n = np.linalg.norm(path, axis=1, keepdims=True)
+    p = path + lift * path / np.where(n > 0, n, 1.0)
+    a, b = p[:-1], p[1:]
+    ok = np.isfinite(a).all(axis=1) & np.isfinite(b).all(axis=1)
+    return np.stack([a[ok], b[ok]], axis=1)

@@ -1,0 +1,127 @@
+"""The debrief model: a scored session (:class:`~haptic_anfis.exam.ExamSession` and its report)
+as what the page shows at any time of a replay (no ROS, no viser).
+
+Times on the scrubber are seconds from the session's first sample. Coverage at a time is exact to
+one of ``bins`` steps: the contact samples are folded into a coverage grid in that many time
+steps once, keeping the first time each face reached each level.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..exam.config import LEVELS
+from ..exam.coverage import CoverageGrid
+
+__all__ = ['Debrief', 'LesionMarker', 'lesion_status', 'panel_numbers']
+
+
+@dataclass(frozen=True)
+class LesionMarker:
+    """A lesion revealed: ``name``, ``centre`` (3,) [m], ``radius`` [m], ``surface`` (3,) [m]
+    (its projection on the skin), ``status``: 'hit', 'missed' or 'not palpable', ``why``."""
+    name: str
+    centre: tuple
+    radius: float
+    surface: tuple
+    status: str
+    why: str
+
+
+def lesion_status(entry: dict) -> str:
+    """'hit', 'not palpable' (the case grades the lesion as not palpable: a report entry with
+    ``palpable`` false) or 'missed'."""
+    if entry.get('found'):
+        return 'hit'
+    if entry.get('palpable') is False:
+        return 'not palpable'
+    return 'missed'
+
+
+def panel_numbers(report: dict) -> dict:
+    """The headline numbers the debrief panel shows, as the report has them (``exam report
+    --json``): coverage per level [%], hits, misses, false marks, score, verdict, pattern,
+    duration [s]."""
+    return {'coverage_light_pct': report['coverage_pct']['light'],
+            'coverage_medium_pct': report['coverage_pct']['medium'],
+            'coverage_deep_pct': report['coverage_pct']['deep'],
+            'hits': report['hits'], 'misses': report['misses'],
+            'false_marks': report['false_marks'], 'score': report['score'],
+            'verdict': report['verdict'], 'pattern': report['pattern'],
+            'duration_s': report['duration_s']}
+
+
+class Debrief:
+    """What the debrief shows of ``session`` with its ``report`` (``ExamSession.report()``).
+
+    Args:
+        bins: time steps of the replay's coverage (the scrubber's resolution for the heat map).
+    """
+
+    def __init__(self, report: dict, session, bins: int = 200) -> None:
+        self.report, self.session = report, session
+        c = np.array(session.contacts, float).reshape(-1, 6)
+        c = c[np.argsort(c[:, 0], kind='stable')]
+        times = [c[:, 0]] + [np.array(x, float).reshape(-1, 4)[:, 0]
+                             for x in (session.poses, session.forces, session.marks)]
+        allt = np.concatenate(times)
+        self.t0 = float(allt.min()) if len(allt) else 0.0
+        self.duration = float(allt.max() - self.t0) if len(allt) else 0.0
+        self.contacts = c
+        g = session.grid
+        self._first = np.full((len(g.centroids), len(LEVELS)), np.inf)
+        grid = CoverageGrid(g.vertices, g.faces, session.region_radius, g.footprint_radius,
+                            g.thresholds)
+        ins = c[:, 5] > 0.5
+        edges = np.linspace(self.t0, self.t0 + self.duration, max(int(bins), 1) + 1)
+        rel = c[:, 0]
+        for a, b in zip(edges[:-1], edges[1:]):
+            sel = ins & (rel >= a) & ((rel < b) | (b == edges[-1]))
+            if sel.any():
+                before = grid.covered.copy()
+                grid.add(c[sel, 1:4], c[sel, 4])
+                new = grid.covered & ~before
+                self._first[new] = b - self.t0
+        self.lesions = [LesionMarker(e['name'], tuple(np.array(e['centre_mm']) * 1e-3),
+                                     e['radius_mm'] * 1e-3, tuple(np.array(e['surface_mm']) * 1e-3),
+                                     lesion_status(e), e.get('missed', ''))
+                        for e in report['lesions']]
+
+    def face_levels(self, t: float | None = None) -> np.ndarray:
+        """(m,) int 0..3: highest level per coverage face reached by ``t`` [s] (None = the end)."""
+        t = self.duration if t is None else t
+        return (self._first <= t + 1e-9).sum(axis=1)
+
+    def path(self, t: float | None = None, step: float = 1e-3) -> np.ndarray:
+        """(n, 3) [m]: the probe's contact points in contact up to ``t`` [s], thinned to points
+        at least ``step`` [m] apart (NaN rows split the path where it left the skin)."""
+        t = self.duration if t is None else t
+        c = self.contacts
+        c = c[c[:, 0] - self.t0 <= t + 1e-9]
+        out, last, was_in = [], None, False
+        for row in c:
+            if row[5] <= 0.5 or not np.isfinite(row[1:4]).all():
+                if was_in:
+                    out.append((np.nan, np.nan, np.nan))
+                was_in, last = False, None
+                continue
+            p = row[1:4]
+            if last is None or np.linalg.norm(p - last) >= step:
+                out.append(tuple(p))
+                last = p
+            was_in = True
+        return np.array(out, float).reshape(-1, 3)
+
+    def marks(self, t: float | None = None) -> list[tuple[np.ndarray, str]]:
+        """Marks placed by ``t`` [s]: (surface point [m] (3,), result 'hit' / 'repeat' /
+        'false'); marks without a surface point are left out."""
+        t = self.duration if t is None else t
+        out = []
+        for (tm, *_), e in zip(self.session.marks, self.report['marks']):
+            if tm - self.t0 <= t + 1e-9 and e.get('surface_mm') is not None:
+                out.append((np.array(e['surface_mm'], float) * 1e-3, e['result']))
+        return out
+
+    def numbers(self) -> dict:
+        return panel_numbers(self.report)

@@ -1,0 +1,50 @@
+"""The force gauge and the trainee's cue (no ROS).
+
+The pressure levels are the exam's (config/exam.yaml): depth below the undeformed skin, light >= 2
+mm, medium >= 5 mm, deep >= 8 mm — there are no agreed newton values, so the gauge's bands are
+depths; the force [N] is shown beside them with the device's limit.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from ..exam.config import LEVELS
+
+__all__ = ['DEVICE_MAX_FORCE', 'LIGHT_PRESS_S', 'Gauge', 'gauge']
+
+#: [N] the Novint Falcon's force (the driver's clamp default)
+DEVICE_MAX_FORCE = 10.0
+#: [s] a press held this long above light but short of deep draws the "press deeper" cue
+LIGHT_PRESS_S = 1.0
+
+
+@dataclass(frozen=True)
+class Gauge:
+    """``level``: 'none', 'light', 'medium' or 'deep'; ``percent``: the depth as a share of the
+    deep threshold x 1.5 (the bar's full scale), 0..100; ``force_n`` [N]; ``cue``: '' or the
+    prompt."""
+    level: str
+    percent: float
+    depth_mm: float
+    force_n: float
+    cue: str
+
+
+def gauge(depth: float, force_n: float, thresholds, in_contact: bool, light_for: float = 0.0,
+          max_force: float = DEVICE_MAX_FORCE) -> Gauge:
+    """The gauge for a probe ``depth`` [m] and force magnitude ``force_n`` [N]; ``thresholds``
+    (light, medium, deep) [m]; ``light_for`` [s]: how long the press has stayed in contact short
+    of deep. Cues: at or beyond ``max_force`` the device clamps ("beyond the device's force"); a
+    press held ``LIGHT_PRESS_S`` short of deep is too light for deep coverage."""
+    d = max(float(depth), 0.0) if in_contact else 0.0
+    k = sum(d >= t for t in thresholds)
+    level = 'none' if k == 0 else LEVELS[k - 1]
+    full = 1.5 * thresholds[-1]
+    cue = ''
+    if force_n >= max_force:
+        cue = f"beyond the device's force ({max_force:.0f} N): ease off"
+    elif in_contact and d < thresholds[-1] and light_for >= LIGHT_PRESS_S:
+        cue = (f'press harder: {d * 1e3:.1f} mm is too light for deep coverage '
+               f'(>= {thresholds[-1] * 1e3:.0f} mm)')
+    return Gauge(level, round(min(100.0, 100.0 * d / full), 1), round(d * 1e3, 2),
+                 round(float(force_n), 2), cue)

@@ -1,0 +1,102 @@
+"""``make screenshots``: the live page and the debrief of an exam, as PNGs for the docs.
+
+Records ``haptic-anfis exam run --trainee systematic --duration S`` (the simulated trainee
+palpates the default case), then serves two pages from that bag and captures them with headless
+chromium: the live page as it was halfway through the exam (the probe, its dent, force and gauge
+at that moment, the coverage painted so far — drawn by the same calls the web_view node makes
+each frame, held still for the capture: chromium's virtual time does not run out on a page that
+streams frames), and the debrief (``haptic-anfis view BAG``). Needs chromium.
+
+    python -m haptic_anfis.view.shots [--out docs] [--duration 30]
+"""
+from __future__ import annotations
+
+import argparse
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from .browser import chromium, free_port, screenshot
+
+__all__ = ['live_at', 'main']
+
+
+def _drawn(png) -> bool:
+    from PIL import Image
+    a = np.asarray(Image.open(png).convert('RGB')).astype(int)[100:700, 150:900]
+    return ((a < 225).any(axis=2)).mean() > 0.2
+
+
+def live_at(app, debrief, t: float) -> None:
+    """Draw on ``app`` the live page of ``debrief``'s session at ``t`` [s]: the newest contact,
+    pose and force command by then, the coverage so far, the clock."""
+    s = debrief.session
+    t_abs = debrief.t0 + t
+    c = debrief.contacts
+    c = c[c[:, 0] <= t_abs]
+    contact = None
+    if len(c) and c[-1, 5] > 0.5:
+        contact = (c[-1, 1:4], np.array([-1.0, 0.0, 0.0]), float(c[-1, 4]))
+    p = np.array(s.poses, float).reshape(-1, 4)
+    p = p[p[:, 0] <= t_abs]
+    f = np.array(s.forces, float).reshape(-1, 4)
+    f = f[f[:, 0] <= t_abs]
+    lv = debrief.face_levels(t)
+    from .app import coverage_fractions
+    app.set_coverage(lv, coverage_fractions(s.grid, lv))
+    app.show_live(p[-1, 1:4] if len(p) else None, contact, f[-1, 1:4] if len(f) else None, t)
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument('--out', default='docs', help='directory for view_live.png, view_debrief.png')
+    ap.add_argument('--duration', type=float, default=30.0, help='exam length [s]')
+    a = ap.parse_args(argv)
+    if chromium() is None:
+        print('screenshots: chromium is not installed (apt-get install chromium)', file=sys.stderr)
+        return 1
+    out = Path(a.out)
+    out.mkdir(parents=True, exist_ok=True)
+    from .app import ViewApp
+    from .build import bag_debrief, case_view, open_bag_view
+    with tempfile.TemporaryDirectory(prefix='haptic-anfis-shots-') as tmp:
+        bag = Path(tmp) / 'exam'
+        r = subprocess.run([sys.executable, '-m', 'haptic_anfis.cli', 'exam', 'run', '--trainee',
+                            'systematic', '--duration', str(a.duration), '--record', str(bag)],
+                           capture_output=True, text=True)
+        if r.returncode != 0:
+            print(f'screenshots: the exam failed: {r.stderr.strip()[-500:]}', file=sys.stderr)
+            return 1
+        d = bag_debrief(bag)
+        cv = case_view(None)
+        from ..cases import library
+        app = ViewApp(cv.vertices, cv.faces, cv.region_faces, cv.config.thresholds,
+                      port=free_port(), deformation=cv.deformation, controls=True,
+                      cases=[c.name for c in library().ready()])
+        try:
+            app.set_exam_running(True)
+            # the first moment past the middle with the probe pressing (the dent shows)
+            c = d.contacts
+            rel = c[:, 0] - d.t0
+            pressing = np.flatnonzero((rel >= 0.5 * d.duration) & (c[:, 5] > 0.5)
+                                      & (c[:, 4] > cv.config.medium))
+            t = float(rel[pressing[0]]) if len(pressing) else 0.5 * d.duration
+            live_at(app, d, t)
+            print('live     ', screenshot(app.url, out / 'view_live.png', app=app, ready=_drawn,
+                                          timeout=300), flush=True)
+        finally:
+            app.close()
+        app = open_bag_view(bag, port=free_port())
+        try:
+            print('debrief  ', screenshot(app.url, out / 'view_debrief.png', app=app,
+                                          ready=_drawn, timeout=300), flush=True)
+        finally:
+            app.close()
+    return 0
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())

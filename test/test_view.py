@@ -1,0 +1,153 @@
+"""The browser view's room (haptic_anfis.view) without a browser: gauge, framing, debrief numbers
+against ``exam report --json``, the server's state, and bad input named in one line."""
+import json
+import socket
+
+import numpy as np
+import pytest
+
+pytest.importorskip('viser', reason='the view extra (pip install .[view]) is not installed')
+
+from haptic_anfis.cli import main  # noqa: E402
+from haptic_anfis.exam.config import ExamConfig  # noqa: E402
+from haptic_anfis.view import frame_camera, gauge, lesion_status, probe_quaternion  # noqa: E402
+from haptic_anfis.view.browser import free_port  # noqa: E402
+
+from _view_bag import write_session_bag  # noqa: E402
+
+
+@pytest.fixture(scope='module')
+def bag(tmp_path_factory):
+    p = tmp_path_factory.mktemp('view') / 'session'
+    write_session_bag(p)
+    return p
+
+
+def last_json(out: str) -> dict:
+    return json.loads(out.strip().splitlines()[-1])
+
+
+def test_gauge_bands_follow_the_exam_levels_and_cue_light_and_overforce():
+    th = ExamConfig().thresholds
+    assert gauge(th[0] - 1e-4, 1.0, th, True).level == 'none'
+    assert gauge(th[0], 1.0, th, True).level == 'light'
+    assert gauge(th[1], 1.0, th, True).level == 'medium'
+    assert gauge(th[2], 1.0, th, True).level == 'deep'
+    assert gauge(th[2], 1.0, th, False).level == 'none'   # not in contact: no pressure
+    assert gauge(th[1], 3.0, th, True, light_for=0.5).cue == ''
+    assert 'press harder' in gauge(th[1], 3.0, th, True, light_for=1.5).cue
+    assert gauge(th[2], 3.0, th, True, light_for=5.0).cue == ''   # deep: no cue
+    assert "device's force" in gauge(th[2], 10.0, th, True, max_force=10.0).cue
+    assert 0 <= gauge(0.1, 1.0, th, True).percent <= 100
+
+
+def test_camera_frames_the_breast():
+    rng = np.random.default_rng(0)
+    v = rng.uniform((0, -0.07, -0.07), (0.045, 0.07, 0.07), (500, 3))
+    f = frame_camera(v)
+    d = np.subtract(f.look_at, f.position)
+    dist = np.linalg.norm(d)
+    assert 0.1 < dist < 1.0   # viser's default sits 5 m away
+    rays = v - np.asarray(f.position)
+    ang = np.arccos(rays @ d / np.linalg.norm(rays, axis=1) / dist)
+    assert ang.max() < f.fov / 2   # every point inside the (vertical) field of view
+    assert f.near < dist - 0.1 and f.far > dist + 0.1
+
+
+@pytest.mark.parametrize('d', [(-1, 0, 0), (0, 1, 0), (0, 0, 1), (0, 0, -1), (-0.6, 0.3, 0.74)])
+def test_probe_quaternion_stands_the_probe_out_of_the_tissue(d):
+    w, x, y, z = probe_quaternion(d)
+    q = np.array([x, y, z])
+    # rotate +z by the quaternion
+    v = np.array([0.0, 0.0, 1.0])
+    r = v + 2 * w * np.cross(q, v) + 2 * np.cross(q, np.cross(q, v))
+    np.testing.assert_allclose(r, -np.asarray(d) / np.linalg.norm(d), atol=1e-12)
+
+
+def test_lesion_status():
+    assert lesion_status({'found': True}) == 'hit'
+    assert lesion_status({'found': False}) == 'missed'
+    assert lesion_status({'found': False, 'palpable': False}) == 'not palpable'
+
+
+def test_debrief_equals_exam_report_and_replays_in_time(bag, capfd):
+    from haptic_anfis.view.build import bag_debrief
+    assert main(['exam', 'report', str(bag), '--json']) == 0
+    want = last_json(capfd.readouterr().out)
+    d = bag_debrief(bag)
+    n = d.numbers()
+    assert n['hits'] == want['hits'] and n['misses'] == want['misses']
+    assert n['false_marks'] == want['false_marks'] and n['score'] == want['score']
+    assert n['coverage_deep_pct'] == want['coverage_pct']['deep']
+    assert [(le.name, le.status) for le in d.lesions] == [
+        (e['name'], 'hit' if e['found'] else 'missed') for e in want['lesions']]
+    end = d.session.grid.level_per_face()
+    early = d.face_levels(0.25 * d.duration)
+    assert (early <= end).all() and early.sum() < end.sum()   # coverage grows over the replay
+    assert len(d.marks(0.0)) == 0 and len(d.marks()) == want['samples']['marks']
+    assert len(d.path(0.1 * d.duration)) < len(d.path())
+
+
+def test_page_state_is_the_report_and_lesions_are_revealed(bag):
+    from haptic_anfis.view.build import open_bag_view
+    app = open_bag_view(bag, port=free_port())
+    try:
+        s = app.state()
+        assert s['mode'] == 'debrief' and s['lesions_visible']
+        assert f"score: **{s['numbers']['score']}**" in s['numbers_text']
+        assert f"hits: **{s['numbers']['hits']}**" in s['numbers_text']
+        app.scrub(0.0)   # the start of the replay: nothing covered yet
+        assert 'light 0.0 %' in app.state()['coverage_text']
+    finally:
+        app.close()
+
+
+def test_live_page_hides_lesions_and_draws_the_dent():
+    from haptic_anfis.view.app import ViewApp
+    from haptic_anfis.view.build import case_view
+    cv = case_view(None)
+    app = ViewApp(cv.vertices, cv.faces, cv.region_faces, cv.config.thresholds,
+                  port=free_port(), deformation=cv.deformation, controls=True, cases=['default'])
+    try:
+        app.set_exam_running(True, blind=True)
+        y, z = 0.01, 0.0
+        x = 0.045 * np.sqrt(1 - (y / 0.07) ** 2)
+        frames = app.stats.skin_frames
+        app.show_live(np.array([x - 0.006, y, z]),
+                      (np.array([x, y, z]), np.array([-1.0, 0, 0]), 0.006), np.array([3.0, 0, 0]),
+                      12.0)
+        s = app.state()
+        assert not s['lesions_visible'] and 'blind' in s['status']
+        assert 'medium' in s['gauge_text'] and s['skin_frames'] == frames + 1
+        assert np.abs(app.displacement).max() == pytest.approx(0.006)   # the probe's depth
+        app.show_live(np.array([x + 0.01, y, z]), None, None, 13.0)   # lifted: dent gone
+        assert app.displacement is None
+    finally:
+        app.close()
+
+
+def test_bad_input_is_one_line_naming_it(tmp_path, bag, capfd):
+    assert main(['view', str(tmp_path / 'nope'), '--port', str(free_port())]) == 1
+    err = capfd.readouterr().err
+    assert 'nope' in err and len(err.strip().splitlines()) == 1
+    bad = tmp_path / 'corrupt'
+    bad.mkdir()
+    (bad / 'metadata.yaml').write_text('rosbag2_bagfile_information: [not: a bag')
+    assert main(['view', str(bad), '--port', str(free_port())]) == 1
+    err = capfd.readouterr().err
+    assert 'corrupt' in err and len(err.strip().splitlines()) == 1
+    nocontact = tmp_path / 'nocontact'
+    write_session_bag(nocontact, with_contact=False)
+    assert main(['view', str(nocontact), '--port', str(free_port())]) == 1
+    err = capfd.readouterr().err
+    assert '/contact' in err and 'nothing to show' in err and len(err.strip().splitlines()) == 1
+    assert main(['view', str(bag), '--case', 'no_such_case', '--port', str(free_port())]) == 1
+    err = capfd.readouterr().err
+    assert 'no_such_case' in err and len(err.strip().splitlines()) == 1
+    with socket.socket() as s:
+        s.bind(('127.0.0.1', 0))
+        s.listen()
+        port = s.getsockname()[1]
+        assert main(['view', str(bag), '--port', str(port)]) == 1
+        err = capfd.readouterr().err
+        assert f'--port {port}' in err and 'in use' in err and len(err.strip().splitlines()) == 1

@@ -1,0 +1,122 @@
+"""The view in a real browser (Debian's chromium, headless, software WebGL): what a person would
+check on the debrief of a recorded session and on a live page fed by ROS topics.
+
+Skipped, saying why, where chromium or viser is absent (.ci/run installs chromium)."""
+import json
+import time
+
+import numpy as np
+import pytest
+
+pytest.importorskip('viser', reason='the view extra (pip install .[view]) is not installed')
+
+from haptic_anfis.view.browser import chromium, free_port, screenshot  # noqa: E402
+
+from _view_bag import write_session_bag  # noqa: E402
+
+pytestmark = pytest.mark.skipif(chromium() is None,
+                                reason='chromium is not installed (apt-get install chromium)')
+
+#: the scene's part of the 1280 x 800 window: left of the GUI panel, clear of the axes gizmo
+SCENE = (slice(100, 700), slice(150, 900))   # rows, columns
+
+
+def drawn(png) -> bool:
+    """The scene arrived: the breast covers a fifth of the scene part of the window (a capture
+    before the page received it is white there)."""
+    px = pixels(png)
+    return px['drawn'] > 0.2 * px['total']
+
+
+def pixels(png):
+    from PIL import Image
+    a = np.asarray(Image.open(png).convert('RGB')).astype(int)[SCENE]
+    r, g, b = a[..., 0], a[..., 1], a[..., 2]
+    return {'drawn': int(((r < 235) | (g < 225) | (b < 225)).sum()),   # not the white page
+            'red': int(((r > g + 60) & (r > b + 60)).sum()),          # deep coverage
+            'yellow': int(((r > 200) & (g > 170) & (b < 150)).sum()),  # light coverage
+            'green': int(((g > r + 40) & (g > b + 20)).sum()),         # a lesion found
+            'blue': int(((b > r + 80) & (b > g + 50)).sum()),          # the probe
+            'total': int(r.size)}
+
+
+def test_debrief_page_shows_the_report_heat_map_and_lesions(tmp_path, capfd):
+    from haptic_anfis.cli import main
+    from haptic_anfis.view.build import open_bag_view
+    bag = tmp_path / 'session'
+    write_session_bag(bag)
+    assert main(['exam', 'report', str(bag), '--json']) == 0
+    want = json.loads(capfd.readouterr().out.strip().splitlines()[-1])
+    app = open_bag_view(bag, port=free_port())
+    try:
+        px = pixels(screenshot(app.url, tmp_path / 'debrief.png', app=app, ready=drawn))
+        assert px['drawn'] > 0.15 * px['total'], px   # the breast fills the middle of the view
+        assert px['red'] > 2000 and px['yellow'] > 1000, px   # deep and light coverage painted
+        assert px['green'] > 200, px   # the lesion found, revealed
+        # the panel's numbers as the server holds them for every page: exam report --json's
+        n = app.state()['numbers_text']
+        for key, value in (('score', want['score']), ('hits', want['hits']),
+                           ('misses', want['misses']), ('false marks', want['false_marks']),
+                           ('coverage deep %', want['coverage_pct']['deep']),
+                           ('coverage light %', want['coverage_pct']['light'])):
+            assert f'{key}: **{value}**' in n, (key, value)
+        app.scrub(0.0)   # the instructor drags the replay to the start; a page (re)connecting
+        px0 = pixels(screenshot(app.url, tmp_path / 'start.png', app=app, ready=drawn))   # now gets that state
+        assert px0['red'] < 0.05 * px['red'] and px0['drawn'] > 0.15 * px0['total'], px0
+        assert px0['green'] > 200, px0   # the lesions stay revealed over the replay
+    finally:
+        app.close()
+
+
+def test_live_page_from_ros_topics_draws_probe_and_dent_and_hides_lesions(tmp_path,
+                                                                          monkeypatch):
+    monkeypatch.setenv('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+    monkeypatch.setenv('ROS_DOMAIN_ID', '116')
+    from haptic_anfis.nodes.web_view import web_view_in_thread
+    with web_view_in_thread({'port': free_port()}, 'fake_loop') as (node, feeder):
+        held_press(node, feeder, tmp_path)
+
+
+def held_press(node, feeder, tmp_path):
+    """Publish a held press (pose, contact, force) at 100 Hz until the page draws it (at most
+    60 s), then look at the page."""
+    from geometry_msgs.msg import PoseStamped, WrenchStamped
+    from sensor_msgs.msg import JointState
+
+    from haptic_anfis import interfaces as ifc
+    pubs = {t: feeder.create_publisher(m, t, 10) for t, m in (
+        (ifc.TOPIC_POSE, PoseStamped), (ifc.TOPIC_CONTACT, JointState),
+        (ifc.TOPIC_COMMAND, WrenchStamped))}
+    y, z, depth = 0.02, 0.01, 0.006
+    x = 0.045 * np.sqrt(1 - (y / 0.07) ** 2 - (z / 0.07) ** 2)
+
+    def drawn_press() -> bool:
+        st = node.app.stats
+        return st.probe_position is not None and np.allclose(
+            st.probe_position, (x - depth, y, z), atol=1e-9) and node.app.displacement is not None
+
+    end = time.monotonic() + 60.0   # discovery and the first frames on a loaded machine
+    while time.monotonic() < end and not drawn_press():   # a held press, 100 Hz
+        p = PoseStamped()
+        p.header.frame_id = 'tissue'
+        p.pose.position.x, p.pose.position.y, p.pose.position.z = x - depth, y, z
+        c = JointState(name=list(ifc.CONTACT_FIELDS))
+        v = [0.0] * len(ifc.CONTACT_FIELDS)
+        v[0:3], v[ifc.I_DEPTH], v[ifc.I_DX], v[ifc.I_IN_CONTACT] = [x, y, z], depth, -1.0, 1.0
+        c.position = v
+        w = WrenchStamped()
+        w.wrench.force.x = 4.0
+        for t, m in ((ifc.TOPIC_POSE, p), (ifc.TOPIC_CONTACT, c), (ifc.TOPIC_COMMAND, w)):
+            pubs[t].publish(m)
+        time.sleep(0.01)
+    s = node.app.state()
+    assert s['mode'] == 'live' and not s['lesions_visible']
+    assert node.app.stats.probe_position is not None
+    np.testing.assert_allclose(node.app.stats.probe_position, (x - depth, y, z), atol=1e-9)
+    assert node.app.displacement is not None   # the dent is drawn
+    px = pixels(screenshot(node.app.url, tmp_path / 'live.png', app=node.app, ready=drawn))
+    assert px['drawn'] > 0.15 * px['total'], px
+    assert px['blue'] > 300, px   # the probe
+    assert px['green'] < 50, px   # no lesion marker
+    s = node.app.state()   # the newest of each topic: the gauge
+    assert 'pressure: **medium**' in s['gauge_text'] and 'force **4.0 N**' in s['gauge_text']
