@@ -13,14 +13,14 @@ export AMENT_PREFIX_PATH := $(abspath $(VENV))
 unexport _ROS_WHEELS_BOOTSTRAP_COMPLETE
 PIP_QUIET := --quiet --disable-pip-version-check
 
-.PHONY: venv demo test bench clean
+.PHONY: venv demo test bench docs clean
 
 venv: $(STAMP)
 
 $(STAMP): setup.py setup.cfg package.xml
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install $(PIP_QUIET) --upgrade pip 2>&1 | grep -v '^WARNING: Location' || true
-	$(PY) -m pip install $(PIP_QUIET) -e '.[ros,fe,test,report,dask]' 2>&1 | grep -v '^WARNING: Location' || true
+	$(PY) -m pip install $(PIP_QUIET) -e '.[ros,fe,test,report,dask,docs]' 2>&1 | grep -v '^WARNING: Location' || true
 	$(PY) -c 'import haptic_anfis, numba, rclpy, trimesh, rosbags, matplotlib, sklearn' # fail here if the install did not
 	$(VENV)/bin/haptic-anfis warmup # compile the nodes' numba kernels now, not at the first session
 	$(PYTHON) -m venv $(XVENV)
@@ -41,9 +41,14 @@ demo: venv
 test: venv
 	$(PY) -m pytest test
 
+# The documentation site into site/ (warnings are errors). The reference pages (CLI, nodes, case
+# table, measurements index) are generated first by docs/gen/generate.py, a mkdocs hook.
+docs: venv
+	NO_MKDOCS_2_WARNING=1 $(PY) -m mkdocs build --strict --quiet --site-dir site
+
 # Every bench/bench_*.py script prints its own table (ratios and percentiles, never asserted).
 bench: venv
 	@set -e; for f in bench/bench_*.py; do echo "== $$f"; $(PY) $$f; done
 
 clean:
-	rm -rf $(VENV) $(XVENV) build install log *.egg-info
+	rm -rf $(VENV) $(XVENV) build install log site *.egg-info

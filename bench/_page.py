@@ -123,6 +123,9 @@ def run_with_page(main: Callable[[], int | None], script: str, doc: str | None,
         intro = '\n'.join(lines[1:]).strip()
         body = (intro + '\n\n' if intro else '') + '## Output\n\n' + printed_to_markdown(
             tee.copy.getvalue())
-        path = write_page(name, title, body)
+        root = PAGES_DIR.parent.parent
+        script_rel = os.path.relpath(Path(script).resolve(), root)
+        command = ' '.join(['.venv/bin/python', script_rel] + sys.argv[1:])
+        path = write_page(name, title, body, command=command)
         print(f'wrote {os.path.relpath(path)}', file=sys.stderr)
     return rc
