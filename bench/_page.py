@@ -104,11 +104,22 @@ class _Tee(io.TextIOBase):
         self.stream.flush()
 
 
+def _title_and_intro(doc: str) -> tuple[str, str]:
+    """(title, introduction) of a benchmark page from the script's docstring: the title is the
+    first paragraph up to its first ': ' or '. ' (the whole docstring stays as the introduction,
+    unless it is only that title)."""
+    doc = doc.strip()
+    first = ' '.join(doc.split('\n\n', 1)[0].split())
+    cuts = [i for i in (first.find(': '), first.find('. ')) if i > 0]
+    title = (first[:min(cuts)] if cuts else first).rstrip('.')
+    return title, ('' if doc.rstrip('.') == title else doc)
+
+
 def run_with_page(main: Callable[[], int | None], script: str, doc: str | None,
-                  no_page_flags: Iterable[str] = ()) -> int:
+                  no_page_flags: Iterable[str] = (), pages_dir: Path | None = None) -> int:
     """Run a benchmark's ``main`` printing as usual; if it returns 0 / None, write its printed
-    output as ``docs/measurements/<name>.md`` (name: the script's file name without ``bench_``,
-    title: the first line of ``doc``, followed by the rest of ``doc`` as the page's introduction).
+    output as ``docs/measurements/<name>.md`` (name: the script's file name without ``bench_``;
+    title and introduction from ``doc``, see :func:`_title_and_intro`).
     No page for ``--help``, a failure, or when an argument in ``no_page_flags`` is given (a
     script's child-process mode). Returns ``main``'s exit code."""
     if any(a in no_page_flags for a in sys.argv[1:]):
@@ -118,14 +129,12 @@ def run_with_page(main: Callable[[], int | None], script: str, doc: str | None,
         rc = int(main() or 0)
     if rc == 0:
         name = Path(script).stem.removeprefix('bench_')
-        lines = (doc or name).strip().splitlines()
-        title = lines[0].strip().rstrip('.')
-        intro = '\n'.join(lines[1:]).strip()
+        title, intro = _title_and_intro(doc or name)
         body = (intro + '\n\n' if intro else '') + '## Output\n\n' + printed_to_markdown(
             tee.copy.getvalue())
         root = PAGES_DIR.parent.parent
         script_rel = os.path.relpath(Path(script).resolve(), root)
         command = ' '.join(['.venv/bin/python', script_rel] + sys.argv[1:])
-        path = write_page(name, title, body, command=command)
+        path = write_page(name, title, body, command=command, pages_dir=pages_dir)
         print(f'wrote {os.path.relpath(path)}', file=sys.stderr)
     return rc
