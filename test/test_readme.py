@@ -108,3 +108,13 @@ def test_the_check_catches_wrong_lines(parser):
     assert check_uses('`haptic-anfis sim --no-such-option`', parser)
     assert check_uses('`haptic-anfis exam run --case normal --speeed 0.02`', parser)
     assert command_uses('`haptic-anfis COMMAND`') == []
+
+
+def test_docs_command_lines_match_the_cli(parser):
+    """The hand-written pages of the manual (docs/*.md; the generated ones are made from the
+    parser) name only real commands and options too."""
+    problems = []
+    for page in sorted((README.parent / 'docs').glob('*.md')):
+        problems += [f'{page.name}: {p}' for p in check_uses(page.read_text(encoding='utf-8'),
+                                                               parser)]
+    assert problems == []
