@@ -152,17 +152,33 @@ def node_names() -> dict[str, str]:
 
 def declarations(module) -> list:
     """The parameters a node module declares, as objects with ``name``, ``default``,
-    ``description`` (:class:`haptic_anfis.nodes._common.Param`).
+    ``description`` (and, with the registry, ``type``).
 
-    Today read from the module's ``PARAMS`` list, plus the shared ``CASE_PARAMS`` when the
-    module declares the case parameters. When the nodes get a declaration registry that needs no
-    rclpy, this function is the one place to switch to it.
+    With the nodes' declaration registry (``haptic_anfis.nodes.registry.node_parameters``, which
+    needs no rclpy) this is what it returns. Without it, read from the module's ``PARAMS`` list
+    plus the shared ``CASE_PARAMS`` when the module declares the case parameters.
     """
+    try:
+        from haptic_anfis.nodes.registry import node_parameters
+    except ImportError:
+        node_parameters = None
+    if node_parameters is not None:
+        return list(node_parameters(module.__name__.rsplit('.', 1)[-1]))
     params = list(getattr(module, 'PARAMS', []))
     if 'declare_case(' in Path(module.__file__).read_text(encoding='utf-8'):
         from haptic_anfis.nodes._case import CASE_PARAMS
         params += [p for p in CASE_PARAMS if p.name not in {q.name for q in params}]
     return params
+
+
+def _param_type(p) -> str:
+    """The parameter's type: the registry's ROS type name when it has one, else from the default."""
+    declared = getattr(p, 'type', None)
+    if isinstance(declared, str) and declared:
+        return declared
+    if isinstance(p.default, list) and p.default:
+        return f'list of {type(p.default[0]).__name__}'
+    return type(p.default).__name__
 
 
 _KINDS = {'create_publisher': 'publishes', 'create_subscription': 'subscribes',
@@ -265,10 +281,7 @@ def node_reference() -> str:
         if params:
             parts.append('| parameter | type | default | description |\n|---|---|---|---|\n')
             for p in params:
-                kind = type(p.default).__name__
-                if isinstance(p.default, list) and p.default:
-                    kind = f'list of {type(p.default[0]).__name__}'
-                parts.append(f'| `{p.name}` | {kind} | {_code(repr(p.default))} | '
+                parts.append(f'| `{p.name}` | {_param_type(p)} | {_code(repr(p.default))} | '
                              f'{_cell(p.description)} |\n')
             parts.append('\n')
     return ''.join(parts)
