@@ -427,14 +427,16 @@ def measurements_index() -> str:
         title = lines[0].lstrip('# ').strip() if lines else page.stem
         stamp = next((ln.strip('*') for ln in lines[1:4] if ln.startswith('*Written')), '')
         when = stamp.split(':', 1)[1].split(';')[0].strip() if ':' in stamp else ''
-        rows.append(f'| [{_cell(title)}]({page.name}) | `bench/bench_{page.stem}.py` | {when} |')
+        cmd = next((ln.split('`')[1] for ln in lines if ln.startswith('Reproduce: `')),
+                   f'bench/bench_{page.stem}.py')
+        rows.append(f'| [{_cell(title)}]({page.name}) | {_code(cmd)} | {when} |')
     scripts = sorted(p.stem.removeprefix('bench_') for p in (ROOT / 'bench').glob('bench_*.py'))
     missing = [s for s in scripts if not (MEASUREMENTS / f'{s}.md').exists()]
     text = ('# Measurements\n\n' + NOTE.format(src='the pages in `docs/measurements/`')
             + 'Every figure here was written by the benchmark script that measured it '
             '(`bench/_page.py`), with the date, the machine and its load; re-running a script '
             'rewrites its page. Timings on a shared machine follow its load: read them with it.\n\n')
-    text += ('| page | script | written |\n|---|---|---|\n' + '\n'.join(rows) + '\n'
+    text += ('| page | command | written |\n|---|---|---|\n' + '\n'.join(rows) + '\n'
              if rows else 'No benchmark has written its page yet.\n')
     if missing:
         text += ('\nNot measured yet (run the script to add its page): '
