@@ -42,9 +42,10 @@ test: venv
 	$(PY) -m pytest test
 
 # The documentation site into site/ (warnings are errors). The reference pages (CLI, nodes, case
-# table, measurements index) are generated first by docs/gen/generate.py, a mkdocs hook.
+# table, dependencies, measurements index) are generated first by docs/gen/generate.py, a mkdocs
+# hook. No --quiet: it hides the warnings that --strict counts (the build would pass broken links).
 docs: venv
-	NO_MKDOCS_2_WARNING=1 $(PY) -m mkdocs build --strict --quiet --site-dir site
+	NO_MKDOCS_2_WARNING=1 $(PY) -m mkdocs build --strict --site-dir site
 
 # Every bench/bench_*.py script prints its own table (ratios and percentiles, never asserted) and
 # writes it to docs/measurements/<name>.md with the date, machine and load (bench/_page.py).
