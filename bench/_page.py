@@ -119,7 +119,8 @@ def run_with_page(main: Callable[[], int | None], script: str, doc: str | None,
                   no_page_flags: Iterable[str] = (), pages_dir: Path | None = None) -> int:
     """Run a benchmark's ``main`` printing as usual; if it returns 0 / None, write its printed
     output as ``docs/measurements/<name>.md`` (name: the script's file name without ``bench_``;
-    title and introduction from ``doc``, see :func:`_title_and_intro`).
+    title and introduction from ``doc``, see :func:`_title_and_intro`; the introduction goes in
+    as plain text).
     No page for ``--help``, a failure, or when an argument in ``no_page_flags`` is given (a
     script's child-process mode). Returns ``main``'s exit code."""
     if any(a in no_page_flags for a in sys.argv[1:]):
@@ -130,8 +131,9 @@ def run_with_page(main: Callable[[], int | None], script: str, doc: str | None,
     if rc == 0:
         name = Path(script).stem.removeprefix('bench_')
         title, intro = _title_and_intro(doc or name)
-        body = (intro + '\n\n' if intro else '') + '## Output\n\n' + printed_to_markdown(
-            tee.copy.getvalue())
+        # the docstring as written (plain text: its brackets and indentation are not Markdown)
+        body = ((f'```text\n{intro}\n```\n\n' if intro else '') + '## Output\n\n'
+                + printed_to_markdown(tee.copy.getvalue()))
         root = PAGES_DIR.parent.parent
         script_rel = os.path.relpath(Path(script).resolve(), root)
         command = ' '.join(['.venv/bin/python', script_rel] + sys.argv[1:])

@@ -35,6 +35,7 @@ def test_run_with_page_prints_and_writes_only_on_success(tmp_path, capsys, monke
     assert '| 1 | 2 |' in capsys.readouterr().out  # still printed
     text = (tmp_path / 'demo.md').read_text()
     assert text.startswith('# Demo bench\n') and '| 1 | 2 |' in text
+    assert '```text\nDemo bench: a test.\n```' in text  # the docstring as plain text
     assert 'Reproduce: `.venv/bin/python bench/bench_demo.py --quick`' in text
     assert 'load ' in text  # the machine line with its load
 
