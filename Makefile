@@ -13,14 +13,14 @@ export AMENT_PREFIX_PATH := $(abspath $(VENV))
 unexport _ROS_WHEELS_BOOTSTRAP_COMPLETE
 PIP_QUIET := --quiet --disable-pip-version-check
 
-.PHONY: venv demo test bench screenshots clean
+.PHONY: venv demo test bench docs screenshots clean
 
 venv: $(STAMP)
 
 $(STAMP): setup.py setup.cfg package.xml
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install $(PIP_QUIET) --upgrade pip 2>&1 | grep -v '^WARNING: Location' || true
-	$(PY) -m pip install $(PIP_QUIET) -e '.[ros,fe,test,report,dask,view]' 2>&1 | grep -v '^WARNING: Location' || true
+	$(PY) -m pip install $(PIP_QUIET) -e '.[ros,fe,test,report,dask,view,docs]' 2>&1 | grep -v '^WARNING: Location' || true
 	$(PY) -c 'import haptic_anfis, numba, rclpy, trimesh, rosbags, matplotlib, sklearn' # fail here if the install did not
 	$(VENV)/bin/haptic-anfis warmup # compile the nodes' numba kernels now, not at the first session
 	$(PYTHON) -m venv $(XVENV)
@@ -41,7 +41,14 @@ demo: venv
 test: venv
 	$(PY) -m pytest test
 
-# Every bench/bench_*.py script prints its own table (ratios and percentiles, never asserted).
+# The documentation site into site/ (warnings are errors). The reference pages (CLI, nodes, case
+# table, dependencies, measurements index) are generated first by docs/gen/generate.py, a mkdocs
+# hook. No --quiet: it hides the warnings that --strict counts (the build would pass broken links).
+docs: venv
+	NO_MKDOCS_2_WARNING=1 $(PY) -m mkdocs build --strict --site-dir site
+
+# Every bench/bench_*.py script prints its own table (ratios and percentiles, never asserted) and
+# writes it to docs/measurements/<name>.md with the date, machine and load (bench/_page.py).
 bench: venv
 	@set -e; for f in bench/bench_*.py; do echo "== $$f"; $(PY) $$f; done
 
@@ -51,4 +58,4 @@ screenshots: venv
 	$(PY) -m haptic_anfis.view.shots --out docs
 
 clean:
-	rm -rf $(VENV) $(XVENV) build install log *.egg-info
+	rm -rf $(VENV) $(XVENV) build install log site *.egg-info

@@ -106,6 +106,13 @@ setup(
             'torch==2.13.0',
             'xanfis==1.1.0',
         ],
+        # The documentation site (make docs: mkdocs build --strict; nothing fetched at build time).
+        'docs': [
+            'mkdocs==1.6.1',
+            'mkdocs-material==9.8.1',
+            'mkdocstrings==1.0.8',
+            'mkdocstrings-python==2.0.11',
+        ],
         'test': [
             'pytest>=8',
             # test_wheel_resources builds the package's wheel offline (--no-build-isolation):

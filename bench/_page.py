@@ -7,16 +7,26 @@ pages; re-running the script rewrites its page.
 
     from _page import write_page   # bench/ is sys.path[0] when a bench script runs
     write_page('loop', 'Haptic loop', table_md, command='.venv/bin/python bench/bench_loop.py')
+
+A script that prints its tables can instead hand its ``main`` to :func:`run_with_page`: it prints
+as before and, when ``main`` returns 0 (or None), the printed text becomes the page (lines that
+start with ``|`` stay Markdown tables, the rest goes into text blocks)::
+
+    if __name__ == '__main__':
+        sys.exit(run_with_page(main, __file__, __doc__))
 """
 from __future__ import annotations
 
+import contextlib
 import datetime as _dt
+import io
 import os
 import platform
 import sys
 from pathlib import Path
+from typing import Callable, Iterable
 
-__all__ = ['machine_line', 'write_page', 'PAGES_DIR']
+__all__ = ['machine_line', 'write_page', 'printed_to_markdown', 'run_with_page', 'PAGES_DIR']
 
 PAGES_DIR = Path(__file__).resolve().parent.parent / 'docs' / 'measurements'
 
@@ -60,3 +70,73 @@ def write_page(name: str, title: str, body_md: str, command: str | None = None,
     path = out_dir / f'{name}.md'
     path.write_text(text, encoding='utf-8')
     return path
+
+
+def printed_to_markdown(text: str) -> str:
+    """Markdown of a benchmark's printed output: runs of lines starting with ``|`` (Markdown
+    tables the script prints) are kept as they are, everything else goes into ``text`` blocks."""
+    out: list[str] = []
+    block: list[str] = []
+    table = False
+    for line in text.rstrip().splitlines() + [None]:  # type: ignore[list-item]
+        is_table = line is not None and line.lstrip().startswith('|')
+        if line is None or is_table != table:
+            if block and any(b.strip() for b in block):
+                out.append('\n'.join(block).strip('\n') if table
+                           else '```text\n' + '\n'.join(block).strip('\n') + '\n```')
+            block, table = [], is_table
+        if line is not None:
+            block.append(line)
+    return '\n\n'.join(out) + '\n'
+
+
+class _Tee(io.TextIOBase):
+    """Writes to ``stream`` and keeps a copy."""
+
+    def __init__(self, stream) -> None:
+        self.stream, self.copy = stream, io.StringIO()
+
+    def write(self, s: str) -> int:
+        self.copy.write(s)
+        return self.stream.write(s)
+
+    def flush(self) -> None:
+        self.stream.flush()
+
+
+def _title_and_intro(doc: str) -> tuple[str, str]:
+    """(title, introduction) of a benchmark page from the script's docstring: the title is the
+    first paragraph up to its first ': ' or '. ' (the whole docstring stays as the introduction,
+    unless it is only that title)."""
+    doc = doc.strip()
+    first = ' '.join(doc.split('\n\n', 1)[0].split())
+    cuts = [i for i in (first.find(': '), first.find('. ')) if i > 0]
+    title = (first[:min(cuts)] if cuts else first).rstrip('.')
+    return title, ('' if doc.rstrip('.') == title else doc)
+
+
+def run_with_page(main: Callable[[], int | None], script: str, doc: str | None,
+                  no_page_flags: Iterable[str] = (), pages_dir: Path | None = None) -> int:
+    """Run a benchmark's ``main`` printing as usual; if it returns 0 / None, write its printed
+    output as ``docs/measurements/<name>.md`` (name: the script's file name without ``bench_``;
+    title and introduction from ``doc``, see :func:`_title_and_intro`; the introduction goes in
+    as plain text).
+    No page for ``--help``, a failure, or when an argument in ``no_page_flags`` is given (a
+    script's child-process mode). Returns ``main``'s exit code."""
+    if any(a in no_page_flags for a in sys.argv[1:]):
+        return int(main() or 0)
+    tee = _Tee(sys.stdout)
+    with contextlib.redirect_stdout(tee):
+        rc = int(main() or 0)
+    if rc == 0:
+        name = Path(script).stem.removeprefix('bench_')
+        title, intro = _title_and_intro(doc or name)
+        # the docstring as written (plain text: its brackets and indentation are not Markdown)
+        body = ((f'```text\n{intro}\n```\n\n' if intro else '') + '## Output\n\n'
+                + printed_to_markdown(tee.copy.getvalue()))
+        root = PAGES_DIR.parent.parent
+        script_rel = os.path.relpath(Path(script).resolve(), root)
+        command = ' '.join(['.venv/bin/python', script_rel] + sys.argv[1:])
+        path = write_page(name, title, body, command=command, pages_dir=pages_dir)
+        print(f'wrote {os.path.relpath(path)}', file=sys.stderr)
+    return rc

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import sys
 import time
 
 for _v in ('OMP_NUM_THREADS', 'MKL_NUM_THREADS', 'OPENBLAS_NUM_THREADS'):
@@ -21,6 +22,7 @@ from haptic_anfis.cases.summary import eval_p50_us  # noqa: E402
 from haptic_anfis.commands.train import load_config  # noqa: E402
 from haptic_anfis.tissue.dataset import load_dataset  # noqa: E402
 from haptic_anfis.tissue.scene import SCENE_DIR  # noqa: E402
+from _page import run_with_page  # noqa: E402  (bench/ is sys.path[0])
 
 
 def main() -> None:
@@ -77,4 +79,4 @@ def main() -> None:
 
 
 if __name__ == '__main__':
-    main()
+    sys.exit(run_with_page(main, __file__, __doc__))

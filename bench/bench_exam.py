@@ -23,6 +23,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from _page import run_with_page  # noqa: E402  (bench/ is sys.path[0])
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -165,4 +166,4 @@ def main() -> None:
 
 
 if __name__ == '__main__':
-    main()
+    sys.exit(run_with_page(main, __file__, __doc__))

@@ -25,6 +25,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from _page import run_with_page  # noqa: E402  (bench/ is sys.path[0])
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
@@ -103,4 +104,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == '__main__':
-    sys.exit(main())
+    sys.exit(run_with_page(main, __file__, __doc__))

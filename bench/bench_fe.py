@@ -4,6 +4,7 @@ is `haptic-anfis dataset --report DIR`."""
 from __future__ import annotations
 
 import os
+import sys
 import time
 
 for _v in ('OMP_NUM_THREADS', 'MKL_NUM_THREADS', 'OPENBLAS_NUM_THREADS'):
@@ -14,6 +15,7 @@ import numpy as np  # noqa: E402
 from haptic_anfis.tissue.fe import default_linear_solver, scene_mesh, solve_scene_point  # noqa: E402
 from haptic_anfis.tissue.geometry import loading_points  # noqa: E402
 from haptic_anfis.tissue.scene import load_scene  # noqa: E402
+from _page import run_with_page  # noqa: E402  (bench/ is sys.path[0])
 
 
 def main() -> None:
@@ -35,4 +37,4 @@ def main() -> None:
 
 
 if __name__ == '__main__':
-    main()
+    sys.exit(run_with_page(main, __file__, __doc__))

@@ -30,6 +30,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from _page import run_with_page  # noqa: E402  (bench/ is sys.path[0])
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
@@ -276,4 +277,4 @@ def main() -> int:
 
 
 if __name__ == '__main__':
-    sys.exit(main())
+    sys.exit(run_with_page(main, __file__, __doc__))

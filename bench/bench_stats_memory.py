@@ -13,6 +13,7 @@ import argparse
 import os
 import sys
 from pathlib import Path
+from _page import run_with_page  # noqa: E402  (bench/ is sys.path[0])
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
@@ -62,4 +63,4 @@ def main() -> int:
 
 
 if __name__ == '__main__':
-    sys.exit(main())
+    sys.exit(run_with_page(main, __file__, __doc__))

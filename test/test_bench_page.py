@@ -1,0 +1,51 @@
+"""bench/_page.py: a benchmark's printed output becomes its documentation page (issue 28.5)."""
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import pytest
+
+BENCH = Path(__file__).resolve().parents[1] / 'bench'
+sys.path.insert(0, str(BENCH))
+import _page  # noqa: E402
+
+
+def test_printed_tables_stay_markdown_the_rest_is_text():
+    out = _page.printed_to_markdown('load 3.2\nrate 999 Hz\n| a | b |\n|---|---|\n| 1 | 2 |\nend\n')
+    assert out == ('```text\nload 3.2\nrate 999 Hz\n```\n\n| a | b |\n|---|---|\n| 1 | 2 |\n\n'
+                   '```text\nend\n```\n')
+
+
+def test_title_is_the_first_clause_and_the_docstring_stays():
+    title, intro = _page._title_and_intro('Bag benchmark: recording overhead\non the loop.\n\nMore.')
+    assert title == 'Bag benchmark'
+    assert intro.startswith('Bag benchmark: recording overhead') and intro.endswith('More.')
+    assert _page._title_and_intro('Start time of every node.') == ('Start time of every node', '')
+
+
+def test_run_with_page_prints_and_writes_only_on_success(tmp_path, capsys, monkeypatch):
+    monkeypatch.setattr(sys, 'argv', ['bench/bench_demo.py', '--quick'])
+
+    def main():
+        print('| x | y |\n|---|---|\n| 1 | 2 |')
+        return 0
+    assert _page.run_with_page(main, str(BENCH / 'bench_demo.py'), 'Demo bench: a test.',
+                               pages_dir=tmp_path) == 0
+    assert '| 1 | 2 |' in capsys.readouterr().out  # still printed
+    text = (tmp_path / 'demo.md').read_text()
+    assert text.startswith('# Demo bench\n') and '| 1 | 2 |' in text
+    assert '```text\nDemo bench: a test.\n```' in text  # the docstring as plain text
+    assert 'Reproduce: `.venv/bin/python bench/bench_demo.py --quick`' in text
+    assert 'load ' in text  # the machine line with its load
+
+    assert _page.run_with_page(lambda: 1, 'bench/bench_fails.py', 'Fails.', pages_dir=tmp_path) == 1
+    assert not (tmp_path / 'fails.md').exists()
+    monkeypatch.setattr(sys, 'argv', ['bench/bench_child.py', '--stream-child', 'x'])
+    assert _page.run_with_page(lambda: 0, 'bench/bench_child.py', 'Child.',
+                               no_page_flags=('--stream-child',), pages_dir=tmp_path) == 0
+    assert not (tmp_path / 'child.md').exists()
+    with pytest.raises(SystemExit):  # --help: argparse exits, no page
+        _page.run_with_page(lambda: sys.exit(0), 'bench/bench_help.py', 'Help.',
+                            pages_dir=tmp_path)
+    assert not (tmp_path / 'help.md').exists()
