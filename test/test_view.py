@@ -151,3 +151,27 @@ def test_bad_input_is_one_line_naming_it(tmp_path, bag, capfd):
         assert main(['view', str(bag), '--port', str(port)]) == 1
         err = capfd.readouterr().err
         assert f'--port {port}' in err and 'in use' in err and len(err.strip().splitlines()) == 1
+
+
+def test_debrief_lists_the_trainees_sessions_from_the_record(tmp_path, bag):
+    from haptic_anfis.exam.from_bag import session_from_bag
+    from haptic_anfis.record import store_session
+    from haptic_anfis.view.build import open_bag_view
+    db = tmp_path / 'record.sqlite'
+    report, _ = session_from_bag(bag)
+    for _ in range(2):
+        store_session(db, 't01', report, source='bag')
+    app = open_bag_view(bag, port=free_port(), trainee='t01', db=db)
+    try:
+        table = app.g_history_md.content
+        assert app.g_history.visible and '**t01**: 2 sessions' in table
+        rows = [r for r in table.splitlines() if r.startswith('| ') and r[2].isdigit()]
+        assert len(rows) == 2 and f"| {report['verdict']} |" in rows[-1]
+    finally:
+        app.close()
+    app = open_bag_view(bag, port=free_port(), trainee='nobody', db=db)   # said, not raised
+    try:
+        assert app.g_history_md.content.startswith('trainee record: ')
+        assert str(db) in app.g_history_md.content
+    finally:
+        app.close()

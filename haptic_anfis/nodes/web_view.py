@@ -54,6 +54,8 @@ PARAMS = [
     Param('dent', True, 'draw the dent under the probe (FE skin displacements)'),
     Param('controls', True, "show the instructor's panel (case, trainee id, start / stop)"),
     Param('trainee', '', 'trainee id shown in the instructor panel'),
+    Param('db', '', "trainee record file for the sessions the page stops ('' = the record's "
+                    'default: $HAPTIC_ANFIS_DB, else the user data directory)'),
 ]
 
 
@@ -168,9 +170,12 @@ class WebView(Node):
                 from ..view.debrief import Debrief
                 report = self.cv.session.report()
                 report['case'] = 'blind case' if self.blind else (self.cv.name or 'default')
-                trainee = self.app.g_trainee.value if self.app.g_instructor is not None else ''
-                self.app.show_debrief(Debrief(report, self.cv.session), trainee)
-                self.app.message('exam stopped: debrief below')
+                trainee = (self.app.g_trainee.value or '').strip() \
+                    if self.app.g_instructor is not None else ''
+                stored = self._store(trainee, report) if trainee else ''
+                self.app.show_debrief(Debrief(report, self.cv.session), trainee,
+                                      self.params['db'] or None)
+                self.app.message('exam stopped: debrief below' + stored)
             elif what == 'case':
                 self._choose_case(arg)
             elif what == 'switched':   # our own case parameter was set
@@ -178,6 +183,20 @@ class WebView(Node):
         except Exception as exc:   # keep serving: say it on the page
             self.get_logger().error(f'{what}: {exc}')
             self.app.message(f'{what} failed: {exc}')
+
+    def _store(self, trainee: str, report: dict) -> str:
+        """Store the stopped exam in the trainee record (issue 31) under ``trainee``, with the
+        case's real name (a blind case is named in the record, not on the page); returns what
+        to say on the page. A record that cannot be written is said, never raised."""
+        from ..record import RecordError, level_of_case_name, store_session
+        name = self.cv.name or 'default'
+        try:
+            sid = store_session(self.params['db'] or None, trainee, dict(report, case=name),
+                                source='run', case_level=level_of_case_name(name))
+        except (ValueError, OSError) as exc:   # RecordError is a ValueError
+            self.get_logger().error(f'trainee record: {exc}')
+            return f'; NOT stored in the trainee record: {exc}'
+        return f'; stored as session {sid} of trainee {trainee}'
 
     def _restart(self) -> None:
         from ..exam import ExamSession

@@ -21,6 +21,8 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import TypeVar
 
+from ..errors import HapticAnfisError
+
 __all__ = ['APPLICATION_ID', 'DB_ENV', 'RecordError', 'SCHEMA_VERSION', 'connect',
            'default_db_path', 'migrate', 'resolve_db_path', 'write']
 
@@ -36,7 +38,7 @@ RETRIES = 6
 T = TypeVar('T')
 
 
-class RecordError(ValueError):
+class RecordError(HapticAnfisError, ValueError):
     """The trainee record cannot be used: one line naming the file and what is wrong."""
 
 
