@@ -25,7 +25,9 @@ class HeldScript:
 
     @property
     def held(self) -> bool:
-        return self._offset is None
+        """Still held: not released yet (the compiled servo loop plays the script's arrays and
+        never queries this object, so release, not the next query, ends the hold)."""
+        return not self._released
 
     def release(self) -> None:
         """Start the script at the next query (idempotent)."""
