@@ -307,7 +307,8 @@ def test_case_level_prefers_a_stated_level_else_count_and_size():
     levels = {c.name: case_level(c) for c in library().cases()}
     assert levels['default'] == 1 and levels['normal'] == 1
     assert levels['three_lesions_large'] == 3
-    assert set(levels.values()) == {1, 2, 3}    # every level has a case to draw
+    assert {1, 2, 3} <= set(levels.values())    # the first levels have cases to draw
+    assert all(case_level(c) == c.level for c in library().cases() if c.level is not None)
 
 
 def session(level, deep=95.0, missed=0, false_marks=0):
@@ -365,12 +366,23 @@ def test_next_case_climbs_a_level_after_mastery(db, rng):
     assert level2 == 2 and case_level(c2) == 2
     # a configured level above the hardest case in the library draws from the hardest
     one = MasteryLevel(consecutive_sessions=1)
-    cfg5 = MasteryConfig({k: one for k in range(1, 6)})
     top = max(case_level(c) for c in lib.ready())
+    cfg_all = MasteryConfig({k: one for k in range(1, top + 2)})
     for k in range(2, top + 1):
         store_session(db, 'nia', fake_report(rng, deep=95), case_level=k)
-    c3, level3, m3 = next_case(db, 'nia', lib, cfg5)
+    c3, level3, m3 = next_case(db, 'nia', lib, cfg_all)
     assert m3['next_level'] == top + 1 and level3 == top and case_level(c3) == top
+
+
+def test_next_case_skips_a_level_without_cases_to_the_next_harder(db, rng):
+    fake = [SimpleNamespace(name=f'c{k}', level=k, tumours=()) for k in (1, 2, 3, 5)]
+    lib = SimpleNamespace(ready=lambda: fake)
+    one = MasteryLevel(consecutive_sessions=1)
+    cfg = MasteryConfig({k: one for k in range(1, 6)})
+    for k in (1, 2, 3):
+        store_session(db, 'ola', fake_report(rng, deep=95), case_level=k)
+    c, level, m = next_case(db, 'ola', lib, cfg)
+    assert m['next_level'] == 4 and level == 5 and c.name == 'c5'
 
 
 def test_trainees_cli(db, tmp_path, rng, capsys):

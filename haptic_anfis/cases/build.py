@@ -61,13 +61,16 @@ class BuildResult:
 def grouped_cv(ds, model, params: dict[str, Any], folds: int = CV_FOLDS,
                seeds: Sequence[int] = CV_SEEDS) -> np.ndarray:
     """(3,) mean over seeds of the out-of-fold RMSE [N] per axis, refitting ``model``'s own
-    structures (no structure search) with ``params`` (:func:`haptic_anfis.report.cv.group_cv`)."""
+    inputs and structures (no structure search, no input check) with ``params`` (:func:`haptic_anfis.report.cv.group_cv`)."""
     from ..anfis import ForceModel
     from ..report.cv import group_cv
 
     p = {k: v for k, v in params.items() if k not in ('test_fraction', 'seed', 'candidates',
-                                                        'tol', 'structure')}
+                                                        'tol', 'structure', 'inputs')}
     structures = [tuple(s) for s in model.structures_]
+    # the model's own inputs too: 'auto' decided on a fold may keep an input it dropped
+    from ..anfis.force_model import INPUT_NAMES
+    p['inputs'] = tuple(INPUT_NAMES[c] for c in model.input_cols_)
     res = group_cv(ds, lambda seed: ForceModel(structure=structures, seed=seed, **p),
                    folds=folds, seeds=seeds)
     return np.asarray(res['mean'], dtype=float)

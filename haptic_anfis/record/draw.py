@@ -20,7 +20,9 @@ __all__ = ['next_case']
 def next_case(db: str | os.PathLike | None, trainee_id: str, lib=None,
               config: MasteryConfig | None = None, exam_config: str | None = None):
     """``(case, level, mastery dict)`` for the trainee's next blind session; a trainee with no
-    record yet starts at level 1; a next level above the hardest ready case draws from that.
+    record yet starts at level 1; a next level above the hardest ready case draws from that; a
+    level without a ready case draws from the next harder level that has one (``level`` says
+    which level was drawn, the mastery dict's ``next_level`` what the record asks for).
 
     Raises:
         ValueError: no ready case of that level (names the level and the levels there are);
@@ -43,6 +45,8 @@ def next_case(db: str | os.PathLike | None, trainee_id: str, lib=None,
             continue   # a broken scene is not drawn (cases list names it)
     if by_level and level > max(by_level):   # past the hardest case there is: stay there
         level = max(by_level)
+    elif level not in by_level and any(k > level for k in by_level):
+        level = min(k for k in by_level if k > level)   # no case of that level: the next harder
     pool = by_level.get(level)
     if not pool:
         raise ValueError(f'--next: no ready case of level {level} for trainee {trainee_id!r} '

@@ -32,13 +32,15 @@ from typing import Any, Iterable
 
 import numpy as np
 
+from ..errors import HapticAnfisError
+
 __all__ = ['FORMAT_VERSION', 'PointStore', 'StoreError', 'default_store_root', 'point_key',
            'store_manifest']
 
 FORMAT_VERSION = 1
 
 
-class StoreError(ValueError):
+class StoreError(HapticAnfisError, ValueError):
     """A store directory belongs to another scene/mesh, or a point file is unreadable."""
 
 

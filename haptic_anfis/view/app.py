@@ -21,6 +21,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..errors import HapticAnfisError
 from ..exam.config import LEVELS
 from .gauge import DEVICE_MAX_FORCE, gauge
 from .scene import LESION_RGB, MARK_RGB, SkinPaint, frame_camera, probe_quaternion
@@ -34,7 +35,7 @@ PROBE_LENGTH = 0.03  # [m] drawn length of the probe cylinder
 FORCE_SCALE = 0.004  # [m/N] force arrow length
 
 
-class ViewError(ValueError):
+class ViewError(HapticAnfisError, ValueError):
     """Bad input for the view (a port in use, a bag it cannot show): one line naming it."""
 
 
