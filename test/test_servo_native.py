@@ -349,3 +349,15 @@ def test_an_external_script_is_played_through_the_hand_buffer():
     # the hand pulled the handle to the target (y = 0.02 m tissue = 0.0133 m device)
     assert lp.st[nt.S.x1] == pytest.approx(0.02 / 1.5, abs=2e-3)
     assert lp.last_out is not None and lp.cnt[nt.CNT.marks] == 1  # button 1 pressed once
+
+
+def test_auto_servo_loop_takes_a_process_only_without_realtime_in_a_process_of_its_own():
+    from haptic_anfis.device.servo import realtime_allowed
+    from haptic_anfis.nodes.falcon_driver import resolve_servo_loop
+    assert resolve_servo_loop('auto', 0, shared_process=False) == 'native_process'
+    assert resolve_servo_loop('auto', 0, shared_process=True) == 'native'
+    assert resolve_servo_loop('auto', 50, shared_process=False) == (
+        'native' if realtime_allowed(50) else 'native_process')
+    for choice in ('native', 'native_process', 'python'):
+        assert resolve_servo_loop(choice, 0, shared_process=False) == choice
+    assert realtime_allowed(0) is False

@@ -133,12 +133,14 @@ PARAMS = [
     Param('gil_switch_interval', 0.0002, "this process's Python thread switch interval [s]: how "
           'long another thread may hold the GIL before the servo thread gets it back (Python '
           'default 0.005; 0 = leave it)', non_negative),
-    Param('servo_loop', 'native', "sim: 'native' runs the servo tick (device, local model, "
+    Param('servo_loop', 'auto', "sim: 'native' runs the servo tick (device, local model, "
           'clutch, safety, passivity bound) compiled on its own thread without the interpreter '
           "lock (haptic_anfis.device.servo_native); 'native_process' the same compiled loop in a "
           "servo process of its own session on shared memory; 'python' the Python tick (the "
-          "'falcon' backend always uses it: its USB library is Python)",
-          one_of('native', 'native_process', 'python')),
+          "'falcon' backend always uses it: its USB library is Python); 'auto': 'native' when "
+          "the thread may run at servo_priority (SCHED_FIFO) or the driver shares its process "
+          "with the loop's other nodes (sim, exam run), else 'native_process' (measured: "
+          'docs/servo_loop.md)', one_of('auto', 'native', 'native_process', 'python')),
     Param('passivity_damping', 1.5, 'native: device damping b [N s/m] of the passivity bound on '
           'the rendered stiffness, K <= 2 b / T with T the measured tick period (Colgate & '
           'Schenkel 1997; docs/servo_loop.md)', positive),
@@ -156,10 +158,27 @@ PARAMS = [
 ]
 
 
+def resolve_servo_loop(choice: str, priority: int, shared_process: bool) -> str:
+    """``servo_loop: auto`` made concrete: the compiled thread when it may run at real-time
+    priority (it then keeps the period in any layout) or shares its process with the loop's
+    other nodes; else the compiled loop in a servo process of its own session, which under the
+    normal scheduler kept the period and the force in a driver process of its own where the
+    thread did not (docs/measurements/servo_load_beside_tests.md). Other choices pass through."""
+    if choice != 'auto':
+        return choice
+    from ..device.servo import realtime_allowed
+    return 'native' if shared_process or realtime_allowed(priority) else 'native_process'
+
+
 class FalconDriver(Node):
-    def __init__(self, name: str = 'falcon_driver', **kw):
+    def __init__(self, name: str = 'falcon_driver', shared_process: bool = False, **kw):
+        """``shared_process``: the driver is built into the one-process graph (sim, exam run;
+        :func:`~haptic_anfis.nodes.graph.build_graph`), which ``servo_loop: auto`` takes into
+        account."""
         super().__init__(name, **kw)
         p = self.params = declare_parameters(self, PARAMS)
+        p['servo_loop'] = self.servo_loop = resolve_servo_loop(p['servo_loop'],
+                                                               p['servo_priority'], shared_process)
         if p['gil_switch_interval'] > 0:
             # A busy thread (bag writer, executor callbacks) keeps the GIL up to this long while
             # the 1 kHz servo thread waits: with a recorder in the same process the worst
