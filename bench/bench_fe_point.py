@@ -104,7 +104,8 @@ def main() -> None:
                  f'{np.nanmedian(wall):.0f} s under the shared load. Projected wall time of '
                  f'one case ({len(pts)} points of {CASE}) on idle cores: 1 worker '
                  f'{2 * per_case:.1f} min, 2 single-threaded workers on 2 cores {per_case:.1f} min '
-                 f'(two such workers doubled throughput, DESIGN.md); the whole graded library (18 cases, '
+                 f'(two such workers doubled throughput: tissue/sweep.py, limit_threads); '
+                 f'the whole graded library (18 cases, '
                  f'{sum(len(loading_points(c.scene)) for c in library().cases() if c.name.startswith("lib_"))} '
                  f'points): {sum(len(loading_points(c.scene)) for c in library().cases() if c.name.startswith("lib_")) * med / 3600:.1f} CPU-hours.')
         print(sweep.strip())

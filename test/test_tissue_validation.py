@@ -13,7 +13,7 @@ def test_sneddon_formula():
 
 
 def test_hayes_kappa_matches_paper_value_and_limits():
-    # DESIGN.md: a = 8 mm on a 40 mm layer, nu ~ 0.5: kappa ~ 1.28 (Hayes et al. 1972, Table)
+    # a = 8 mm on a 40 mm layer, nu ~ 0.5: kappa ~ 1.28 (Hayes et al. 1972, Table)
     assert hayes_kappa(0.2, 0.5) == pytest.approx(1.28, abs=0.005)
     assert hayes_kappa(1e-3, 0.5) == pytest.approx(1.0, abs=2e-3)
     k = [hayes_kappa(x, 0.5) for x in (0.05, 0.1, 0.2, 0.5, 1.0)]

@@ -62,9 +62,8 @@ class ForceModel:
         search_folds: k > 1 scores each structure candidate by k-fold validation over the
             training data (whole surface points per fold with ``split='point'``; k is capped at
             the number of points); 1 uses the single ``val_fraction`` hold-out. On the FE data
-            (~24 validation points) one hold-out chose a 2-2-3-2 Fx model with 0.23 N test RMSE;
-            Fx test RMSE over seeds 0-2: 1 fold 0.09-0.23 N, 3 folds 0.06-0.14 N (~6 s for the
-            three outputs), 5 folds 0.08-0.12 N (~16 s; the shipped model, config/force_model.yaml).
+            (~24 validation points) one hold-out chose worse Fx structures than 3 or 5 folds, and
+            their test RMSE varied more over seeds (docs/model.md).
         split: ``'point'`` (hold out whole surface points, when ``groups`` are given) or ``'sample'``.
         extrapolation: out-of-range band per input (x, y, z, depth), fraction of its range (see
             :mod:`.sugeno`): by default positions saturate and depth extrapolates by 25 %.

@@ -81,9 +81,9 @@ class ContactDetector:
     """Exact contact queries against a triangle surface (the undeformed tissue).
 
     Build once (the AABB tree is built and the numba kernels compiled or loaded from cache at
-    construction: 0.1-0.4 s for 80k faces once cached, ~10 s on the very first compile), then
-    query at haptic rate: ~5-7 µs p50, ~8-12 µs p99 per call from Python on 5k-80k faces
-    (bench_contact.py, a shared 2-core machine).
+    construction; the very first compile takes longest), then query at haptic rate (build time
+    and per-call latency on 5k-80k faces: ``docs/measurements/contact.md``, written by
+    ``bench/bench_contact.py``).
 
     Args:
         mesh: ``trimesh.Trimesh`` in metres, tissue frame; faces are used as given (no merging).

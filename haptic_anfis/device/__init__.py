@@ -2,7 +2,8 @@
 with a scripted virtual hand, servo-loop timing statistics.
 
 - :class:`SafetyLayer`: clamp, force-rate limit, watchdog, command validation.
-- :class:`SimulatedFalcon`: 10 cm workspace, 10 N, handle pulled by a mass-spring-damper hand.
+- :class:`SimulatedFalcon`: 10 cm workspace, force clamped to ``max_force`` (the falcon driver
+  passes its own, 8.9 N by default), handle pulled by a mass-spring-damper hand.
 - :class:`PalpationScript`: the hand's scripted pattern (press, strips, circles) from YAML.
 - :class:`WorkspaceMapping`: device frame <-> tissue frame (scale, offset, force scale).
 - :class:`LoopStats`: rate, latency percentiles, deadline misses.

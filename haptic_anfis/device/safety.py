@@ -51,7 +51,8 @@ class SafetyLayer:
     """Clamp, rate limit, watchdog and command validation (see the module docstring).
 
     Args:
-        max_force: device force limit [N], > 0 (Falcon: 10 N).
+        max_force: device force limit [N], > 0 (the falcon driver passes its ``max_force``, default
+            8.9 N, the Falcon's rated force).
         max_force_rate: largest change of the output per second [N/s], > 0.
         watchdog_timeout: command age [s] after which the force ramps to zero, > 0.
         frame_id: the frame commands must be expressed in ('' accepts any frame).

@@ -43,6 +43,7 @@ from sensor_msgs.msg import JointState, Joy
 from ..device import (HandParams, PalpationScript, SafetyLayer, ServoLoop, SimulatedFalcon,
                       WorkspaceMapping)
 from ..device.buttons import ClutchMark
+from ..device.falcon_usb import RATED_FORCE
 from ..device.force_input import MODES, ForceInput
 from ..device.local_model import FALCON_MAX_STIFFNESS, STATUS_NAMES
 from ..device.safety import OK
@@ -64,7 +65,7 @@ PARAMS = [
     Param('rate', 1000.0, 'servo loop rate [Hz]', positive),
     Param('frame_id', 'tissue', 'frame of the published pose/velocity/force and of accepted '
           'force commands (others are rejected)'),
-    Param('max_force', 8.9, 'device force limit [N]; commands are clamped to it (default: the '
+    Param('max_force', RATED_FORCE, 'device force limit [N]; commands are clamped to it (default: the '
           "Falcon's rated force, > 2 lbf = 8.9 N per Novint's specification)", positive),
     Param('max_force_rate', 1000.0, 'largest change of the applied force [N/s]', positive),
     Param('watchdog_timeout', 0.010, 'no force command for this long [s] ramps the force to zero '

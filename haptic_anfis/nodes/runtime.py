@@ -45,7 +45,7 @@ def run_node(factory: Callable[[], Any], args=None) -> int:
     """Init rclpy, build the node, spin it until shut down or ``node.finished``; 1 on bad params.
 
     Uses EventsExecutor with a ``spin_once(timeout_sec=...)`` loop (its ``spin()`` runs no
-    callbacks with the rclpy wheels here, see DESIGN.md). Calls ``node.close()`` (if defined)
+    callbacks with the rclpy wheels here, see docs/design.md). Calls ``node.close()`` (if defined)
     before destroying the node. Once built, the node announces its status on ``session/status``
     (:class:`~haptic_anfis.nodes.session.Readiness`). Interrupted while starting (Ctrl-C or SIGTERM
     during a long compile), the node exits with code 0 and a one-line message, no traceback.

@@ -1,6 +1,6 @@
 """Finite-element solve of one loading point's indentation path with felupe.
 
-Model (DESIGN.md section 2, measured on this machine): nearly incompressible Neo-Hookean tissue on
+Model (docs/design.md, "What was learned on these machines"): nearly incompressible Neo-Hookean tissue on
 mean-dilatation (three-field, statically condensed) hexahedra; the probe is a bonded rigid indenter,
 i.e. every surface node under its footprint gets the same prescribed displacement (all three
 components); Newton-Raphson with load steps of at most ``max_step`` and cut-back that restores the

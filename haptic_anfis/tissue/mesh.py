@@ -9,7 +9,7 @@ How a mesh is made (all in the (y, z) chest-wall plane first, then extruded alon
    circle |w| = s lands exactly on the probe outline (centre p, radius a). It is conformal, so
    cells stay square; and it shrinks them near p, so the mesh is finest under the probe and
    coarse far from it: model only what the load case needs. The footprint outline is a mesh
-   line by construction (DESIGN.md: nodes ON r = a, not "nodes with r <= a").
+   line by construction (docs/design.md: nodes ON r = a, not "nodes with r <= a").
 3. Scale the unit disc to the base ellipse (radii Ry, Rz times ``rim``); for Ry != Rz a local radial
    correction puts the footprint nodes back onto the circle r = a.
 4. Extrude each base node from the chest wall (x = 0) to the surface in the same number of layers,

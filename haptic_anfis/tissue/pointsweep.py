@@ -54,7 +54,7 @@ def solve_point(scene: Scene, point: Sequence[float], probe_cells: int,
     direction = indentation_direction(scene, np.asarray(point)[None])[0]
     out: dict[str, Any] = {'surface_point_m': point, 'direction': direction.tolist()}
     errors = []
-    with threadpool_limits(1):  # one math thread per worker process (DESIGN.md section 2)
+    with threadpool_limits(1):  # one math thread per worker process (sweep.limit_threads)
         for k, (frac, cutbacks) in enumerate(attempts, 1):
             name, solver = default_linear_solver()
             try:

@@ -32,7 +32,7 @@ THREAD_VARS = ('OMP_NUM_THREADS', 'MKL_NUM_THREADS', 'OPENBLAS_NUM_THREADS',
 
 def limit_threads() -> None:
     """One math thread per worker process: with 2 cores, 2 single-threaded workers doubled
-    throughput, threaded BLAS/MKL inside workers only oversubscribes (DESIGN.md)."""
+    throughput, threaded BLAS/MKL inside workers only oversubscribes."""
     for var in THREAD_VARS:
         os.environ.setdefault(var, '1')
 

@@ -204,7 +204,7 @@ class ViewApp:
         if gg is None:
             return f'pressure: — (bands: {lv})'
         return (f'pressure: **{gg.level}** ({gg.depth_mm:.1f} mm) · force **{gg.force_n:.1f} N**'
-                f' of {self.max_force:.0f} N  \nbands: {lv}')
+                f' of {self.max_force:g} N  \nbands: {lv}')
 
     @staticmethod
     def _coverage_text(cov: dict) -> str:

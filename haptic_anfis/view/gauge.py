@@ -8,12 +8,14 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from ..device.falcon_usb import RATED_FORCE
 from ..exam.config import LEVELS
 
 __all__ = ['DEVICE_MAX_FORCE', 'LIGHT_PRESS_S', 'Gauge', 'gauge']
 
-#: [N] the Novint Falcon's force (the driver's clamp default)
-DEVICE_MAX_FORCE = 10.0
+#: [N] the device's force limit: the falcon driver's ``max_force`` default (the Falcon's rated
+#: force, :data:`haptic_anfis.device.falcon_usb.RATED_FORCE`, 8.9 N)
+DEVICE_MAX_FORCE = RATED_FORCE
 #: [s] a press held this long above light but short of deep draws the "press deeper" cue
 LIGHT_PRESS_S = 1.0
 
@@ -42,7 +44,7 @@ def gauge(depth: float, force_n: float, thresholds, in_contact: bool, light_for:
     full = 1.5 * thresholds[-1]
     cue = ''
     if force_n >= max_force:
-        cue = f"beyond the device's force ({max_force:.0f} N): ease off"
+        cue = f"beyond the device's force ({max_force:g} N): ease off"
     elif in_contact and d < thresholds[-1] and light_for >= LIGHT_PRESS_S:
         cue = (f'press harder: {d * 1e3:.1f} mm is too light for deep coverage '
                f'(>= {thresholds[-1] * 1e3:.0f} mm)')
