@@ -2,8 +2,8 @@
 with a scripted virtual hand, servo-loop timing statistics.
 
 - :class:`SafetyLayer`: clamp, force-rate limit, watchdog, command validation.
-- :class:`SimulatedFalcon`: 10 cm workspace, force clamped to ``max_force`` (the falcon driver
-  passes its own, 8.9 N by default), handle pulled by a mass-spring-damper hand.
+- :class:`SimulatedFalcon`: 10 cm workspace, force clamped to ``max_force`` (default
+  :data:`RATED_FORCE`, 8.9 N), handle pulled by a mass-spring-damper hand.
 - :class:`PalpationScript`: the hand's scripted pattern (press, strips, circles) from YAML.
 - :class:`WorkspaceMapping`: device frame <-> tissue frame (scale, offset, force scale).
 - :class:`LoopStats`: rate, latency percentiles, deadline misses.
@@ -14,11 +14,11 @@ A real Novint Falcon (not imported here; its USB library is the optional ``falco
 disconnect detection and reconnect), :mod:`.falcon_check` (the step-by-step hardware check and the
 force-scale calibration behind ``haptic-anfis falcon check``).
 """
-from .falcon import Device, DeviceState, HandParams, SimulatedFalcon, WorkspaceMapping
+from .falcon import RATED_FORCE, Device, DeviceState, HandParams, SimulatedFalcon, WorkspaceMapping
 from .palpation import PalpationScript, dome_height
 from .safety import SafetyLayer, SafetyStats
 from .servo import ServoLoop
 from .stats import LoopStats
 
-__all__ = ['Device', 'DeviceState', 'HandParams', 'LoopStats', 'PalpationScript', 'SafetyLayer',
+__all__ = ['RATED_FORCE', 'Device', 'DeviceState', 'HandParams', 'LoopStats', 'PalpationScript', 'SafetyLayer',
            'SafetyStats', 'ServoLoop', 'SimulatedFalcon', 'WorkspaceMapping', 'dome_height']

@@ -11,6 +11,11 @@ from dataclasses import dataclass
 
 from .palpation import PalpationScript
 
+#: The force limit used by default [N]: Novint's published specification gives the Falcon's force
+#: capability as "> 2 lb" (2 lbf = 8.9 N; Novint Falcon product specifications, 2007); we read
+#: it as the continuous rating and do not ask for more. ``max_force`` overrides it.
+RATED_FORCE = 8.9
+
 
 @dataclass(frozen=True)
 class DeviceState:
@@ -22,7 +27,7 @@ class DeviceState:
 
 class Device:
     """What the servo loop needs from a haptic device (sim or real)."""
-    max_force: float = 10.0
+    max_force: float = RATED_FORCE
 
     def open(self, now: float) -> None:
         """Start; the motors output zero force."""
@@ -103,7 +108,7 @@ class SimulatedFalcon(Device):
 
     def __init__(self, script: PalpationScript, mapping: WorkspaceMapping = WorkspaceMapping(),
                  hand: HandParams = HandParams(), half_extent: float = 0.05,
-                 max_force: float = 10.0, dt_max: float = 0.001, max_catch_up: float = 0.05):
+                 max_force: float = RATED_FORCE, dt_max: float = 0.001, max_catch_up: float = 0.05):
         self.script, self.mapping, self.hand = script, mapping, hand
         self.half_extent, self.max_force = float(half_extent), float(max_force)
         self.dt_max, self.max_catch_up = dt_max, max_catch_up

@@ -46,17 +46,13 @@ from pathlib import Path
 from typing import Callable
 
 from . import falcon_protocol as fp
-from .falcon import Device, DeviceState
+from .falcon import RATED_FORCE, Device, DeviceState
 from .falcon_kinematics import (GEOMETRY, WORKSPACE_CENTER, FalconGeometry, KinematicsError,
                                 force_to_torque, forward_kinematics, gravity_force,
                                 inverse_kinematics, ticks_to_angles, torques_to_commands)
 from ..errors import HapticAnfisError
 
 INSTALL_HINT = "pip install 'haptic_anfis[falcon]'"
-#: The force limit used by default [N]: Novint's published specification gives the Falcon's force
-#: capability as "> 2 lb" (2 lbf = 8.9 N; Novint Falcon product specifications, 2007); we read
-#: it as the continuous rating and do not ask for more. ``max_force`` overrides it.
-RATED_FORCE = 8.9
 #: Default stall-guard timeout [s], chosen from the servo thread's measured write-to-write gaps
 #: (bench/bench_falcon_jitter.py; figures in the README): on a 2-core machine at load 7-17 the
 #: FalconUSB servo thread's p99.9 gap was 14 ms, gaps > 25 ms came about 4-6 times a minute and

@@ -29,6 +29,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .falcon import RATED_FORCE
+
 OK, REJECTED_NONFINITE, REJECTED_FRAME, IGNORED_DISABLED, IGNORED_OLDER = (
     'ok', 'rejected: non-finite force', 'rejected: wrong frame', 'ignored: disabled',
     'ignored: older than the current command')
@@ -60,7 +62,7 @@ class SafetyLayer:
             a large jump).
     """
 
-    def __init__(self, max_force: float = 10.0, max_force_rate: float = 1000.0,
+    def __init__(self, max_force: float = RATED_FORCE, max_force_rate: float = 1000.0,
                  watchdog_timeout: float = 0.010, frame_id: str = 'tissue',
                  max_dt: float = 0.005) -> None:
         for name, v in (('max_force', max_force), ('max_force_rate', max_force_rate),

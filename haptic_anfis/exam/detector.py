@@ -9,9 +9,7 @@ residuals on a ``cell`` grid, and report cells whose mean residual stands out by
 ``min_rel`` (relative force excess) AND ``k_sigma`` robust standard deviations of all cells.
 
 The fit is robust (iteratively reweighted least squares with Tukey's biweight on the residuals):
-an ordinary least-squares baseline bends towards a lump and hides a third to a half of it (the
-default tumour stood +9 % over an OLS baseline, +15 % over the robust one, in its model's forces),
-and with several lumps it leaves structure that looks like lumps. Cells within ``edge`` of the
+an ordinary least-squares baseline bends towards a lump and hides part of it, and with several lumps it leaves structure that looks like lumps. Cells within ``edge`` of the
 searched region's rim are not candidates: there the quartic is least constrained and bends
 (the strongest "lumps" of two cases of the library were such rim artefacts). After each of the
 strongest bumps, a lump or not, the fit is repeated without the samples within ``exclude`` of it

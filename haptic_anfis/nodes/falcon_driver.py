@@ -43,7 +43,7 @@ from sensor_msgs.msg import JointState, Joy
 from ..device import (HandParams, PalpationScript, SafetyLayer, ServoLoop, SimulatedFalcon,
                       WorkspaceMapping)
 from ..device.buttons import ClutchMark
-from ..device.falcon_usb import RATED_FORCE
+from ..device.falcon import RATED_FORCE
 from ..device.force_input import MODES, ForceInput
 from ..device.local_model import FALCON_MAX_STIFFNESS, STATUS_NAMES
 from ..device.safety import OK

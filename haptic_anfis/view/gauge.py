@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from ..device.falcon_usb import RATED_FORCE
+from ..device.falcon import RATED_FORCE
 from ..exam.config import LEVELS
 
 __all__ = ['DEVICE_MAX_FORCE', 'LIGHT_PRESS_S', 'Gauge', 'gauge']
