@@ -75,11 +75,38 @@ def params_file(d: Path, priority: int, loop: str) -> Path:
     return f
 
 
+def browser_when_up(port: int, stop) -> 'threading.Thread':
+    """A thread that waits until the page on ``port`` answers, then keeps a headless chromium
+    on it (bench_view's, niced: it stands for the trainee's browser) until ``stop`` is set."""
+    import socket
+    import threading
+
+    from bench_view import open_browser
+
+    def run() -> None:
+        while not stop.is_set():
+            with socket.socket() as s:
+                if s.connect_ex(('127.0.0.1', port)) == 0:
+                    break
+            time.sleep(0.5)
+        else:
+            return
+        b = open_browser(f'http://127.0.0.1:{port}/')
+        stop.wait()
+        b.kill()
+        b.wait()
+
+    t = threading.Thread(target=run, daemon=True)
+    t.start()
+    return t
+
+
 def run_one(kind: str, priority: int, duration: float, loop: str, d: Path,
-            graph_priority: int = 0) -> dict:
+            graph_priority: int = 0, view: bool = False) -> dict:
     """One run; the last JSON line of its output (or {'error': ...}). ``graph_priority`` > 0:
     the whole graph (every process and thread) runs SCHED_FIFO at it (``chrt -f``), the servo
-    tick above it at ``priority``."""
+    tick above it at ``priority``. ``view``: the browser view too (``--view``: the web_view
+    node, and a headless chromium showing its page)."""
     pf = params_file(d, priority, loop)
     bag = d / f'bag_{kind}_{priority}_{time.monotonic_ns()}'
     if kind == 'sim':
@@ -90,8 +117,21 @@ def run_one(kind: str, priority: int, duration: float, loop: str, d: Path,
                '--params-file', str(pf), '--localhost', '--log-dir', str(d / f'log_{bag.name}')]
     if graph_priority > 0:
         cmd = ['chrt', '-f', str(graph_priority), *cmd]
+    stop = None
+    if view:
+        import threading
+
+        from haptic_anfis.view.browser import free_port
+        port = free_port()
+        cmd += ['--view', '--view-port', str(port)]
+        stop = threading.Event()
+        browser_when_up(port, stop)
     env = dict(os.environ, PYTHONPATH=str(ROOT))
-    r = subprocess.run(cmd, capture_output=True, text=True, env=env, timeout=duration + 900)
+    try:
+        r = subprocess.run(cmd, capture_output=True, text=True, env=env, timeout=duration + 900)
+    finally:
+        if stop is not None:
+            stop.set()
     for line in reversed(r.stdout.splitlines()):
         if line.startswith('{'):
             try:
@@ -132,9 +172,12 @@ def main() -> int:
     ap.add_argument('--quiet', action='store_true',
                     help='also run without busy processes (the first of --loops only)')
     ap.add_argument('--configs', default='sim:50,sim:0,launch:50,launch:0')
-    ap.add_argument('--loops', default='native',
-                    help="the driver's servo_loop values to run, comma-separated (native, "
-                         "native_process, python; default native)")
+    ap.add_argument('--loops', default='auto',
+                    help="the driver's servo_loop values to run, comma-separated (auto, native, "
+                         "native_process, python; default auto, the driver's default)")
+    ap.add_argument('--view', action='store_true',
+                    help='the browser view too: the web_view node and a headless chromium on its '
+                         'page (issue 32 measures with the recorder and the view running)')
     ap.add_argument('--no-page', action='store_true', help='print only')
     ap.add_argument('--page', default='servo_load',
                     help='page name: docs/measurements/<page>.md (default servo_load)')
@@ -154,7 +197,7 @@ def main() -> int:
                 time.sleep(1.0)
                 load0 = os.getloadavg()[0]
                 rt = rt_threads()
-                j = run_one(kind, prio, a.duration, loop, d, gprio)
+                j = run_one(kind, prio, a.duration, loop, d, gprio, a.view)
                 load = max(load0, os.getloadavg()[0])
             finally:
                 stop(procs)
@@ -176,7 +219,9 @@ def _page(a, rows: list[dict], planned: int):
     head = '| ' + ' | '.join(COLS) + ' |\n|' + '---|' * len(COLS) + '\n'
     body = head + ''.join('| ' + ' | '.join(fmt(r[c]) for c in COLS) + ' |\n' for r in rows)
     notes = (f'\n{a.duration:g} s per run after the graph is ready, default force mode '
-             f'(local_model), recorder running; `busy`: processes spinning beside it on the '
+             f'(local_model), recorder running'
+             + (', browser view running (web_view node and a headless chromium on its page)'
+                if a.view else '') + '; `busy`: processes spinning beside it on the '
              f'machine\'s {os.cpu_count()} cores; `load`: the 1-minute load average (the machine '
              'is shared: other users add to it); `rt_others`: user-space real-time threads of other '
              'processes at the start of the run (other sessions\' servo threads: they run before '
