@@ -30,10 +30,12 @@ NO_RESPAWN = ('falcon_driver',)
 
 
 def recorded_topics() -> list[str]:
-    """What the launched recorder records: the default topics and the session's own."""
-    from ..bag.topics import DEFAULT_TOPICS
+    """What the launched recorder records: every loop topic, as the one-process runner records
+    (:data:`~haptic_anfis.bag.topics.ALL_LOOP_TOPICS`: the applied force and velocity too), and
+    the session's own status and events."""
+    from ..bag.topics import ALL_LOOP_TOPICS
     from ..nodes.session import EVENTS_TOPIC, STATUS_TOPIC
-    return [*DEFAULT_TOPICS, STATUS_TOPIC, EVENTS_TOPIC]
+    return [*ALL_LOOP_TOPICS, STATUS_TOPIC, EVENTS_TOPIC]
 
 
 @dataclass
