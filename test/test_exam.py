@@ -403,3 +403,22 @@ def test_detector_on_live_sessions_of_the_case_library():
         assert len(found) == len(where), (case, found)
         for f, (ly, lz) in zip(found, where):
             assert np.hypot(f.y - ly, f.z - lz) < 0.007, (case, f)
+
+
+def test_saved_samples_replay_into_the_same_report(tmp_path, surface, subject):
+    """exam run's side examiner saves its raw samples; the debrief replays them elsewhere."""
+    les = subject.lesions[0]
+    y, z = les.centre[1], les.centre[2]
+    s = session_with(surface, subject, strips(np.arange(-0.040, 0.041, 0.008), 0.012),
+                     [(1.0, (skin(y, z) - 0.005, y, z))])
+    s.add_force(0.5, (1.0, 2.0, 3.0))
+    s.save_samples(tmp_path / 'samples.npz')
+    again = ExamSession(surface, subject, s.config)
+    again.load_samples(tmp_path / 'samples.npz')
+    a, b = s.report(), again.report()
+    for k in ('coverage_pct', 'hits', 'misses', 'false_marks', 'pattern', 'path_length_m'):
+        assert a[k] == b[k], k
+    assert again.forces == s.forces and again.marks == s.marks
+    (tmp_path / 'bad.npz').write_bytes(b'not numpy')
+    with pytest.raises(ValueError, match='bad.npz: not a samples file'):
+        ExamSession(surface, subject, s.config).load_samples(tmp_path / 'bad.npz')
