@@ -31,6 +31,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from _launch import stop_launch  # noqa: E402
 from _page import write_page  # noqa: E402
 
 MODES = (('zoh', True), ('local_model', True), ('zoh', False), ('local_model', False))
@@ -136,14 +137,7 @@ def respawn(kills: int, domain: int) -> list[dict]:
                   f"load {os.getloadavg()[0]:.1f}", flush=True)
             spin(10)   # let it settle before the next kill
     finally:
-        launch.send_signal(signal.SIGINT)
-        try:
-            launch.wait(120)
-        except subprocess.TimeoutExpired:
-            launch.kill()
-        ex.shutdown(timeout_sec=1.0)
-        node.destroy_node()
-        rclpy.try_shutdown(context=ctx)
+        stop_launch(launch, ex, node, ctx)
     return rows
 
 

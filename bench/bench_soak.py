@@ -22,7 +22,6 @@ import argparse
 import os
 import re
 import shutil
-import signal
 import subprocess
 import sys
 import tempfile
@@ -30,6 +29,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from _launch import stop_launch  # noqa: E402
 from _page import run_with_page  # noqa: E402  (bench/ is sys.path[0])
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -231,14 +231,7 @@ def multi_process(minutes: float, interval: float, workdir: Path,
                       dir_mb(bag), {n: rss_mb(p) for n, p in pids.items()}), flush=True)
             p0, l0, tprev = len(poses), len(lats), now
     finally:
-        launch.send_signal(signal.SIGINT)
-        try:
-            launch.wait(120)
-        except subprocess.TimeoutExpired:
-            launch.kill()
-        ex.shutdown(timeout_sec=1.0)
-        node.destroy_node()
-        rclpy.try_shutdown(context=ctx)
+        stop_launch(launch, ex, node, ctx)
     print(out.read_text().strip().splitlines()[-1])
     print(f'bag {bag}: {dir_mb(bag):.1f} MB', flush=True)
 
