@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import re
 import subprocess
 import sys
 import tempfile
@@ -193,6 +194,13 @@ def loop_runs(seconds: float, configs: list[str]) -> list[dict]:
                         p.wait()
                     if wv is not None:
                         stop_node(wv)
+                        # the page's dent frames while drawing (the node says it when stopped)
+                        m = re.findall(r'skin frames \(([\d.]+) Hz while drawing\)',
+                                       (Path(tmp) / f'web_view_{key}.log').read_text())
+                        if out and out[-1].get('view'):
+                            out[-1]['skin_hz'] = float(m[-1]) if m else None
+                            print(f"  page: dent frames {out[-1]['skin_hz']} Hz while drawing",
+                                  flush=True)
     return out
 
 
@@ -202,7 +210,8 @@ def row(r: dict) -> str:
     return (f'| {name} | {"open" if r["view"] else "closed"} | '
             f'{r["rates_hz"]["falcon/measured_cp"] or 0:.1f} | {f(r["latency_p50_ms"])} | '
             f'{f(r["latency_p99_ms"])} | {f(r["force_error_rms_pct"])} | '
-            f'{f(r["force_error_rms_n"], 3)} | {r.get("deadline_misses") or 0} | {r["load"]} |')
+            f'{f(r["force_error_rms_n"], 3)} | {r.get("deadline_misses") or 0} | '
+            f'{f(r.get("skin_hz"), 1) if r["view"] else ""} | {r["load"]} |')
 
 
 def main() -> int:
@@ -225,7 +234,8 @@ def main() -> int:
               f"{f(lat['max'])} | {f(lat['render_rtt_p50'])} |")
     print(lat_md, flush=True)
     head = ('| graph | view | servo rate Hz | pose->command p50 ms | p99 ms | force error RMS % | '
-            'RMS N | deadline misses | load |\n|---|---|---|---|---|---|---|---|---|')
+            'RMS N | deadline misses | page dent frames Hz | load |\n'
+            '|---|---|---|---|---|---|---|---|---|---|')
     print(head, flush=True)
     runs = loop_runs(a.seconds, [c for c in a.configs.split(',') if c])
     body = (f'Load when started: `{up}`.\n\n'
@@ -242,7 +252,9 @@ def main() -> int:
             'bench_loop\'s graphs, force_mode local_model, '
             f'{a.seconds:g} s each; "open": a web_view node process plus a headless chromium '
             'showing its page. Force error: applied force against the ideal loop (the force '
-            'model at each tick\'s own pose).\n\n' + head + '\n' + '\n'.join(row(r) for r in runs))
+            'model at each tick\'s own pose). Page dent frames: the skin frames the web_view '
+            'node sent per second while drawing (1 / the median interval, pauses of a steady '
+            'press left out), as the node logs it when stopped.\n\n' + head + '\n' + '\n'.join(row(r) for r in runs))
     write_page('view', 'Browser view: latency and the loop with the view open', body)
     return 0
 

@@ -247,7 +247,8 @@ class WebView(Node):
 
     def close(self) -> None:
         st = self.app.stats
-        self.get_logger().info(f'{st.skin_frames} skin frames, {st.probe_updates} probe updates')
+        self.get_logger().info(f'{st.skin_frames} skin frames ({st.drawing_rate():.1f} Hz while '
+                               f'drawing), {st.probe_updates} probe updates')
         for s in self._inputs.values():
             s.destroy()
         self.app.close()

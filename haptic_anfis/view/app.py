@@ -83,6 +83,14 @@ class ViewStats:
         t = list(self.frame_times)
         return (len(t) - 1) / (t[-1] - t[0]) if len(t) > 1 and t[-1] > t[0] else 0.0
 
+    def drawing_rate(self, pause: float = 0.5) -> float:
+        """Skin frames per second while the skin was being redrawn: 1 / the median interval
+        between the newest frames, leaving out gaps longer than ``pause`` [s] (a steady press or
+        a lifted probe sends nothing); 0 without two such frames."""
+        d = np.diff(np.asarray(self.frame_times, dtype=float))
+        d = d[(d > 0) & (d <= pause)]
+        return float(1.0 / np.median(d)) if len(d) else 0.0
+
 
 class ViewApp:
     """The page on ``host:port``.
