@@ -385,6 +385,15 @@ def test_next_case_skips_a_level_without_cases_to_the_next_harder(db, rng):
     assert m['next_level'] == 4 and level == 5 and c.name == 'c5'
 
 
+def test_next_case_prefers_graded_cases_of_the_level(db):
+    old = SimpleNamespace(name='coarse', level=None, tumours=())   # level 1 by its lesions
+    new = SimpleNamespace(name='graded', level=1, tumours=())
+    lib = SimpleNamespace(ready=lambda: [old, new])
+    for _ in range(3):
+        c, level, _ = next_case(db, 'pia', lib, MasteryConfig({1: MasteryLevel()}))
+        assert level == 1 and c.name == 'graded'
+
+
 def test_trainees_cli(db, tmp_path, rng, capsys):
     for k in range(4):
         store_session(db, 'oz', fake_report(rng, deep=60 + 10 * k), case_level=1)

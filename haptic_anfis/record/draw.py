@@ -1,6 +1,7 @@
 """``exam run --trainee-id ID --next``: a blind case of the level after the trainee's mastered one.
 
-Among the library's ready cases of that level, the one the trainee has done least often (ties:
+Among the library's ready cases of that level — the graded ones (issue 29: full-density FE, models
+within the gates) when the level has any — the one the trainee has done least often (ties:
 drawn with the number of sessions stored as the seed, so the draw is reproducible from the record
 and differs from one session to the next). Pure Python, no ROS.
 """
@@ -48,6 +49,9 @@ def next_case(db: str | os.PathLike | None, trainee_id: str, lib=None,
     elif level not in by_level and any(k > level for k in by_level):
         level = min(k for k in by_level if k > level)   # no case of that level: the next harder
     pool = by_level.get(level)
+    # a graded case (full-density FE, models within the gates) before an older coarse one
+    graded = [c for c in pool or () if getattr(c, 'level', None) is not None]
+    pool = graded or pool
     if not pool:
         raise ValueError(f'--next: no ready case of level {level} for trainee {trainee_id!r} '
                          f'(levels with cases: {sorted(by_level) or "none"})')
