@@ -9,7 +9,7 @@ import pytest
 
 pytest.importorskip('rclpy')
 
-from geometry_msgs.msg import WrenchStamped  # noqa: E402
+from geometry_msgs.msg import PoseStamped, WrenchStamped  # noqa: E402
 from rclpy.serialization import deserialize_message, serialize_message  # noqa: E402
 from sensor_msgs.msg import JointState  # noqa: E402
 
@@ -35,6 +35,22 @@ def test_wrench_stamped_both_ways(frame):
         np.testing.assert_array_equal([back.wrench.force.x, back.wrench.force.y,
                                        back.wrench.force.z], np.asarray(f, dtype=float))
         assert (back.wrench.torque.x, back.wrench.torque.y, back.wrench.torque.z) == (0, 0, 0)
+
+
+@pytest.mark.parametrize('frame', FRAMES)
+def test_pose_position_reads_what_rclpy_wrote(frame):
+    rng = np.random.default_rng(7 + len(frame))
+    m = PoseStamped()
+    m.header.frame_id = frame
+    m.header.stamp.sec, m.header.stamp.nanosec = 1_763_900_001, 5
+    p = rng.normal(size=3)
+    m.pose.position.x, m.pose.position.y, m.pose.position.z = (float(c) for c in p)
+    m.pose.orientation.w = 0.5
+    stamp, fr, got = cdr.read_pose_position(serialize_message(m))
+    assert stamp == 1_763_900_001_000_000_005 and fr == frame
+    np.testing.assert_array_equal(got, p)
+    with pytest.raises(ValueError, match='malformed PoseStamped'):
+        cdr.read_pose_position(serialize_message(m)[:20])
 
 
 @pytest.mark.parametrize('frame', FRAMES)

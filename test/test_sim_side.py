@@ -2,8 +2,11 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
 
 pytest.importorskip('rclpy')
 pytestmark = pytest.mark.ros
@@ -68,6 +71,31 @@ def test_a_bad_parameter_value_is_refused_before_any_node_starts(capfd):
         'haptic-anfis sim: error: -p mesh_alpha:=5.0: visualizer: mesh_alpha: 5.0: expected '
         '0 <= value <= 1'], cap.err
     assert 'started' not in cap.out + cap.err
+
+
+def test_a_hand_set_while_held_keeps_the_start_gate():
+    """exam run hands the simulated Falcon a trainee while the hand is held (its side examiner
+    not subscribed yet): the trainee must wait at the gate, not start unwatched."""
+    import threading
+
+    from haptic_anfis.device.palpation import PalpationScript
+    from haptic_anfis.device.start_gate import HeldScript
+    from haptic_anfis.nodes.graph import build_graph
+    g = build_graph(None, visualizer=False)
+    try:
+        gate = threading.Event()
+        g.driver.release_gate = gate.is_set
+        trainee = PalpationScript.from_yaml(str(ROOT / 'config' / 'palpation.yaml'))
+        g.set_hand(trainee)
+        s = g.driver.device.script
+        assert isinstance(s, HeldScript) and s.script is trainee and s.held
+        assert g.wait_ready(120.0) is not None
+        g.spin_for(0.5)
+        assert g.driver.device.script.held   # force commands came, the gate is shut
+        gate.set()
+        assert g.spin_for(5.0, until=lambda: not g.driver.device.script.held)
+    finally:
+        g.shutdown()
 
 
 def test_the_release_gate_holds_the_hand_after_the_first_force_command():

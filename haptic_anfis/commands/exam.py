@@ -165,9 +165,9 @@ def _run_sim(args):
     if side is not None:
         from ..nodes.exam_side import hold_until_examiner
         try:   # the examiner (another process) is up: hold the hand until it subscribed
-            if not hold_until_examiner(graph, 60.0):
-                raise ValueError('exam: the examiner did not subscribe to the loop topics in '
-                                 '60 s' + ''.join(f'; {n} exited with code {c}'
+            if not hold_until_examiner(graph, 60.0, watch=examiner):
+                raise ValueError('exam: the examiner did not subscribe to the loop topics and '
+                                 'publish its heat map in 60 s' + ''.join(f'; {n} exited with code {c}'
                                                   for n, c in side.dead()))
         except BaseException:
             session.stop()

@@ -36,21 +36,36 @@ def _header(b: bytes) -> tuple[int, str, int]:
     return sec * 1_000_000_000 + nsec, b[16:15 + n].decode('utf-8', errors='replace'), 12 + n
 
 
+def _first_vector(b: bytes, what: str) -> tuple[int, str, tuple[float, float, float]]:
+    """(stamp [ns], frame_id, the three doubles after the header) of a little-endian message
+    that starts with a Header and then a Vector3 / Point (``WrenchStamped``: the force;
+    ``PoseStamped``: the position)."""
+    try:
+        stamp, frame, o = _header(b)
+        o = (o + 7) & ~7
+        v = _F3.unpack_from(b, 4 + o)
+    except struct.error as exc:
+        raise ValueError(f'malformed {what} ({len(b)} bytes): {exc}') from None
+    return stamp, frame, v
+
+
 def read_wrench_stamped(b: bytes) -> tuple[int, str, tuple[float, float, float]]:
     """(stamp [ns], frame_id, force (3,) [N]) of a serialized ``geometry_msgs/WrenchStamped``.
 
     Raises:
         ValueError: not a WrenchStamped (too short, bad lengths).
     """
-    if b[:4] != _LE:
-        return _slow_wrench(b)
-    try:
-        stamp, frame, o = _header(b)
-        o = (o + 7) & ~7
-        f = _F3.unpack_from(b, 4 + o)
-    except struct.error as exc:
-        raise ValueError(f'malformed WrenchStamped ({len(b)} bytes): {exc}') from None
-    return stamp, frame, f
+    return _first_vector(b, 'WrenchStamped') if b[:4] == _LE else _slow_wrench(b)
+
+
+def read_pose_position(b: bytes) -> tuple[int, str, tuple[float, float, float]]:
+    """(stamp [ns], frame_id, position (3,) [m]) of a serialized ``geometry_msgs/PoseStamped``
+    (the orientation is not read).
+
+    Raises:
+        ValueError: not a PoseStamped (too short, bad lengths).
+    """
+    return _first_vector(b, 'PoseStamped') if b[:4] == _LE else _slow_pose(b)
 
 
 def read_joint_state(b: bytes) -> tuple[int, str, tuple[float, ...], tuple[float, ...]]:
@@ -257,6 +272,17 @@ def _slow_wrench(b: bytes):
         raise ValueError(f'malformed WrenchStamped ({len(b)} bytes): {exc}') from None
     f, s = m.wrench.force, m.header.stamp
     return s.sec * 1_000_000_000 + s.nanosec, m.header.frame_id, (f.x, f.y, f.z)
+
+
+def _slow_pose(b: bytes):
+    from geometry_msgs.msg import PoseStamped
+    from rclpy.serialization import deserialize_message
+    try:
+        m = deserialize_message(b, PoseStamped)
+    except Exception as exc:  # the rmw's error type varies
+        raise ValueError(f'malformed PoseStamped ({len(b)} bytes): {exc}') from None
+    q, s = m.pose.position, m.header.stamp
+    return s.sec * 1_000_000_000 + s.nanosec, m.header.frame_id, (q.x, q.y, q.z)
 
 
 def _slow_joint_state(b: bytes):

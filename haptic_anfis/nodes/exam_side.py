@@ -64,10 +64,13 @@ def examiner_arguments(scene: str, exam_config: str, case: str | None, report_di
     return a
 
 
-def hold_until_examiner(graph, timeout: float, examiner: str = 'examiner') -> bool:
+def hold_until_examiner(graph, timeout: float, examiner: str = 'examiner',
+                        watch: CoverageWatch | None = None) -> bool:
     """Hold the simulated hand of ``graph`` until the node ``examiner`` (another process)
-    subscribes to every topic it scores (the session is then scored from its first move),
-    spinning the graph meanwhile. False if that did not happen within ``timeout`` s."""
+    subscribes to every topic it scores and — with ``watch`` — has published its first heat map
+    (its executor spins and its first fold is done: a subscribed examiner still starting up
+    lost the first seconds of a short exam), so the session is scored from its first move;
+    spins the graph meanwhile. False if that did not happen within ``timeout`` s."""
     import threading
 
     from .side_nodes import recorder_matched
@@ -75,7 +78,8 @@ def hold_until_examiner(graph, timeout: float, examiner: str = 'examiner') -> bo
     graph.driver.release_gate = matched.is_set
 
     def check() -> bool:
-        if not matched.is_set() and recorder_matched(graph.driver, EXAMINER_TOPICS, examiner):
+        if not matched.is_set() and recorder_matched(graph.driver, EXAMINER_TOPICS, examiner) \
+                and (watch is None or watch.times):
             matched.set()
         return matched.is_set()
     return graph.spin_for(timeout, until=check)

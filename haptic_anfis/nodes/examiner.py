@@ -26,6 +26,7 @@ from visualization_msgs.msg import Marker, MarkerArray
 from ..exam import ExamSession, Surface, load_exam_config, subject_from_scene
 from ..exam.lesions import ExamSubject
 from ..pipeline.contact import load_surface
+from . import cdr
 from . import interfaces as ifc
 from ._case import CASE_PARAMS, apply_case, declare_case  # noqa: F401 (CASE_PARAMS: in config)
 from ._common import Param, declare_parameters, positive, run_node, stamp_ns
@@ -64,9 +65,15 @@ class Examiner(Node):
         case = declare_case(self, self.switch_case)
         self._start_exam(case)
         self.pub = self.create_publisher(MarkerArray, ifc.TOPIC_COVERAGE, 1)
-        self.create_subscription(JointState, ifc.TOPIC_CONTACT, self._on_contact, SAMPLE_QOS)
-        self.create_subscription(WrenchStamped, ifc.TOPIC_COMMAND, self._on_force, SAMPLE_QOS)
-        self.create_subscription(PoseStamped, ifc.TOPIC_POSE, self._on_pose, SAMPLE_QOS)
+        # The three 1 kHz topics arrive as raw bytes read by nodes/cdr.py: rclpy's own
+        # deserialisation made a side examiner fall seconds behind and lose samples.
+        self.create_subscription(JointState, ifc.TOPIC_CONTACT, self._on_contact, SAMPLE_QOS,
+                                 raw=True)
+        self.create_subscription(WrenchStamped, ifc.TOPIC_COMMAND, self._on_force, SAMPLE_QOS,
+                                 raw=True)
+        self.create_subscription(PoseStamped, ifc.TOPIC_POSE, self._on_pose, SAMPLE_QOS,
+                                 raw=True)
+        self.malformed = 0   # loop messages that could not be read (counted, said once)
         self.create_subscription(PointStamped, ifc.TOPIC_MARKS, self._on_mark, 10)
         self.create_subscription(Joy, ifc.TOPIC_BUTTONS, self._on_buttons, 10)
         self.timer = self.create_timer(1.0 / p['rate'], self._publish)
@@ -102,16 +109,34 @@ class Examiner(Node):
                                + ('' if blind else f' from {subject.source}')
                                + f', {len(s.grid.centroids)} surface cells in the palpable region')
 
-    def _on_contact(self, msg: JointState) -> None:
-        self.session.add_contact_values(stamp_ns(msg.header.stamp) * 1e-9, msg.position)
+    def _bad(self, exc: ValueError) -> None:
+        self.malformed += 1
+        if self.malformed == 1:
+            self.get_logger().warning(f'{exc}: not scored (further ones counted)')
 
-    def _on_force(self, msg: WrenchStamped) -> None:
-        f = msg.wrench.force
-        self.session.add_force(stamp_ns(msg.header.stamp) * 1e-9, (f.x, f.y, f.z))
+    def _on_contact(self, raw: bytes) -> None:
+        try:
+            stamp, _, position, _ = cdr.read_joint_state(raw)
+        except ValueError as exc:
+            self._bad(exc)
+            return
+        self.session.add_contact_values(stamp * 1e-9, position)
 
-    def _on_pose(self, msg: PoseStamped) -> None:
-        q = msg.pose.position
-        self.session.add_pose(stamp_ns(msg.header.stamp) * 1e-9, (q.x, q.y, q.z))
+    def _on_force(self, raw: bytes) -> None:
+        try:
+            stamp, _, f = cdr.read_wrench_stamped(raw)
+        except ValueError as exc:
+            self._bad(exc)
+            return
+        self.session.add_force(stamp * 1e-9, f)
+
+    def _on_pose(self, raw: bytes) -> None:
+        try:
+            stamp, _, q = cdr.read_pose_position(raw)
+        except ValueError as exc:
+            self._bad(exc)
+            return
+        self.session.add_pose(stamp * 1e-9, q)
 
     def _on_mark(self, msg: PointStamped) -> None:
         q = msg.point

@@ -48,8 +48,18 @@ class Graph:
 
     def set_hand(self, script) -> None:
         """The simulated Falcon's hand plays ``script`` (an object with the palpation script's
-        interface, e.g. :class:`~haptic_anfis.exam.trainee.TraineeController`) from now on."""
-        self.driver.device.script = script
+        interface, e.g. :class:`~haptic_anfis.exam.trainee.TraineeController`) from now on.
+
+        A hand still held at its start (the driver's start gate: until the force source answers
+        and the driver's ``release_gate`` opens, e.g. until a side examiner or recorder has
+        subscribed) keeps that gate: ``script`` starts when the gate opens, from its own t = 0."""
+        from ..device.start_gate import HeldScript
+        held = self.driver.device.script
+        if isinstance(held, HeldScript) and held.held:
+            held.script = script
+            self.driver.device.script = held
+        else:
+            self.driver.device.script = script
 
     def summary(self) -> dict:
         s = {'loop': self.driver.summary(), 'contact': self.contact.summary(),
