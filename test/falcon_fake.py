@@ -25,8 +25,11 @@ code and the real device disagree. Sources (public, described not copied):
 from __future__ import annotations
 
 import errno
+import mmap
 import time
 from dataclasses import dataclass
+
+import numpy as np
 
 VENDOR_ID, PRODUCT_ID = 0x0403, 0xCB48
 BOOT_BAUD, UPLOAD_BAUD, SERVO_BAUD = 9600, 140_000, 1_456_312
@@ -329,3 +332,40 @@ class Clock:
 
     def sleep(self, dt: float) -> None:
         self.t += max(dt, 1e-4)
+
+
+# shared slots: commands received, last motors (3), closed, plugged
+N, M0, CLOSED, PLUGGED = 0, 1, 4, 5
+
+
+class SharedFake(FakeFalcon):
+    """A FakeFalcon whose received commands, closed flag and cable are in ``shm`` (float64), so
+    another process (the test, across the fork) sees them and can pull the cable."""
+
+    def __init__(self, shm: np.ndarray, **kw):
+        self._shm = shm
+        super().__init__(**kw)
+        self.commands = _Commands(shm)
+
+    plugged = property(lambda s: bool(s._shm[PLUGGED]),
+                       lambda s, v: s._shm.__setitem__(PLUGGED, float(v)))
+    present = property(lambda s: bool(s._shm[PLUGGED]), lambda s, v: None)
+    closed = property(lambda s: bool(s._shm[CLOSED]),
+                      lambda s, v: s._shm.__setitem__(CLOSED, float(v)))
+
+
+class _Commands(list):
+    def __init__(self, shm):
+        super().__init__()
+        self._shm = shm
+
+    def append(self, cmd) -> None:
+        if len(self) > 1000:
+            del self[:500]  # bounded: only the shared slots are read
+        super().append(cmd)
+        self._shm[M0:M0 + 3] = cmd.motors
+        self._shm[N] += 1
+
+
+def shared(n: int = 8) -> np.ndarray:
+    return np.frombuffer(mmap.mmap(-1, 8 * n), dtype=np.float64)

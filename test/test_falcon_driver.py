@@ -56,7 +56,7 @@ def test_falcon_backend_runs_the_servo_loop_and_stops_at_zero(ctx, monkeypatch):
     fake = FakeFalcon(firmware_running=True,
                       encoders=k.angles_to_ticks(k.inverse_kinematics(k.WORKSPACE_CENTER)))
     monkeypatch.setattr(falcon_usb, 'import_ftdi', lambda: ftdi_class(fake))
-    d = driver(ctx, backend='falcon', homing=False, gravity_compensation=True)
+    d = driver(ctx, backend='falcon', homing=False, gravity_compensation=True, servo_loop='python')
     try:
         assert isinstance(d.device, falcon_usb.FalconUSB) and d.device.gravity_compensation
         deadline = time.monotonic() + 5.0
@@ -94,7 +94,7 @@ def test_unplugged_falcon_stops_the_node_with_exit_1_without_reconnect(ctx, monk
     fake = FakeFalcon(firmware_running=True,
                       encoders=k.angles_to_ticks(k.inverse_kinematics(k.WORKSPACE_CENTER)))
     monkeypatch.setattr(falcon_usb, 'import_ftdi', lambda: ftdi_class(fake))
-    d = driver(ctx, backend='falcon', reconnect=False, disconnect_after=20)
+    d = driver(ctx, backend='falcon', reconnect=False, disconnect_after=20, servo_loop='python')
     try:
         assert _wait(lambda: d.device.replies >= 50)
         fake.unplug()
@@ -111,7 +111,7 @@ def test_replugged_falcon_is_reconnected_and_force_resumes(ctx, monkeypatch):
     fake = FakeFalcon(firmware_running=True,
                       encoders=k.angles_to_ticks(k.inverse_kinematics(k.WORKSPACE_CENTER)))
     monkeypatch.setattr(falcon_usb, 'import_ftdi', lambda: ftdi_class(fake))
-    d = driver(ctx, backend='falcon', disconnect_after=20, reconnect_period=0.1,
+    d = driver(ctx, backend='falcon', disconnect_after=20, reconnect_period=0.1, servo_loop='python',
                gravity_compensation=True)
     try:
         assert _wait(lambda: d.device.replies >= 50)

@@ -77,7 +77,7 @@ def _index(name: str, names: str) -> type:
 #: configuration (float64), written once before the loop starts
 CFG = _index('CFG', 'period max_force max_force_rate watchdog max_dt validity_time validity_radius '
              'fresh_age max_stiffness scale ox oy oz force_scale hand_m hand_k hand_c half '
-             'dt_max max_catch_up ramp damping mode observer loop dev_max_force hold_time')
+             'dt_max max_catch_up ramp damping mode observer loop dev_max_force hold_time device')
 #: the loop's own state (float64)
 S = _index('S', 'x0 x1 x2 v0 v1 v2 f0 f1 f2 t_dev t_open script_off '
            'enabled target0 target1 target2 out0 out1 out2 last_cmd last_out tripped '
@@ -95,7 +95,9 @@ MODEL_LEN = 1 + 3 + 3 + 9 + 3 + 3 + 6
 #: enable generation and enabled (SafetyLayer.start / stop)
 CTL = _index('CTL', 'stop release fault enable_gen enabled external')
 #: external hand target (float64 seqlock; ``ctl[external]`` = 1): seq, its time [s], target (3,)
-#: device frame [m], its velocity (3,) [m/s], buttons 0 and 1 (a script only Python can play)
+#: device frame [m], its velocity (3,) [m/s], buttons 0 and 1 (a script only Python can play).
+#: With ``cfg[device]`` = 1 (a real device read by the servo process before each tick, see
+#: :mod:`.falcon_servo`) the same layout holds the device's MEASURED position and velocity.
 HAND_LEN = 10
 #: the hand target is extrapolated from the newest one for at most this long [s], then held
 HAND_EXTRAPOLATE = 0.02
@@ -172,7 +174,16 @@ def _script_point(cfg, st, times, points, t):
 
 @nb.njit(nogil=True, cache=True)
 def _device_read(cfg, st, times, points, buttons, now, ctl, hand):
-    """Advance the simulated handle to ``now``; returns (b0, b1) buttons."""
+    """Advance the simulated handle to ``now`` (or take a real device's reading from ``hand``);
+    returns (b0, b1) buttons."""
+    if cfg[CFG.device] > 0.5:  # a real device: its servo process read it just before this tick
+        if st[S.t_dev] != st[S.t_dev]:
+            st[S.t_open] = now
+        st[S.t_dev] = now
+        for k in range(3):
+            st[S.x0 + k] = hand[2 + k]
+            st[S.v0 + k] = hand[5 + k]
+        return int(hand[8]), int(hand[9])
     if st[S.t_dev] != st[S.t_dev]:
         st[S.t_dev] = now
         st[S.t_open] = now

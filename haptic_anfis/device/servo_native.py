@@ -15,8 +15,10 @@ A stalled bridge (or a frozen process, short of SIGSTOP) no longer stops the tic
 is rendered until it expires (``model_validity_time`` from its pose) and the watchdog then ramps
 the force to zero inside the compiled loop.
 
-Simulated Falcon only: the real USB backend is Python (pyusb / pyftdi) and keeps
-:class:`~.servo.ServoLoop` (see docs/servo_loop.md).
+The real Falcon (``device_factory``): its USB library is Python, so the device's I/O runs in
+the servo process around the same compiled tick (:mod:`.device_process`); that process holds
+nothing but the device, so no executor, recorder or frozen node delays it, and the tick's
+watchdog zeroes the force whatever the node does (see docs/servo_loop.md).
 """
 from __future__ import annotations
 
@@ -28,6 +30,7 @@ from typing import Callable
 import numpy as np
 
 from . import native_tick as nt
+from . import device_process as dp
 from .buttons import ButtonEvents
 from .falcon import DeviceState, HandParams, WorkspaceMapping
 from .local_model import FALCON_MAX_STIFFNESS, LocalModelRenderer, RenderStats, \
@@ -366,6 +369,14 @@ class NativeServoLoop:
         process: run the compiled loop in a child process of its own session (``fork`` +
             ``setsid``: its own scheduler autogroup, so the parent's busy threads do not share
             its CPU time), on shared memory; else on a thread of this process.
+        device_factory: a real device instead of the simulated handle (``script`` is then
+            None): called IN the servo process (implies ``process``) to build the
+            :class:`~.falcon.Device` (e.g. a :class:`~.falcon_usb.FalconUSB`) that
+            :func:`~.device_process.run_device_loop` reads and writes around every tick.
+            :attr:`device` shows its counters.
+        open_timeout: seconds :meth:`start` waits for the device to open (firmware, homing).
+        open_error: the exception type :meth:`start` raises, with the servo process's one-line
+            message, when the device could not be opened.
     """
 
     def __init__(self, script, mapping: WorkspaceMapping = WorkspaceMapping(),
@@ -378,7 +389,8 @@ class NativeServoLoop:
                  on_state: Callable[[NativeState, tuple, float], None] | None = None,
                  trace: TickTrace | None = None, priority: int = 0, ring: int = 1 << 16,
                  half_extent: float = 0.05, device_max_force: float | None = None,
-                 process: bool = False) -> None:
+                 process: bool = False, device_factory: Callable[[], object] | None = None,
+                 open_timeout: float = 120.0, open_error: type[Exception] = OSError) -> None:
         if not rate > 0:
             raise ValueError(f'rate: expected > 0 Hz, got {rate!r}')
         if not 0 <= priority <= 99:
@@ -390,10 +402,17 @@ class NativeServoLoop:
         self.period = 1.0 / rate
         self.priority = int(priority)
         self.mapping, self.on_state, self.trace = mapping, on_state, trace
-        self.times, points, self.buttons, loop, held = script_arrays(script)
+        self.device_factory = device_factory
+        self.open_timeout, self.open_error = float(open_timeout), open_error
+        if device_factory is not None:  # no script: a still handle at the centre, never read
+            self.times, points, self.buttons, loop, held = (
+                np.zeros(1), np.zeros((1, 3)), np.zeros((0, 2), dtype=np.int64), False, False)
+            points[0] = mapping.offset
+        else:
+            self.times, points, self.buttons, loop, held = script_arrays(script)
         self.points = points
         self._script = script
-        self.process = bool(process)
+        self.process = bool(process) or device_factory is not None
         self._mem = _SharedArrays() if self.process else None
         zeros = self._mem.zeros if self.process else np.zeros
         self.hand = zeros(nt.HAND_LEN)
@@ -417,7 +436,15 @@ class NativeServoLoop:
         cfg[C.loop] = 1.0 if loop else 0.0
         cfg[C.dev_max_force] = max_force if device_max_force is None else device_max_force
         cfg[C.hold_time] = max(float(hold_time), validity_time)
+        cfg[C.device] = 1.0 if device_factory is not None else 0.0
         self.cfg = cfg
+        #: the real device's status and counters (:data:`~.device_process.DEV`), its message
+        self.devst = zeros(dp.DEV_LEN, dtype=np.int64)
+        self.devmsg = zeros(dp.MESSAGE_BYTES, dtype=np.uint8)
+        self.device = dp.ProcessDevice(self.devst) if device_factory is not None else None
+        #: called on the bridge thread when the real device is lost / back (a message)
+        self.on_disconnect: Callable[[str], None] | None = None
+        self.on_reconnect: Callable[[str], None] | None = None
         self.st = zeros(nt.STATE_LEN)
         self.st[:] = nt.new_state()
         x0 = [min(max((points[0, k] - mapping.offset[k]) / mapping.scale, -half_extent),
@@ -499,6 +526,12 @@ class NativeServoLoop:
                self.cmd.copy(),
                self.model.copy(), ctl, self.out.copy(), self.cnt.copy(), self.ring[:0].copy(),
                self._scratch.copy(), self._ts.copy())
+        if self.device_factory is not None:  # the device loop calls these from Python
+            st, cnt = self.st.copy(), self.cnt.copy()
+            nt.tick(0.0, self.cfg, st, self.times, self.points, self.buttons, self.hand.copy(),
+                    self.cmd.copy(), self.model.copy(), ctl, self.out.copy(), cnt,
+                    self.ring.copy(), self._scratch.copy(), 0)
+            nt._fault(st, cnt)
 
     def tick(self, now: float, stamp_ns: int = 0) -> tuple[float, float, float]:
         """One compiled tick at monotonic ``now`` [s] on this loop's state, without the thread
@@ -532,18 +565,32 @@ class NativeServoLoop:
             code = 0
             try:
                 os.setsid()  # a session of its own: its own autogroup (fair share) on Linux
-                _die_with_parent(signal.SIGKILL)
+                if self.device_factory is not None:
+                    # a real device must be left at zero force: stop the loop, do not kill it
+                    signal.signal(signal.SIGTERM, lambda *_: self.ctl.__setitem__(nt.CTL.stop, 1))
+                    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C: the node stops us
+                    _die_with_parent(signal.SIGTERM)
+                else:
+                    _die_with_parent(signal.SIGKILL)
                 set_realtime(self.priority)
                 if self.priority <= 0:
                     request_short_slice()
-                nt.run(self.cfg, self.st, self.times, self.points, self.buttons, self.hand,
-                       self.cmd, self.model, self.ctl, self.out, self.cnt, self.ring,
-                       self._scratch, self._ts)
+                if self.device_factory is not None:
+                    code = dp.run_device_loop(
+                        self.device_factory, self.cfg, self.st, self.times, self.points,
+                        self.buttons, self.hand, self.cmd, self.model, self.ctl, self.out,
+                        self.cnt, self.ring, self._scratch, self.devst, self.devmsg)
+                else:
+                    nt.run(self.cfg, self.st, self.times, self.points, self.buttons, self.hand,
+                           self.cmd, self.model, self.ctl, self.out, self.cnt, self.ring,
+                           self._scratch, self._ts)
             except BaseException:
                 code = 1
             finally:
                 os._exit(code)
         self._pid = pid
+        if self.device_factory is not None:
+            self._wait_open(pid)
         policy = ''
         for _ in range(100):  # how the child is scheduled, once it has set itself up
             try:
@@ -559,6 +606,27 @@ class NativeServoLoop:
         except OSError as exc:
             policy = f'unknown ({exc})'
         self.scheduling = f'compiled tick in servo process {pid} (own session); {policy}'
+
+    def _wait_open(self, pid: int) -> None:
+        """Wait for the servo process to open the device; raise ``open_error`` with its message
+        when it could not (the process has exited then)."""
+        import os
+        end = time.monotonic() + self.open_timeout
+        while self.devst[dp.DEV.state] == dp.STARTING:
+            done = os.waitpid(pid, os.WNOHANG)[0]
+            if done or time.monotonic() > end:
+                if not done:
+                    os.kill(pid, 9)
+                    os.waitpid(pid, 0)
+                self._pid = 0
+                raise self.open_error(
+                    'the servo process died while opening the device' if done else
+                    f'the device did not open within {self.open_timeout:g} s')
+            time.sleep(0.005)
+        if self.devst[dp.DEV.state] == dp.FAILED:
+            os.waitpid(pid, 0)
+            self._pid = 0
+            raise self.open_error(dp.read_message(self.devmsg))
 
     def stop(self, timeout: float = 2.0) -> None:
         self.safety.stop()
@@ -610,7 +678,17 @@ class NativeServoLoop:
         seen = -1.0
         period = self.period
         next_drain = 0
+        lost_seen = back_seen = 0
         while not self._stop.is_set():
+            if self.device is not None:  # the real device's losses and returns, in order
+                lost, back = int(self.devst[dp.DEV.disconnects]), int(self.devst[dp.DEV.reconnects])
+                if lost > lost_seen:
+                    lost_seen = lost
+                    self._device_event(self.on_disconnect, 'Falcon: device lost (servo process '
+                                       f'{self._pid}; disconnect {lost})')
+                if back > back_seen:
+                    back_seen = back
+                    self._device_event(self.on_reconnect, f'Falcon: device back (reconnect {back})')
             if self.ctl[nt.CTL.external]:
                 try:
                     self._feed_hand()
@@ -626,6 +704,14 @@ class NativeServoLoop:
                 next_drain = 0
                 self._drain()
             time.sleep(period * 0.5)
+
+    def _device_event(self, hook, msg: str) -> None:
+        if hook is not None:
+            try:
+                hook(msg)
+            except Exception as exc:  # the hook's own error must not stop the bridge
+                self.errors += 1
+                self.last_error = exc
 
     def _publish(self, o: np.ndarray) -> None:
         O = nt.OUT

@@ -53,7 +53,8 @@ from ..device.trace import TickTrace, save_trace
 from . import cdr
 from . import interfaces as ifc
 from .polled import PolledSubscription
-from ._common import (LOOP_QOS, Param, config_file, declare_parameters, finite_vector,
+from ._common import (LOOP_QOS, Param, ParameterError, config_file, declare_parameters,
+                      finite_vector,
                       non_negative, one_of, positive, run_node, set_stamp)
 
 BACKENDS = ('sim', 'falcon')
@@ -137,11 +138,13 @@ PARAMS = [
     Param('servo_loop', 'auto', "sim: 'native' runs the servo tick (device, local model, "
           'clutch, safety, passivity bound) compiled on its own thread without the interpreter '
           "lock (haptic_anfis.device.servo_native); 'native_process' the same compiled loop in a "
-          "servo process of its own session on shared memory; 'python' the Python tick (the "
-          "'falcon' backend always uses it: its USB library is Python); 'auto': 'native' when "
-          "the thread may run at servo_priority (SCHED_FIFO) or the driver shares its process "
-          "with the loop's other nodes (sim, exam run), else 'native_process' (measured: "
-          'docs/servo_loop.md)', one_of('auto', 'native', 'native_process', 'python')),
+          "servo process of its own session on shared memory; 'python' the Python tick; 'auto': "
+          "'native' when the thread may run at servo_priority (SCHED_FIFO) or the driver shares "
+          "its process with the loop's other nodes (sim, exam run), else 'native_process' "
+          "(measured: docs/servo_loop.md). falcon: 'auto' and 'native_process' run the USB I/O "
+          "and the compiled tick in the servo process (a frozen node cannot leave force on the "
+          "motors); 'python' the Python tick on a thread of the node; 'native' is refused (its "
+          "USB library needs the interpreter)", one_of('auto', 'native', 'native_process', 'python')),
     Param('passivity_damping', 1.5, 'native: device damping b [N s/m] of the passivity bound on '
           'the rendered stiffness, K <= 2 b / T with T the measured tick period (Colgate & '
           'Schenkel 1997; docs/servo_loop.md)', positive),
@@ -159,12 +162,27 @@ PARAMS = [
 ]
 
 
-def resolve_servo_loop(choice: str, priority: int, shared_process: bool) -> str:
+def resolve_servo_loop(choice: str, priority: int, shared_process: bool,
+                       backend: str = 'sim') -> str:
     """``servo_loop: auto`` made concrete: the compiled thread when it may run at real-time
     priority (it then keeps the period in any layout) or shares its process with the loop's
     other nodes; else the compiled loop in a servo process of its own session, which under the
     normal scheduler kept the period and the force in a driver process of its own where the
-    thread did not (docs/measurements/servo_load_beside_tests.md). Other choices pass through."""
+    thread did not (docs/measurements/servo_load_beside_tests.md). The Falcon always gets the
+    servo process (its USB library is Python: on a thread it would share the node's interpreter
+    lock). Other choices pass through.
+
+    Raises:
+        ParameterError: ``native`` (a thread) with the falcon backend.
+    """
+    if backend == 'falcon':
+        if choice == 'native':
+            raise ParameterError("falcon_driver: servo_loop: got 'native' with backend 'falcon'; "
+                                 "expected 'auto' or 'native_process' (the USB I/O and the "
+                                 "compiled tick in a servo process) or 'python': the Falcon's "
+                                 "USB library needs the interpreter, which a compiled thread "
+                                 "does not hold")
+        return 'native_process' if choice == 'auto' else choice
     if choice != 'auto':
         return choice
     from ..device.servo import realtime_allowed
@@ -178,8 +196,8 @@ class FalconDriver(Node):
         account."""
         super().__init__(name, **kw)
         p = self.params = declare_parameters(self, PARAMS)
-        p['servo_loop'] = self.servo_loop = resolve_servo_loop(p['servo_loop'],
-                                                               p['servo_priority'], shared_process)
+        p['servo_loop'] = self.servo_loop = resolve_servo_loop(
+            p['servo_loop'], p['servo_priority'], shared_process, p['backend'])
         if p['gil_switch_interval'] > 0:
             # A busy thread (bag writer, executor callbacks) keeps the GIL up to this long while
             # the 1 kHz servo thread waits: with a recorder in the same process the worst
@@ -189,7 +207,7 @@ class FalconDriver(Node):
         self.mapping = WorkspaceMapping(p['workspace_scale'], tuple(p['workspace_offset']),
                                         p['force_scale'])
         if p['backend'] == 'falcon':
-            self.device = self._make_falcon(p)
+            self.device = self._make_falcon(p) if p['servo_loop'] == 'python' else None
             what = (f"Falcon {p['device_serial'] or 'index ' + str(p['device_index'])}, homing "
                     f"{'on' if p['homing'] else 'off'}, gravity compensation "
                     f"{p['gravity_mass'] if p['gravity_compensation'] else 'off'}")
@@ -203,7 +221,13 @@ class FalconDriver(Node):
                                           max_force=p['max_force'])
             what = f'script {script_path} ({script.duration:.1f} s)'
         self.native = None
-        if p['backend'] == 'sim' and p['servo_loop'] != 'python':
+        if p['backend'] == 'falcon' and p['servo_loop'] != 'python':
+            self.native = self._make_native(p, None, self._falcon_factory(p))
+            self.device, self.safety = self.native.device, self.native.safety
+            self.native.on_disconnect, self.native.on_reconnect = (self._device_lost,
+                                                                   self._device_back)
+            self.clutch = self.native.clutch
+        elif p['backend'] == 'sim' and p['servo_loop'] != 'python':
             self.native = self._make_native(p, script)
             self.device, self.safety = self.native, self.native.safety
             self.clutch = self.native.clutch  # the clutch / mark rules run in the compiled tick
@@ -272,28 +296,44 @@ class FalconDriver(Node):
             f"{p['force_mode']}, {what}")
 
     def _make_falcon(self, p):
-        """The USB backend (imported here: its USB library is an optional extra). Connecting,
+        """The USB backend on a thread of this node (``servo_loop: python``). Connecting,
         firmware upload and homing happen when the servo loop opens it; a FalconError (an
         OSError) stops the node at start with its message."""
+        return self._falcon_factory(p)(log=self.get_logger().info,
+                                       on_disconnect=self._device_lost,
+                                       on_reconnect=self._device_back)
+
+    @staticmethod
+    def _falcon_factory(p):
+        """A callable building the USB backend from the parameters; it holds no ROS object, so
+        the servo process can call it (its log and hooks are that process's own). The USB
+        library is imported here, before any servo process is forked: a missing library is
+        this node's one-line error (FalconUnavailableError) at start."""
         import dataclasses
+        import functools
 
         from ..device.falcon_kinematics import GEOMETRY
-        from ..device.falcon_usb import FalconUSB
-        return FalconUSB(firmware_path=p['firmware_path'], device_index=p['device_index'],
-                         serial=p['device_serial'], firmware_attempts=p['firmware_attempts'],
-                         homing=p['homing'], homing_timeout=p['homing_timeout'],
-                         gravity_compensation=p['gravity_compensation'],
-                         gravity_mass=p['gravity_mass'], max_force=p['max_force'],
-                         stall_timeout=p['stall_timeout'], log=self.get_logger().info,
-                         disconnect_after=p['disconnect_after'], reconnect=p['reconnect'],
-                         reconnect_period=p['reconnect_period'],
-                         max_motor_command=p['max_motor_command'],
-                         geometry=dataclasses.replace(GEOMETRY, counts_per_nm=p['counts_per_nm']),
-                         on_disconnect=self._device_lost, on_reconnect=self._device_back)
+        from ..device.falcon_usb import FalconUSB, import_ftdi
+        import_ftdi()
+        return functools.partial(
+            FalconUSB, firmware_path=p['firmware_path'], device_index=p['device_index'],
+            serial=p['device_serial'], firmware_attempts=p['firmware_attempts'],
+            homing=p['homing'], homing_timeout=p['homing_timeout'],
+            gravity_compensation=p['gravity_compensation'], gravity_mass=p['gravity_mass'],
+            max_force=p['max_force'], stall_timeout=p['stall_timeout'],
+            disconnect_after=p['disconnect_after'], reconnect=p['reconnect'],
+            reconnect_period=p['reconnect_period'], max_motor_command=p['max_motor_command'],
+            geometry=dataclasses.replace(GEOMETRY, counts_per_nm=p['counts_per_nm']))
 
-    def _make_native(self, p, script):
-        """The compiled, GIL-free servo loop with the simulated Falcon (device/servo_native.py)."""
+    def _make_native(self, p, script, device_factory=None):
+        """The compiled, GIL-free servo loop (device/servo_native.py): with the simulated Falcon,
+        or with the real one opened in the servo process (``device_factory``)."""
         from ..device.servo_native import NativeServoLoop
+        kw = {}
+        if device_factory is not None:
+            from ..device.falcon_usb import FalconError
+            kw = dict(device_factory=device_factory, open_error=FalconError,
+                      open_timeout=p['homing_timeout'] + 60.0)  # firmware upload + homing
         return NativeServoLoop(
             script, self.mapping, HandParams(p['hand_mass'], p['hand_stiffness'],
                                              p['hand_damping']),
@@ -301,7 +341,7 @@ class FalconDriver(Node):
             self.frame_id, p['force_mode'], p['max_stiffness'], p['model_validity_time'],
             p['model_validity_radius'], p['passivity_damping'], p['passivity_observer'],
             p['model_hold_time'], trace=TickTrace() if p['trace_path'] else None,
-            priority=p['servo_priority'], process=p['servo_loop'] == 'native_process')
+            priority=p['servo_priority'], process=p['servo_loop'] == 'native_process', **kw)
 
     def _device_lost(self, why: str) -> None:
         """The Falcon backend lost the device (servo thread): zero the force; without reconnect,

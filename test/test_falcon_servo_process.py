@@ -1,0 +1,176 @@
+"""The real Falcon's USB I/O and the compiled tick in a servo process of their own (issue 32):
+the default for backend 'falcon'. The fake device lives in the servo process after the fork, so
+what it receives is mirrored into shared memory (or a file, for a node in another process) that
+the test reads. No hardware."""
+from __future__ import annotations
+
+import mmap
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from falcon_fake import ftdi_class
+
+from haptic_anfis.device import falcon_kinematics as k
+from haptic_anfis.device import falcon_usb
+
+ROOT = Path(__file__).resolve().parents[1]
+TEST_DIR = Path(__file__).resolve().parent
+from falcon_fake import CLOSED, M0, N, PLUGGED, SharedFake, shared  # noqa: E402
+
+
+def centred_fake(shm, **kw) -> SharedFake:
+    return SharedFake(shm, firmware_running=True,
+                      encoders=k.angles_to_ticks(k.inverse_kinematics(k.WORKSPACE_CENTER)), **kw)
+
+
+def _wait(cond, seconds=10.0):
+    deadline = time.monotonic() + seconds
+    while not cond() and time.monotonic() < deadline:
+        time.sleep(0.005)
+    return cond()
+
+
+rclpy = pytest.importorskip('rclpy')
+from rclpy.context import Context  # noqa: E402
+from rclpy.parameter import Parameter  # noqa: E402
+
+from haptic_anfis.nodes._common import ParameterError  # noqa: E402
+
+
+@pytest.fixture
+def ctx():
+    c = Context()
+    rclpy.init(context=c)
+    yield c
+    rclpy.try_shutdown(context=c)
+
+
+def driver(ctx, **params):
+    from haptic_anfis.nodes.falcon_driver import FalconDriver
+    return FalconDriver(context=ctx, parameter_overrides=[
+        Parameter(n, value=v) for n, v in params.items()])
+
+
+def test_falcon_runs_in_a_servo_process_by_default_and_stops_at_zero(ctx, monkeypatch):
+    shm = shared()
+    fake = centred_fake(shm)
+    monkeypatch.setattr(falcon_usb, 'import_ftdi', lambda: ftdi_class(fake))
+    d = driver(ctx, backend='falcon', homing=False, gravity_compensation=True)
+    try:
+        assert d.servo_loop == 'native_process' and d.native is not None
+        assert d.native._pid and d.native._pid != os.getpid()
+        assert 'servo process' in d.servo.scheduling
+        assert _wait(lambda: d.device.replies >= 50 and shm[N] >= 50)
+        assert d.device.connected and not d.device.disconnected
+        # gravity compensation alone: a small non-zero command reaches the motors
+        assert tuple(shm[M0:M0 + 3]) != (0.0, 0.0, 0.0)
+        assert d.servo.errors == 0 and d.device.loop_errors == 0
+        # the node publishes the servo process's ticks
+        n = d.servo.stats.summary()['ticks'] if 'ticks' in d.servo.stats.summary() else None
+        assert d.native.last_state is not None, n
+    finally:
+        d.close()
+        d.destroy_node()
+    assert tuple(shm[M0:M0 + 3]) == (0.0, 0.0, 0.0) and shm[CLOSED] == 1.0
+    assert d.device.state == 3  # STOPPED: the loop ended itself, not killed
+
+
+def test_native_thread_is_refused_for_the_falcon_in_one_line(ctx):
+    with pytest.raises(ParameterError, match=r"servo_loop: got 'native' with backend 'falcon'"):
+        driver(ctx, backend='falcon', servo_loop='native')
+
+
+def test_a_device_that_cannot_be_opened_is_one_line_at_start(ctx, monkeypatch):
+    shm = shared()
+    fake = SharedFake(shm, firmware_running=False)  # no firmware and no firmware file
+    monkeypatch.setattr(falcon_usb, 'import_ftdi', lambda: ftdi_class(fake))
+    with pytest.raises(falcon_usb.FalconError, match='runs no firmware.*firmware_path'):
+        driver(ctx, backend='falcon')
+
+
+def test_unplugged_falcon_in_the_servo_process_stops_the_node_with_exit_1(ctx, monkeypatch):
+    shm = shared()
+    fake = centred_fake(shm)
+    monkeypatch.setattr(falcon_usb, 'import_ftdi', lambda: ftdi_class(fake))
+    d = driver(ctx, backend='falcon', reconnect=False, disconnect_after=20)
+    try:
+        assert _wait(lambda: d.device.replies >= 50)
+        shm[PLUGGED] = 0.0  # the cable, pulled in the servo process's fake
+        assert _wait(lambda: d.finished)
+        assert d.exit_code == 1 and d.device.disconnected and not d.safety.enabled
+        assert d.servo.running and d.servo.errors == 0
+    finally:
+        d.close()
+        d.destroy_node()
+
+
+NODE = textwrap.dedent('''
+    import mmap, sys, time
+    import numpy as np
+    sys.path.insert(0, {test_dir!r})
+    from falcon_fake import SharedFake, ftdi_class
+    from haptic_anfis.device import falcon_kinematics as k, falcon_usb
+    from haptic_anfis.device.falcon import WorkspaceMapping
+    from haptic_anfis.device.servo_native import NativeServoLoop
+
+    f = open({path!r}, 'r+b')
+    shm = np.frombuffer(mmap.mmap(f.fileno(), 64), dtype=np.float64)
+    fake = SharedFake(shm, firmware_running=True,
+                      encoders=k.angles_to_ticks(k.inverse_kinematics(k.WORKSPACE_CENTER)))
+    factory = lambda: falcon_usb.FalconUSB(homing=False, transport=falcon_usb.PyFtdiTransport(
+        ftdi_class(fake)))
+    loop = NativeServoLoop(None, WorkspaceMapping(), mode='zoh', watchdog_timeout=0.010,
+                           device_factory=factory, open_error=falcon_usb.FalconError)
+    loop.start()
+    print('pid', loop._pid, flush=True)
+    while True:  # the node: a force command every 2 ms, until it is frozen
+        loop.safety.command((0.0, 0.0, 3.0), time.monotonic(), 'tissue')
+        time.sleep(0.002)
+''')
+
+
+def test_a_frozen_node_cannot_leave_force_on_the_motors(tmp_path):
+    """The node process is SIGSTOPped while it commands 3 N: the servo process keeps ticking on
+    its own, its watchdog zeroes the motors within the watchdog time (10 ms) plus the force ramp,
+    and it keeps sending zero; SIGCONT brings the commanded force back."""
+    path = tmp_path / 'shm'
+    path.write_bytes(bytes(64))
+    script = NODE.format(test_dir=str(TEST_DIR), path=str(path))
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(ROOT), str(TEST_DIR)]))
+    node = subprocess.Popen([sys.executable, '-c', script], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, env=env)
+    f = open(path, 'r+b')
+    shm = np.frombuffer(mmap.mmap(f.fileno(), 64), dtype=np.float64)
+    try:
+        line = node.stdout.readline()
+        assert line.startswith('pid'), node.stderr.read() if node.poll() is not None else line
+        servo_pid = int(line.split()[1])
+        assert _wait(lambda: shm[N] > 200 and tuple(shm[M0:M0 + 3]) != (0.0, 0.0, 0.0))
+        os.kill(node.pid, signal.SIGSTOP)
+        t_stop = time.monotonic()
+        assert _wait(lambda: tuple(shm[M0:M0 + 3]) == (0.0, 0.0, 0.0), 2.0)
+        zeroed_after = time.monotonic() - t_stop
+        print(f"zeroed {zeroed_after * 1e3:.1f} ms after SIGSTOP")
+        n = shm[N]
+        time.sleep(0.2)
+        assert shm[N] > n + 50  # the servo process keeps sending (zero) while the node is frozen
+        assert tuple(shm[M0:M0 + 3]) == (0.0, 0.0, 0.0)
+        # polled every 5 ms by a test process that shares 2 cores with both: a loose bound
+        assert zeroed_after < 0.5, zeroed_after
+        os.kill(node.pid, signal.SIGCONT)
+        assert _wait(lambda: tuple(shm[M0:M0 + 3]) != (0.0, 0.0, 0.0), 5.0)
+    finally:
+        os.kill(node.pid, signal.SIGCONT)
+        node.terminate()  # the servo process gets SIGTERM with its parent: zero, closed
+        node.wait(10)
+        f.close()
+    # the servo process got SIGTERM with its parent: it stopped its loop, sent zero, closed
+    assert _wait(lambda: shm[CLOSED] == 1.0, 5.0), servo_pid
+    assert tuple(shm[M0:M0 + 3]) == (0.0, 0.0, 0.0)
