@@ -25,7 +25,9 @@ With the simulated Falcon the tick itself is compiled and never takes the interp
 (``servo_loop: native``, :mod:`haptic_anfis.device.servo_native`; ``native_process``: in a servo
 process of its own): device, local model, clutch, safety and the passivity bound run there, and
 the Python side above (publishing, taking commands and models) is a bridge thread that may fall
-behind without costing a tick (docs/servo_loop.md).
+behind without costing a tick (docs/servo_loop.md). The real Falcon's USB I/O runs with that
+compiled tick in the servo process (:mod:`haptic_anfis.device.device_process`): a frozen node
+cannot leave force on the motors.
 """
 from __future__ import annotations
 
