@@ -26,9 +26,11 @@ import sys
 from pathlib import Path
 from typing import Callable, Iterable
 
-__all__ = ['machine_line', 'write_page', 'printed_to_markdown', 'run_with_page', 'PAGES_DIR']
+__all__ = ['machine_line', 'write_page', 'write_readme_block', 'printed_to_markdown',
+           'run_with_page', 'PAGES_DIR', 'README']
 
 PAGES_DIR = Path(__file__).resolve().parent.parent / 'docs' / 'measurements'
+README = Path(__file__).resolve().parent.parent / 'README.md'
 
 
 def machine_line() -> str:
@@ -69,6 +71,23 @@ def write_page(name: str, title: str, body_md: str, command: str | None = None,
             f'Reproduce: `{cmd}`\n\n{body_md.rstrip()}\n')
     path = out_dir / f'{name}.md'
     path.write_text(text, encoding='utf-8')
+    return path
+
+
+def write_readme_block(name: str, body_md: str, command: str, readme: Path | None = None) -> Path:
+    """Replace the README's text between ``<!-- measured:NAME -->`` and ``<!-- /measured:NAME -->``
+    with ``body_md``, its date, machine and command (a figure the README states, written by the
+    script that measures it). Raises ValueError when the markers are missing."""
+    path = Path(readme) if readme is not None else README
+    text = path.read_text(encoding='utf-8')
+    start, end = f'<!-- measured:{name} -->', f'<!-- /measured:{name} -->'
+    i, j = text.find(start), text.find(end)
+    if i < 0 or j < i:
+        raise ValueError(f'{path}: no {start} ... {end} block to write')
+    stamp = _dt.datetime.now(_dt.timezone.utc).strftime('%Y-%m-%d %H:%M UTC')
+    block = (f'{start}\n{body_md.strip()} *(Written by `{command}`, {stamp}; '
+             f'{machine_line()}.)*\n')
+    path.write_text(text[:i] + block + text[j:], encoding='utf-8')
     return path
 
 

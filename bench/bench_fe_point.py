@@ -27,7 +27,7 @@ for _v in ('OMP_NUM_THREADS', 'MKL_NUM_THREADS', 'OPENBLAS_NUM_THREADS'):
 
 import numpy as np  # noqa: E402
 
-from _page import write_page  # noqa: E402
+from _page import write_page, write_readme_block  # noqa: E402
 from haptic_anfis.cases import library  # noqa: E402
 from haptic_anfis.tissue.fe import solve_scene_point  # noqa: E402
 from haptic_anfis.tissue.geometry import loading_points  # noqa: E402
@@ -51,7 +51,9 @@ def _scipy_default(A, b):
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split('\n')[0])
-    ap.add_argument('--points', type=int, default=2, help='loading points to time (default 2)')
+    ap.add_argument('--points', type=int, default=2,
+                    help='loading points to time (default 2; 0: only the committed store\'s '
+                         'figures, written into the README, the page left as it is)')
     ap.add_argument('--no-before', action='store_true', help='skip the slow "before" solver')
     args = ap.parse_args()
     case = library().get(CASE)
@@ -96,6 +98,8 @@ def main() -> None:
         n_pts += 1
     sweep = ''
     if n_pts:
+        graded = [c for c in library().cases() if c.name.startswith('lib_')]
+        n_graded = sum(len(loading_points(c.scene)) for c in graded)
         med = float(np.nanmedian(cpu))
         per_case = len(pts) * med / 2 / 60
         sweep = (f'\n\nIn the committed store (`fe_store/lib_*`, the real background sweeps, '
@@ -105,10 +109,16 @@ def main() -> None:
                  f'one case ({len(pts)} points of {CASE}) on idle cores: 1 worker '
                  f'{2 * per_case:.1f} min, 2 single-threaded workers on 2 cores {per_case:.1f} min '
                  f'(two such workers doubled throughput: tissue/sweep.py, limit_threads); '
-                 f'the whole graded library (18 cases, '
-                 f'{sum(len(loading_points(c.scene)) for c in library().cases() if c.name.startswith("lib_"))} '
-                 f'points): {sum(len(loading_points(c.scene)) for c in library().cases() if c.name.startswith("lib_")) * med / 3600:.1f} CPU-hours.')
+                 f'the whole graded library ({len(graded)} cases, {n_graded} points): '
+                 f'{n_graded * med / 3600:.1f} CPU-hours.')
         print(sweep.strip())
+        write_readme_block('fe-case-time', (
+            f'One graded case at full density ({len(pts)} loading points of {CASE}, five '
+            f'depths), projected from the {n_pts} points solved in `fe_store/` (CPU per point '
+            f'median {med:.1f} s): **{2 * per_case:.0f} min with 1 worker, {per_case:.0f} min with '
+            f'2 workers** on idle cores.'), 'python bench/bench_fe_point.py --points 0')
+        if not chosen:
+            return
     table = (f'Load average at the start: {load0:.1f} (2 cores, shared with 7 other developers).\n\n'
              + '\n'.join([head, '|---|---|---|---|---|---|---|---|', *rows]) + sweep)
     write_page('fe_point', 'FE point solve: before / after (issue 29)', table,

@@ -68,10 +68,11 @@ def rt_threads() -> int:
     return n
 
 
-def params_file(d: Path, priority: int, loop: str) -> Path:
-    f = d / f'driver_{priority}_{loop}.yaml'
+def params_file(d: Path, priority: int, loop: str, force_mode: str = '') -> Path:
+    f = d / f'driver_{priority}_{loop}_{force_mode or "default"}.yaml'
     f.write_text('falcon_driver:\n  ros__parameters:\n'
-                 f'    servo_priority: {priority}\n    servo_loop: {loop}\n')
+                 f'    servo_priority: {priority}\n    servo_loop: {loop}\n'
+                 + (f'    force_mode: {force_mode}\n' if force_mode else ''))
     return f
 
 
@@ -102,12 +103,12 @@ def browser_when_up(port: int, stop) -> 'threading.Thread':
 
 
 def run_one(kind: str, priority: int, duration: float, loop: str, d: Path,
-            graph_priority: int = 0, view: bool = False) -> dict:
+            graph_priority: int = 0, view: bool = False, force_mode: str = '') -> dict:
     """One run; the last JSON line of its output (or {'error': ...}). ``graph_priority`` > 0:
     the whole graph (every process and thread) runs SCHED_FIFO at it (``chrt -f``), the servo
     tick above it at ``priority``. ``view``: the browser view too (``--view``: the web_view
     node, and a headless chromium showing its page)."""
-    pf = params_file(d, priority, loop)
+    pf = params_file(d, priority, loop, force_mode)
     bag = d / f'bag_{kind}_{priority}_{time.monotonic_ns()}'
     if kind == 'sim':
         cmd = [*CLI, 'sim', '--duration', str(duration), '--json', '--record', str(bag),
@@ -178,6 +179,9 @@ def main() -> int:
     ap.add_argument('--view', action='store_true',
                     help='the browser view too: the web_view node and a headless chromium on its '
                          'page (issue 32 measures with the recorder and the view running)')
+    ap.add_argument('--force-mode', default='', choices=('', 'local_model', 'zoh'),
+                    help="the driver's force_mode (default: its default, local_model; zoh: the "
+                         "zero-order hold of the force server's commands)")
     ap.add_argument('--no-page', action='store_true', help='print only')
     ap.add_argument('--page', default='servo_load',
                     help='page name: docs/measurements/<page>.md (default servo_load)')
@@ -197,7 +201,7 @@ def main() -> int:
                 time.sleep(1.0)
                 load0 = os.getloadavg()[0]
                 rt = rt_threads()
-                j = run_one(kind, prio, a.duration, loop, d, gprio, a.view)
+                j = run_one(kind, prio, a.duration, loop, d, gprio, a.view, a.force_mode)
                 load = max(load0, os.getloadavg()[0])
             finally:
                 stop(procs)
@@ -218,8 +222,9 @@ def main() -> int:
 def _page(a, rows: list[dict], planned: int):
     head = '| ' + ' | '.join(COLS) + ' |\n|' + '---|' * len(COLS) + '\n'
     body = head + ''.join('| ' + ' | '.join(fmt(r[c]) for c in COLS) + ' |\n' for r in rows)
-    notes = (f'\n{a.duration:g} s per run after the graph is ready, default force mode '
-             f'(local_model), recorder running'
+    notes = (f'\n{a.duration:g} s per run after the graph is ready, '
+             + (f'force mode {a.force_mode}' if a.force_mode else 'default force mode (local_model)')
+             + ', recorder running'
              + (', browser view running (web_view node and a headless chromium on its page)'
                 if a.view else '') + '; `busy`: processes spinning beside it on the '
              f'machine\'s {os.cpu_count()} cores; `load`: the 1-minute load average (the machine '
@@ -238,7 +243,8 @@ def _page(a, rows: list[dict], planned: int):
              'err_rms_pct <= 2, ripple_pct <= 1; quiet err_rms_pct <= 0.2.\n')
     if len(rows) < planned:
         notes += f'\n({len(rows)} of {planned} planned runs so far.)\n'
-    return write_page(a.page, f'Servo loop under load ({a.loops})', body + notes)
+    return write_page(a.page, f'Servo loop under load ({a.loops}'
+                      + (f', {a.force_mode}' if a.force_mode else '') + ')', body + notes)
 
 
 if __name__ == '__main__':

@@ -296,3 +296,59 @@ def test_search_folds_capped_by_points_and_recorded(synthetic):
     m = ForceModel(search_folds=5, candidates=[(2, 2, 2, 2)], search_epochs=2, epochs=2, form='plain')
     m.fit(X, synthetic.Y[few], groups=synthetic.point[few])  # 4 points: 4 folds, not 5
     assert m.metadata_['training']['search_folds'] == 5
+
+
+def test_ridge_is_chosen_with_the_structure_on_the_same_folds(rng):
+    """``ridges``: every structure is scored with each ridge on the same folds (each score checked
+    by hand); the chosen pair is the smallest structure within tol, then its best ridge."""
+    from haptic_anfis.anfis import search_structure
+    from haptic_anfis.anfis.training import train as train_one
+
+    X = rng.random((90, 2))
+    t = np.sin(4 * X[:, 0]) * X[:, 1] + 0.05 * rng.standard_normal(90)  # noisy: ridge matters
+    folds = [(np.setdiff1d(np.arange(90), v), v) for v in np.array_split(rng.permutation(90), 3)]
+    ridges = [1e-6, 1e-2, 1.0]
+    res = search_structure(X, t, candidates=[(2, 2), (4, 4)], epochs=3, folds=folds,
+                           ridges=ridges, tol=0.0, ridge=123.0)  # the ladder overrides ridge
+    assert len(res.candidates) == 6
+    assert {(c.structure, c.ridge) for c in res.candidates} == {
+        (s, r) for s in [(2, 2), (4, 4)] for r in ridges}
+    for c in res.candidates:
+        fold = []
+        for f, v in folds:
+            r = train_one(X[f], t[f], c.structure, 3, X_check=X[v], t_check=t[v], ridge=c.ridge)
+            fold.append(r.check_rmse[r.best_epoch - 1])
+        assert c.val_rmse == pytest.approx(np.sqrt(np.mean(np.square(fold))), rel=1e-12)
+    best = min(res.candidates, key=lambda c: c.val_rmse)
+    assert (res.chosen.structure, res.chosen.ridge) == (best.structure, best.ridge)
+    # with a wide tolerance the smaller structure wins, with its own best ridge
+    loose = search_structure(X, t, candidates=[(2, 2), (4, 4)], epochs=3, folds=folds,
+                             ridges=ridges, tol=10.0)
+    small = min((c for c in loose.candidates if c.structure == (2, 2)), key=lambda c: c.val_rmse)
+    assert (loose.chosen.structure, loose.chosen.ridge) == ((2, 2), small.ridge)
+    for bad in ([], [np.nan], [-1.0]):
+        with pytest.raises(ValueError, match='ridges'):
+            search_structure(X, t, candidates=[(2, 2)], epochs=1, folds=folds, ridges=bad)
+
+
+def test_force_model_keeps_the_chosen_ridge_per_output_and_refits_with_it(synthetic):
+    m = ForceModel(candidates=[(2, 2, 2), (3, 3, 2)], ridge_candidates=[1e-6, 1e-3],
+                   search_epochs=2, epochs=3, search_folds=3)
+    m.fit(synthetic.X, synthetic.Y, groups=synthetic.point)
+    assert len(m.ridges_) == 3 and set(m.ridges_) <= {1e-6, 1e-3}
+    tr = m.metadata_['training']
+    assert tr['ridge_candidates'] == [1e-6, 1e-3]
+    for o in range(3):  # the recorded choice is a scored candidate of that output
+        assert any(c['ridge'] == m.ridges_[o] and tuple(c['structure']) == m.structures_[o]
+                   for c in tr['candidates'][o])
+    # refit with the chosen structures and ridges (what the case's grouped CV does)
+    again = ForceModel(structure=m.structures_, ridge=m.ridges_, search_epochs=2, epochs=3)
+    again.fit(synthetic.X, synthetic.Y, groups=synthetic.point)
+    assert again.ridges_ == m.ridges_
+    with pytest.raises(ValueError, match='ridge_candidates'):
+        ForceModel(structure=(2, 2, 2), ridge_candidates=[1e-6]).fit(
+            synthetic.X, synthetic.Y, groups=synthetic.point)
+    for bad in ([1e-6, 1e-6], [np.nan] * 3, -1.0):
+        with pytest.raises(ValueError, match='ridge'):
+            ForceModel(structure=(2, 2, 2), ridge=bad).fit(synthetic.X, synthetic.Y,
+                                                           groups=synthetic.point)

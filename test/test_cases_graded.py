@@ -65,6 +65,39 @@ def test_store_roundtrip_resume_and_foreign_manifest(tmp_path):
         PointStore(tmp_path / 's', store_manifest(scene, 4))  # another density
 
 
+def test_a_scene_reads_the_store_of_the_same_fe_problem_under_another_name(tmp_path):
+    """``fe_store``: two scenes that differ only in name (and sources) solve to the same points;
+    the store accepts one's manifest for the other's points, and refuses a different problem."""
+    from haptic_anfis.tissue.scene import SceneError
+
+    a = parse_scene(TINY, 'a')
+    b = parse_scene({**TINY, 'name': 'alias', 'fe_store': 'tinygraded',
+                     'material': {**TINY['material'], 'source': 'another wording'}}, 'b')
+    assert b.fe_store == 'tinygraded' and a.fe_store == ''
+    assert a.sha256() != b.sha256() and a.fe_sha256() == b.fe_sha256()
+    store = PointStore(tmp_path / 'tinygraded', store_manifest(a, 2))
+    store.save('y+000000_z+000000', {'surface_point_m': [0.045, 0.0, 0.0], 'depths_m': [0.002],
+                                     'direction': [-1.0, 0.0, 0.0],
+                                     'forces_N': [[1.0, 0.0, 0.0]], 'status': 'ok'})
+    shared = PointStore(tmp_path / 'tinygraded', store_manifest(b, 2))
+    assert shared.solved() == {'y+000000_z+000000'}
+    other = parse_scene({**TINY, 'name': 'alias', 'fe_store': 'tinygraded',
+                         'material': {'youngs_kPa': 19, 'poisson': 0.499}}, 'c')
+    with pytest.raises(StoreError, match='fe hash .* the scene or the mesh changed'):
+        PointStore(tmp_path / 'tinygraded', store_manifest(other, 2))
+    # a manifest written before fe_sha256 existed matches on the scene's own hash only
+    old = store_manifest(a, 2)
+    old.pop('fe_sha256')
+    (tmp_path / 'old').mkdir()
+    (tmp_path / 'old' / 'manifest.json').write_text(json.dumps(old))
+    PointStore(tmp_path / 'old', store_manifest(a, 2))
+    with pytest.raises(StoreError, match='scene hash'):
+        PointStore(tmp_path / 'old', store_manifest(b, 2))
+    for bad in (3, 'a/b', '../x'):
+        with pytest.raises(SceneError, match='fe_store'):
+            parse_scene({**TINY, 'fe_store': bad}, 'bad')
+
+
 def test_lesion_rings_in_the_loading_points():
     scene = parse_scene({**TINY, 'loading': {**TINY['loading'], 'ring_diameters': [0.5, 1.0, 1.5],
                                              'ring_points': 8, 'palpable_radius_mm': 42,

@@ -54,7 +54,11 @@ class ForceModel:
         epochs: maximum hybrid-learning epochs when training the final models.
         search_epochs: maximum epochs per candidate during the structure search.
         search_start, max_mfs, candidates, tol: structure search settings.
-        ridge: relative ridge weight of the consequent least squares.
+        ridge: relative ridge weight of the consequent least squares: one for all outputs, or
+            three (one per output, e.g. a trained model's ``ridges_``).
+        ridge_candidates: ridge weights the structure search scores every structure with
+            (chosen per output with the structure, :func:`~.structure.search_structure`); None:
+            ``ridge`` only. The chosen ones are ``ridges_``.
         step: initial gradient step (fraction of an input's range).
         val_fraction: part of the training data held out to choose the epoch count (and the
             structure when ``search_folds`` is 1); 0 = no hold-out: train ``epochs`` epochs on
@@ -84,11 +88,12 @@ class ForceModel:
                  epochs: int = SHIPPED['epochs'], search_epochs: int = SHIPPED['search_epochs'],
                  search_start: Structure | None = None, max_mfs: Structure | None = SHIPPED['max_mfs'],
                  candidates: list[Structure] | None = None, tol: float = SHIPPED['tol'],
-                 ridge: float = SHIPPED['ridge'], step: float = 0.01,
+                 ridge: float | Sequence[float] = SHIPPED['ridge'], step: float = 0.01,
                  val_fraction: float = SHIPPED['val_fraction'], split: str = SHIPPED['split'],
                  search_folds: int = SHIPPED['search_folds'],
                  extrapolation: Sequence[float] | None = None, seed: int = SHIPPED['seed'],
-                 form: str = SHIPPED['form'], inputs: Sequence[str] | str = SHIPPED['inputs']) -> None:
+                 form: str = SHIPPED['form'], inputs: Sequence[str] | str = SHIPPED['inputs'],
+                 ridge_candidates: Sequence[float] | None = None) -> None:
         self.form = form
         self.inputs = inputs
         self.structure = structure
@@ -99,6 +104,7 @@ class ForceModel:
         self.candidates = candidates
         self.tol = tol
         self.ridge = ridge
+        self.ridge_candidates = ridge_candidates
         self.step = step
         self.val_fraction = val_fraction
         self.split = split
@@ -108,6 +114,15 @@ class ForceModel:
         self.metadata_: dict[str, Any] = {}
 
     # ---- training ---------------------------------------------------------------------------
+    def _ridges(self) -> list[float]:
+        """Per-output ridge weight (checked)."""
+        r = self.ridge
+        vals = [r] * 3 if np.ndim(r) == 0 else list(r)
+        if len(vals) != 3 or not all(isinstance(v, (int, float, np.floating, np.integer))
+                                     and np.isfinite(v) and v >= 0 for v in vals):
+            raise ValueError(f'ridge: expected a weight >= 0 or one per output (3), got {r!r}')
+        return [float(v) for v in vals]
+
     def _structures(self, names: Sequence[str] | None = None) -> list[Structure | None]:
         """Per-output structure (None = search); ``names``: the resolved ANFIS inputs (for
         ``structure='auto'``)."""
@@ -210,7 +225,10 @@ class ForceModel:
         folds = (fold_indices(ds, k, self.seed, by=by)
                  if k > 1 and any(s is None for s in structures) else None)
         lo, hi = X.min(axis=0), X.max(axis=0)  # of the ANFIS inputs
-        kw = dict(ridge=self.ridge, step=self.step)
+        ridges = self._ridges()
+        if self.ridge_candidates is not None and all(s is not None for s in structures):
+            raise ValueError('ridge_candidates: the ridge is chosen with the structure search; '
+                             'with fixed structures give ridge (one, or one per output)')
         t_start = time.perf_counter()
         self.models_: list[SugenoModel] = []
         self.search_: list[SearchResult | None] = []
@@ -218,8 +236,10 @@ class ForceModel:
         self.val_rmse_: list[float] = []
         self.train_rmse_: list[float] = []
         self.train_curves_: list[dict[str, list[float]]] = []
+        self.ridges_: list[float] = []
         for o, fixed in enumerate(structures):
             t0 = time.perf_counter()
+            kw = dict(ridge=ridges[o], step=self.step)
             Xf, tf, Xv, tv = X[fit_idx], Y[fit_idx, o], X[val_idx], Y[val_idx, o]
             if fixed is None:
                 held = (dict(folds=folds, scale=S) if folds else
@@ -227,11 +247,15 @@ class ForceModel:
                 sr = search_structure(X if folds else Xf, Y[:, o] if folds else tf,
                                       start=search_start, max_mfs=max_mfs,
                                       candidates=self.candidates, tol=self.tol,
-                                      epochs=self.search_epochs, lo=lo, hi=hi, **held, **kw)
+                                      epochs=self.search_epochs, lo=lo, hi=hi,
+                                      ridges=self.ridge_candidates, **held, **kw)
                 structure = sr.chosen.structure
+                if sr.chosen.ridge is not None:
+                    kw['ridge'] = sr.chosen.ridge
             else:
                 sr = None
                 structure = fixed
+            self.ridges_.append(float(kw['ridge']))
             if len(val_idx):
                 # Choose the epoch with the full epoch budget on the held-out part ...
                 chk = train(Xf, tf, structure, self.epochs, X_check=Xv, t_check=tv, lo=lo, hi=hi,
@@ -258,7 +282,10 @@ class ForceModel:
         self.metadata_ = {'training': {
             'form': self.form, 'inputs': [INPUT_NAMES[c] for c in cols], 'max_mfs': list(max_mfs),
             'epochs': self.epochs, 'search_epochs': self.search_epochs, 'tol': self.tol,
-            'ridge': self.ridge, 'val_fraction': self.val_fraction, 'split': by,
+            'ridge': self.ridges_[0] if len(set(self.ridges_)) == 1 else list(self.ridges_),
+            **({'ridge_candidates': [float(r) for r in self.ridge_candidates]}
+               if self.ridge_candidates is not None else {}),
+            'val_fraction': self.val_fraction, 'split': by,
             'search_folds': self.search_folds, 'input_check': self.input_check_,
             'structure': 'given' if not isinstance(self.structure, str) and self.structure is not None
             else ('search' if all(s is None for s in structures) else 'shipped'),
@@ -474,7 +501,7 @@ def _read_form(doc: dict[str, Any], path: str | os.PathLike) -> tuple[tuple[int,
 def _candidate_dict(c: Candidate) -> dict[str, Any]:
     return {'structure': list(c.structure), 'rules': c.n_rules, 'params': c.n_params,
             'train_rmse': c.train_rmse, 'val_rmse': c.val_rmse, 'best_epoch': c.best_epoch,
-            'seconds': round(c.seconds, 3)}
+            'seconds': round(c.seconds, 3), **({'ridge': c.ridge} if c.ridge is not None else {})}
 
 
 def _print_output_summary(name: str, sr: SearchResult | None, structure: Structure, epoch: int,

@@ -50,12 +50,15 @@ class CaseStores:
 
 def case_stores(case: Case, root: str | os.PathLike | None = None, coarse: bool = False
                 ) -> CaseStores:
-    """The stores of ``case`` under ``root`` (default :func:`default_store_root`)."""
+    """The stores of ``case`` under ``root`` (default :func:`default_store_root`): its own
+    directory, or the one of the case its scene names in ``fe_store`` (the same FE problem under
+    another name: solved once; the store refuses it if the problems differ)."""
     scene = case.scene
     n = scene.mesh.coarse_probe_cells if coarse else scene.mesh.probe_cells
     base = Path(root) if root is not None else default_store_root()
-    d = base / (case.name + ('-coarse' if coarse else ''))
-    main = PointStore(d, store_manifest(scene, n))
+    suffix = '-coarse' if coarse else ''
+    d = base / (case.name + suffix)
+    main = PointStore(base / ((scene.fe_store or case.name) + suffix), store_manifest(scene, n))
     twin = PointStore(d / 'twin', store_manifest(twin_scene(scene), n)) if scene.tumours else None
     return CaseStores(case, n, main, twin)
 

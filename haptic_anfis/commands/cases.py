@@ -5,9 +5,10 @@
     haptic-anfis cases generate [NAMES...] [--workers N] [--coarse] [--dask local|ADDRESS]
                                 [--no-train | --train-only] [--config config/force_model.yaml]
 
-Graded-library cases (scenes with lesion rings, ``lib_*``) are solved per point into the
-committed store ``fe_store/`` (resumable across sessions) and shipped only when complete and
-passing the gates (haptic_anfis.cases.build); the older cases keep their work-dir sweep.
+Graded cases (scenes with lesion rings in their loading: every case but ``default``) are solved
+per point into the committed store ``fe_store/`` (resumable across sessions) and shipped only
+when complete and passing the gates (haptic_anfis.cases.build). A scene without rings (a user's
+own) keeps the work-dir sweep of :mod:`haptic_anfis.cases.generate`.
 """
 from __future__ import annotations
 
@@ -30,8 +31,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     ls.add_argument('--no-timing', action='store_true', help='skip the evaluation-time measurement')
     sw = sub.add_parser('sweep', help='solve the missing FE points of cases into the committed '
                         'per-point store (fe_store/; resumable, parallel, local or dask)')
-    sw.add_argument('names', nargs='*', help='cases (default: every lib_* case, the most '
-                    'advanced first)')
+    sw.add_argument('names', nargs='*', help='cases (default: every graded case, i.e. every '
+                    'scene with lesion rings in its loading, the most advanced first)')
     sw.add_argument('--workers', type=int, default=2,
                     help='local FE worker processes, one math thread each (default 2)')
     sw.add_argument('--dask', metavar='local|ADDRESS', default=None,
@@ -142,7 +143,7 @@ def _sweep(args: argparse.Namespace) -> int:
     if args.workers < 1:
         raise ValueError(f'--workers must be >= 1, got {args.workers}')
     lib = _open_library(args)
-    names = args.names or [n for n in lib.names() if n.startswith('lib_')]
+    names = args.names or [n for n in lib.names() if lib.get(n).scene.ring_diameters]
     cases = [lib.get(n) for n in names]
     for c in cases:
         _ = c.scene

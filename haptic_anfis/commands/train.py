@@ -49,7 +49,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 #: Keys of the config's "force_model" section: ForceModel arguments plus the test split.
 CONFIG_KEYS = {'structure', 'candidates', 'epochs', 'search_epochs', 'search_start', 'max_mfs', 'tol', 'ridge',
                'step', 'val_fraction', 'split', 'search_folds', 'extrapolation', 'seed',
-               'test_fraction', 'form', 'inputs'}
+               'test_fraction', 'form', 'inputs', 'ridge_candidates'}
 
 
 def load_config(path: str | None) -> dict:

@@ -107,6 +107,9 @@ class Scene:
     #: ``ring_points`` points on each, plus the centre and its mirror point; () = none
     ring_diameters: tuple[float, ...] = ()
     ring_points: int = 0
+    #: the case whose per-point FE store this scene reads (its FE problem is the same: see
+    #: :meth:`fe_sha256`); '' = its own (haptic_anfis.cases.sweeps.case_stores)
+    fe_store: str = ''
 
     def to_dict(self) -> dict[str, Any]:
         """Plain-dict form in SI units (for provenance sidecars)."""
@@ -120,7 +123,7 @@ class Scene:
         default scene's hash, recorded in its dataset, stays what it was.
         """
         d = self.to_dict()
-        for key in ('source_sha256', 'description'):
+        for key in ('source_sha256', 'description', 'fe_store'):
             d.pop(key)
         for t in d['tumours']:
             t.pop('kind')
@@ -129,9 +132,22 @@ class Scene:
                 d.pop(key)
         return hashlib.sha256(json.dumps(d, sort_keys=True).encode()).hexdigest()
 
+    def fe_sha256(self) -> str:
+        """Hash of the FE problem alone: :meth:`sha256` without the labels (name, sources), so two
+        scenes that differ only in name solve to the same points (one store serves both)."""
+        d = self.to_dict()
+        for key in ('source_sha256', 'description', 'fe_store', 'name'):
+            d.pop(key)
+        d['material'].pop('source')
+        for t in d['tumours']:
+            for key in ('kind', 'source', 'name'):
+                t.pop(key)
+        return hashlib.sha256(json.dumps(d, sort_keys=True).encode()).hexdigest()
+
 
 _KEYS: dict[str, set[str]] = {
-    '': {'name', 'description', 'breast', 'material', 'tumours', 'probe', 'loading', 'mesh'},
+    '': {'name', 'description', 'breast', 'material', 'tumours', 'probe', 'loading', 'mesh',
+         'fe_store'},
     'breast': {'radii_mm'},
     'material': {'model', 'youngs_kPa', 'poisson', 'source'},
     'tumour': {'name', 'kind', 'centre_mm', 'position_mm', 'depth_mm', 'radius_mm', 'youngs_kPa',
@@ -286,7 +302,15 @@ def parse_scene(data: Any, name: str = 'scene', source_sha256: str = '') -> Scen
                  palpable_radius=palp, depths=depths, max_step=max_step, mesh=mesh,
                  source_sha256=source_sha256, description=description.strip(),
                  refine_spacing=refine_spacing, refine_margin=refine_margin,
-                 ring_diameters=tuple(float(v) for v in rings_raw), ring_points=int(ring_points))
+                 ring_diameters=tuple(float(v) for v in rings_raw), ring_points=int(ring_points),
+                 fe_store=_fe_store(top.get('fe_store', ''), name))
+
+
+def _fe_store(v: Any, where: str) -> str:
+    if not isinstance(v, str) or (v and not v.replace('_', '').replace('-', '').isalnum()):
+        raise SceneError(f'{where}: fe_store: expected the name of a case (letters, digits, _ and '
+                         f'-), got {v!r}')
+    return v
 
 
 #: Lesion limits of the scene format: at most 3 lesions of diameter 5-25 mm (issue 29: 5 mm is what

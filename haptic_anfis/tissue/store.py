@@ -59,8 +59,10 @@ def point_key(y: float, z: float) -> str:
 
 
 def store_manifest(scene, probe_cells: int) -> dict[str, Any]:
-    """What a store directory's points belong to: the scene's hash, mesh density and depths."""
+    """What a store directory's points belong to: the scene's hash (and that of its FE problem
+    alone, which another scene of another name may share), mesh density and depths."""
     return {'format_version': FORMAT_VERSION, 'scene': scene.name, 'scene_sha256': scene.sha256(),
+            'fe_sha256': scene.fe_sha256(),
             'probe_cells': int(probe_cells), 'edge_refine': scene.mesh.edge_refine,
             'edge_offset': scene.mesh.edge_offset,
             'depths_m': [float(d) for d in scene.depths]}
@@ -86,7 +88,10 @@ class PointStore:
     Args:
         directory: ``<root>/<case>`` (or ``<root>/<case>/twin``); created on first write.
         manifest: :func:`store_manifest` of the scene and density; an existing directory with
-            another manifest raises :class:`StoreError` naming both hashes.
+            another manifest raises :class:`StoreError` naming both hashes. Two manifests that
+            both carry ``fe_sha256`` match on it (the FE problem), not on the scene's own hash
+            (which includes its name): a scene may read another scene's store when they solve
+            the same problem (``fe_store`` in the scene file).
     """
 
     def __init__(self, directory: str | os.PathLike, manifest: dict[str, Any]) -> None:
@@ -95,13 +100,14 @@ class PointStore:
         mpath = self.dir / 'manifest.json'
         if mpath.is_file():
             old = json.loads(mpath.read_text())
-            keys = ('format_version', 'scene_sha256', 'probe_cells', 'edge_refine', 'edge_offset',
-                    'depths_m')
+            h = 'fe_sha256' if old.get('fe_sha256') and self.manifest.get('fe_sha256') \
+                else 'scene_sha256'
+            keys = ('format_version', h, 'probe_cells', 'edge_refine', 'edge_offset', 'depths_m')
             if any(old.get(k) != self.manifest.get(k) for k in keys):
                 raise StoreError(
-                    f'FE store {str(self.dir)!r} holds points of scene hash '
-                    f'{str(old.get("scene_sha256"))[:12]} at {old.get("probe_cells")} cells across '
-                    f'the probe, not {self.manifest["scene_sha256"][:12]} at '
+                    f'FE store {str(self.dir)!r} holds points of {h[:-7].replace("_", " ")} hash '
+                    f'{str(old.get(h))[:12]} at {old.get("probe_cells")} cells across '
+                    f'the probe, not {str(self.manifest.get(h))[:12]} at '
                     f'{self.manifest["probe_cells"]}: the scene or the mesh changed; move that '
                     'directory away to solve afresh')
 
