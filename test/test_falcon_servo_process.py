@@ -37,25 +37,10 @@ def _wait(cond, seconds=10.0):
     return cond()
 
 
-rclpy = pytest.importorskip('rclpy')
-from rclpy.context import Context  # noqa: E402
-from rclpy.parameter import Parameter  # noqa: E402
+pytest.importorskip('rclpy')
+from test_falcon_driver import ctx, driver  # noqa: E402,F401  (the same context fixture and node)
 
 from haptic_anfis.nodes._common import ParameterError  # noqa: E402
-
-
-@pytest.fixture
-def ctx():
-    c = Context()
-    rclpy.init(context=c)
-    yield c
-    rclpy.try_shutdown(context=c)
-
-
-def driver(ctx, **params):
-    from haptic_anfis.nodes.falcon_driver import FalconDriver
-    return FalconDriver(context=ctx, parameter_overrides=[
-        Parameter(n, value=v) for n, v in params.items()])
 
 
 def test_falcon_runs_in_a_servo_process_by_default_and_stops_at_zero(ctx, monkeypatch):
