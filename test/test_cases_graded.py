@@ -271,3 +271,29 @@ def test_exam_reports_a_non_palpable_lesion_neither_hit_nor_miss():
     cov = {'light': 1.0, 'medium': 1.0, 'deep': 1.0}
     _, why = verdict_of(cov, fin, type('C', (), {'pass_deep_coverage': 0.9})())
     assert any('big' in w for w in why) and not any('small' in w for w in why)
+
+
+def test_every_shipped_case_is_at_the_validated_fidelity():
+    """Issue 29, item 1: every case but the package's default is a graded case as shipped — the
+    validated mesh (6 cells across the probe, not the coarse one), >= 149 loading points, lesion
+    rings, no failed point, its dataset and scene tied by hash, and its grouped-CV figures within
+    the gates that let it ship."""
+    from haptic_anfis.tissue.dataset import load_dataset
+
+    lib = library()
+    for case in lib.cases():
+        if case.name == 'default':
+            continue
+        scene = case.scene
+        assert scene.ring_diameters and scene.mesh.probe_cells == 6, case.name
+        if case.missing():  # not shipped (refused or not solved yet): nothing a trainee can run
+            assert case.name not in {c.name for c in lib.ready()}, case.name
+            continue
+        ds = load_dataset(case.dataset_path)
+        pv = ds.provenance
+        assert pv['coarse'] is False and pv['mesh']['probe_cells'] == 6, case.name
+        assert pv['scene_sha256'] == scene.sha256(), f'{case.name}: dataset of another scene'
+        assert pv['n_points'] >= 149 and not pv['failed_points'], case.name
+        assert not pv.get('reused'), case.name  # no far-field reuse
+        assert max(pv['grouped_cv']['pct_range']) <= build_mod.RANGE_GATE_PCT, case.name
+        assert case.level in (1, 2, 3, 4, 5), case.name
