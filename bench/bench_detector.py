@@ -218,8 +218,9 @@ def grid_table(G: np.ndarray) -> str:
 
 
 def lesions_of(case_name: str) -> list:
-    from haptic_anfis.cases import get_case
-    return [tuple(float(v) for v in les) for les in get_case(case_name).lesions_m()]
+    from haptic_anfis.cases import library
+    # the scene's lesions: re-scoring stored felt samples needs no shipped model
+    return [tuple(float(v) for v in les) for les in library().get(case_name).lesions_m()]
 
 
 def role_of(case: str, seed: int) -> str:
