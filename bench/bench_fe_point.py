@@ -90,7 +90,7 @@ def main() -> None:
             rows.append(row)
     # the real sweeps: every point in the committed store
     cpu, wall, n_pts = [], [], 0
-    for f in glob.glob(str(ROOT / 'fe_store' / 'lib_*' / '*.npz')):
+    for f in glob.glob(str(ROOT / 'fe_store' / '*' / '*.npz')):
         with np.load(f) as z:
             m = json.loads(str(z['meta']))
         cpu.append(m.get('cpu_time_s', np.nan))
@@ -102,7 +102,7 @@ def main() -> None:
         n_graded = sum(len(loading_points(c.scene)) for c in graded)
         med = float(np.nanmedian(cpu))
         per_case = len(pts) * med / 2 / 60
-        sweep = (f'\n\nIn the committed store (`fe_store/lib_*`, the real background sweeps, '
+        sweep = (f'\n\nIn the committed store (`fe_store/`, the real background sweeps, '
                  f'niced, 2 workers): {n_pts} points, CPU per point median {med:.1f} s '
                  f'(p90 {np.nanpercentile(cpu, 90):.1f} s), wall per point median '
                  f'{np.nanmedian(wall):.0f} s under the shared load. Projected wall time of '
