@@ -331,7 +331,7 @@ def test_ridge_is_chosen_with_the_structure_on_the_same_folds(rng):
             search_structure(X, t, candidates=[(2, 2)], epochs=1, folds=folds, ridges=bad)
 
 
-def test_force_model_keeps_the_chosen_ridge_per_output_and_refits_with_it(synthetic):
+def test_force_model_keeps_the_chosen_ridge_per_output_and_refits_with_it(synthetic, tmp_path):
     m = ForceModel(candidates=[(2, 2, 2), (3, 3, 2)], ridge_candidates=[1e-6, 1e-3],
                    search_epochs=2, epochs=3, search_folds=3)
     m.fit(synthetic.X, synthetic.Y, groups=synthetic.point)
@@ -345,6 +345,8 @@ def test_force_model_keeps_the_chosen_ridge_per_output_and_refits_with_it(synthe
     again = ForceModel(structure=m.structures_, ridge=m.ridges_, search_epochs=2, epochs=3)
     again.fit(synthetic.X, synthetic.Y, groups=synthetic.point)
     assert again.ridges_ == m.ridges_
+    m.save(tmp_path / 'm.json')  # a loaded model knows the ridges it was trained with
+    assert ForceModel.load(tmp_path / 'm.json').ridges_ == m.ridges_
     with pytest.raises(ValueError, match='ridge_candidates'):
         ForceModel(structure=(2, 2, 2), ridge_candidates=[1e-6]).fit(
             synthetic.X, synthetic.Y, groups=synthetic.point)

@@ -474,8 +474,20 @@ class ForceModel:
                                   for k in sorted(rmse_keys)}
         self.source_ = {'path': str(path), 'software_version': doc.get('software_version'),
                         'created_utc': doc.get('created_utc')}
+        self.ridges_ = _trained_ridges(self.metadata_)
         self._compile()
         return self
+
+
+def _trained_ridges(metadata: dict[str, Any]) -> list[float]:
+    """Per-output ridge a model file was trained with (its training metadata: one weight or one
+    per output); the shipped default when the file does not say (older files)."""
+    r = metadata.get('training', {}).get('ridge', SHIPPED['ridge'])
+    vals = list(r) if np.ndim(r) else [r] * 3
+    try:
+        return [float(v) for v in vals] if len(vals) == 3 else [float(SHIPPED['ridge'])] * 3
+    except (TypeError, ValueError):
+        return [float(SHIPPED['ridge'])] * 3
 
 
 def _read_form(doc: dict[str, Any], path: str | os.PathLike) -> tuple[tuple[int, ...], int]:

@@ -70,22 +70,13 @@ def grouped_cv(ds, model, params: dict[str, Any], folds: int = CV_FOLDS,
                                                         'ridge_candidates')}
     structures = [tuple(s) for s in model.structures_]
     # the ridge the search chose with each structure (one per output)
-    p['ridge'] = list(getattr(model, 'ridges_', None) or _trained_ridges(model, p))
+    p['ridge'] = list(model.ridges_)
     # the model's own inputs too: 'auto' decided on a fold may keep an input it dropped
     from ..anfis.force_model import INPUT_NAMES
     p['inputs'] = tuple(INPUT_NAMES[c] for c in model.input_cols_)
     res = group_cv(ds, lambda seed: ForceModel(structure=structures, seed=seed, **p),
                    folds=folds, seeds=seeds)
     return np.asarray(res['mean'], dtype=float)
-
-
-def _trained_ridges(model, params: dict[str, Any]) -> list[float]:
-    """Per-output ridge of a loaded model (its training metadata), else ``params``' ridge."""
-    r = model.metadata_.get('training', {}).get('ridge', params.get('ridge'))
-    if r is None:
-        from ..anfis.defaults import SHIPPED
-        r = SHIPPED['ridge']
-    return [float(v) for v in (r if np.ndim(r) else [r] * 3)]
 
 
 def gate_failures(cv_rmse: np.ndarray, span: np.ndarray, grades: Sequence[dict[str, Any]]
