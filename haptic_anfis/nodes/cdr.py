@@ -263,35 +263,34 @@ def triangle_markers(frame_id: str, ns: str, markers, stamp_ns: int = 0) -> byte
     return w.bytes()
 
 
+def _deserialize(b: bytes, msg_type):
+    """(``b`` read by rclpy as ``msg_type`` (any byte order), its header stamp [ns]); ValueError
+    naming the type when malformed."""
+    from rclpy.serialization import deserialize_message
+
+    from .runtime import stamp_ns
+    try:
+        m = deserialize_message(b, msg_type)
+    except Exception as exc:  # the rmw's error type varies
+        raise ValueError(f'malformed {msg_type.__name__} ({len(b)} bytes): {exc}') from None
+    return m, stamp_ns(m.header.stamp)
+
+
 def _slow_wrench(b: bytes):
     from geometry_msgs.msg import WrenchStamped
-    from rclpy.serialization import deserialize_message
-    try:
-        m = deserialize_message(b, WrenchStamped)
-    except Exception as exc:  # the rmw's error type varies
-        raise ValueError(f'malformed WrenchStamped ({len(b)} bytes): {exc}') from None
-    f, s = m.wrench.force, m.header.stamp
-    return s.sec * 1_000_000_000 + s.nanosec, m.header.frame_id, (f.x, f.y, f.z)
+    m, ns = _deserialize(b, WrenchStamped)
+    f = m.wrench.force
+    return ns, m.header.frame_id, (f.x, f.y, f.z)
 
 
 def _slow_pose(b: bytes):
     from geometry_msgs.msg import PoseStamped
-    from rclpy.serialization import deserialize_message
-    try:
-        m = deserialize_message(b, PoseStamped)
-    except Exception as exc:  # the rmw's error type varies
-        raise ValueError(f'malformed PoseStamped ({len(b)} bytes): {exc}') from None
-    q, s = m.pose.position, m.header.stamp
-    return s.sec * 1_000_000_000 + s.nanosec, m.header.frame_id, (q.x, q.y, q.z)
+    m, ns = _deserialize(b, PoseStamped)
+    q = m.pose.position
+    return ns, m.header.frame_id, (q.x, q.y, q.z)
 
 
 def _slow_joint_state(b: bytes):
-    from rclpy.serialization import deserialize_message
     from sensor_msgs.msg import JointState
-    try:
-        m = deserialize_message(b, JointState)
-    except Exception as exc:  # the rmw's error type varies
-        raise ValueError(f'malformed JointState ({len(b)} bytes): {exc}') from None
-    s = m.header.stamp
-    return (s.sec * 1_000_000_000 + s.nanosec, m.header.frame_id, tuple(m.position),
-            tuple(m.effort))
+    m, ns = _deserialize(b, JointState)
+    return ns, m.header.frame_id, tuple(m.position), tuple(m.effort)
