@@ -684,17 +684,13 @@ class NativeServoLoop:
                 lost, back = int(self.devst[dp.DEV.disconnects]), int(self.devst[dp.DEV.reconnects])
                 if lost > lost_seen:
                     lost_seen = lost
-                    self._device_event(self.on_disconnect, 'Falcon: device lost (servo process '
-                                       f'{self._pid}; disconnect {lost})')
+                    self._call(self.on_disconnect, 'Falcon: device lost (servo process '
+                               f'{self._pid}; disconnect {lost})')
                 if back > back_seen:
                     back_seen = back
-                    self._device_event(self.on_reconnect, f'Falcon: device back (reconnect {back})')
+                    self._call(self.on_reconnect, f'Falcon: device back (reconnect {back})')
             if self.ctl[nt.CTL.external]:
-                try:
-                    self._feed_hand()
-                except Exception as exc:  # the script's own error: counted, the hand holds
-                    self.errors += 1
-                    self.last_error = exc
+                self._call(self._feed_hand)  # the script's own error: counted, the hand holds
             o = _seq_read(self.out)
             if o is not None and o[0] != seen:
                 seen = o[0]
@@ -705,11 +701,13 @@ class NativeServoLoop:
                 self._drain()
             time.sleep(period * 0.5)
 
-    def _device_event(self, hook, msg: str) -> None:
+    def _call(self, hook, *args) -> None:
+        """``hook(*args)`` on the bridge thread, if set; its own error (a publishing hiccup, a
+        script's or a device hook's failure) is counted and never stops the bridge."""
         if hook is not None:
             try:
-                hook(msg)
-            except Exception as exc:  # the hook's own error must not stop the bridge
+                hook(*args)
+            except Exception as exc:
                 self.errors += 1
                 self.last_error = exc
 
@@ -725,12 +723,7 @@ class NativeServoLoop:
         self.force = (o[O.f0], o[O.f1], o[O.f2])
         self.status = int(o[O.status])
         self.bridge_gaps.tick(t)
-        if self.on_state is not None:
-            try:
-                self.on_state(state, self.force, t)
-            except Exception as exc:  # a publishing hiccup must not stop the bridge
-                self.errors += 1
-                self.last_error = exc
+        self._call(self.on_state, state, self.force, t)
 
     def _drain(self) -> None:
         """Move the trace rows the loop wrote since the last drain into :attr:`trace`."""
