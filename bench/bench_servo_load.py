@@ -9,7 +9,9 @@ driver's figures from ``--json``: tick rate, servo periods lost, the longest gap
 the applied-force RMS error vs the ideal loop (% of the RMS ideal force), the ripple share (200 ms
 windows with > 0.1 N around the 50 ms mean; the ideal force's own share beside it), the dropout
 ticks (0 N applied in contact while the ideal is > 1 N) and watchdog trips in contact. ``--quiet``
-adds the same runs without busy processes. The 1-minute load average is printed with each row
+adds the same runs without busy processes; ``--beside-tests`` runs the project's test suite
+(``python -m pytest test``, what ``make test`` runs) beside every run, restarted when it ends.
+The 1-minute load average is printed with each row
 (other users of the machine add to it), and ``rt_others``: the user-space SCHED_FIFO/RR threads
 already running when the run started (other users' servo threads, ahead of every normal-priority
 thread). Prints the table and writes
@@ -23,6 +25,7 @@ Usage: ``python bench/bench_servo_load.py [--duration 20] [--busy 8] [--quiet]
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import os
 import subprocess
@@ -44,6 +47,33 @@ COLS = ('config', 'busy', 'load', 'rt_others', 'rate_hz', 'periods_lost', 'max_g
 def busy(n: int) -> list[subprocess.Popen]:
     """``n`` processes spinning on the CPU (ended by :func:`stop`)."""
     return [subprocess.Popen([sys.executable, '-c', 'while True: pass']) for _ in range(n)]
+
+
+class TestSuite:
+    """The project's test suite running beside the runs (``--beside-tests``): restarted when it
+    ends, so every run has it beside it; its output is discarded."""
+
+    def __init__(self) -> None:
+        self.proc: subprocess.Popen | None = None
+        self.starts = 0
+
+    def ensure(self) -> None:
+        if self.proc is None or self.proc.poll() is not None:
+            self.proc = subprocess.Popen(
+                [sys.executable, '-m', 'pytest', 'test', '-q', '-p', 'no:cacheprovider'],
+                cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                env=dict(os.environ, PYTHONPATH=str(ROOT)), start_new_session=True)
+            self.starts += 1
+
+    def stop(self) -> None:
+        if self.proc is not None and self.proc.poll() is None:
+            import signal
+            os.killpg(self.proc.pid, signal.SIGTERM)
+            try:
+                self.proc.wait(30)
+            except subprocess.TimeoutExpired:
+                os.killpg(self.proc.pid, signal.SIGKILL)
+                self.proc.wait()
 
 
 def stop(procs: list[subprocess.Popen]) -> None:
@@ -182,6 +212,9 @@ def main() -> int:
     ap.add_argument('--force-mode', default='', choices=('', 'local_model', 'zoh'),
                     help="the driver's force_mode (default: its default, local_model; zoh: the "
                          "zero-order hold of the force server's commands)")
+    ap.add_argument('--beside-tests', action='store_true',
+                    help="the project's test suite (python -m pytest test) running beside "
+                         'every run, restarted when it ends')
     ap.add_argument('--no-page', action='store_true', help='print only')
     ap.add_argument('--page', default='servo_load',
                     help='page name: docs/measurements/<page>.md (default servo_load)')
@@ -190,12 +223,19 @@ def main() -> int:
                 int(c.split(':')[2]) if c.count(':') > 1 else 0) for c in a.configs.split(',')]
     rows = []
     print(' '.join(f'{c:>12}' for c in COLS), flush=True)
-    with tempfile.TemporaryDirectory(prefix='bench-servo-') as td:
+    suite = TestSuite() if a.beside_tests else None
+    with tempfile.TemporaryDirectory(prefix='bench-servo-') as td, \
+            contextlib.ExitStack() as stack:
+        if suite is not None:
+            stack.callback(suite.stop)
         d = Path(td)
         loops = a.loops.split(',')
         runs = ([(0, loops[0], *c) for c in configs] if a.quiet else []) + \
             [(a.busy, lp, *c) for lp in loops for c in configs]
         for nbusy, loop, kind, prio, gprio in runs:
+            if suite is not None:
+                suite.ensure()
+                time.sleep(20.0 if suite.starts == 1 and not rows else 0.0)  # collecting tests
             procs = busy(nbusy)
             try:
                 time.sleep(1.0)
@@ -225,6 +265,8 @@ def _page(a, rows: list[dict], planned: int):
     notes = (f'\n{a.duration:g} s per run after the graph is ready, '
              + (f'force mode {a.force_mode}' if a.force_mode else 'default force mode (local_model)')
              + ', recorder running'
+             + (', the test suite (`python -m pytest test`) running beside every run'
+                if a.beside_tests else '')
              + (', browser view running (web_view node and a headless chromium on its page)'
                 if a.view else '') + '; `busy`: processes spinning beside it on the '
              f'machine\'s {os.cpu_count()} cores; `load`: the 1-minute load average (the machine '

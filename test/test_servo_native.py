@@ -221,7 +221,7 @@ def test_stop_leaves_zero_force_and_trace_rows():
     assert lp.tick(0.001)[0] == pytest.approx(2.0)
     lp.ctl[nt.CTL.stop] = 1
     nt.run(lp.cfg, lp.st, lp.times, lp.points, lp.buttons, lp.hand, lp.cmd, lp.model, lp.ctl,
-           lp.out, lp.cnt, lp.ring, lp._scratch, lp._ts)
+           lp.out, lp.cnt, lp.ring, lp._scratch, lp._ts, lp._lock)
     assert tuple(lp.st[nt.S.f0:nt.S.f0 + 3]) == (0.0, 0.0, 0.0)
     lp._drain()
     rows = lp.trace.arrays()
@@ -324,6 +324,56 @@ def test_loop_runs_on_its_thread_or_process_and_stops_at_zero_force(process):
     assert states  # the bridge published ticks
 
 
+@pytest.mark.parametrize('process', [False, True])
+def test_two_workers_serve_one_schedule_each_on_its_core(process):
+    """Two tick workers (threads of the node, or of the servo process) on distinct cores share
+    one schedule: every tick is traced once, in time order, and no period is served twice
+    (ticks <= span / period + 1, whoever woke first). Counts and order only, no timing."""
+    import os
+    import time
+
+    from haptic_anfis.device.servo_native import worker_cpus
+    from haptic_anfis.device.trace import TickTrace
+    lp = loop(process=process, trace=TickTrace(), workers=2)
+    cpus = worker_cpus(2)
+    lp.start()
+    try:
+        end = time.monotonic() + 20.0
+        while lp.cnt[nt.CNT.ticks] < 300 and time.monotonic() < end:
+            time.sleep(0.01)
+        if process:
+            threads = os.listdir(f'/proc/{lp._pid}/task')
+            assert len(threads) == len(cpus)  # the workers and nothing else
+        else:
+            assert sorted(min(os.sched_getaffinity(th.native_id)) for th in lp._tick_threads
+                          ) == sorted(c for c in cpus if c is not None) or cpus == [None]
+    finally:
+        lp.stop()
+    lp._drain()
+    t = lp.trace.arrays()[:, 0]
+    ticks = int(lp.cnt[nt.CNT.ticks])
+    assert ticks >= 300 and len(t) == ticks
+    assert np.all(np.diff(t) > 0)
+    assert ticks <= (t[-1] - t[0]) / lp.period + 1 + 1e-9
+    assert lp.cnt[nt.CNT.running] == 0 and lp.cnt[nt.CNT.deadline_ns] == 0
+    assert tuple(lp.st[nt.S.f0:nt.S.f0 + 3]) == (0.0, 0.0, 0.0)
+
+
+def test_worker_cores_are_distinct_and_never_more_than_allowed(monkeypatch):
+    import os
+
+    from haptic_anfis.device.servo_native import worker_cpus
+    monkeypatch.setattr(os, 'sched_getaffinity', lambda pid: {0, 1, 2, 3})
+    assert worker_cpus(2) == [0, 3]
+    assert worker_cpus(4) == [0, 3, 1, 2]
+    assert worker_cpus(8) == [0, 3, 1, 2]
+    assert worker_cpus(1) == [None]
+    monkeypatch.setattr(os, 'sched_getaffinity', lambda pid: {5})
+    assert worker_cpus(2) == [None]  # one core: one unpinned worker
+    with pytest.raises(ValueError, match='workers: expected an integer from 1 to 8, got 0'):
+        loop(workers=0)
+
+
 def test_an_external_script_is_played_through_the_hand_buffer():
     """exam run swaps in a script only Python can play: the bridge feeds its target (plain float
     times: a numpy time once leaked into the exam report as a numpy bool) and the tick follows."""
@@ -351,13 +401,11 @@ def test_an_external_script_is_played_through_the_hand_buffer():
     assert lp.last_out is not None and lp.cnt[nt.CNT.marks] == 1  # button 1 pressed once
 
 
-def test_auto_servo_loop_takes_a_process_only_without_realtime_in_a_process_of_its_own():
-    from haptic_anfis.device.servo import realtime_allowed
-    from haptic_anfis.nodes.falcon_driver import resolve_servo_loop
-    assert resolve_servo_loop('auto', 0, shared_process=False) == 'native_process'
-    assert resolve_servo_loop('auto', 0, shared_process=True) == 'native'
-    assert resolve_servo_loop('auto', 50, shared_process=False) == (
-        'native' if realtime_allowed(50) else 'native_process')
+def test_auto_servo_loop_is_the_servo_process_for_both_backends():
+    from haptic_anfis.nodes.falcon_driver import ParameterError, resolve_servo_loop
+    assert resolve_servo_loop('auto') == 'native_process'
+    assert resolve_servo_loop('auto', 'falcon') == 'native_process'
     for choice in ('native', 'native_process', 'python'):
-        assert resolve_servo_loop(choice, 0, shared_process=False) == choice
-    assert realtime_allowed(0) is False
+        assert resolve_servo_loop(choice) == choice
+    with pytest.raises(ParameterError, match="servo_loop: got 'native' with backend 'falcon'"):
+        resolve_servo_loop('native', 'falcon')

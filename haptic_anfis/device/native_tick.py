@@ -45,7 +45,7 @@ from llvmlite import binding as llvm
 import numpy as np
 
 __all__ = ['CFG', 'CNT', 'OUT', 'CMD_LEN', 'MODEL_LEN', 'STATE_LEN', 'CTL', 'TRACE_COLS',
-           'CFG_LEN', 'CTL_LEN', 'HAND_LEN', 'OUT_LEN', 'CNT_LEN', 'SCRATCH_LEN',
+           'CFG_LEN', 'CTL_LEN', 'HAND_LEN', 'OUT_LEN', 'CNT_LEN', 'SCRATCH_LEN', 'LOCK_LEN',
            'tick', 'run', 'clock_now', 'new_state']
 
 _libc = ctypes.CDLL(ctypes.util.find_library('c') or 'libc.so.6', use_errno=True)
@@ -57,7 +57,10 @@ def _external(name: str, sig) -> object:
     pointer). Pointer arguments are declared int64 (the same register on x86-64 / aarch64):
     numba passes ``array.ctypes.data`` as an integer."""
     sym = f'haptic_anfis_{name}'
-    llvm.add_symbol(sym, ctypes.cast(getattr(_libc, name), ctypes.c_void_p).value)
+    fn = getattr(_libc, name, None)
+    if fn is None:  # glibc < 2.34 keeps the pthread functions in libpthread
+        fn = getattr(ctypes.CDLL(ctypes.util.find_library('pthread') or 'libpthread.so.0'), name)
+    llvm.add_symbol(sym, ctypes.cast(fn, ctypes.c_void_p).value)
     return nb.types.ExternalFunction(sym, sig)
 
 
@@ -65,6 +68,9 @@ _i32, _i64 = nb.types.int32, nb.types.int64
 _clock_gettime = _external('clock_gettime', _i32(_i32, _i64))
 _clock_nanosleep = _external('clock_nanosleep', _i32(_i32, _i32, _i64, _i64))
 _memcpy = _external('memcpy', _i64(_i64, _i64, _i64))
+_mutex_trylock = _external('pthread_mutex_trylock', _i32(_i64))
+_mutex_lock = _external('pthread_mutex_lock', _i32(_i64))
+_mutex_unlock = _external('pthread_mutex_unlock', _i32(_i64))
 CLOCK_REALTIME, CLOCK_MONOTONIC, TIMER_ABSTIME = 0, 1, 1
 
 
@@ -110,10 +116,13 @@ OUT = _index('OUT', 'seq t p0 p1 p2 v0 v1 v2 q0 q1 q2 f0 f1 f2 status held b0 b1
 CNT = _index('CNT', 'ticks periods_lost deadline_misses watchdog_trips watchdog_trips_in_contact '
              'clamped rejected_nonfinite none fresh extrapolated expired free approach '
              'passivity_limited observer_active max_gap_ns max_force_un marks clutches '
-             'trace_w t_first_ns t_last_ns running held')
+             'trace_w t_first_ns t_last_ns running held deadline_ns')
 #: trace row: t, device position (3,), applied force (3,) device frame, status (as TickTrace)
 TRACE_COLS = 8
 CFG_LEN, CTL_LEN, OUT_LEN, CNT_LEN = len(CFG), len(CTL), len(OUT), len(CNT)
+#: the workers' mutex: int64 words holding a zeroed ``pthread_mutex_t`` (40 bytes on x86-64, 48
+#: on aarch64; all-zero is glibc's PTHREAD_MUTEX_INITIALIZER)
+LOCK_LEN = 16
 #: scratch array length (the largest seqlock buffer)
 SCRATCH_LEN = max(CMD_LEN, MODEL_LEN, OUT_LEN)
 
@@ -556,30 +565,53 @@ def tick(now, cfg, st, times, points, buttons, hand, cmd, model, ctl, out, cnt, 
 
 
 @nb.njit(nogil=True, cache=True)
-def run(cfg, st, times, points, buttons, hand, cmd, model, ctl, out, cnt, trace, scratch, ts):
-    """The servo loop: :func:`tick` every ``period`` to absolute deadlines until ``ctl[stop]``;
-    a tick more than one period late is a deadline miss and the schedule re-synchronises (the
-    periods it lost are counted by :func:`tick`). Leaves the device at zero force. Returns the
-    number of ticks."""
+def run(cfg, st, times, points, buttons, hand, cmd, model, ctl, out, cnt, trace, scratch, ts,
+        lock):
+    """The servo loop of one worker: :func:`tick` every ``period`` to absolute deadlines until
+    ``ctl[stop]``. Several workers (threads of one process, each calling this with its own
+    ``ts`` and the same arrays and ``lock``) serve ONE schedule: each sleeps to the next deadline;
+    the first to wake takes the lock, runs the tick when it is due and moves the deadline on; the
+    others find it not due (or the lock taken) and sleep to the next one. Under the normal
+    scheduler one thread is sometimes not run for milliseconds after it wakes (a busy core, a
+    long kernel path); two workers pinned to different cores are rarely both held (issue 32:
+    ``bench/bench_servo_wake.py``). A tick more than one period late is a deadline miss and the
+    schedule re-synchronises (the periods lost are counted by :func:`tick`). The last worker
+    out leaves the device at zero force. Returns the number of ticks."""
     period_ns = int(cfg[CFG.period] * 1e9 + 0.5)
-    _clock_gettime(CLOCK_MONOTONIC, ts.ctypes.data)
-    deadline = ts[0] * 1000000000 + ts[1]
-    cnt[CNT.running] = 1
+    m = lock.ctypes.data
+    _mutex_lock(m)
+    cnt[CNT.running] += 1
+    _mutex_unlock(m)
+    mine = np.int64(0)
     while ctl[CTL.stop] == 0:
-        _clock_gettime(CLOCK_MONOTONIC, ts.ctypes.data)
-        now_ns = ts[0] * 1000000000 + ts[1]
-        if now_ns - deadline > period_ns:
-            cnt[CNT.deadline_misses] += 1
-            deadline = now_ns
-        _clock_gettime(CLOCK_REALTIME, ts.ctypes.data)
-        stamp = ts[0] * 1000000000 + ts[1]
-        tick(now_ns * 1e-9, cfg, st, times, points, buttons, hand, cmd, model, ctl, out, cnt,
-             trace, scratch, stamp)
-        deadline += period_ns
-        ts[0] = deadline // 1000000000
-        ts[1] = deadline % 1000000000
+        if _mutex_trylock(m) == 0:
+            _clock_gettime(CLOCK_MONOTONIC, ts.ctypes.data)
+            now_ns = ts[0] * 1000000000 + ts[1]
+            deadline = cnt[CNT.deadline_ns]
+            if deadline == 0:  # the first tick: the schedule starts now
+                deadline = now_ns
+            if now_ns >= deadline and ctl[CTL.stop] == 0:
+                if now_ns - deadline > period_ns:
+                    cnt[CNT.deadline_misses] += 1
+                    deadline = now_ns
+                _clock_gettime(CLOCK_REALTIME, ts.ctypes.data)
+                stamp = ts[0] * 1000000000 + ts[1]
+                tick(now_ns * 1e-9, cfg, st, times, points, buttons, hand, cmd, model, ctl,
+                     out, cnt, trace, scratch, stamp)
+                deadline += period_ns
+                cnt[CNT.deadline_ns] = deadline
+            mine = deadline
+            _mutex_unlock(m)
+        else:  # another worker is in the tick: its deadline is served, sleep to the next
+            mine = max(mine, cnt[CNT.deadline_ns]) + period_ns
+        ts[0] = mine // 1000000000
+        ts[1] = mine % 1000000000
         _clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, ts.ctypes.data, 0)
+    _mutex_lock(m)
     _safety_reset(st, 0.0, False)
     _device_write(cfg, st, 0.0, 0.0, 0.0)
-    cnt[CNT.running] = 0
+    cnt[CNT.running] -= 1
+    if cnt[CNT.running] == 0:
+        cnt[CNT.deadline_ns] = 0
+    _mutex_unlock(m)
     return cnt[CNT.ticks]

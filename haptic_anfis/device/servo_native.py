@@ -344,6 +344,22 @@ class NativeRenderer(LocalModelRenderer):
         self._py.models += 1
 
 
+def worker_cpus(n: int) -> list[int | None]:
+    """The cores for ``n`` tick workers: distinct cores this process may run on, the first and
+    the last of them first (on most machines different physical cores, whose interrupts and
+    busy neighbours differ); fewer when fewer are allowed. ``[None]`` (one worker, unpinned)
+    where affinity is not available."""
+    import os
+    try:
+        allowed = sorted(os.sched_getaffinity(0))
+    except (AttributeError, OSError):
+        return [None]
+    if n <= 1 or len(allowed) <= 1:
+        return [None]
+    order = [allowed[0], allowed[-1], *allowed[1:-1]]
+    return order[:min(n, len(allowed))]
+
+
 class NativeServoLoop:
     """The simulated Falcon's servo loop, compiled and GIL-free (module docstring).
 
@@ -368,7 +384,11 @@ class NativeServoLoop:
         ring: trace ring rows in the loop (the bridge must drain it within ``ring`` ticks).
         process: run the compiled loop in a child process of its own session (``fork`` +
             ``setsid``: its own scheduler autogroup, so the parent's busy threads do not share
-            its CPU time), on shared memory; else on a thread of this process.
+            its CPU time), on shared memory; else on threads of this process.
+        workers: threads that serve the one tick schedule (:func:`~.native_tick.run`), each
+            pinned to its own core (:func:`worker_cpus`): the first to wake runs the tick, so a
+            core held busy for milliseconds no longer costs ticks (issue 32). At most the
+            cores this process may use; 1 is the single servo thread of before.
         device_factory: a real device instead of the simulated handle (``script`` is then
             None): called IN the servo process (implies ``process``) to build the
             :class:`~.falcon.Device` (e.g. a :class:`~.falcon_usb.FalconUSB`) that
@@ -390,7 +410,8 @@ class NativeServoLoop:
                  trace: TickTrace | None = None, priority: int = 0, ring: int = 1 << 16,
                  half_extent: float = 0.05, device_max_force: float | None = None,
                  process: bool = False, device_factory: Callable[[], object] | None = None,
-                 open_timeout: float = 120.0, open_error: type[Exception] = OSError) -> None:
+                 open_timeout: float = 120.0, open_error: type[Exception] = OSError,
+                 workers: int = 2) -> None:
         if not rate > 0:
             raise ValueError(f'rate: expected > 0 Hz, got {rate!r}')
         if not 0 <= priority <= 99:
@@ -399,6 +420,8 @@ class NativeServoLoop:
             raise ValueError(f"mode: expected 'zoh' or 'local_model', got {mode!r}")
         if not (math.isfinite(damping) and damping > 0):
             raise ValueError(f'damping: expected a finite number > 0 N s/m, got {damping!r}')
+        if not (isinstance(workers, int) and 1 <= workers <= 8):
+            raise ValueError(f'workers: expected an integer from 1 to 8, got {workers!r}')
         self.period = 1.0 / rate
         self.priority = int(priority)
         self.mapping, self.on_state, self.trace = mapping, on_state, trace
@@ -458,6 +481,9 @@ class NativeServoLoop:
         self.cnt = zeros(nt.CNT_LEN, dtype=np.int64)
         self.ring = zeros((int(ring) if trace is not None else 0, nt.TRACE_COLS))
         self._scratch = np.zeros(nt.SCRATCH_LEN)
+        self.workers = int(workers)
+        self._lock = np.zeros(nt.LOCK_LEN, dtype=np.int64)  # the workers' mutex (one process)
+        self._cpus = worker_cpus(self.workers)  # before any worker pins itself
         self._ts = np.zeros(2, dtype=np.int64)
         self.safety = NativeSafety(self, max_force, max_force_rate, watchdog_timeout, frame_id)
         self.renderer = NativeRenderer(self, tissue_stiffness_limit(
@@ -476,7 +502,7 @@ class NativeServoLoop:
         self.status = -1
         self._read = 0
         self._stop = threading.Event()
-        self._tick_thread: threading.Thread | None = None
+        self._tick_threads: list[threading.Thread] = []
         self._pid = 0
         self._bridge: threading.Thread | None = None
         self._scheduled = threading.Event()
@@ -525,7 +551,7 @@ class NativeServoLoop:
         nt.run(self.cfg, self.st.copy(), self.times, self.points, self.buttons, self.hand.copy(),
                self.cmd.copy(),
                self.model.copy(), ctl, self.out.copy(), self.cnt.copy(), self.ring[:0].copy(),
-               self._scratch.copy(), self._ts.copy())
+               self._scratch.copy(), self._ts.copy(), self._lock.copy())
         if self.device_factory is not None:  # the device loop calls these from Python
             st, cnt = self.st.copy(), self.cnt.copy()
             nt.tick(0.0, self.cfg, st, self.times, self.points, self.buttons, self.hand.copy(),
@@ -548,9 +574,7 @@ class NativeServoLoop:
         if self.process:
             self._start_process()
         else:
-            self._tick_thread = threading.Thread(target=self._run_ticks, name='servo-native',
-                                                 daemon=True)
-            self._tick_thread.start()
+            self._tick_threads = self._start_workers()
             self._scheduled.wait(1.0)
         self._bridge = threading.Thread(target=self._run_bridge, name='servo-bridge', daemon=True)
         self._bridge.start()
@@ -572,18 +596,17 @@ class NativeServoLoop:
                     _die_with_parent(signal.SIGTERM)
                 else:
                     _die_with_parent(signal.SIGKILL)
-                set_realtime(self.priority)
-                if self.priority <= 0:
-                    request_short_slice()
                 if self.device_factory is not None:
+                    set_realtime(self.priority)  # the device loop: one thread (its USB I/O)
+                    if self.priority <= 0:
+                        request_short_slice()
                     code = dp.run_device_loop(
                         self.device_factory, self.cfg, self.st, self.times, self.points,
                         self.buttons, self.hand, self.cmd, self.model, self.ctl, self.out,
                         self.cnt, self.ring, self._scratch, self.devst, self.devmsg)
                 else:
-                    nt.run(self.cfg, self.st, self.times, self.points, self.buttons, self.hand,
-                           self.cmd, self.model, self.ctl, self.out, self.cnt, self.ring,
-                           self._scratch, self._ts)
+                    for th in self._start_workers(first=1):  # worker 0 is this thread
+                        th.join()
             except BaseException:
                 code = 1
             finally:
@@ -605,7 +628,9 @@ class NativeServoLoop:
                       'normal scheduler' + (' (SCHED_FIFO refused)' if self.priority > 0 else ''))
         except OSError as exc:
             policy = f'unknown ({exc})'
-        self.scheduling = f'compiled tick in servo process {pid} (own session); {policy}'
+        self.scheduling = (f'compiled tick in servo process {pid} (own session); {policy}'
+                           + ('' if self.device_factory is not None else
+                              f'; {self._workers_text()}'))
 
     def _wait_open(self, pid: int) -> None:
         """Wait for the servo process to open the device; raise ``open_error`` with its message
@@ -632,7 +657,7 @@ class NativeServoLoop:
         self.safety.stop()
         self.ctl[nt.CTL.stop] = 1
         self._stop.set()
-        for th in (self._tick_thread, self._bridge):
+        for th in (*self._tick_threads, self._bridge):
             if th is not None and th is not threading.current_thread():
                 th.join(timeout)
         if self._pid:
@@ -655,18 +680,45 @@ class NativeServoLoop:
     def running(self) -> bool:
         if self._pid:
             return bool(self.cnt[nt.CNT.running])
-        return self._tick_thread is not None and self._tick_thread.is_alive()
+        return any(th.is_alive() for th in self._tick_threads)
 
     # -- threads --------------------------------------------------------------------------------
-    def _run_ticks(self) -> None:
-        self.scheduling = set_realtime(self.priority)
+    def _start_workers(self, first: int = 0) -> list[threading.Thread]:
+        """Start the tick workers ``first`` .. ``workers - 1`` as threads, each on its core; when
+        ``first`` is 1 the calling thread is worker 0 and runs it before returning (the servo
+        process's main thread). Returns the started threads."""
+        cpus = self._cpus
+        threads = [threading.Thread(target=self._run_ticks, args=(w, cpus[w]), daemon=True,
+                                    name=f'servo-native-{w}') for w in range(first, len(cpus))]
+        for th in threads:
+            th.start()
+        if first == 1:
+            self._run_ticks(0, cpus[0])
+        return threads
+
+    def _workers_text(self) -> str:
+        cpus = self._cpus
+        return (f'{len(cpus)} tick workers on cores {", ".join(map(str, cpus))}'
+                if len(cpus) > 1 else '1 tick worker')
+
+    def _run_ticks(self, worker: int = 0, cpu: int | None = None) -> None:
+        """One tick worker: its core, its scheduling, then the compiled loop until stop."""
+        import os
+        if cpu is not None:
+            try:
+                os.sched_setaffinity(0, {cpu})  # this thread only
+            except OSError:
+                pass  # a core taken away since: the worker still serves, unpinned
+        scheduling = set_realtime(self.priority)
         if self.priority <= 0:
-            self.scheduling += request_short_slice()
-        self.scheduling = 'compiled nogil tick; ' + self.scheduling
-        self._scheduled.set()
+            scheduling += request_short_slice()
+        if worker == 0 and not self.process:
+            self.scheduling = f'compiled nogil tick; {scheduling}; {self._workers_text()}'
+            self._scheduled.set()
         try:
             nt.run(self.cfg, self.st, self.times, self.points, self.buttons, self.hand, self.cmd,
-                   self.model, self.ctl, self.out, self.cnt, self.ring, self._scratch, self._ts)
+                   self.model, self.ctl, self.out, self.cnt, self.ring, self._scratch,
+                   np.zeros(2, dtype=np.int64), self._lock)
         except Exception as exc:  # cannot happen short of a bug; say so, the device is at 0 N
             self.errors += 1
             self.last_error = exc

@@ -138,12 +138,12 @@ PARAMS = [
           'long another thread may hold the GIL before the servo thread gets it back (Python '
           'default 0.005; 0 = leave it)', non_negative),
     Param('servo_loop', 'auto', "sim: 'native' runs the servo tick (device, local model, "
-          'clutch, safety, passivity bound) compiled on its own thread without the interpreter '
-          "lock (haptic_anfis.device.servo_native); 'native_process' the same compiled loop in a "
-          "servo process of its own session on shared memory; 'python' the Python tick; 'auto': "
-          "'native' when the thread may run at servo_priority (SCHED_FIFO) or the driver shares "
-          "its process with the loop's other nodes (sim, exam run), else 'native_process' "
-          "(measured: docs/servo_loop.md). falcon: 'auto' and 'native_process' run the USB I/O "
+          'clutch, safety, passivity bound) compiled on threads of the driver without the '
+          "interpreter lock (haptic_anfis.device.servo_native); 'native_process' the same "
+          'compiled loop in a servo process of its own session on shared memory; '
+          "'python' the Python tick; 'auto': 'native_process', which kept the period and the "
+          'force in every layout and load measured, with or without real-time priority '
+          "(docs/servo_loop.md). falcon: 'auto' and 'native_process' run the USB I/O "
           "and the compiled tick in the servo process (a frozen node cannot leave force on the "
           "motors); 'python' the Python tick on a thread of the node; 'native' is refused (its "
           "USB library needs the interpreter)", one_of('auto', 'native', 'native_process', 'python')),
@@ -157,6 +157,12 @@ PARAMS = [
           '<= model_validity_time: off', positive),
     Param('passivity_observer', False, 'native: run the passivity observer / controller '
           '(Hannaford & Ryu 2002) on the rendered port'),
+    Param('servo_workers', 2, "native, native_process with the simulated Falcon: threads "
+          'that serve the one 1 kHz tick schedule, each pinned to its own core; the first to '
+          'wake runs the tick, so one core held busy no longer costs ticks (measured: '
+          'docs/servo_loop.md). At most the cores the process may use; 1: one servo thread. '
+          "The real Falcon's servo process has one (its USB I/O)",
+          lambda v: None if 1 <= v <= 8 else 'expected 1 to 8'),
     Param('servo_priority', 50, 'real-time priority of the servo thread (SCHED_FIFO 1-99; 0 = '
           'the normal scheduler). Needs CAP_SYS_NICE or an rtprio limit (ulimit -r); without it '
           'the thread keeps the normal scheduler and a warning says how to allow it',
@@ -164,42 +170,32 @@ PARAMS = [
 ]
 
 
-def resolve_servo_loop(choice: str, priority: int, shared_process: bool,
-                       backend: str = 'sim') -> str:
-    """``servo_loop: auto`` made concrete: the compiled thread when it may run at real-time
-    priority (it then keeps the period in any layout) or shares its process with the loop's
-    other nodes; else the compiled loop in a servo process of its own session, which under the
-    normal scheduler kept the period and the force in a driver process of its own where the
-    thread did not (docs/measurements/servo_load_beside_tests.md). The Falcon always gets the
-    servo process (its USB library is Python: on a thread it would share the node's interpreter
-    lock). Other choices pass through.
+def resolve_servo_loop(choice: str, backend: str = 'sim') -> str:
+    """``servo_loop: auto`` made concrete: the compiled loop in a servo process of its own
+    session, for both backends. With two tick workers it kept the period (>= 999 Hz, no gap
+    past the watchdog) and the force in ``sim`` and ``launch``, at real-time priority and
+    without, beside 8 busy processes with the recorder and the view, where the thread in the
+    driver's process lost periods without real-time priority (docs/servo_loop.md). The Falcon
+    needs it besides: its USB library is Python, and on a thread it would share the node's
+    interpreter lock. Other choices pass through.
 
     Raises:
         ParameterError: ``native`` (a thread) with the falcon backend.
     """
-    if backend == 'falcon':
-        if choice == 'native':
-            raise ParameterError("falcon_driver: servo_loop: got 'native' with backend 'falcon'; "
-                                 "expected 'auto' or 'native_process' (the USB I/O and the "
-                                 "compiled tick in a servo process) or 'python': the Falcon's "
-                                 "USB library needs the interpreter, which a compiled thread "
-                                 "does not hold")
-        return 'native_process' if choice == 'auto' else choice
-    if choice != 'auto':
-        return choice
-    from ..device.servo import realtime_allowed
-    return 'native' if shared_process or realtime_allowed(priority) else 'native_process'
+    if backend == 'falcon' and choice == 'native':
+        raise ParameterError("falcon_driver: servo_loop: got 'native' with backend 'falcon'; "
+                             "expected 'auto' or 'native_process' (the USB I/O and the "
+                             "compiled tick in a servo process) or 'python': the Falcon's "
+                             "USB library needs the interpreter, which a compiled thread "
+                             "does not hold")
+    return 'native_process' if choice == 'auto' else choice
 
 
 class FalconDriver(Node):
-    def __init__(self, name: str = 'falcon_driver', shared_process: bool = False, **kw):
-        """``shared_process``: the driver is built into the one-process graph (sim, exam run;
-        :func:`~haptic_anfis.nodes.graph.build_graph`), which ``servo_loop: auto`` takes into
-        account."""
+    def __init__(self, name: str = 'falcon_driver', **kw):
         super().__init__(name, **kw)
         p = self.params = declare_parameters(self, PARAMS)
-        p['servo_loop'] = self.servo_loop = resolve_servo_loop(
-            p['servo_loop'], p['servo_priority'], shared_process, p['backend'])
+        p['servo_loop'] = self.servo_loop = resolve_servo_loop(p['servo_loop'], p['backend'])
         if p['gil_switch_interval'] > 0:
             # A busy thread (bag writer, executor callbacks) keeps the GIL up to this long while
             # the 1 kHz servo thread waits: with a recorder in the same process the worst
@@ -343,7 +339,8 @@ class FalconDriver(Node):
             self.frame_id, p['force_mode'], p['max_stiffness'], p['model_validity_time'],
             p['model_validity_radius'], p['passivity_damping'], p['passivity_observer'],
             p['model_hold_time'], trace=TickTrace() if p['trace_path'] else None,
-            priority=p['servo_priority'], process=p['servo_loop'] == 'native_process', **kw)
+            priority=p['servo_priority'], process=p['servo_loop'] == 'native_process',
+            workers=p['servo_workers'], **kw)
 
     def _device_lost(self, why: str) -> None:
         """The Falcon backend lost the device (servo thread): zero the force; without reconnect,

@@ -114,8 +114,7 @@ def build_graph(args: list[str] | None = None, visualizer: bool = True,
         for factory in extra:
             extra_nodes.append(factory(ctx))
             made.append(extra_nodes[-1])
-        driver = FalconDriver(context=ctx, parameter_overrides=ov.get('falcon_driver', []),
-                              shared_process=True)
+        driver = FalconDriver(context=ctx, parameter_overrides=ov.get('falcon_driver', []))
         made.append(driver)
     except BaseException:
         for n in made:
