@@ -13,7 +13,11 @@ asserted (timings under load).
    while the probe presses; per kill, the seconds until the launch restarted it and until force
    commands (``falcon/servo_cf``) came back.
 
-Run: ``.venv/bin/python bench/bench_exam_modes.py [--runs N] [--kills N]``
+``--busy N`` runs the exams beside N processes spinning on the CPU (issue 32.5: the exam passes
+under the servo benchmark's load); ``--force-modes`` picks the modes, ``--page`` the page.
+
+Run: ``.venv/bin/python bench/bench_exam_modes.py [--runs N] [--kills N] [--busy N]
+[--force-modes local_model] [--page exam_modes]``
 """
 from __future__ import annotations
 
@@ -146,19 +150,35 @@ def main() -> None:
     ap.add_argument('--runs', type=int, default=1, help='exams per mode and layout')
     ap.add_argument('--kills', type=int, default=3, help='force-server kills')
     ap.add_argument('--skip-exams', action='store_true')
+    ap.add_argument('--busy', type=int, default=0,
+                    help='processes spinning on the CPU beside every exam (default 0)')
+    ap.add_argument('--force-modes', default='zoh,local_model',
+                    help='comma-separated force modes to run (default zoh,local_model)')
+    ap.add_argument('--page', default='exam_modes',
+                    help='page name: docs/measurements/<page>.md (default exam_modes)')
     a = ap.parse_args()
+    modes = [m for m in MODES if m[0] in a.force_modes.split(',')]
     domain = 150 + os.getpid() % 40
     rows = []
     if not a.skip_exams:
         for _ in range(a.runs):
-            for mode, inproc in MODES:
-                r = exam(mode, inproc, domain)
+            for mode, inproc in modes:
+                busy = [subprocess.Popen([sys.executable, '-c', 'while True: pass'])
+                        for _ in range(a.busy)]
+                try:
+                    r = exam(mode, inproc, domain)
+                finally:
+                    for b in busy:
+                        b.terminate()
+                        b.wait()
                 rows.append(r)
                 print(json.dumps(r), flush=True)
     kills = respawn(a.kills, domain) if a.kills else []
     lines = ['`exam run --trainee systematic` (default case) per force mode and examiner process; '
              '"heat map" = its rate [Hz] (the examiner promises 5 Hz); "lost" = contact samples '
-             'the side examiner never got; load = 1-minute load average at the start.', '',
+             'the side examiner never got; load = 1-minute load average at the start'
+             + (f'; {a.busy} processes spinning on the CPU beside every exam' if a.busy else '')
+             + '.', '',
              '| force mode | examiner | deep coverage % | hits / misses / false | verdict | '
              'heat map [Hz] | lost | max depth [mm] | contact samples | wall [s] | load |',
              '|---|---|---|---|---|---|---|---|---|---|---|']
@@ -186,9 +206,11 @@ def main() -> None:
                              f" | {r['load']:.1f} |")
     table = '\n'.join(lines)
     print(table)
-    write_page('exam_modes', 'Exam in each force mode and process layout; force after a respawn',
-               table, command='.venv/bin/python bench/bench_exam_modes.py'
-               + ''.join(f' {k} {v}' for k, v in (('--runs', a.runs), ('--kills', a.kills))))
+    write_page(a.page, 'Exam in each force mode and process layout'
+               + (f', beside {a.busy} busy processes' if a.busy else '')
+               + ('; force after a respawn' if kills else ''),
+               table, command=('.venv/bin/python bench/bench_exam_modes.py '
+                               + ' '.join(sys.argv[1:])).strip())
 
 
 if __name__ == '__main__':

@@ -146,7 +146,8 @@ PARAMS = [
           "(docs/servo_loop.md). falcon: 'auto' and 'native_process' run the USB I/O "
           "and the compiled tick in the servo process (a frozen node cannot leave force on the "
           "motors); 'python' the Python tick on a thread of the node; 'native' is refused (its "
-          "USB library needs the interpreter)", one_of('auto', 'native', 'native_process', 'python')),
+          "USB library needs the interpreter)",
+          one_of('auto', 'native', 'native_process', 'python')),
     Param('passivity_damping', 1.5, 'native: device damping b [N s/m] of the passivity bound on '
           'the rendered stiffness, K <= 2 b / T with T the measured tick period (Colgate & '
           'Schenkel 1997; docs/servo_loop.md)', positive),
