@@ -44,9 +44,11 @@ COLS = ('config', 'busy', 'load', 'rt_others', 'rate_hz', 'periods_lost', 'max_g
         'expired', 'held', 'lat_p99_ms', 'lat_max_ms')
 
 
-def busy(n: int) -> list[subprocess.Popen]:
-    """``n`` processes spinning on the CPU (ended by :func:`stop`)."""
-    return [subprocess.Popen([sys.executable, '-c', 'while True: pass']) for _ in range(n)]
+def busy(n: int, sessions: bool = False) -> list[subprocess.Popen]:
+    """``n`` processes spinning on the CPU (ended by :func:`stop`); ``sessions``: each in a
+    session of its own, as other programs on a desktop are (autogroup: a fair share each)."""
+    return [subprocess.Popen([sys.executable, '-c', 'while True: pass'],
+                             start_new_session=sessions) for _ in range(n)]
 
 
 class TestSuite:
@@ -212,6 +214,9 @@ def main() -> int:
     ap.add_argument('--force-mode', default='', choices=('', 'local_model', 'zoh'),
                     help="the driver's force_mode (default: its default, local_model; zoh: the "
                          "zero-order hold of the force server's commands)")
+    ap.add_argument('--busy-sessions', action='store_true',
+                    help='each busy process in a session of its own (other programs); by '
+                         "default they share the benchmark's session, with the graph")
     ap.add_argument('--beside-tests', action='store_true',
                     help="the project's test suite (python -m pytest test) running beside "
                          'every run, restarted when it ends')
@@ -236,7 +241,7 @@ def main() -> int:
             if suite is not None:
                 suite.ensure()
                 time.sleep(20.0 if suite.starts == 1 and not rows else 0.0)  # collecting tests
-            procs = busy(nbusy)
+            procs = busy(nbusy, a.busy_sessions)
             try:
                 time.sleep(1.0)
                 load0 = os.getloadavg()[0]
@@ -265,6 +270,7 @@ def _page(a, rows: list[dict], planned: int):
     notes = (f'\n{a.duration:g} s per run after the graph is ready, '
              + (f'force mode {a.force_mode}' if a.force_mode else 'default force mode (local_model)')
              + ', recorder running'
+             + (', each busy process in a session of its own' if a.busy_sessions else '')
              + (', the test suite (`python -m pytest test`) running beside every run'
                 if a.beside_tests else '')
              + (', browser view running (web_view node and a headless chromium on its page)'

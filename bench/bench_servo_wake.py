@@ -13,7 +13,9 @@ milliseconds (here up to 80-130 ms: a core held by a long kernel path or another
 single thread can avoid; two workers on two cores are rarely both held.
 
 Usage: ``python bench/bench_servo_wake.py [--duration 15] [--busy 8] [--repeat 4]
-[--background-sim] [--no-page]``. ``--background-sim``: a ``haptic-anfis sim`` session (with the
+[--background-sim] [--busy-sessions] [--page servo_wake] [--no-page]``.
+``--busy-sessions``: each busy process in a session of its own, as other programs on a desktop
+are (Linux's autogroup then gives each its own fair share; by default they share this one's). ``--background-sim``: a ``haptic-anfis sim`` session (with the
 recorder) runs beside it too, as a second trainee's session would. Writes
 ``docs/measurements/servo_wake.md``.
 """
@@ -69,9 +71,14 @@ def main() -> int:
     ap.add_argument('--repeat', type=int, default=4)
     ap.add_argument('--background-sim', action='store_true',
                     help='a haptic-anfis sim session with the recorder beside it as well')
+    ap.add_argument('--busy-sessions', action='store_true',
+                    help='each busy process in a session of its own (other programs)')
+    ap.add_argument('--page', default='servo_wake',
+                    help='page name: docs/measurements/<page>.md (default servo_wake)')
     ap.add_argument('--no-page', action='store_true', help='print only')
     a = ap.parse_args()
-    busy = [subprocess.Popen([sys.executable, '-c', 'while True: pass']) for _ in range(a.busy)]
+    busy = [subprocess.Popen([sys.executable, '-c', 'while True: pass'],
+                             start_new_session=a.busy_sessions) for _ in range(a.busy)]
     bg = None
     td = tempfile.TemporaryDirectory(prefix='bench-wake-')
     results: dict[tuple[str, int], list[tuple[float, float]]] = {c: [] for c in CONFIGS}
@@ -109,6 +116,8 @@ def main() -> int:
         from _page import write_page
         notes = (f'\n\n{a.repeat} runs of {a.duration:g} s per configuration, interleaved, '
                  f'beside {a.busy} busy processes'
+                 + (' (each in a session of its own)' if a.busy_sessions else
+                    ' (in this session)')
                  + (' and a `haptic-anfis sim` session with the recorder' if a.background_sim
                     else '') + f' on the machine\'s {os.cpu_count()} cores; the normal scheduler '
                  '(no real-time priority; a 0.1 ms time slice requested). `thread`: the '
@@ -117,7 +126,7 @@ def main() -> int:
                  'own core. Lost: 1 ms periods with no tick. Target (issue 32): rate >= 995 Hz '
                  '(lost <= 0.5 %), no gap longer than the 10 ms watchdog.\n')
         cmd = ('.venv/bin/python bench/bench_servo_wake.py ' + ' '.join(sys.argv[1:])).strip()
-        print('page:', write_page('servo_wake', 'Servo tick workers under load', table + notes,
+        print('page:', write_page(a.page, 'Servo tick workers under load', table + notes,
                                   command=cmd))
     return 0
 

@@ -1,8 +1,10 @@
 """The servo loop without the interpreter lock: the compiled tick on its own thread (no ROS).
 
-:class:`NativeServoLoop` runs :func:`haptic_anfis.device.native_tick.run` on a thread: the
-compiled loop releases the GIL once and keeps it released until it is told to stop, so nothing
-else in the process (executors, recorder, garbage collector, a view) can delay a tick. A second,
+:class:`NativeServoLoop` runs :func:`haptic_anfis.device.native_tick.run` on its tick workers
+(two threads by default, each pinned to its own core, serving one schedule: the first to wake runs
+the tick), in a servo process of its own or in this one: the compiled loop releases the GIL once
+and keeps it released until it is told to stop, so nothing else in the process (executors,
+recorder, garbage collector, a view) can delay a tick. A second,
 ordinary Python thread, the *bridge*, does what needs the interpreter, at whatever pace it gets:
 it reads the newest published tick (a seqlock), hands it to ``on_state`` (the driver publishes
 the pose and takes the newest command / local model from its readers), and drains the tick
