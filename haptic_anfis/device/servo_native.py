@@ -1,4 +1,4 @@
-"""The servo loop without the interpreter lock: the compiled tick on its own thread (no ROS).
+"""The servo loop without the interpreter lock: the compiled tick on its own workers (no ROS).
 
 :class:`NativeServoLoop` runs :func:`haptic_anfis.device.native_tick.run` on its tick workers
 (two threads by default, each pinned to its own core, serving one schedule: the first to wake runs
