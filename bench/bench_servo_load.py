@@ -114,7 +114,7 @@ def browser_when_up(port: int, stop) -> 'threading.Thread':
     import socket
     import threading
 
-    from bench_view import open_browser
+    from bench_view import close_browser, open_browser
 
     def run() -> None:
         while not stop.is_set():
@@ -126,8 +126,7 @@ def browser_when_up(port: int, stop) -> 'threading.Thread':
             return
         b = open_browser(f'http://127.0.0.1:{port}/')
         stop.wait()
-        b.kill()
-        b.wait()
+        close_browser(b)
 
     t = threading.Thread(target=run, daemon=True)
     t.start()

@@ -51,7 +51,20 @@ def open_browser(url: str) -> subprocess.Popen:
                              '--disable-renderer-backgrounding',
                              '--disable-background-timer-throttling',
                              '--disable-backgrounding-occluded-windows', url],
-                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                            start_new_session=True)
+
+
+def close_browser(browser: subprocess.Popen) -> None:
+    """Kill the chromium of :func:`open_browser` with every process it started (its zygote,
+    GPU and renderer processes outlive a killed browser process and kept loading the cores of
+    the runs after it)."""
+    import signal
+    try:
+        os.killpg(browser.pid, signal.SIGKILL)
+    except ProcessLookupError:
+        pass
+    browser.wait()
 
 
 def _blue_centre(img: np.ndarray):
@@ -113,8 +126,7 @@ def _steps(node, pub, steps: int) -> dict:
                     break
             time.sleep(0.2)
     finally:
-        browser.kill()
-        browser.wait()
+        close_browser(browser)
     lat, rtt = np.array(lat), np.array(rtt)
     return {'n': len(lat), 'p50': float(np.percentile(lat, 50)) if len(lat) else None,
             'p95': float(np.percentile(lat, 95)) if len(lat) else None,
@@ -190,8 +202,7 @@ def loop_runs(seconds: float, configs: list[str]) -> list[dict]:
                     print(f'{key} view={view}: failed: {exc}', flush=True)
                 finally:
                     for p in procs:
-                        p.kill()
-                        p.wait()
+                        close_browser(p)
                     if wv is not None:
                         stop_node(wv)
                         # the page's dent frames while drawing (the node says it when stopped)
