@@ -103,7 +103,7 @@ CTL = _index('CTL', 'stop release fault enable_gen enabled external')
 #: external hand target (float64 seqlock; ``ctl[external]`` = 1): seq, its time [s], target (3,)
 #: device frame [m], its velocity (3,) [m/s], buttons 0 and 1 (a script only Python can play).
 #: With ``cfg[device]`` = 1 (a real device read by the servo process before each tick, see
-#: :mod:`.falcon_servo`) the same layout holds the device's MEASURED position and velocity.
+#: :mod:`.device_process`) the same layout holds the device's MEASURED position and velocity.
 HAND_LEN = 10
 #: the hand target is extrapolated from the newest one for at most this long [s], then held
 HAND_EXTRAPOLATE = 0.02
@@ -575,8 +575,9 @@ def run(cfg, st, times, points, buttons, hand, cmd, model, ctl, out, cnt, trace,
     scheduler one thread is sometimes not run for milliseconds after it wakes (a busy core, a
     long kernel path); two workers pinned to different cores are rarely both held (issue 32:
     ``bench/bench_servo_wake.py``). A tick more than one period late is a deadline miss and the
-    schedule re-synchronises (the periods lost are counted by :func:`tick`). The last worker
-    out leaves the device at zero force. Returns the number of ticks."""
+    schedule re-synchronises (the periods lost are counted by :func:`tick`). Each worker leaves
+    the device at zero force on its way out (under the lock, so after any tick in progress); the
+    last one also clears the schedule. Returns the number of ticks."""
     period_ns = int(cfg[CFG.period] * 1e9 + 0.5)
     m = lock.ctypes.data
     _mutex_lock(m)

@@ -154,28 +154,6 @@ def set_realtime(priority: int) -> str:
     return f'SCHED_FIFO priority {priority}'
 
 
-def realtime_allowed(priority: int) -> bool:
-    """Whether a thread of this process may take SCHED_FIFO at ``priority`` (tried on a
-    throwaway thread, so no thread of the caller changes scheduling). False for ``priority`` 0."""
-    if priority <= 0:
-        return False
-    import os
-    import threading
-    ok: list[bool] = []
-
-    def probe() -> None:
-        try:
-            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(int(priority)))
-            ok.append(True)
-        except (OSError, AttributeError):   # EPERM without the right; not Linux
-            ok.append(False)
-
-    t = threading.Thread(target=probe, name='rt-probe', daemon=True)
-    t.start()
-    t.join()
-    return bool(ok and ok[0])
-
-
 def request_short_slice(slice_s: float = 0.0001) -> str:
     """Ask the kernel's fair scheduler (EEVDF, Linux >= 6.12) for a short time slice for the
     calling thread (``sched_setattr`` with SCHED_OTHER and ``sched_runtime``): a thread that

@@ -141,8 +141,8 @@ PARAMS = [
           'clutch, safety, passivity bound) compiled on threads of the driver without the '
           "interpreter lock (haptic_anfis.device.servo_native); 'native_process' the same "
           'compiled loop in a servo process of its own session on shared memory; '
-          "'python' the Python tick; 'auto': 'native_process', which kept the period and the "
-          'force in every layout and load measured, with or without real-time priority '
+          "'python' the Python tick; 'auto': 'native_process', which kept the period better "
+          'than the threads under the normal scheduler and as well at real-time priority '
           "(docs/servo_loop.md). falcon: 'auto' and 'native_process' run the USB I/O "
           "and the compiled tick in the servo process (a frozen node cannot leave force on the "
           "motors); 'python' the Python tick on a thread of the node; 'native' is refused (its "
@@ -173,10 +173,10 @@ PARAMS = [
 
 def resolve_servo_loop(choice: str, backend: str = 'sim') -> str:
     """``servo_loop: auto`` made concrete: the compiled loop in a servo process of its own
-    session, for both backends. With two tick workers it kept the period (>= 999 Hz, no gap
-    past the watchdog) and the force in ``sim`` and ``launch``, at real-time priority and
-    without, beside 8 busy processes with the recorder and the view, where the thread in the
-    driver's process lost periods without real-time priority (docs/servo_loop.md). The Falcon
+    session, for both backends. With two tick workers it kept the period and the force in
+    ``sim`` and ``launch`` at real-time priority as well as the threads in the driver's process,
+    and better than they did without it, beside busy processes with the recorder and the view
+    (docs/servo_loop.md, the measured pages it names). The Falcon
     needs it besides: its USB library is Python, and on a thread it would share the node's
     interpreter lock. Other choices pass through.
 
