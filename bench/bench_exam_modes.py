@@ -35,6 +35,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from _busy import busy  # noqa: E402
 from _launch import stop_launch  # noqa: E402
 from _page import write_page  # noqa: E402
 
@@ -163,14 +164,8 @@ def main() -> None:
     if not a.skip_exams:
         for _ in range(a.runs):
             for mode, inproc in modes:
-                busy = [subprocess.Popen([sys.executable, '-c', 'while True: pass'])
-                        for _ in range(a.busy)]
-                try:
+                with busy(a.busy):
                     r = exam(mode, inproc, domain)
-                finally:
-                    for b in busy:
-                        b.terminate()
-                        b.wait()
                 rows.append(r)
                 print(json.dumps(r), flush=True)
     kills = respawn(a.kills, domain) if a.kills else []

@@ -33,7 +33,8 @@ import sys
 import tempfile
 import time
 from pathlib import Path
-from _page import run_with_page  # noqa: E402  (bench/ is sys.path[0])
+from _busy import busy as spinning  # noqa: E402  (bench/ is sys.path[0])
+from _page import run_with_page  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
@@ -77,29 +78,26 @@ def one_process(seconds: float, mode: str, trace: Path) -> None:
 def multi_process(seconds: float, mode: str, trace: Path, busy: int = 0) -> None:
     from haptic_anfis.nodes.processes import node_env, start_node, stop_node
     env = node_env(150 + os.getpid() % 50, localhost=True)
-    hogs = [subprocess.Popen([sys.executable, '-c', 'while True: pass']) for _ in range(busy)]
-    cargs = [a for k, v in CONTACT_PARAMS.items() for a in ('-p', f'{k}:={v}')]
-    helpers = [start_node(n, cargs if n == 'contact_detector' else (), env=env,
-                          log=subprocess.DEVNULL) for n in ('force_server', 'contact_detector')]
-    try:
-        time.sleep(3.0)
-        driver = start_node('falcon_driver', ['-p', f'run_duration:={float(seconds)}',
-                                              '-p', f'force_mode:={mode}',
-                                              '-p', f'trace_path:={trace}',
-                                              *(a for k, v in DRIVER_PARAMS.items()
-                                                for a in ('-p', f'{k}:={str(v).lower()}'))],
-                            env=env, log=subprocess.PIPE)
-        helpers.append(driver)  # stopped below if it outlives the timeout
-        out = driver.communicate(timeout=seconds + 180)[0].decode(errors='replace')
-        if not trace.is_file():
-            raise RuntimeError(f'falcon_driver wrote no trace (rc {driver.returncode}):\n'
-                               f'{out[-2000:]}')
-    finally:
-        for h in helpers:
-            stop_node(h)
-        for h in hogs:
-            h.kill()
-            h.wait()
+    with spinning(busy):
+        cargs = [a for k, v in CONTACT_PARAMS.items() for a in ('-p', f'{k}:={v}')]
+        helpers = [start_node(n, cargs if n == 'contact_detector' else (), env=env,
+                              log=subprocess.DEVNULL) for n in ('force_server', 'contact_detector')]
+        try:
+            time.sleep(3.0)
+            driver = start_node('falcon_driver', ['-p', f'run_duration:={float(seconds)}',
+                                                  '-p', f'force_mode:={mode}',
+                                                  '-p', f'trace_path:={trace}',
+                                                  *(a for k, v in DRIVER_PARAMS.items()
+                                                    for a in ('-p', f'{k}:={str(v).lower()}'))],
+                                env=env, log=subprocess.PIPE)
+            helpers.append(driver)  # stopped below if it outlives the timeout
+            out = driver.communicate(timeout=seconds + 180)[0].decode(errors='replace')
+            if not trace.is_file():
+                raise RuntimeError(f'falcon_driver wrote no trace (rc {driver.returncode}):\n'
+                                   f'{out[-2000:]}')
+        finally:
+            for h in helpers:
+                stop_node(h)
 
 
 def row(name: str, r: dict) -> str:

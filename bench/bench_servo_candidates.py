@@ -34,6 +34,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _busy import busy  # noqa: E402
 
 SCHEDULING = ('fifo 50', 'normal', 'normal + slice')
 
@@ -137,19 +138,12 @@ def main() -> int:
     for nbusy in (0, a.busy):
         for kind in ('python thread', 'nogil thread', 'own process'):
             for how in SCHEDULING:
-                procs = [subprocess.Popen([sys.executable, '-c', 'while True: pass'])
-                         for _ in range(nbusy)]
-                try:
+                with busy(nbusy):
                     time.sleep(0.5)
                     r = subprocess.run([sys.executable, __file__, '--ticks', str(a.ticks),
                                         '--child', kind, how], capture_output=True, text=True,
                                        timeout=600)
                     load = os.getloadavg()[0]
-                finally:
-                    for p in procs:
-                        p.terminate()
-                    for p in procs:
-                        p.wait()
                 try:
                     j = json.loads(r.stdout.strip().splitlines()[-1])
                 except (ValueError, IndexError):

@@ -36,19 +36,13 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _busy import busy  # noqa: E402
 from _page import write_page  # noqa: E402
 
 CLI = [sys.executable, '-m', 'haptic_anfis.cli']
 COLS = ('config', 'busy', 'load', 'rt_others', 'rate_hz', 'periods_lost', 'max_gap_ms',
         'err_rms_pct', 'ripple_pct', 'ripple_ideal_pct', 'zero_ticks', 'dropout_ms', 'trips_contact',
         'expired', 'held', 'lat_p99_ms', 'lat_max_ms')
-
-
-def busy(n: int, sessions: bool = False) -> list[subprocess.Popen]:
-    """``n`` processes spinning on the CPU (ended by :func:`stop`); ``sessions``: each in a
-    session of its own, as other programs on a desktop are (autogroup: a fair share each)."""
-    return [subprocess.Popen([sys.executable, '-c', 'while True: pass'],
-                             start_new_session=sessions) for _ in range(n)]
 
 
 class TestSuite:
@@ -76,13 +70,6 @@ class TestSuite:
             except subprocess.TimeoutExpired:
                 os.killpg(self.proc.pid, signal.SIGKILL)
                 self.proc.wait()
-
-
-def stop(procs: list[subprocess.Popen]) -> None:
-    for p in procs:
-        p.terminate()
-    for p in procs:
-        p.wait()
 
 
 def rt_threads() -> int:
@@ -240,15 +227,12 @@ def main() -> int:
             if suite is not None:
                 suite.ensure()
                 time.sleep(20.0 if suite.starts == 1 and not rows else 0.0)  # collecting tests
-            procs = busy(nbusy, a.busy_sessions)
-            try:
+            with busy(nbusy, a.busy_sessions):
                 time.sleep(1.0)
                 load0 = os.getloadavg()[0]
                 rt = rt_threads()
                 j = run_one(kind, prio, a.duration, loop, d, gprio, a.view, a.force_mode)
                 load = max(load0, os.getloadavg()[0])
-            finally:
-                stop(procs)
             r = row(f'{kind} prio {prio}' + (f' graph {gprio}' if gprio else '') + f' ({loop})',
                     nbusy, load, j)
             r['rt_others'] = rt

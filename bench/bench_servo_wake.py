@@ -15,9 +15,9 @@ single thread can avoid; two workers on two cores are rarely both held.
 Usage: ``python bench/bench_servo_wake.py [--duration 15] [--busy 8] [--repeat 4]
 [--background-sim] [--busy-sessions] [--page servo_wake] [--no-page]``.
 ``--busy-sessions``: each busy process in a session of its own, as other programs on a desktop
-are (Linux's autogroup then gives each its own fair share; by default they share this one's). ``--background-sim``: a ``haptic-anfis sim`` session (with the
-recorder) runs beside it too, as a second trainee's session would. Writes
-``docs/measurements/servo_wake.md``.
+are (Linux's autogroup then gives each its own fair share; by default they share this one's).
+``--background-sim``: a ``haptic-anfis sim`` session (with the recorder) runs beside it too, as
+a second trainee's session would. Writes ``docs/measurements/<page>.md``.
 """
 from __future__ import annotations
 
@@ -32,13 +32,15 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / 'bench'))
 
 import numpy as np  # noqa: E402
 
 from haptic_anfis.device import HandParams, WorkspaceMapping  # noqa: E402
-from haptic_anfis.device import native_tick as nt  # noqa: E402
 from haptic_anfis.device.palpation import PalpationScript  # noqa: E402
 from haptic_anfis.device.servo_native import NativeServoLoop  # noqa: E402
+
+from _busy import busy  # noqa: E402
 
 CONFIGS = (('thread', 1), ('thread', 2), ('process', 1), ('process', 2))
 
@@ -77,32 +79,26 @@ def main() -> int:
                     help='page name: docs/measurements/<page>.md (default servo_wake)')
     ap.add_argument('--no-page', action='store_true', help='print only')
     a = ap.parse_args()
-    busy = [subprocess.Popen([sys.executable, '-c', 'while True: pass'],
-                             start_new_session=a.busy_sessions) for _ in range(a.busy)]
-    bg = None
-    td = tempfile.TemporaryDirectory(prefix='bench-wake-')
     results: dict[tuple[str, int], list[tuple[float, float]]] = {c: [] for c in CONFIGS}
-    try:
-        if a.background_sim:
-            bg = subprocess.Popen(
-                [sys.executable, '-m', 'haptic_anfis.cli', 'sim', '--duration', '100000',
-                 '--record', str(Path(td.name) / 'bag')], stdout=subprocess.DEVNULL,
-                stderr=subprocess.DEVNULL, env=dict(os.environ, PYTHONPATH=str(ROOT)))
-            time.sleep(20.0)  # its graph up and pressing
-        for r in range(a.repeat):
-            for c in CONFIGS:
-                results[c].append(one(*c, a.duration))
-                print(f'run {r + 1}/{a.repeat} {c[0]:>7} workers {c[1]}: lost '
-                      f'{results[c][-1][0]:.2f} %, max gap {results[c][-1][1]:.2f} ms', flush=True)
-    finally:
-        for p in busy:
-            p.terminate()
-        if bg is not None:
-            bg.terminate()
-            bg.wait(30)
-        for p in busy:
-            p.wait()
-        td.cleanup()
+    with busy(a.busy, a.busy_sessions), tempfile.TemporaryDirectory(prefix='bench-wake-') as td:
+        bg = None
+        try:
+            if a.background_sim:
+                bg = subprocess.Popen(
+                    [sys.executable, '-m', 'haptic_anfis.cli', 'sim', '--duration', '100000',
+                     '--record', str(Path(td) / 'bag')], stdout=subprocess.DEVNULL,
+                    stderr=subprocess.DEVNULL, env=dict(os.environ, PYTHONPATH=str(ROOT)))
+                time.sleep(20.0)  # its graph up and pressing
+            for r in range(a.repeat):
+                for c in CONFIGS:
+                    results[c].append(one(*c, a.duration))
+                    print(f'run {r + 1}/{a.repeat} {c[0]:>7} workers {c[1]}: lost '
+                          f'{results[c][-1][0]:.2f} %, max gap {results[c][-1][1]:.2f} ms',
+                          flush=True)
+        finally:
+            if bg is not None:
+                bg.terminate()
+                bg.wait(30)
     lines = ['| loop | workers | lost % median | lost % worst | max gap ms median | '
              'max gap ms worst |', '|---|---|---|---|---|---|']
     for (kind, w), rs in results.items():
@@ -112,7 +108,6 @@ def main() -> int:
     table = '\n'.join(lines)
     print(table)
     if not a.no_page:
-        sys.path.insert(0, str(ROOT / 'bench'))
         from _page import write_page
         notes = (f'\n\n{a.repeat} runs of {a.duration:g} s per configuration, interleaved, '
                  f'beside {a.busy} busy processes'

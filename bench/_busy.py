@@ -1,0 +1,34 @@
+"""Processes that spin on the CPU beside a benchmark: the load of other programs.
+
+    from _busy import busy   # bench/ is sys.path[0] when a bench script runs
+    with busy(8):                 # 8 Python processes spinning until the block ends
+        ...
+    with busy(8, sessions=True):  # each in a session of its own, as a desktop's programs are
+        ...
+
+``sessions``: Linux's autogroup gives each session one fair share of the CPU, so 8 spinners in
+8 sessions load a process in another session far more than 8 spinners sharing one session.
+"""
+from __future__ import annotations
+
+import contextlib
+import subprocess
+import sys
+from typing import Iterator
+
+__all__ = ['busy']
+
+
+@contextlib.contextmanager
+def busy(n: int, sessions: bool = False) -> Iterator[list[subprocess.Popen]]:
+    """``n`` processes spinning on the CPU for the block (``sessions``: each in a session of
+    its own); ended, and waited for, when it leaves, also on an error."""
+    procs = [subprocess.Popen([sys.executable, '-c', 'while True: pass'],
+                              start_new_session=sessions) for _ in range(n)]
+    try:
+        yield procs
+    finally:
+        for p in procs:
+            p.terminate()
+        for p in procs:
+            p.wait()
