@@ -221,7 +221,7 @@ def test_stop_leaves_zero_force_and_trace_rows():
     assert lp.tick(0.001)[0] == pytest.approx(2.0)
     lp.ctl[nt.CTL.stop] = 1
     nt.run(lp.cfg, lp.st, lp.times, lp.points, lp.buttons, lp.hand, lp.cmd, lp.model, lp.ctl,
-           lp.out, lp.cnt, lp.ring, lp._scratch, lp._ts, lp._lock)
+           lp.out, lp.cnt, lp.ring, lp._scratch, np.zeros(2, dtype=np.int64), lp._lock)
     assert tuple(lp.st[nt.S.f0:nt.S.f0 + 3]) == (0.0, 0.0, 0.0)
     lp._drain()
     rows = lp.trace.arrays()

@@ -486,7 +486,6 @@ class NativeServoLoop:
         self.workers = int(workers)
         self._lock = np.zeros(nt.LOCK_LEN, dtype=np.int64)  # the workers' mutex (one process)
         self._cpus = worker_cpus(self.workers)  # before any worker pins itself
-        self._ts = np.zeros(2, dtype=np.int64)
         self.safety = NativeSafety(self, max_force, max_force_rate, watchdog_timeout, frame_id)
         self.renderer = NativeRenderer(self, tissue_stiffness_limit(
             max_stiffness, mapping.force_scale, mapping.scale), validity_time, validity_radius,
@@ -553,7 +552,7 @@ class NativeServoLoop:
         nt.run(self.cfg, self.st.copy(), self.times, self.points, self.buttons, self.hand.copy(),
                self.cmd.copy(),
                self.model.copy(), ctl, self.out.copy(), self.cnt.copy(), self.ring[:0].copy(),
-               self._scratch.copy(), self._ts.copy(), self._lock.copy())
+               self._scratch.copy(), np.zeros(2, dtype=np.int64), self._lock.copy())
         if self.device_factory is not None:  # the device loop calls these from Python
             st, cnt = self.st.copy(), self.cnt.copy()
             nt.tick(0.0, self.cfg, st, self.times, self.points, self.buttons, self.hand.copy(),
