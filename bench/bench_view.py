@@ -42,17 +42,24 @@ from haptic_anfis.view.browser import free_port  # noqa: E402
 
 def open_browser(url: str) -> subprocess.Popen:
     """A headless chromium keeping ``url`` open (killed by the caller), niced: it stands for a
-    viewer's browser, which renders on a GPU; this one renders in software on the loop's cores."""
+    viewer's browser, which renders on a GPU; this one renders in software on the loop's cores
+    (a full core of two for the page at 30 Hz). In a session of its own (so that
+    :func:`close_browser` finds all its processes), niced with its session (``yield_cpu``: with
+    autogroups a plain ``nice`` would not lower a session's share)."""
+    import functools
+
+    from haptic_anfis.nodes.processes import yield_cpu
     from haptic_anfis.view.browser import CHROMIUM_FLAGS, chromium
     profile = tempfile.mkdtemp(prefix='bench-view-chromium-')
-    return subprocess.Popen(['nice', '-n', '10', chromium(), *CHROMIUM_FLAGS,
+    return subprocess.Popen([chromium(), *CHROMIUM_FLAGS,
                              f'--user-data-dir={profile}', '--window-size=1280,800',
                              '--remote-debugging-port=0',
                              '--disable-renderer-backgrounding',
                              '--disable-background-timer-throttling',
                              '--disable-backgrounding-occluded-windows', url],
                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-                            start_new_session=True)
+                            start_new_session=True,
+                            preexec_fn=functools.partial(yield_cpu, 10))
 
 
 def close_browser(browser: subprocess.Popen) -> None:

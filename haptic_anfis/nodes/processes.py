@@ -61,11 +61,37 @@ def _stop_with_parent() -> None:
         pass
 
 
+#: CPU priority of the side nodes (nice): they yield the cores to the loop's threads
+SIDE_NICE = 10
+
+#: Nodes drawn for a person, never on the haptic path: at :data:`SIDE_NICE` in every layout.
+VIEW_NODES = ('visualizer', 'web_view')
+
+
+def yield_cpu(nice: int) -> None:
+    """Lower this process's CPU priority by ``nice`` (> 0), in a way the scheduler honours.
+
+    A kernel with autogroups (``/proc/sys/kernel/sched_autogroup_enabled``, on by default on
+    many desktop kernels) shares the CPU fairly between sessions first and uses nice values only
+    between the processes of one session; a process that leads a session of its own (the nodes,
+    the browser of the benchmarks) lowers its session's weight too (``/proc/self/autogroup``,
+    sched(7)), or its nice value would change nothing. Lowering is allowed without privileges;
+    where the file is missing or refused only the process's nice value changes."""
+    if nice <= 0:
+        return
+    os.nice(nice)
+    if os.getsid(0) == os.getpid():  # never renice a session this process does not lead
+        try:
+            with open('/proc/self/autogroup', 'w') as f:
+                f.write(str(int(nice)))
+        except OSError:
+            pass
+
+
 def _in_child(stop_with_parent: bool, nice: int) -> None:
     if stop_with_parent:
         _stop_with_parent()
-    if nice:
-        os.nice(nice)
+    yield_cpu(nice)
 
 
 def start_node(name: str, ros_args: Sequence[str] = (), env: Mapping[str, str] | None = None,
@@ -77,7 +103,8 @@ def start_node(name: str, ros_args: Sequence[str] = (), env: Mapping[str, str] |
     session, so a Ctrl-C at the terminal reaches only the launcher, which stops the nodes in
     order (the driver first) instead of all at once; the node then also gets SIGINT if the
     launcher dies (Linux), since no terminal signal would reach it. ``nice`` > 0 lowers the
-    node's CPU priority (a node off the haptic loop yields the cores to it)."""
+    node's CPU priority, its session's too (:func:`yield_cpu`: a node off the haptic loop yields
+    the cores to it)."""
     if name not in node_names():
         raise ValueError(f'unknown node {name!r}; known: {", ".join(node_names())}')
     exe = BIN / name
@@ -114,15 +141,18 @@ class Supervisor:
     them, e.g. a new bag directory for the recorder) while at most ``max_restarts`` restarts per
     node are allowed. ``log_dir``: each node's output goes to ``DIR/<node>.log`` (appended to on a
     restart), else to ``stream`` (a file object; None = this terminal's standard output). ``nice``:
-    as :func:`start_node`'s, for every node.
+    as :func:`start_node`'s, for every node, or per node name ({name: nice}; others 0); by
+    default the view nodes (:data:`VIEW_NODES`) at :data:`SIDE_NICE`, the others at 0.
     """
 
     def __init__(self, env: Mapping[str, str], log_dir: Path | None = None,
-                 max_restarts: int = 3, stream: IO | None = None, nice: int = 0):
+                 max_restarts: int = 3, stream: IO | None = None,
+                 nice: int | Mapping[str, int] | None = None):
         if max_restarts < 0:
             raise ValueError(f'max_restarts: expected >= 0, got {max_restarts}')
         self.env, self.log_dir, self.max_restarts = dict(env), log_dir, max_restarts
-        self.stream, self.nice = stream, nice
+        self.stream = stream
+        self.nice = {n: SIDE_NICE for n in VIEW_NODES} if nice is None else nice
         self.procs: dict[str, subprocess.Popen] = {}
         self.args: dict[str, list[str]] = {}
         self.first_args: dict[str, list[str]] = {}
@@ -138,7 +168,8 @@ class Supervisor:
             log = self.logs.get(name) or (self.log_dir / f'{name}.log').open('w')
             self.logs[name] = log
         p = start_node(name, list(args), env={**self.env, **(env or {})}, log=log,
-                       own_session=True, nice=self.nice)
+                       own_session=True, nice=self.nice if isinstance(self.nice, int)
+                       else self.nice.get(name, 0))
         self.procs[name], self.args[name] = p, list(args)
         self.first_args.setdefault(name, list(args))
         self.started_at[name] = time.monotonic()

@@ -18,12 +18,10 @@ import sys
 import time
 from typing import Mapping, Sequence
 
-from .processes import SESSION_CHECKED, Supervisor, node_env
+from .processes import SESSION_CHECKED, SIDE_NICE, Supervisor, node_env
 from ..errors import HapticAnfisError
 
 
-#: CPU priority of the side nodes (nice): they yield the cores to the loop's threads
-SIDE_NICE = 10
 
 
 class SideNodeError(HapticAnfisError, RuntimeError):
