@@ -43,23 +43,21 @@ from haptic_anfis.view.browser import free_port  # noqa: E402
 def open_browser(url: str) -> subprocess.Popen:
     """A headless chromium keeping ``url`` open (killed by the caller), niced: it stands for a
     viewer's browser, which renders on a GPU; this one renders in software on the loop's cores
-    (a full core of two for the page at 30 Hz). In a session of its own (so that
-    :func:`close_browser` finds all its processes), niced with its session (``yield_cpu``: with
-    autogroups a plain ``nice`` would not lower a session's share)."""
-    import functools
-
-    from haptic_anfis.nodes.processes import yield_cpu
+    (a full core of two for the page at 30 Hz). In a process group of its own (so that
+    :func:`close_browser` finds all its processes) but in this session: with autogroups
+    (``/proc/sys/kernel/sched_autogroup_enabled``) a nice value counts only within a session;
+    lowering a whole session's weight instead (``/proc/<pid>/autogroup``) made a 1 kHz loop in
+    another session lose periods on this kernel (tried, not kept)."""
     from haptic_anfis.view.browser import CHROMIUM_FLAGS, chromium
     profile = tempfile.mkdtemp(prefix='bench-view-chromium-')
-    return subprocess.Popen([chromium(), *CHROMIUM_FLAGS,
+    return subprocess.Popen(['nice', '-n', '10', chromium(), *CHROMIUM_FLAGS,
                              f'--user-data-dir={profile}', '--window-size=1280,800',
                              '--remote-debugging-port=0',
                              '--disable-renderer-backgrounding',
                              '--disable-background-timer-throttling',
                              '--disable-backgrounding-occluded-windows', url],
                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-                            start_new_session=True,
-                            preexec_fn=functools.partial(yield_cpu, 10))
+                            process_group=0)
 
 
 def close_browser(browser: subprocess.Popen) -> None:

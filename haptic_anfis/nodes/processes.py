@@ -68,30 +68,11 @@ SIDE_NICE = 10
 VIEW_NODES = ('visualizer', 'web_view')
 
 
-def yield_cpu(nice: int) -> None:
-    """Lower this process's CPU priority by ``nice`` (> 0), in a way the scheduler honours.
-
-    A kernel with autogroups (``/proc/sys/kernel/sched_autogroup_enabled``, on by default on
-    many desktop kernels) shares the CPU fairly between sessions first and uses nice values only
-    between the processes of one session; a process that leads a session of its own (the nodes,
-    the browser of the benchmarks) lowers its session's weight too (``/proc/self/autogroup``,
-    sched(7)), or its nice value would change nothing. Lowering is allowed without privileges;
-    where the file is missing or refused only the process's nice value changes."""
-    if nice <= 0:
-        return
-    os.nice(nice)
-    if os.getsid(0) == os.getpid():  # never renice a session this process does not lead
-        try:
-            with open('/proc/self/autogroup', 'w') as f:
-                f.write(str(int(nice)))
-        except OSError:
-            pass
-
-
 def _in_child(stop_with_parent: bool, nice: int) -> None:
     if stop_with_parent:
         _stop_with_parent()
-    yield_cpu(nice)
+    if nice:
+        os.nice(nice)
 
 
 def start_node(name: str, ros_args: Sequence[str] = (), env: Mapping[str, str] | None = None,
@@ -103,8 +84,11 @@ def start_node(name: str, ros_args: Sequence[str] = (), env: Mapping[str, str] |
     session, so a Ctrl-C at the terminal reaches only the launcher, which stops the nodes in
     order (the driver first) instead of all at once; the node then also gets SIGINT if the
     launcher dies (Linux), since no terminal signal would reach it. ``nice`` > 0 lowers the
-    node's CPU priority, its session's too (:func:`yield_cpu`: a node off the haptic loop yields
-    the cores to it)."""
+    node's CPU priority (a node off the haptic loop yields the cores to it). Where the kernel
+    groups processes by session (autogroups, ``/proc/sys/kernel/sched_autogroup_enabled``) a nice
+    value counts only between the processes of one session, so a node in a session of its own
+    keeps its session's share; lowering the session's weight instead (``/proc/<pid>/autogroup``)
+    was tried and made a 1 kHz loop in another session lose periods (issue 32): not done."""
     if name not in node_names():
         raise ValueError(f'unknown node {name!r}; known: {", ".join(node_names())}')
     exe = BIN / name
