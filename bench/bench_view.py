@@ -41,13 +41,13 @@ from haptic_anfis.view.browser import free_port  # noqa: E402
 
 
 def open_browser(url: str) -> subprocess.Popen:
-    """A headless chromium keeping ``url`` open (killed by the caller), niced: it stands for a
-    viewer's browser, which renders on a GPU; this one renders in software on the loop's cores
-    (a full core of two for the page at 30 Hz). In a process group of its own (so that
-    :func:`close_browser` finds all its processes) but in this session: with autogroups
-    (``/proc/sys/kernel/sched_autogroup_enabled``) a nice value counts only within a session;
-    lowering a whole session's weight instead (``/proc/<pid>/autogroup``) made a 1 kHz loop in
-    another session lose periods on this kernel (tried, not kept)."""
+    """A headless chromium keeping ``url`` open (killed by the caller): it stands for a trainee's
+    browser, another program in a session of its own, which draws on a GPU; this one draws in
+    software on the loop's cores (a whole core of two at the view's 30 Hz). ``nice`` counts only
+    inside its session where the kernel groups by session (autogroups), and run as root chromium
+    sets some of its processes' priorities itself; putting it in the benchmark's session made it
+    starve the `sim` graph there instead, and lowering its session's weight
+    (``/proc/<pid>/autogroup``) made a 1 kHz loop in another session lose periods (issue 32)."""
     from haptic_anfis.view.browser import CHROMIUM_FLAGS, chromium
     profile = tempfile.mkdtemp(prefix='bench-view-chromium-')
     return subprocess.Popen(['nice', '-n', '10', chromium(), *CHROMIUM_FLAGS,
@@ -57,7 +57,7 @@ def open_browser(url: str) -> subprocess.Popen:
                              '--disable-background-timer-throttling',
                              '--disable-backgrounding-occluded-windows', url],
                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-                            process_group=0)
+                            start_new_session=True)
 
 
 def close_browser(browser: subprocess.Popen) -> None:
