@@ -136,7 +136,7 @@ def run_one(kind: str, priority: int, duration: float, loop: str, d: Path,
                '--params-file', str(pf), '--localhost', '--log-dir', str(d / f'log_{bag.name}')]
     if graph_priority > 0:
         cmd = ['chrt', '-f', str(graph_priority), *cmd]
-    stop = None
+    stop = browser = None
     if view:
         import threading
 
@@ -144,13 +144,16 @@ def run_one(kind: str, priority: int, duration: float, loop: str, d: Path,
         port = free_port()
         cmd += ['--view', '--view-port', str(port)]
         stop = threading.Event()
-        browser_when_up(port, stop)
+        browser = browser_when_up(port, stop)
     env = dict(os.environ, PYTHONPATH=str(ROOT))
     try:
         r = subprocess.run(cmd, capture_output=True, text=True, env=env, timeout=duration + 900)
     finally:
         if stop is not None:
+            # Join: a daemon thread still closing its chromium when the benchmark exits leaves
+            # that chromium drawing on the cores of whatever runs next.
             stop.set()
+            browser.join(timeout=60)
     for line in reversed(r.stdout.splitlines()):
         if line.startswith('{'):
             try:
