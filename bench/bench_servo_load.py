@@ -134,6 +134,8 @@ def run_one(kind: str, priority: int, duration: float, loop: str, d: Path,
     else:
         cmd = [*CLI, 'launch', '--duration', str(duration), '--json', '--record', str(bag),
                '--params-file', str(pf), '--localhost', '--log-dir', str(d / f'log_{bag.name}')]
+    if priority <= 0:  # a user without real-time rights: the graph cannot have it either
+        cmd += ['--graph-priority', '0']
     if graph_priority > 0:
         cmd = ['chrt', '-f', str(graph_priority), *cmd]
     stop = browser = None

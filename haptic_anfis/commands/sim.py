@@ -73,7 +73,8 @@ def run(args: argparse.Namespace) -> int:
     recorded = session.print_recorded()
     if args.json:
         out = json_summary(summary, recorded)
-        out.update(_trace_figures(trace, spec.params_files))
+        out.update(_trace_figures(trace, spec.params_files),
+                   graph_scheduling=session.graph_scheduling)
         print(json.dumps(out), flush=True)
     return 0
 

@@ -68,11 +68,88 @@ SIDE_NICE = 10
 VIEW_NODES = ('visualizer', 'web_view')
 
 
+#: SCHED_FIFO priority of the graph's nodes on the haptic path (every node but the view nodes;
+#: in ``sim``, the loop's whole process), below the servo thread's (falcon_driver's
+#: ``servo_priority``, 50): the local models come from them. Under the normal scheduler a busy
+#: machine starves them even where the servo thread itself is real-time: beside 8 busy
+#: processes and the browser view on 2 cores, ``sim`` with the servo at SCHED_FIFO 50 had its
+#: models expire (204 ticks at 0 N mid-press, 20.6 % applied-force error); with the graph at
+#: SCHED_FIFO 10 as well, 0 and 0.08 % (issue 32, docs/measurements/servo_load_view.md).
+#: Event-driven nodes: they sleep between messages, and Linux keeps 5 % of each second for the
+#: normal scheduler whatever real-time threads do (``/proc/sys/kernel/sched_rt_runtime_us``).
+GRAPH_PRIORITY = 10
+
+_RT_POLICIES = tuple(getattr(os, n) for n in ('SCHED_FIFO', 'SCHED_RR') if hasattr(os, n))
+
+
+def _threads(pid: int | None = None) -> list[int]:
+    try:
+        return [int(t) for t in os.listdir(f'/proc/{pid or "self"}/task')]
+    except FileNotFoundError:  # the process has ended
+        return []
+    except OSError:  # not Linux: the calling thread only
+        return [0] if pid is None else []
+
+
+def set_graph_priority(priority: int, pid: int | None = None) -> str:
+    """Schedule every thread of process ``pid`` (None: this one) SCHED_FIFO at ``priority``
+    (0: leave them as they are); the threads it starts later inherit it (the processes it
+    starts with :func:`start_node` do not). A thread already real-time at ``priority`` or above
+    keeps its own (the servo thread). Call it once the process is ready: a cold numba compile
+    at real-time priority would hold a core for minutes. Returns what was done, in words, for
+    the log; refused (no CAP_SYS_NICE or rtprio limit), every thread keeps the normal scheduler
+    and the words say how to allow it."""
+    if priority <= 0:
+        return 'normal scheduler (graph priority 0)'
+    done = []
+    for tid in _threads(pid):
+        try:
+            if (os.sched_getscheduler(tid) in _RT_POLICIES
+                    and os.sched_getparam(tid).sched_priority >= priority):
+                continue
+            os.sched_setscheduler(tid, os.SCHED_FIFO, os.sched_param(int(priority)))
+            done.append(tid)
+        except ProcessLookupError:  # the thread has ended
+            continue
+        except (OSError, AttributeError) as exc:  # EPERM without the right; not Linux
+            for t in done:
+                _normal(t)
+            why = getattr(exc, 'strerror', None) or str(exc)
+            return (f'normal scheduler: SCHED_FIFO {priority} refused ({why}); allow it with '
+                    f'`ulimit -r {priority}` or an rtprio line in /etc/security/limits.conf')
+    return f'SCHED_FIFO priority {priority}'
+
+
+def clear_graph_priority(priority: int) -> None:
+    """Back to the normal scheduler for every thread of this process at SCHED_FIFO
+    ``priority`` (what :func:`set_graph_priority` set, and the threads that inherited it)."""
+    if priority <= 0:
+        return
+    for tid in _threads():
+        try:
+            if (os.sched_getscheduler(tid) == os.SCHED_FIFO
+                    and os.sched_getparam(tid).sched_priority == priority):
+                _normal(tid)
+        except OSError:
+            continue
+
+
+def _normal(tid: int) -> None:
+    try:
+        os.sched_setscheduler(tid, os.SCHED_OTHER, os.sched_param(0))
+    except OSError:
+        pass
+
+
 def _in_child(stop_with_parent: bool, nice: int) -> None:
     if stop_with_parent:
         _stop_with_parent()
+    if os.sched_getscheduler(0) in _RT_POLICIES:
+        _normal(0)  # not inherited from a real-time parent (sim's graph): raised when ready
     if nice:
         os.nice(nice)
+
+
 
 
 def start_node(name: str, ros_args: Sequence[str] = (), env: Mapping[str, str] | None = None,
@@ -88,7 +165,9 @@ def start_node(name: str, ros_args: Sequence[str] = (), env: Mapping[str, str] |
     groups processes by session (autogroups, ``/proc/sys/kernel/sched_autogroup_enabled``) a nice
     value counts only between the processes of one session, so a node in a session of its own
     keeps its session's share; lowering the session's weight instead (``/proc/<pid>/autogroup``)
-    was tried and made a 1 kHz loop in another session lose periods (issue 32): not done."""
+    was tried and made a 1 kHz loop in another session lose periods (issue 32): not done.
+    The node starts under the normal scheduler also when this process is real-time (sim's graph
+    after :func:`set_graph_priority`); :meth:`Supervisor.raise_priority` raises it once ready."""
     if name not in node_names():
         raise ValueError(f'unknown node {name!r}; known: {", ".join(node_names())}')
     exe = BIN / name
@@ -97,7 +176,7 @@ def start_node(name: str, ros_args: Sequence[str] = (), env: Mapping[str, str] |
     return subprocess.Popen(cmd, env=dict(env) if env is not None else node_env(), cwd=cwd,
                             start_new_session=own_session,
                             preexec_fn=functools.partial(_in_child, own_session, nice)
-                            if own_session or nice else None,
+                            if own_session or nice or _realtime() else None,
                             stdout=log, stderr=subprocess.STDOUT if log is not None else None)
 
 
@@ -117,6 +196,13 @@ def stop_node(p: subprocess.Popen, timeout: float = 10.0, sig: int = signal.SIGI
     return p.returncode
 
 
+def _realtime() -> bool:
+    try:
+        return os.sched_getscheduler(0) in _RT_POLICIES
+    except (OSError, AttributeError):
+        return False
+
+
 class Supervisor:
     """The launched node processes and their restarts (no ROS; ``haptic-anfis launch``).
 
@@ -127,6 +213,8 @@ class Supervisor:
     restart), else to ``stream`` (a file object; None = this terminal's standard output). ``nice``:
     as :func:`start_node`'s, for every node, or per node name ({name: nice}; others 0); by
     default the view nodes (:data:`VIEW_NODES`) at :data:`SIDE_NICE`, the others at 0.
+    :meth:`raise_priority` puts the nodes on the haptic path (all but the view nodes) at a
+    real-time priority once they are ready.
     """
 
     def __init__(self, env: Mapping[str, str], log_dir: Path | None = None,
@@ -137,6 +225,7 @@ class Supervisor:
         self.env, self.log_dir, self.max_restarts = dict(env), log_dir, max_restarts
         self.stream = stream
         self.nice = {n: SIDE_NICE for n in VIEW_NODES} if nice is None else nice
+        self.raised: dict[str, int] = {}  # node: the pid raised (a restart is raised again)
         self.procs: dict[str, subprocess.Popen] = {}
         self.args: dict[str, list[str]] = {}
         self.first_args: dict[str, list[str]] = {}
@@ -159,6 +248,19 @@ class Supervisor:
         self.started_at[name] = time.monotonic()
         self.restarts.setdefault(name, 0)
         return p
+
+    def raise_priority(self, priority: int, names: Sequence[str]) -> dict[str, str]:
+        """Every node of ``names`` not raised yet (since its last start), but the view nodes, at
+        SCHED_FIFO ``priority`` (:func:`set_graph_priority`); {node: what was done}."""
+        done = {}
+        for n in names:
+            p = self.procs.get(n)
+            if priority <= 0 or n in VIEW_NODES or p is None or self.raised.get(n) == p.pid \
+                    or p.poll() is not None:
+                continue
+            done[n] = set_graph_priority(priority, p.pid)
+            self.raised[n] = p.pid
+        return done
 
     def dead(self) -> list[tuple[str, int]]:
         """(name, exit code) of every node that has exited (and was not restarted since)."""

@@ -61,6 +61,8 @@ class OneProcessSession:
         self.spec, self.overrides, self.hand = spec, overrides, hand
         self.extra = list(extra)
         self.graph = None
+        #: how the graph's threads are scheduled once ready (``--graph-priority``), in words
+        self.graph_scheduling = ''
         self.codes: dict[str, int] = {}
         if spec.record and not spec.recorder_process:
             self.extra.append(self._recorder)
@@ -132,6 +134,11 @@ class OneProcessSession:
             print(f'not ready after {s.ready_timeout:g} s: no force command reached the driver',
                   flush=True)
             return False
+        from ..nodes.processes import set_graph_priority
+        # now, not before: a cold numba compile at real-time priority would hold a core
+        self.graph_scheduling = set_graph_priority(s.graph_priority)
+        if 'refused' in self.graph_scheduling:
+            print(f'graph: {self.graph_scheduling}', flush=True)
         g.driver.servo.stats.reset()
         return True
 
@@ -147,7 +154,9 @@ class OneProcessSession:
     def stop(self) -> dict[str, int]:
         """The device to zero force and the graph down first, then the side nodes (the recorder
         has every message sent to it); the side nodes' exit codes."""
+        from ..nodes.processes import clear_graph_priority
         try:
+            clear_graph_priority(self.spec.graph_priority)  # the rest runs as it was started
             if self.graph is not None:
                 self.graph.shutdown()
         finally:

@@ -80,6 +80,8 @@ class ProcessSession:
                             else len(ORDER))
         self.result = ProcessResult()
         self.history: list[dict] = []
+        #: {node: how it is scheduled once ready} (``--graph-priority``), in words
+        self.graph_scheduling: dict[str, str] = {}
         self._replay_pending = False
         self._replay_known: set[bytes] = set()
         self.mon = self.sup = None
@@ -156,6 +158,7 @@ class ProcessSession:
                     f'{n} {mon.state(n) or "none"}' for n in self.order))
         if not ok:
             return
+        self._raise_priority()
         self.say('ready', after_s=round(time.monotonic() - self.t0, 1))
         print(f'ready after {time.monotonic() - self.t0:.1f} s: {len(sup.procs)} nodes running'
               + (f' for {s.duration:g} s' if s.duration else '; Ctrl-C stops them'), flush=True)
@@ -164,6 +167,7 @@ class ProcessSession:
             mon.spin(0.1)
             if not self._handle_deaths():
                 break
+            self._raise_priority()
 
     # -- steps --------------------------------------------------------------------------------
     def say(self, event: str, **kw) -> None:
@@ -172,6 +176,16 @@ class ProcessSession:
         self.history.append(e)
         print('session: ' + ', '.join(f'{k} {v}' for k, v in e.items() if k != 'wall_time'),
               flush=True)
+
+    def _raise_priority(self) -> None:
+        """The ready nodes on the haptic path to ``--graph-priority`` (once per start: a
+        restarted node when it is ready again); the first time, and any refusal, is said."""
+        s, mon, sup = self.spec, self.mon, self.sup
+        ready = [n for n in self.order if n in sup.procs and mon.state(n, sup.started_at[n])]
+        for n, what in sup.raise_priority(s.graph_priority, ready).items():
+            if 'refused' in what or n not in self.graph_scheduling:
+                print(f'scheduling {n:<16} {what}', flush=True)
+            self.graph_scheduling[n] = what
 
     def _start(self, name: str) -> None:
         p = self.sup.start(name, [*self.spec.params_arguments(), *self.extra[name]])

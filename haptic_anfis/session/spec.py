@@ -22,6 +22,7 @@ from pathlib import Path
 from typing import Any, Mapping, Sequence
 
 from ..errors import HapticAnfisError
+from ..nodes.processes import GRAPH_PRIORITY
 
 __all__ = ['SessionSpec', 'SessionError', 'Option', 'OPTIONS', 'COMMANDS', 'ONE_PROCESS_NODES',
            'CASE_NODES', 'add_session_arguments', 'spec_from_args', 'recorder_settings']
@@ -147,6 +148,16 @@ OPTIONS: tuple[Option, ...] = (
                                   help='with --view: serve the debrief this many seconds after '
                                        'the exam (default: until Ctrl-C)'),
            commands=('exam',), group=_VIEW),
+    Option(('--graph-priority',), dict(type=int, default=GRAPH_PRIORITY, metavar='N',
+                                       help='real-time priority (SCHED_FIFO 1-98) of the nodes '
+                                            'that make the local models once they are ready '
+                                            "(all but the view nodes; sim: the loop's process), "
+                                            "below the driver's servo_priority (50), so a busy "
+                                            'machine cannot starve them; 0 = the normal '
+                                            'scheduler (use 0 with servo_priority 0). Needs '
+                                            'CAP_SYS_NICE or an rtprio limit (ulimit -r); '
+                                            'refused, they keep the normal scheduler and a line '
+                                            f'says so (default {GRAPH_PRIORITY})')),
     Option(('--ready-timeout',), dict(type=float, default=300.0,
                                       help='seconds to wait for the nodes to start and the first '
                                            'force command to reach the driver (default 300: a '
@@ -187,6 +198,7 @@ class SessionSpec:
     view: bool = False
     view_port: int = 8080
     view_hold: float | None = None
+    graph_priority: int = GRAPH_PRIORITY
 
     # -- derived ------------------------------------------------------------------------------
     @property
@@ -236,6 +248,9 @@ class SessionSpec:
             raise SessionError(f'--ready-timeout: expected >= 0 s, got {self.ready_timeout}')
         if self.max_restarts < 0:
             raise SessionError(f'--max-restarts: expected >= 0, got {self.max_restarts}')
+        if not 0 <= self.graph_priority <= 98:
+            raise SessionError(f'--graph-priority: expected 0 (the normal scheduler) to 98 '
+                               f"(below the driver's servo thread), got {self.graph_priority}")
         for f in self.params_files:
             if not Path(f).is_file():
                 raise SessionError(f'--params-file {f}: no such file')
