@@ -41,6 +41,7 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
+    args._program = argv is None  # the program's own command line (not a call from Python)
     if not getattr(args, '_run', None):
         parser.print_help()
         return 2

@@ -134,3 +134,39 @@ def test_supervisor_raises_the_loop_nodes_once_and_never_a_view_node(monkeypatch
         for p in procs.values():
             p.kill()
             p.wait()
+
+
+def test_sim_runs_its_graph_in_a_session_of_its_own_and_stops_on_ctrl_c(tmp_path):
+    """``haptic-anfis sim`` from a command line re-runs itself in a session of its own (its
+    CPU share no longer split with the terminal's other jobs); Ctrl-C (SIGINT) at the
+    terminal's process is passed on: the graph stops cleanly, says so, and nothing is left."""
+    import signal
+    import time
+
+    from haptic_anfis.nodes.processes import OWN_SESSION
+    env = {k: v for k, v in os.environ.items() if k != OWN_SESSION}
+    env['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+    p = subprocess.Popen([sys.executable, '-m', 'haptic_anfis.cli', 'sim', '--duration', '120',
+                          '--no-viz', '--json'], env=env, stdout=subprocess.PIPE,
+                         stderr=subprocess.STDOUT, text=True)
+    lines = []
+    try:
+        for line in p.stdout:
+            lines.append(line)
+            if line.startswith('ready after'):
+                break
+        time.sleep(1.0)
+        p.send_signal(signal.SIGINT)
+        out, _ = p.communicate(timeout=120)
+    finally:
+        p.kill()
+    lines += out.splitlines()
+    assert p.returncode == 0, ''.join(lines)[-2000:]
+    assert any(line.startswith('interrupted') for line in lines)
+    import json
+    j = json.loads([line for line in lines if line.startswith('{')][-1])
+    assert j['own_session'] is True
+    assert j['rate_hz'] > 0
+    left = subprocess.run(['pgrep', '-f', 'haptic_anfis.cli sim --duration 120 --no-viz'],
+                          capture_output=True)
+    assert left.returncode == 1, left.stdout  # the re-run has ended with its parent

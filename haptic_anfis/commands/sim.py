@@ -32,6 +32,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    if getattr(args, '_program', False):  # the graph in a session of its own (a fair CPU share)
+        import sys
+
+        from ..nodes.processes import rerun_in_own_session
+        code = rerun_in_own_session(sys.argv[1:])
+        if code is not None:
+            return code
     from ..nodes.side_nodes import SideNodeError
     from ..session import OneProcessSession, spec_from_args
     from ..session.spec import ONE_PROCESS_NODES
@@ -73,8 +80,10 @@ def run(args: argparse.Namespace) -> int:
     recorded = session.print_recorded()
     if args.json:
         out = json_summary(summary, recorded)
+        import os
         out.update(_trace_figures(trace, spec.params_files),
-                   graph_scheduling=session.graph_scheduling)
+                   graph_scheduling=session.graph_scheduling,
+                   own_session=os.getsid(0) == os.getpid())
         print(json.dumps(out), flush=True)
     return 0
 

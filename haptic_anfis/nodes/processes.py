@@ -297,6 +297,51 @@ class Supervisor:
         return codes
 
 
+def _rerun_child() -> None:
+    _stop_with_parent()
+    # SIGINT is how this process stops it: a SIGINT ignored here (a shell's background job)
+    # must not be ignored there
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
+#: Set in the environment of a command re-run by :func:`rerun_in_own_session`.
+OWN_SESSION = 'HAPTIC_ANFIS_OWN_SESSION'
+
+
+def rerun_in_own_session(argv: Sequence[str]) -> int | None:
+    """Run ``haptic-anfis ARGV`` again in a session of its own and return its exit code; None
+    (nothing done) in that re-run itself, or when this process leads a session already.
+
+    Why (``sim``, issue 32): where the kernel groups processes by session (autogroups), the
+    CPU is shared between sessions first, and the one-process graph shared its terminal's
+    session with whatever else runs there: beside 8 busy processes of that session and the
+    browser view, without real-time priority, ``sim`` ran 923 Hz with 2.8 % applied-force error
+    and ripple in 15.6 % of the windows; in a session of its own 985 Hz, 0.17 % and none
+    (docs/servo_loop.md). This process stays in the terminal's session and waits: Ctrl-C,
+    SIGTERM and SIGHUP reach it and are passed on as SIGINT (the re-run stops the device at
+    zero force first and closes its bag); killed, the re-run gets SIGINT all the same
+    (PR_SET_PDEATHSIG)."""
+    if os.environ.get(OWN_SESSION) or os.getsid(0) == os.getpid():
+        return None
+    p = subprocess.Popen([sys.executable, '-m', 'haptic_anfis.cli', *argv],
+                         env={**os.environ, OWN_SESSION: '1'}, start_new_session=True,
+                         preexec_fn=_rerun_child)
+
+    def forward(signum, frame) -> None:
+        try:
+            p.send_signal(signal.SIGINT)
+        except ProcessLookupError:
+            pass
+    stop_signals = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
+    previous = {sig: signal.signal(sig, forward) for sig in stop_signals}
+    try:
+        code = p.wait()
+    finally:
+        for sig, h in previous.items():
+            signal.signal(sig, h)
+    return code if code >= 0 else 128 - code
+
+
 def recorder_arguments(output: str | os.PathLike, topics: Sequence[str]) -> list[str]:
     """The recorder's ``--ros-args`` for a bag at ``output`` (made absolute: the node may run in
     another working directory) holding ``topics``."""
