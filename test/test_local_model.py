@@ -6,10 +6,13 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as hst
 
 from haptic_anfis.device import DeviceState, SafetyLayer, ServoLoop, WorkspaceMapping
 from haptic_anfis.device.force_input import ForceInput
 from haptic_anfis.device.local_model import (EXPIRED, EXTRAPOLATED, FREE, FRESH, NONE,
+                                             hold_offset,
                                              LocalModel, LocalModelRenderer, condition_stiffness,
                                              condition_stiffness_values, contact_jacobian,
                                              depth_gradient)
@@ -208,19 +211,48 @@ def test_non_finite_model_rejected(field):
     assert r.stats.rejected == 1 and r.render((0, 0, 0), 0.0) == (None, NONE)
 
 
-def test_expiry_time_radius_and_leaving_contact():
+def test_expiry_by_time_beyond_the_radius_and_leaving_contact():
     n = np.array([1.0, 0, 0])
     r = LocalModelRenderer(validity_time=0.05, validity_radius=0.005, fresh_age=0.0015)
-    r.offer(make((2, 0, 0), (-0.004, 0, 0), -500 * np.eye(3), (0, 0, 0), n, -n, 0.004, t=1.0))
+    K = np.diag([-500.0, -100.0, -100.0])
+    r.offer(make((2, 0, 0), (-0.004, 0, 0), K, (0, 0, 0), n, -n, 0.004, t=1.0))
     assert r.render((-0.004, 0, 0), 1.001)[1] == FRESH
     assert r.render((-0.004, 0, 0), 1.02)[1] == EXTRAPOLATED
     assert r.render((-0.004, 0, 0), 1.0501) == (None, EXPIRED)
-    assert r.render((-0.004, 0.0051, 0), 1.01) == (None, EXPIRED)
+    # beyond the radius across the normal: rendered, the offset across held at 5 mm
+    f, st = r.render((-0.004, 0.008, 0), 1.01)
+    assert st == EXTRAPOLATED and f == pytest.approx((2.0, -0.5, 0.0))
+    # beyond it along the normal (a deep press on a late model): the depth followed exactly
+    f, st = r.render((-0.010, 0.001, 0), 1.01)
+    assert st == EXTRAPOLATED and f == pytest.approx((2.0 + 500 * 0.006, -0.1, 0.0))
     # out along the normal: zero at once, even beyond the radius
     assert r.render((0.0001, 0, 0), 1.01) == ((0.0, 0.0, 0.0), FREE)
     assert r.render((0.02, 0, 0), 1.01) == ((0.0, 0.0, 0.0), FREE)
     s = r.stats
-    assert (s.ticks_fresh, s.ticks_extrapolated, s.ticks_expired, s.ticks_free) == (1, 1, 2, 2)
+    assert (s.ticks_fresh, s.ticks_extrapolated, s.ticks_expired, s.ticks_free) == (1, 3, 1, 2)
+    assert s.ticks_beyond == 2
+
+
+@settings(max_examples=300, deadline=None)
+@given(g=hst.tuples(*[hst.floats(-2, 2)] * 3), e=hst.tuples(*[hst.floats(-0.05, 0.05)] * 3),
+       r=hst.floats(1e-4, 0.02))
+def test_hold_offset_keeps_the_depth_and_holds_the_offset_across(g, e, r):
+    """The depth g . e is kept; the part across g is at most r and points the same way; inside
+    the radius nothing changes; a zero gradient (no direction) holds the whole offset."""
+    h = np.array(hold_offset(*g, *e, r))
+    g, e = np.array(g), np.array(e)
+    assert np.all(np.isfinite(h))
+    gg = g @ g
+    if gg > 1e-12:
+        assert h @ g == pytest.approx(e @ g, abs=1e-12)
+        across = lambda v: v - (v @ g) / gg * g  # noqa: E731
+    else:
+        across = lambda v: v  # noqa: E731
+    assert np.linalg.norm(across(h)) <= r * (1 + 1e-9)
+    if np.linalg.norm(across(e)) <= r:
+        assert np.allclose(h, e, atol=1e-15)
+    else:
+        assert across(h) @ across(e) >= 0.0
 
 
 @pytest.mark.parametrize('seed', range(4))

@@ -122,8 +122,9 @@ def model_values(rng):
                       0.0).values()
 
 
+@pytest.mark.parametrize('spread', [0.001, 0.004])  # 0.004: many probes beyond the radius
 @pytest.mark.parametrize('seed', range(3))
-def test_local_model_renders_as_the_python_renderer(seed):
+def test_local_model_renders_as_the_python_renderer(seed, spread):
     rng = np.random.default_rng(seed)
     v = model_values(rng)
     lp = loop('local_model', max_force_rate=1e6, validity_time=1.0)
@@ -134,7 +135,7 @@ def test_local_model_renders_as_the_python_renderer(seed):
     p0 = np.array(v[3:6])
     t = 0.0
     for _ in range(20):
-        q = p0 + rng.normal(size=3) * 0.001
+        q = p0 + rng.normal(size=3) * spread
         pin(lp, MAP.to_device(tuple(q)), t)
         lp.tick(t)
         want, status = ref.render(tuple(q), t)
@@ -147,6 +148,8 @@ def test_local_model_renders_as_the_python_renderer(seed):
         t += 0.001
     assert lp.renderer.stats.ticks_fresh + lp.renderer.stats.ticks_extrapolated + \
         lp.renderer.stats.ticks_free > 0
+    assert lp.cnt[nt.CNT.beyond] == ref.stats.ticks_beyond
+    assert (ref.stats.ticks_beyond > 0) == (spread > 0.002)
 
 
 def test_non_finite_model_is_never_rendered():
@@ -260,7 +263,7 @@ def test_spectral_norm_matches_numpy():
             np.abs(np.linalg.eigvalsh(K)).max(), rel=1e-9)
 
 
-def test_an_old_model_is_held_inside_its_radius_then_expires():
+def test_an_old_model_is_held_then_expires():
     lp = loop('local_model', max_force_rate=1e6, validity_time=0.05, hold_time=0.3)
     lp.safety.start()
     K = np.diag([-1000.0, 0.0, 0.0])
@@ -273,9 +276,10 @@ def test_an_old_model_is_held_inside_its_radius_then_expires():
         f = lp.tick(t)
     assert f[0] == pytest.approx(2.0)
     assert lp.cnt[nt.CNT.held] == 2
-    pin(lp, MAP.to_device((0.05, 0.006, 0.0)), 0.102)  # 6 mm away: outside the radius
-    lp.tick(0.102)
-    assert int(lp.st[nt.S.status]) == EXPIRED
+    pin(lp, MAP.to_device((0.05, 0.006, 0.0)), 0.102)  # 6 mm away across: beyond the radius
+    f = lp.tick(0.102)
+    assert int(lp.st[nt.S.status]) != EXPIRED and f[0] == pytest.approx(2.0)
+    assert lp.cnt[nt.CNT.beyond] == 1
     for t in np.arange(0.103, 0.32, 0.001):  # past the hold time: expired, watchdog -> 0 N
         pin(lp, q, t)
         f = lp.tick(t)

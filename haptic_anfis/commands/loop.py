@@ -92,7 +92,7 @@ def trace_report(trace: str | Path, params_files=()) -> dict:
                                    'watchdog_trips', 'watchdog_trips_in_contact',
                                    'deadline_misses', 'periods_lost', 'max_gap_ms',
                                    'passivity_limited', 'servo_scheduling', 'trace_rows_lost',
-                                   'ticks_held',
+                                   'ticks_held', 'ticks_beyond',
                                    'rejected_stale', 'rejected_future',
                                    'rejected_unknown_stamp', 'process_cpu_pct',
                                    'ticks_approach')},

@@ -36,9 +36,13 @@ with these rules (:class:`LocalModelRenderer`):
   force-server latency late. Without a normal (all zeros) it renders zero force.
 - Non-finite F0, p0, K, normal or direction: the model is rejected (the caller zeroes the force).
 - Expiry: a model older than ``validity_time`` (measured from the time of the driver's own pose it
-  answers, not from its arrival) or a probe further than ``validity_radius`` from ``p0`` is
-  expired: the renderer stops extrapolating and the caller holds the last force and lets the
-  watchdog ramp it to zero, as the zero-order hold does.
+  answers, not from its arrival) is expired: the renderer stops extrapolating and the caller
+  holds the last force and lets the watchdog ramp it to zero, as the zero-order hold does.
+- Beyond ``validity_radius`` from ``p0`` (a late model under a fast stroke) the model is still
+  rendered, with the depth followed exactly and the offset across the indentation direction held
+  at the radius (:func:`hold_offset`): the force stays the tissue's at the probe's depth, a little
+  behind along the surface, where expiring it dropped the force to 0 N mid-press and brought it
+  back with a jolt when the next model came (issue 32). Counted (``ticks_beyond``).
 
 The message (``falcon/servo_cf_local``, layout :data:`haptic_anfis.interfaces.LOCAL_MODEL_FIELDS`)
 is encoded and decoded here, beside :class:`LocalModel`: :func:`model_values` /
@@ -460,6 +464,24 @@ def check_values(v) -> None:
                 raise ValueError(f'local model {name}: expected a unit vector, got {vec!r}')
 
 
+def hold_offset(gx: float, gy: float, gz: float, ex: float, ey: float, ez: float, r: float
+                ) -> tuple[float, float, float]:
+    """The probe's offset ``e`` [m] from a model's p0 with its part across the depth gradient
+    ``g`` held at ``r`` [m]; its part along ``g`` (so the depth ``g . e``) unchanged. A depth
+    gradient has a length of 1 or more (1 / cos of the angle between the indentation direction
+    and the normal); one of length <= 1e-6 gives no direction: the whole offset is held. Compiled
+    as it is for the native tick (``native_tick``)."""
+    gg = gx * gx + gy * gy + gz * gz
+    a = (gx * ex + gy * ey + gz * ez) / gg if gg > 1e-12 else 0.0
+    nx, ny, nz = a * gx, a * gy, a * gz
+    tx, ty, tz = ex - nx, ey - ny, ez - nz
+    tt = tx * tx + ty * ty + tz * tz
+    if tt <= r * r:
+        return ex, ey, ez
+    c = r / math.sqrt(tt)
+    return nx + c * tx, ny + c * ty, nz + c * tz
+
+
 @dataclass
 class RenderStats:
     """Tick counts by status, and models accepted/rejected, since construction or reset."""
@@ -469,6 +491,7 @@ class RenderStats:
     ticks_free: int = 0
     ticks_none: int = 0
     ticks_approach: int = 0  # of the fresh + extrapolated: from an approach model (contact onset)
+    ticks_beyond: int = 0  # of the fresh + extrapolated: beyond the validity radius (hold_offset)
     models: int = 0
     rejected: int = 0
     stiffness_clamped: int = 0
@@ -574,8 +597,9 @@ class LocalModelRenderer:
     def render(self, p, now: float) -> tuple[tuple[float, float, float] | None, int]:
         """(force (3,) [N] or None, status) for the probe at ``p`` (3,) [m] at time ``now``.
 
-        Status FRESH / EXTRAPOLATED: the model's force at p; FREE: zero (the model says no contact,
-        or p is out of the surface along the local normal); EXPIRED (too old or p too far) and
+        Status FRESH / EXTRAPOLATED: the model's force at p (beyond the validity radius: at p with
+        its offset across the depth gradient held at the radius); FREE: zero (the model says no
+        contact, or p is out of the surface along the local normal); EXPIRED (too old) and
         NONE (no model yet): None — the caller holds the last force and its watchdog ramps it.
         """
         m = self._m
@@ -595,8 +619,8 @@ class LocalModelRenderer:
             st.ticks_free += 1
             return (0.0, 0.0, 0.0), FREE
         if ex * ex + ey * ey + ez * ez > self.validity_radius ** 2:
-            st.ticks_expired += 1
-            return None, EXPIRED
+            st.ticks_beyond += 1
+            ex, ey, ez = hold_offset(g[0], g[1], g[2], ex, ey, ez, self.validity_radius)
         fresh = age <= self.fresh_age
         if fresh:
             st.ticks_fresh += 1

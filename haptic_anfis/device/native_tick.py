@@ -11,11 +11,14 @@ It sleeps to absolute 1 ms deadlines with ``clock_nanosleep`` and reads the cloc
    target, semi-implicit Euler, at most ``dt_max`` steps; the script sampled into arrays).
 2. The clutch / mark buttons (:class:`haptic_anfis.device.buttons.ClutchMark`'s rules).
 3. Render: the newest local model (:mod:`.local_model`'s rules: depth along the indentation
-   direction, onset correction, expiry by age and radius) or the newest force command (zero-order
-   hold), in the device frame. A model older than its validity time but younger than
-   ``hold_time`` is still rendered while the probe is inside its validity radius (counted as
-   ``held``): the tissue does not move, so its local linearisation stays right near p0, and an
-   upstream stall (force server, contact detector, the bridge) no longer drops the force to 0 N.
+   direction, onset correction, expiry by age, the offset across held beyond the radius) or the
+   newest force command (zero-order hold), in the device frame. A model older than its validity
+   time but younger than ``hold_time`` is still rendered (counted as ``held``): the tissue does
+   not move, so its local linearisation stays right near p0, and an upstream stall (force
+   server, contact detector, the bridge) no longer drops the force to 0 N. Beyond the validity
+   radius the depth is followed exactly and the offset across the indentation direction held at
+   the radius (:func:`.local_model.hold_offset`, counted as ``beyond``): a late model under a
+   fast stroke no longer drops the force to 0 N either.
 4. Passivity: the model's stiffness is limited by the MEASURED tick period ``T`` (the time the
    previous output was held): ``K <= 2 (b - |B|) / T`` with ``b`` the device's damping and ``B``
    the rendered damping (here 0) — Colgate & Schenkel 1997 (J. Robotic Systems 14(1):37-47),
@@ -43,6 +46,8 @@ import enum
 import numba as nb
 from llvmlite import binding as llvm
 import numpy as np
+
+from .local_model import hold_offset
 
 __all__ = ['CFG', 'CNT', 'OUT', 'CMD_LEN', 'MODEL_LEN', 'STATE_LEN', 'CTL', 'TRACE_COLS',
            'CFG_LEN', 'CTL_LEN', 'HAND_LEN', 'OUT_LEN', 'CNT_LEN', 'SCRATCH_LEN', 'LOCK_LEN',
@@ -116,7 +121,7 @@ OUT = _index('OUT', 'seq t p0 p1 p2 v0 v1 v2 q0 q1 q2 f0 f1 f2 status held b0 b1
 CNT = _index('CNT', 'ticks periods_lost deadline_misses watchdog_trips watchdog_trips_in_contact '
              'clamped rejected_nonfinite none fresh extrapolated expired free approach '
              'passivity_limited observer_active max_gap_ns max_force_un marks clutches '
-             'trace_w t_first_ns t_last_ns running held deadline_ns')
+             'trace_w t_first_ns t_last_ns running held deadline_ns beyond')
 #: trace row: t, device position (3,), applied force (3,) device frame, status (as TickTrace)
 TRACE_COLS = 8
 CFG_LEN, CTL_LEN, OUT_LEN, CNT_LEN = len(CFG), len(CTL), len(OUT), len(CNT)
@@ -386,6 +391,9 @@ def _take(buf, scratch, seen):
     return s2 == s1 and scratch[0] == s1
 
 
+_hold_offset = nb.njit(nogil=True, cache=True)(hold_offset)
+
+
 @nb.njit(nogil=True, cache=True)
 def _render(cfg, st, cnt, qx, qy, qz, now, gap):
     """The local model's force (tissue frame) at the tissue position q, or NaN (nothing to offer:
@@ -408,10 +416,9 @@ def _render(cfg, st, cnt, qx, qy, qz, now, gap):
         st[S.status] = FREE
         return 0.0, 0.0, 0.0
     r = cfg[CFG.validity_radius]
-    if ex * ex + ey * ey + ez * ez > r * r:
-        cnt[CNT.expired] += 1
-        st[S.status] = EXPIRED
-        return np.nan, np.nan, np.nan
+    if ex * ex + ey * ey + ez * ez > r * r:  # depth followed, the offset across held (module doc)
+        cnt[CNT.beyond] += 1
+        ex, ey, ez = _hold_offset(st[S.m_g0], st[S.m_g1], st[S.m_g2], ex, ey, ez, r)
     if held:  # older than its validity, inside the hold time and the radius: still the tissue
         cnt[CNT.held] += 1
     if age <= cfg[CFG.fresh_age]:

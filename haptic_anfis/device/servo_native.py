@@ -171,7 +171,8 @@ class NativeLoopStats(LoopStats):
                  passivity_limited=int(c[nt.CNT.passivity_limited]
                                        - b[nt.CNT.passivity_limited]),
                  observer_active=int(c[nt.CNT.observer_active] - b[nt.CNT.observer_active]),
-                 ticks_held=int(c[nt.CNT.held] - b[nt.CNT.held]))
+                 ticks_held=int(c[nt.CNT.held] - b[nt.CNT.held]),
+                 ticks_beyond=int(c[nt.CNT.beyond] - b[nt.CNT.beyond]))
         return s
 
 

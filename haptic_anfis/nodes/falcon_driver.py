@@ -125,8 +125,9 @@ PARAMS = [
           '(zero-order hold)', one_of(*MODES)),
     Param('model_validity_time', 0.05, 'local_model: a model older than this [s] (from its pose) '
           'expires: the last force is held and the watchdog ramps it to zero', positive),
-    Param('model_validity_radius', 0.005, 'local_model: a probe further than this [m] (tissue '
-          'frame) from the model\'s position expires it', positive),
+    Param('model_validity_radius', 0.005, 'local_model: beyond this [m] (tissue frame) from the '
+          'model\'s position the depth is still followed but the offset across the indentation '
+          'direction is held at it (no 0 N mid-press; counted as ticks_beyond)', positive),
     Param('max_stiffness', FALCON_MAX_STIFFNESS, 'local_model: stiffness bound [N/m] in the DEVICE '
           'frame (3000.0: the Falcon figure CHAI3D uses); the model is clamped to it', positive),
     Param('trace_path', '', "write every servo tick (time, position, applied force, model status) "
@@ -152,10 +153,9 @@ PARAMS = [
           'the rendered stiffness, K <= 2 b / T with T the measured tick period (Colgate & '
           'Schenkel 1997; docs/servo_loop.md)', positive),
     Param('model_hold_time', 0.5, 'native, local_model: a model older than model_validity_time '
-          'but not than this [s] is still rendered while the probe is within '
-          'model_validity_radius of it (the tissue does not move: an upstream stall no longer '
-          'drops the force to 0 N); then it expires and the watchdog ramps the force to zero. '
-          '<= model_validity_time: off', positive),
+          'but not than this [s] is still rendered (the tissue does not move: an upstream stall '
+          'no longer drops the force to 0 N); then it expires and the watchdog ramps the force '
+          'to zero. <= model_validity_time: off', positive),
     Param('passivity_observer', False, 'native: run the passivity observer / controller '
           '(Hannaford & Ryu 2002) on the rendered port'),
     Param('servo_workers', 2, "native, native_process with the simulated Falcon: threads "
