@@ -11,7 +11,8 @@ import pytest
 from haptic_anfis.device import HandParams, WorkspaceMapping
 from haptic_anfis.device import native_tick as nt
 from haptic_anfis.device.force_error import ripple_and_dropouts
-from haptic_anfis.device.local_model import (EXPIRED, FRESH, LocalModel, LocalModelRenderer,
+from haptic_anfis.device.local_model import (EXPIRED, EXTRAPOLATED, FRESH, LocalModel,
+                                             LocalModelRenderer,
                                              tissue_stiffness_limit)
 from haptic_anfis.device.palpation import PalpationScript
 from haptic_anfis.device.servo_native import NativeServoLoop
@@ -413,3 +414,28 @@ def test_auto_servo_loop_is_the_servo_process_for_both_backends():
         assert resolve_servo_loop(choice) == choice
     with pytest.raises(ParameterError, match="servo_loop: got 'native' with backend 'falcon'"):
         resolve_servo_loop('native', 'falcon')
+
+
+def test_ticks_with_the_safety_layer_off_are_traced_as_disabled():
+    """Before start and at shutdown the device gets 0 N on purpose: the trace says so, so the
+    force error and the dropout count leave those ticks out (a run stopped mid-press counted
+    its last tick as a dropout)."""
+    from haptic_anfis.device.trace import DISABLED, TickTrace
+    lp = loop('local_model', max_force_rate=1e6, validity_time=1.0, trace=TickTrace())
+    v = LocalModel((2.0, 0.0, 0.0), (0.05, 0.0, 0.0), np.diag([-1000.0, 0.0, 0.0]),
+                   (0.055, 0.0, 0.0), (1.0, 0.0, 0.0), (-1.0, 0.0, 0.0), 0.005, False,
+                   0.0).values()
+    lp.renderer.offer_values(v, 0.0)
+    q = MAP.to_device((0.05, 0.0, 0.0))
+    forces = []
+    for t, on in ((0.0, False), (0.001, True), (0.002, True), (0.003, False)):
+        if on and not lp.safety.enabled:
+            lp.safety.start()
+        if not on and lp.safety.enabled:
+            lp.safety.stop()
+        pin(lp, q, t)
+        forces.append(lp.tick(t)[0])
+    lp._drain()
+    rows = lp.trace.arrays()
+    assert forces[0] == forces[3] == 0.0 and forces[2] == pytest.approx(2.0)
+    assert list(rows[:, 7]) == [DISABLED, FRESH, EXTRAPOLATED, DISABLED]

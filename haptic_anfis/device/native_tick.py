@@ -48,6 +48,7 @@ from llvmlite import binding as llvm
 import numpy as np
 
 from .local_model import hold_offset
+from .trace import DISABLED
 
 __all__ = ['CFG', 'CNT', 'OUT', 'CMD_LEN', 'MODEL_LEN', 'STATE_LEN', 'CTL', 'TRACE_COLS',
            'CFG_LEN', 'CTL_LEN', 'HAND_LEN', 'OUT_LEN', 'CNT_LEN', 'SCRATCH_LEN', 'LOCK_LEN',
@@ -536,7 +537,7 @@ def tick(now, cfg, st, times, points, buttons, hand, cmd, model, ctl, out, cnt, 
         trace[row, 0] = now
         trace[row, 1], trace[row, 2], trace[row, 3] = st[S.x0], st[S.x1], st[S.x2]
         trace[row, 4], trace[row, 5], trace[row, 6] = fx, fy, fz
-        trace[row, 7] = st[S.status]
+        trace[row, 7] = st[S.status] if st[S.enabled] > 0.5 else DISABLED
     seq = out[OUT.seq]
     scratch[0] = seq + 1.0
     scratch[OUT.t] = now

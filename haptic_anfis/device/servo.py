@@ -17,7 +17,7 @@ from typing import Callable
 from .falcon import Device, DeviceState
 from .safety import SafetyLayer
 from .stats import LoopStats
-from .trace import TickTrace
+from .trace import DISABLED, TickTrace
 
 
 class ServoLoop:
@@ -92,7 +92,8 @@ class ServoLoop:
         self.device.write(f)
         self.force = f
         if self.trace is not None:
-            self.trace.add(now, state.position, f, self.status)
+            self.trace.add(now, state.position, f,
+                           self.status if self.safety.enabled else DISABLED)
         n = (f[0] * f[0] + f[1] * f[1] + f[2] * f[2]) ** 0.5
         if n > self.stats.max_force:
             self.stats.max_force = n

@@ -2,7 +2,9 @@
 
 One row per tick: time [s] (the loop's monotonic clock), probe position (3,) [m] and applied force
 (3,) [N] in the frame the caller chooses, and the local-model status code of that tick
-(:data:`haptic_anfis.device.local_model.STATUS_NAMES`; -1 in zero-order-hold mode). Rows go into
+(:data:`haptic_anfis.device.local_model.STATUS_NAMES`; -1 in zero-order-hold mode; :data:`DISABLED`
+while the safety layer is off: before start and at shutdown, when the device is told 0 N on
+purpose, so the force error leaves those ticks out). Rows go into
 preallocated chunks (no allocation per tick in the servo thread); :meth:`TickTrace.arrays`
 concatenates them.
 """
@@ -13,6 +15,8 @@ from pathlib import Path
 import numpy as np
 
 COLUMNS = ('t', 'px', 'py', 'pz', 'fx', 'fy', 'fz', 'status')
+#: status of a tick with the safety layer disabled (0 N on purpose: not a dropout)
+DISABLED = -2
 
 
 class TickTrace:
