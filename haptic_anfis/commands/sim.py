@@ -14,6 +14,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 
 NAME = 'sim'
 HELP = 'run the haptic node graph in one process with the simulated Falcon and print loop statistics'
@@ -80,7 +81,6 @@ def run(args: argparse.Namespace) -> int:
     recorded = session.print_recorded()
     if args.json:
         out = json_summary(summary, recorded)
-        import os
         out.update(_trace_figures(trace, spec.params_files),
                    graph_scheduling=session.graph_scheduling,
                    own_session=os.getsid(0) == os.getpid())
@@ -92,8 +92,8 @@ def run(args: argparse.Namespace) -> int:
 TRACE_KEYS = ('force_error_rms_pct', 'force_error_rms_n', 'force_error_p99_n',
               'force_error_p99_pct', 'contact_ticks', 'ripple_windows_pct',
               'ripple_windows_ideal_pct', 'zero_force_ticks', 'longest_dropout_ms', 'force_mode',
-              'watchdog_trips_in_contact', 'ticks_expired', 'ticks_held', 'ticks_beyond', 'periods_lost',
-              'max_gap_ms')
+              'watchdog_trips_in_contact', 'ticks_expired', 'ticks_held', 'ticks_beyond',
+              'periods_lost', 'max_gap_ms')
 
 
 def _trace_figures(trace, params_files) -> dict:
