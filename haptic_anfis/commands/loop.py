@@ -71,8 +71,7 @@ def ideal_forces(positions: np.ndarray, params_files=()) -> tuple[np.ndarray, np
 def trace_report(trace: str | Path, params_files=()) -> dict:
     """The report of one trace (keys in the module docstring)."""
     from ..device.force_error import error_by_phase, force_error, ripple_and_dropouts
-    from ..device.trace import load_trace
-    from ..device.trace import DISABLED
+    from ..device.trace import DISABLED, load_trace
     rows, meta = load_trace(trace)
     rows = rows[rows[:, 7] != DISABLED]  # 0 N on purpose (before start, at shutdown)
     st = meta.get('stats', {})

@@ -145,12 +145,10 @@ def _normal(tid: int) -> None:
 def _in_child(stop_with_parent: bool, nice: int) -> None:
     if stop_with_parent:
         _stop_with_parent()
-    if os.sched_getscheduler(0) in _RT_POLICIES:
+    if _realtime():
         _normal(0)  # not inherited from a real-time parent (sim's graph): raised when ready
     if nice:
         os.nice(nice)
-
-
 
 
 def start_node(name: str, ros_args: Sequence[str] = (), env: Mapping[str, str] | None = None,
