@@ -44,11 +44,18 @@ def test_a_restarted_node_holds_its_output_until_the_recorder_matched_it():
     with _node('recorder') as rec, _node('force_server') as fs:
         rec.create_subscription(String, '/falcon/servo_cf_test', lambda m: None, 10)
         pub = fs.create_publisher(String, '/falcon/servo_cf_test', 10)
-        assert hold_until_recorder_matched(fs, 'recorder', timeout=10.0)
-        assert pub.get_subscription_count() >= 1  # the recorder's subscription is matched
+        # told the recorded topics: the recorder's subscription has been discovered and matched
+        # (the recorder's name alone may be known before its endpoints)
+        assert hold_until_recorder_matched(fs, 'recorder', timeout=10.0,
+                                           topics=['falcon/servo_cf_test'])
+        assert pub.get_subscription_count() >= 1
     with _node('force_server') as alone:  # no recorder on the domain: gives up, warned
         alone.create_publisher(String, '/falcon/servo_cf_test', 10)
         assert not hold_until_recorder_matched(alone, 'recorder', timeout=0.3)
+    with _node('recorder'), _node('force_server') as fs:  # the recorder without that topic yet
+        fs.create_publisher(String, '/falcon/servo_cf_test', 10)
+        assert not hold_until_recorder_matched(fs, 'recorder', timeout=1.0,
+                                               topics=['/falcon/servo_cf_test'])
 
 
 def test_a_node_stopped_with_sigint_closes_without_a_warning(tmp_path):

@@ -24,6 +24,8 @@ SESSION_CHECKED = 'HAPTIC_ANFIS_SESSION_CHECKED'
 #: recorder node; the node holds its output until the recorder has matched its publishers
 #: (``haptic_anfis.nodes.runtime.hold_until_recorder_matched``), so the bag misses none of it.
 HOLD_FOR_RECORDER = 'HAPTIC_ANFIS_HOLD_FOR_RECORDER'
+#: Set beside :data:`HOLD_FOR_RECORDER`: the topics that recorder records, comma-separated.
+RECORDED_TOPICS = 'HAPTIC_ANFIS_RECORDED_TOPICS'
 
 
 @functools.lru_cache(maxsize=1)

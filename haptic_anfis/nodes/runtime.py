@@ -6,7 +6,7 @@ from __future__ import annotations
 import os
 import sys
 import time
-from typing import Any, Callable
+from typing import Any, Callable, Collection
 
 import rclpy
 from builtin_interfaces.msg import Time
@@ -14,7 +14,7 @@ from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from .executor import make_executor, settle_gc
 from .parameters import ParameterError
-from .processes import HOLD_FOR_RECORDER, SESSION_CHECKED
+from .processes import HOLD_FOR_RECORDER, RECORDED_TOPICS, SESSION_CHECKED
 
 __all__ = ['LOOP_QOS', 'stamp_ns', 'set_stamp', 'interrupted', 'run_node', 'message_class',
            'check_node_arguments', 'hold_until_recorder_matched', 'HOLD_TIMEOUT_S']
@@ -86,7 +86,9 @@ def run_node(factory: Callable[[], Any], args=None) -> int:
         try:
             recorder = os.environ.get(HOLD_FOR_RECORDER)
             if recorder:  # a restart in a recording session: nothing unrecorded leaves this node
-                hold_until_recorder_matched(node, recorder)
+                recorded = os.environ.get(RECORDED_TOPICS)
+                hold_until_recorder_matched(
+                    node, recorder, topics=recorded.split(',') if recorded else None)
             node.readiness = Readiness(node)
             executor = make_executor()
             executor.add_node(node)
@@ -178,15 +180,24 @@ def check_node_arguments(factory: Callable, args) -> list[str]:
 
 
 def hold_until_recorder_matched(node, recorder: str = 'recorder',
-                                timeout: float = HOLD_TIMEOUT_S, poll: float = 0.01) -> bool:
+                                timeout: float = HOLD_TIMEOUT_S, poll: float = 0.01,
+                                topics: Collection[str] | None = None) -> bool:
     """Before ``node`` spins (so none of its callbacks publishes yet): wait until every
-    publisher of ``node`` on a topic the node ``recorder`` subscribes to has matched all the
+    publisher of ``node`` on a topic the node ``recorder`` records has matched all the
     subscriptions the graph shows on that topic, the recorder's among them. A node restarted
     in a recording session would otherwise publish (force commands the driver applies) before
-    the recorder had matched it, and the bag would miss its first seconds. True when matched,
-    False (warned) after ``timeout`` s."""
+    the recorder had matched it, and the bag would miss its first seconds.
+
+    ``topics``: what the recorder records (the session knows). With them, a publisher on one of
+    them waits until the recorder's own subscription on it has been discovered: a fresh node
+    learns the recorder's name before its endpoints, and the graph alone would let it publish
+    in between. Without them, the topics the graph shows the recorder subscribed to (that gap
+    open). True when matched, False (warned) after ``timeout`` s."""
+    from ..bag.topics import absolute
     from .session import INFRA_TOPICS
-    pubs = [p for p in node.publishers if p.topic_name not in INFRA_TOPICS]
+    wanted = None if topics is None else {absolute(t) for t in topics}
+    pubs = [p for p in node.publishers if p.topic_name not in INFRA_TOPICS
+            and (wanted is None or p.topic_name in wanted)]
     end = time.monotonic() + timeout
     pending: list[str] = []
     while True:
@@ -194,8 +205,9 @@ def hold_until_recorder_matched(node, recorder: str = 'recorder',
             pending = []
             for p in pubs:
                 subs = node.get_subscriptions_info_by_topic(p.topic_name)
-                if any(i.node_name == recorder for i in subs) and \
-                        p.get_subscription_count() < len(subs):
+                seen = any(i.node_name == recorder for i in subs)
+                if (wanted is not None and not seen) or \
+                        (seen and p.get_subscription_count() < len(subs)):
                     pending.append(p.topic_name)
             if not pending:
                 return True

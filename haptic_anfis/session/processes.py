@@ -64,9 +64,11 @@ class ProcessSession:
             self.extra.setdefault('web_view', spec.case_arguments()).extend(
                 spec.view_arguments(controls=True))
         self.notes: list[str] = []
+        self.recorded: list[str] = []  # the topics the session's recorder records
         if spec.record:
             from ..nodes.processes import recorder_arguments
             topics, self.notes = recorder_settings(spec, recorded_topics())
+            self.recorded = topics
             self.extra.setdefault('recorder', []).extend(recorder_arguments(spec.record, topics))
         if spec.enclave_root:
             root = '/' + spec.enclave_root.strip('/')
@@ -205,7 +207,7 @@ class ProcessSession:
 
     def _handle_deaths(self) -> bool:
         """Restart what died and may be restarted; False when the session must stop."""
-        from ..nodes.processes import HOLD_FOR_RECORDER, renamed_output
+        from ..nodes.processes import HOLD_FOR_RECORDER, RECORDED_TOPICS, renamed_output
         s, sup = self.spec, self.sup
         for name, code in sup.dead():
             self.say('died', node=name, code=code)
@@ -216,8 +218,11 @@ class ProcessSession:
                 self.say('stopping', node=name, reason=why)
                 self.result.failed.append((name, code))
                 return False
-            hold = {HOLD_FOR_RECORDER: 'recorder'} if 'recorder' in self.extra and \
-                name != 'recorder' else None  # its output waits until the recorder matched it
+            hold = None  # a restarted node's output waits until the recorder matched it
+            if 'recorder' in self.extra and name != 'recorder':
+                hold = {HOLD_FOR_RECORDER: 'recorder'}
+                if self.recorded:
+                    hold[RECORDED_TOPICS] = ','.join(self.recorded)
             p = sup.restart(name, renamed_output if name == 'recorder' else None, env=hold)
             self.say('restarted', node=name, pid=p.pid, restarts=sup.restarts[name])
             if name == 'recorder':
