@@ -31,8 +31,10 @@ def ctx():
 
 def driver(ctx, **params):
     from haptic_anfis.nodes.falcon_driver import FalconDriver
-    return FalconDriver(context=ctx, parameter_overrides=[
+    d = FalconDriver(context=ctx, parameter_overrides=[
         Parameter(n, value=v) for n, v in params.items()])
+    d.start_loop()
+    return d
 
 
 def test_unknown_backend_is_rejected_naming_the_choices(ctx):
@@ -127,3 +129,49 @@ def test_replugged_falcon_is_reconnected_and_force_resumes(ctx, monkeypatch):
     finally:
         d.close()
         d.destroy_node()
+
+
+def test_the_servo_starts_once_the_node_is_told_not_when_it_is_built(ctx):
+    """Built, the driver's servo does not run yet (its bridge thread would share the interpreter
+    lock with the rest of the process's start); start_loop starts it, once."""
+    from haptic_anfis.nodes.falcon_driver import FalconDriver
+    d = FalconDriver(context=ctx)
+    try:
+        assert not d.started and not d.servo.running
+    finally:
+        d.close()  # never started: nothing to stop, no error
+        d.destroy_node()
+    d = FalconDriver(context=ctx)
+    try:
+        d.start_loop()
+        assert d.started and d.servo.running
+        bridge = d.servo._bridge
+        d.start_loop()  # idempotent: the same loop
+        assert d.servo._bridge is bridge
+    finally:
+        d.close()
+        d.destroy_node()
+    assert not d.servo.running
+
+
+def test_run_node_starts_a_nodes_loop_after_the_process_settled(tmp_path):
+    """run_node calls start_loop once the node is built, its executor made and the garbage
+    collector settled (frozen), before the first spin."""
+    code = ("import gc, sys\n"
+            "from rclpy.node import Node\n"
+            "from haptic_anfis.nodes.runtime import run_node\n"
+            "class N(Node):\n"
+            "    def __init__(self):\n"
+            "        super().__init__('loop_probe')\n"
+            "        self.spun = False\n"
+            "        self.create_timer(0.01, self._tick)\n"
+            "    def _tick(self):\n"
+            "        self.spun = True\n"
+            "        self.finished = True\n"
+            "    def start_loop(self):\n"
+            "        print('frozen', gc.get_freeze_count() > 0, 'spun', self.spun, flush=True)\n"
+            "sys.exit(run_node(N, ['loop_probe']))\n")
+    r = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True, timeout=60,
+                       cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.splitlines().count('frozen True spun False') == 1, r.stdout

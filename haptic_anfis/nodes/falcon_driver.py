@@ -284,15 +284,28 @@ class FalconDriver(Node):
                                    on_state=self._publish_state, render=self.input.render,
                                    trace=TickTrace() if self.trace_path else None,
                                    priority=p['servo_priority'])
-        self.servo.start()
-        if 'refused' in self.servo.scheduling:  # one call site per severity (rclpy)
-            self.get_logger().warning(f'servo thread: {self.servo.scheduling}')
-        else:
-            self.get_logger().info(f'servo thread: {self.servo.scheduling}')
         self.get_logger().info(
             f"backend {p['backend']}, {p['rate']:.0f} Hz servo thread, max force "
             f"{p['max_force']} N, watchdog {p['watchdog_timeout'] * 1e3:.1f} ms, force "
             f"{p['force_mode']}, {what}")
+        self.started = False
+
+    def start_loop(self) -> None:
+        """Start the servo loop (a real device is opened here: a FalconError / OSError). Called
+        once the process has settled (:func:`~.runtime.run_node`, the one-process graph): the
+        loop's bridge thread publishes the poses and takes the commands, and it shares this
+        process's interpreter lock; started in ``__init__`` it waited behind the rest of the
+        process's start (a first log call inspecting every module, the full garbage collection of
+        ``settle_gc``): 40-340 ms after the first command had released the hand (launch, about
+        one start in four). Idempotent."""
+        if self.started:
+            return
+        self.servo.start()
+        self.started = True
+        if 'refused' in self.servo.scheduling:  # one call site per severity (rclpy)
+            self.get_logger().warning(f'servo thread: {self.servo.scheduling}')
+        else:
+            self.get_logger().info(f'servo thread: {self.servo.scheduling}')
 
     def _make_falcon(self, p):
         """The USB backend on a thread of this node (``servo_loop: python``). Connecting,
@@ -494,7 +507,7 @@ class FalconDriver(Node):
 
     def close(self) -> None:
         """Stop the servo thread; the device is left at zero force."""
-        if self.servo.running or self.safety.enabled:
+        if self.started and (self.servo.running or self.safety.enabled):
             self.servo.stop()
         for sub, _ in self._polled:
             sub.destroy()

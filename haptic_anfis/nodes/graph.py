@@ -92,8 +92,10 @@ def build_graph(args: list[str] | None = None, visualizer: bool = True,
     from rclpy.context import Context
 
     from .contact_detector import ContactDetectorNode
+    from .executor import make_executor, settle_gc
     from .falcon_driver import FalconDriver
     from .force_server import ForceServer
+    from .session import Readiness
     from .visualizer import Visualizer
 
     ctx = Context()
@@ -116,6 +118,12 @@ def build_graph(args: list[str] | None = None, visualizer: bool = True,
             made.append(extra_nodes[-1])
         driver = FalconDriver(context=ctx, parameter_overrides=ov.get('falcon_driver', []))
         made.append(driver)
+        ex = make_executor(ctx)
+        for n in made:
+            n.readiness = Readiness(n)
+            ex.add_node(n)
+        settle_gc()
+        driver.start_loop()  # the servo once the process settled (FalconDriver.start_loop)
     except BaseException:
         for n in made:
             if hasattr(n, 'servo'):
@@ -123,13 +131,6 @@ def build_graph(args: list[str] | None = None, visualizer: bool = True,
             n.destroy_node()
         rclpy.try_shutdown(context=ctx)
         raise
-    from .executor import make_executor, settle_gc
-    from .session import Readiness
-    ex = make_executor(ctx)
-    for n in made:
-        n.readiness = Readiness(n)
-        ex.add_node(n)
-    settle_gc()
     return Graph(ctx, ex, driver, contact, force, vis, extra=extra_nodes)
 
 

@@ -3,6 +3,7 @@
 spins, shuts down quietly)."""
 from __future__ import annotations
 
+import contextlib
 import os
 import sys
 import time
@@ -46,7 +47,10 @@ def run_node(factory: Callable[[], Any], args=None) -> int:
 
     Uses EventsExecutor with a ``spin_once(timeout_sec=...)`` loop (its ``spin()`` runs no
     callbacks with the rclpy wheels here, see docs/design.md). Calls ``node.close()`` (if defined)
-    before destroying the node. Once built, the node announces its status on ``session/status``
+    before destroying the node. A node with a ``start_loop()`` (the falcon driver's servo loop)
+    has it called once built and the garbage collector settled, before the first spin: a loop
+    thread started earlier shares the interpreter lock with the rest of the process's start.
+    Once built, the node announces its status on ``session/status``
     (:class:`~haptic_anfis.nodes.session.Readiness`). Interrupted while starting (Ctrl-C or SIGTERM
     during a long compile), the node exits with code 0 and a one-line message, no traceback.
     """
@@ -72,6 +76,17 @@ def run_node(factory: Callable[[], Any], args=None) -> int:
     try:
         try:
             node = factory()
+            recorder = os.environ.get(HOLD_FOR_RECORDER)
+            if recorder:  # a restart in a recording session: nothing unrecorded leaves this node
+                recorded = os.environ.get(RECORDED_TOPICS)
+                hold_until_recorder_matched(
+                    node, recorder, topics=recorded.split(',') if recorded else None)
+            node.readiness = Readiness(node)
+            executor = make_executor()
+            executor.add_node(node)
+            settle_gc()
+            if hasattr(node, 'start_loop'):  # a loop thread of its own (the driver's servo):
+                node.start_loop()  # started once the process settled, nothing holds it then
         except (ParameterError, ValueError, OSError) as exc:
             if interrupted():
                 return _interrupted_while_starting()
@@ -84,15 +99,6 @@ def run_node(factory: Callable[[], Any], args=None) -> int:
                 return _interrupted_while_starting()
             raise
         try:
-            recorder = os.environ.get(HOLD_FOR_RECORDER)
-            if recorder:  # a restart in a recording session: nothing unrecorded leaves this node
-                recorded = os.environ.get(RECORDED_TOPICS)
-                hold_until_recorder_matched(
-                    node, recorder, topics=recorded.split(',') if recorded else None)
-            node.readiness = Readiness(node)
-            executor = make_executor()
-            executor.add_node(node)
-            settle_gc()
             stop.spinning = True
             while rclpy.ok() and not stop.requested and not getattr(node, 'finished', False):
                 executor.spin_once(timeout_sec=0.05)
@@ -102,13 +108,14 @@ def run_node(factory: Callable[[], Any], args=None) -> int:
             if not interrupted():
                 raise
         code = int(getattr(node, 'exit_code', 0) or 0)
-        if executor is not None:
-            executor.shutdown(timeout_sec=1.0)
     except KeyboardInterrupt:  # a second Ctrl-C while shutting down
         pass
     finally:
         stop.spinning = False  # a second Ctrl-C while closing: KeyboardInterrupt, as before
         try:
+            if executor is not None:
+                with contextlib.suppress(KeyboardInterrupt):  # a second Ctrl-C: still close
+                    executor.shutdown(timeout_sec=1.0)
             if node is not None:
                 if hasattr(node, 'close'):
                     node.close()
