@@ -149,10 +149,15 @@ def set_realtime(priority: int) -> str:
     try:
         os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(int(priority)))
     except (OSError, AttributeError) as exc:  # EPERM without the right; not Linux
-        why = getattr(exc, 'strerror', None) or str(exc)
-        return (f'normal scheduler: SCHED_FIFO {priority} refused ({why}); allow it with '
-                f'`ulimit -r {priority}` or an rtprio line in /etc/security/limits.conf')
+        return realtime_refused(priority, exc)
     return f'SCHED_FIFO priority {priority}'
+
+
+def realtime_refused(priority: int, exc: BaseException) -> str:
+    """The log's words for a refused SCHED_FIFO ``priority``: why, and how to allow it."""
+    why = getattr(exc, 'strerror', None) or str(exc)
+    return (f'normal scheduler: SCHED_FIFO {priority} refused ({why}); allow it with '
+            f'`ulimit -r {priority}` or an rtprio line in /etc/security/limits.conf')
 
 
 def request_short_slice(slice_s: float = 0.0001) -> str:

@@ -117,9 +117,8 @@ def set_graph_priority(priority: int, pid: int | None = None) -> str:
         except (OSError, AttributeError) as exc:  # EPERM without the right; not Linux
             for t in done:
                 _normal(t)
-            why = getattr(exc, 'strerror', None) or str(exc)
-            return (f'normal scheduler: SCHED_FIFO {priority} refused ({why}); allow it with '
-                    f'`ulimit -r {priority}` or an rtprio line in /etc/security/limits.conf')
+            from ..device.servo import realtime_refused
+            return realtime_refused(priority, exc)
     return f'SCHED_FIFO priority {priority}'
 
 
@@ -333,14 +332,28 @@ def rerun_in_own_session(argv: Sequence[str]) -> int | None:
             p.send_signal(signal.SIGINT)
         except ProcessLookupError:
             pass
-    stop_signals = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
-    previous = {sig: signal.signal(sig, forward) for sig in stop_signals}
+    previous = on_stop_signals(forward)
     try:
         code = p.wait()
     finally:
-        for sig, h in previous.items():
-            signal.signal(sig, h)
+        restore_signals(previous)
     return code if code >= 0 else 128 - code
+
+
+#: The signals that stop a session: Ctrl-C, a kill, the terminal closed.
+STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
+
+
+def on_stop_signals(handler) -> dict:
+    """Handle every one of :data:`STOP_SIGNALS` with ``handler``; returns the handlers they had,
+    for :func:`restore_signals`."""
+    return {sig: signal.signal(sig, handler) for sig in STOP_SIGNALS}
+
+
+def restore_signals(previous: dict) -> None:
+    """Give the signals back the handlers :func:`on_stop_signals` returned."""
+    for sig, h in previous.items():
+        signal.signal(sig, h)
 
 
 def recorder_arguments(output: str | os.PathLike, topics: Sequence[str]) -> list[str]:

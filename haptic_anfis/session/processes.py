@@ -13,7 +13,6 @@
 from __future__ import annotations
 
 import os
-import signal
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -96,7 +95,8 @@ class ProcessSession:
         Raises:
             SessionError / CaseError / ParameterError: bad input (nothing started).
         """
-        from ..nodes.processes import SESSION_CHECKED, Supervisor, node_env
+        from ..nodes.processes import (SESSION_CHECKED, Supervisor, node_env, on_stop_signals,
+                                       restore_signals)
         from ..nodes.session import SessionMonitor
         s = self.spec
         s.check()
@@ -116,8 +116,7 @@ class ProcessSession:
         # order and none is left running.
         def _stop(signum, frame):
             raise KeyboardInterrupt
-        stop_signals = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
-        previous = {sig: signal.signal(sig, _stop) for sig in stop_signals}
+        previous = on_stop_signals(_stop)
         self.mon = SessionMonitor(domain_id=s.domain_id, enclave=(
             f"/{s.enclave_root.strip('/')}/launch_monitor" if s.enclave_root else None))
         self.sup = Supervisor(env, log_dir, max_restarts=s.max_restarts)
@@ -129,16 +128,14 @@ class ProcessSession:
         except KeyboardInterrupt:
             print('interrupted: stopping the nodes', flush=True)
         finally:
-            for sig in stop_signals:  # a second Ctrl-C must not cut the ordered stop short
-                signal.signal(sig, lambda *_: print('stopping the nodes, please wait',
-                                                    flush=True))
+            # a second Ctrl-C must not cut the ordered stop short
+            on_stop_signals(lambda *_: print('stopping the nodes, please wait', flush=True))
             try:
                 self.result.codes = self.sup.stop_all(list(reversed(self.order)), starting=[
                     n for n in self.sup.procs if not self.mon.state(n, self.sup.started_at[n])])
             finally:
                 self.mon.close()
-                for sig, h in previous.items():
-                    signal.signal(sig, h)
+                restore_signals(previous)
         for n in reversed(self.order):
             if n in self.result.codes:
                 print(f'stopped {n:<17} exit code {self.result.codes[n]}', flush=True)
