@@ -92,7 +92,7 @@ def build_graph(args: list[str] | None = None, visualizer: bool = True,
     from rclpy.context import Context
 
     from .contact_detector import ContactDetectorNode
-    from .executor import make_executor, settle_gc
+    from .executor import make_executor, settle_and_start
     from .falcon_driver import FalconDriver
     from .force_server import ForceServer
     from .session import Readiness
@@ -122,8 +122,7 @@ def build_graph(args: list[str] | None = None, visualizer: bool = True,
         for n in made:
             n.readiness = Readiness(n)
             ex.add_node(n)
-        settle_gc()
-        driver.start_loop()  # the servo once the process settled (FalconDriver.start_loop)
+        settle_and_start(made)
     except BaseException:
         for n in made:
             if hasattr(n, 'servo'):

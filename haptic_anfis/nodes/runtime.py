@@ -13,7 +13,7 @@ import rclpy
 from builtin_interfaces.msg import Time
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 
-from .executor import make_executor, settle_gc
+from .executor import make_executor, settle_and_start
 from .parameters import ParameterError
 from .processes import HOLD_FOR_RECORDER, RECORDED_TOPICS, SESSION_CHECKED
 
@@ -84,9 +84,7 @@ def run_node(factory: Callable[[], Any], args=None) -> int:
             node.readiness = Readiness(node)
             executor = make_executor()
             executor.add_node(node)
-            settle_gc()
-            if hasattr(node, 'start_loop'):  # a loop thread of its own (the driver's servo):
-                node.start_loop()  # started once the process settled, nothing holds it then
+            settle_and_start([node])
         except (ParameterError, ValueError, OSError) as exc:
             if interrupted():
                 return _interrupted_while_starting()
