@@ -29,6 +29,8 @@ setup(
     packages=find_packages(exclude=['test', 'test.*']),
     package_data={PACKAGE: ['py.typed',  # PEP 561: the package's type hints are for its users
                             'data/*.csv', 'data/*.json', 'data/*.stl',
+                            # Fast DDS over UDP only (haptic_anfis.nodes.middleware)
+                            'data/dds/*.xml',
                             # the case library (haptic-anfis cases list)
                             'data/cases/*.stl', 'data/cases/*/*.csv', 'data/cases/*/*.json',
                             'data/cases/*/*.npz']},

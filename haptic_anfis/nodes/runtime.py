@@ -14,6 +14,7 @@ from builtin_interfaces.msg import Time
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from .executor import make_executor, settle_and_start
+from .middleware import use_loop_transport
 from .parameters import ParameterError
 from .processes import HOLD_FOR_RECORDER, RECORDED_TOPICS, SESSION_CHECKED
 
@@ -69,6 +70,7 @@ def run_node(factory: Callable[[], Any], args=None) -> int:
     # While the node is being built it raises KeyboardInterrupt (a long compile stops at once);
     # once it spins it only ends the spin loop (raised inside a callback it was logged FATAL),
     # so close() logs and the node and the context go, in that order. SIGTERM stays rclpy's.
+    use_loop_transport()  # DDS over UDP only: a shared-memory port's opening held publishes ~333 ms
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.SIGTERM)
     stop = _SigintStop()
     node = executor = None

@@ -1,0 +1,107 @@
+"""A haptic process's DDS participant uses UDP only (nodes/middleware.py): opening a Fast DDS
+shared-memory port held a publishing thread ~333 ms (issue 32)."""
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import time
+
+import pytest
+
+from haptic_anfis.nodes.middleware import (KEEP_SHM, LOCALHOST_UDP_PROFILE, loop_transport_env,
+                                           use_loop_transport)
+
+LOCALHOST = {'ROS_AUTOMATIC_DISCOVERY_RANGE': 'LOCALHOST'}
+
+
+def test_localhost_discovery_becomes_the_udp_only_profile():
+    assert loop_transport_env(LOCALHOST) == {
+        'ROS_AUTOMATIC_DISCOVERY_RANGE': 'SYSTEM_DEFAULT',
+        'FASTRTPS_DEFAULT_PROFILES_FILE': str(LOCALHOST_UDP_PROFILE)}
+    assert LOCALHOST_UDP_PROFILE.is_file()
+
+
+@pytest.mark.parametrize('discovery', [None, 'SUBNET', 'SYSTEM_DEFAULT'])
+def test_other_ranges_keep_theirs_with_udp_only(discovery):
+    env = {} if discovery is None else {'ROS_AUTOMATIC_DISCOVERY_RANGE': discovery}
+    assert loop_transport_env(env) == {'FASTDDS_BUILTIN_TRANSPORTS': 'UDPv4'}
+
+
+@pytest.mark.parametrize('own', [
+    {KEEP_SHM: '1'},
+    {'FASTRTPS_DEFAULT_PROFILES_FILE': '/etc/my_profile.xml'},
+    {'FASTDDS_DEFAULT_PROFILES_FILE': '/etc/my_profile.xml'},
+    {'FASTDDS_BUILTIN_TRANSPORTS': 'SHM'},
+    {'RMW_IMPLEMENTATION': 'rmw_cyclonedds_cpp'},
+    {'ROS_STATIC_PEERS': '192.168.0.7'},
+    {'ROS_LOCALHOST_ONLY': '1'},
+    {'ROS_AUTOMATIC_DISCOVERY_RANGE': 'OFF'},
+])
+def test_a_users_own_middleware_choice_is_left_alone(own):
+    env = {**LOCALHOST, **own}
+    assert loop_transport_env(env) == {}
+    before = dict(env)
+    assert use_loop_transport(env) == {} and env == before
+
+
+def test_use_applies_the_changes_to_the_given_environment():
+    env = dict(LOCALHOST)
+    changes = use_loop_transport(env)
+    assert env == {**LOCALHOST, **changes} and changes
+
+
+NODE = """
+import sys, time
+from rclpy.node import Node
+from std_msgs.msg import String
+from haptic_anfis.nodes.runtime import run_node
+
+class Talker(Node):
+    def __init__(self):
+        super().__init__('udp_talker')
+        self.pub = self.create_publisher(String, 'udp_probe', 10)
+        self.create_timer(0.02, lambda: self.pub.publish(String(data='hello')))
+        self.t0 = time.monotonic()
+        self.create_timer(0.1, self._end)
+    def _end(self):
+        if time.monotonic() - self.t0 > 20.0:
+            self.finished = True
+
+sys.exit(run_node(Talker, ['udp_talker']))
+"""
+
+
+def test_a_node_process_talks_udp_only_with_a_localhost_participant(tmp_path):
+    """run_node's process has no shared-memory transport (no 'dds.shm' thread) and a participant
+    of rmw's own localhost setup (this test process: shared memory and UDP) receives from it."""
+    import rclpy
+    from rclpy.context import Context
+    from rclpy.executors import SingleThreadedExecutor
+    from std_msgs.msg import String
+
+    assert os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] == 'LOCALHOST'  # conftest: isolation
+    p = subprocess.Popen([sys.executable, '-c', NODE], cwd=tmp_path, stdout=subprocess.PIPE,
+                         stderr=subprocess.STDOUT, text=True)
+    ctx = Context()
+    rclpy.init(context=ctx)
+    node = rclpy.create_node('udp_listener', context=ctx)
+    got = []
+    node.create_subscription(String, 'udp_probe', lambda m: got.append(m.data), 10)
+    ex = SingleThreadedExecutor(context=ctx)
+    ex.add_node(node)
+    try:
+        deadline = time.monotonic() + 30.0
+        while not got and time.monotonic() < deadline and p.poll() is None:
+            ex.spin_once(timeout_sec=0.05)
+        threads = {open(f'/proc/{p.pid}/task/{t}/comm').read().strip()
+                   for t in os.listdir(f'/proc/{p.pid}/task')} if p.poll() is None else set()
+    finally:
+        ex.shutdown()
+        node.destroy_node()
+        rclpy.try_shutdown(context=ctx)
+        p.terminate()
+        out = p.communicate(timeout=30)[0]
+    assert got == got[:1] * len(got) and got, out
+    assert any(t.startswith('dds.udp') for t in threads), threads
+    assert not any(t.startswith('dds.shm') for t in threads), threads
