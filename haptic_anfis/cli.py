@@ -42,6 +42,9 @@ def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     args._program = argv is None  # the program's own command line (not a call from Python)
+    if args._program:  # this process and the nodes it starts: DDS over UDP only
+        from .nodes.middleware import use_loop_transport
+        use_loop_transport()
     if not getattr(args, '_run', None):
         parser.print_help()
         return 2

@@ -15,17 +15,37 @@ from haptic_anfis.nodes.middleware import (KEEP_SHM, LOCALHOST_UDP_PROFILE, loop
 LOCALHOST = {'ROS_AUTOMATIC_DISCOVERY_RANGE': 'LOCALHOST'}
 
 
+PROFILE = {'ROS_AUTOMATIC_DISCOVERY_RANGE': 'SYSTEM_DEFAULT',
+           'FASTRTPS_DEFAULT_PROFILES_FILE': str(LOCALHOST_UDP_PROFILE)}
+UDP = {'FASTDDS_BUILTIN_TRANSPORTS': 'UDPv4', 'HAPTIC_ANFIS_DDS_UDP': '1'}
+
+
 def test_localhost_discovery_becomes_the_udp_only_profile():
-    assert loop_transport_env(LOCALHOST) == {
-        'ROS_AUTOMATIC_DISCOVERY_RANGE': 'SYSTEM_DEFAULT',
-        'FASTRTPS_DEFAULT_PROFILES_FILE': str(LOCALHOST_UDP_PROFILE)}
+    assert loop_transport_env(LOCALHOST) == PROFILE
     assert LOCALHOST_UDP_PROFILE.is_file()
 
 
 @pytest.mark.parametrize('discovery', [None, 'SUBNET', 'SYSTEM_DEFAULT'])
 def test_other_ranges_keep_theirs_with_udp_only(discovery):
     env = {} if discovery is None else {'ROS_AUTOMATIC_DISCOVERY_RANGE': discovery}
-    assert loop_transport_env(env) == {'FASTDDS_BUILTIN_TRANSPORTS': 'UDPv4'}
+    assert loop_transport_env(env) == UDP
+
+
+@pytest.mark.parametrize('first,then,expected', [
+    ('LOCALHOST', 'LOCALHOST', PROFILE),
+    ('SUBNET', 'LOCALHOST', PROFILE),
+    ('LOCALHOST', 'SUBNET', {'ROS_AUTOMATIC_DISCOVERY_RANGE': 'SUBNET', **UDP}),
+    ('SUBNET', 'OFF', {'ROS_AUTOMATIC_DISCOVERY_RANGE': 'OFF'}),
+])
+def test_it_composes_when_a_runner_sets_its_nodes_range(first, then, expected):
+    """A session runner applies it to itself, then starts its nodes with its environment and
+    the range they are to use: each node gets that range's setup, not the runner's."""
+    env = {'ROS_AUTOMATIC_DISCOVERY_RANGE': first}
+    use_loop_transport(env)
+    env['ROS_AUTOMATIC_DISCOVERY_RANGE'] = then
+    use_loop_transport(env)
+    assert env == expected
+    assert use_loop_transport(env) == {}  # idempotent
 
 
 @pytest.mark.parametrize('own', [
@@ -48,7 +68,12 @@ def test_a_users_own_middleware_choice_is_left_alone(own):
 def test_use_applies_the_changes_to_the_given_environment():
     env = dict(LOCALHOST)
     changes = use_loop_transport(env)
-    assert env == {**LOCALHOST, **changes} and changes
+    assert env == {**LOCALHOST, **changes} == PROFILE
+
+
+def test_a_users_own_udp_choice_is_not_taken_for_ours():
+    env = {**LOCALHOST, 'FASTDDS_BUILTIN_TRANSPORTS': 'UDPv4'}  # no marker: the user's
+    assert loop_transport_env(env) == {}
 
 
 NODE = """

@@ -40,8 +40,6 @@ def run(args: argparse.Namespace) -> int:
         code = rerun_in_own_session(sys.argv[1:])
         if code is not None:
             return code
-        from ..nodes.middleware import use_loop_transport
-        use_loop_transport()  # this process is the graph's: DDS over UDP only (nodes/middleware.py)
     from ..nodes.side_nodes import SideNodeError
     from ..session import OneProcessSession, spec_from_args
     from ..session.spec import ONE_PROCESS_NODES

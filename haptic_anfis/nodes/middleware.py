@@ -11,7 +11,9 @@ such latency in 16 starts (docs/servo_loop.md has the commands). For
 ``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`` rmw_fastrtps adds its shared-memory transport itself,
 so the same discovery (this machine only) is given as a Fast DDS profile instead
 (``data/dds/localhost_udp.xml``) with ``ROS_AUTOMATIC_DISCOVERY_RANGE=SYSTEM_DEFAULT``; other
-ranges keep theirs and get ``FASTDDS_BUILTIN_TRANSPORTS=UDPv4``. Other ROS 2 programs (``ros2
+ranges keep theirs and get ``FASTDDS_BUILTIN_TRANSPORTS=UDPv4``. Applied by ``run_node`` (every
+node process, ``ros2 run`` included) and by the ``haptic-anfis`` program for itself and what it
+starts (``sim``, ``exam run``, ``launch``); not by a call from Python (``main([...])``, tests). Other ROS 2 programs (``ros2
 topic echo``, rviz, a user's own nodes) still find and talk to these nodes: over UDP.
 
 Nothing is changed when the user configured the middleware: a Fast DDS profile of their own
@@ -32,34 +34,49 @@ __all__ = ['LOCALHOST_UDP_PROFILE', 'KEEP_SHM', 'loop_transport_env', 'use_loop_
 LOCALHOST_UDP_PROFILE = DATA_DIR / 'dds' / 'localhost_udp.xml'
 #: set to '1' to leave the middleware as configured (shared memory included)
 KEEP_SHM = 'HAPTIC_ANFIS_DDS_SHM'
+#: '1' when FASTDDS_BUILTIN_TRANSPORTS was set here, not by the user (a child recomputes it)
+_APPLIED = 'HAPTIC_ANFIS_DDS_UDP'
 
 _RANGE = 'ROS_AUTOMATIC_DISCOVERY_RANGE'
-_OWN_CHOICES = ('FASTRTPS_DEFAULT_PROFILES_FILE', 'FASTDDS_DEFAULT_PROFILES_FILE',
-                'FASTDDS_BUILTIN_TRANSPORTS')
+_PROFILE = 'FASTRTPS_DEFAULT_PROFILES_FILE'
+_BUILTIN = 'FASTDDS_BUILTIN_TRANSPORTS'
 _FAST_DDS = ('', 'rmw_fastrtps_cpp', 'rmw_fastrtps_dynamic_cpp')
 
 
-def loop_transport_env(environ: Mapping[str, str]) -> dict[str, str]:
-    """The environment variables to set (before ``rclpy.init``) so that this process's DDS
-    participant uses UDP only, with the discovery range ``environ`` asks for; {} = leave it."""
-    if (environ.get(KEEP_SHM) == '1' or any(environ.get(k) for k in _OWN_CHOICES)
-            or environ.get('RMW_IMPLEMENTATION', '') not in _FAST_DDS
-            or environ.get('ROS_LOCALHOST_ONLY') == '1'):
+def loop_transport_env(environ: Mapping[str, str]) -> dict[str, str | None]:
+    """The environment changes (None: unset) that make this process's DDS participant use UDP
+    only, with the discovery range ``environ`` asks for; {} = nothing to change. Idempotent, and
+    it composes: a process started with this one's environment and another range (a session
+    runner sets ``ROS_AUTOMATIC_DISCOVERY_RANGE`` for its nodes) gets that range's setup."""
+    ours_profile = environ.get(_PROFILE) == str(LOCALHOST_UDP_PROFILE)
+    ours_builtin = environ.get(_APPLIED) == '1' and environ.get(_BUILTIN) == 'UDPv4'
+    users_own = ((environ.get(_PROFILE) and not ours_profile)
+                 or environ.get('FASTDDS_DEFAULT_PROFILES_FILE')
+                 or (environ.get(_BUILTIN) and not ours_builtin))
+    if (environ.get(KEEP_SHM) == '1' or users_own or environ.get('ROS_LOCALHOST_ONLY') == '1'
+            or environ.get('RMW_IMPLEMENTATION', '') not in _FAST_DDS):
         return {}
     discovery = environ.get(_RANGE, '')
-    if discovery == 'LOCALHOST':
-        if environ.get('ROS_STATIC_PEERS'):  # the profile has no place for them: rmw's own setup
-            return {}
-        return {_RANGE: 'SYSTEM_DEFAULT', 'FASTRTPS_DEFAULT_PROFILES_FILE': str(LOCALHOST_UDP_PROFILE)}
-    if discovery in ('', 'SUBNET', 'SYSTEM_DEFAULT'):
-        return {'FASTDDS_BUILTIN_TRANSPORTS': 'UDPv4'}
-    return {}  # OFF (no other participant) or a value rcl will warn about
+    if discovery == 'LOCALHOST' and not environ.get('ROS_STATIC_PEERS'):
+        want = {_RANGE: 'SYSTEM_DEFAULT', _PROFILE: str(LOCALHOST_UDP_PROFILE), _BUILTIN: None,
+                _APPLIED: None}
+    elif discovery == 'SYSTEM_DEFAULT' and ours_profile:
+        want = {}  # applied already
+    elif discovery in ('', 'SUBNET', 'SYSTEM_DEFAULT'):
+        want = {_PROFILE: None, _BUILTIN: 'UDPv4', _APPLIED: '1'}
+    else:  # OFF (no other participant), LOCALHOST with static peers (rmw's own setup), unknown
+        want = {_PROFILE: None, _BUILTIN: None, _APPLIED: None}
+    return {k: v for k, v in want.items() if environ.get(k) != v}
 
 
-def use_loop_transport(environ: MutableMapping[str, str] | None = None) -> dict[str, str]:
+def use_loop_transport(environ: MutableMapping[str, str] | None = None) -> dict[str, str | None]:
     """Apply :func:`loop_transport_env` to ``environ`` (default: this process's environment,
-    which rcl and Fast DDS read when the participant is made); returns what was set."""
+    which rcl and Fast DDS read when the participant is made); returns what was changed."""
     env = os.environ if environ is None else environ
     changes = loop_transport_env(env)
-    env.update(changes)
+    for k, v in changes.items():
+        if v is None:
+            env.pop(k, None)
+        else:
+            env[k] = v
     return changes
