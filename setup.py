@@ -29,6 +29,7 @@ setup(
     packages=find_packages(exclude=['test', 'test.*']),
     package_data={PACKAGE: ['py.typed',  # PEP 561: the package's type hints are for its users
                             'data/*.csv', 'data/*.json', 'data/*.stl',
+                            'data/*.npz',  # the default case's FE surface displacement (dent)
                             # Fast DDS over UDP only (haptic_anfis.nodes.middleware)
                             'data/dds/*.xml',
                             # the case library (haptic-anfis cases list)

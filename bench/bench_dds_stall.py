@@ -1,8 +1,9 @@
-"""The longest pose -> force-command latency of ``haptic-anfis launch`` starts, with the DDS
-transport the nodes use (UDP only, the default: nodes/middleware.py) and with Fast DDS's
-shared-memory transport (``HAPTIC_ANFIS_DDS_SHM=1``), and with a late joiner: a plain ROS 2
-process (shared memory and UDP, as ``ros2 topic echo`` is) subscribing to the loop's topics one
-second after the session is ready.
+"""DDS transport and the slowest force answer of a launch. The longest pose -> force-command
+latency of ``haptic-anfis launch`` starts, with the DDS transport the nodes use (UDP only, the
+default: nodes/middleware.py) and with Fast DDS's shared-memory transport
+(``HAPTIC_ANFIS_DDS_SHM=1``), and with a late joiner: a plain ROS 2 process (shared memory and
+UDP, as ``ros2 topic echo`` is) subscribing to the loop's topics one second after the session is
+ready.
 
 Why: opening another process's shared-memory port makes Fast DDS check the port's health; when
 its listener was idle and checked a moment before, the opening thread sleeps one listener period

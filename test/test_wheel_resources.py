@@ -65,6 +65,13 @@ def test_an_installed_wheel_finds_its_config_and_data(tmp_path):
     assert Path(r['package']).is_relative_to(venv), r
     for f in r['files']:
         assert Path(f).is_file() and Path(f).is_relative_to(venv), f  # not the source tree's
+    # every file the package ships in data/ is in the wheel (the FE dent of the default case,
+    # the DDS profile, the case library), not only the ones probed above
+    shipped = subprocess.run(['git', 'ls-files', 'haptic_anfis/data'], cwd=ROOT, text=True,
+                             capture_output=True).stdout.split()
+    installed = Path(r['package']).parent
+    missing = [f for f in shipped if not (installed.parent / f).is_file()]
+    assert shipped and not missing, missing
 
 
 def _install_wheel(whl: Path, site: Path, prefix: Path) -> None:
