@@ -11,6 +11,8 @@ from dataclasses import dataclass, field
 
 import rclpy
 
+from .sigint import SigintStop
+
 
 @dataclass
 class Graph:
@@ -36,14 +38,18 @@ class Graph:
         return None
 
     def spin_for(self, seconds: float, until=None) -> bool:
-        """Spin for ``seconds`` or until ``until()`` is true (checked between callbacks)."""
+        """Spin for ``seconds`` or until ``until()`` is true (checked between callbacks). Ctrl-C
+        raises KeyboardInterrupt here, between callbacks, not inside one (nodes/sigint.py)."""
         if until is not None and until():
             return True
         end = time.monotonic() + seconds
-        while time.monotonic() < end:
-            self.executor.spin_once(timeout_sec=0.01)
-            if until is not None and until():
-                return True
+        with SigintStop(spinning=True) as stop:
+            while time.monotonic() < end:
+                self.executor.spin_once(timeout_sec=0.01)
+                if stop.requested:
+                    raise KeyboardInterrupt
+                if until is not None and until():
+                    return True
         return False
 
     def set_hand(self, script) -> None:

@@ -17,6 +17,7 @@ from .executor import make_executor, settle_and_start
 from .middleware import use_loop_transport
 from .parameters import ParameterError
 from .processes import HOLD_FOR_RECORDER, RECORDED_TOPICS, SESSION_CHECKED
+from .sigint import SigintStop
 
 __all__ = ['LOOP_QOS', 'stamp_ns', 'set_stamp', 'interrupted', 'run_node', 'message_class',
            'check_node_arguments', 'hold_until_recorder_matched', 'HOLD_TIMEOUT_S']
@@ -72,7 +73,7 @@ def run_node(factory: Callable[[], Any], args=None) -> int:
     # so close() logs and the node and the context go, in that order. SIGTERM stays rclpy's.
     use_loop_transport()  # DDS over UDP only: a shared-memory port's opening held publishes ~333 ms
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.SIGTERM)
-    stop = _SigintStop()
+    stop = SigintStop()
     node = executor = None
     code = 0
     try:
@@ -124,31 +125,6 @@ def run_node(factory: Callable[[], Any], args=None) -> int:
         finally:
             stop.restore()
     return code
-
-
-class _SigintStop:
-    """run_node's SIGINT handler: KeyboardInterrupt unless ``spinning``, then only
-    ``requested`` (the spin loop checks it every 50 ms)."""
-
-    def __init__(self):
-        import signal
-        import threading
-        self.spinning = False
-        self.requested = False
-        self._previous = None
-        if threading.current_thread() is threading.main_thread():
-            self._previous = signal.signal(signal.SIGINT, self._on_sigint)
-
-    def _on_sigint(self, signum, frame) -> None:
-        if not self.spinning:
-            raise KeyboardInterrupt
-        self.requested = True
-
-    def restore(self) -> None:
-        if self._previous is not None:
-            import signal
-            signal.signal(signal.SIGINT, self._previous)
-            self._previous = None
 
 
 def check_node_arguments(factory: Callable, args) -> list[str]:
