@@ -26,8 +26,8 @@ import sys
 from pathlib import Path
 from typing import Callable, Iterable
 
-__all__ = ['machine_line', 'write_page', 'write_readme_block', 'printed_to_markdown',
-           'run_with_page', 'PAGES_DIR', 'README']
+__all__ = ['machine_line', 'reproduce_command', 'write_page', 'write_readme_block',
+           'printed_to_markdown', 'run_with_page', 'PAGES_DIR', 'README']
 
 PAGES_DIR = Path(__file__).resolve().parent.parent / 'docs' / 'measurements'
 README = Path(__file__).resolve().parent.parent / 'README.md'
@@ -55,6 +55,13 @@ def machine_line() -> str:
             f'Python {platform.python_version()}, load {load:.1f} at the start of the write')
 
 
+def reproduce_command(script: str) -> str:
+    """The command line that re-runs ``script`` with this run's arguments, from the checkout's
+    root with the project's interpreter (the scripts are not executables of their own)."""
+    rel = os.path.relpath(Path(script).resolve(), PAGES_DIR.parent.parent)
+    return ' '.join(['.venv/bin/python', rel] + sys.argv[1:])
+
+
 def write_page(name: str, title: str, body_md: str, command: str | None = None,
                pages_dir: Path | None = None) -> Path:
     """Write ``<pages_dir>/<name>.md`` (default ``docs/measurements``) and return its path.
@@ -64,7 +71,7 @@ def write_page(name: str, title: str, body_md: str, command: str | None = None,
     """
     out_dir = Path(pages_dir) if pages_dir is not None else PAGES_DIR
     out_dir.mkdir(parents=True, exist_ok=True)
-    cmd = command or ' '.join([os.path.relpath(sys.argv[0])] + sys.argv[1:])
+    cmd = command or reproduce_command(sys.argv[0])
     stamp = _dt.datetime.now(_dt.timezone.utc).strftime('%Y-%m-%d %H:%M UTC')
     text = (f'# {title}\n\n'
             f'*Written by the benchmark, not by hand: {stamp}; {machine_line()}.*\n\n'
@@ -153,9 +160,7 @@ def run_with_page(main: Callable[[], int | None], script: str, doc: str | None,
         # the docstring as written (plain text: its brackets and indentation are not Markdown)
         body = ((f'```text\n{intro}\n```\n\n' if intro else '') + '## Output\n\n'
                 + printed_to_markdown(tee.copy.getvalue()))
-        root = PAGES_DIR.parent.parent
-        script_rel = os.path.relpath(Path(script).resolve(), root)
-        command = ' '.join(['.venv/bin/python', script_rel] + sys.argv[1:])
-        path = write_page(name, title, body, command=command, pages_dir=pages_dir)
+        path = write_page(name, title, body, command=reproduce_command(script),
+                          pages_dir=pages_dir)
         print(f'wrote {os.path.relpath(path)}', file=sys.stderr)
     return rc

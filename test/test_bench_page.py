@@ -49,3 +49,11 @@ def test_run_with_page_prints_and_writes_only_on_success(tmp_path, capsys, monke
         _page.run_with_page(lambda: sys.exit(0), 'bench/bench_help.py', 'Help.',
                             pages_dir=tmp_path)
     assert not (tmp_path / 'help.md').exists()
+
+
+def test_a_page_written_without_a_command_says_how_to_reproduce_it(tmp_path, monkeypatch):
+    """The default command names the interpreter: the scripts are not executable themselves
+    (a page said `bench/bench_servo_load.py ...`, which a shell refuses)."""
+    monkeypatch.setattr(sys, 'argv', [str(BENCH / 'bench_demo.py'), '--busy', '8'])
+    text = _page.write_page('demo', 'Demo', '| a |', pages_dir=tmp_path).read_text()
+    assert 'Reproduce: `.venv/bin/python bench/bench_demo.py --busy 8`' in text
