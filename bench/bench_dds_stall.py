@@ -59,7 +59,7 @@ def one_start(config: str, duration: float, domain: int, work: Path) -> dict:
         for line in p.stdout:
             if line.startswith('ready after') and config.endswith('+join'):
                 time.sleep(1.0)  # a user's `ros2 topic echo` once the session runs
-                jenv = {k: v for k, v in env.items() if k != 'HAPTIC_ANFIS_DDS_SHM'}
+                jenv = dict(env)  # a plain rclpy process: rmw's own localhost setup
                 jenv.update(ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST')
                 joiner = subprocess.Popen([sys.executable, '-c', JOINER], env=jenv,
                                           stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)

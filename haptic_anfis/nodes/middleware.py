@@ -6,15 +6,16 @@ participant. When the port's listener has been idle and was checked a moment bef
 thread sleeps a full listener period — a third of ``healthy_check_timeout_ms`` (default 1000), so
 ~333 ms — and it is the thread that publishes (rmw_fastrtps publishes synchronously) or the
 discovery thread holding the writer's lock. Measured with ``launch``: one pose -> command latency
-of 333-342 ms in about one start in four, the local model expiring mid-press; over UDP only, no
-such latency in 16 starts (docs/servo_loop.md has the commands). For
+of 333-342 ms in about one start in four, the local model expiring mid-press; over UDP only, none
+(``bench/bench_dds_stall.py``, docs/measurements/dds_stall.md). For
 ``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`` rmw_fastrtps adds its shared-memory transport itself,
 so the same discovery (this machine only) is given as a Fast DDS profile instead
 (``data/dds/localhost_udp.xml``) with ``ROS_AUTOMATIC_DISCOVERY_RANGE=SYSTEM_DEFAULT``; other
 ranges keep theirs and get ``FASTDDS_BUILTIN_TRANSPORTS=UDPv4``. Applied by ``run_node`` (every
 node process, ``ros2 run`` included) and by the ``haptic-anfis`` program for itself and what it
-starts (``sim``, ``exam run``, ``launch``); not by a call from Python (``main([...])``, tests). Other ROS 2 programs (``ros2
-topic echo``, rviz, a user's own nodes) still find and talk to these nodes: over UDP.
+starts (``sim``, ``exam run``, ``launch``); not by a call from Python (``main([...])``, tests).
+Other ROS 2 programs (``ros2 topic echo``, rviz, a user's own nodes) still find and talk to these
+nodes: over UDP.
 
 Nothing is changed when the user configured the middleware: a Fast DDS profile of their own
 (``FASTRTPS_DEFAULT_PROFILES_FILE`` / ``FASTDDS_DEFAULT_PROFILES_FILE``), a transport choice
