@@ -75,6 +75,21 @@ def test_live_page_from_ros_topics_draws_probe_and_dent_and_hides_lesions(tmp_pa
     from haptic_anfis.nodes.web_view import web_view_in_thread
     with web_view_in_thread({'port': free_port()}, 'fake_loop') as (node, feeder):
         held_press(node, feeder, tmp_path)
+        # bytes that are no contact message: counted and skipped, the page keeps drawing
+        from sensor_msgs.msg import JointState
+
+        from haptic_anfis import interfaces as ifc
+        bad = feeder.create_publisher(JointState, ifc.TOPIC_CONTACT, 10)
+        frames = node.app.stats.probe_updates
+        end = time.monotonic() + 30.0
+        while time.monotonic() < end and node.malformed == 0:
+            bad.publish(b'\x00\x01\x00\x00\x01\x00')
+            time.sleep(0.05)
+        assert node.malformed > 0
+        end = time.monotonic() + 10.0
+        while time.monotonic() < end and node.app.stats.probe_updates <= frames + 3:
+            time.sleep(0.05)
+        assert node.app.stats.probe_updates > frames + 3
 
 
 def held_press(node, feeder, tmp_path):
@@ -120,3 +135,11 @@ def held_press(node, feeder, tmp_path):
     assert px['green'] < 50, px   # no lesion marker
     s = node.app.state()   # the newest of each topic: the gauge
     assert 'pressure: **medium**' in s['gauge_text'] and 'force **4.0 N**' in s['gauge_text']
+    # the force arrow is one scene node, moved frame after frame (not re-created)
+    first = node.app.arrow
+    time.sleep(0.3)   # ~9 frames of the same press
+    assert node.app.arrow is first
+    from haptic_anfis.view.app import FORCE_SCALE
+    tip = np.array([x - depth, y, z])
+    np.testing.assert_allclose(node.app.arrow.points[0],
+                               [tip, tip + FORCE_SCALE * np.array([4.0, 0, 0])], atol=1e-6)

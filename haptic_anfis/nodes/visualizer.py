@@ -140,6 +140,10 @@ class Visualizer(Node):
                                                ('_force', WrenchStamped, ifc.TOPIC_COMMAND))]
         self.timer = self.create_timer(1.0 / p['rate'], self._draw)
         self.n_published = 0
+        # marker frames not built: their topic had no subscriber. RViz is not part of every
+        # install, and a picture nobody draws cost ~12 % of a core of the loop's machine (the
+        # dent thread skips the same way while visualization/tissue has no subscriber)
+        self.frames_unwatched = 0
         # compute + publish time of the last dent frames [s] (bounded: a long session)
         self.dent_seconds: collections.deque = collections.deque(maxlen=10000)
         self.last_dent = None
@@ -232,6 +236,8 @@ class Visualizer(Node):
                 if n_sub > subscribers:  # a late subscriber: send every patch as drawn now
                     self._publish_patches(surface.all_patches())
                 subscribers = n_sub
+                if n_sub == 0:  # nobody draws it (no RViz): the surface keeps what it showed
+                    continue
                 if (key is None and last is None) or \
                         (key is not None and last is not None and np.array_equal(key, last)):
                     continue
@@ -248,17 +254,22 @@ class Visualizer(Node):
                 self.get_logger().error(f'dent drawing failed: {exc!r}', throttle_duration_sec=5.0)
 
     def close(self) -> None:
-        """Stop the dent thread (called before the node is destroyed) and log what it drew."""
+        """Stop the dent thread (called before the node is destroyed) and log what it drew
+        (once)."""
+        if self._stop.is_set():
+            return
         self._stop.set()
         if self._thread is not None:
             self._thread.join(timeout=2.0)
             self._thread = None
-            if self.dent_seconds:
-                ms = np.percentile(np.asarray(self.dent_seconds) * 1e3, [50, 99])
-                self.get_logger().info(
-                    f'dent: {self.n_dent_frames} frames drawn, {self.n_dent_messages} messages, '
+        dent = ''
+        if self.dent_seconds:
+            ms = np.percentile(np.asarray(self.dent_seconds) * 1e3, [50, 99])
+            dent = (f'dent: {self.n_dent_frames} frames drawn, {self.n_dent_messages} messages, '
                     f'compute + publish p50 {ms[0]:.1f} ms, p99 {ms[1]:.1f} ms (newest '
-                    f'{len(self.dent_seconds)} frames); {self.n_published} marker arrays')
+                    f'{len(self.dent_seconds)} frames); ')
+        self.get_logger().info(f'{dent}{self.n_published} marker arrays, '
+                               f'{self.frames_unwatched} frames not drawn (no subscriber)')
 
     def destroy_node(self):
         self.close()
@@ -324,6 +335,9 @@ class Visualizer(Node):
 
     def _draw(self) -> None:
         self._take_inputs()  # the dent thread reads what this took
+        if self.pub.get_subscription_count() == 0:  # nobody draws them: build nothing
+            self.frames_unwatched += 1
+            return
         markers = list(self.tumours)
         if self._pose is not None:
             q = self._pose.pose.position

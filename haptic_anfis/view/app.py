@@ -290,10 +290,13 @@ class ViewApp:
                 self.stats.probe_at = now
                 tip = np.asarray(pose, float)
                 pts = np.array([[tip, tip + FORCE_SCALE * fvec]]) if fn > 1e-3 else None
-                if pts is not None:
+                if pts is not None and self.arrow is None:
                     self.arrow = self.server.scene.add_arrows(
                         '/force', pts, (30, 160, 30), shaft_radius=0.0012, head_radius=0.003,
                         head_length=0.005)
+                elif pts is not None:   # move it: a new node per frame cost ~2 ms here
+                    self.arrow.points = pts.astype(np.float32)
+                    self.arrow.visible = True
                 elif self.arrow is not None:
                     self.arrow.visible = False
             in_contact = contact is not None and contact[2] > 0
