@@ -1,0 +1,54 @@
+"""The scheduler-trace benchmark's reading of ``perf sched timehist`` (synthetic lines: no perf,
+no tracing right needed)."""
+import sys
+from pathlib import Path
+
+import pytest
+
+BENCH = Path(__file__).resolve().parents[1] / 'bench'
+sys.path.insert(0, str(BENCH))
+from bench_sched_trace import analyse, parse, program  # noqa: E402
+
+SERVO, W0, W1, BUSY, CHROME = 100, 101, 102, 200, 300
+HEAD = '''           time    cpu  task name                       wait time  sch delay   run time
+                        [tid/pid]                          (msec)     (msec)     (msec)
+--------------- ------  ------------------------------  ---------  ---------  ---------
+'''
+
+
+def line(t: float, cpu: int, comm: str, tid: int, pid: int, sch: float, run: float) -> str:
+    task = f'{comm}[{tid}/{pid}]' if tid != pid else f'{comm}[{pid}]'
+    return f'{t:15.6f} [{cpu:04d}]  {task:<30s}  {1.0:9.3f}  {sch:9.3f}  {run:9.3f}'
+
+
+def test_delays_holders_and_a_gap_on_both_cores():
+    rows = []
+    t = 10.0
+    for k in range(5):                       # 5 periods: each worker wakes on time
+        rows += [line(t + 0.0002, 0, 'python', W0, SERVO, 0.01, 0.02),
+                 line(t + 0.0003, 1, 'python', W1, SERVO, 0.02, 0.01)]
+        t += 0.001
+    # both cores held: the busy process 4 ms on core 0, chromium on core 1
+    rows += [line(t + 0.004, 0, 'python', BUSY, BUSY, 0.0, 4.0),
+             line(t + 0.0041, 0, 'python', W0, SERVO, 3.9, 0.02),
+             line(t + 0.003, 1, 'Thread<00>', 301, CHROME, 0.0, 3.0),
+             line(t + 0.0031, 1, 'python', W1, SERVO, 2.9, 0.02)]
+    runs = parse(HEAD + '\n'.join(rows) + '\n')
+    assert len(runs) == 14
+    assert runs[-2][2:4] == (301, CHROME)
+    s = analyse(sorted(runs), SERVO, {BUSY: 'busy process', CHROME: 'chromium'})
+    assert s['wakeups'] == 10       # the first run on each core has no run before it
+    assert s['max'] == pytest.approx(3.9)
+    assert s['late_holders'] == {'busy process': 1, 'chromium': 1}
+    assert s['held_for']['busy process'] == [4.0]
+    assert s['gaps'] == 1
+    assert s['gap_holders'] == {'busy process + chromium': 1}
+
+
+def test_programs_named_from_command_lines():
+    assert program('python -c while True: pass', 1, 2) == 'busy process'
+    assert program('/usr/lib/chromium/chromium --type=gpu-process', 1, 2) == 'chromium'
+    assert program('.venv/bin/python .venv/bin/web_view --ros-args', 1, 2) == 'web_view'
+    assert program('python -m haptic_anfis.cli sim --duration 30', 1, 2) == 'sim graph'
+    assert program('python -m haptic_anfis.cli sim --duration 30', 2, 2) == 'servo process'
+    assert program('', 1, 2) == 'kernel'
