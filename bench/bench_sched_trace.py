@@ -35,7 +35,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _busy import busy  # noqa: E402
 from _page import write_page  # noqa: E402
-from bench_servo_load import run_one  # noqa: E402
+from bench_servo_load import row, run_one  # noqa: E402
 
 #: a worker that waited longer than this for its core [ms]
 LATE_MS = 1.0
@@ -72,8 +72,9 @@ def program(cmd: str | None, servo_pid: int, pid: int) -> str:
         return 'busy process'
     if 'chrom' in cmd:
         return 'chromium'
+    head = ' '.join(cmd.split()[:3])   # the interpreter and the node's program, not its arguments
     for n in NODES:
-        if n in cmd:
+        if n in head:
             return n
     if 'haptic_anfis.cli sim' in cmd:
         return 'sim graph'
@@ -84,9 +85,24 @@ def program(cmd: str | None, servo_pid: int, pid: int) -> str:
     return 'other'
 
 
+def _pinned_threads(pid: int) -> int:
+    """Threads of ``pid`` allowed on one CPU only (the servo process's tick workers are pinned,
+    one to each core; no other thread of the graph is)."""
+    n = 0
+    for t in Path(f'/proc/{pid}/task').glob('*/status'):
+        try:
+            for line in t.read_text().splitlines():
+                if line.startswith('Cpus_allowed_list:'):
+                    n += line.split(':')[1].strip().isdigit()
+        except OSError:
+            pass
+    return n
+
+
 def find_servo_process(timeout: float) -> int | None:
-    """The servo process: a child of the driver with the driver's own command line (forked after
-    the compile)."""
+    """The servo process: forked by the driver after the compile (so with its parent's command
+    line), its tick workers each pinned to one core (``sim``'s re-run of itself has its parent's
+    command line too, but no pinned thread)."""
     end = time.monotonic() + timeout
     while time.monotonic() < end:
         for p in Path('/proc').iterdir():
@@ -94,17 +110,24 @@ def find_servo_process(timeout: float) -> int | None:
                 continue
             pid = int(p.name)
             cmd = _cmdline(pid)
-            if cmd and ('haptic_anfis' in cmd or 'falcon_driver' in cmd):
-                parent = _ppid(pid)
-                if parent and _cmdline(parent) == cmd:
-                    return pid
+            if cmd and ('haptic_anfis' in cmd or 'falcon_driver' in cmd) \
+                    and _cmdline(_ppid(pid)) == cmd and _pinned_threads(pid) >= 1:
+                return pid
         time.sleep(0.2)
     return None
 
 
-def names_now(servo_pid: int) -> dict[int, str]:
-    return {int(p.name): program(_cmdline(int(p.name)), servo_pid, int(p.name))
-            for p in Path('/proc').iterdir() if p.name.isdigit()}
+def names_now(servo_pid: int, examples: dict | None = None) -> dict[int, str]:
+    """{pid: program} of every process now; ``examples`` gets one command line per program."""
+    out = {}
+    for p in Path('/proc').iterdir():
+        if p.name.isdigit():
+            pid = int(p.name)
+            cmd = _cmdline(pid)
+            out[pid] = program(cmd, servo_pid, pid)
+            if examples is not None and cmd:
+                examples.setdefault(out[pid], cmd[:160])
+    return out
 
 
 def parse(text: str) -> list[tuple[float, int, int, int, float, float]]:
@@ -172,17 +195,20 @@ def trace_one(kind: str, prio: int, a, d: Path) -> tuple[dict, dict]:
         raise SystemExit(f'{kind}: no servo process appeared: {result.get("error", "")}')
     time.sleep(a.settle)   # the graph ready, the browser on its page
     data = d / f'{kind}_{prio}.perf'
-    names = names_now(servo)
+    examples: dict = {}
+    names = names_now(servo, examples)
     rec = subprocess.run(['perf', 'sched', 'record', '-a', '-o', str(data), '--', 'sleep',
                           str(a.seconds)], capture_output=True, text=True)
-    names.update({k: v for k, v in names_now(servo).items() if k not in names})
+    names.update({k: v for k, v in names_now(servo, examples).items() if k not in names})
     th.join()
     if rec.returncode != 0:
         raise SystemExit(f'perf sched record failed (root or kernel.perf_event_paranoid <= -1 '
                          f'is needed): {rec.stderr.strip()[-300:]}')
     hist = subprocess.run(['perf', 'sched', 'timehist', '-i', str(data)], capture_output=True,
                           text=True)
-    return analyse(parse(hist.stdout), servo, names), result
+    s = analyse(parse(hist.stdout), servo, names)
+    s['examples'] = examples
+    return s, result
 
 
 def main() -> int:
@@ -208,9 +234,10 @@ def main() -> int:
             with busy(a.busy):
                 s, j = trace_one(kind, prio, a, Path(td))
             label = f'{kind} prio {prio}, {a.busy} busy' + (', view' if a.view else '')
+            j = row(label, a.busy, 0.0, j)
             lines = [f'## {label}', '',
-                     f'Run: rate {j.get("rate_hz")} Hz, periods lost {j.get("periods_lost")}, '
-                     f'longest gap {j.get("max_gap_ms")} ms (the whole run); traced '
+                     f'Run: rate {j["rate_hz"] or 0:.1f} Hz, periods lost {j["periods_lost"]}, '
+                     f'longest gap {j["max_gap_ms"] or 0:.1f} ms (the whole run); traced '
                      f'{s["seconds"]:.1f} s of it.', '',
                      '| worker wake-ups | delay p50 ms | p99 ms | max ms | over 1 ms % | gaps |',
                      '|---|---|---|---|---|---|',
@@ -225,6 +252,10 @@ def main() -> int:
             lines += ['', 'Servo gaps (no worker ran for > 1.9 ms): the program on each core.',
                       '', '| cores | gaps |', '|---|---|']
             lines += [f'| {who} | {n} |' for who, n in s['gap_holders'].most_common()]
+            shown = set(s['late_holders']) | {w for k in s['gap_holders'] for w in k.split(' + ')}
+            lines += ['', 'The programs, as named from a command line of theirs:', '',
+                      '| program | a command line |', '|---|---|']
+            lines += [f'| {k} | `{v}` |' for k, v in sorted(s['examples'].items()) if k in shown]
             sections.append('\n'.join(lines))
             print(sections[-1], flush=True)
     body = ('\n\n'.join(sections) + '\n\nThe servo process has two tick workers, one pinned to '
