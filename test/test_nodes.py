@@ -15,6 +15,7 @@ from geometry_msgs.msg import PoseStamped, WrenchStamped  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
 from sensor_msgs.msg import JointState  # noqa: E402
 from std_srvs.srv import Trigger  # noqa: E402
+from visualization_msgs.msg import MarkerArray  # noqa: E402
 
 from haptic_anfis.tissue.dataset import DATA_DIR  # noqa: E402
 from haptic_anfis.nodes import interfaces as ifc  # noqa: E402
@@ -55,6 +56,10 @@ def fnorm(f):
 
 def test_force_appears_when_pressing_and_vanishes_when_lifting(graph_factory, press_script):
     g = graph_factory(driver=[Parameter('palpation_script', value=press_script)], visualizer=True)
+    viewer = rclpy.create_node('viewer', context=g.context)   # RViz: the visualizer draws for it
+    g.extra.append(viewer)
+    g.executor.add_node(viewer)
+    viewer.create_subscription(MarkerArray, ifc.TOPIC_MARKERS, lambda m: None, 10)
     servo = g.driver.servo
     assert g.spin_for(20.0, lambda: fnorm(servo.force) > 1.0), 'no force while pressing'
     assert servo.force[0] > 0  # pushes the probe out of the body

@@ -153,4 +153,6 @@ def print_summary(s: dict) -> None:
           f"({100 * c['contact_fraction']:.1f} %, ~{contact_seconds(s):.1f} s), "
           f"max depth {c['max_depth_mm']:.2f} mm, bad poses {c['bad_poses']}")
     if 'visualizer' in s:
-        print(f"visualizer     {s['visualizer']['marker_arrays']} marker arrays")
+        v = s['visualizer']
+        print(f"visualizer     {v['marker_arrays']} marker arrays, {v['frames_not_drawn']} frames "
+              'not drawn (no subscriber)')

@@ -71,7 +71,8 @@ class Graph:
         s = {'loop': self.driver.summary(), 'contact': self.contact.summary(),
              'force': self.force.summary()}
         if self.visualizer is not None:
-            s['visualizer'] = {'marker_arrays': self.visualizer.n_published}
+            s['visualizer'] = {'marker_arrays': self.visualizer.n_published,
+                               'frames_not_drawn': self.visualizer.frames_unwatched}
         return s
 
     def shutdown(self) -> None:
