@@ -1,12 +1,13 @@
 """``web_view``: the trainee's screen in a browser (``haptic_anfis.view``), in a process of its own.
 
 Reads the loop topics at its own ``rate`` (default 30 Hz), best effort, polled from their DDS
-readers (``nodes/polled.py``): the newest pose and force command, and every contact sample still
-held (a bounded best-effort queue: the coverage map needs the path, not just the newest point) —
-no callback per 1 kHz message and no acknowledgement the loop's publishers would wait for. It
-draws the probe, the force, the dent from the FE skin displacements, the coverage painted per
-pressure level (folded at ``coverage_rate``), the gauge and cue, the exam clock; lesions stay
-hidden until the debrief. ``exam/marks`` is a plain subscription (rare, must not be lost).
+readers (``nodes/polled.py``) as serialized bytes (``nodes/cdr.py``): the newest pose and force
+command, and every contact sample still held (a bounded best-effort queue: the coverage map needs
+the path, not just the newest point) — no callback per 1 kHz message and no acknowledgement the
+loop's publishers would wait for. It draws the probe, the force, the dent from the FE skin
+displacements, the coverage painted per pressure level (folded at ``coverage_rate``), the gauge
+and cue, the exam clock; lesions stay hidden until the debrief. ``exam/marks`` is a plain
+subscription (rare, must not be lost).
 
 The instructor's controls on the page: a case or a blind random one (set on the loop nodes'
 writable ``case`` / ``random_case_seed`` parameters, and on this node), start (a fresh session,
@@ -108,8 +109,8 @@ class WebView(Node):
 
     def _take(self) -> None:
         """The newest pose and force command, and every contact sample since the last frame,
-        read from their serialized bytes (``nodes/cdr.py``): rclpy's message objects cost this
-        node ~40 µs of its interpreter per contact sample, a thousand a second."""
+        read from their serialized bytes (``nodes/cdr.py``): rclpy's message objects cost tens
+        of microseconds of this node's interpreter per contact sample, a thousand a second."""
         for k, read in (('pose', cdr.read_pose_position), ('force', cdr.read_wrench_stamped)):
             b = self._inputs[k].take_newest()
             if b is not None:
