@@ -25,6 +25,20 @@ def test_localhost_discovery_becomes_the_udp_only_profile():
     assert LOCALHOST_UDP_PROFILE.is_file()
 
 
+def test_the_profile_is_udp_only_with_large_socket_buffers():
+    """A reader that waits for the CPU must not have datagrams dropped: the loop's writers keep
+    one sample, so a dropped one is lost for good (the system's ~200 KiB overflowed in a busy
+    exam)."""
+    import xml.etree.ElementTree as ET
+    ns = {'d': 'http://www.eprosima.com/XMLSchemas/fastRTPS_Profiles'}
+    root = ET.parse(LOCALHOST_UDP_PROFILE).getroot()
+    (t,) = root.findall('.//d:transport_descriptor', ns)
+    assert t.find('d:type', ns).text == 'UDPv4'
+    for tag in ('sendBufferSize', 'receiveBufferSize'):
+        assert int(t.find(f'd:{tag}', ns).text) >= 4 * 2**20
+    assert root.find('.//d:useBuiltinTransports', ns).text == 'false'
+
+
 @pytest.mark.parametrize('discovery', [None, 'SUBNET', 'SYSTEM_DEFAULT'])
 def test_other_ranges_keep_theirs_with_udp_only(discovery):
     env = {} if discovery is None else {'ROS_AUTOMATIC_DISCOVERY_RANGE': discovery}
