@@ -9,15 +9,15 @@ import time
 
 import pytest
 
-from haptic_anfis.nodes.middleware import (KEEP_SHM, LOCALHOST_UDP_PROFILE, loop_transport_env,
-                                           use_loop_transport)
+from haptic_anfis.nodes.middleware import (KEEP_SHM, LOCALHOST_UDP_PROFILE, UDP_PROFILE,
+                                           loop_transport_env, use_loop_transport)
 
 LOCALHOST = {'ROS_AUTOMATIC_DISCOVERY_RANGE': 'LOCALHOST'}
 
 
 PROFILE = {'ROS_AUTOMATIC_DISCOVERY_RANGE': 'SYSTEM_DEFAULT',
            'FASTRTPS_DEFAULT_PROFILES_FILE': str(LOCALHOST_UDP_PROFILE)}
-UDP = {'FASTDDS_BUILTIN_TRANSPORTS': 'UDPv4', 'HAPTIC_ANFIS_DDS_UDP': '1'}
+UDP = {'FASTRTPS_DEFAULT_PROFILES_FILE': str(UDP_PROFILE)}
 
 
 def test_localhost_discovery_becomes_the_udp_only_profile():
@@ -25,13 +25,14 @@ def test_localhost_discovery_becomes_the_udp_only_profile():
     assert LOCALHOST_UDP_PROFILE.is_file()
 
 
-def test_the_profile_is_udp_only_with_large_socket_buffers():
+@pytest.mark.parametrize('profile', [LOCALHOST_UDP_PROFILE, UDP_PROFILE])
+def test_the_profiles_are_udp_only_with_large_socket_buffers(profile):
     """A reader that waits for the CPU must not have datagrams dropped: the loop's writers keep
     one sample, so a dropped one is lost for good (the system's ~200 KiB overflowed in a busy
     exam)."""
     import xml.etree.ElementTree as ET
     ns = {'d': 'http://www.eprosima.com/XMLSchemas/fastRTPS_Profiles'}
-    root = ET.parse(LOCALHOST_UDP_PROFILE).getroot()
+    root = ET.parse(profile).getroot()
     (t,) = root.findall('.//d:transport_descriptor', ns)
     assert t.find('d:type', ns).text == 'UDPv4'
     for tag in ('sendBufferSize', 'receiveBufferSize'):
@@ -83,6 +84,15 @@ def test_use_applies_the_changes_to_the_given_environment():
     env = dict(LOCALHOST)
     changes = use_loop_transport(env)
     assert env == {**LOCALHOST, **changes} == PROFILE
+
+
+def test_an_environment_from_the_builtin_transport_version_is_recomputed():
+    """Before the profiles, other ranges got FASTDDS_BUILTIN_TRANSPORTS=UDPv4 with a marker: a
+    process started with such an environment gets the profile, the old setting removed."""
+    env = {'ROS_AUTOMATIC_DISCOVERY_RANGE': 'SUBNET', 'FASTDDS_BUILTIN_TRANSPORTS': 'UDPv4',
+           'HAPTIC_ANFIS_DDS_UDP': '1'}
+    use_loop_transport(env)
+    assert env == {'ROS_AUTOMATIC_DISCOVERY_RANGE': 'SUBNET', **UDP}
 
 
 def test_a_users_own_udp_choice_is_not_taken_for_ours():

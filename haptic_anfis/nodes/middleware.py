@@ -11,7 +11,10 @@ of 333-342 ms in about one start in four, the local model expiring mid-press; ov
 ``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`` rmw_fastrtps adds its shared-memory transport itself,
 so the same discovery (this machine only) is given as a Fast DDS profile instead
 (``data/dds/localhost_udp.xml``) with ``ROS_AUTOMATIC_DISCOVERY_RANGE=SYSTEM_DEFAULT``; other
-ranges keep theirs and get ``FASTDDS_BUILTIN_TRANSPORTS=UDPv4``. Applied by ``run_node`` (every
+ranges keep theirs with the profile ``data/dds/udp.xml`` (Fast DDS's default discovery). Both
+profiles ask for 4 MiB socket buffers: with the system's ~200 KiB a reader process waiting for
+the CPU had datagrams dropped, and the loop's writers keep one sample (a dropped one never
+arrives). Applied by ``run_node`` (every
 node process, ``ros2 run`` included) and by the ``haptic-anfis`` program for itself and what it
 starts (``sim``, ``exam run``, ``launch``); not by a call from Python (``main([...])``, tests).
 Other ROS 2 programs (``ros2 topic echo``, rviz, a user's own nodes) still find and talk to these
@@ -29,13 +32,17 @@ from collections.abc import Mapping, MutableMapping
 
 from ..resources import DATA_DIR
 
-__all__ = ['LOCALHOST_UDP_PROFILE', 'KEEP_SHM', 'loop_transport_env', 'use_loop_transport']
+__all__ = ['LOCALHOST_UDP_PROFILE', 'UDP_PROFILE', 'KEEP_SHM', 'loop_transport_env',
+           'use_loop_transport']
 
 #: the Fast DDS profile for discovery on this machine only, over UDP only
 LOCALHOST_UDP_PROFILE = DATA_DIR / 'dds' / 'localhost_udp.xml'
+#: the Fast DDS profile for the other discovery ranges: UDP only, Fast DDS's default discovery
+UDP_PROFILE = DATA_DIR / 'dds' / 'udp.xml'
 #: set to '1' to leave the middleware as configured (shared memory included)
 KEEP_SHM = 'HAPTIC_ANFIS_DDS_SHM'
-#: '1' when FASTDDS_BUILTIN_TRANSPORTS was set here, not by the user (a child recomputes it)
+#: '1' when FASTDDS_BUILTIN_TRANSPORTS was set here (an environment from an earlier version of
+#: this module: recomputed, not taken for the user's)
 _APPLIED = 'HAPTIC_ANFIS_DDS_UDP'
 
 _RANGE = 'ROS_AUTOMATIC_DISCOVERY_RANGE'
@@ -49,7 +56,7 @@ def loop_transport_env(environ: Mapping[str, str]) -> dict[str, str | None]:
     only, with the discovery range ``environ`` asks for; {} = nothing to change. Idempotent, and
     it composes: a process started with this one's environment and another range (a session
     runner sets ``ROS_AUTOMATIC_DISCOVERY_RANGE`` for its nodes) gets that range's setup."""
-    ours_profile = environ.get(_PROFILE) == str(LOCALHOST_UDP_PROFILE)
+    ours_profile = environ.get(_PROFILE) in (str(LOCALHOST_UDP_PROFILE), str(UDP_PROFILE))
     ours_builtin = environ.get(_APPLIED) == '1' and environ.get(_BUILTIN) == 'UDPv4'
     users_own = ((environ.get(_PROFILE) and not ours_profile)
                  or environ.get('FASTDDS_DEFAULT_PROFILES_FILE')
@@ -62,9 +69,9 @@ def loop_transport_env(environ: Mapping[str, str]) -> dict[str, str | None]:
         want = {_RANGE: 'SYSTEM_DEFAULT', _PROFILE: str(LOCALHOST_UDP_PROFILE), _BUILTIN: None,
                 _APPLIED: None}
     elif discovery == 'SYSTEM_DEFAULT' and ours_profile:
-        want = {}  # applied already
+        want = {}  # applied already (LOCALHOST's profile says SYSTEM_DEFAULT)
     elif discovery in ('', 'SUBNET', 'SYSTEM_DEFAULT'):
-        want = {_PROFILE: None, _BUILTIN: 'UDPv4', _APPLIED: '1'}
+        want = {_PROFILE: str(UDP_PROFILE), _BUILTIN: None, _APPLIED: None}
     else:  # OFF (no other participant), LOCALHOST with static peers (rmw's own setup), unknown
         want = {_PROFILE: None, _BUILTIN: None, _APPLIED: None}
     return {k: v for k, v in want.items() if environ.get(k) != v}
