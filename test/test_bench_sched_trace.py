@@ -52,3 +52,14 @@ def test_programs_named_from_command_lines():
     assert program('python -m haptic_anfis.cli sim --duration 30', 1, 2) == 'sim graph'
     assert program('python -m haptic_anfis.cli sim --duration 30', 2, 2) == 'servo process'
     assert program('', 1, 2) == 'kernel'
+
+
+def test_without_perf_it_says_so_and_ends_without_a_page(monkeypatch, capsys, tmp_path):
+    import bench_sched_trace
+    monkeypatch.setattr(bench_sched_trace.shutil, 'which', lambda name: None)
+    monkeypatch.setattr(sys, 'argv', ['bench_sched_trace.py', '--page', 'x'])
+    written = []
+    monkeypatch.setattr(bench_sched_trace, 'write_page', lambda *a, **k: written.append(a))
+    assert bench_sched_trace.main() == 0   # make bench goes on
+    assert 'skipped: perf is not installed' in capsys.readouterr().out
+    assert written == []
