@@ -3,21 +3,19 @@ the install's usual case) it publishes nothing and computes no dent; a subscribe
 gets the markers and the dent from then on."""
 from __future__ import annotations
 
-import threading
 import time
 
 import numpy as np
 import pytest
 
 rclpy = pytest.importorskip('rclpy')
-from rclpy.context import Context  # noqa: E402
-from rclpy.executors import SingleThreadedExecutor  # noqa: E402
 from rclpy.qos import DurabilityPolicy, QoSProfile  # noqa: E402
 from geometry_msgs.msg import PoseStamped  # noqa: E402
 from sensor_msgs.msg import JointState  # noqa: E402
 from visualization_msgs.msg import MarkerArray  # noqa: E402
 
 from haptic_anfis import interfaces as ifc  # noqa: E402
+from haptic_anfis.nodes.executor import node_in_thread  # noqa: E402
 from haptic_anfis.nodes.visualizer import Visualizer  # noqa: E402
 
 pytestmark = pytest.mark.ros
@@ -37,24 +35,9 @@ def _press(i: int) -> tuple[PoseStamped, JointState]:
 
 
 def test_no_subscriber_no_markers_no_dent_then_drawn_for_a_subscriber():
-    ctx = Context()
-    rclpy.init(context=ctx)
-    stop = threading.Event()
-    vis = feeder = ex = th = None
-    try:
-        vis = Visualizer(context=ctx)
-        feeder = rclpy.create_node('vis_feeder', context=ctx)
+    with node_in_thread(Visualizer, other='vis_feeder') as (vis, feeder):
         pub_pose = feeder.create_publisher(PoseStamped, ifc.TOPIC_POSE, 10)
         pub_contact = feeder.create_publisher(JointState, ifc.TOPIC_CONTACT, 10)
-        ex = SingleThreadedExecutor(context=ctx)
-        ex.add_node(vis)
-        ex.add_node(feeder)
-
-        def spin() -> None:
-            while not stop.is_set():
-                ex.spin_once(timeout_sec=0.01)
-        th = threading.Thread(target=spin, daemon=True)
-        th.start()
         i = 0
 
         def feed_until(cond, timeout: float) -> bool:
@@ -83,14 +66,3 @@ def test_no_subscriber_no_markers_no_dent_then_drawn_for_a_subscriber():
         feeder.create_subscription(MarkerArray, ifc.TOPIC_TISSUE, lambda m: None, QoSProfile(
             depth=100, durability=DurabilityPolicy.TRANSIENT_LOCAL))
         assert feed_until(lambda: vis.n_dent_frames > 3, 30.0)
-    finally:
-        stop.set()
-        if th is not None:
-            th.join(timeout=2)
-        if vis is not None:
-            vis.destroy_node()
-        if feeder is not None:
-            feeder.destroy_node()
-        if ex is not None:
-            ex.shutdown(timeout_sec=1.0)
-        rclpy.try_shutdown(context=ctx)

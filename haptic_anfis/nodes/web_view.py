@@ -17,7 +17,6 @@ shown). The page's URL: ``http://host:port/``.
 from __future__ import annotations
 
 import collections
-import contextlib
 import random
 import time
 
@@ -270,48 +269,13 @@ def _stamp(m) -> float:
     return m.header.stamp.sec + m.header.stamp.nanosec * 1e-9
 
 
-@contextlib.contextmanager
 def web_view_in_thread(parameters: dict, other: str = 'view_feeder'):
-    """A :class:`WebView` with ``parameters`` ({name: value}) on an rclpy context of its own,
-    spun by a thread, and a plain node ``other`` on that context (to publish the loop topics
-    to it): yields ``(web_view, other)``; everything is shut down on exit. For tests and
-    benches (the node's real home is its own process)."""
-    import threading
-
-    import rclpy
-    from rclpy.context import Context
-    from rclpy.executors import SingleThreadedExecutor
-    from rclpy.parameter import Parameter
-    ctx = Context()
-    rclpy.init(context=ctx)
-    node = feeder = ex = th = None
-    stop = threading.Event()
-    try:
-        node = WebView(context=ctx, parameter_overrides=[Parameter(k, value=v)
-                                                         for k, v in parameters.items()])
-        feeder = rclpy.create_node(other, context=ctx)
-        ex = SingleThreadedExecutor(context=ctx)
-        ex.add_node(node)
-
-        def spin():
-            while not stop.is_set():
-                ex.spin_once(timeout_sec=0.01)
-
-        th = threading.Thread(target=spin, daemon=True)
-        th.start()
-        yield node, feeder
-    finally:
-        stop.set()
-        if th is not None:
-            th.join(timeout=2)
-        if node is not None:
-            node.close()
-        if ex is not None:
-            ex.shutdown(timeout_sec=1.0)
-        for n in (node, feeder):
-            if n is not None:
-                n.destroy_node()
-        rclpy.try_shutdown(context=ctx)
+    """A :class:`WebView` with ``parameters`` ({name: value}) spun by a thread of its own, and a
+    plain node ``other`` on its context (to publish the loop topics to it): a context manager
+    yielding ``(web_view, other)`` (:func:`~haptic_anfis.nodes.executor.node_in_thread`). For
+    tests and benches (the node's real home is its own process)."""
+    from .executor import node_in_thread
+    return node_in_thread(WebView, parameters, other)
 
 
 def main(args=None) -> None:
