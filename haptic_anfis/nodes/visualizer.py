@@ -141,7 +141,7 @@ class Visualizer(Node):
         self.timer = self.create_timer(1.0 / p['rate'], self._draw)
         self.n_published = 0
         # marker frames not built: their topic had no subscriber. RViz is not part of every
-        # install, and a picture nobody draws cost ~12 % of a core of the loop's machine (the
+        # install, and a picture nobody draws took about a tenth of a core of the loop's machine (the
         # dent thread skips the same way while visualization/tissue has no subscriber)
         self.frames_unwatched = 0
         # compute + publish time of the last dent frames [s] (bounded: a long session)
