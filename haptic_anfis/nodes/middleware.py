@@ -15,9 +15,9 @@ ranges keep theirs with the profile ``data/dds/udp.xml`` (Fast DDS's default dis
 profiles ask for 4 MiB socket buffers: with the system's ~200 KiB a reader process waiting for
 the CPU had datagrams dropped, and the loop's writers keep one sample (a dropped one never
 arrives). Applied by ``run_node`` (every node process, ``ros2 run`` included) and by the
-``haptic-anfis`` program for itself and what it starts (``sim``, ``exam run``, ``launch``); not by a call from Python (``main([...])``, tests).
-Other ROS 2 programs (``ros2 topic echo``, rviz, a user's own nodes) still find and talk to these
-nodes: over UDP.
+``haptic-anfis`` program for itself and what it starts (``sim``, ``exam run``, ``launch``); not
+by a call from Python (``main([...])``, tests). Other ROS 2 programs (``ros2 topic echo``, rviz,
+a user's own nodes) still find and talk to these nodes: over UDP.
 
 Nothing is changed when the user configured the middleware: a Fast DDS profile of their own
 (``FASTRTPS_DEFAULT_PROFILES_FILE`` / ``FASTDDS_DEFAULT_PROFILES_FILE``), a transport choice
