@@ -171,7 +171,8 @@ def main() -> None:
     kills = respawn(a.kills, domain) if a.kills else []
     lines = ['`exam run --trainee systematic` (default case) per force mode and examiner process; '
              '"heat map" = its rate [Hz] (the examiner promises 5 Hz); "lost" = contact samples '
-             'the side examiner never got; load = 1-minute load average at the start'
+             'published that the side examiner\'s report does not hold; load = 1-minute load '
+             'average at the start'
              + (f'; {a.busy} processes spinning on the CPU beside every exam' if a.busy else '')
              + '.', '',
              '| force mode | examiner | deep coverage % | hits / misses / false | verdict | '

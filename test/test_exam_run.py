@@ -121,3 +121,12 @@ def test_bad_inputs_are_named(tmp_path, capfd):
     assert 'no_such_case' in capfd.readouterr().err
     assert main(['exam', 'run', '--trainee', 'lazy']) == 1
     assert 'lazy' in capfd.readouterr().err
+
+
+def test_lost_contacts_are_those_missing_from_the_examiners_report():
+    from haptic_anfis.commands.exam import lost_contacts
+    # late at the drain (the heat map said 900) but in the report: none missing
+    assert lost_contacts(1000, {'samples': {'contact': 1000}}, watched=900) == 0
+    assert lost_contacts(1000, {'samples': {'contact': 990}}, watched=900) == 10
+    assert lost_contacts(1000, {}, watched=950) == 50          # a report without the counts
+    assert lost_contacts(1000, {'samples': {'contact': 1200}}, watched=0) == 0

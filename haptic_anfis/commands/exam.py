@@ -200,7 +200,8 @@ def _run_sim(args):
         report, exam_session = _side_report(report_dir, args.out, args if args.view else None)
         heat_maps = len(examiner.times)
         report['heat_map_hz'] = round(examiner.rate(t_start), 2)
-        report['examiner_lost_contacts'] = max(graph.contact.n_poses - examiner.samples, 0)
+        report['examiner_lost_contacts'] = lost_contacts(graph.contact.n_poses, report,
+                                                        examiner.samples)
     report['interrupted'] = interrupted
     report['trainee'] = {'name': args.trainee, 'detections': [
         {'y_mm': round(d.y * 1e3, 2), 'z_mm': round(d.z * 1e3, 2),
@@ -218,6 +219,15 @@ def _examiner_marks(examiner) -> int:
     """Marks the examiner has: the in-process node's session, or the side examiner's last heat
     map text (:class:`~haptic_anfis.nodes.exam_side.CoverageWatch`)."""
     return len(examiner.session.marks) if hasattr(examiner, 'session') else examiner.marks
+
+
+def lost_contacts(published: int, report: dict, watched: int) -> int:
+    """Contact samples missing from the side examiner's report: ``published`` (the contact
+    detector's count) minus those its session holds (the report's ``samples.contact``; without
+    it, ``watched``: the count its last heat map gave). Samples that arrived late, after the
+    exam's drain but before the examiner wrote its report, are not missing."""
+    got = (report.get('samples') or {}).get('contact', watched)
+    return max(int(published) - int(got), 0)
 
 
 def _side_report(report_dir, out: str | None, view_args=None):
