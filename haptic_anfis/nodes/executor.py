@@ -50,7 +50,6 @@ def node_in_thread(make, parameters: dict | None = None, other: str = 'feeder'):
 
     import rclpy
     from rclpy.context import Context
-    from rclpy.executors import SingleThreadedExecutor
     from rclpy.parameter import Parameter
     ctx = Context()
     rclpy.init(context=ctx)
@@ -60,7 +59,7 @@ def node_in_thread(make, parameters: dict | None = None, other: str = 'feeder'):
         node = make(context=ctx, parameter_overrides=[Parameter(k, value=v) for k, v in
                                                       (parameters or {}).items()])
         feeder = rclpy.create_node(other, context=ctx)
-        ex = SingleThreadedExecutor(context=ctx)
+        ex = make_executor(ctx)   # what the node runs on in its own process
         ex.add_node(node)
         ex.add_node(feeder)
 
