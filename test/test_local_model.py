@@ -117,9 +117,19 @@ def test_stiffness_guard():
     rng = np.random.default_rng(0)
     A = rng.normal(size=(3, 3)) * 5e3  # asymmetric, indefinite, too stiff
     K = condition_stiffness(A, 3000.0)
-    np.testing.assert_allclose(K, K.T, atol=1e-9)
-    w = np.linalg.eigvalsh(K)
+    w = np.linalg.eigvalsh(0.5 * (K + K.T))
     assert w.min() >= -3000.0 - 1e-6 and w.max() <= 1e-9
+    # the skew part is A's, its |w| (A e = w x e) bounded to 3000 N/m
+    skew = 0.5 * (A - A.T)
+    np.testing.assert_allclose(0.5 * (K - K.T), skew, atol=1e-9)  # |w| 2290 N/m: kept
+    K2 = condition_stiffness(2 * A, 3000.0)
+    np.testing.assert_allclose(0.5 * (K2 - K2.T), skew * 3000.0 / skew_norm(skew), atol=1e-9)
+    # a conforming symmetric part with a skew part within the bound passes unchanged
+    S = spd_neg(rng, 1000.0)
+    W = 0.1 * skew
+    out, changed = condition_stiffness_values((S + W).ravel().tolist(), 3000.0)
+    np.testing.assert_allclose(np.reshape(out, (3, 3)), S + W, atol=1e-9)
+    assert not changed
     # a conforming K passes unchanged
     S = spd_neg(rng, 1000.0)
     np.testing.assert_allclose(condition_stiffness(S, 3000.0), S, atol=1e-9)
@@ -136,11 +146,19 @@ def test_stiffness_guard():
     assert f[0] == pytest.approx(1.0 + 2000.0 * 0.001)
 
 
+def skew_norm(A) -> float:
+    """|w| of the skew-symmetric A (A e = w x e): its spectral norm."""
+    return float(np.linalg.norm([A[2, 1], A[0, 2], A[1, 0]]))
+
+
 def eigh_reference(K, kmax):
-    """The guard by numpy's eigh: symmetrise, clip the eigenvalues to [-kmax, 0], rebuild."""
+    """The guard by numpy's eigh: symmetrise, clip the eigenvalues to [-kmax, 0], rebuild; add
+    the skew part back, scaled to a spectral norm of at most kmax."""
     S = 0.5 * (K + K.T)
     w, V = np.linalg.eigh(S)
-    return (V * np.clip(w, -kmax, 0.0)) @ V.T
+    A = 0.5 * (K - K.T)
+    a = skew_norm(A)
+    return (V * np.clip(w, -kmax, 0.0)) @ V.T + (A * min(1.0, kmax / a) if a > 0 else A)
 
 
 def rotation(rng):
@@ -180,9 +198,10 @@ def test_closed_form_guard_matches_eigh(seed):
         got = np.array(out).reshape(3, 3)
         scale = max(1.0, np.abs(K).max())
         np.testing.assert_allclose(got, ref, atol=1e-9 * scale, rtol=0)
-        np.testing.assert_array_equal(got, got.T)
-        w = np.linalg.eigvalsh(got)
+        w = np.linalg.eigvalsh(0.5 * (got + got.T))
         assert w.max() <= 1e-9 * scale and w.min() >= -kmax - 1e-9 * scale
+        e = np.random.default_rng(seed).normal(size=(20, 3))  # no displacement gains force along it
+        assert np.all(np.einsum('ij,jk,ik->i', e, got, e) <= 1e-9 * scale * np.sum(e * e, 1))
         diff = np.abs(ref - K).max()
         if abs(diff - 1e-6) > 1e-8 * scale:  # not on the counting threshold itself
             assert changed == (diff > 1e-6)

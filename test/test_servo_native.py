@@ -117,7 +117,7 @@ def model_values(rng):
     depth0 = 0.004
     p0 = c0 + depth0 * d
     A = rng.normal(size=(3, 3))
-    K = -(A @ A.T) / np.linalg.norm(A @ A.T) * 800.0
+    K = -(A @ A.T) / np.linalg.norm(A @ A.T) * 800.0 + (A - A.T) * 50.0  # with a skew part
     F0 = -K @ (p0 - c0) * 0.5 + rng.normal(size=3) * 0.1
     return LocalModel(tuple(F0), tuple(p0), K, tuple(c0), tuple(n), tuple(d), depth0, True,
                       0.0).values()
@@ -157,7 +157,9 @@ def test_non_finite_model_is_never_rendered():
     lp = loop('local_model', max_force_rate=1e6)
     lp.safety.start()
     v = list(model_values(np.random.default_rng(0)))
-    nt_values = [*v[:6], *v[6:15], 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, v[24], 1.0, 1.0, 0.0, 1.0, 1.0]
+    nt_values = [*v[:6], *v[6:15], 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, v[24], 1.0, 1.0, 0.0, 1.0, 1.0,
+                 0.0, 0.0, 0.0]
+    assert len(nt_values) == nt.MODEL_LEN - 1
     nt_values[0] = math.nan
     from haptic_anfis.device.servo_native import _seq_write
     _seq_write(lp.model, nt_values)
@@ -286,6 +288,27 @@ def test_an_old_model_is_held_then_expires():
         f = lp.tick(t)
     assert int(lp.st[nt.S.status]) == EXPIRED
     assert f == (0.0, 0.0, 0.0)
+
+
+def test_a_held_model_renders_its_passive_spring_only():
+    """The skew part of K (the tissue field turning with the probe) is rendered while the model
+    is valid; a held one (no newer model for longer than its validity) renders F0 + S e only."""
+    lp = loop('local_model', max_force_rate=1e6, validity_time=0.05, hold_time=0.3)
+    lp.safety.start()
+    K = np.array([[-1000.0, 0.0, 0.0], [200.0, -500.0, 0.0], [0.0, 0.0, 0.0]])  # Fy grows w. depth
+    v = LocalModel((2.0, 0.0, 0.0), (0.05, 0.0, 0.0), K, (0.055, 0.0, 0.0), (1.0, 0.0, 0.0),
+                   (-1.0, 0.0, 0.0), 0.005, False, 0.0).values()
+    lp.renderer.offer_values(v, 0.0)
+    q = MAP.to_device((0.049, 0.0, 0.0))  # 1 mm deeper than p0
+    pin(lp, q, 0.0)
+    lp.tick(0.0)
+    S = nt.S
+    np.testing.assert_allclose(lp.st[S.target0:S.target0 + 3], (3.0, -0.2, 0.0), atol=1e-9)
+    for t in (0.1, 0.101):  # held: S = [[-1000, 100], [100, -500]] only, at e = (-1 mm, 0, 0)
+        pin(lp, q, t)
+        lp.tick(t)
+    assert lp.cnt[nt.CNT.held] == 2
+    np.testing.assert_allclose(lp.st[S.target0:S.target0 + 3], (3.0, -0.1, 0.0), atol=1e-9)
 
 
 def test_passivity_observer_takes_back_energy_the_port_put_out():

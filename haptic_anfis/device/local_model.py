@@ -21,8 +21,18 @@ with these rules (:class:`LocalModelRenderer`):
   tangent plane. The correction is zero at ``depth0`` with zero slope (the tangent stiffness is
   kept), zero for a linear field that is itself zero on the plane (exactness kept), and makes the
   force exactly zero at depth 0 whatever the tangential offset.
-- Stiffness guard (:func:`condition_stiffness`): K is made symmetric and negative-semidefinite
-  ("the surface pushes back": a passive spring) and its eigenvalues clamped to ``-max_stiffness``.
+- Stiffness guard (:func:`condition_stiffness`): K's symmetric part ``S = (K + K^T) / 2`` is made
+  negative-semidefinite ("the surface pushes back": a passive spring) with its eigenvalues clamped
+  to ``-max_stiffness``; its skew part ``A = (K - K^T) / 2`` is kept, bounded to ``max_stiffness``
+  (``A e = w x e``, ``|w| <= max_stiffness``). The result is the K nearest the model's (Frobenius)
+  whose quadratic form is <= 0: a displacement ``e`` never gains force along itself
+  (``e . K e = e . S e <= 0``). The skew part is the tissue field's own: the ANFIS force turns as
+  the probe moves (its lateral components grow with the depth), which the force server's F0
+  carries at every model anyway; dropping it made the force between two models drift away from
+  the tissue's by ~0.04 % of the force per ms of model age and jump back at the next model
+  (issue 32; with it ~0.01 %/ms: ``bench/bench_model_age.py``). It does not enter the sampling
+  bound below: a zero-order hold's energy leak per period is ``-T^2 v . K v / 2``, and
+  ``v . A v = 0``.
   The Falcon figure: 3000 N/m, the maximum linear stiffness CHAI3D's Falcon driver advertises
   (``cHapticDeviceInfo::m_maxLinearStiffness``, with 8 N and 20 N s/m damping). By Colgate & Brown
   1994 a sampled spring K is passive when the device's own damping b > K T / 2 + B: at T = 1 ms
@@ -150,7 +160,9 @@ def condition_stiffness_values(k, max_stiffness: float) -> tuple[tuple[float, ..
     complement (a Jacobi rotation), and S is rebuilt from the clipped eigenvalues — the same
     construction as a robust 3 x 3 symmetric eigensolver (cf. Eberly, Geometric Tools), written
     for this one job. The common case — one eigenvalue out of range, the other two in — is a
-    rank-one correction with that eigenvalue's eigenvector only (:func:`_clip_one`).
+    rank-one correction with that eigenvalue's eigenvector only (:func:`_clip_one`). K's skew
+    part is then added back, its |w| bounded to ``max_stiffness`` (:func:`skew_vector`; module
+    docstring).
     """
     k00, k01, k02, k10, k11, k12, k20, k21, k22 = k
     a00, a11, a22 = k00, k11, k22
@@ -185,8 +197,33 @@ def condition_stiffness_values(k, max_stiffness: float) -> tuple[tuple[float, ..
                 out = _keep_one(a00, a01, a02, a11, a12, a22, l1, lo, lo)
             if out is None:
                 out = _rebuild_clipped(a00, a01, a02, a11, a12, a22, l1, l2, l3, lo)
+    out = _with_skew(out, k, max_stiffness)
     changed = max(abs(out[i] - k[i]) for i in range(9)) > 1e-6
     return out, changed
+
+
+def skew_vector(k) -> tuple[float, float, float]:
+    """w of the skew part ``A = (K - K^T) / 2`` of ``k`` (9 values row-major [N/m]):
+    ``A e = w x e`` for every e."""
+    return 0.5 * (k[7] - k[5]), 0.5 * (k[2] - k[6]), 0.5 * (k[3] - k[1])
+
+
+def _with_skew(s, k, bound: float) -> tuple[float, ...]:
+    """The symmetric ``s`` (9 values) plus the skew part of ``k``, its |w| scaled to ``bound``."""
+    w0, w1, w2 = skew_vector(k)
+    ww = w0 * w0 + w1 * w1 + w2 * w2
+    if ww == 0.0:
+        return s
+    if ww > bound * bound:
+        c = bound / math.sqrt(ww)
+        w0, w1, w2 = c * w0, c * w1, c * w2
+    return (s[0], s[1] - w2, s[2] + w1, s[3] + w2, s[4], s[5] - w0, s[6] - w1, s[7] + w0, s[8])
+
+
+def symmetric_part(k) -> tuple[float, ...]:
+    """``(K + K^T) / 2`` of ``k`` (9 values row-major), 9 values."""
+    a01, a02, a12 = 0.5 * (k[1] + k[3]), 0.5 * (k[2] + k[6]), 0.5 * (k[5] + k[7])
+    return (k[0], a01, a02, a01, k[4], a12, a02, a12, k[8])
 
 
 def _eigenvector(a00, a01, a02, a11, a12, a22, la):
@@ -298,7 +335,8 @@ def _rebuild_clipped(a00, a01, a02, a11, a12, a22, l1, l2, l3, lo) -> tuple[floa
 
 
 def condition_stiffness(K, max_stiffness: float) -> np.ndarray:
-    """K (3, 3) made symmetric negative-semidefinite with eigenvalues in [-max_stiffness, 0] [N/m]
+    """K (3, 3) [N/m] with its symmetric part made negative-semidefinite with eigenvalues in
+    [-max_stiffness, 0] and its skew part kept, bounded to ``max_stiffness``
     (:func:`condition_stiffness_values`).
 
     Raises:

@@ -96,13 +96,15 @@ S = _index('S', 'x0 x1 x2 v0 v1 v2 f0 f1 f2 t_dev t_open script_off '
            'held frozen0 frozen1 frozen2 off0 off1 off2 wait_zero ramp_start mark_prev '
            'energy t_prev cmd_seen model_seen fault_seen enable_seen status '
            'm_f0 m_f1 m_f2 m_p0 m_p1 m_p2 m_k0 m_k1 m_k2 m_k3 m_k4 m_k5 m_k6 m_k7 m_k8 '
-           'm_g0 m_g1 m_g2 m_d0 m_d1 m_d2 m_depth0 m_zero m_contact m_t0 m_valid m_knorm')
+           'm_g0 m_g1 m_g2 m_d0 m_d1 m_d2 m_depth0 m_zero m_contact m_t0 m_valid m_knorm '
+           'm_w0 m_w1 m_w2')
 STATE_LEN = len(S)
 #: command buffer (float64 seqlock): seq, force (3,) device frame [N], its pose's time [s]
 CMD_LEN = 5
-#: model buffer (float64 seqlock): seq, f0 p0 K(9) g d (tissue), depth0, zero, contact, t0,
-#: valid (0 = cleared), |K| (an upper bound of its spectral norm, tissue frame [N/m])
-MODEL_LEN = 1 + 3 + 3 + 9 + 3 + 3 + 6
+#: model buffer (float64 seqlock): seq, f0 p0 K(9: the conditioned stiffness's symmetric part) g d
+#: (tissue), depth0, zero, contact, t0, valid (0 = cleared), |K| (the symmetric part's spectral
+#: norm, tissue frame [N/m]), w (3: its skew part, A e = w x e [N/m]; local_model module doc)
+MODEL_LEN = 1 + 3 + 3 + 9 + 3 + 3 + 6 + 3
 #: control (int64): stop, release (the held script), fault generation (zero at once),
 #: enable generation and enabled (SafetyLayer.start / stop)
 CTL = _index('CTL', 'stop release fault enable_gen enabled external')
@@ -438,20 +440,33 @@ def _render(cfg, st, cnt, qx, qy, qz, now, gap):
         if kdev > kmax:
             s = kmax / kdev
             cnt[CNT.passivity_limited] += 1
-    k = S.m_k0
-    f = np.empty(3)
-    for a in range(3):
-        f[a] = st[S.m_f0 + a] + s * (st[k + 3 * a] * ex + st[k + 3 * a + 1] * ey
-                                     + st[k + 3 * a + 2] * ez)
+    # a held model renders its symmetric part only: a passive spring while nothing refreshes it
+    skew = 0.0 if held else s
+    f = np.zeros(3)
+    _add_linear(st, f, 1.0, s, skew, ex, ey, ez)
     if st[S.m_zero] > 0.5 and depth < depth0:
         sx = ex - depth * st[S.m_d0]
         sy = ey - depth * st[S.m_d1]
         sz = ez - depth * st[S.m_d2]
         w = (1.0 - depth / depth0) ** 2
-        for a in range(3):
-            f[a] -= w * (st[S.m_f0 + a] + s * (st[k + 3 * a] * sx + st[k + 3 * a + 1] * sy
-                                               + st[k + 3 * a + 2] * sz))
+        _add_linear(st, f, -w, s, skew, sx, sy, sz)
     return f[0], f[1], f[2]
+
+
+@nb.njit(nogil=True, cache=True)
+def _add_linear(st, f, c, s, skew, ex, ey, ez):
+    """f += c (F0 + s S e + skew w x e): the model's linear field at offset e, its symmetric
+    stiffness S scaled by s, its skew part by skew."""
+    k = S.m_k0
+    w0, w1, w2 = st[S.m_w0], st[S.m_w1], st[S.m_w2]
+    cx = w1 * ez - w2 * ey
+    cy = w2 * ex - w0 * ez
+    cz = w0 * ey - w1 * ex
+    for a in range(3):
+        lin = (st[S.m_f0 + a] + s * (st[k + 3 * a] * ex + st[k + 3 * a + 1] * ey
+                                     + st[k + 3 * a + 2] * ez)
+               + skew * (cx if a == 0 else (cy if a == 1 else cz)))
+        f[a] += c * lin
 
 
 @nb.njit(nogil=True, cache=True)
