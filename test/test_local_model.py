@@ -15,6 +15,7 @@ from haptic_anfis.device.local_model import (EXPIRED, EXTRAPOLATED, FREE, FRESH,
                                              hold_offset,
                                              LocalModel, LocalModelRenderer, condition_stiffness,
                                              condition_stiffness_values, contact_jacobian,
+                                             rotating_mode,
                                              depth_gradient)
 from haptic_anfis.device.stamps import FUTURE, OK, STALE, UNKNOWN, StampBook
 from haptic_anfis.device.trace import TickTrace, load_trace, save_trace
@@ -625,3 +626,20 @@ def test_force_server_approach_model(default_model):
     assert local_model_from_contact(default_model, free)[1] == [0.0] * len(lm)
     for bad in ([math.nan, 0, 0, *n], [*c, 0.0, 0.0, 0.0], [*c, *n][:5]):
         assert local_model_from_contact(default_model, free, approach=bad)[1] == [0.0] * len(lm)
+
+
+@pytest.mark.parametrize('seed', range(10))
+def test_rotating_mode_is_a_complex_pair_of_eigenvalues(seed):
+    """rotating_mode agrees with numpy's eigenvalues on random, symmetric (never rotating, also
+    with repeated eigenvalues) and guarded stiffnesses."""
+    for K in hard_stiffnesses(seed):
+        for M in (K, 0.5 * (K + K.T), condition_stiffness(K, 3000.0)):
+            w = np.linalg.eigvals(M)
+            scale = max(np.abs(M).max(), 1e-300)
+            complex_pair = np.abs(w.imag).max() > 1e-4 * scale
+            real = np.abs(w.imag).max() < 1e-7 * scale
+            if complex_pair or real:  # not on the edge between them
+                assert rotating_mode(M.ravel().tolist()) == complex_pair, M
+    # the tissue's kind (the depth coupled with the surface) and a turned surface plane
+    assert not rotating_mode([-1000, 0, 0, 200, -500, 0, 0, 0, 0])
+    assert rotating_mode([-1000, 0, 0, 0, 0, -100, 0, 100, 0])

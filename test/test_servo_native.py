@@ -158,7 +158,7 @@ def test_non_finite_model_is_never_rendered():
     lp.safety.start()
     v = list(model_values(np.random.default_rng(0)))
     nt_values = [*v[:6], *v[6:15], 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, v[24], 1.0, 1.0, 0.0, 1.0, 1.0,
-                 0.0, 0.0, 0.0]
+                 0.0, 0.0, 0.0, 1.0]
     assert len(nt_values) == nt.MODEL_LEN - 1
     nt_values[0] = math.nan
     from haptic_anfis.device.servo_native import _seq_write
@@ -290,25 +290,34 @@ def test_an_old_model_is_held_then_expires():
     assert f == (0.0, 0.0, 0.0)
 
 
-def test_a_held_model_renders_its_passive_spring_only():
-    """The skew part of K (the tissue field turning with the probe) is rendered while the model
-    is valid; a held one (no newer model for longer than its validity) renders F0 + S e only."""
+@pytest.mark.parametrize('rotating', [False, True])
+def test_a_held_model_keeps_the_skew_part_unless_it_rotates(rotating):
+    """The skew part of K (the tissue force turning with the probe) is rendered while the model
+    is valid; a held one (no newer model for longer than its validity) keeps it only where K has
+    no rotating mode, else renders F0 + S e, a passive spring."""
     lp = loop('local_model', max_force_rate=1e6, validity_time=0.05, hold_time=0.3)
     lp.safety.start()
-    K = np.array([[-1000.0, 0.0, 0.0], [200.0, -500.0, 0.0], [0.0, 0.0, 0.0]])  # Fy grows w. depth
+    if rotating:  # w along x, where y and z have no stiffness: the surface plane turned
+        K = np.array([[-1000.0, 0.0, 0.0], [0.0, 0.0, -100.0], [0.0, 100.0, 0.0]])
+        e = (-0.001, 0.001, 0.0)
+        full, sym = (3.0, 0.0, 0.1), (3.0, 0.0, 0.0)
+    else:  # Fy grows with the depth: real modes
+        K = np.array([[-1000.0, 0.0, 0.0], [200.0, -500.0, 0.0], [0.0, 0.0, 0.0]])
+        e = (-0.001, 0.0, 0.0)
+        full = sym = (3.0, -0.2, 0.0)
     v = LocalModel((2.0, 0.0, 0.0), (0.05, 0.0, 0.0), K, (0.055, 0.0, 0.0), (1.0, 0.0, 0.0),
                    (-1.0, 0.0, 0.0), 0.005, False, 0.0).values()
     lp.renderer.offer_values(v, 0.0)
-    q = MAP.to_device((0.049, 0.0, 0.0))  # 1 mm deeper than p0
+    q = MAP.to_device(tuple(np.add((0.05, 0.0, 0.0), e)))
     pin(lp, q, 0.0)
     lp.tick(0.0)
     S = nt.S
-    np.testing.assert_allclose(lp.st[S.target0:S.target0 + 3], (3.0, -0.2, 0.0), atol=1e-9)
-    for t in (0.1, 0.101):  # held: S = [[-1000, 100], [100, -500]] only, at e = (-1 mm, 0, 0)
+    np.testing.assert_allclose(lp.st[S.target0:S.target0 + 3], full, atol=1e-9)
+    for t in (0.1, 0.101):  # held
         pin(lp, q, t)
         lp.tick(t)
     assert lp.cnt[nt.CNT.held] == 2
-    np.testing.assert_allclose(lp.st[S.target0:S.target0 + 3], (3.0, -0.1, 0.0), atol=1e-9)
+    np.testing.assert_allclose(lp.st[S.target0:S.target0 + 3], sym, atol=1e-9)
 
 
 def test_passivity_observer_takes_back_energy_the_port_put_out():

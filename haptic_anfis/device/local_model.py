@@ -226,6 +226,29 @@ def symmetric_part(k) -> tuple[float, ...]:
     return (k[0], a01, a02, a01, k[4], a12, a02, a12, k[8])
 
 
+def rotating_mode(k) -> bool:
+    """Whether the stiffness ``k`` (9 values row-major [N/m]) has a complex pair of eigenvalues:
+    a mode in which its linear field turns the displacement instead of scaling it. A free handle
+    of mass m and damping b in the field ``K e`` moves as m e'' + b e' - K e = 0; along a real
+    eigenvalue -lambda >= 0 of K that is a damped spring, but along a complex pair with too
+    little damping (or stiffness) the handle can spiral out (circulatory, "follower" forces).
+    The tissue's skew part couples the depth with the surface (real modes: the normal stiffness
+    dominates); a skew part turning the surface plane itself, where the guard left no stiffness,
+    would not. By the sign of the discriminant of K's characteristic cubic (negative: a complex
+    pair), relative to the scale of K so that a repeated real eigenvalue is not mistaken for one.
+    """
+    k00, k01, k02, k10, k11, k12, k20, k21, k22 = k
+    tr = k00 + k11 + k22
+    c2 = (k00 * k11 - k01 * k10) + (k00 * k22 - k02 * k20) + (k11 * k22 - k12 * k21)
+    det = (k00 * (k11 * k22 - k12 * k21) - k01 * (k10 * k22 - k12 * k20)
+           + k02 * (k10 * k21 - k11 * k20))
+    # x^3 + b x^2 + c x + d with b = -tr, c = c2, d = -det
+    b, c, d = -tr, c2, -det
+    disc = 18.0 * b * c * d - 4.0 * b ** 3 * d + b * b * c * c - 4.0 * c ** 3 - 27.0 * d * d
+    scale = max(abs(v) for v in k)
+    return disc < -1e-9 * scale ** 6
+
+
 def _eigenvector(a00, a01, a02, a11, a12, a22, la):
     """(u, |u|^2) with u an unnormalised eigenvector of the simple eigenvalue ``la``: the largest
     cross product of two rows of S - la I; None when all are ~0 (la repeated)."""

@@ -18,7 +18,10 @@ It sleeps to absolute 1 ms deadlines with ``clock_nanosleep`` and reads the cloc
    server, contact detector, the bridge) no longer drops the force to 0 N. Beyond the validity
    radius the depth is followed exactly and the offset across the indentation direction held at
    the radius (:func:`.local_model.hold_offset`, counted as ``beyond``): a late model under a
-   fast stroke no longer drops the force to 0 N either.
+   fast stroke no longer drops the force to 0 N either. The stiffness's skew part (the tissue
+   force turning with the probe) is rendered while the model is valid; a held model keeps it
+   only where K has no rotating mode (:func:`.local_model.rotating_mode`): a free handle could
+   spiral out along one.
 4. Passivity: the model's stiffness is limited by the MEASURED tick period ``T`` (the time the
    previous output was held): ``K <= 2 (b - |B|) / T`` with ``b`` the device's damping and ``B``
    the rendered damping (here 0) — Colgate & Schenkel 1997 (J. Robotic Systems 14(1):37-47),
@@ -97,14 +100,15 @@ S = _index('S', 'x0 x1 x2 v0 v1 v2 f0 f1 f2 t_dev t_open script_off '
            'energy t_prev cmd_seen model_seen fault_seen enable_seen status '
            'm_f0 m_f1 m_f2 m_p0 m_p1 m_p2 m_k0 m_k1 m_k2 m_k3 m_k4 m_k5 m_k6 m_k7 m_k8 '
            'm_g0 m_g1 m_g2 m_d0 m_d1 m_d2 m_depth0 m_zero m_contact m_t0 m_valid m_knorm '
-           'm_w0 m_w1 m_w2')
+           'm_w0 m_w1 m_w2 m_hold_skew')
 STATE_LEN = len(S)
 #: command buffer (float64 seqlock): seq, force (3,) device frame [N], its pose's time [s]
 CMD_LEN = 5
 #: model buffer (float64 seqlock): seq, f0 p0 K(9: the conditioned stiffness's symmetric part) g d
 #: (tissue), depth0, zero, contact, t0, valid (0 = cleared), |K| (the symmetric part's spectral
-#: norm, tissue frame [N/m]), w (3: its skew part, A e = w x e [N/m]; local_model module doc)
-MODEL_LEN = 1 + 3 + 3 + 9 + 3 + 3 + 6 + 3
+#: norm, tissue frame [N/m]), w (3: its skew part, A e = w x e [N/m]; local_model module doc),
+#: hold_skew (1: a held model keeps the skew part, K having no rotating mode)
+MODEL_LEN = 1 + 3 + 3 + 9 + 3 + 3 + 6 + 3 + 1
 #: control (int64): stop, release (the held script), fault generation (zero at once),
 #: enable generation and enabled (SafetyLayer.start / stop)
 CTL = _index('CTL', 'stop release fault enable_gen enabled external')
@@ -440,8 +444,8 @@ def _render(cfg, st, cnt, qx, qy, qz, now, gap):
         if kdev > kmax:
             s = kmax / kdev
             cnt[CNT.passivity_limited] += 1
-    # a held model renders its symmetric part only: a passive spring while nothing refreshes it
-    skew = 0.0 if held else s
+    # a held model keeps the skew part only where K has no rotating mode (local_model.rotating_mode)
+    skew = 0.0 if held and st[S.m_hold_skew] < 0.5 else s
     f = np.zeros(3)
     _add_linear(st, f, 1.0, s, skew, ex, ey, ez)
     if st[S.m_zero] > 0.5 and depth < depth0:

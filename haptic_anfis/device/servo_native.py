@@ -36,8 +36,8 @@ from . import device_process as dp
 from .buttons import ButtonEvents
 from .falcon import DeviceState, HandParams, WorkspaceMapping
 from .local_model import FALCON_MAX_STIFFNESS, LocalModelRenderer, RenderStats, \
-    condition_stiffness_values, depth_gradient_values, skew_vector, symmetric_part, \
-    tissue_stiffness_limit
+    condition_stiffness_values, depth_gradient_values, rotating_mode, skew_vector, \
+    symmetric_part, tissue_stiffness_limit
 from .safety import IGNORED_DISABLED, OK, REJECTED_FRAME, REJECTED_NONFINITE, SafetyLayer, \
     SafetyStats
 from .servo import request_short_slice, set_realtime
@@ -339,12 +339,12 @@ class NativeRenderer(LocalModelRenderer):
         contact = depth0 > 0.0 or nx * nx + ny * ny + nz * nz > 0.0
         g = depth_gradient_values(nx, ny, nz, dx, dy, dz) if contact else (0.0, 0.0, 0.0)
         d = (dx, dy, dz) if contact else (0.0, 0.0, 0.0)
-        ks = symmetric_part(k)  # the tick adds the skew part w x e while the model is not held
+        ks = symmetric_part(k)  # the tick adds the skew part w x e (held: without rotating mode)
         t = float(time)
         _seq_write(self._loop.model, (f0x, f0y, f0z, p0x, p0y, p0z, *ks, *g, *d, float(depth0),
                                       1.0 if (zero > 0.5 and contact) else 0.0,
                                       1.0 if contact else 0.0, t, 1.0, spectral_norm_sym(ks),
-                                      *skew_vector(k)))
+                                      *skew_vector(k), 0.0 if rotating_mode(k) else 1.0))
         self.time = t
         self._py.models += 1
 
