@@ -22,10 +22,12 @@ It sleeps to absolute 1 ms deadlines with ``clock_nanosleep`` and reads the cloc
    force turning with the probe) is rendered while the model is valid; a held model keeps it
    only where K has no rotating mode (:func:`.local_model.rotating_mode`): a free handle could
    spiral out along one.
-4. Passivity: the model's stiffness is limited by the MEASURED tick period ``T`` (the time the
-   previous output was held): ``K <= 2 (b - |B|) / T`` with ``b`` the device's damping and ``B``
-   the rendered damping (here 0) — Colgate & Schenkel 1997 (J. Robotic Systems 14(1):37-47),
-   the discrete-time passivity condition of a virtual wall, ``b > K T / 2 + |B|``. Optional
+4. Passivity: the model's stiffness is limited by the MEASURED tick period ``T``:
+   ``K <= 2 (b - |B|) / T`` with ``b`` the device's damping and ``B`` the rendered damping
+   (here 0) — Colgate & Schenkel 1997 (J. Robotic Systems 14(1):37-47), the discrete-time
+   passivity condition of a virtual wall, ``b > K T / 2 + |B|`` — with ``T`` the energy-weighted
+   mean of the last ~20 ms of periods (:func:`_passivity_period`; it was the last gap alone,
+   which turned one late tick into a one-tick force step of up to 0.2 N). Optional
    passivity observer / controller (Hannaford & Ryu 2002, IEEE T-RO 18(1):1-10): the energy the
    rendered port put out so far; when it turns negative a damping force takes it back.
 5. Safety (:class:`haptic_anfis.device.safety.SafetyLayer`'s rules): non-finite -> zero at once,
@@ -97,7 +99,7 @@ CFG = _index('CFG', 'period max_force max_force_rate watchdog max_dt validity_ti
 S = _index('S', 'x0 x1 x2 v0 v1 v2 f0 f1 f2 t_dev t_open script_off '
            'enabled target0 target1 target2 out0 out1 out2 last_cmd last_out tripped '
            'held frozen0 frozen1 frozen2 off0 off1 off2 wait_zero ramp_start mark_prev '
-           'energy t_prev cmd_seen model_seen fault_seen enable_seen status '
+           'energy t_prev pt1 pt2 cmd_seen model_seen fault_seen enable_seen status '
            'm_f0 m_f1 m_f2 m_p0 m_p1 m_p2 m_k0 m_k1 m_k2 m_k3 m_k4 m_k5 m_k6 m_k7 m_k8 '
            'm_g0 m_g1 m_g2 m_d0 m_d1 m_d2 m_depth0 m_zero m_contact m_t0 m_valid m_knorm '
            'm_w0 m_w1 m_w2 m_hold_skew')
@@ -139,6 +141,8 @@ LOCK_LEN = 16
 SCRATCH_LEN = max(CMD_LEN, MODEL_LEN, OUT_LEN)
 
 NONE, FRESH, EXTRAPOLATED, EXPIRED, FREE = 0, 1, 2, 3, 4  # local_model's status codes
+#: time constant [s] of the tick periods the passivity bound weighs (:func:`_passivity_period`)
+PASSIVITY_WINDOW = 0.02
 
 
 def new_state() -> np.ndarray:
@@ -402,7 +406,7 @@ _hold_offset = nb.njit(nogil=True, cache=True)(hold_offset)
 
 
 @nb.njit(nogil=True, cache=True)
-def _render(cfg, st, cnt, qx, qy, qz, now, gap):
+def _render(cfg, st, cnt, qx, qy, qz, now, period):
     """The local model's force (tissue frame) at the tissue position q, or NaN (nothing to offer:
     expired / no model); sets the status."""
     if st[S.m_valid] < 0.5:
@@ -439,8 +443,8 @@ def _render(cfg, st, cnt, qx, qy, qz, now, gap):
     # passivity: the stiffness the device renders is limited by the measured period (module doc)
     s = 1.0
     kdev = st[S.m_knorm] * cfg[CFG.force_scale] * cfg[CFG.scale]
-    if kdev > 0.0 and gap > 0.0:
-        kmax = 2.0 * cfg[CFG.damping] / gap
+    if kdev > 0.0 and period > 0.0:
+        kmax = 2.0 * cfg[CFG.damping] / period
         if kdev > kmax:
             s = kmax / kdev
             cnt[CNT.passivity_limited] += 1
@@ -474,6 +478,25 @@ def _add_linear(st, f, c, s, skew, ex, ey, ez):
 
 
 @nb.njit(nogil=True, cache=True)
+def _passivity_period(cfg, st, gap):
+    """The period the passivity bound uses [s]: sum(T^2) / sum(T) over the periods T of the last
+    ~:data:`PASSIVITY_WINDOW` (exponentially weighted; each T capped at the watchdog time, past
+    which the force was ramped down). At a steady hand speed v a zero-order hold leaks
+    K v^2 T^2 / 2 per period and the device's damping takes b v^2 T, so the window is passive
+    when K <= 2 b sum(T) / sum(T^2): one late tick among nominal ones barely moves the bound
+    (it leaked once, a bounded amount), a loop that keeps ticking late meets the per-period
+    bound. The sums start as if the loop had run at its nominal period."""
+    t = min(gap, cfg[CFG.watchdog])
+    if st[S.pt1] <= 0.0:
+        st[S.pt1] = PASSIVITY_WINDOW
+        st[S.pt2] = PASSIVITY_WINDOW * cfg[CFG.period]
+    lam = np.exp(-t / PASSIVITY_WINDOW)
+    st[S.pt1] = lam * st[S.pt1] + t
+    st[S.pt2] = lam * st[S.pt2] + t * t
+    return st[S.pt2] / st[S.pt1]
+
+
+@nb.njit(nogil=True, cache=True)
 def tick(now, cfg, st, times, points, buttons, hand, cmd, model, ctl, out, cnt, trace, scratch,
          stamp_ns):
     """One servo tick at monotonic time ``now`` [s] (see the module docstring); ``stamp_ns``: the
@@ -503,6 +526,7 @@ def tick(now, cfg, st, times, points, buttons, hand, cmd, model, ctl, out, cnt, 
             if st[S.enabled] > 0.5:
                 _fault(st, cnt)
     gap = now - st[S.t_prev] if st[S.t_prev] == st[S.t_prev] else cfg[CFG.period]
+    period = _passivity_period(cfg, st, gap)
     # 1. device
     b0, b1 = _device_read(cfg, st, times, points, buttons, now, ctl, hand)
     sc, fs = cfg[CFG.scale], cfg[CFG.force_scale]
@@ -513,7 +537,7 @@ def tick(now, cfg, st, times, points, buttons, hand, cmd, model, ctl, out, cnt, 
     qx, qy, qz = _clutch(st, cnt, b0, b1, mx, my, mz)
     # 3. render (device frame)
     if cfg[CFG.mode] > 0.5:
-        fx, fy, fz = _render(cfg, st, cnt, qx, qy, qz, now, gap)
+        fx, fy, fz = _render(cfg, st, cnt, qx, qy, qz, now, period)
         if fx == fx:
             if not np.isfinite(fx + fy + fz):
                 _fault(st, cnt)
