@@ -150,8 +150,9 @@ PARAMS = [
           "USB library needs the interpreter)",
           one_of('auto', 'native', 'native_process', 'python')),
     Param('passivity_damping', 1.5, 'native: device damping b [N s/m] of the passivity bound on '
-          'the rendered stiffness, K <= 2 b / T with T the measured tick period (Colgate & '
-          'Schenkel 1997; docs/servo_loop.md)', positive),
+          'the rendered stiffness, K <= 2 b / T with T the measured tick periods of the last '
+          '~20 ms, energy-weighted (sum T^2 / sum T; Colgate & Schenkel 1997; '
+          'docs/servo_loop.md)', positive),
     Param('model_hold_time', 0.5, 'native, local_model: a model older than model_validity_time '
           'but not than this [s] is still rendered (the tissue does not move: an upstream stall '
           'no longer drops the force to 0 N); then it expires and the watchdog ramps the force '
