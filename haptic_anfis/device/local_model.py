@@ -24,9 +24,9 @@ with these rules (:class:`LocalModelRenderer`):
 - Stiffness guard (:func:`condition_stiffness`): K's symmetric part ``S = (K + K^T) / 2`` is made
   negative-semidefinite ("the surface pushes back": a passive spring) with its eigenvalues clamped
   to ``-max_stiffness``; its skew part ``A = (K - K^T) / 2`` is kept, bounded to ``max_stiffness``
-  (``A e = w x e``, ``|w| <= max_stiffness``). The result is the K nearest the model's (Frobenius)
-  whose quadratic form is <= 0: a displacement ``e`` never gains force along itself
-  (``e . K e = e . S e <= 0``). The skew part is the tissue field's own: the ANFIS force turns as
+  (``A e = w x e``, ``|w| <= max_stiffness``). Bounds aside, the result is the K nearest the
+  model's (Frobenius: the two parts are orthogonal) whose quadratic form is <= 0: a displacement
+  ``e`` never gains force along itself (``e . K e = e . S e <= 0``). The skew part is the tissue field's own: the ANFIS force turns as
   the probe moves (its lateral components grow with the depth), which the force server's F0
   carries at every model anyway; dropping it made the force between two models drift away from
   the tissue's by ~0.04 % of the force per ms of model age and jump back at the next model
