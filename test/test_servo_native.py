@@ -7,6 +7,8 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 
 from haptic_anfis.device import HandParams, WorkspaceMapping
 from haptic_anfis.device import native_tick as nt
@@ -217,6 +219,25 @@ def test_stiffness_is_limited_by_the_measured_period():
         pin(lp, q, t)
         lp.tick(t)
     assert lp.st[S.target0] == pytest.approx(1.0 + 1.5)
+
+
+@given(st.lists(st.floats(0.0002, 0.05), min_size=1, max_size=300))
+def test_passivity_period_is_the_energy_weighted_mean_of_the_recent_periods(gaps):
+    """sum(T^2) / sum(T) of the capped periods, exponentially weighted from a nominal history:
+    never below the shortest (or nominal) period nor above the longest (capped) one, and the
+    bound it gives holds at every tick."""
+    lp = loop('local_model')
+    cfg, state = lp.cfg, nt.new_state()
+    cap, nominal = cfg[nt.CFG.watchdog], cfg[nt.CFG.period]
+    a, b = nt.PASSIVITY_WINDOW, nt.PASSIVITY_WINDOW * nominal
+    for i, gap in enumerate(gaps):
+        t = min(gap, cap)
+        lam = math.exp(-t / nt.PASSIVITY_WINDOW)
+        a, b = lam * a + t, lam * b + t * t
+        got = nt._passivity_period(cfg, state, gap)
+        assert got == pytest.approx(b / a, rel=1e-9)
+        capped = [min(g, cap) for g in gaps[:i + 1]] + [nominal]
+        assert min(capped) * (1 - 1e-9) <= got <= max(capped) * (1 + 1e-9)
 
 
 def test_lost_periods_are_counted():
