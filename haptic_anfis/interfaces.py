@@ -68,6 +68,8 @@ renders zero on the outer side of that plane and K (p - p0) once the probe is pa
 """
 from __future__ import annotations
 
+import math
+
 CONTACT_FIELDS = ('contact_x', 'contact_y', 'contact_z', 'depth', 'direction_x', 'direction_y',
                   'direction_z', 'in_contact', 'saturated', 'normal_x', 'normal_y', 'normal_z')
 (I_X, I_Y, I_Z, I_DEPTH, I_DX, I_DY, I_DZ, I_IN_CONTACT, I_SATURATED, I_NX, I_NY,
@@ -88,6 +90,18 @@ def is_contact_values(v) -> bool:
     """``v`` has the length of a contact message (current or the older 9-value layout); a
     reader that must report what it skipped counts through :class:`ContactLayouts`."""
     return len(v) in CONTACT_LENGTHS
+
+
+def contact_geometry(v) -> tuple[tuple[float, ...], tuple[float, ...], float] | None:
+    """(contact point (3,) [m], indentation direction (3,), depth [m]) of the contact values
+    ``v`` (either layout) while in contact with these fields finite; None otherwise (not a
+    contact, not in contact, or a NaN / Inf among them): what the view nodes draw."""
+    if not is_contact_values(v) or not v[I_IN_CONTACT] >= 0.5:
+        return None
+    x, y, z, depth, dx, dy, dz = (float(c) for c in v[:I_IN_CONTACT])
+    if not math.isfinite(x + y + z + depth + dx + dy + dz):
+        return None
+    return (x, y, z), (dx, dy, dz), depth
 
 
 class ContactLayouts:

@@ -2,6 +2,7 @@
 reader through one helper; a message of any other length is counted and reported, not dropped in
 silence. The bags here are written by a plain ``rosbags`` writer, not by the project's recorder."""
 import json
+import math
 
 import numpy as np
 import pytest
@@ -99,3 +100,17 @@ def test_training_data_from_either_layout(tmp_path, n_values):
     ds = dataset_from_bag(tmp_path / 'b')
     assert len(ds.X) == sum(1 for _, v in rows if v[7] > 0.5)
     assert ds.provenance['contact_messages']['other'] == {'4': 1}
+
+
+def test_contact_geometry_of_either_layout_and_what_is_not_drawn():
+    """What the view nodes draw: point, direction and depth while in contact and finite."""
+    cur = [0.01, 0.02, 0.03, 0.004, -1.0, 0.0, 0.0, 1.0, 0.0, 1.0, 0.0, 0.0]
+    assert ifc.contact_geometry(cur) == ((0.01, 0.02, 0.03), (-1.0, 0.0, 0.0), 0.004)
+    assert ifc.contact_geometry(cur[:9]) == ifc.contact_geometry(cur)  # the older layout
+    assert ifc.contact_geometry(cur[:8] + [0.0, math.nan, 0.0, 0.0]) is not None  # normal unused
+    for bad in ([*cur[:7], 0.0, *cur[8:]],            # not in contact
+                [*cur[:7], math.nan, *cur[8:]],       # in_contact NaN
+                [math.inf, *cur[1:]],                 # a non-finite point
+                [*cur[:3], math.nan, *cur[4:]],       # a non-finite depth
+                cur[:10]):                            # no known layout
+        assert ifc.contact_geometry(bad) is None

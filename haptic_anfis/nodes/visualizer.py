@@ -201,13 +201,7 @@ class Visualizer(Node):
 
     def _contact_state(self):
         c = self._contact
-        if c is None or not ifc.is_contact_values(c.position) \
-                or c.position[ifc.I_IN_CONTACT] < 0.5:
-            return None
-        v = np.asarray(c.position, dtype=float)
-        if not np.all(np.isfinite(v)):
-            return None
-        return v[0:3], v[ifc.I_DX:ifc.I_DZ + 1], float(v[ifc.I_DEPTH])
+        return None if c is None else ifc.contact_geometry(c.position)
 
     def _dent_loop(self) -> None:
         period = 1.0 / self.params['rate']

@@ -138,13 +138,7 @@ class WebView(Node):
                                   throttle_duration_sec=5.0)
 
     def _contact_state(self):
-        c = self._contact
-        if c is None or not ifc.is_contact_values(c) or c[ifc.I_IN_CONTACT] < 0.5:
-            return None
-        v = np.asarray(c, float)
-        if not np.isfinite(v[:ifc.I_IN_CONTACT]).all():
-            return None
-        return v[0:3], v[ifc.I_DX:ifc.I_DZ + 1], float(v[ifc.I_DEPTH])
+        return None if self._contact is None else ifc.contact_geometry(self._contact)
 
     # -- frames -----------------------------------------------------------------------------
 
