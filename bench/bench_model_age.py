@@ -26,7 +26,8 @@ from pathlib import Path
 import numpy as np
 
 from _page import write_page
-from haptic_anfis.device.local_model import LocalModelRenderer, symmetric_part
+from haptic_anfis.device.local_model import LocalModelRenderer, condition_stiffness_values, \
+    rotating_mode, skew_vector, symmetric_part
 from haptic_anfis.device.trace import DISABLED, load_trace
 from haptic_anfis.nodes.resim import build_pipeline
 from haptic_anfis.pipeline.contact import approach_values, contact_values
@@ -85,6 +86,28 @@ def rendered(models: list, positions: np.ndarray, times: np.ndarray, age: int,
     return out
 
 
+def guard_figures(models: list, contact: np.ndarray) -> list[str]:
+    """Lines on what the stiffness guard leaves of the contact models' K: the symmetric part's
+    positive eigenvalues it clips, the skew part it keeps, and the share with a rotating mode
+    (a held model renders those without the skew part)."""
+    top, skew, rotating = [], [], 0
+    bound = LocalModelRenderer().max_stiffness  # the guard as the renderer here applies it
+    for values, c in zip(models, contact):
+        if not c:
+            continue
+        k = values[6:15]
+        top.append(np.linalg.eigvalsh(np.reshape(symmetric_part(k), (3, 3)))[-1])
+        skew.append(np.linalg.norm(skew_vector(k)))
+        rotating += rotating_mode(condition_stiffness_values(k, bound)[0])
+    if not top:
+        return ['no contact model']
+    p = lambda a, q: float(np.percentile(a, q))  # noqa: E731
+    return [f'{len(top)} contact models: the symmetric part\'s largest eigenvalue (clipped to 0 '
+            f'when positive) p50 {p(top, 50):.1f}, p99 {p(top, 99):.1f} N/m; the skew part |w| '
+            f'p50 {p(skew, 50):.1f}, p99 {p(skew, 99):.1f} N/m; with a rotating mode after the '
+            f'guard (held: rendered without the skew part) {100 * rotating / len(top):.0f} %']
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument('--duration', type=float, default=15.0, help='seconds of session (default 15)')
@@ -114,6 +137,7 @@ def main() -> int:
         (a, am), (b, bm) = cells
         lines.append(f'| {age} | {a:.3f} | {am:.1f} | {b:.3f} | {bm:.1f} | '
                      f'{a / b if b > 0 else float("inf"):.1f} |')
+    lines += ['', *guard_figures(models, contact)]
     text = '\n'.join(lines)
     print(text)
     if not args.no_page:

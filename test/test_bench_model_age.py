@@ -6,7 +6,7 @@ import numpy as np
 
 BENCH = Path(__file__).resolve().parents[1] / 'bench'
 sys.path.insert(0, str(BENCH))
-from bench_model_age import models_along, rendered  # noqa: E402
+from bench_model_age import guard_figures, models_along, rendered  # noqa: E402
 
 from haptic_anfis.device.palpation import dome_height  # noqa: E402
 
@@ -30,3 +30,11 @@ def test_a_fresh_model_renders_the_ideal_force_and_an_old_one_drifts():
            for sym in (True, False)}
     assert err[False] > 0.0
     assert err[False] < err[True]  # the skew part kept: closer to the tissue's force
+
+
+def test_guard_figures_count_the_contact_models():
+    times, positions = press_and_stroke()
+    models, _, contact = models_along(positions)
+    line, = guard_figures(models, contact)
+    assert line.startswith(f'{int(contact.sum())} contact models')
+    assert guard_figures(models, np.zeros_like(contact)) == ['no contact model']
