@@ -141,8 +141,9 @@ class Visualizer(Node):
         self.timer = self.create_timer(1.0 / p['rate'], self._draw)
         self.n_published = 0
         # marker frames not built: their topic had no subscriber. RViz is not part of every
-        # install, and a picture nobody draws took about a tenth of a core of the loop's machine (the
-        # dent thread skips the same way while visualization/tissue has no subscriber)
+        # install, and a picture nobody draws took about a tenth of a core of the loop's
+        # machine (the dent thread skips the same way while visualization/tissue has no
+        # subscriber)
         self.frames_unwatched = 0
         # compute + publish time of the last dent frames [s] (bounded: a long session)
         self.dent_seconds: collections.deque = collections.deque(maxlen=10000)
