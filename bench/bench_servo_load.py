@@ -42,7 +42,7 @@ from _page import write_page  # noqa: E402
 CLI = [sys.executable, '-m', 'haptic_anfis.cli']
 COLS = ('config', 'busy', 'load', 'rt_others', 'rate_hz', 'periods_lost', 'max_gap_ms',
         'err_rms_pct', 'ripple_pct', 'ripple_ideal_pct', 'zero_ticks', 'dropout_ms', 'trips_contact',
-        'expired', 'held', 'beyond', 'lat_p99_ms', 'lat_max_ms')
+        'expired', 'held', 'beyond', 'taken_over', 'lat_p99_ms', 'lat_max_ms')
 
 
 class TestSuite:
@@ -176,6 +176,7 @@ def row(name: str, nbusy: int, load: float, j: dict) -> dict:
             'ripple_ideal_pct': f('ripple_windows_ideal_pct'), 'zero_ticks': f('zero_force_ticks'),
             'dropout_ms': f('longest_dropout_ms'), 'trips_contact': f('watchdog_trips_in_contact'),
             'expired': f('ticks_expired'), 'held': f('ticks_held'), 'beyond': f('ticks_beyond'),
+            'taken_over': f('ticks_taken_over'),
             'lat_p99_ms': f('latency_p99_ms'), 'lat_max_ms': f('latency_max_ms'), 'error': j.get('error')}
 
 
@@ -276,8 +277,9 @@ def _page(a, rows: list[dict], planned: int):
              'expired (older than `model_hold_time`); `held`: ticks rendered from a model older '
              'than its validity time, inside `model_hold_time`; `beyond`: ticks rendered with the '
              'probe beyond the model\'s validity radius (the depth followed, the offset across '
-             'held at the radius); `lat_p99_ms`, `lat_max_ms`: pose -> local model '
-             'latency, 99th percentile and largest. Targets (issue 32): rate >= 995 Hz, zero_ticks 0, '
+             'held at the radius); `taken_over`: ticks one tick worker took over from the other, '
+             'which was preempted in the middle of its tick; `lat_p99_ms`, `lat_max_ms`: pose -> '
+             'local model latency, 99th percentile and largest. Targets (issue 32): rate >= 995 Hz, zero_ticks 0, '
              'err_rms_pct <= 2, ripple_pct <= 1; quiet err_rms_pct <= 0.2.\n')
     if len(rows) < planned:
         notes += f'\n({len(rows)} of {planned} planned runs so far.)\n'

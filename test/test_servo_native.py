@@ -4,6 +4,7 @@ the ripple / dropout figures (device/force_error.py)."""
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -428,9 +429,14 @@ def test_two_workers_serve_one_schedule_each_on_its_core(process):
         if process:
             threads = os.listdir(f'/proc/{lp._pid}/task')
             assert len(threads) == len(cpus)  # the workers and nothing else
+            tids = [f'/proc/{lp._pid}/task/{t}' for t in threads]
         else:
             assert sorted(min(os.sched_getaffinity(th.native_id)) for th in lp._tick_threads
                           ) == sorted(c for c in cpus if c is not None) or cpus == [None]
+            tids = [f'/proc/self/task/{th.native_id}' for th in lp._tick_threads]
+        # named for top -H, ps -L and scheduler traces
+        assert sorted(Path(t, 'comm').read_text().strip() for t in tids) == [
+            f'servo-tick{w}' for w in range(len(cpus))]
     finally:
         lp.stop()
     lp._drain()
@@ -441,6 +447,54 @@ def test_two_workers_serve_one_schedule_each_on_its_core(process):
     assert ticks <= (t[-1] - t[0]) / lp.period + 1 + 1e-9
     assert lp.cnt[nt.CNT.running] == 0 and lp.cnt[nt.CNT.deadline_ns] == 0
     assert tuple(lp.st[nt.S.f0:nt.S.f0 + 3]) == (0.0, 0.0, 0.0)
+
+
+def test_a_worker_stalled_in_its_tick_is_taken_over_and_its_result_dropped():
+    """Two workers' claims and commits played by hand at chosen times (the protocol ``run``
+    follows, no threads): worker A claims the tick and stalls before its commit; B, waking within
+    the period, leaves it; a period later B takes it over from the committed state and commits;
+    A's late commit is dropped. One tick counted, one trace row, the state B's."""
+    from haptic_anfis.device.trace import TickTrace
+    lp = loop(max_force_rate=1e6, trace=TickTrace())
+    lp.safety.start()
+    lp.safety.command((2.0, 0.0, 0.0), 0.0, 'tissue')
+    C, S = nt.CNT, nt.S
+    period = int(lp.period * 1e9 + 0.5)
+    t0 = 10 ** 9
+    lp.cnt[C.deadline_ns] = t0
+    lp.cnt[C.max_gap_ns] = 7_000_000  # a statistics window's maximum, reset below mid-tick
+    a = [np.empty_like(lp.st), np.empty_like(lp.cnt), np.empty_like(lp.cnt),
+         np.empty_like(lp._scratch)]
+    b = [np.empty_like(x) for x in a]
+
+    def compute(w, now):
+        return nt._compute(now * 1e-9, lp.cfg, w[0], lp.times, lp.points, lp.buttons, lp.hand,
+                           lp.cmd, lp.model, lp.ctl, w[1], w[3])
+
+    ok, da, ga = nt._claim(t0, period, lp.ctl, lp.st, lp.cnt, a[0], a[1], a[2])
+    assert ok and da == t0
+    compute(a, t0)  # ... and A is preempted here
+    ok, again, _ = nt._claim(t0 + period // 2, period, lp.ctl, lp.st, lp.cnt, b[0], b[1], b[2])
+    assert not ok and again == t0 + period  # being run: B looks again a period on
+    lp.cnt[C.max_gap_ns] = 0  # the driver's statistics window restarts meanwhile
+    late = t0 + period + 1000
+    ok, db, gb = nt._claim(late, period, lp.ctl, lp.st, lp.cnt, b[0], b[1], b[2])
+    assert ok and db == late and gb == ga  # taken over, the schedule re-synchronised
+    assert lp.cnt[C.taken_over] == 1 and lp.cnt[C.deadline_misses] == 1
+    _, *q = compute(b, late)
+    assert nt._commit(gb, db, period, lp.st, lp.cnt, b[0], b[1], b[2])
+    nt._publish(late * 1e-9, lp.st, lp.out, lp.cnt, lp.ring, b[3], 0, *q)
+    assert not nt._commit(ga, da, period, lp.st, lp.cnt, a[0], a[1], a[2])  # dropped
+    assert lp.st[S.t_prev] == pytest.approx(late * 1e-9)
+    assert lp.cnt[C.ticks] == 1 and lp.cnt[C.trace_w] == 1 and lp.cnt[C.gen] == 1
+    assert lp.cnt[C.max_gap_ns] == 0  # the window's reset kept
+    assert lp.cnt[C.deadline_ns] == late + period and lp.cnt[C.claim_ns] == 0
+    assert lp.cnt[C.t_last_ns] == late
+    lp._drain()
+    assert lp.trace.arrays()[:, 0] == pytest.approx([late * 1e-9])
+    # the next period is B's (or A's) as usual
+    ok, d, g = nt._claim(late + period, period, lp.ctl, lp.st, lp.cnt, a[0], a[1], a[2])
+    assert ok and d == late + period and g == 1 and lp.cnt[C.taken_over] == 1
 
 
 def test_worker_cores_are_distinct_and_never_more_than_allowed(monkeypatch):

@@ -19,7 +19,8 @@ the plane ahead of a free probe), ``force_error_by_phase`` (onset / offset / ste
 the rest, each ``ticks``, ``rms_n``, ``share_pct`` of the squared error),
 ``ripple_windows_pct``, ``ripple_windows_ideal_pct``, ``zero_force_ticks``, ``longest_dropout_ms``
 (:func:`haptic_anfis.device.force_error.ripple_and_dropouts`), ``periods_lost`` (servo periods
-with no tick), ``max_gap_ms`` (the longest time between two ticks),
+with no tick), ``max_gap_ms`` (the longest time between two ticks), ``ticks_taken_over`` (ticks
+one tick worker took over from the other, preempted in the middle of its tick),
 ``process_cpu_pct`` (the driver process's CPU time over the window / its wall time, all threads:
 in one process, the whole graph's).
 """
@@ -93,7 +94,7 @@ def trace_report(trace: str | Path, params_files=()) -> dict:
                                    'watchdog_trips', 'watchdog_trips_in_contact',
                                    'deadline_misses', 'periods_lost', 'max_gap_ms',
                                    'passivity_limited', 'servo_scheduling', 'trace_rows_lost',
-                                   'ticks_held', 'ticks_beyond',
+                                   'ticks_held', 'ticks_beyond', 'ticks_taken_over',
                                    'rejected_stale', 'rejected_future',
                                    'rejected_unknown_stamp', 'process_cpu_pct',
                                    'ticks_approach')},

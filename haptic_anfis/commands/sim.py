@@ -93,7 +93,7 @@ TRACE_KEYS = ('force_error_rms_pct', 'force_error_rms_n', 'force_error_p99_n',
               'force_error_p99_pct', 'contact_ticks', 'ripple_windows_pct',
               'ripple_windows_ideal_pct', 'zero_force_ticks', 'longest_dropout_ms', 'force_mode',
               'watchdog_trips_in_contact', 'ticks_expired', 'ticks_held', 'ticks_beyond',
-              'periods_lost', 'max_gap_ms')
+              'ticks_taken_over', 'periods_lost', 'max_gap_ms')
 
 
 def _trace_figures(trace, params_files) -> dict:

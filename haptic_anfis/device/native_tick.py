@@ -130,7 +130,8 @@ OUT = _index('OUT', 'seq t p0 p1 p2 v0 v1 v2 q0 q1 q2 f0 f1 f2 status held b0 b1
 CNT = _index('CNT', 'ticks periods_lost deadline_misses watchdog_trips watchdog_trips_in_contact '
              'clamped rejected_nonfinite none fresh extrapolated expired free approach '
              'passivity_limited observer_active max_gap_ns max_force_un marks clutches '
-             'trace_w t_first_ns t_last_ns running held deadline_ns beyond')
+             'trace_w t_first_ns t_last_ns running held deadline_ns beyond claim_ns claim_at_ns '
+             'gen taken_over')
 #: trace row: t, device position (3,), applied force (3,) device frame, status (as TickTrace)
 TRACE_COLS = 8
 CFG_LEN, CTL_LEN, OUT_LEN, CNT_LEN = len(CFG), len(CTL), len(OUT), len(CNT)
@@ -501,6 +502,18 @@ def tick(now, cfg, st, times, points, buttons, hand, cmd, model, ctl, out, cnt, 
          stamp_ns):
     """One servo tick at monotonic time ``now`` [s] (see the module docstring); ``stamp_ns``: the
     wall-clock stamp the published pose carries. Returns the applied force's magnitude [N]."""
+    n, qx, qy, qz, b0, b1 = _compute(now, cfg, st, times, points, buttons, hand, cmd, model, ctl,
+                                     cnt, scratch)
+    _publish(now, st, out, cnt, trace, scratch, stamp_ns, qx, qy, qz, b0, b1)
+    return n
+
+
+@nb.njit(nogil=True, cache=True)
+def _compute(now, cfg, st, times, points, buttons, hand, cmd, model, ctl, cnt, scratch):
+    """Steps 1-5 of a tick and its timing counters, on ``st`` and ``cnt`` only (the shared
+    buffers ``out`` and ``trace`` are :func:`_publish`'s): a worker may run it on copies and
+    throw the result away (:func:`run`). Returns the applied force's magnitude [N], the tissue
+    position (with the clutch) and the buttons."""
     # inputs first: enable / disable, faults, the newest command and model
     if ctl[CTL.enable_gen] != st[S.enable_seen]:
         st[S.enable_seen] = ctl[CTL.enable_gen]
@@ -568,12 +581,33 @@ def tick(now, cfg, st, times, points, buttons, hand, cmd, model, ctl, out, cnt, 
             e += alpha * vv * gap
             cnt[CNT.observer_active] += 1
         st[S.energy] = e
-    # 5./6. device, counters, trace, published state
+    # 5. device, counters
     _device_write(cfg, st, ox, oy, oz)
     fx, fy, fz = st[S.f0], st[S.f1], st[S.f2]
     n = np.sqrt(fx * fx + fy * fy + fz * fz)
     if n * 1e6 > cnt[CNT.max_force_un]:
         cnt[CNT.max_force_un] = int(n * 1e6)
+    # timing counters: a gap of k periods lost k - 1 of them
+    period = cfg[CFG.period]
+    if st[S.t_prev] == st[S.t_prev]:
+        lost = int(np.floor(gap / period + 0.5)) - 1
+        if lost > 0:
+            cnt[CNT.periods_lost] += lost
+        g_ns = int(gap * 1e9)
+        if g_ns > cnt[CNT.max_gap_ns]:
+            cnt[CNT.max_gap_ns] = g_ns
+    else:
+        cnt[CNT.t_first_ns] = int(now * 1e9)
+    cnt[CNT.t_last_ns] = int(now * 1e9)
+    st[S.t_prev] = now
+    cnt[CNT.ticks] += 1
+    return n, qx, qy, qz, b0, b1
+
+
+@nb.njit(nogil=True, cache=True)
+def _publish(now, st, out, cnt, trace, scratch, stamp_ns, qx, qy, qz, b0, b1):
+    """Step 6 of a tick: its trace row and the published state (a seqlock) from ``st``."""
+    fx, fy, fz = st[S.f0], st[S.f1], st[S.f2]
     w = cnt[CNT.trace_w]
     if trace.shape[0] > 0:
         row = w % trace.shape[0]
@@ -598,64 +632,111 @@ def tick(now, cfg, st, times, points, buttons, hand, cmd, model, ctl, out, cnt, 
     _memcpy(out.ctypes.data + 8, scratch.ctypes.data + 8, np.int64((OUT_LEN - 1) * 8))
     out[OUT.seq] = seq + 2.0
     cnt[CNT.trace_w] = w + 1
-    # timing counters: a gap of k periods lost k - 1 of them
-    period = cfg[CFG.period]
-    if st[S.t_prev] == st[S.t_prev]:
-        lost = int(np.floor(gap / period + 0.5)) - 1
-        if lost > 0:
-            cnt[CNT.periods_lost] += lost
-        g_ns = int(gap * 1e9)
-        if g_ns > cnt[CNT.max_gap_ns]:
-            cnt[CNT.max_gap_ns] = g_ns
-    else:
-        cnt[CNT.t_first_ns] = int(now * 1e9)
-    cnt[CNT.t_last_ns] = int(now * 1e9)
-    st[S.t_prev] = now
-    cnt[CNT.ticks] += 1
-    return n
+
+
+#: counters a worker's tick changes that are not sums: the largest value wins, or the newest
+_CNT_MAX = (CNT.max_gap_ns, CNT.max_force_un)
+_CNT_SET = (CNT.t_first_ns, CNT.t_last_ns)
+
+
+@nb.njit(nogil=True, cache=True)
+def _claim(now_ns, period_ns, ctl, st, cnt, st_w, cnt_w, base):
+    """Under the workers' mutex: claim the due tick. Returns (claimed, deadline, generation):
+    when claimed, ``st_w`` and ``cnt_w`` hold copies of the state and counters (``base`` the
+    counters as copied) for :func:`_compute`, and ``deadline`` is the period claimed; else
+    ``deadline`` is when to look again. A tick claimed by another worker more than a period ago
+    and not committed (that worker is not running: preempted mid-tick) is taken over."""
+    deadline = cnt[CNT.deadline_ns]
+    if deadline == 0:  # the first tick: the schedule starts now
+        deadline = now_ns
+    if now_ns < deadline or ctl[CTL.stop] != 0:
+        return False, deadline, 0
+    if cnt[CNT.claim_ns] == deadline:
+        if now_ns - cnt[CNT.claim_at_ns] <= period_ns:
+            return False, deadline + period_ns, 0  # being run: look again a period on
+        cnt[CNT.taken_over] += 1
+    if now_ns - deadline > period_ns:
+        cnt[CNT.deadline_misses] += 1
+        deadline = now_ns
+        cnt[CNT.deadline_ns] = deadline
+    cnt[CNT.claim_ns] = deadline
+    cnt[CNT.claim_at_ns] = now_ns
+    st_w[:] = st
+    cnt_w[:] = cnt
+    base[:] = cnt
+    return True, deadline, cnt[CNT.gen]
+
+
+@nb.njit(nogil=True, cache=True)
+def _commit(gen, deadline, period_ns, st, cnt, st_w, cnt_w, base):
+    """Under the workers' mutex: make a claimed tick's state and counters (computed on the
+    copies) the loop's, unless another worker committed since the claim (then nothing is
+    written: that worker took the tick over). Returns whether it was committed."""
+    if cnt[CNT.gen] != gen:
+        return False
+    st[:] = st_w
+    for i in range(cnt.shape[0]):
+        d = cnt_w[i] - base[i]
+        if d != 0:
+            if i == _CNT_MAX[0] or i == _CNT_MAX[1]:
+                cnt[i] = max(cnt[i], cnt_w[i])  # a window reset since the claim stays reset
+            elif i == _CNT_SET[0] or i == _CNT_SET[1]:
+                cnt[i] = cnt_w[i]
+            else:
+                cnt[i] += d
+    cnt[CNT.gen] = gen + 1
+    cnt[CNT.claim_ns] = 0
+    cnt[CNT.deadline_ns] = deadline + period_ns
+    return True
 
 
 @nb.njit(nogil=True, cache=True)
 def run(cfg, st, times, points, buttons, hand, cmd, model, ctl, out, cnt, trace, scratch, ts,
         lock):
-    """The servo loop of one worker: :func:`tick` every ``period`` to absolute deadlines until
+    """The servo loop of one worker: a tick every ``period`` to absolute deadlines until
     ``ctl[stop]``. Several workers (threads of one process, each calling this with its own
     ``ts`` and the same arrays and ``lock``) serve ONE schedule: each sleeps to the next deadline;
-    the first to wake takes the lock, runs the tick when it is due and moves the deadline on; the
-    others find it not due (or the lock taken) and sleep to the next one. Under the normal
-    scheduler one thread is sometimes not run for milliseconds after it wakes (a busy core, a
-    long kernel path); two workers pinned to different cores are rarely both held (issue 32:
-    ``bench/bench_servo_wake.py``). A tick more than one period late is a deadline miss and the
-    schedule re-synchronises (the periods lost are counted by :func:`tick`). Each worker leaves
-    the device at zero force on its way out (under the lock, so after any tick in progress); the
-    last one also clears the schedule. Returns the number of ticks."""
+    the first to wake claims the tick (:func:`_claim`, under the lock), computes it on its own
+    copies of the state and counters with the lock let go (:func:`_compute`), then commits it
+    and publishes it (:func:`_commit`, :func:`_publish`, under the lock); the others find it
+    not due or claimed and sleep to the next one. Under the normal scheduler one thread is
+    sometimes not run for milliseconds after it wakes (a busy core, a long kernel path); two
+    workers pinned to different cores are rarely both held (issue 32:
+    ``bench/bench_servo_wake.py``). A worker preempted in the middle of its tick holds no lock:
+    a period later the other takes the tick over from the last committed state, and the late
+    one's result is dropped (``taken_over``). A tick more than one period late is a deadline
+    miss and the schedule re-synchronises (the periods lost are counted by :func:`_compute`).
+    Each worker leaves the device at zero force on its way out (under the lock, so after any
+    commit in progress); the last one also clears the schedule. Returns the number of ticks."""
     period_ns = int(cfg[CFG.period] * 1e9 + 0.5)
     m = lock.ctypes.data
     _mutex_lock(m)
     cnt[CNT.running] += 1
     _mutex_unlock(m)
+    st_w, cnt_w, base, scr = np.empty_like(st), np.empty_like(cnt), np.empty_like(cnt), \
+        np.empty_like(scratch)
     mine = np.int64(0)
     while ctl[CTL.stop] == 0:
+        claimed, deadline, gen = False, np.int64(0), np.int64(0)
+        now_ns = np.int64(0)
         if _mutex_trylock(m) == 0:
             _clock_gettime(CLOCK_MONOTONIC, ts.ctypes.data)
             now_ns = ts[0] * 1000000000 + ts[1]
-            deadline = cnt[CNT.deadline_ns]
-            if deadline == 0:  # the first tick: the schedule starts now
-                deadline = now_ns
-            if now_ns >= deadline and ctl[CTL.stop] == 0:
-                if now_ns - deadline > period_ns:
-                    cnt[CNT.deadline_misses] += 1
-                    deadline = now_ns
-                _clock_gettime(CLOCK_REALTIME, ts.ctypes.data)
-                stamp = ts[0] * 1000000000 + ts[1]
-                tick(now_ns * 1e-9, cfg, st, times, points, buttons, hand, cmd, model, ctl,
-                     out, cnt, trace, scratch, stamp)
-                deadline += period_ns
-                cnt[CNT.deadline_ns] = deadline
-            mine = deadline
+            claimed, deadline, gen = _claim(now_ns, period_ns, ctl, st, cnt, st_w, cnt_w, base)
             _mutex_unlock(m)
-        else:  # another worker is in the tick: its deadline is served, sleep to the next
+            mine = deadline
+        else:  # another worker is claiming or committing: this period is served
             mine = max(mine, cnt[CNT.deadline_ns]) + period_ns
+        if claimed:
+            _clock_gettime(CLOCK_REALTIME, ts.ctypes.data)
+            stamp = ts[0] * 1000000000 + ts[1]
+            _, qx, qy, qz, b0, b1 = _compute(now_ns * 1e-9, cfg, st_w, times, points, buttons,
+                                             hand, cmd, model, ctl, cnt_w, scr)
+            _mutex_lock(m)
+            if _commit(gen, deadline, period_ns, st, cnt, st_w, cnt_w, base):
+                _publish(now_ns * 1e-9, st, out, cnt, trace, scr, stamp, qx, qy, qz, b0, b1)
+            mine = cnt[CNT.deadline_ns]
+            _mutex_unlock(m)
         ts[0] = mine // 1000000000
         ts[1] = mine % 1000000000
         _clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, ts.ctypes.data, 0)
@@ -665,5 +746,6 @@ def run(cfg, st, times, points, buttons, hand, cmd, model, ctl, out, cnt, trace,
     cnt[CNT.running] -= 1
     if cnt[CNT.running] == 0:
         cnt[CNT.deadline_ns] = 0
+        cnt[CNT.claim_ns] = 0
     _mutex_unlock(m)
     return cnt[CNT.ticks]

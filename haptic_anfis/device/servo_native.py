@@ -40,7 +40,7 @@ from .local_model import FALCON_MAX_STIFFNESS, LocalModelRenderer, RenderStats, 
     symmetric_part, tissue_stiffness_limit
 from .safety import IGNORED_DISABLED, OK, REJECTED_FRAME, REJECTED_NONFINITE, SafetyLayer, \
     SafetyStats
-from .servo import request_short_slice, set_realtime
+from .servo import name_thread, request_short_slice, set_realtime
 from .stats import LoopStats
 from .trace import TickTrace
 
@@ -173,7 +173,8 @@ class NativeLoopStats(LoopStats):
                                        - b[nt.CNT.passivity_limited]),
                  observer_active=int(c[nt.CNT.observer_active] - b[nt.CNT.observer_active]),
                  ticks_held=int(c[nt.CNT.held] - b[nt.CNT.held]),
-                 ticks_beyond=int(c[nt.CNT.beyond] - b[nt.CNT.beyond]))
+                 ticks_beyond=int(c[nt.CNT.beyond] - b[nt.CNT.beyond]),
+                 ticks_taken_over=int(c[nt.CNT.taken_over] - b[nt.CNT.taken_over]))
         return s
 
 
@@ -601,6 +602,7 @@ class NativeServoLoop:
                 else:
                     _die_with_parent(signal.SIGKILL)
                 if self.device_factory is not None:
+                    name_thread('servo-device')
                     set_realtime(self.priority)  # the device loop: one thread (its USB I/O)
                     if self.priority <= 0:
                         request_short_slice()
@@ -693,7 +695,7 @@ class NativeServoLoop:
         process's main thread). Returns the started threads."""
         cpus = self._cpus
         threads = [threading.Thread(target=self._run_ticks, args=(w, cpus[w]), daemon=True,
-                                    name=f'servo-native-{w}') for w in range(first, len(cpus))]
+                                    name=f'servo-tick{w}') for w in range(first, len(cpus))]
         for th in threads:
             th.start()
         if first == 1:
@@ -708,6 +710,7 @@ class NativeServoLoop:
     def _run_ticks(self, worker: int = 0, cpu: int | None = None) -> None:
         """One tick worker: its core, its scheduling, then the compiled loop until stop."""
         import os
+        name_thread(f'servo-tick{worker}')
         if cpu is not None:
             try:
                 os.sched_setaffinity(0, {cpu})  # this thread only
@@ -728,6 +731,7 @@ class NativeServoLoop:
             self.last_error = exc
 
     def _run_bridge(self) -> None:
+        name_thread('servo-bridge')
         set_realtime(max(self.priority - 10, 1) if self.priority > 0 else 0)
         if self.priority <= 0:
             request_short_slice()
