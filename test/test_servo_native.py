@@ -497,6 +497,19 @@ def test_a_worker_stalled_in_its_tick_is_taken_over_and_its_result_dropped():
     assert ok and d == late + period and g == 1 and lp.cnt[C.taken_over] == 1
 
 
+def test_the_first_tick_is_claimed_once():
+    """The schedule starts with the first claim: a second worker waking a moment later finds
+    that tick claimed, not a new schedule of its own."""
+    lp = loop()
+    period = int(lp.period * 1e9 + 0.5)
+    w = [np.empty_like(lp.st), np.empty_like(lp.cnt), np.empty_like(lp.cnt)]
+    t0 = 5 * 10 ** 9
+    ok, d, _ = nt._claim(t0, period, lp.ctl, lp.st, lp.cnt, *w)
+    assert ok and d == t0 and lp.cnt[nt.CNT.deadline_ns] == t0
+    ok, again, _ = nt._claim(t0 + 2000, period, lp.ctl, lp.st, lp.cnt, *w)
+    assert not ok and again == t0 + period
+
+
 def test_worker_cores_are_distinct_and_never_more_than_allowed(monkeypatch):
     import os
 

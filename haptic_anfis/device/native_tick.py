@@ -658,7 +658,7 @@ def _claim(now_ns, period_ns, ctl, st, cnt, st_w, cnt_w, base):
     if now_ns - deadline > period_ns:
         cnt[CNT.deadline_misses] += 1
         deadline = now_ns
-        cnt[CNT.deadline_ns] = deadline
+    cnt[CNT.deadline_ns] = deadline  # also the first: the other worker finds it claimed
     cnt[CNT.claim_ns] = deadline
     cnt[CNT.claim_at_ns] = now_ns
     st_w[:] = st
