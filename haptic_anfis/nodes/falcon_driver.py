@@ -161,7 +161,8 @@ PARAMS = [
           '(Hannaford & Ryu 2002) on the rendered port'),
     Param('servo_workers', 2, "native, native_process with the simulated Falcon: threads "
           'that serve the one 1 kHz tick schedule, each pinned to its own core; the first to '
-          'wake runs the tick, so one core held busy no longer costs ticks (measured: '
+          'wake runs the tick, so one core held busy no longer costs ticks, and a tick whose '
+          'worker was preempted mid-tick is taken over a period later (measured: '
           'docs/servo_loop.md). At most the cores the process may use; 1: one servo thread. '
           "The real Falcon's servo process has one (its USB I/O)",
           lambda v: None if 1 <= v <= 8 else 'expected 1 to 8'),
