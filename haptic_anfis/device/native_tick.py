@@ -679,7 +679,8 @@ def _commit(gen, deadline, period_ns, st, cnt, st_w, cnt_w, base):
         d = cnt_w[i] - base[i]
         if d != 0:
             if i == _CNT_MAX[0] or i == _CNT_MAX[1]:
-                cnt[i] = max(cnt[i], cnt_w[i])  # a window reset since the claim stays reset
+                # a window reset since the claim stays reset but for this tick's own value
+                cnt[i] = max(cnt[i], cnt_w[i])
             elif i == _CNT_SET[0] or i == _CNT_SET[1]:
                 cnt[i] = cnt_w[i]
             else:
