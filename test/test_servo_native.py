@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from hypothesis import given
+from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from haptic_anfis.device import HandParams, WorkspaceMapping
@@ -495,6 +495,50 @@ def test_a_worker_stalled_in_its_tick_is_taken_over_and_its_result_dropped():
     # the next period is B's (or A's) as usual
     ok, d, g = nt._claim(late + period, period, lp.ctl, lp.st, lp.cnt, a[0], a[1], a[2])
     assert ok and d == late + period and g == 1 and lp.cnt[C.taken_over] == 1
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.lists(st.tuples(st.integers(0, 1), st.integers(0, 3000)), min_size=2, max_size=80))
+def test_any_order_of_claims_and_commits_keeps_one_tick_per_generation(events):
+    """Two workers' steps in any order: each event is a worker's next step (wake and claim, or,
+    with a claim pending, commit) and the time to the next event [us] (> 1000: a worker
+    preempted mid-tick, its claim taken over). Whatever the order: one tick per commit, the
+    committed ticks in time order and traced once each, the state the last commit's."""
+    from haptic_anfis.device.trace import TickTrace
+    lp = loop(trace=TickTrace())
+    lp.safety.start()
+    C, S = nt.CNT, nt.S
+    period = int(lp.period * 1e9 + 0.5)
+    work = [[np.empty_like(lp.st), np.empty_like(lp.cnt), np.empty_like(lp.cnt),
+             np.empty_like(lp._scratch)] for _ in range(2)]
+    pending: list = [None, None]
+    committed = []
+    t = 10 ** 9
+    for who, step_us in events:
+        w = work[who]
+        if pending[who] is None:
+            ok, d, g = nt._claim(t, period, lp.ctl, lp.st, lp.cnt, w[0], w[1], w[2])
+            if ok:
+                q = nt._compute(t * 1e-9, lp.cfg, w[0], lp.times, lp.points, lp.buttons,
+                                lp.hand, lp.cmd, lp.model, lp.ctl, w[1], w[3])[1:]
+                pending[who] = (g, d, t, q)
+            else:
+                assert d > t or lp.cnt[C.claim_ns] == lp.cnt[C.deadline_ns]
+        else:
+            g, d, t0, q = pending[who]
+            pending[who] = None
+            if nt._commit(g, d, period, lp.st, lp.cnt, w[0], w[1], w[2]):
+                nt._publish(t0 * 1e-9, lp.st, lp.out, lp.cnt, lp.ring, w[3], 0, *q)
+                committed.append(t0)
+        t += step_us * 1000
+    n = len(committed)
+    assert lp.cnt[C.ticks] == lp.cnt[C.gen] == lp.cnt[C.trace_w] == n
+    assert all(b > a for a, b in zip(committed, committed[1:]))
+    if n:
+        assert lp.st[S.t_prev] == pytest.approx(committed[-1] * 1e-9)
+        assert lp.cnt[C.t_last_ns] == committed[-1]
+    lp._drain()
+    assert lp.trace.arrays()[:, 0] == pytest.approx(np.array(committed) * 1e-9)
 
 
 def test_the_first_tick_is_claimed_once():
