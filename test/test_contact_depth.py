@@ -191,3 +191,31 @@ def test_tracker_proxy_step_matches_two_separate_ray_casts(dome_mesh, direction,
         assert r.depth == min(t, limit) and r.saturated == (t > limit)
         np.testing.assert_array_equal(r.normal, det._tri[det._row_of[face], 9:12])
     assert n_contact > 100 and n_sat > 10
+
+
+def test_a_press_compiles_nothing_after_the_detector_is_built():
+    """Every kernel a contact uses — the entry's ray cast, the follow, the approach's ray cast and
+    normal — is compiled (or loaded from numba's cache) when the detector is built, not at the
+    first touch: with a cold cache a first-touch compile stopped the contact stream ~1.5 s and the
+    servo loop rendered 0 N for 0.65 s (issue 32). A new signature of any kernel after the build
+    would be such a compile."""
+    from haptic_anfis.contact import ContactDetector, ContactTracker, bvh, load_mesh
+    from haptic_anfis.pipeline.contact import DEFAULT_SURFACE, approach_values
+    mesh = load_mesh(DEFAULT_SURFACE, unit='mm')
+    mesh.merge_vertices()
+    tracker = ContactTracker(ContactDetector(mesh, direction=(-1.0, 0.0, 0.0)))
+
+    def signatures():
+        return {k: len(v.signatures) for k, v in vars(bvh).items() if hasattr(v, 'signatures')}
+    built = signatures()
+    touched = 0
+    for x in np.arange(0.09, 0.0, -0.001):  # the default surface, pressed along -x
+        p = np.array([x, 0.005, 0.002])
+        c = tracker.update(p)
+        approach_values(tracker, c, (x, 0.005, 0.002), 0.02)
+        touched += c.in_contact
+        if touched > 5:
+            break
+    assert touched > 5  # the press did reach into the tissue
+    tracker.update(np.array([0.09, 0.005, 0.002]))  # and out again
+    assert signatures() == built

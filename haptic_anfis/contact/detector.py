@@ -119,8 +119,24 @@ class ContactDetector:
         self._buf, (self._tri, self._box, self._node, self._ids, self._par) = bvh.pack_tables(
             self._tri, self._box, self._node, np.stack([self._order, row_of]), self._par)
         self._order, self._row_of = self._ids[0], self._ids[1]
-        self.query(self._tri[0, 0:3])  # compile or load the kernels now, not in the 1 kHz loop
+        self._compile()
+
+    def _compile(self) -> None:
+        """Compile (or load from numba's cache) every kernel of this surface's queries now, not
+        in the 1 kHz loop: the closest point, the ray casts of a contact's entry and of the
+        approach and the normal ahead (:mod:`.approach`), and the tracker's follow
+        (:mod:`.proxy`), called as they are called there, at the first triangle (answers
+        unused). With a cold cache the ray casts and the follow compiled at the trainee's first
+        touch: the contact stream stopped for ~1.5 s and the servo loop rendered 0 N for 0.65 s
+        as its model expired (issue 32)."""
+        q = self._tri[0, 0:3].copy()
+        p = q + self._tri[0, 9:12] * (1e-3 * self.scale)  # off the surface, outside
+        self.query(q)
         self.query_many(self._tri[:2, 0:3])
+        self._raycast(p, np.array([0.0, 0.0, 1.0]), 0.0, 1.0, -1)
+        self._normal_at(p, int(self._order[0]), q)
+        x, y, z = q.tolist()
+        bvh.follow_packed(self._buf, x, y, z, 0.0, 0.0, 1.0, 0.01, np.empty(6))
 
     @classmethod
     def from_file(cls, path: str | os.PathLike, unit: str = 'mm', transform=None,
