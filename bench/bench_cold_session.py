@@ -11,7 +11,6 @@ expires (issue 32). Usage: ``python bench/bench_cold_session.py [--duration 10] 
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import subprocess
 import sys
@@ -22,9 +21,11 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / 'bench'))
 
+from bench_servo_load import fmt, last_json, loop_rate  # noqa: E402
+
 CLI = [sys.executable, '-m', 'haptic_anfis.cli']
-COLS = ('layout', 'cache', 'compiled', 'compiled_after_ready', 'zero_ticks', 'dropout_ms', 'expired',
-        'err_rms_pct', 'rate_hz')
+COLS = ('layout', 'cache', 'compiled', 'compiled_after_ready', 'zero_ticks', 'dropout_ms',
+        'expired', 'err_rms_pct', 'rate_hz')
 
 
 def compiled_after_ready(text: str) -> int:
@@ -45,24 +46,16 @@ def one(layout: str, cache: Path, work: Path, duration: float) -> dict:
     # one stream, in order: numba's cache log (stdout) against the ready line (the ROS log)
     r = subprocess.run(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env,
                        timeout=duration + 900)
-    j = {}
-    for line in reversed(r.stdout.splitlines()):
-        if line.startswith('{'):
-            j = json.loads(line)
-            break
+    j = last_json(r.stdout) or {}
     # each node's own log (launch) or the one process's output (sim)
     texts = ([p.read_text(errors='replace') for p in sorted(logs.glob('*.log'))]
              if layout == 'launch' else [r.stdout])
-    rate = j.get('rate_hz') or (j.get('rates_hz') or {}).get('falcon/measured_cp')
     return {'layout': layout, 'compiled': sum(t.count('data saved to') for t in texts),
             'compiled_after_ready': sum(map(compiled_after_ready, texts)),
             'zero_ticks': j.get('zero_force_ticks'), 'dropout_ms': j.get('longest_dropout_ms'),
             'expired': j.get('ticks_expired'), 'err_rms_pct': j.get('force_error_rms_pct'),
-            'rate_hz': rate, 'error': None if j else f'exit {r.returncode}: {r.stdout[-300:]}'}
-
-
-def fmt(v) -> str:
-    return f'{v:.2f}' if isinstance(v, float) else str(v)
+            'rate_hz': loop_rate(j),
+            'error': None if j else f'exit {r.returncode}: {r.stdout[-300:]}'}
 
 
 def main() -> int:

@@ -156,21 +156,33 @@ def run_one(kind: str, priority: int, duration: float, loop: str, d: Path,
             # that chromium drawing on the cores of whatever runs next.
             stop.set()
             browser.join(timeout=60)
-    for line in reversed(r.stdout.splitlines()):
+    j = last_json(r.stdout)
+    return j if j is not None else {'error': f'exit {r.returncode}: {(r.stdout + r.stderr)[-600:]}'}
+
+
+def last_json(out: str) -> dict | None:
+    """The last line of a command's output that is JSON (``--json``'s summary), or None."""
+    for line in reversed(out.splitlines()):
         if line.startswith('{'):
             try:
                 return json.loads(line)
             except ValueError:
                 break
-    return {'error': f'exit {r.returncode}: {(r.stdout + r.stderr)[-600:]}'}
+    return None
+
+
+def loop_rate(j: dict) -> float | None:
+    """The servo rate of a ``sim --json`` or ``launch --json`` summary [Hz] (``launch`` gives
+    the rate of the driver's published poses)."""
+    rate = j.get('rate_hz')
+    if rate is None and isinstance(j.get('rates_hz'), dict):
+        rate = j['rates_hz'].get('falcon/measured_cp')
+    return rate
 
 
 def row(name: str, nbusy: int, load: float, j: dict) -> dict:
     f = lambda k: j.get(k)  # noqa: E731
-    rate = f('rate_hz')
-    if rate is None and isinstance(j.get('rates_hz'), dict):
-        rate = j['rates_hz'].get('falcon/measured_cp')
-    return {'config': name, 'busy': nbusy, 'load': round(load, 1), 'rate_hz': rate,
+    return {'config': name, 'busy': nbusy, 'load': round(load, 1), 'rate_hz': loop_rate(j),
             'periods_lost': f('periods_lost'), 'max_gap_ms': f('max_gap_ms'),
             'err_rms_pct': f('force_error_rms_pct'), 'ripple_pct': f('ripple_windows_pct'),
             'ripple_ideal_pct': f('ripple_windows_ideal_pct'), 'zero_ticks': f('zero_force_ticks'),
@@ -279,8 +291,8 @@ def _page(a, rows: list[dict], planned: int):
              'probe beyond the model\'s validity radius (the depth followed, the offset across '
              'held at the radius); `taken_over`: ticks one tick worker took over from the other, '
              'which was preempted in the middle of its tick; `lat_p99_ms`, `lat_max_ms`: pose -> '
-             'local model latency, 99th percentile and largest. Targets (issue 32): rate >= 995 Hz, zero_ticks 0, '
-             'err_rms_pct <= 2, ripple_pct <= 1; quiet err_rms_pct <= 0.2.\n')
+             'local model latency, 99th percentile and largest. Targets (issue 32): rate >= '
+             '995 Hz, zero_ticks 0, err_rms_pct <= 2, ripple_pct <= 1; quiet err_rms_pct <= 0.2.\n')
     if len(rows) < planned:
         notes += f'\n({len(rows)} of {planned} planned runs so far.)\n'
     return write_page(a.page, f'Servo loop under load ({a.loops}'

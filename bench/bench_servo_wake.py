@@ -122,7 +122,8 @@ def main() -> int:
                  'own session. `workers`: threads serving the one schedule, each pinned to its '
                  'own core. Lost: 1 ms periods with no tick. Taken over: ticks one worker '
                  'computed again, all runs together, because the other, preempted in the middle '
-                 'of its tick, had not committed it a period after claiming it. Target (issue 32): rate >= 995 Hz '
+                 'of its tick, had not committed it a period after claiming it. Target (issue 32): '
+                 'rate >= 995 Hz '
                  '(lost <= 0.5 %), no gap longer than the 10 ms watchdog.\n')
         cmd = ('.venv/bin/python bench/bench_servo_wake.py ' + ' '.join(sys.argv[1:])).strip()
         print('page:', write_page(a.page, 'Servo tick workers under load', table + notes,

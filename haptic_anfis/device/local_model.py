@@ -28,11 +28,11 @@ with these rules (:class:`LocalModelRenderer`):
   model's (Frobenius: the two parts are orthogonal) whose quadratic form is <= 0: a displacement
   ``e`` never gains force along itself (``e . K e = e . S e <= 0``). The skew part is the
   tissue field's own: the ANFIS force turns as the probe moves (its lateral components grow with
-  the depth), which the force server's F0 carries at every model anyway; dropping it made the force between two models drift away from
-  the tissue's by ~0.04 % of the force per ms of model age and jump back at the next model
-  (issue 32; with it ~0.01 %/ms: ``bench/bench_model_age.py``). It does not enter the sampling
-  bound below: a zero-order hold's energy leak per period is ``-T^2 v . K v / 2``, and
-  ``v . A v = 0``.
+  the depth), which the force server's F0 carries at every model anyway; dropping it made the
+  force between two models drift away from the tissue's by ~0.04 % of the force per ms of model
+  age and jump back at the next model (issue 32; with it ~0.01 %/ms:
+  ``bench/bench_model_age.py``). It does not enter the sampling bound below: a zero-order
+  hold's energy leak per period is ``-T^2 v . K v / 2``, and ``v . A v = 0``.
   The Falcon figure: 3000 N/m, the maximum linear stiffness CHAI3D's Falcon driver advertises
   (``cHapticDeviceInfo::m_maxLinearStiffness``, with 8 N and 20 N s/m damping). By Colgate & Brown
   1994 a sampled spring K is passive when the device's own damping b > K T / 2 + B: at T = 1 ms
