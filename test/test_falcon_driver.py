@@ -33,7 +33,12 @@ def driver(ctx, **params):
     from haptic_anfis.nodes.falcon_driver import FalconDriver
     d = FalconDriver(context=ctx, parameter_overrides=[
         Parameter(n, value=v) for n, v in params.items()])
-    d.start_loop()
+    try:
+        d.start_loop()
+    except BaseException:  # a node left undestroyed stays on the graph until collected
+        d.close()
+        d.destroy_node()
+        raise
     return d
 
 

@@ -159,3 +159,47 @@ def test_a_frozen_node_cannot_leave_force_on_the_motors(tmp_path):
     # the servo process got SIGTERM with its parent: it stopped its loop, sent zero, closed
     assert _wait(lambda: shm[CLOSED] == 1.0, 5.0), servo_pid
     assert tuple(shm[M0:M0 + 3]) == (0.0, 0.0, 0.0)
+
+
+class _Finalised:
+    """Garbage with a finalizer that writes the pid of the process that collects it."""
+
+    def __init__(self, shm):
+        self.shm, self.me = shm, self
+
+    def __del__(self):
+        self.shm[7] = os.getpid()
+
+
+def test_the_servo_process_never_collects_the_parents_garbage(ctx, monkeypatch):
+    """Garbage the driver's process holds at the fork (here: a cycle with a finalizer, as an
+    rclpy node left undestroyed makes) is never collected in the servo process: its finalizer
+    would call into DDS, whose locks the parent's threads may have held at the fork (the
+    device loop hung). The device factory runs in the servo process: it collects there first."""
+    import gc
+    shm = shared()
+    fake = centred_fake(shm)
+
+    def factory_collecting():
+        gc.collect()
+        return falcon_usb.FalconUSB(homing=False, transport=falcon_usb.PyFtdiTransport(
+            ftdi_class(fake)))
+
+    monkeypatch.setattr(falcon_usb, 'import_ftdi', lambda: ftdi_class(fake))
+    from haptic_anfis.nodes.falcon_driver import FalconDriver
+    monkeypatch.setattr(FalconDriver, '_falcon_factory', staticmethod(
+        lambda p: lambda **kw: factory_collecting()))
+    gc.disable()
+    try:
+        _Finalised(shm)  # unreachable at once: garbage
+        d = driver(ctx, backend='falcon', homing=False)
+        try:
+            assert _wait(lambda: d.device.replies >= 50)
+            assert shm[7] == 0.0, f'collected in process {shm[7]:.0f} (this one: {os.getpid()})'
+        finally:
+            d.close()
+            d.destroy_node()
+    finally:
+        gc.enable()
+    gc.collect()
+    assert shm[7] == os.getpid()  # collected here, where it belongs

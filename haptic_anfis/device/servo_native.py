@@ -587,10 +587,16 @@ class NativeServoLoop:
     def _start_process(self) -> None:
         """Fork the servo process: it only runs the compiled loop (compiled before the fork) on
         the shared arrays and exits with ``os._exit``; it dies with this process (PDEATHSIG)."""
+        import gc
         import os
         import signal
         pid = os.fork()
         if pid == 0:  # the child: no Python threads, no ROS; only the compiled loop
+            # Never collect what the parent left: a finalizer of its garbage (an rclpy node, a
+            # subscription) calls into DDS, whose locks other threads of the parent may have
+            # held at the fork, and the child then hangs for good (seen: the Falcon's device
+            # loop, which runs Python, stopped; 1-3 forks in 20 with a leaked node).
+            gc.freeze()
             code = 0
             try:
                 os.setsid()  # a session of its own: its own autogroup (fair share) on Linux

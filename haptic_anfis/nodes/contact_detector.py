@@ -16,7 +16,6 @@ from __future__ import annotations
 from array import array
 
 from geometry_msgs.msg import PoseStamped
-from rclpy.node import Node
 from sensor_msgs.msg import JointState
 
 from ..pipeline.contact import DEFAULT_SURFACE, approach_values, contact_values, make_tracker
@@ -24,6 +23,7 @@ from . import interfaces as ifc
 from ._case import CASE_PARAMS, apply_case, declare_case  # noqa: F401 (CASE_PARAMS: in config)
 from ._common import (LOOP_QOS, Param, declare_parameters, finite_vector, non_negative, one_of,
                       positive, run_node)
+from .base import HapticNode
 
 MESH_PARAMS = [
     Param('mesh_path', '', "tissue surface mesh file (STL, OBJ, PLY...; '' = the shipped surface "
@@ -50,7 +50,7 @@ PARAMS = MESH_PARAMS + [
 ]
 
 
-class ContactDetectorNode(Node):
+class ContactDetectorNode(HapticNode):
     def __init__(self, name: str = 'contact_detector', **kw):
         super().__init__(name, **kw)
         p = self.own_params = declare_parameters(self, PARAMS)

@@ -17,10 +17,10 @@ import re
 import time
 from typing import Sequence
 
-from rclpy.node import Node
 from visualization_msgs.msg import MarkerArray
 
 from . import interfaces as ifc
+from .base import HapticNode
 
 __all__ = ['EXAMINER_TOPICS', 'CoverageWatch', 'examiner_arguments', 'hold_until_examiner']
 
@@ -30,7 +30,7 @@ EXAMINER_TOPICS = tuple('/' + t for t in (ifc.TOPIC_CONTACT, ifc.TOPIC_COMMAND, 
 _MARKS = re.compile(rb'marks (\d+)  samples (\d+)')
 
 
-class CoverageWatch(Node):
+class CoverageWatch(HapticNode):
     """Counts the examiner's heat maps (``exam/coverage``) and their arrival times (monotonic
     [s]) and keeps the newest ``marks N  samples M`` of its summary text."""
 

@@ -17,7 +17,6 @@ from pathlib import Path
 
 import numpy as np
 from geometry_msgs.msg import Point, PointStamped, PoseStamped, WrenchStamped
-from rclpy.node import Node
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import Joy, JointState
 from std_msgs.msg import ColorRGBA
@@ -30,6 +29,7 @@ from . import cdr
 from . import interfaces as ifc
 from ._case import CASE_PARAMS, apply_case, declare_case  # noqa: F401 (CASE_PARAMS: in config)
 from ._common import Param, declare_parameters, positive, run_node, stamp_ns
+from .base import HapticNode
 from .contact_detector import MESH_PARAMS
 
 PARAMS = MESH_PARAMS + [
@@ -57,7 +57,7 @@ def lesion_source(p: dict, case=None) -> ExamSubject:
     return subject_from_scene(p['scene'] or None)
 
 
-class Examiner(Node):
+class Examiner(HapticNode):
     def __init__(self, name: str = 'examiner', **kw):
         super().__init__(name, **kw)
         p = self.own_params = declare_parameters(self, PARAMS)

@@ -39,7 +39,6 @@ from typing import Callable
 
 import numpy as np
 from geometry_msgs.msg import PointStamped, PoseStamped, TwistStamped, WrenchStamped
-from rclpy.node import Node
 from sensor_msgs.msg import JointState, Joy
 
 from ..device import (HandParams, PalpationScript, SafetyLayer, ServoLoop, SimulatedFalcon,
@@ -54,6 +53,7 @@ from ..device.stamps import STALE
 from ..device.trace import TickTrace, save_trace
 from . import cdr
 from . import interfaces as ifc
+from .base import HapticNode
 from .polled import PolledSubscription
 from ._common import (LOOP_QOS, Param, ParameterError, config_file, declare_parameters,
                       finite_vector,
@@ -194,7 +194,7 @@ def resolve_servo_loop(choice: str, backend: str = 'sim') -> str:
     return 'native_process' if choice == 'auto' else choice
 
 
-class FalconDriver(Node):
+class FalconDriver(HapticNode):
     def __init__(self, name: str = 'falcon_driver', **kw):
         super().__init__(name, **kw)
         p = self.params = declare_parameters(self, PARAMS)

@@ -22,7 +22,6 @@ import threading
 import time
 
 from geometry_msgs.msg import WrenchStamped
-from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
 
@@ -33,6 +32,7 @@ from . import interfaces as ifc
 from ._case import CASE_PARAMS, apply_case, declare_case  # noqa: F401 (CASE_PARAMS: in config)
 from ._common import (LOOP_QOS, Param, declare_parameters, non_negative, positive, run_node,
                       set_stamp, stamp_ns)
+from .base import HapticNode
 
 PARAMS = [
     Param('model_path', '', "ANFIS model file (JSON) ('' = the shipped default model); re-read "
@@ -47,7 +47,7 @@ PARAMS = [
 ]
 
 
-class ForceServer(Node):
+class ForceServer(HapticNode):
     def __init__(self, name: str = 'force_server', **kw):
         super().__init__(name, **kw)
         p = self.own_params = declare_parameters(self, PARAMS)

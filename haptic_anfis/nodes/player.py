@@ -24,7 +24,6 @@ from __future__ import annotations
 import threading
 import time
 
-from rclpy.node import Node
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from ..bag import BagError, bag_info
@@ -32,6 +31,7 @@ from ..bag.playback import Recorded, check_timing, schedule
 from ..bag.topics import WRENCH_TYPE, absolute, playback_topic
 from . import interfaces as ifc
 from ._common import Param, declare_parameters, message_class, non_negative, positive, run_node
+from .base import HapticNode
 
 PARAMS = [
     Param('bag_path', '', 'the bag to play (a rosbag2 directory); required'),
@@ -60,7 +60,7 @@ PLAY_QOS = QoSProfile(depth=100, history=HistoryPolicy.KEEP_LAST,
                       reliability=ReliabilityPolicy.RELIABLE)
 
 
-class Player(Node):
+class Player(HapticNode):
     def __init__(self, name: str = 'player', **kw):
         super().__init__(name, **kw)
         p = self.params = declare_parameters(self, PARAMS)

@@ -23,13 +23,13 @@ import signal
 import threading
 import time
 
-from rclpy.node import Node
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from ..bag import BagError, BagWriter
 from ..bag.segment import COMPRESSIONS
 from ..bag.topics import DEFAULT_TOPICS, KNOWN_TYPES
 from ._common import Param, declare_parameters, message_class, positive, run_node
+from .base import HapticNode
 from .polled import PolledSubscription
 
 #: Topics never recorded with ``all_topics`` (ROS infrastructure, as ``ros2 bag record -a``).
@@ -68,7 +68,7 @@ def default_output() -> str:
     return time.strftime('session_%Y%m%d-%H%M%S')
 
 
-class Recorder(Node):
+class Recorder(HapticNode):
     """Parameters in :data:`PARAMS`; ``topics`` / ``output`` arguments override them (used by
     ``haptic-anfis sim --record``)."""
 

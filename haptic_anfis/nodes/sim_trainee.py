@@ -10,11 +10,11 @@ from __future__ import annotations
 import math
 
 from geometry_msgs.msg import WrenchStamped
-from rclpy.node import Node
 from sensor_msgs.msg import JointState
 
 from . import interfaces as ifc
 from ._common import stamp_ns
+from .base import HapticNode
 from .examiner import SAMPLE_QOS
 
 
@@ -23,7 +23,7 @@ from .examiner import SAMPLE_QOS
 MAX_PENDING = 5000
 
 
-class SimTrainee(Node):
+class SimTrainee(HapticNode):
     def __init__(self, controller, name: str = 'sim_trainee', **kw):
         super().__init__(name, **kw)
         self.controller = controller

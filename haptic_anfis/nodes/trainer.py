@@ -13,7 +13,6 @@ from __future__ import annotations
 import threading
 import time
 
-from rclpy.node import Node
 from std_msgs.msg import String
 from std_srvs.srv import Trigger
 
@@ -23,6 +22,7 @@ from ..bag.training_data import load_training_data
 from ..tissue.dataset import DEFAULT_DATASET
 from . import interfaces as ifc
 from ._common import Param, declare_parameters, positive, run_node
+from .base import HapticNode
 
 
 def _structure_check(v: str):
@@ -56,7 +56,7 @@ PARAMS = [
 ]
 
 
-class Trainer(Node):
+class Trainer(HapticNode):
     def __init__(self, name: str = 'trainer', **kw):
         super().__init__(name, **kw)
         self.params = declare_parameters(self, PARAMS)

@@ -19,7 +19,6 @@ import time
 
 import numpy as np
 from geometry_msgs.msg import Point, PoseStamped, WrenchStamped
-from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 from visualization_msgs.msg import Marker, MarkerArray
@@ -29,6 +28,7 @@ from . import cdr
 from . import interfaces as ifc
 from ._case import CASE_PARAMS, apply_case, declare_case  # noqa: F401 (CASE_PARAMS: in config)
 from ._common import Param, declare_parameters, non_negative, positive, run_node
+from .base import HapticNode
 from .contact_detector import MESH_PARAMS
 from .polled import PolledSubscription
 
@@ -111,7 +111,7 @@ def _direction_quaternion(d) -> tuple[float, float, float, float]:
 PROBE_LENGTH = 0.03  # drawn length of the probe cylinder [m]
 
 
-class Visualizer(Node):
+class Visualizer(HapticNode):
     def __init__(self, name: str = 'visualizer', **kw):
         super().__init__(name, **kw)
         p = self.own_params = declare_parameters(self, PARAMS)

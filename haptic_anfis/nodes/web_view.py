@@ -22,7 +22,6 @@ import time
 
 import numpy as np
 from geometry_msgs.msg import PointStamped, PoseStamped, WrenchStamped
-from rclpy.node import Node
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 
@@ -30,6 +29,7 @@ from . import cdr
 from . import interfaces as ifc
 from ._case import declare_case
 from ._common import Param, declare_parameters, positive, run_node
+from .base import HapticNode
 from .polled import PolledSubscription
 
 #: newest sample, best effort
@@ -60,7 +60,7 @@ PARAMS = [
 ]
 
 
-class WebView(Node):
+class WebView(HapticNode):
     def __init__(self, name: str = 'web_view', **kw):
         super().__init__(name, **kw)
         p = self.params = declare_parameters(self, PARAMS)
