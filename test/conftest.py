@@ -37,5 +37,16 @@ def small_model(synthetic):
 
 
 @pytest.fixture
+def ctx():
+    """An rclpy context of the test's own (on the test run's domain), shut down after it."""
+    rclpy = pytest.importorskip('rclpy')
+    from rclpy.context import Context
+    c = Context()
+    rclpy.init(context=c)
+    yield c
+    rclpy.try_shutdown(context=c)
+
+
+@pytest.fixture
 def rng():
     return np.random.default_rng(1234)

@@ -11,7 +11,6 @@ import pytest
 from falcon_fake import FakeFalcon, ftdi_class
 
 rclpy = pytest.importorskip('rclpy')
-from rclpy.context import Context  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
 
 from haptic_anfis.device import falcon_kinematics as k  # noqa: E402
@@ -20,13 +19,6 @@ from haptic_anfis.nodes._common import ParameterError  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 
-
-@pytest.fixture
-def ctx():
-    c = Context()
-    rclpy.init(context=c)
-    yield c
-    rclpy.try_shutdown(context=c)
 
 
 def driver(ctx, **params):

@@ -38,7 +38,7 @@ def _wait(cond, seconds=10.0):
 
 
 pytest.importorskip('rclpy')
-from test_falcon_driver import ctx, driver  # noqa: E402,F401  (the same context fixture and node)
+from test_falcon_driver import driver  # noqa: E402  (the same node)
 
 from haptic_anfis.nodes._common import ParameterError  # noqa: E402
 

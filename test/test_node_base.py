@@ -11,7 +11,6 @@ import inspect
 import pytest
 
 rclpy = pytest.importorskip('rclpy')
-from rclpy.context import Context  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
 
 from haptic_anfis.nodes.base import HapticNode  # noqa: E402
@@ -43,13 +42,6 @@ FAILURES = {
     'recorder': ({'output': '{unwritable}'}, 'File exists'),
 }
 
-
-@pytest.fixture
-def ctx():
-    c = Context()
-    rclpy.init(context=c)
-    yield c
-    rclpy.try_shutdown(context=c)
 
 
 @pytest.mark.parametrize('name', sorted(FAILURES))

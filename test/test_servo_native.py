@@ -449,6 +449,13 @@ def test_two_workers_serve_one_schedule_each_on_its_core(process):
     assert tuple(lp.st[nt.S.f0:nt.S.f0 + 3]) == (0.0, 0.0, 0.0)
 
 
+def worker_arrays(lp) -> list[np.ndarray]:
+    """One worker's own copies, as ``run`` gives each: state, counters, the counters at its
+    claim, scratch."""
+    return [np.empty_like(lp.st), np.empty_like(lp.cnt), np.empty_like(lp.cnt),
+            np.empty_like(lp._scratch)]
+
+
 def test_a_worker_stalled_in_its_tick_is_taken_over_and_its_result_dropped():
     """Two workers' claims and commits played by hand at chosen times (the protocol ``run``
     follows, no threads): worker A claims the tick and stalls before its commit; B, waking within
@@ -463,9 +470,7 @@ def test_a_worker_stalled_in_its_tick_is_taken_over_and_its_result_dropped():
     t0 = 10 ** 9
     lp.cnt[C.deadline_ns] = t0
     lp.cnt[C.max_gap_ns] = 7_000_000  # a statistics window's maximum, reset below mid-tick
-    a = [np.empty_like(lp.st), np.empty_like(lp.cnt), np.empty_like(lp.cnt),
-         np.empty_like(lp._scratch)]
-    b = [np.empty_like(x) for x in a]
+    a, b = worker_arrays(lp), worker_arrays(lp)
 
     def compute(w, now):
         return nt._compute(now * 1e-9, lp.cfg, w[0], lp.times, lp.points, lp.buttons, lp.hand,
@@ -509,8 +514,7 @@ def test_any_order_of_claims_and_commits_keeps_one_tick_per_generation(events):
     lp.safety.start()
     C, S = nt.CNT, nt.S
     period = int(lp.period * 1e9 + 0.5)
-    work = [[np.empty_like(lp.st), np.empty_like(lp.cnt), np.empty_like(lp.cnt),
-             np.empty_like(lp._scratch)] for _ in range(2)]
+    work = [worker_arrays(lp) for _ in range(2)]
     pending: list = [None, None]
     committed = []
     t = 10 ** 9
@@ -546,7 +550,7 @@ def test_the_first_tick_is_claimed_once():
     that tick claimed, not a new schedule of its own."""
     lp = loop()
     period = int(lp.period * 1e9 + 0.5)
-    w = [np.empty_like(lp.st), np.empty_like(lp.cnt), np.empty_like(lp.cnt)]
+    w = worker_arrays(lp)[:3]
     t0 = 5 * 10 ** 9
     ok, d, _ = nt._claim(t0, period, lp.ctl, lp.st, lp.cnt, *w)
     assert ok and d == t0 and lp.cnt[nt.CNT.deadline_ns] == t0

@@ -238,15 +238,6 @@ class ContactDetector:
 
     # -- building blocks for ContactTracker (face indices in, face indices out) ---------------
 
-    def _closest_within(self, p: np.ndarray, hint: int, center: np.ndarray, radius: float):
-        """Closest point to p among faces within ``radius`` of ``center``: (face, point) or None."""
-        h = self._row_of[hint] if hint >= 0 else -1
-        r = bvh.closest(self._tri, self._box, self._node, p[0], p[1], p[2], h,
-                        center[0], center[1], center[2], radius * radius)
-        if r[0] < 0:
-            return None
-        return int(self._order[r[0]]), np.array(r[2:5])
-
     def _normal_at(self, p: np.ndarray, face: int, q: np.ndarray) -> np.ndarray:
         """Outward unit pseudo-normal at the surface point q of ``face`` seen from p."""
         row = self._row_of[face]

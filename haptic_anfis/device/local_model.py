@@ -525,6 +525,41 @@ def check_values(v) -> None:
                 raise ValueError(f'local model {name}: expected a unit vector, got {vec!r}')
 
 
+def accept_values(v, max_stiffness: float, stats, checked: bool = False):
+    """What a renderer keeps of a received model's flat values ``v`` (26,): checked (unless
+    ``checked``: the caller did), K conditioned; ``stats`` (a :class:`RenderStats`) counts a
+    rejected model and a K the guard changed by more than 1e-6 N/m. Plain floats: this runs
+    once per received model. Both renderers (Python and compiled) take models through it.
+
+    Returns:
+        ``(f0, p0, k, g, d, depth0, zero, contact)``: force [N] and point [m] (3-tuples), K
+        conditioned (9,) [N/m], depth gradient and direction (3-tuples; zero when neither in
+        contact nor an approach model), depth0 [m], whether to render zero at depth 0, and
+        whether the model renders past its plane (in contact, or an approach model).
+
+    Raises:
+        ValueError: a non-finite or malformed field (the model is not taken).
+    """
+    if not checked:
+        try:
+            check_values(v)
+        except ValueError:
+            stats.rejected += 1
+            raise
+    (f0x, f0y, f0z, p0x, p0y, p0z, *_, nx, ny, nz, dx, dy, dz, depth0, zero) = v
+    k, changed = condition_stiffness_values(v[6:15], max_stiffness)
+    if changed:
+        stats.stiffness_clamped += 1
+    # in contact, or an approach model (free, with the plane ahead): renders past its plane
+    contact = depth0 > 0.0 or nx * nx + ny * ny + nz * nz > 0.0
+    if contact:
+        g, d = depth_gradient_values(nx, ny, nz, dx, dy, dz), (dx, dy, dz)
+    else:
+        g = d = (0.0, 0.0, 0.0)
+    return ((f0x, f0y, f0z), (p0x, p0y, p0z), k, g, d, float(depth0), zero > 0.5 and contact,
+            contact)
+
+
 def hold_offset(gx: float, gy: float, gz: float, ex: float, ey: float, ez: float, r: float
                 ) -> tuple[float, float, float]:
     """The probe's offset ``e`` [m] from a model's p0 with its part across the depth gradient
@@ -623,27 +658,10 @@ class LocalModelRenderer:
         Raises:
             ValueError: a non-finite or malformed field (the model is not taken).
         """
-        if not checked:
-            try:
-                check_values(v)
-            except ValueError:
-                self.stats.rejected += 1
-                raise
-        (f0x, f0y, f0z, p0x, p0y, p0z, _, _, _, _, _, _, _, _, _, _, _, _,
-         nx, ny, nz, dx, dy, dz, depth0, zero) = v
-        k, changed = condition_stiffness_values(v[6:15], self.max_stiffness)
-        if changed:
-            self.stats.stiffness_clamped += 1
-        # in contact, or an approach model (free, with the plane ahead): renders past its plane
-        contact = depth0 > 0.0 or nx * nx + ny * ny + nz * nz > 0.0
-        if contact:
-            g = depth_gradient_values(nx, ny, nz, dx, dy, dz)
-            d = (dx, dy, dz)
-        else:
-            g = d = (0.0, 0.0, 0.0)
+        f0, p0, k, g, d, depth0, zero, contact = accept_values(v, self.max_stiffness, self.stats,
+                                                               checked)
         t = float(time)
-        self._m = ((f0x, f0y, f0z), (p0x, p0y, p0z), (k[0:3], k[3:6], k[6:9]), g, d,
-                   float(depth0), zero > 0.5 and contact, t, contact)
+        self._m = (f0, p0, (k[0:3], k[3:6], k[6:9]), g, d, depth0, zero, t, contact)
         self._values = v
         self.time = t
         self.stats.models += 1

@@ -36,8 +36,7 @@ from . import device_process as dp
 from .buttons import ButtonEvents
 from .falcon import DeviceState, HandParams, WorkspaceMapping
 from .local_model import FALCON_MAX_STIFFNESS, LocalModelRenderer, RenderStats, \
-    condition_stiffness_values, depth_gradient_values, rotating_mode, skew_vector, \
-    symmetric_part, tissue_stiffness_limit
+    accept_values, rotating_mode, skew_vector, symmetric_part, tissue_stiffness_limit
 from .safety import IGNORED_DISABLED, OK, REJECTED_FRAME, REJECTED_NONFINITE, SafetyLayer, \
     SafetyStats
 from .servo import name_thread, request_short_slice, set_realtime
@@ -326,24 +325,11 @@ class NativeRenderer(LocalModelRenderer):
 
     def offer_values(self, v, time: float, checked: bool = False) -> None:
         """As :meth:`LocalModelRenderer.offer_values` (raises ValueError on a malformed model)."""
-        if not checked:
-            from .local_model import check_values
-            try:
-                check_values(v)
-            except ValueError:
-                self._py.rejected += 1
-                raise
-        (f0x, f0y, f0z, p0x, p0y, p0z, *_, nx, ny, nz, dx, dy, dz, depth0, zero) = v
-        k, changed = condition_stiffness_values(v[6:15], self.max_stiffness)
-        if changed:
-            self._py.stiffness_clamped += 1
-        contact = depth0 > 0.0 or nx * nx + ny * ny + nz * nz > 0.0
-        g = depth_gradient_values(nx, ny, nz, dx, dy, dz) if contact else (0.0, 0.0, 0.0)
-        d = (dx, dy, dz) if contact else (0.0, 0.0, 0.0)
+        f0, p0, k, g, d, depth0, zero, contact = accept_values(v, self.max_stiffness, self._py,
+                                                               checked)
         ks = symmetric_part(k)  # the tick adds the skew part w x e (held: without rotating mode)
         t = float(time)
-        _seq_write(self._loop.model, (f0x, f0y, f0z, p0x, p0y, p0z, *ks, *g, *d, float(depth0),
-                                      1.0 if (zero > 0.5 and contact) else 0.0,
+        _seq_write(self._loop.model, (*f0, *p0, *ks, *g, *d, depth0, 1.0 if zero else 0.0,
                                       1.0 if contact else 0.0, t, 1.0, spectral_norm_sym(ks),
                                       *skew_vector(k), 0.0 if rotating_mode(k) else 1.0))
         self.time = t
