@@ -39,7 +39,7 @@ FAILURES = {
     'falcon_driver': ({'backend': 'falcon', 'servo_loop': 'native'}, "servo_loop: got 'native'"),
     'web_view': ({'case': 'no_such_case'}, "unknown case 'no_such_case'"),
     'player': ({'bag_path': '{missing}'}, 'bag'),
-    'recorder': ({'output': '{unwritable}'}, 'File exists'),
+    'recorder': ({'output': '{unwritable}'}, 'is a file, not a folder'),
 }
 
 

@@ -46,7 +46,15 @@ class Segment:
         if path.exists():
             raise BagError(f'{path}: exists already; a recording needs a new directory '
                            '(choose another path or remove it)')
-        path.parent.mkdir(parents=True, exist_ok=True)
+        blocker = next((a for a in path.parents if a.exists() and not a.is_dir()), None)
+        if blocker is not None:
+            raise BagError(f'{path}: {blocker} is a file, not a folder (expected a path whose '
+                           'parents are folders, or do not exist yet)')
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:  # a file in the way, no permission, a read-only disk
+            raise BagError(f'{path}: cannot create the folder it goes in: {exc.strerror} '
+                           f'({exc.filename})') from exc
         self.w = Writer(path, version=9, storage_plugin=StoragePlugin.MCAP)
         for k, v in custom_data.items():
             self.w.set_custom_data(k, str(v))
