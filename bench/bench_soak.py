@@ -232,7 +232,11 @@ def multi_process(minutes: float, interval: float, workdir: Path,
             p0, l0, tprev = len(poses), len(lats), now
     finally:
         stop_launch(launch, ex, node, ctx)
-    print(out.read_text().strip().splitlines()[-1])
+    # launch's loop report: the driver's own ticks (the rows above are what this observer got)
+    lines = out.read_text().strip().splitlines()
+    first = max((i for i, line in enumerate(lines) if line.startswith('loop (')),
+                default=len(lines) - 1)
+    print('\n'.join(lines[first:]))
     print(f'bag {bag}: {dir_mb(bag):.1f} MB', flush=True)
 
 

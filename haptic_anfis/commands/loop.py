@@ -122,7 +122,9 @@ def format_report(r: dict) -> str:
         f"  ripple: {f(r.get('ripple_windows_pct'))} % of 200 ms windows > 0.1 N around the "
         f"50 ms mean (ideal force: {f(r.get('ripple_windows_ideal_pct'))} %); dropouts: "
         f"{r.get('zero_force_ticks')} ticks at 0 N with the ideal > 1 N (longest "
-        f"{f(r.get('longest_dropout_ms'), 1)} ms); periods lost {r.get('periods_lost')}",
+        f"{f(r.get('longest_dropout_ms'), 1)} ms)",
+        f"  servo ticks: {r.get('ticks')} traced; periods lost {r.get('periods_lost')}, longest "
+        f"gap {f(r.get('max_gap_ms'))} ms, taken over {r.get('ticks_taken_over')}",
         _phase_line(r.get('force_error_by_phase'))])
 
 
