@@ -154,13 +154,13 @@ def analyse(runs, servo_pid: int, names: dict[int, str]) -> dict:
     delays, late_holders, held_for = [], collections.Counter(), collections.defaultdict(list)
     for cpu, rs in per_cpu.items():
         for prev, r in zip(rs, rs[1:]):
-            if r[3] != servo_pid or r[2] == servo_pid:   # a tick worker (not the main thread)
+            if r[3] != servo_pid:   # a tick worker: the servo process runs nothing else
                 continue
             delays.append(r[4])
             if r[4] > LATE_MS and prev[3] != servo_pid:
                 late_holders[name(prev[3])] += 1
                 held_for[name(prev[3])].append(prev[5])
-    ticks = [r[0] for r in runs if r[3] == servo_pid and r[2] != servo_pid]
+    ticks = [r[0] for r in runs if r[3] == servo_pid]
     gaps = [(a, b) for a, b in zip(ticks, ticks[1:]) if (b - a) * 1e3 > GAP_MS]
     gap_holders = collections.Counter()
     ends = {c: [r[0] for r in rs] for c, rs in per_cpu.items()}

@@ -9,7 +9,8 @@ BENCH = Path(__file__).resolve().parents[1] / 'bench'
 sys.path.insert(0, str(BENCH))
 from bench_sched_trace import analyse, parse, program  # noqa: E402
 
-SERVO, W0, W1, BUSY, CHROME = 100, 101, 102, 200, 300
+SERVO, W1, BUSY, CHROME = 100, 102, 200, 300
+W0 = SERVO  # the servo process's main thread is tick worker 0
 HEAD = '''           time    cpu  task name                       wait time  sch delay   run time
                         [tid/pid]                          (msec)     (msec)     (msec)
 --------------- ------  ------------------------------  ---------  ---------  ---------
@@ -43,6 +44,23 @@ def test_delays_holders_and_a_gap_on_both_cores():
     assert s['held_for']['busy process'] == [4.0]
     assert s['gaps'] == 1
     assert s['gap_holders'] == {'busy process + chromium': 1}
+
+
+def test_one_worker_late_is_no_gap_while_the_other_ticks():
+    """Worker 1 held off its core for 4 ms by chromium while worker 0 (the servo process's main
+    thread) runs every period on the other: a late wake-up, no servo gap."""
+    rows = []
+    t = 10.0
+    for k in range(8):
+        rows.append(line(t + 0.0002, 0, 'servo-tick0', W0, SERVO, 0.01, 0.02))
+        t += 0.001
+    rows += [line(10.0003, 1, 'servo-tick1', W1, SERVO, 0.02, 0.01),
+             line(10.0043, 1, 'Thread<00>', 301, CHROME, 0.0, 4.0),
+             line(10.0044, 1, 'servo-tick1', W1, SERVO, 3.9, 0.02)]
+    s = analyse(sorted(parse(HEAD + '\n'.join(rows) + '\n')), SERVO, {CHROME: 'chromium'})
+    assert s['gaps'] == 0
+    assert s['late_holders'] == {'chromium': 1}
+    assert s['wakeups'] == 7 + 1   # each core's runs after its first
 
 
 def test_programs_named_from_command_lines():
