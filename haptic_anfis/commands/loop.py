@@ -74,6 +74,7 @@ def trace_report(trace: str | Path, params_files=()) -> dict:
     from ..device.force_error import error_by_phase, force_error, ripple_and_dropouts
     from ..device.trace import DISABLED, load_trace
     rows, meta = load_trace(trace)
+    kept = len(rows)
     rows = rows[rows[:, 7] != DISABLED]  # 0 N on purpose (before start, at shutdown)
     st = meta.get('stats', {})
     F, contact = ideal_forces(rows[:, 1:4], params_files)
@@ -84,7 +85,11 @@ def trace_report(trace: str | Path, params_files=()) -> dict:
     err.update(ripple_and_dropouts(rows[:, 0], rows[:, 4:7], F, contact, max_force=fmax))
     # the trace and the received counts start at the first command (the driver resets them)
     secs = float(rows[-1, 0] - rows[0, 0]) if len(rows) > 1 else 0.0
-    rate = lambda k: round(st[k] / secs, 1) if secs > 0 and k in st else None  # noqa: E731
+    # The received counts cover the whole run; a long run's trace keeps only its newest rows
+    # (``ticks_dropped``): their time is taken at the kept rows' tick rate.
+    dropped = int(meta.get('ticks_dropped') or 0)
+    counted = secs * (kept + dropped) / kept if kept else 0.0
+    rate = lambda k: round(st[k] / counted, 1) if counted > 0 and k in st else None  # noqa: E731
     r = {'force_mode': st.get('mode'),
          'rates_hz': {'falcon/measured_cp': round((len(rows) - 1) / secs, 1) if secs else None,
                       'falcon/servo_cf': rate('commands_received'),
