@@ -119,13 +119,21 @@ def find_servo_process(timeout: float) -> int | None:
 
 
 def names_now(servo_pid: int, examples: dict | None = None) -> dict[int, str]:
-    """{pid: program} of every process now; ``examples`` gets one command line per program."""
+    """{pid or thread id: program} of every process and thread now (the trace names a thread
+    by its own id where it does not know its process's); ``examples`` gets one command line
+    per program."""
     out = {}
     for p in Path('/proc').iterdir():
         if p.name.isdigit():
             pid = int(p.name)
             cmd = _cmdline(pid)
             out[pid] = program(cmd, servo_pid, pid)
+            try:
+                tids = [int(t.name) for t in (p / 'task').iterdir()]
+            except OSError:
+                tids = []
+            for tid in tids:
+                out.setdefault(tid, out[pid])
             if examples is not None and cmd:
                 examples.setdefault(out[pid], cmd[:160])
     return out
@@ -148,19 +156,22 @@ def analyse(runs, servo_pid: int, names: dict[int, str]) -> dict:
     """The servo workers' scheduler delays, who held the core when they were late, and the
     servo gaps with the program on each core."""
     name = lambda pid: names.get(pid, 'exited')  # noqa: E731
+    # a tick worker: any thread of the servo process (it runs nothing else), by its process
+    # id or, where the trace gives only the thread's, by that
+    servo = lambda r: r[3] == servo_pid or names.get(r[2]) == 'servo process'  # noqa: E731
     per_cpu: dict[int, list] = collections.defaultdict(list)
     for r in runs:
         per_cpu[r[1]].append(r)
     delays, late_holders, held_for = [], collections.Counter(), collections.defaultdict(list)
     for cpu, rs in per_cpu.items():
         for prev, r in zip(rs, rs[1:]):
-            if r[3] != servo_pid:   # a tick worker: the servo process runs nothing else
+            if not servo(r):
                 continue
             delays.append(r[4])
-            if r[4] > LATE_MS and prev[3] != servo_pid:
+            if r[4] > LATE_MS and not servo(prev):
                 late_holders[name(prev[3])] += 1
                 held_for[name(prev[3])].append(prev[5])
-    ticks = [r[0] for r in runs if r[3] == servo_pid]
+    ticks = [r[0] for r in runs if servo(r)]
     gaps = [(a, b) for a, b in zip(ticks, ticks[1:]) if (b - a) * 1e3 > GAP_MS]
     gap_holders = collections.Counter()
     ends = {c: [r[0] for r in rs] for c, rs in per_cpu.items()}

@@ -7,7 +7,7 @@ import pytest
 
 BENCH = Path(__file__).resolve().parents[1] / 'bench'
 sys.path.insert(0, str(BENCH))
-from bench_sched_trace import analyse, parse, program  # noqa: E402
+from bench_sched_trace import analyse, names_now, parse, program  # noqa: E402
 
 SERVO, W1, BUSY, CHROME = 100, 102, 200, 300
 W0 = SERVO  # the servo process's main thread is tick worker 0
@@ -81,3 +81,20 @@ def test_without_perf_it_says_so_and_ends_without_a_page(monkeypatch, capsys, tm
     assert bench_sched_trace.main() == 0   # make bench goes on
     assert 'skipped: perf is not installed' in capsys.readouterr().out
     assert written == []
+
+
+def test_threads_are_named_after_their_process():
+    """A thread the trace names by its own id is its process's program (it was 'exited')."""
+    import os
+    import threading
+    seen, stop = [], threading.Event()
+    th = threading.Thread(target=lambda: (seen.append(threading.get_native_id()), stop.wait()))
+    th.start()
+    try:
+        while not seen:
+            pass
+        names = names_now(servo_pid=os.getpid())
+        assert names[seen[0]] == names[os.getpid()] == 'servo process'
+    finally:
+        stop.set()
+        th.join()
