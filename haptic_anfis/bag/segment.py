@@ -52,7 +52,7 @@ class Segment:
                            'parents are folders, or do not exist yet)')
         try:
             path.parent.mkdir(parents=True, exist_ok=True)
-        except OSError as exc:  # a file in the way, no permission, a read-only disk
+        except OSError as exc:  # no permission, a read-only disk, a path that vanished
             raise BagError(f'{path}: cannot create the folder it goes in: {exc.strerror} '
                            f'({exc.filename})') from exc
         self.w = Writer(path, version=9, storage_plugin=StoragePlugin.MCAP)
