@@ -142,10 +142,11 @@ def _title_and_intro(doc: str) -> tuple[str, str]:
 
 
 def run_with_page(main: Callable[[], int | None], script: str, doc: str | None,
-                  no_page_flags: Iterable[str] = (), pages_dir: Path | None = None) -> int:
+                  no_page_flags: Iterable[str] = (), pages_dir: Path | None = None,
+                  name: str | None = None) -> int:
     """Run a benchmark's ``main`` printing as usual; if it returns 0 / None, write its printed
-    output as ``docs/measurements/<name>.md`` (name: the script's file name without ``bench_``;
-    title and introduction from ``doc``, see :func:`_title_and_intro`; the introduction goes in
+    output as ``docs/measurements/<name>.md`` (``name``: by default the script's file name
+    without ``bench_``; title and introduction from ``doc``, see :func:`_title_and_intro`; the introduction goes in
     as plain text).
     No page for ``--help``, a failure, or when an argument in ``no_page_flags`` is given (a
     script's child-process mode). Returns ``main``'s exit code."""
@@ -155,7 +156,7 @@ def run_with_page(main: Callable[[], int | None], script: str, doc: str | None,
     with contextlib.redirect_stdout(tee):
         rc = int(main() or 0)
     if rc == 0:
-        name = Path(script).stem.removeprefix('bench_')
+        name = name or Path(script).stem.removeprefix('bench_')
         title, intro = _title_and_intro(doc or name)
         # the docstring as written (plain text: its brackets and indentation are not Markdown)
         body = ((f'```text\n{intro}\n```\n\n' if intro else '') + '## Output\n\n'

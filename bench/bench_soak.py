@@ -171,7 +171,10 @@ def one_process(minutes: float, interval: float, workdir: Path, freeze: bool = T
 
 
 def multi_process(minutes: float, interval: float, workdir: Path,
-                  force_mode: str | None = None) -> None:
+                  force_mode: str | None = None, priority: int | None = None) -> None:
+    """``priority``: the driver's ``servo_priority`` (None: its default, real-time where
+    allowed); 0 runs the session as a user without real-time rights does (the servo and the
+    graph under the normal scheduler: ``--graph-priority 0``)."""
     import rclpy
     from geometry_msgs.msg import PoseStamped, WrenchStamped
     from rclpy.context import Context
@@ -185,11 +188,17 @@ def multi_process(minutes: float, interval: float, workdir: Path,
     env = node_env(domain, localhost=True)
     env['PYTHONPATH'] = str(ROOT)
     params = []
-    if force_mode:
-        f = workdir / 'force_mode.yaml'
-        f.write_text(f'falcon_driver:\n  ros__parameters:\n    force_mode: {force_mode}\n')
+    driver = {k: v for k, v in (('force_mode', force_mode), ('servo_priority', priority))
+              if v is not None}
+    if driver:
+        f = workdir / 'driver.yaml'
+        f.write_text('falcon_driver:\n  ros__parameters:\n'
+                     + ''.join(f'    {k}: {v}\n' for k, v in driver.items()))
         params = ['--params-file', str(f)]
-        print(f'separate processes: falcon_driver force_mode {force_mode}')
+        print('separate processes: falcon_driver '
+              + ', '.join(f'{k} {v}' for k, v in driver.items()))
+    if priority is not None and priority <= 0:  # no real-time rights: the graph has none either
+        params += ['--graph-priority', '0']
     launch = subprocess.Popen(
         [sys.executable, '-m', 'haptic_anfis.cli', 'launch', '--nodes',
          'falcon_driver,contact_detector,force_server', '--domain-id', str(domain), '--localhost',
@@ -240,7 +249,7 @@ def multi_process(minutes: float, interval: float, workdir: Path,
     print(f'bag {bag}: {dir_mb(bag):.1f} MB', flush=True)
 
 
-def main() -> int:
+def parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument('--one-minutes', type=float, default=10.0,
                     help='minutes of the one-process run (0 = skip; default 10)')
@@ -257,7 +266,17 @@ def main() -> int:
     ap.add_argument('--keep', metavar='DIR', default=None,
                     help='write the bags and logs here and keep them (default: a temporary '
                          'directory, removed)')
-    a = ap.parse_args()
+    ap.add_argument('--servo-priority', type=int, default=None, metavar='P',
+                    help="separate processes: the driver's servo_priority (default: its "
+                         'default, real-time where allowed; 0: as a user without real-time '
+                         'rights, the graph under the normal scheduler too)')
+    ap.add_argument('--page', default='soak',
+                    help='page name: docs/measurements/<page>.md (default soak)')
+    return ap
+
+
+def main() -> int:
+    a = parser().parse_args()
     work = Path(a.keep) if a.keep else Path(tempfile.mkdtemp(prefix='soak_'))
     work.mkdir(parents=True, exist_ok=True)
     print(f'soak: {os.cpu_count()} CPUs, load average {os.getloadavg()}')
@@ -266,7 +285,8 @@ def main() -> int:
             one_process(a.one_minutes, a.interval, work, freeze=not a.no_freeze,
                         force_mode=a.force_mode, in_process=not a.recorder_process)
         if a.multi_minutes > 0:
-            multi_process(a.multi_minutes, a.interval, work, force_mode=a.force_mode)
+            multi_process(a.multi_minutes, a.interval, work, force_mode=a.force_mode,
+                          priority=a.servo_priority)
     finally:
         if not a.keep:
             shutil.rmtree(work, ignore_errors=True)
@@ -274,4 +294,4 @@ def main() -> int:
 
 
 if __name__ == '__main__':
-    sys.exit(run_with_page(main, __file__, __doc__))
+    sys.exit(run_with_page(main, __file__, __doc__, name=parser().parse_known_args()[0].page))

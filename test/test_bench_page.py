@@ -39,6 +39,12 @@ def test_run_with_page_prints_and_writes_only_on_success(tmp_path, capsys, monke
     assert 'Reproduce: `.venv/bin/python bench/bench_demo.py --quick`' in text
     assert 'load ' in text  # the machine line with its load
 
+    # a page of its own for another configuration of the same script (bench_soak --page)
+    assert _page.run_with_page(main, str(BENCH / 'bench_demo.py'), 'Demo bench: a test.',
+                               pages_dir=tmp_path, name='demo_other') == 0
+    assert 'Reproduce: `.venv/bin/python bench/bench_demo.py --quick`' in (
+        tmp_path / 'demo_other.md').read_text()
+
     assert _page.run_with_page(lambda: 1, 'bench/bench_fails.py', 'Fails.', pages_dir=tmp_path) == 1
     assert not (tmp_path / 'fails.md').exists()
     monkeypatch.setattr(sys, 'argv', ['bench/bench_child.py', '--stream-child', 'x'])
