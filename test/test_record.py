@@ -19,8 +19,9 @@ import numpy as np
 import pytest
 
 from haptic_anfis.cli import main
-from haptic_anfis.record import (RecordError, case_level, delete_trainee, export_csv, history,
-                                 load_mastery_config, mastery, store_session, trainees)
+from haptic_anfis.record import (AlreadyStored, RecordError, case_level, delete_trainee,
+                                 export_csv, history, load_mastery_config, mastery, store_session,
+                                 trainees)
 from haptic_anfis.record import db as rdb
 from haptic_anfis.record.draw import next_case
 from haptic_anfis.record.mastery import MasteryConfig, MasteryLevel
@@ -124,6 +125,80 @@ def test_a_newer_file_is_refused_untouched(db, rng):
     with pytest.raises(RecordError, match='newer'):
         history(db, 'eve')
     assert db.read_bytes() == before
+
+
+def test_refused_files_are_not_even_switched_to_wal(tmp_path, rng):
+    """A file refused (newer schema, another program's database) keeps its journal mode and
+    bytes: the check comes before any PRAGMA that writes."""
+    newer, other = tmp_path / 'newer.sqlite', tmp_path / 'other.sqlite'
+    with sqlite3.connect(newer) as c:
+        c.execute('PRAGMA user_version = 99')
+        c.execute('CREATE TABLE t (a)')
+    with sqlite3.connect(other) as c:
+        c.execute('PRAGMA application_id = 1234')
+        c.execute('CREATE TABLE x (a)')
+    for path, what in ((newer, 'newer'), (other, 'not a trainee record')):
+        before = path.read_bytes()
+        for call in (lambda: store_session(path, 'f', fake_report(rng)),
+                     lambda: history(path, 'f'), lambda: trainees(path)):
+            with pytest.raises(RecordError, match=what):
+                call()
+        assert path.read_bytes() == before, path
+        with sqlite3.connect(path) as c:
+            assert c.execute('PRAGMA journal_mode').fetchone()[0] == 'delete'
+
+
+def test_a_folder_given_as_the_record_is_one_line_saying_so(tmp_path, rng):
+    folder = tmp_path / 'data'
+    folder.mkdir()
+    for call in (lambda: trainees(folder), lambda: history(folder, 'f'),
+                 lambda: store_session(folder, 'f', fake_report(rng))):
+        with pytest.raises(RecordError, match='is a folder, not a file') as e:
+            call()
+        assert str(folder) in str(e.value) and '\n' not in str(e.value)
+
+
+def test_a_trainee_id_with_a_trailing_newline_is_refused(db, rng):
+    with pytest.raises(ValueError, match='trainee-id'):
+        store_session(db, 'ann\n', fake_report(rng))
+
+
+def test_a_bag_counts_once_for_a_trainee(db, rng):
+    """Scoring the same recording again (``exam report BAG`` twice, or after ``exam run
+    --record``) must not add a session: three passes of one bag would master a level."""
+    rep = fake_report(rng, deep=100, case='x')
+    sid = store_session(db, 'ann', rep, case_level=1, bag='/bags/s1')
+    for _ in range(2):
+        with pytest.raises(AlreadyStored, match=f'already stored as session {sid}') as e:
+            store_session(db, 'ann', rep, case_level=1, bag='/bags/s1')
+        assert e.value.session == sid
+    store_session(db, 'bo', rep, case_level=1, bag='/bags/s1')   # another trainee's own count
+    store_session(db, 'ann', rep, case_level=1)                   # no bag: a live session
+    assert len(history(db, 'ann')) == 2
+    m = mastery(history(db, 'ann'), MasteryConfig({1: MasteryLevel(consecutive_sessions=3)}))
+    assert m['levels'][1]['sessions'] == 2 and not m['levels'][1]['mastered']
+    # a record written before the check may hold a bag twice: mastery counts it once
+    dup = dict(history(db, 'ann')[0], session=99)
+    m = mastery(history(db, 'ann') + [dup, dup],
+                MasteryConfig({1: MasteryLevel(consecutive_sessions=3)}))
+    assert m['levels'][1]['sessions'] == 2 and not m['levels'][1]['mastered']
+
+
+def test_sessions_are_ordered_by_their_start_not_by_when_they_were_stored(db, rng):
+    """An old bag scored after a live session takes its place by its start: the list's last
+    session and its score, the history and the mastery streak follow the exams' order."""
+    new = fake_report(rng, deep=100)
+    new['score'], new['verdict'] = 95.0, 'pass'
+    old = fake_report(rng, deep=10)
+    old['score'], old['verdict'] = 40.0, 'retry'
+    store_session(db, 'ann', new, started_utc='2025-03-10T10:00:00+00:00', case_level=1)
+    store_session(db, 'ann', old, started_utc='2025-01-05T10:00:00+00:00', case_level=1,
+                  bag='/bags/old')
+    (t,) = trainees(db)
+    assert (t['last_utc'], t['last_score'], t['last_verdict']) == (
+        '2025-03-10T10:00:00+00:00', 95.0, 'pass')
+    assert [s['score'] for s in history(db, 'ann')] == [40.0, 95.0]
+    assert mastery(history(db, 'ann'))['levels'][1]['streak'] == 1   # the newest one met it
 
 
 def test_corrupt_foreign_and_missing_files_are_one_line_naming_the_file(tmp_path, rng):
@@ -261,8 +336,9 @@ def test_an_interrupted_exam_stores_nothing(db, rng, capsys):
 
 def test_delete_removes_every_row_and_every_byte_of_the_trainee(db, rng):
     secret = 'zed-private-7'
-    for _ in range(5):
-        store_session(db, secret, fake_report(rng, case='normal', lesions=()), bag='/b/' + secret)
+    for k in range(5):
+        store_session(db, secret, fake_report(rng, case='normal', lesions=()),
+                      bag=f'/b/{secret}/{k}')
     store_session(db, 'lou', fake_report(rng))
     assert delete_trainee(db, secret) == 5
     with pytest.raises(RecordError, match='unknown trainee'):
@@ -409,6 +485,17 @@ def test_trainees_cli(db, tmp_path, rng, capsys):
     assert png.stat().st_size > 10_000
     assert main(['trainees', '--db', str(db), 'export', 'oz', '--csv']) == 0
     assert len(capsys.readouterr().out.strip().splitlines()) == 5
+    assert main(['trainees', 'list', '--db', str(db)]) == 0   # --db after the action too
+    assert 'oz' in capsys.readouterr().out
+    # a failed export (a mistyped id) leaves an earlier export as it was
+    old = tmp_path / 'oz.csv'
+    old.write_text('an earlier export\n')
+    assert main(['trainees', '--db', str(db), 'export', 'o2', '--csv', '-o', str(old)]) == 1
+    assert "unknown trainee id 'o2'" in capsys.readouterr().err
+    assert old.read_text() == 'an earlier export\n'
+    assert main(['trainees', '--db', str(db), 'export', 'oz', '--csv', '-o', str(old)]) == 0
+    assert len(old.read_text().splitlines()) == 5
+    assert '4 session(s) of oz written' in capsys.readouterr().err
     assert main(['trainees', '--db', str(db), 'show', 'nobody']) == 1
     err = capsys.readouterr().err
     assert "unknown trainee id 'nobody'" in err and str(db) in err and err.count('\n') == 1
@@ -458,6 +545,11 @@ def test_exam_report_stores_the_full_report_and_a_bad_record_still_prints_it(db,
     out, err = capfd.readouterr()
     assert json.loads(out.strip().splitlines()[-1])['coverage_pct'] == r['coverage_pct']
     assert 'coverage ' in out and str(bad) in err and len(err.strip().splitlines()) == 1
+    # the same bag scored again: the report is printed, the record keeps its first session
+    assert main(['exam', 'report', str(bag), '--trainee-id', 'pat', '--db', str(db)]) == 0
+    out, err = capfd.readouterr()
+    assert f'already stored as session {s["session"]}' in out and not err
+    assert len(history(db, 'pat')) == 1
     # a bad id is refused before the exam, and --next needs an id
     assert main(['exam', 'report', str(bag), '--trainee-id', 'a b']) == 1
     assert 'trainee-id' in capfd.readouterr().err

@@ -7,7 +7,6 @@ from __future__ import annotations
 import argparse
 import sys
 import time
-from datetime import datetime, timezone
 from pathlib import Path
 
 __all__ = ['add_record_arguments', 'case_parameter', 'prepare_record', 'store_report']
@@ -35,10 +34,10 @@ def prepare_record(args: argparse.Namespace) -> None:
         ValueError: a bad id, ``--next`` without ``--trainee-id`` or with ``--case``, no case of
         the next level, an unusable record file (for ``--next``, which reads it).
     """
-    from ..record import check_trainee_id
+    from ..record import check_trainee_id, utc_iso
     if args.trainee_id is not None:
         check_trainee_id(args.trainee_id)
-    args.record_started_utc = _utc(time.time())
+    args.record_started_utc = utc_iso(time.time())
     if not getattr(args, 'next', False):
         return
     if args.trainee_id is None:
@@ -70,18 +69,15 @@ def case_parameter(args: argparse.Namespace, case) -> tuple[str, str | int]:
     raise ValueError('--next: no random-case seed draws the case chosen for the session')
 
 
-def _utc(t_s: float) -> str:
-    return datetime.fromtimestamp(t_s, timezone.utc).isoformat(timespec='seconds')
-
-
 def _bag_start_utc(bag) -> str | None:
     """When the bag's first message was written (UTC), if its clock is wall time."""
     from ..bag.reader import bag_info
+    from ..record import utc_iso
     try:
         start = bag_info(bag).start_ns
     except Exception:   # noqa: BLE001 (the report already read it; a time is optional)
         return None
-    return _utc(start * 1e-9) if start > 1e18 else None   # after 2001: wall clock, not sim time
+    return utc_iso(start * 1e-9) if start > 1e18 else None   # after 2001: wall clock, not sim time
 
 
 def store_report(args: argparse.Namespace, report: dict) -> int:
@@ -89,7 +85,8 @@ def store_report(args: argparse.Namespace, report: dict) -> int:
     exam); returns the exit status: 0, or 1 after one line on stderr naming the record file."""
     if not getattr(args, 'trainee_id', None):
         return 0
-    from ..record import RecordError, level_of_case_name, resolve_db_path, store_session
+    from ..record import (AlreadyStored, RecordError, level_of_case_name, resolve_db_path,
+                          store_session)
     if report.get('interrupted'):
         print(f'record: the exam was interrupted: nothing stored for trainee {args.trainee_id}',
               file=sys.stderr)
@@ -102,6 +99,9 @@ def store_report(args: argparse.Namespace, report: dict) -> int:
         sid = store_session(args.db, args.trainee_id, report, source=source, started_utc=started,
                             case_level=level_of_case_name(report.get('case')),
                             bag=str(Path(bag).resolve()) if bag else None)
+    except AlreadyStored as exc:   # the report stands; the record keeps the bag's first one
+        print(f'record         {exc}', flush=True)
+        return 0
     except RecordError as exc:
         print(f'record: {exc}', file=sys.stderr)
         return 1

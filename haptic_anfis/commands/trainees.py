@@ -22,7 +22,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help='the record file (default $HAPTIC_ANFIS_DB, else '
                         '$XDG_DATA_HOME/haptic_anfis/trainees.sqlite)')
     sub = p.add_subparsers(dest='action', metavar='ACTION', required=True)
-    sub.add_parser('list', help='one row per trainee: sessions, last session, last score')
+    lst = sub.add_parser('list', help='one row per trainee: sessions, last session, last score')
     s = sub.add_parser('show', help="a trainee's sessions, one row each, and mastery")
     s.add_argument('id', metavar='ID')
     g = sub.add_parser('progress', help='the learning curve: table, --json, --figure PNG')
@@ -37,10 +37,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     e.add_argument('-o', '--output', metavar='FILE', default=None, help='file (default stdout)')
     d = sub.add_parser('delete', help='remove a trainee and every session of it (privacy)')
     d.add_argument('id', metavar='ID')
-    for q in (p, s, g, e, d):   # --db also after the action
-        if q is not p:
-            q.add_argument('--db', default=argparse.SUPPRESS, metavar='PATH',
-                           help=argparse.SUPPRESS)
+    for q in (lst, s, g, e, d):   # --db also after the action
+        q.add_argument('--db', default=argparse.SUPPRESS, metavar='PATH', help=argparse.SUPPRESS)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -122,10 +120,13 @@ def _progress(args, db) -> int:
 
 
 def _export(args, db) -> int:
+    import io
     from ..record import export_csv
     if args.output:
+        text = io.StringIO()
+        n = export_csv(db, args.id, text)   # first: an unknown id must not empty an old export
         with open(args.output, 'w', newline='') as f:
-            n = export_csv(db, args.id, f)
+            f.write(text.getvalue())
         print(f'{n} session(s) of {args.id} written to {args.output}', file=sys.stderr)
     else:
         export_csv(db, args.id, sys.stdout)

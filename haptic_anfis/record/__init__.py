@@ -13,10 +13,10 @@ sessions, mastery by case level.
 from .db import RecordError, default_db_path, resolve_db_path
 from .levels import case_level, level_of_case_name
 from .mastery import MasteryConfig, MasteryLevel, load_mastery_config, mastery, meets
-from .store import (UnknownTrainee, check_trainee_id, delete_trainee, export_csv, history,
-                    session_report, store_session, trainees)
+from .store import (AlreadyStored, UnknownTrainee, check_trainee_id, delete_trainee,
+                    export_csv, history, session_report, store_session, trainees, utc_iso)
 
-__all__ = ['MasteryConfig', 'MasteryLevel', 'RecordError', 'UnknownTrainee', 'case_level',
-           'check_trainee_id', 'default_db_path', 'delete_trainee', 'export_csv', 'history',
-           'level_of_case_name', 'load_mastery_config', 'mastery', 'meets', 'resolve_db_path',
-           'session_report', 'store_session', 'trainees']
+__all__ = ['AlreadyStored', 'MasteryConfig', 'MasteryLevel', 'RecordError', 'UnknownTrainee',
+           'case_level', 'check_trainee_id', 'default_db_path', 'delete_trainee', 'export_csv',
+           'history', 'level_of_case_name', 'load_mastery_config', 'mastery', 'meets',
+           'resolve_db_path', 'session_report', 'store_session', 'trainees', 'utc_iso']

@@ -137,6 +137,9 @@ def _retrying(path: Path, fn: Callable[[], T]) -> T:
 
 
 def _open(path: Path, create: bool) -> sqlite3.Connection:
+    if path.exists() and not path.is_file():
+        raise RecordError(f'trainee record {str(path)!r}: is a folder, not a file (expected the '
+                          'record\'s SQLite file, e.g. <folder>/trainees.sqlite)')
     if not create and not path.is_file():
         raise RecordError(f'trainee record {str(path)!r}: no such file (nothing stored yet)')
     if create:
@@ -148,18 +151,22 @@ def _open(path: Path, create: bool) -> sqlite3.Connection:
     conn = sqlite3.connect(str(path), timeout=BUSY_TIMEOUT_S, isolation_level=None)
     try:
         conn.execute(f'PRAGMA busy_timeout = {int(BUSY_TIMEOUT_S * 1000)}')
+        version = _check(path, conn)   # before anything that changes the file: refused = untouched
         if conn.execute('PRAGMA journal_mode').fetchone()[0].lower() != 'wal':
             conn.execute('PRAGMA journal_mode = WAL')
         conn.execute('PRAGMA foreign_keys = ON')
         conn.execute('PRAGMA synchronous = NORMAL')   # WAL: durable at checkpoints, never corrupt
-        _check_and_migrate(path, conn)
+        if version < SCHEMA_VERSION:
+            migrate(conn, path=path)
     except BaseException:
         conn.close()
         raise
     return conn
 
 
-def _check_and_migrate(path: Path, conn: sqlite3.Connection) -> None:
+def _check(path: Path, conn: sqlite3.Connection) -> int:
+    """The file's schema version, read without writing; RecordError for a newer schema or a
+    database that is not a trainee record (someone else's file is left as it was)."""
     app = conn.execute('PRAGMA application_id').fetchone()[0]
     version = conn.execute('PRAGMA user_version').fetchone()[0]
     if version > SCHEMA_VERSION:
@@ -169,8 +176,17 @@ def _check_and_migrate(path: Path, conn: sqlite3.Connection) -> None:
     if app not in (0, APPLICATION_ID):
         raise RecordError(f'trainee record {str(path)!r}: not a trainee record (application_id '
                           f'{app:#x}, expected {APPLICATION_ID:#x})')
-    if version < SCHEMA_VERSION:
-        migrate(conn, path=path)
+    if version == 0:
+        _no_foreign_tables(path, conn)
+    return version
+
+
+def _no_foreign_tables(path: Path | None, conn: sqlite3.Connection) -> None:
+    """RecordError for a version-0 file that already has tables (someone else's database)."""
+    tables = conn.execute("SELECT count(*) FROM sqlite_master WHERE type = 'table'").fetchone()[0]
+    if tables:
+        raise RecordError(f'trainee record {str(path)!r}: not a trainee record (it has '
+                          f'{tables} table(s) but no schema version)')
 
 
 def migrate(conn: sqlite3.Connection, to: int = SCHEMA_VERSION,
@@ -184,11 +200,7 @@ def migrate(conn: sqlite3.Connection, to: int = SCHEMA_VERSION,
     try:
         old = conn.execute('PRAGMA user_version').fetchone()[0]   # again, under the write lock
         if old == 0:
-            tables = conn.execute("SELECT count(*) FROM sqlite_master WHERE type = 'table'"
-                                  ).fetchone()[0]
-            if tables:
-                raise RecordError(f'trainee record {str(path)!r}: not a trainee record (it has '
-                                  f'{tables} table(s) but no schema version)')
+            _no_foreign_tables(path, conn)
         for step in MIGRATIONS[old:to]:
             for stmt in filter(str.strip, step.split(';')):
                 conn.execute(stmt)

@@ -114,11 +114,20 @@ def mastery(sessions: list[dict], config: MasteryConfig = DEFAULT) -> dict:
 
     Returns ``{'mastered_level': int (0 = none), 'next_level': int, 'levels': {L: {'sessions',
     'met', 'streak' (current run), 'best_streak', 'needed', 'mastered'}}}``; sessions with no
-    case level are not counted.
+    case level are not counted, nor a bag's second session (a recording scored again, in a
+    record from before :class:`~haptic_anfis.record.AlreadyStored`).
     """
+    seen: set[str] = set()
+    counted = []
+    for s in sessions:
+        if s.get('bag') in seen:
+            continue
+        if s.get('bag'):
+            seen.add(s['bag'])
+        counted.append(s)
     per = {}
     for L, th in sorted(config.levels.items()):
-        mine = [s for s in sessions if s.get('case_level') == L]
+        mine = [s for s in counted if s.get('case_level') == L]
         streak = best = met = 0
         for s in mine:
             ok = meets(s, th)

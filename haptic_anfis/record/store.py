@@ -16,9 +16,9 @@ from typing import IO
 
 from .db import RecordError, connect, resolve_db_path, write
 
-__all__ = ['CSV_COLUMNS', 'UnknownTrainee', 'check_trainee_id', 'delete_trainee', 'export_csv',
-           'history', 'not_palpable_of', 'session_report', 'session_row', 'store_session',
-           'trainees']
+__all__ = ['CSV_COLUMNS', 'AlreadyStored', 'UnknownTrainee', 'check_trainee_id', 'delete_trainee',
+           'export_csv', 'history', 'not_palpable_of', 'session_report', 'session_row',
+           'store_session', 'trainees', 'utc_iso']
 
 _ID = re.compile(r'^[A-Za-z0-9][A-Za-z0-9._@+-]{0,63}$')
 
@@ -33,17 +33,33 @@ class UnknownTrainee(RecordError):
     """The trainee id has no row in the record (the message names the file)."""
 
 
+class AlreadyStored(RecordError):
+    """The trainee already has a session scored from this bag (``session``: its id): a bag
+    counts once, or scoring it again would count toward mastery again."""
+
+    def __init__(self, message: str, session: int):
+        super().__init__(message)
+        self.session = session
+
+
 def check_trainee_id(trainee_id: str) -> str:
     """``trainee_id`` if it is 1-64 letters, digits or ``._@+-`` (starting with a letter or
     digit); else ValueError naming it. Use a pseudonym: the record needs no real name."""
-    if not isinstance(trainee_id, str) or not _ID.match(trainee_id):
+    if not isinstance(trainee_id, str) or not _ID.fullmatch(trainee_id):
         raise ValueError(f'--trainee-id {trainee_id!r}: expected 1-64 letters, digits or ._@+- '
                          '(starting with a letter or digit)')
     return trainee_id
 
 
+def utc_iso(t_s: float | None = None) -> str:
+    """``t_s`` (seconds since the epoch; None = now) as the record writes times: ISO 8601, UTC,
+    to the second (so they sort as text)."""
+    t = datetime.now(timezone.utc) if t_s is None else datetime.fromtimestamp(t_s, timezone.utc)
+    return t.isoformat(timespec='seconds')
+
+
 def _now() -> str:
-    return datetime.now(timezone.utc).isoformat(timespec='seconds')
+    return utc_iso()
 
 
 def not_palpable_of(report: dict) -> list[str]:
@@ -96,7 +112,9 @@ def store_session(db: str | os.PathLike | None, trainee_id: str, report: dict, *
     transaction; returns the session id.
 
     Raises:
-        ValueError: bad trainee id or report; RecordError (a ValueError): the file.
+        ValueError: bad trainee id or report; RecordError (a ValueError): the file;
+            AlreadyStored (a RecordError): ``bag`` is already stored for this trainee (a
+            recording counts once toward mastery; nothing is stored).
     """
     check_trainee_id(trainee_id)
     row = session_row(report, source=source, case_level=case_level, bag=bag,
@@ -105,6 +123,14 @@ def store_session(db: str | os.PathLike | None, trainee_id: str, report: dict, *
     marks = ', '.join(f':{k}' for k in row)
 
     def tx(conn):
+        if row['bag_path'] is not None:
+            old = conn.execute('SELECT id FROM sessions WHERE trainee_id = ? AND bag_path = ? '
+                               'LIMIT 1', (trainee_id, row['bag_path'])).fetchone()
+            if old is not None:
+                raise AlreadyStored(
+                    f'bag {row["bag_path"]!r} is already stored as session {old[0]} of trainee '
+                    f'{trainee_id} in {str(resolve_db_path(db))!r}: a recording counts once '
+                    'toward mastery; not stored again', int(old[0]))
         conn.execute('INSERT OR IGNORE INTO trainees (id, created_utc) VALUES (?, ?)',
                      (trainee_id, row['stored_utc']))
         cur = conn.execute(f'INSERT INTO sessions (trainee_id, {cols}) VALUES (:trainee_id, '
@@ -115,14 +141,20 @@ def store_session(db: str | os.PathLike | None, trainee_id: str, report: dict, *
 
 def trainees(db: str | os.PathLike | None = None) -> list[dict]:
     """One dict per trainee: ``id``, ``created_utc``, ``sessions``, ``last_utc``, ``last_score``,
-    ``last_verdict``; [] when the record file does not exist yet."""
-    if not resolve_db_path(db).is_file():
+    ``last_verdict`` (the last session by its start, as :func:`history` orders them); [] when
+    the record file does not exist yet.
+
+    Raises:
+        RecordError: the path is a folder, or a bad file (naming it).
+    """
+    if not resolve_db_path(db).exists():
         return []
+    last = ('(SELECT {} FROM sessions WHERE trainee_id = t.id '
+            'ORDER BY started_utc DESC, id DESC LIMIT 1)')
     with connect(db) as conn:
         rows = conn.execute(
-            'SELECT t.id, t.created_utc, count(s.id), max(s.started_utc), '
-            '(SELECT score FROM sessions WHERE trainee_id = t.id ORDER BY id DESC LIMIT 1), '
-            '(SELECT verdict FROM sessions WHERE trainee_id = t.id ORDER BY id DESC LIMIT 1) '
+            f'SELECT t.id, t.created_utc, count(s.id), {last.format("started_utc")}, '
+            f'{last.format("score")}, {last.format("verdict")} '
             'FROM trainees t LEFT JOIN sessions s ON s.trainee_id = t.id '
             'GROUP BY t.id ORDER BY t.id').fetchall()
     return [dict(zip(('id', 'created_utc', 'sessions', 'last_utc', 'last_score',
@@ -143,7 +175,9 @@ def _known(conn, db, trainee_id: str) -> None:
 
 
 def history(db: str | os.PathLike | None, trainee_id: str, full: bool = False) -> list[dict]:
-    """The sessions of ``trainee_id``, oldest first, one dict each (the browser view's call):
+    """The sessions of ``trainee_id``, oldest first (by their start; sessions stored in
+    another order, a bag scored later, take their place), one dict each (the browser view's
+    call):
 
     ``session`` (id), ``started_utc`` (ISO 8601, UTC), ``source`` ('run' / 'bag'), ``case``,
     ``case_level``, ``bag``, ``coverage_pct`` {light, medium, deep} [%], ``pattern``,
@@ -160,7 +194,8 @@ def history(db: str | os.PathLike | None, trainee_id: str, full: bool = False) -
         _known(conn, db, trainee_id)
         extra = ', report_json' if full else ''
         rows = conn.execute(f'SELECT {", ".join(_HISTORY_COLS)}{extra} FROM sessions '
-                            'WHERE trainee_id = ? ORDER BY id', (trainee_id,)).fetchall()
+                            'WHERE trainee_id = ? ORDER BY started_utc, id',
+                            (trainee_id,)).fetchall()
     out = []
     for r in rows:
         d = dict(zip(_HISTORY_COLS, r))

@@ -59,11 +59,12 @@ def check_port(port: int, host: str = '127.0.0.1', flag: str = '--port') -> None
 def trainee_history(trainee: str, db=None) -> list[dict]:
     """The trainee's sessions from the trainee record (:func:`haptic_anfis.record.history`,
     oldest first; ``db``: the record file, None = its default). A record that cannot be read
-    gives one row ``{'error': ...}`` naming it: the page shows it and goes on."""
-    from ..record import RecordError, history
+    gives one row ``{'error': ...}`` naming it, as does a malformed id (typed on the page):
+    the page shows it and goes on."""
+    from ..record import history
     try:
         return history(db, trainee)
-    except (RecordError, OSError) as exc:
+    except (ValueError, OSError) as exc:   # RecordError is a ValueError
         return [{'error': str(exc)}]
 
 
