@@ -565,3 +565,14 @@ def test_a_blind_case_goes_to_the_nodes_as_a_seed_that_draws_it():
     name, seed = case_parameter(SimpleNamespace(blind=True), c)
     assert name == 'random_case_seed' and lib.random(seed).name == c.name
     assert case_parameter(SimpleNamespace(), c) == ('case', c.name)
+
+
+def test_the_page_shows_a_bad_trainee_id_or_record_as_an_error_row(db, rng):
+    """The browser view's history call: what the instructor typed on the page is never a
+    traceback in the node."""
+    from haptic_anfis.view.app import trainee_history
+    store_session(db, 'ann', fake_report(rng))
+    assert len(trainee_history('ann', db)) == 1
+    for tid, what in (('Jane Doe', 'trainee-id'), ('nobody', 'unknown trainee')):
+        (row,) = trainee_history(tid, db)
+        assert what in row['error']
