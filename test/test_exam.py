@@ -294,6 +294,15 @@ def test_exam_config_checks(tmp_path):
     p.write_text('hit_margin_mm: 8\n')
     with pytest.raises(ValueError, match='unknown key'):
         load_exam_config(p)
+    # millimetres or percent where metres or a fraction are expected: one line, not a wrong score
+    for text, what in (('levels: {light: 2, medium: 5, deep: 8}\n',
+                        r"'.*x\.yaml': light: 2 m is larger"),
+                       ('hit_margin: 8\n', r'hit_margin: 8 m .*8 mm is 0\.008'),
+                       ('pass_deep_coverage: 90\n', 'expected a fraction 0-1')):
+        p.write_text(text)
+        with pytest.raises(ValueError, match=what) as e:
+            load_exam_config(p)
+        assert str(p) in str(e.value) and '\n' not in str(e.value)
 
 
 # -- the lump detector ----------------------------------------------------------------------------

@@ -130,3 +130,30 @@ def test_lost_contacts_are_those_missing_from_the_examiners_report():
     assert lost_contacts(1000, {'samples': {'contact': 990}}, watched=900) == 10
     assert lost_contacts(1000, {}, watched=950) == 50          # a report without the counts
     assert lost_contacts(1000, {'samples': {'contact': 1200}}, watched=0) == 0
+
+
+def test_marks_from_buttons_follow_the_drivers_clutch_rule(tmp_path):
+    """A bag without exam/marks: its marks come from button presses, by the driver's rule — a
+    press of the mark button while the clutch is held marks nothing (it was a false mark)."""
+    from haptic_anfis.bag import typestore
+    from haptic_anfis.bag.writer import BagWriter
+    from haptic_anfis.exam.from_bag import session_from_bag
+    ts = typestore()
+    T, H = ts.types['builtin_interfaces/msg/Time'], ts.types['std_msgs/msg/Header']
+    PS, Pose = ts.types['geometry_msgs/msg/PoseStamped'], ts.types['geometry_msgs/msg/Pose']
+    P, Q = ts.types['geometry_msgs/msg/Point'], ts.types['geometry_msgs/msg/Quaternion']
+    Joy = ts.types['sensor_msgs/msg/Joy']
+    bag = tmp_path / 'clutch'
+    with BagWriter(bag) as w:
+        w.add_topic('/falcon/measured_cp', PS.__msgtype__)
+        w.add_topic('/falcon/buttons', Joy.__msgtype__)
+        pose = PS(H(T(100, 0), 'tissue'), Pose(P(0.045, 0.0, 0.0), Q(0.0, 0.0, 0.0, 1.0)))
+        w.write('/falcon/measured_cp', ts.serialize_cdr(pose, PS.__msgtype__), 100 * 10**9)
+        # clutch, mark while it is held, release both; then one mark without the clutch
+        for k, b in enumerate(([0, 0], [1, 0], [1, 1], [1, 0], [0, 0], [0, 1], [0, 0])):
+            joy = Joy(H(T(101 + k, 0), 'tissue'), np.zeros(0, np.float32), np.array(b, np.int32))
+            w.write('/falcon/buttons', ts.serialize_cdr(joy, Joy.__msgtype__),
+                    (101 + k) * 10**9)
+    report, _ = session_from_bag(bag)
+    assert len(report['marks']) == 1
+    assert any('clutch' in n for n in report['notes'])

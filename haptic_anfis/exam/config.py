@@ -14,6 +14,11 @@ import yaml
 from ..resources import config_file
 
 LEVELS = ('light', 'medium', 'deep')
+#: the keys that are lengths [m], and the most any may be: the Falcon's workspace is a 10 cm cube,
+#: so a larger value is a length in millimetres written where metres are expected
+LENGTHS = ('light', 'medium', 'deep', 'footprint_radius', 'region_radius', 'hit_margin',
+           'mark_tolerance')
+MAX_LENGTH = 0.1
 DEFAULT_CONFIG = config_file('exam.yaml')  # source tree or installed share dir (resources)
 
 
@@ -40,6 +45,15 @@ class ExamConfig:
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) \
                     or v < 0:
                 raise ValueError(f'exam config {f.name}: expected a finite number >= 0, got {v!r}')
+        for name in LENGTHS:
+            v = getattr(self, name)
+            if v > MAX_LENGTH:
+                raise ValueError(f'exam config {name}: {v!r} m is larger than the device\'s '
+                                 f'workspace (expected metres <= {MAX_LENGTH:g}; '
+                                 f'{v:g} mm is {v / 1000:g})')
+        if self.pass_deep_coverage > 1:
+            raise ValueError(f'exam config pass_deep_coverage: expected a fraction 0-1 (0.9 = '
+                             f'90 %), got {self.pass_deep_coverage!r}')
         if not 0 < self.light <= self.medium <= self.deep:
             raise ValueError('exam config levels: expected 0 < light <= medium <= deep, got '
                              f'{self.light}, {self.medium}, {self.deep} m')
@@ -76,4 +90,6 @@ def load_exam_config(path: str | os.PathLike | None = None) -> ExamConfig:
             raise ValueError(f'unknown key(s) {sorted(bad)}')
         return ExamConfig(**kw)
     except (OSError, yaml.YAMLError, ValueError, TypeError) as exc:
-        raise ValueError(f'exam config {str(path)!r}: {exc}') from None
+        # the checks of ExamConfig name themselves 'exam config': say it once, with the file
+        raise ValueError(f'exam config {str(path)!r}: '
+                         f'{str(exc).removeprefix("exam config ")}') from None

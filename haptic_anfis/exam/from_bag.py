@@ -69,6 +69,7 @@ def session_from_bag(bag: str | os.PathLike, case: str | None = None,
     """
     from ..bag.reader import bag_info, read_messages
     from ..bag.topics import absolute
+    from ..device.buttons import CLUTCH, MARK
     cfg = load_exam_config(exam_config)
     c, scene = resolve_exam_case(case, need=('mesh_path',))
     subject = subject_from_scene(scene)
@@ -88,8 +89,9 @@ def session_from_bag(bag: str | os.PathLike, case: str | None = None,
                      f'{", ".join(sorted(have)) or "none"}): nothing to score, zero coverage')
     marks_topic = absolute(ifc.TOPIC_MARKS) in have
     if not marks_topic:
-        notes.append('no exam/marks topic: marks taken from button 1 presses at the probe pose')
-    last_pose, b1 = None, 0
+        notes.append('no exam/marks topic: marks taken from button 1 presses at the probe pose '
+                     '(not while the clutch, button 0, is held: the driver marks nothing then)')
+    last_pose, mark_prev = None, False
     for topic, _, _, msg in read_messages(bag, sorted(wanted)) if wanted else ():
         t = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
         if topic == absolute(ifc.TOPIC_CONTACT):
@@ -107,10 +109,13 @@ def session_from_bag(bag: str | os.PathLike, case: str | None = None,
         elif topic == absolute(ifc.TOPIC_BUTTONS):
             b = list(msg.buttons)
             session.add_buttons(t, b)
-            now = b[1] if len(b) > 1 else 0
-            if not marks_topic and now and not b1 and last_pose is not None:
+            # the driver's rule (device.buttons.ClutchMark): a rising edge of the mark button
+            # while the clutch is not held
+            mark, clutch = len(b) > MARK and bool(b[MARK]), len(b) > CLUTCH and bool(b[CLUTCH])
+            if not marks_topic and mark and not mark_prev and not clutch \
+                    and last_pose is not None:
                 session.add_mark(t, last_pose)
-            b1 = now
+            mark_prev = mark
     report = session.report()
     report['notes'] = notes + report['notes']
     report['bag'] = str(bag)
