@@ -44,6 +44,25 @@ def test_systematic_trainee_marks_nothing_on_the_lesion_free_case(capfd):
     assert any('no lesion' in n for n in r['notes'])
 
 
+def test_an_exam_cut_off_by_its_time_limit_says_so_and_is_not_stored(tmp_path, capfd):
+    """--duration shorter than the trainee's search: the report says the exam stopped before
+    the trainee finished, and the trainee record stores nothing (misses would be blamed on
+    areas the trainee had not reached yet). Its scene file describes a larger breast than the
+    default surface that renders: said at the start and in the report's notes."""
+    db = tmp_path / 'rec.sqlite'
+    scene = ROOT / 'config' / 'scenes' / 'normal_large.yaml'
+    assert main(['exam', 'run', '--trainee', 'systematic', '--duration', '3', '--json',
+                 '--case', str(scene), '--trainee-id', 'kim', '--db', str(db)]) == 1
+    out, err = capfd.readouterr()
+    r = last_json(out)
+    assert r['time_limit_reached'] and not r['trainee']['finished'] and not r['interrupted']
+    assert 'the exam will stop before the trainee finishes' in out
+    assert any('time limit' in n for n in r['notes'])
+    assert 'stopped at its time limit' in err and not db.exists()
+    assert 'describes a 55x80x80 mm breast' in out
+    assert any('the default surface (45x70x70 mm) renders' in n for n in r['notes'])
+
+
 def test_careless_trainee_scores_lower_and_misses_and_the_bag_says_the_same(tmp_path, capfd):
     bag = tmp_path / 'bag'
     assert main(['exam', 'run', '--trainee', 'careless', '--json', '--record', str(bag)]) == 0

@@ -330,6 +330,9 @@ def test_an_interrupted_exam_stores_nothing(db, rng, capsys):
     args = SimpleNamespace(trainee_id='kim', db=str(db), exam_command='run', record=None)
     assert store_report(args, fake_report(rng, interrupted=True)) == 1
     assert 'interrupted' in capsys.readouterr().err and not db.exists()
+    # cut off by the time limit before the trainee finished: not a whole exam either
+    assert store_report(args, fake_report(rng, interrupted=False, time_limit_reached=True)) == 1
+    assert 'time limit' in capsys.readouterr().err and not db.exists()
     assert store_report(args, fake_report(rng, interrupted=False)) == 0
     assert len(history(db, 'kim')) == 1
 

@@ -87,8 +87,10 @@ def store_report(args: argparse.Namespace, report: dict) -> int:
         return 0
     from ..record import (AlreadyStored, RecordError, level_of_case_name, resolve_db_path,
                           store_session)
-    if report.get('interrupted'):
-        print(f'record: the exam was interrupted: nothing stored for trainee {args.trainee_id}',
+    if report.get('interrupted') or report.get('time_limit_reached'):
+        why = 'was interrupted' if report.get('interrupted') else (
+            'stopped at its time limit before the trainee finished')
+        print(f'record: the exam {why}: nothing stored for trainee {args.trainee_id}',
               file=sys.stderr)
         return 1
     bag = getattr(args, 'bag', None) or getattr(args, 'record', None)

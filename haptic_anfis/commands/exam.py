@@ -123,7 +123,21 @@ def _run_sim(args):
     spec.check()
     script = trainee_path(args.trainee)
     sc = load_scene(scene) if scene else None
-    # The trainee sees the breast (its size), never the lesions: scripts fit to the case's surface.
+    scene_note = None
+    if case is None and sc is not None:
+        # A scene file changes the lesions scored; the default model and surface render
+        # (resolve_exam_case): the trainee palpates that surface, not the file's breast.
+        rendered = load_scene()
+        if sc.radii != rendered.radii:
+            mm = lambda r: 'x'.join(f'{1e3 * v:g}' for v in r)  # noqa: E731
+            scene_note = (f'scene {scene} describes a {mm(sc.radii)} mm breast, but a scene file '
+                          f'changes only the lesions scored: the default surface ('
+                          f'{mm(rendered.radii)} mm) renders and the trainee palpates it (a '
+                          'library case renders its own breast)')
+            print(f'exam: {scene_note}', flush=True)
+        sc = rendered
+    # The trainee sees the breast (its size), never the lesions: scripts fit to the rendered
+    # surface.
     controller = TraineeController.from_yaml(
         script, args.speed, breast=None if sc is None else (sc.radii, sc.palpable_radius))
     import tempfile
@@ -176,6 +190,10 @@ def _run_sim(args):
              + (f'in pid {side.pids["examiner"]}' if side else 'in this process'))
     print(f'exam: trainee {args.trainee} ({controller.search.duration:.0f} s search), case '
           f'{"blind" if getattr(args, "blind", False) else shown}', flush=True)
+    if controller.search.duration > limit:
+        print(f'exam: the search takes {controller.search.duration:.0f} s, longer than the time '
+              f'limit ({limit:g} s, --duration): the exam will stop before the trainee finishes',
+              flush=True)
     interrupted = False   # the trainee record stores no half session
     t_start = time.monotonic()
     try:
@@ -203,6 +221,14 @@ def _run_sim(args):
         report['examiner_lost_contacts'] = lost_contacts(graph.contact.n_poses, report,
                                                         examiner.samples)
     report['interrupted'] = interrupted
+    if scene_note:
+        report['notes'] = [scene_note] + list(report.get('notes', []))
+    # cut off by --duration (or its 300 s default) before the trainee finished: not a whole exam
+    report['time_limit_reached'] = cut = not interrupted and not controller.finished
+    if cut:
+        report['notes'] = [f'stopped at the time limit ({limit:g} s, --duration) before the '
+                           'trainee finished its search: not a whole exam (its misses may be '
+                           'the areas it had not reached yet)'] + list(report.get('notes', []))
     report['trainee'] = {'name': args.trainee, 'detections': [
         {'y_mm': round(d.y * 1e3, 2), 'z_mm': round(d.z * 1e3, 2),
          'excess_pct': round(100 * d.excess, 1), 'sigma': round(d.sigma, 1)}
