@@ -242,6 +242,19 @@ def test_pattern_of_the_systematic_search_survives_radial_wobble_and_dropped_sam
     assert r['strips']['spacing_mm'] == pytest.approx(8.0, abs=0.5), r
 
 
+def test_dense_strips_do_not_chain_into_one():
+    """Lanes 3 mm apart (a thorough search, closer than half the 8 mm footprint radius) are
+    grouped a few to a strip, at most a footprint radius wide; grouping each run with the last
+    chained all 27 into a single strip (no spacing, no overlap to report)."""
+    ys = np.arange(-0.039, 0.0391, 0.003)
+    yz = np.concatenate([np.c_[np.full(61, y), np.linspace(-0.03, 0.03, 61)] for y in ys])
+    seg = np.repeat(np.arange(len(ys)), 61)
+    r = classify(yz, seg, 0.008)
+    assert r['pattern'] == 'vertical_strip', r
+    assert len(ys) // 3 <= r['strips']['count'] <= len(ys), r
+    assert r['strips']['spacing_mm'] <= 10.0 and r['strips']['gaps'] == 0, r
+
+
 def test_pattern_circles_and_spokes_with_wobble():
     """The same wobble (1.5 mm radial at 15 Hz, sampled at 1 kHz while moving at 30 mm/s) leaves
     circles circular and spokes radial."""

@@ -73,8 +73,9 @@ def classify(yz: np.ndarray, segment: np.ndarray, footprint_radius: float,
     Returns {pattern, shares: {vertical_strip, spiral_circular, radial}: the share of the path
     length along only that class, along: the same counting the ambiguous steps in every class
     they fit, ambiguous: the share along more than one class, step_mm, strips: {count,
-    spacing_mm, overlap, gaps}} where strips are vertical runs >= 10 mm grouped by y (within half
-    a footprint radius), spacing the mean distance between neighbouring strips, overlap = 1 -
+    spacing_mm, overlap, gaps}} where strips are vertical runs >= 10 mm grouped by y (each within
+    half a footprint radius of the next, a strip at most a footprint radius wide: lanes closer
+    than half a footprint radius are grouped, a few to a strip), spacing the mean distance between neighbouring strips, overlap = 1 -
     spacing / footprint diameter (negative = gaps) and gaps = neighbouring strips farther apart
     than the footprint diameter.
     """
@@ -126,8 +127,11 @@ def classify(yz: np.ndarray, segment: np.ndarray, footprint_radius: float,
         pattern = best if share[best] > 0 and share_along[best] >= min_share else 'mixed'
     ys = sorted(y for y, _ in runs)
     strips = []
-    for y in ys:  # group runs closer than half a footprint radius into one strip
-        if strips and y - strips[-1][-1] <= 0.5 * footprint_radius:
+    for y in ys:  # runs closer than half a footprint radius to the last are one strip (a strip's
+        # runs wobble by millimetres), up to a footprint radius wide: denser lanes must not chain
+        # into one strip across the breast
+        if strips and y - strips[-1][-1] <= 0.5 * footprint_radius \
+                and y - strips[-1][0] <= footprint_radius:
             strips[-1].append(y)
         else:
             strips.append([y])
