@@ -82,6 +82,36 @@ def test_missing_files_name_case_and_field(tmp_path):
         lib.random(0)
 
 
+def test_a_scene_edited_after_its_case_was_made_is_not_ready(tmp_path):
+    """A lesion moved in a graded case's scene file: its model would render the lump where it
+    was while the exam scores it where it is now, and its FE grade is the old scene's. The
+    case is refused with one line, left out of the draw, and shows as changed in `cases list`."""
+    from haptic_anfis.tissue.dataset import DATA_DIR
+    name = 'lib_m_dense_idc20_d12'
+    text = (SCENE_DIR / f'{name}.yaml').read_text()
+    sd = tmp_path / 'scenes'
+    sd.mkdir()
+    (sd / f'{name}.yaml').write_text(text)
+    lib = CaseLibrary(sd, DATA_DIR, work_root=tmp_path / 'work')
+    assert lib.get(name).require() and lib.get(name).level is not None   # as generated
+    assert [c.name for c in lib.ready()] == [name]
+    assert '[-15, 12]' in text
+    (sd / f'{name}.yaml').write_text(text.replace('[-15, 12]', '[20, -15]'))
+    case = lib.get(name)
+    with pytest.raises(CaseError, match=f"case '{name}': its scene file .* changed since its "
+                                        'model was made') as e:
+        case.require()
+    assert f'cases generate {name}' in str(e.value) and '\n' not in str(e.value)
+    assert case.level is None and lib.ready() == []
+    with pytest.raises(CaseError, match='no case has a model|no case is ready'):
+        lib.random(0)
+    row = case_summary(case, timing=False, contrast=False)
+    assert 'changed since' in row['scene_changed']
+    # a label the FE does not see (the description) changes nothing
+    (sd / f'{name}.yaml').write_text(text.replace('description:', 'description: edited,', 1))
+    assert lib.get(name).scene_changed() is None
+
+
 def test_lesion_outside_the_breast_names_case_and_field(tmp_path):
     bad = json.loads(json.dumps(TINY))
     bad['tumours'][0]['depth_mm'] = 44  # centre 1 mm above the chest wall: sphere pokes through
@@ -101,6 +131,8 @@ def test_lesion_outside_the_breast_names_case_and_field(tmp_path):
     (lambda t: t['tumours'].extend([dict(t['tumours'][0], position_mm=[-15, 0])] * 3),
      r'at most 3 lesions'),
     (lambda t: t['tumours'].append(dict(t['tumours'][0], position_mm=[20, 0])), r'overlaps'),
+    (lambda t: t['tumours'].append(dict(t['tumours'][0], position_mm=[-15, 0])),
+     r"tumours\[1\]\.name: 'idc' is also the name of tumours\[0\]"),
     (lambda t: t['loading'].update(refine_spacing_mm=20), r'finer than spacing'),
     (lambda t: t['loading'].pop('refine_margin_mm'), r'both > 0'),
     (lambda t: t.update(description='two\nlines'), r'one line'),

@@ -62,14 +62,48 @@ class Case:
         return [f for f in fields if not getattr(self, f).is_file()]
 
     def require(self, fields: tuple[str, ...] = ('model_path', 'mesh_path')) -> 'Case':
-        """Self if the files of ``fields`` exist (and the scene is valid); else a CaseError."""
+        """Self if the files of ``fields`` exist (and the scene is valid, and the model was made
+        from the scene file as it is now); else a CaseError."""
         _ = self.scene
         gone = self.missing(fields)
         if gone:
             what = ', '.join(f'{f} {str(getattr(self, f))!r}' for f in gone)
             raise CaseError(f'case {self.name!r}: missing {what}; make it with '
                             f'`haptic-anfis cases generate {self.name}`')
+        changed = self.scene_changed() if 'model_path' in fields else None
+        if changed:
+            raise CaseError(changed)
         return self
+
+    def _made_from(self, path: Path, key: tuple[str, ...]) -> str | None:
+        """The scene hash a generated file records under ``key`` (None: no file or none
+        recorded; a malformed file is its own loader's error)."""
+        import json
+        try:
+            d = json.loads(path.read_text())
+            for k in key:
+                d = d[k]
+            return d if isinstance(d, str) else None
+        except (OSError, ValueError, KeyError, TypeError):
+            return None
+
+    def scene_changed(self) -> str | None:
+        """One line saying the case's model or FE grading was made from another version of its
+        scene file (a lesion moved, resized or renamed since: the force model would render the
+        lumps where they were while the exam scores them where the file puts them now); None
+        when they match, or record no scene hash."""
+        from ..tissue.dataset import sidecar_path
+        now = self.scene.sha256()
+        for what, path, key in (('model', self.model_path, ('case', 'scene_sha256')),
+                                ('FE dataset', sidecar_path(self.dataset_path),
+                                 ('scene_sha256',))):
+            made = self._made_from(path, key) if path.is_file() else None
+            if made is not None and made != now:
+                return (f'case {self.name!r}: its scene file {str(self.scene_path)!r} changed '
+                        f'since its {what} was made (the lumps rendered and graded would not be '
+                        f'those scored); regenerate it with `haptic-anfis cases generate '
+                        f'{self.name}`')
+        return None
 
     def grading(self) -> dict | None:
         """The FE grading of a graded-library case (:mod:`.grading`, written by
@@ -84,9 +118,12 @@ class Case:
         if not side.is_file():
             return None
         try:
-            return json.loads(side.read_text()).get('grading')
+            d = json.loads(side.read_text())
         except (OSError, ValueError):
             return None
+        if d.get('scene_sha256') not in (None, self.scene.sha256()):
+            return None   # graded on another version of the scene file (scene_changed)
+        return d.get('grading')
 
     @property
     def level(self) -> int | None:
@@ -161,8 +198,10 @@ class CaseLibrary:
         return {c.name: c.level for c in self.cases()}
 
     def ready(self) -> list[Case]:
-        """Cases whose model and mesh exist (what a session can run)."""
-        return [c for c in self.cases() if not c.missing(('model_path', 'mesh_path'))]
+        """Cases whose model and mesh exist and fit their scene file (what a session can
+        run)."""
+        return [c for c in self.cases()
+                if not c.missing(('model_path', 'mesh_path')) and not c.scene_changed()]
 
     def random(self, seed: int, include_default: bool = True) -> Case:
         """A ready case drawn by ``seed`` (the same seed draws the same case from the same library).

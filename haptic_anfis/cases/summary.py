@@ -106,7 +106,7 @@ def case_summary(case: Case, timing: bool = True, contrast: bool = True) -> dict
         'glandular_kpa': round(scene.material.youngs / 1e3, 3),
         'dataset_path': str(case.dataset_path), 'model_path': str(case.model_path),
         'mesh_path': str(case.mesh_path), 'mesh_unit': 'mm', 'scene_path': str(case.scene_path),
-        'missing': case.missing(), 'dataset_rows': None, 'dataset_points': None,
+        'missing': case.missing(), 'scene_changed': case.scene_changed(), 'dataset_rows': None, 'dataset_points': None,
         'fe_probe_cells': None, 'structures': None, 'rules': None, 'rules_per_output': None,
         'parameters': None, 'rmse_n': None, 'rmse_pct_range': None, 'eval_p50_us': None,
         'contrast': None, 'level': case.level, 'cv_rmse_n': None, 'cv_pct_range': None,
@@ -174,7 +174,8 @@ def format_table(rows: list[dict[str, Any]]) -> str:
               (f'FE {r["fe_points"]["solved"]}/{r["fe_points"]["total"]}'
                if r.get('fe_points') and not r['structures'] else '-'))
         size = 'x'.join(f'{v:g}' for v in r['breast_radii_mm'])
-        st = '/'.join(r['structures']) if r['structures'] else '(no model)'
+        st = ('(scene changed)' if r.get('scene_changed') else
+              '/'.join(r['structures']) if r['structures'] else '(no model)')
         err = (', '.join(f'{v:.3f} ({p:.1f}%)' for v, p in zip(r['rmse_n'], r['rmse_pct_range']))
                if r['rmse_n'] and r['rmse_pct_range'] else '-')
         lines.append(f'{r["name"]:<24} {lvl:>3} {les:<30} {size:<10} {r["glandular_kpa"]:>5g} '
@@ -184,7 +185,9 @@ def format_table(rows: list[dict[str, Any]]) -> str:
     lines.append('lesions: kind (m = malignant, b = benign, u = unstated), diameter @ centre depth '
                  'under the skin [mm]; graded cases add the FE contrast at the deep level vs the '
                  'lesion-free twin (% / N) and the difficulty dN (np = not palpable); lvl: case '
-                 'level 1-5; CV % range: grouped-CV RMSE Fx/Fy/Fz (or FE points solved so far)')
+                 'level 1-5; CV % range: grouped-CV RMSE Fx/Fy/Fz (or FE points solved so far); '
+                 '(scene changed): the scene file was edited since the case was generated '
+                 '(not ready until `cases generate NAME`)')
     return '\n'.join(lines)
 
 

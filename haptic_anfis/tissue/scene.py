@@ -365,7 +365,12 @@ def _parse_lesions(items: Any, radii: tuple[float, float, float], scene: str) ->
             if gap < 0:
                 raise SceneError(f'{where}: overlaps tumours[{j}] ({other.name}) by '
                                  f'{-gap / MM:.1f} mm; lesions must be separate')
-        out.append(Tumour(name=str(t.get('name', f'tumour{i}')), centre=c, radius=r, youngs=e,
+        name = str(t.get('name', f'tumour{i}'))
+        twin = [j for j, other in enumerate(out) if other.name == name]
+        if twin:   # names key the grading, the FE twins and the exam's palpability
+            raise SceneError(f'{where}.name: {name!r} is also the name of tumours[{twin[0]}]; '
+                             'expected a name of its own for each lesion')
+        out.append(Tumour(name=name, centre=c, radius=r, youngs=e,
                           source=str(t.get('source', '')), kind=kind))
     return tuple(out)
 
