@@ -112,6 +112,23 @@ def test_a_scene_edited_after_its_case_was_made_is_not_ready(tmp_path):
     assert lib.get(name).scene_changed() is None
 
 
+def test_train_only_without_a_dataset_runs_no_fe(tmp_path, capsys, monkeypatch):
+    """`cases generate --train-only` promises no FE: a case without its dataset is one line,
+    not an hours-long sweep."""
+    from haptic_anfis.cases import generate
+    from haptic_anfis.cli import main
+    _library(tmp_path, {'tiny': TINY})
+
+    def no_sweep(*a, **k):
+        raise AssertionError('an FE sweep started under --train-only')
+    monkeypatch.setattr(generate, 'sweep_case', no_sweep)
+    assert main(['cases', 'generate', 'tiny', '--train-only', '--scene-dir',
+                 str(tmp_path / 'scenes'), '--data-dir', str(tmp_path / 'data'), '--work-root',
+                 str(tmp_path / 'work')]) == 1
+    err = capsys.readouterr().err
+    assert "case 'tiny': no dataset" in err and '--train-only runs no FE' in err
+
+
 def test_lesion_outside_the_breast_names_case_and_field(tmp_path):
     bad = json.loads(json.dumps(TINY))
     bad['tumours'][0]['depth_mm'] = 44  # centre 1 mm above the chest wall: sphere pokes through

@@ -42,6 +42,50 @@ def test_config_with_unknown_key_is_rejected(dataset_csv, tmp_path, capsys):
     assert "unknown force_model key(s) ['epochz']" in capsys.readouterr().err
 
 
+def test_a_config_without_its_section_or_with_a_bad_epoch_count_is_one_line(dataset_csv,
+                                                                          tmp_path, capsys):
+    """A typo in the section name (or another config file) trained with every default and said
+    nothing; an epoch count as text was a traceback deep in training."""
+    cfg = tmp_path / 'cfg.yaml'
+    out = tmp_path / 'm.json'
+    for text, what in (('force-model: {epochs: 5}\n', 'no "force_model" section (its top-level '
+                                                       'keys: force-model)'),
+                       ('force_model: {epochs: 4e1}\n', "epochs: expected an integer >= 1, got "
+                                                         "'4e1'"),
+                       ('force_model: {search_epochs: 0}\n', 'search_epochs: expected an '
+                                                              'integer >= 1, got 0')):
+        cfg.write_text(text)
+        assert main(['train', dataset_csv, '--out', str(out), '--config', str(cfg)]) == 1
+        err = capsys.readouterr().err
+        assert what in err and len(err.strip().splitlines()) == 1, err
+    assert not out.exists()
+    with pytest.raises(SystemExit):   # argparse: exit 2 with its usage line
+        main(['train', dataset_csv, '--out', str(out), '--epochs', '-3'])
+    assert "'-3': expected an integer >= 1" in capsys.readouterr().err
+
+
+def test_a_dataset_in_millimetres_or_with_a_zero_depth_is_refused_before_training(
+        synthetic, tmp_path, capsys):
+    """Training wrote a model from a dataset in millimetres that loading then refused (it
+    could replace a good model); a depth of 0 was named by its index in the training split."""
+    import numpy as np
+
+    from haptic_anfis.tissue.dataset import ForceDataset
+    out = tmp_path / 'm.json'
+    mm = save_dataset(ForceDataset(synthetic.X * 1000, synthetic.Y, synthetic.point),
+                      tmp_path / 'mm.csv')
+    assert main(['train', str(mm), '--out', str(out), '--epochs', '2']) == 1
+    err = capsys.readouterr().err
+    assert 'mm.csv' in err and 'expected metres within ±1 m' in err and not out.exists()
+    X = synthetic.X.copy()
+    X[7, 3] = 0.0
+    zero = save_dataset(ForceDataset(X, synthetic.Y, synthetic.point), tmp_path / 'zero.csv')
+    assert main(['train', str(zero), '--out', str(out), '--epochs', '2']) == 1
+    err = capsys.readouterr().err
+    assert 'zero.csv' in err and 'depth_m = 0 at row 8' in err and not out.exists()
+    assert np.all(synthetic.X[:, 3] > 0)
+
+
 def test_shipped_config_is_valid():
     from pathlib import Path
 

@@ -186,6 +186,10 @@ class ForceModel:
         ``split='point'``) is held out to choose each output's structure and epoch count; the chosen
         structure is then retrained on all of ``X`` for that many epochs.
         """
+        for name in ('epochs', 'search_epochs'):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
+                raise ValueError(f'{name}: expected an integer >= 1, got {v!r}')
         X = check_finite_inputs(X, INPUT_NAMES)
         Y = np.asarray(Y, dtype=np.float64)
         if X.shape[1] != 4 or Y.shape != (len(X), 3):
@@ -536,6 +540,25 @@ def rmse(pred: np.ndarray, Y: np.ndarray) -> list[float]:
     return [float(v) for v in np.sqrt(np.mean((pred - Y) ** 2, axis=0))]
 
 
+def _check_training_inputs(ds: ForceDataset, dataset_path: str | None) -> None:
+    """DatasetError naming the dataset, the row and the column for inputs no model file may
+    hold: lengths beyond the model file's ±1 m (a dataset in millimetres: the model would be
+    written, then refused when loaded) and depths <= 0 (the depth-scaled form divides by them).
+    Rows count from 1 after the header (a CSV's line is one more)."""
+    from .model_file import MAX_ABS_INPUT_M
+    where = f'dataset {dataset_path!r}' if dataset_path else 'dataset'
+    X = np.asarray(ds.X, dtype=np.float64)
+    for c, name in enumerate(('x_m', 'y_m', 'z_m', 'depth_m')):
+        k = int(np.argmax(np.abs(X[:, c]))) if len(X) else 0
+        if len(X) and abs(X[k, c]) > MAX_ABS_INPUT_M:
+            raise DatasetError(f'{where}: {name} = {X[k, c]:g} at row {k + 1}; expected metres '
+                               f'within ±{MAX_ABS_INPUT_M:g} m (a dataset in millimetres?)')
+    if len(X) and not np.all(X[:, 3] > 0):
+        k = int(np.argmin(X[:, 3]))
+        raise DatasetError(f'{where}: depth_m = {X[k, 3]:g} at row {k + 1}; expected depths > 0 '
+                           '(a sample with no indentation has no force to learn)')
+
+
 def train_on_dataset(ds: ForceDataset, test_fraction: float = 0.2, seed: int = 0,
                      verbose: bool = False, dataset_path: str | None = None,
                      **params: Any) -> tuple[ForceModel, ForceDataset]:
@@ -544,6 +567,7 @@ def train_on_dataset(ds: ForceDataset, test_fraction: float = 0.2, seed: int = 0
     ``params`` override them), record RMSEs and the dataset hash in the model. Returns (model,
     test set).
     """
+    _check_training_inputs(ds, dataset_path)
     by = params.get('split', 'point')
     if by == 'point' and len(np.unique(ds.point)) < 5:
         raise DatasetError(f'training needs at least 5 surface points for a split by point, the '

@@ -183,6 +183,10 @@ def _generate(args: argparse.Namespace) -> int:
     cases = [lib.get(n) for n in names]  # unknown names fail before any work
     for c in cases:
         _ = c.scene  # and invalid scenes
+        if args.train_only and not c.scene.ring_diameters and not c.dataset_path.is_file():
+            from ..cases import CaseError   # --train-only promises no FE: no hours-long sweep
+            raise CaseError(f'case {c.name!r}: no dataset {str(c.dataset_path)!r} to train on '
+                            '(--train-only runs no FE; run without it to sweep the FE first)')
     config = args.config
     if config is None:  # config/case_model.yaml beside the scene files (source tree or share)
         from ..tissue.scene import SCENE_DIR

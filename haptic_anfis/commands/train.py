@@ -26,6 +26,16 @@ def parse_structure(text: str) -> tuple[int, ...]:
     return st
 
 
+def _positive_int(text: str) -> int:
+    try:
+        v = int(text)
+    except ValueError:
+        v = 0
+    if v < 1:
+        raise argparse.ArgumentTypeError(f'{text!r}: expected an integer >= 1')
+    return v
+
+
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument('dataset', help='force dataset CSV (point,x_m,y_m,z_m,depth_m,fx_N,fy_N,fz_N), '
                    'or a recorded session bag (its contact and force-command topics)')
@@ -37,7 +47,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help='fixed MF counts for all outputs, one per ANFIS input, e.g. 5-5-2 for the default '
                         '(y, z, depth) inputs (default: the shipped 6-6-2/6-6-2/5-5-2 over (y, z, '
                         'depth), a search per output when x is kept)')
-    p.add_argument('--epochs', type=int, default=None,
+    p.add_argument('--epochs', type=_positive_int, default=None,
                    help=f"epochs of the final models (default {SHIPPED['epochs']})")
     p.add_argument('--test-fraction', type=float, default=None,
                    help='held-out test part (default 0.2)')
@@ -58,7 +68,10 @@ def load_config(path: str | None) -> dict:
         return {}
     from ..yamlfile import read_yaml
     doc = read_yaml(path, 'config file') or {}
-    section = doc.get('force_model', {}) if isinstance(doc, dict) else None
+    if isinstance(doc, dict) and 'force_model' not in doc:   # a typo, or another config file
+        raise ValueError(f'{path}: no "force_model" section (its top-level keys: '
+                         f'{", ".join(map(str, doc)) or "none"}); see config/force_model.yaml')
+    section = doc.get('force_model') if isinstance(doc, dict) else None
     if not isinstance(section, dict):
         raise ValueError(f'{path}: expected a mapping under "force_model"')
     unknown = sorted(set(section) - CONFIG_KEYS)
