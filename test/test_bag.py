@@ -297,6 +297,122 @@ def test_export_keeps_rows_when_joint_names_change(tmp_path):
     assert len(rows) == 5
 
 
+def test_export_keeps_the_contact_approach_values_and_says_when_there_is_nothing(
+        tmp_path, capsys):
+    """The contact message carries the six approach values in ``effort`` while the probe is
+    free (a length other than its names'): they were dropped. A bag or a topic without
+    messages exported nothing and said nothing."""
+    import numpy as np
+
+    from haptic_anfis.interfaces import APPROACH_FIELDS, CONTACT_FIELDS
+    ts = typestore()
+    J = ts.types['sensor_msgs/msg/JointState']
+    H, T = ts.types['std_msgs/msg/Header'], ts.types['builtin_interfaces/msg/Time']
+    bag = tmp_path / 'contact'
+    with BagWriter(bag) as w:
+        w.add_topic('/contact', J.__msgtype__)
+        w.add_topic('/falcon/servo_cf', 'geometry_msgs/msg/WrenchStamped')
+        for i in range(3):
+            effort = np.array([0.01, 0.02, 0.03, 1.0, 0.0, 0.0]) if i < 2 else np.zeros(0)
+            msg = J(H(T(i, 0), 'tissue'), list(CONTACT_FIELDS),
+                    np.zeros(len(CONTACT_FIELDS)), np.zeros(0), effort)
+            w.write('/contact', ts.serialize_cdr(msg, J.__msgtype__), 1_000 + i)
+    assert cli(['bag', 'export', str(bag), '--csv', str(tmp_path / 'csv')]) == 0
+    out = capsys.readouterr().out
+    assert '/falcon/servo_cf: no messages (no file)' in out and '/contact: 3 rows' in out
+    with (tmp_path / 'csv' / 'contact.csv').open() as fh:
+        rows = list(csv.DictReader(fh))
+    assert [r['effort.surface_x'] for r in rows] == ['0.01', '0.01', '']
+    assert {'effort.' + n for n in APPROACH_FIELDS} <= set(rows[0])
+    assert rows[2]['effort.normal_x'] == ''   # in contact: no approach values
+    assert not list((tmp_path / 'csv').glob('.export-*'))   # its spill files are gone
+    e = _error(capsys, 'bag', 'export', str(bag), '--csv', str(tmp_path / 'c2'), '--topics',
+               '/falcon/servo_cf')
+    assert 'no messages on /falcon/servo_cf; nothing to export' in e
+
+
+def test_a_bag_being_recorded_is_not_called_interrupted_nor_recovered(tmp_path, capsys):
+    """While a recording runs its bag has no metadata.yaml, as an interrupted one; `bag
+    recover` then moved the live file aside and the rest of the session went into a file
+    nothing reads. The writer holds a lock on its file: info and recover say it is being
+    recorded, and after the close the bag is whole."""
+    from haptic_anfis.bag import recover_bag
+    bag = tmp_path / 'live'
+    w = BagWriter(bag)
+    w.add_topic('/falcon/measured_cp', 'geometry_msgs/msg/PoseStamped')
+    for i in range(20):
+        w.write('/falcon/measured_cp', _pose_bytes(i), 1_000_000_000 + i * 1_000_000)
+    assert 'being recorded' in _error(capsys, 'bag', 'info', str(bag))
+    with pytest.raises(BagError, match='being recorded'):
+        recover_bag(bag)
+    for i in range(20, 40):
+        w.write('/falcon/measured_cp', _pose_bytes(i), 1_000_000_000 + i * 1_000_000)
+    w.close()
+    assert bag_info(bag).message_count == 40 and sorted(p.name for p in bag.iterdir()) == [
+        'live.mcap', 'metadata.yaml']
+
+
+def test_a_forked_child_does_not_keep_a_closed_recording_locked(tmp_path):
+    """The driver forks its servo process while the recorder (in `sim`, the same process) has
+    its bag open: the child's copy of the lock's descriptor must not keep the bag 'being
+    recorded' after the recorder closed it."""
+    import os
+
+    from haptic_anfis.bag.lock import being_recorded
+    bag = tmp_path / 'forked'
+    w = BagWriter(bag)
+    w.add_topic('/falcon/measured_cp', 'geometry_msgs/msg/PoseStamped')
+    w.write('/falcon/measured_cp', _pose_bytes(0), 1_000_000_000)
+    r, wr = os.pipe()
+    pid = os.fork()
+    if pid == 0:   # the child waits until the parent has checked, then leaves
+        os.close(wr)
+        os.read(r, 1)
+        os._exit(0)
+    try:
+        os.close(r)
+        assert being_recorded(bag / 'forked.mcap')
+        w.close()
+        assert not being_recorded(bag / 'forked.mcap')
+    finally:
+        os.write(wr, b'x')
+        os.close(wr)
+        os.waitpid(pid, 0)
+
+
+def test_recover_from_inside_the_bag_directory(tmp_path, monkeypatch, capsys):
+    """`bag recover .`: the path has no name to build the temporary bag's from; it was a
+    traceback and a stray '..recovering' folder inside the bag."""
+    bag = _small_bag(tmp_path / 'b', n=30)
+    (bag / 'metadata.yaml').unlink()   # as a killed recording leaves it
+    monkeypatch.chdir(bag)
+    assert cli(['bag', 'recover', '.']) == 0
+    assert 'recovered 30 messages' in capsys.readouterr().out
+    assert bag_info(bag).message_count == 30
+    assert not list(bag.glob('*recovering*')) and not list(tmp_path.glob('*recovering*'))
+
+
+def test_a_write_that_fails_hands_its_message_on():
+    """rosbags closes a chunk by itself inside a write once it passes its size limit: if that
+    close fails (a full disk) the message is in the lost chunk, so it must be among those
+    handed to the next bag (it was neither written, handed on nor counted lost)."""
+    import tempfile
+
+    from haptic_anfis.bag.segment import Segment
+    with tempfile.TemporaryDirectory() as d:
+        seg = Segment(Path(d) / 'b', {})
+        seg.add_connection('/p', 'geometry_msgs/msg/PoseStamped')
+        seg.write('/p', 1, _pose_bytes(1))
+
+        def full(*a):
+            raise OSError(28, 'No space left on device')
+        seg.w.write = full
+        with pytest.raises(OSError):
+            seg.write('/p', 2, _pose_bytes(2))
+        assert [t for _, t, _ in seg.unflushed] == [1, 2]
+        seg.seal()
+
+
 def test_player_resimulate_mode_plays_the_recomputed_wrenches(session, monkeypatch):
     """The player's re-simulate mode: the comparison matches (0 N), and the force-command topic it
     plays carries the recomputed forces (shifted by +1 N here to see the swap) at the same stamps."""

@@ -4,15 +4,19 @@ Columns: ``t_recv`` (receive time, s, as recorded) then the message's fields fla
 names (``pose.position.x``); a ``builtin_interfaces/Time`` is one column in seconds
 (``header.stamp``); a ``sensor_msgs/JointState`` whose names stay the same (the contact message)
 gets one column per name (``contact_x`` ... ``saturated``; ``velocity.NAME``/``effort.NAME`` when
-present); other sequences are one column, values joined by ``;``.
+present; the contact message's approach values in ``effort`` as ``effort.surface_x`` ...
+``effort.normal_z``); other sequences are one column, values joined by ``;``.
 """
 from __future__ import annotations
 
 import csv
+import json
+import tempfile
 from pathlib import Path
 
 import numpy as np
 
+from ..interfaces import APPROACH_FIELDS, CONTACT_FIELDS
 from .errors import BagError
 from .reader import read_messages
 
@@ -55,6 +59,11 @@ def _joint_state_row(msg, names: list[str]) -> dict[str, object] | None:
         vals = getattr(msg, field)
         if len(vals) == len(names):
             row.update({pre + n: repr(float(x)) for n, x in zip(names, vals)})
+        elif (field == 'effort' and tuple(names) == CONTACT_FIELDS
+              and len(vals) == len(APPROACH_FIELDS)):   # the contact message's approach values
+            row.update({pre + n: repr(float(x)) for n, x in zip(APPROACH_FIELDS, vals)})
+        elif len(vals):   # another length: one column, as other sequences
+            row[field] = ';'.join(repr(float(x)) for x in vals)
     return row
 
 
@@ -62,37 +71,62 @@ def csv_name(topic: str) -> str:
     return topic.strip('/').replace('/', '__') + '.csv'
 
 
-def export_csv(path: str | Path, out_dir: str | Path, topics=None) -> dict[str, tuple[Path, int]]:
-    """Write one CSV per topic into ``out_dir``; {topic: (csv path, rows)}."""
+def _plain(v):
+    return v.item() if hasattr(v, 'item') else str(v)
+
+
+def export_csv(path: str | Path, out_dir: str | Path, topics=None
+               ) -> dict[str, tuple[Path | None, int]]:
+    """Write one CSV per topic into ``out_dir``; {topic: (csv path, rows)}, a topic without
+    messages ``(None, 0)`` (no file). Streams: rows go to a temporary file per topic while the
+    columns are gathered, then into the CSV; memory does not grow with the bag.
+
+    Raises:
+        BagError: the bag (or the topics asked for) holds no message at all, or a bad bag.
+    """
+    from .reader import bag_info
     out = Path(out_dir)
     if out.exists() and not out.is_dir():
         raise BagError(f'{out}: exists and is not a directory (expected an output directory)')
+    info = bag_info(path)
+    wanted = list(topics) if topics else [t.topic for t in info.topics]
     out.mkdir(parents=True, exist_ok=True)
-    rows: dict[str, list[dict]] = {}
+    spill: dict[str, dict] = {}
     names: dict[str, list[str] | None] = {}
-    for topic, msgtype, t, msg in read_messages(path, topics):
-        row = None
-        if msgtype == 'sensor_msgs/msg/JointState':
-            if topic not in names:
-                names[topic] = list(msg.name)
-            if names[topic] is not None:
-                row = _joint_state_row(msg, names[topic])
-                if row is None:  # names changed: the generic layout from here on; the rows
-                    names[topic] = None  # written so far keep theirs (the CSV takes both columns)
-        if row is None:
-            row = flatten(msg)
-        rows.setdefault(topic, []).append({'t_recv': f'{t // 10**9}.{t % 10**9:09d}', **row})
-    written = {}
-    for topic, rs in rows.items():
-        cols: list[str] = []
-        for r in rs:
-            for k in r:
-                if k not in cols:
-                    cols.append(k)
-        f = out / csv_name(topic)
-        with f.open('w', newline='') as fh:
-            w = csv.DictWriter(fh, fieldnames=cols)
-            w.writeheader()
-            w.writerows(rs)
-        written[topic] = (f, len(rs))
+    with tempfile.TemporaryDirectory(dir=out, prefix='.export-') as tmp:
+        try:
+            for topic, msgtype, t, msg in read_messages(path, topics):
+                row = None
+                if msgtype == 'sensor_msgs/msg/JointState':
+                    if topic not in names:
+                        names[topic] = list(msg.name)
+                    if names[topic] is not None:
+                        row = _joint_state_row(msg, names[topic])
+                        if row is None:  # names changed: the generic layout from here on; the
+                            names[topic] = None  # rows so far keep theirs (the CSV takes both)
+                if row is None:
+                    row = flatten(msg)
+                row = {'t_recv': f'{t // 10**9}.{t % 10**9:09d}', **row}
+                s = spill.get(topic)
+                if s is None:
+                    f = Path(tmp) / f'{len(spill)}.jsonl'
+                    s = spill[topic] = {'path': f, 'fh': f.open('w'), 'cols': {}, 'n': 0}
+                s['cols'].update(dict.fromkeys(row))   # insertion-ordered union of the columns
+                s['fh'].write(json.dumps(row, default=_plain) + '\n')
+                s['n'] += 1
+        finally:
+            for s in spill.values():
+                s['fh'].close()
+        if not spill:
+            on = f' on {", ".join(wanted)}' if topics else ''
+            raise BagError(f'{path}: no messages{on}; nothing to export')
+        written: dict[str, tuple[Path | None, int]] = {t: (None, 0) for t in wanted}
+        for topic, s in spill.items():
+            f = out / csv_name(topic)
+            with f.open('w', newline='') as fh, s['path'].open() as src:
+                w = csv.DictWriter(fh, fieldnames=list(s['cols']))
+                w.writeheader()
+                for line in src:
+                    w.writerow(json.loads(line))
+            written[topic] = (f, s['n'])
     return written

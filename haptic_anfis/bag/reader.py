@@ -8,6 +8,7 @@ from pathlib import Path
 from typing import Iterator
 
 from .errors import BagError
+from .lock import being_recorded
 
 _EXPECTED = 'expected a rosbag2 bag: a directory with metadata.yaml and its .mcap (or .db3) file'
 
@@ -26,6 +27,10 @@ def check_bag_path(path: str | Path) -> Path:
             return p
         raise BagError(f'{p}: not a bag ({_EXPECTED})')
     if not (p / 'metadata.yaml').is_file():
+        live = [m.name for m in p.glob('*.mcap') if being_recorded(m)]
+        if live:
+            raise BagError(f'{p}: being recorded ({", ".join(live)} is open in a recorder); '
+                           'metadata.yaml is written when the recording stops')
         if any(p.glob('*.mcap')):
             raise BagError(f'{p}: metadata.yaml is missing (an interrupted recording?); '
                            + _recover_hint(p))

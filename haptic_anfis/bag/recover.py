@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from .errors import BagError
+from .lock import being_recorded
 
 
 @dataclass
@@ -51,7 +52,7 @@ def _is_valid(p: Path) -> bool:
 
 def recover_bag(path: str | Path) -> RecoveryReport:
     """Recover the bag directory ``path`` in place (see the module docstring)."""
-    p = Path(path)
+    p = Path(path).resolve()   # '.' has no name to build the temporary bag's from
     if p.is_file() and p.suffix == '.mcap':
         p = p.parent
     if not p.is_dir():
@@ -63,6 +64,9 @@ def recover_bag(path: str | Path) -> RecoveryReport:
     if len(sources) > 1:
         raise BagError(f'{p}: expected one .mcap file, found {", ".join(s.name for s in sources)}')
     src = sources[0]
+    if being_recorded(src):   # moving a live file aside would lose the rest of the session
+        raise BagError(f'{p}: being recorded ({src.name} is open in a recorder): nothing to '
+                       'recover; it is closed, with its metadata.yaml, when the recording stops')
     if (p / 'metadata.yaml').is_file() and _is_valid(p):
         return RecoveryReport(p, src, already_valid=True)
 
@@ -79,8 +83,12 @@ def recover_bag(path: str | Path) -> RecoveryReport:
     ts = get_typestore(Stores.ROS2_JAZZY)
     schemas: dict[int, Schema] = {}
     conns = {}
-    writer = Writer(tmp_root / p.name, version=9, storage_plugin=StoragePlugin.MCAP)
-    writer.open()
+    try:
+        writer = Writer(tmp_root / p.name, version=9, storage_plugin=StoragePlugin.MCAP)
+        writer.open()
+    except Exception as exc:
+        shutil.rmtree(tmp_root, ignore_errors=True)
+        raise BagError(f'{p}: cannot write the recovered bag beside it: {exc}') from None
     try:
         with src.open('rb') as fh:
             try:

@@ -12,6 +12,7 @@ import struct
 from pathlib import Path
 
 from .errors import BagError
+from .lock import hold, release
 from .topics import typestore
 
 #: Chunk compressions the writer offers (MCAP chunk ``compression`` field; '' = none).
@@ -70,6 +71,7 @@ class Segment:
         except Exception as exc:  # permissions, disk, ...
             raise BagError(f'{path}: cannot create the bag: {exc}') from exc
         self.mcap = Path(self.storage.path)
+        self._lock = hold(self.mcap)   # bag info / recover: being recorded, not interrupted
         self.conns: dict[str, object] = {}
         # The last state known to be on disk (after a successful flush) ...
         self.good_offset = self.storage.bio.tell()
@@ -83,8 +85,10 @@ class Segment:
         self.conns[topic] = self.w.add_connection(topic, msgtype, typestore=typestore())
 
     def write(self, topic: str, t_ns: int, data: bytes) -> None:
-        self.w.write(self.conns[topic], t_ns, data)
+        # Kept first: rosbags closes a chunk by itself past its size limit, inside this write;
+        # if that fails (a full disk) the message is in the lost chunk and goes to the next bag.
         self.unflushed.append((topic, t_ns, data))
+        self.w.write(self.conns[topic], t_ns, data)
 
     @property
     def pending_bytes(self) -> int:
@@ -105,6 +109,7 @@ class Segment:
         """Write the last chunk, the summary and metadata.yaml (rosbags' normal close)."""
         self.flush()
         self.w.close()
+        release(self._lock)
 
     def seal(self) -> str:
         """After a write failed: keep what is on disk as a readable bag; say what was done.
@@ -118,6 +123,7 @@ class Segment:
             self.storage.bio.close()  # flushes what it can, then closes the file in any case
         except Exception:
             pass
+        release(self._lock)
         try:
             os.truncate(self.mcap, self.good_offset)
             with self.mcap.open('ab') as fh:

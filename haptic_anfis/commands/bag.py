@@ -74,7 +74,7 @@ def _export(args) -> int:
     from ..bag.topics import absolute
     topics = [absolute(t) for t in args.topics] if args.topics else None
     for topic, (f, n) in sorted(export_csv(args.path, args.csv, topics).items()):
-        print(f'{topic}: {n} rows -> {f}')
+        print(f'{topic}: {n} rows -> {f}' if f is not None else f'{topic}: no messages (no file)')
     return 0
 
 
