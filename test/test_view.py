@@ -159,8 +159,8 @@ def test_debrief_lists_the_trainees_sessions_from_the_record(tmp_path, bag):
     from haptic_anfis.view.build import open_bag_view
     db = tmp_path / 'record.sqlite'
     report, _ = session_from_bag(bag)
-    for _ in range(2):
-        store_session(db, 't01', report, source='bag')
+    for k in range(2):   # two recordings (one bag counts once)
+        store_session(db, 't01', report, source='bag', bag=f'{bag}-{k}')
     app = open_bag_view(bag, port=free_port(), trainee='t01', db=db)
     try:
         table = app.g_history_md.content
