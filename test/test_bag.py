@@ -278,19 +278,28 @@ def test_record_command_closes_bag_on_sigint(tmp_path):
     assert bag_info(bag).message_count == 300, out
 
 
-def test_export_keeps_rows_when_joint_names_change(tmp_path):
-    """A JointState topic whose names change mid-bag: every message still gets a CSV row."""
+def _joint_state_bag(path: Path, topic: str, msgs, more_topics=()) -> Path:
+    """A bag of JointState messages on ``topic``, one per ``(names, position, effort)`` of
+    ``msgs``; ``more_topics``: (topic, type) added without messages."""
+    import numpy as np
     ts = typestore()
     J = ts.types['sensor_msgs/msg/JointState']
     H, T = ts.types['std_msgs/msg/Header'], ts.types['builtin_interfaces/msg/Time']
-    import numpy as np
-    bag = tmp_path / 'names'
-    with BagWriter(bag) as w:
-        w.add_topic('/joints', J.__msgtype__)
-        for i, names in enumerate([['a', 'b']] * 3 + [['c']] * 2):
-            msg = J(H(T(i, 0), 'tissue'), names, np.arange(len(names), dtype=float),
-                    np.zeros(0), np.zeros(0))
-            w.write('/joints', ts.serialize_cdr(msg, J.__msgtype__), 1_000 + i)
+    with BagWriter(path) as w:
+        w.add_topic(topic, J.__msgtype__)
+        for t, msgtype in more_topics:
+            w.add_topic(t, msgtype)
+        for i, (names, position, effort) in enumerate(msgs):
+            msg = J(H(T(i, 0), 'tissue'), list(names), np.asarray(position, dtype=float),
+                    np.zeros(0), np.asarray(effort, dtype=float))
+            w.write(topic, ts.serialize_cdr(msg, J.__msgtype__), 1_000 + i)
+    return path
+
+
+def test_export_keeps_rows_when_joint_names_change(tmp_path):
+    """A JointState topic whose names change mid-bag: every message still gets a CSV row."""
+    bag = _joint_state_bag(tmp_path / 'names', '/joints',
+                           [(n, range(len(n)), ()) for n in [['a', 'b']] * 3 + [['c']] * 2])
     assert cli(['bag', 'export', str(bag), '--csv', str(tmp_path / 'csv')]) == 0
     with (tmp_path / 'csv' / 'joints.csv').open() as fh:
         rows = list(csv.DictReader(fh))
@@ -302,21 +311,12 @@ def test_export_keeps_the_contact_approach_values_and_says_when_there_is_nothing
     """The contact message carries the six approach values in ``effort`` while the probe is
     free (a length other than its names'): they were dropped. A bag or a topic without
     messages exported nothing and said nothing."""
-    import numpy as np
-
     from haptic_anfis.interfaces import APPROACH_FIELDS, CONTACT_FIELDS
-    ts = typestore()
-    J = ts.types['sensor_msgs/msg/JointState']
-    H, T = ts.types['std_msgs/msg/Header'], ts.types['builtin_interfaces/msg/Time']
-    bag = tmp_path / 'contact'
-    with BagWriter(bag) as w:
-        w.add_topic('/contact', J.__msgtype__)
-        w.add_topic('/falcon/servo_cf', 'geometry_msgs/msg/WrenchStamped')
-        for i in range(3):
-            effort = np.array([0.01, 0.02, 0.03, 1.0, 0.0, 0.0]) if i < 2 else np.zeros(0)
-            msg = J(H(T(i, 0), 'tissue'), list(CONTACT_FIELDS),
-                    np.zeros(len(CONTACT_FIELDS)), np.zeros(0), effort)
-            w.write('/contact', ts.serialize_cdr(msg, J.__msgtype__), 1_000 + i)
+    approach = [0.01, 0.02, 0.03, 1.0, 0.0, 0.0]
+    bag = _joint_state_bag(tmp_path / 'contact', '/contact',
+                           [(CONTACT_FIELDS, [0.0] * len(CONTACT_FIELDS), e)
+                            for e in (approach, approach, ())],
+                           more_topics=[('/falcon/servo_cf', 'geometry_msgs/msg/WrenchStamped')])
     assert cli(['bag', 'export', str(bag), '--csv', str(tmp_path / 'csv')]) == 0
     out = capsys.readouterr().out
     assert '/falcon/servo_cf: no messages (no file)' in out and '/contact: 3 rows' in out
