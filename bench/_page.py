@@ -146,8 +146,8 @@ def run_with_page(main: Callable[[], int | None], script: str, doc: str | None,
                   name: str | None = None) -> int:
     """Run a benchmark's ``main`` printing as usual; if it returns 0 / None, write its printed
     output as ``docs/measurements/<name>.md`` (``name``: by default the script's file name
-    without ``bench_``; title and introduction from ``doc``, see :func:`_title_and_intro`; the introduction goes in
-    as plain text).
+    without ``bench_``; title and introduction from ``doc``, see :func:`_title_and_intro`; the
+    introduction goes in as plain text).
     No page for ``--help``, a failure, or when an argument in ``no_page_flags`` is given (a
     script's child-process mode). Returns ``main``'s exit code."""
     if any(a in no_page_flags for a in sys.argv[1:]):
