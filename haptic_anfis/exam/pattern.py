@@ -76,8 +76,8 @@ def classify(yz: np.ndarray, segment: np.ndarray, footprint_radius: float,
     spacing_mm, overlap, gaps}} where strips are vertical runs >= 10 mm grouped by y (each within
     half a footprint radius of the next, a strip at most a footprint radius wide: lanes closer
     than half a footprint radius are grouped, a few to a strip), spacing the mean distance
-    between neighbouring strips, overlap = 1 - spacing / footprint diameter (negative = gaps) and gaps = neighbouring strips farther apart
-    than the footprint diameter.
+    between neighbouring strips, overlap = 1 - spacing / footprint diameter (negative = gaps)
+    and gaps = neighbouring strips farther apart than the footprint diameter.
     """
     step = float(footprint_radius if step is None else step)
     yz = np.asarray(yz, float).reshape(-1, 2)
