@@ -54,6 +54,11 @@ def _write(tmp_path, doc, name='bad.json'):
     (lambda d: d['inputs'].pop(), 'inputs'),
     (lambda d: d['outputs'][0].update(name='Fq'), 'outputs'),
     (lambda d: d['outputs'][0].pop('extrapolation'), 'malformed'),
+    # hand-edited fields of the wrong type: one line naming the file, not a traceback
+    (lambda d: d.update(outputs=[1, 2, 3]), 'malformed .*AttributeError'),
+    (lambda d: d.update(training='x'), '"training" is str; expected a mapping'),
+    (lambda d: d.update(dataset='x'), '"dataset" is str; expected a mapping'),
+    (lambda d: d['inputs'][0].update(min='zero'), 'numeric "min" and "max"'),
 ])
 def test_bad_model_files_fail_with_clear_errors(small_model, tmp_path, mutate, message):
     doc = _doc(small_model)

@@ -450,6 +450,22 @@ class ForceModel:
     def load(cls, path: str | os.PathLike) -> 'ForceModel':
         """Read a model file; any format, version, shape or finiteness problem -> ModelFileError."""
         doc = read_model_doc(path)
+        try:
+            return cls._from_doc(doc, path)
+        except ModelFileError:
+            raise
+        except (AttributeError, TypeError, KeyError, IndexError, ValueError) as exc:
+            # a field of the wrong type (a hand-edited file): one line, not a traceback
+            raise ModelFileError(f'model file {str(path)!r}: malformed ({type(exc).__name__}: '
+                                 f'{exc}); expected the layout `haptic-anfis train` writes'
+                                 ) from None
+
+    @classmethod
+    def _from_doc(cls, doc: dict, path: str | os.PathLike) -> 'ForceModel':
+        for key in ('training', 'dataset', 'case', 'grouped_cv'):   # read by callers as mappings
+            if key in doc and not isinstance(doc[key], dict):
+                raise ModelFileError(f'model file {str(path)!r}: "{key}" is '
+                                     f'{type(doc[key]).__name__}; expected a mapping')
         names = [i.get('name') for i in doc['inputs']]
         if names != list(INPUT_NAMES):
             raise ModelFileError(f'model file {str(path)!r} has inputs {names}; expected '

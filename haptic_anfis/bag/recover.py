@@ -103,9 +103,10 @@ def recover_bag(path: str | Path) -> RecoveryReport:
                             try:
                                 ts.register(get_types_from_msg(sch.data.decode(), sch.name))
                             except Exception as exc:
+                                why = ' '.join(str(exc).split())   # parse errors span lines
                                 raise BagError(f'{src}: topic {rec.topic}: unknown message type '
-                                               f'{sch.name!r} with an unreadable definition: {exc}'
-                                               ) from None
+                                               f'{sch.name!r} with an unreadable definition: '
+                                               f'{why} (expected a ROS 2 recording)') from None
                         if rec.id not in conns:
                             conns[rec.id] = writer.add_connection(rec.topic, sch.name, typestore=ts)
                     elif isinstance(rec, Message):
