@@ -75,54 +75,37 @@ class Case:
             raise CaseError(changed)
         return self
 
-    def _made_from(self, path: Path, key: tuple[str, ...]) -> str | None:
-        """The scene hash a generated file records under ``key`` (None: no file or none
-        recorded; a malformed file is its own loader's error)."""
-        import json
-        try:
-            d = json.loads(path.read_text())
-            for k in key:
-                d = d[k]
-            return d if isinstance(d, str) else None
-        except (OSError, ValueError, KeyError, TypeError):
-            return None
-
     def scene_changed(self) -> str | None:
         """One line saying the case's model or FE grading was made from another version of its
         scene file (a lesion moved, resized or renamed since: the force model would render the
         lumps where they were while the exam scores them where the file puts them now); None
         when they match, or record no scene hash."""
-        from ..tissue.dataset import sidecar_path
         now = self.scene.sha256()
-        for what, path, key in (('model', self.model_path, ('case', 'scene_sha256')),
-                                ('FE dataset', sidecar_path(self.dataset_path),
-                                 ('scene_sha256',))):
-            made = self._made_from(path, key) if path.is_file() else None
-            if made is not None and made != now:
+        case = _json_file(self.model_path).get('case')
+        made = {'model': case.get('scene_sha256') if isinstance(case, dict) else None,
+                'FE dataset': self._sidecar().get('scene_sha256')}
+        for what, h in made.items():
+            if isinstance(h, str) and h != now:
                 return (f'case {self.name!r}: its scene file {str(self.scene_path)!r} changed '
                         f'since its {what} was made (the lumps rendered and graded would not be '
                         f'those scored); regenerate it with `haptic-anfis cases generate '
                         f'{self.name}`')
         return None
 
+    def _sidecar(self) -> dict:
+        """The dataset's provenance sidecar ({} without one)."""
+        from ..tissue.dataset import sidecar_path
+        return _json_file(sidecar_path(self.dataset_path))
+
     def grading(self) -> dict | None:
         """The FE grading of a graded-library case (:mod:`.grading`, written by
         :func:`.build.build_case` into the dataset sidecar): ``level``, ``lesions`` (each with
         ``contrast_n``, ``contrast_pct``, ``palpable``, ``difficulty``), ``threshold_pct``,
-        ``depth_m``; None for a case not built from the per-point store."""
-        import json
-
-        from ..tissue.dataset import sidecar_path
-
-        side = sidecar_path(self.dataset_path)
-        if not side.is_file():
-            return None
-        try:
-            d = json.loads(side.read_text())
-        except (OSError, ValueError):
-            return None
+        ``depth_m``; None for a case not built from the per-point store, or graded on another
+        version of its scene file (:meth:`scene_changed`)."""
+        d = self._sidecar()
         if d.get('scene_sha256') not in (None, self.scene.sha256()):
-            return None   # graded on another version of the scene file (scene_changed)
+            return None
         return d.get('grading')
 
     @property
@@ -135,6 +118,17 @@ class Case:
     def lesions_m(self) -> list[tuple[float, float, float, float]]:
         """(x, y, z, radius) [m] of every lesion, tissue frame."""
         return [(*t.centre, t.radius) for t in self.scene.tumours]
+
+
+def _json_file(path: Path) -> dict:
+    """A generated JSON file's mapping; {} when it is missing or unreadable (its own loader names
+    a malformed file)."""
+    import json
+    try:
+        d = json.loads(path.read_text())
+    except (OSError, ValueError):
+        return {}
+    return d if isinstance(d, dict) else {}
 
 
 def surface_file_name(radii_m: tuple[float, float, float]) -> str:

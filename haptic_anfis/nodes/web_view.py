@@ -91,7 +91,6 @@ class WebView(HapticNode):
         self._contact = None               # newest contact message's values
         self.malformed = 0                 # loop messages that could not be read
         self.t_start = time.monotonic()
-        self.t_start_wall = time.time()   # the record's start of the exam
         self.running = True   # the session collects from the start; "start" begins afresh
         self._param_clients: dict = {}
         self.timer = self.create_timer(1.0 / p['rate'], self._frame)
@@ -196,10 +195,11 @@ class WebView(HapticNode):
         to say on the page. A record that cannot be written is said, never raised."""
         from ..record import level_of_case_name, store_session, utc_iso
         name = self.cv.name or 'default'
+        started = time.time() - (time.monotonic() - self.t_start)   # wall clock at the start
         try:
             sid = store_session(self.params['db'] or None, trainee, dict(report, case=name),
                                 source='run', case_level=level_of_case_name(name),
-                                started_utc=utc_iso(self.t_start_wall))
+                                started_utc=utc_iso(started))
         except (ValueError, OSError) as exc:   # RecordError is a ValueError
             self.get_logger().error(f'trainee record: {exc}')
             return f'; NOT stored in the trainee record: {exc}'
@@ -210,7 +210,6 @@ class WebView(HapticNode):
         s = self.cv.session
         self.cv.session = ExamSession(s.surface, s.subject, s.config)
         self.t_start = time.monotonic()
-        self.t_start_wall = time.time()   # the record's start of the exam
         self.running = True
         self.app.set_coverage(self.cv.session.grid.level_per_face(),
                               self.cv.session.grid.fraction())

@@ -58,10 +58,6 @@ def utc_iso(t_s: float | None = None) -> str:
     return t.isoformat(timespec='seconds')
 
 
-def _now() -> str:
-    return utc_iso()
-
-
 def not_palpable_of(report: dict) -> list[str]:
     """Names of the lesions the report says cannot be felt: ``report['not_palpable']`` (names or
     dicts with ``name``) when the exam gives it, else lesions with ``palpable: false``; [] when
@@ -88,7 +84,7 @@ def session_row(report: dict, *, source: str, case_level: int | None = None,
         palpable_missed = sum(1 for les in lesions
                               if not les.get('found') and str(les.get('name')) not in hidden)
         return {
-            'started_utc': started_utc or _now(), 'stored_utc': _now(), 'source': source,
+            'started_utc': started_utc or utc_iso(), 'stored_utc': utc_iso(), 'source': source,
             'case_name': report.get('case'), 'case_level': case_level,
             'bag_path': bag if bag is not None else report.get('bag'),
             'coverage_light': float(cov['light']), 'coverage_medium': float(cov['medium']),
