@@ -33,15 +33,23 @@ def test_systematic_trainee_covers_and_finds_the_lesion_from_forces(tmp_path, ca
     pytest.systematic_score = r['score']
 
 
-def test_systematic_trainee_marks_nothing_on_the_lesion_free_case(capfd):
+def test_systematic_trainee_marks_nothing_on_the_lesion_free_case(tmp_path, capfd):
     """The case library's 'normal' (no lesion) through its own model and surface: the same
-    force-only detector finds nothing, so no mark, and the exam passes."""
-    assert main(['exam', 'run', '--case', 'normal', '--trainee', 'systematic', '--json']) == 0
+    force-only detector finds nothing, so no mark, and the exam passes. Its bag says its case:
+    the instructor's report, without --case, scores it against 'normal' (it scored every bag
+    against the default case, whose lesion the trainee had then missed)."""
+    bag = tmp_path / 'bag'
+    assert main(['exam', 'run', '--case', 'normal', '--trainee', 'systematic', '--json',
+                 '--record', str(bag)]) == 0
     r = last_json(capfd.readouterr().out)
     assert r['case'] == 'normal' and r['lesions'] == [] and r['coverage_pct']['deep'] >= 90, r
     assert r['trainee']['finished'] and r['trainee']['detections'] == [], r
     assert r['samples']['marks'] == 0 and r['false_marks'] == 0 and r['verdict'] == 'pass', r
     assert any('no lesion' in n for n in r['notes'])
+    assert main(['exam', 'report', str(bag), '--json']) == 0
+    b = last_json(capfd.readouterr().out)
+    assert b['case'] == 'normal' and b['lesions'] == [] and b['misses'] == 0, b
+    assert b['verdict'] == r['verdict'] and not any('--case' in n for n in b['notes']), b
 
 
 def test_an_exam_cut_off_by_its_time_limit_says_so_and_is_not_stored(tmp_path, capfd):
@@ -85,6 +93,8 @@ def test_careless_trainee_scores_lower_and_misses_and_the_bag_says_the_same(tmp_
     n = last_json(capfd.readouterr().out)
     assert n['misses'] == 0 and n['hits'] == 0 and n['lesions'] == []
     assert any('no lesion' in x for x in n['notes'])
+    assert f'scored against --case {tmp_path / "none.yaml"}; the bag was recorded with case ' \
+           'default' in n['notes']
 
 
 def test_report_of_a_bag_without_the_topics_is_valid(tmp_path, capfd):

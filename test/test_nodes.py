@@ -214,6 +214,8 @@ def test_sim_command_prints_loop_statistics(capfd, tmp_path):
         assert key in last, last
     assert last['cycles'] > 1000 and 0.0 <= last['contact_s'] <= last['seconds']
     assert last['recorded_messages'] > 0
+    from haptic_anfis.bag import bag_info
+    assert bag_info(bag).custom_data['case'] == 'default'   # for exam report
     assert (bag / 'metadata.yaml').is_file()
     assert main(['sim', '--duration', '1', '--record', str(bag)]) == 1  # exists: clear error
     assert 'exists already' in capfd.readouterr().err

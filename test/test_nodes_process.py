@@ -180,6 +180,8 @@ def test_launch_command_runs_the_graph_as_separate_processes(tmp_path, capfd):
     assert out.count('exit code 0') == 4, out
     forces = [m.wrench.force.x for _, _, _, m in read_messages(bag, ['/falcon/servo_cf'])]
     assert len(forces) > 1000 and max(map(abs, forces)) > 0.5
+    from haptic_anfis.bag import bag_info
+    assert bag_info(bag).custom_data['case'] == 'default'   # for exam report
 
 
 def test_launch_rejects_unknown_nodes_and_missing_files(tmp_path, capsys):

@@ -32,6 +32,7 @@ def test_sim_records_from_a_recorder_process_and_draws_from_a_visualizer_process
     info = bag_info(bag)
     assert last['recorded_messages'] == info.message_count > 0
     assert last['dropped_messages'] == 0 == int(info.custom_data['dropped_messages'])
+    assert info.custom_data['case'] == 'default'   # for exam report
     assert {t.topic for t in info.topics} >= {absolute(t) for t in ALL_LOOP_TOPICS
                                                if 'marks' not in t and 'buttons' not in t}
     # the side nodes' output went to standard error: the JSON line is still the last of stdout

@@ -2,7 +2,9 @@
 
 A writer killed with SIGKILL leaves an MCAP without summary or footer, possibly ending in half a
 chunk, and no metadata.yaml. ``mcap.StreamReader`` reads it front to back: every closed chunk
-(schemas, channels and messages live inside the chunks) is salvaged, the torn tail is dropped.
+(schemas, channels and messages live inside the chunks) is salvaged, the torn tail is dropped;
+the custom data (the case recorded, ...) comes from the metadata records the writer put between
+the chunks as it was set (:data:`.segment.CUSTOM_RECORD`).
 The messages are written to a new bag of the same name; the original file is kept beside it as
 ``<name>.mcap.damaged``.
 """
@@ -14,6 +16,7 @@ from pathlib import Path
 
 from .errors import BagError
 from .lock import being_recorded
+from .segment import CUSTOM_RECORD
 
 
 @dataclass
@@ -70,7 +73,7 @@ def recover_bag(path: str | Path) -> RecoveryReport:
     if (p / 'metadata.yaml').is_file() and _is_valid(p):
         return RecoveryReport(p, src, already_valid=True)
 
-    from mcap.records import Channel, Message, Schema
+    from mcap.records import Channel, Message, Metadata, Schema
     from mcap.stream_reader import StreamReader
     from rosbags.rosbag2 import StoragePlugin, Writer
     from rosbags.typesys import Stores, get_types_from_msg, get_typestore
@@ -115,6 +118,9 @@ def recover_bag(path: str | Path) -> RecoveryReport:
                             continue
                         writer.write(c, rec.log_time, rec.data)
                         report.counts[c.topic] = report.counts.get(c.topic, 0) + 1
+                    elif isinstance(rec, Metadata) and rec.name == CUSTOM_RECORD:
+                        for k, v in rec.metadata.items():   # the latest value of each key
+                            writer.set_custom_data(k, v)
             except BagError:
                 raise
             except Exception as exc:  # the torn tail: EndOfFile, bad record, bad magic ...

@@ -18,6 +18,10 @@ from .topics import typestore
 #: Chunk compressions the writer offers (MCAP chunk ``compression`` field; '' = none).
 COMPRESSIONS = ('none', 'zstd', 'lz4')
 
+#: Name of the MCAP metadata records holding the bag's custom data as it is set (metadata.yaml,
+#: which also has it, is written only when the bag closes): ``bag recover`` restores it from them.
+CUSTOM_RECORD = 'haptic_anfis.custom_data'
+
 _MAGIC = b'\x89MCAP0\r\n'
 # DataEnd (op 0x0F, crc 0 = not computed) then a Footer (op 0x02) with no summary section:
 # a valid MCAP that readers index by scanning (rosbags: meta_scan; mcap: StreamReader).
@@ -71,6 +75,9 @@ class Segment:
         except Exception as exc:  # permissions, disk, ...
             raise BagError(f'{path}: cannot create the bag: {exc}') from exc
         self.mcap = Path(self.storage.path)
+        if custom_data:   # in the file from its start: a crash keeps it for bag recover
+            self._custom_record(custom_data)
+            self.storage.bio.flush()
         self._lock = hold(self.mcap)   # bag info / recover: being recorded, not interrupted
         self.conns: dict[str, object] = {}
         # The last state known to be on disk (after a successful flush) ...
@@ -89,6 +96,28 @@ class Segment:
         # if that fails (a full disk) the message is in the lost chunk and goes to the next bag.
         self.unflushed.append((topic, t_ns, data))
         self.w.write(self.conns[topic], t_ns, data)
+
+    def set_custom_data(self, data: dict[str, str]) -> None:
+        """Set custom data entries (metadata.yaml at close, and a metadata record now)."""
+        for k, v in data.items():
+            self.w.set_custom_data(k, str(v))
+        self._custom_record(data)
+        self.flush()   # on disk with the chunk before it (a failure cuts back to this point)
+
+    def _custom_record(self, data: dict[str, str]) -> None:
+        """An MCAP Metadata record (op 0x0C) named :data:`CUSTOM_RECORD` with ``data``; written
+        between chunks (the pending chunk is kept apart until it closes)."""
+        from io import BytesIO
+
+        from rosbags.rosbag2.storage_mcap import write_record, write_string, write_uint32
+        rec, kv = BytesIO(), BytesIO()
+        write_string(rec, CUSTOM_RECORD)
+        for k, v in data.items():
+            write_string(kv, str(k))
+            write_string(kv, str(v))
+        write_uint32(rec, kv.tell())
+        rec.write(kv.getbuffer())
+        write_record(self.storage.bio, 0x0C, rec)
 
     @property
     def pending_bytes(self) -> int:

@@ -27,6 +27,7 @@ from .segment import COMPRESSIONS, Segment, compressor
 from .topics import typestore
 
 _ADD = object()
+_CUSTOM = object()
 
 
 class BagWriter:
@@ -87,6 +88,14 @@ class BagWriter:
                            '(expected a ROS 2 Jazzy standard type)')
         self.topics[topic] = msgtype
         self._q.put((_ADD, topic, msgtype))
+
+    def set_custom_data(self, key: str, value: str) -> None:
+        """Set ``key`` of the bag's custom data (metadata.yaml's ``custom_data``) to ``value``,
+        in the file at once (an MCAP metadata record, which ``bag recover`` reads) and in the
+        metadata.yaml written at close; a fallback bag starts with the latest values."""
+        self.custom_data[key] = str(value)
+        if not self._closed:
+            self._q.put((_CUSTOM, {key: str(value)}))
 
     def write(self, topic: str, data: bytes, t_ns: int | None = None) -> bool:
         """Queue one serialized (CDR) message received at ``t_ns`` (default: now, system clock).
@@ -153,13 +162,16 @@ class BagWriter:
             if item is None:
                 break
             if seg is None:  # stopped by a failure: count what still arrives
-                if item and item[0] is not _ADD:
+                if item and item[0] is not _ADD and item[0] is not _CUSTOM:
                     self.lost += 1
                 continue
             try:
                 if item:
                     if item[0] is _ADD:
                         seg.add_connection(item[1], item[2])
+                    elif item[0] is _CUSTOM:
+                        seg.set_custom_data(item[1])
+                        chunk_since = None   # it closed the pending chunk
                     else:
                         seg.write(*item)
                         self.written += 1

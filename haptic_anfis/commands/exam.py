@@ -48,7 +48,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     b.add_argument('bag', metavar='BAG')
     b.add_argument('--case', default=None, metavar='NAME',
                    help='case of the library (its surface and lesions) or a scene file (its '
-                        'lesions) the session is scored against (default: default)')
+                        'lesions) the session is scored against (default: the one the bag was '
+                        'recorded with; the default case for a bag that does not say)')
     _common(b)
     add_record_arguments(b)
 

@@ -20,8 +20,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument('bag', metavar='BAG', help='recorded session (haptic-anfis sim / exam run '
                    '--record, or the recorder node)')
     p.add_argument('--case', default=None, metavar='NAME',
-                   help='case of the library (its surface and lesions) or a scene file the '
-                        'session is scored against (default: default)')
+                   help='case of the library (its surface and lesions) or a scene file (its '
+                        'lesions) the session is scored against (default: the one the bag was '
+                        'recorded with; the default case for a bag that does not say)')
     p.add_argument('--port', type=int, default=DEFAULT_PORT,
                    help=f'TCP port of the page (default {DEFAULT_PORT})')
     p.add_argument('--host', default='127.0.0.1',

@@ -13,7 +13,7 @@ from .config import load_exam_config
 from .lesions import subject_from_scene
 from .session import ExamSession, Surface
 
-__all__ = ['new_session', 'resolve_exam_case', 'session_from_bag']
+__all__ = ['new_session', 'recorded_case', 'resolve_exam_case', 'session_from_bag']
 
 
 def resolve_exam_case(case: str | None, need: tuple[str, ...] = ('model_path', 'mesh_path'),
@@ -36,6 +36,47 @@ def resolve_exam_case(case: str | None, need: tuple[str, ...] = ('model_path', '
     return c, str(c.scene_path)
 
 
+def recorded_case(bag, custom_data: dict, case: str | None) -> tuple[str | None, str]:
+    """``(case to score against, note)`` for ``bag`` with its ``custom_data`` (metadata.yaml):
+    ``case`` if given (the note says when the bag was recorded with another), else the scene
+    file or the case the recorder wrote (``scene``, ``case``; 'default' -> None); a bag without
+    them (recorded before the recorder wrote them, or by another recorder): None, the default,
+    with a note saying so.
+
+    Raises:
+        BagError: no ``case`` given and the bag holds several cases (a session switched them);
+            its scene file is gone.
+        CaseError: the bag's case is not in this library (or not ready).
+    """
+    from ..bag.errors import BagError
+    scene, recorded = custom_data.get('scene', ''), custom_data.get('case', '')
+    said = f'scene file {scene}' if scene else f'case {recorded}' if recorded else ''
+    if case is not None:
+        same = case in (recorded, scene) or scene and Path(case).resolve() == Path(scene)
+        return case, ('' if not said or same else
+                      f'scored against --case {case}; the bag was recorded with {said}')
+    if scene:
+        if not Path(scene).is_file():
+            raise BagError(f'{bag}: recorded with the scene file {scene}, which is gone: give '
+                           '--case (a case or a scene file) to score it')
+        return scene, ''
+    if not recorded:
+        return None, ('the bag does not say which case it was recorded with (a session given '
+                      'parameter files or overrides, a recorder started on its own, or an older '
+                      'version): scored against the default case; give --case if it was another')
+    if ',' in recorded:
+        raise BagError(f'{bag}: the session switched cases while recording ({recorded}): give '
+                       '--case NAME to score it against one of them')
+    if recorded == 'default':
+        return None, ''
+    from ..cases import CaseError, library
+    try:
+        library().get(recorded).require(('mesh_path',))
+    except CaseError as exc:
+        raise CaseError(f'{bag}: recorded with case {recorded}: {exc}') from None
+    return recorded, ''
+
+
 def _new_session(c, subject, cfg) -> ExamSession:
     from ..cases import DEFAULT_CASE, library
     from ..contact import load_mesh
@@ -56,24 +97,27 @@ def session_from_bag(bag: str | os.PathLike, case: str | None = None,
                      exam_config: str | os.PathLike | None = None,
                      require_contact: bool = False) -> tuple[dict, ExamSession]:
     """``(report, session)`` of the session recorded in ``bag``, scored against ``case`` (a
-    library case or a scene file; None = the default scene) with the scoring settings
-    ``exam_config`` (None = config/exam.yaml).
+    library case or a scene file; None = the case the bag says it was recorded with, see
+    :func:`recorded_case`) with the scoring settings ``exam_config`` (None = config/exam.yaml).
 
     The report carries ``notes`` on what the bag lacks (no contact topic: zero coverage; no
-    ``exam/marks``: marks from button 1 presses at the probe pose), ``bag`` and ``case``.
+    ``exam/marks``: marks from button 1 presses at the probe pose; no case: the default) or
+    where ``case`` differs from the bag's, ``bag`` and ``case``.
 
     Raises:
-        BagError (a ValueError): missing or unreadable bag; or, with ``require_contact``, a bag
-        without the contact topic (the message names it and lists the topics it has).
-        CaseError / ValueError: unknown case, bad exam config.
+        BagError (a ValueError): missing or unreadable bag; a bag of several cases and no
+        ``case``; or, with ``require_contact``, a bag without the contact topic (the message
+        names it and lists the topics it has).
+        CaseError / ValueError: unknown case (also one the bag names), bad exam config.
     """
     from ..bag.reader import bag_info, read_messages
     from ..bag.topics import absolute
     from ..device.buttons import CLUTCH, MARK
     cfg = load_exam_config(exam_config)
+    info = bag_info(bag)   # BagError on a missing / corrupt bag, before the mesh is loaded
+    case, case_note = recorded_case(bag, info.custom_data, case)
     c, scene = resolve_exam_case(case, need=('mesh_path',))
     subject = subject_from_scene(scene)
-    info = bag_info(bag)   # BagError on a missing / corrupt bag, before the mesh is loaded
     have = {t.topic for t in info.topics}
     missing = [t for t in (absolute(ifc.TOPIC_CONTACT),) if t not in have]
     if missing and require_contact:
@@ -83,7 +127,7 @@ def session_from_bag(bag: str | os.PathLike, case: str | None = None,
     session = _new_session(c, subject, cfg)
     wanted = {absolute(t) for t in (ifc.TOPIC_CONTACT, ifc.TOPIC_COMMAND, ifc.TOPIC_POSE,
                                     ifc.TOPIC_MARKS, ifc.TOPIC_BUTTONS)} & have
-    notes = []
+    notes = [case_note] if case_note else []
     if missing:
         notes.append(f'{bag}: no {", ".join(missing)} topic (it has '
                      f'{", ".join(sorted(have)) or "none"}): nothing to score, zero coverage')

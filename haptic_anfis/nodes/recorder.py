@@ -28,6 +28,7 @@ from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from ..bag import BagError, BagWriter
 from ..bag.segment import COMPRESSIONS
 from ..bag.topics import DEFAULT_TOPICS, KNOWN_TYPES
+from ._case import CASE_PARAMS, declare_case  # noqa: F401 (CASE_PARAMS: in config)
 from ._common import Param, declare_parameters, message_class, positive, run_node
 from .base import HapticNode
 from .polled import PolledSubscription
@@ -69,12 +70,23 @@ def default_output() -> str:
 
 
 class Recorder(HapticNode):
-    """Parameters in :data:`PARAMS`; ``topics`` / ``output`` arguments override them (used by
-    ``haptic-anfis sim --record``)."""
+    """Parameters in :data:`PARAMS` and the session's case (``case`` / ``random_case_seed``),
+    which the bag's custom data ``case`` names for ``exam report``: the case names in the order
+    the session switched to them, comma-separated (a blind session's too). Neither parameter
+    given: the recorder does not know the case (the nodes' own files) and writes none until a
+    switch (then 'unknown, NAME'). ``topics`` / ``output`` arguments override the parameters
+    (used by ``haptic-anfis sim --record``); ``custom_data`` adds to the bag's custom data
+    (``exam run``: the scene file)."""
 
-    def __init__(self, name: str = 'recorder', *, topics=None, output: str | None = None, **kw):
+    def __init__(self, name: str = 'recorder', *, topics=None, output: str | None = None,
+                 custom_data: dict[str, str] | None = None, **kw):
         super().__init__(name, **kw)
         p = self.params = declare_parameters(self, PARAMS)
+        case = declare_case(self, self._switch_case)
+        given = bool(self.get_parameter('case').value) or (
+            self.get_parameter('random_case_seed').value >= 0)
+        #: the cases of the session, in order (the first 'unknown' when none was given)
+        self.cases = [case.name if case else 'default'] if given else ['unknown']
         self.output = output or p['output'] or default_output()
         wanted = list(topics) if topics is not None else p['topics']
         self.wanted = [self.resolve_topic_name(t) for t in wanted]
@@ -88,7 +100,9 @@ class Recorder(HapticNode):
             signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
         self.writer = BagWriter(self.output, flush_period=p['flush_period'],
                                 chunk_size=p['chunk_size'], max_queue=p['max_queue'],
-                                custom_data={'recorder': 'haptic_anfis recorder'},
+                                custom_data={'recorder': 'haptic_anfis recorder',
+                                             **({'case': self.cases[0]} if given else {}),
+                                             **(custom_data or {})},
                                 compression=p['compression'],
                                 fallback_dir=p['fallback_output_dir'] or None,
                                 on_error=self._on_write_error)
@@ -102,6 +116,13 @@ class Recorder(HapticNode):
         self._taker.start()
         self.get_logger().info(f'recording to {self.output}: {", ".join(self.wanted)}'
                                + (' + every other topic' if self.all_topics else ''))
+
+    def _switch_case(self, case) -> None:
+        """The session switched its case (a writable parameter set): the bag says so."""
+        label = case.name if case else 'default'
+        if label != self.cases[-1]:
+            self.cases.append(label)
+            self.writer.set_custom_data('case', ', '.join(self.cases))
 
     def _discover(self) -> None:
         graph = dict(self.get_topic_names_and_types())

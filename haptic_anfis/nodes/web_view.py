@@ -39,7 +39,7 @@ NEWEST = QoSProfile(depth=1, history=HistoryPolicy.KEEP_LAST,
 CONTACT_QUEUE = QoSProfile(depth=200, history=HistoryPolicy.KEEP_LAST,
                            reliability=ReliabilityPolicy.BEST_EFFORT)
 #: nodes whose case the instructor's choice switches (those that are running)
-CASE_NODES = ('contact_detector', 'force_server', 'visualizer')
+CASE_NODES = ('contact_detector', 'force_server', 'visualizer', 'recorder')
 
 
 def _port(v):

@@ -70,8 +70,19 @@ class OneProcessSession:
                      if side or side_nodes or spec.view else None)
 
     def _recorder(self, ctx):
+        from pathlib import Path
+
+        from rclpy.parameter import Parameter
+
         from ..nodes.recorder import Recorder
-        return Recorder(context=ctx, output=self.spec.record, topics=RECORDED_TOPICS())
+        s = self.spec   # the case args reach it with the graph's (global); 'default' does not
+        named = s.case_arguments()
+        default = [Parameter('case', value='default')] if s.recorder_case_arguments() and not (
+            named) else []
+        scene = s.scene and not named   # exam run --case FILE (not a case's own scene file)
+        return Recorder(context=ctx, output=s.record, topics=RECORDED_TOPICS(),
+                        parameter_overrides=default,
+                        custom_data={'scene': str(Path(s.scene).resolve())} if scene else None)
 
     def _side_nodes(self, more: Mapping[str, Sequence[str]], nice: int | None):
         """The visualizer (unless ``in_process`` / ``no_viz``), with ``recorder_process`` the
@@ -83,7 +94,8 @@ class OneProcessSession:
         nodes: dict[str, list[str]] = {}
         if s.record and s.recorder_process:
             from ..nodes.processes import recorder_arguments
-            nodes['recorder'] = [*common, *recorder_arguments(s.record, RECORDED_TOPICS())]
+            nodes['recorder'] = [*common, *s.recorder_case_arguments(),
+                                 *recorder_arguments(s.record, RECORDED_TOPICS())]
         if s.visualizer and not s.in_process:
             nodes['visualizer'] = [*common, *s.case_arguments()]
         if s.view:   # the browser page (exam: no session buttons, the exam drives the hand)

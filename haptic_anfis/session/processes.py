@@ -68,7 +68,9 @@ class ProcessSession:
             from ..nodes.processes import recorder_arguments
             topics, self.notes = recorder_settings(spec, recorded_topics())
             self.recorded = topics
-            self.extra.setdefault('recorder', []).extend(recorder_arguments(spec.record, topics))
+            self.extra['recorder'] = [*spec.recorder_case_arguments(),
+                                      *self.extra.get('recorder', []),
+                                      *recorder_arguments(spec.record, topics)]
         if spec.enclave_root:
             root = '/' + spec.enclave_root.strip('/')
             for n in self.extra:

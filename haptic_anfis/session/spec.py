@@ -34,6 +34,9 @@ ONE_PROCESS_NODES = ('falcon_driver', 'contact_detector', 'force_server', 'visua
 #: nodes that take the case parameters (--case / --random-case)
 CASE_NODES = ('contact_detector', 'force_server', 'visualizer', 'examiner', 'web_view')
 DEFAULT_LAUNCH_NODES = 'falcon_driver,contact_detector,force_server,visualizer'
+#: node parameters by which a session renders another scene than its case (or the default)
+SCENE_PARAMETERS = ('case', 'random_case_seed', 'mesh_path', 'mesh_unit', 'dome_radii',
+                    'model_path', 'tumours', 'displacement_path')
 
 
 class SessionError(HapticAnfisError, ValueError):
@@ -211,6 +214,27 @@ class SessionSpec:
         if self.random_case:
             return ['-p', f'random_case_seed:={int(self.seed)}']
         return ['-p', f'case:={self.case}'] if self.case else []
+
+    def recorder_case_arguments(self) -> list[str]:
+        """The recorder's case parameter, which it writes into the bag: the nodes' (see
+        :meth:`case_arguments`), or ``case:=default`` when nothing changed the default scene (no
+        case, no scene file, no parameter file or ``-p`` override setting one of
+        :data:`SCENE_PARAMETERS`); else none (the bag then does not name its case: the nodes
+        may render other files)."""
+        if self.case or self.random_case:
+            return self.case_arguments()
+        return [] if self.scene or self._scene_parameters_set() else ['-p', 'case:=default']
+
+    def _scene_parameters_set(self) -> bool:
+        """A parameter file or ``-p`` override sets one of :data:`SCENE_PARAMETERS` (or the
+        overrides name a parameter file: not looked into)."""
+        from ..nodes.parameters import read_parameter_file
+        if any(key in SCENE_PARAMETERS for f in self.params_files
+               for _, key, _, _ in read_parameter_file(f)):
+            return True
+        args = self.user_ros_args()
+        return '--params-file' in args or any(
+            a.split(':=', 1)[0].rsplit(':', 1)[-1] in SCENE_PARAMETERS for a in args if ':=' in a)
 
     def view_arguments(self, controls: bool) -> list[str]:
         """The web_view node's own ``-p`` arguments (its port; ``controls``: the session's

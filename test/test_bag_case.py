@@ -1,0 +1,162 @@
+"""The case a session ran is in its bag: the recorder writes it (and each switch) into the bag's
+custom data, a crash keeps it (``bag recover`` reads it back from the MCAP), and ``exam report``
+/ ``view BAG`` score against it when no ``--case`` is given (they scored every bag against the
+default case: a small-breast case's bag got ~0 % coverage)."""
+from __future__ import annotations
+
+import shutil
+import time
+
+import pytest
+
+from haptic_anfis.bag import BagError, BagWriter, bag_info, read_messages, recover_bag
+from haptic_anfis.cases import CaseError
+from haptic_anfis.exam.from_bag import recorded_case
+from test_bag import _pose_bytes as _pose
+
+TOPIC = '/falcon/measured_cp'
+
+
+def test_custom_data_set_while_recording_is_in_the_bag_and_survives_a_crash(tmp_path):
+    """Set at the start and changed mid-recording: metadata.yaml has the latest value after a
+    close; a copy of the live files (what a SIGKILL leaves: no metadata.yaml) recovers it."""
+    bag = tmp_path / 'live'
+    w = BagWriter(bag, flush_period=0.05, custom_data={'case': 'a', 'recorder': 'test'})
+    w.add_topic(TOPIC, 'geometry_msgs/msg/PoseStamped')
+    for i in range(50):
+        w.write(TOPIC, _pose(i), 1_000_000_000 + i * 1_000_000)
+    w.set_custom_data('case', 'a, b')
+    for i in range(50, 100):
+        w.write(TOPIC, _pose(i), 1_000_000_000 + i * 1_000_000)
+    time.sleep(0.5)   # past the flush period: every message is in a closed chunk
+    killed = tmp_path / 'killed'
+    shutil.copytree(bag, killed)
+    (killed / 'live.mcap').rename(killed / 'killed.mcap')
+    w.close()
+    info = bag_info(bag)
+    assert info.custom_data == {'case': 'a, b', 'recorder': 'test', 'dropped_messages': '0'}
+    assert info.message_count == 100
+    # the extra metadata records do not disturb the readers (rosbags', and mcap's)
+    got = [m.pose.position.x for _, _, _, m in read_messages(bag)]
+    assert got == [float(i) for i in range(100)]
+    from mcap.reader import make_reader
+    with (bag / 'live.mcap').open('rb') as fh:
+        assert sum(1 for _ in make_reader(fh).iter_messages()) == 100
+    assert not (killed / 'metadata.yaml').exists()
+    report = recover_bag(killed)
+    assert report.messages == 100
+    assert bag_info(killed).custom_data['case'] == 'a, b'
+    assert bag_info(killed).custom_data['recorder'] == 'test'
+
+
+def test_a_bag_without_custom_data_has_no_metadata_record(tmp_path):
+    """Nothing to keep: the file holds no record of ours (and reads as before)."""
+    bag = tmp_path / 'plain'
+    with BagWriter(bag) as w:
+        w.add_topic(TOPIC, 'geometry_msgs/msg/PoseStamped')
+        w.write(TOPIC, _pose(0), 1_000_000_000)
+    from haptic_anfis.bag.segment import CUSTOM_RECORD
+    assert CUSTOM_RECORD.encode() not in (bag / 'plain.mcap').read_bytes()
+    assert bag_info(bag).custom_data == {'dropped_messages': '0'}
+
+
+# --- which case a report scores against --------------------------------------------------------
+
+def test_the_recorded_case_is_the_default_for_scoring():
+    assert recorded_case('b', {'case': 'normal'}, None) == ('normal', '')
+    assert recorded_case('b', {'case': 'default'}, None) == (None, '')
+
+
+def test_a_bag_that_does_not_say_is_scored_against_the_default_and_says_so():
+    case, note = recorded_case('b', {'recorder': 'x'}, None)
+    assert case is None and 'does not say which case' in note and '--case' in note
+
+
+def test_an_explicit_case_wins_and_a_different_one_is_noted():
+    assert recorded_case('b', {'case': 'normal'}, 'normal') == ('normal', '')
+    case, note = recorded_case('b', {'case': 'normal'}, 'default')
+    assert case == 'default'
+    assert note == 'scored against --case default; the bag was recorded with case normal'
+    assert recorded_case('b', {}, 'default') == ('default', '')
+
+
+def test_a_bag_of_several_cases_needs_a_case():
+    with pytest.raises(BagError, match=r"b: the session switched cases while recording "
+                                       r"\(normal, default\): give --case NAME"):
+        recorded_case('b', {'case': 'normal, default'}, None)
+    assert recorded_case('b', {'case': 'normal, default'}, 'normal')[0] == 'normal'
+
+
+def test_a_case_this_library_does_not_have_is_named_with_the_bag():
+    with pytest.raises(CaseError, match="^b: recorded with case no_such_case: "):
+        recorded_case('b', {'case': 'no_such_case'}, None)
+
+
+def test_the_scene_file_of_an_exam_is_used_and_one_that_is_gone_is_said(tmp_path):
+    scene = tmp_path / 'scene.yaml'
+    scene.write_text('x: 1\n')
+    assert recorded_case('b', {'case': 'default', 'scene': str(scene)}, None) == (str(scene), '')
+    assert recorded_case('b', {'case': 'default', 'scene': str(scene)}, str(scene))[1] == ''
+    scene.unlink()
+    with pytest.raises(BagError, match='scene.yaml, which is gone: give --case'):
+        recorded_case('b', {'case': 'default', 'scene': str(scene)}, None)
+
+
+# --- the recorder node ------------------------------------------------------------------------
+
+@pytest.mark.ros
+def test_the_recorder_writes_the_case_and_follows_a_switch(tmp_path):
+    """``case`` at start, then two switches (the browser page's instructor, ``ros2 param set``),
+    one of them back: the bag names them in order; a blind draw is named too (the instructor
+    scores it; the bag is read after the session)."""
+    rclpy = pytest.importorskip('rclpy')
+    from rclpy.parameter import Parameter
+
+    from haptic_anfis.cases import library
+    from haptic_anfis.nodes.recorder import Recorder
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx)
+    try:
+        rec = Recorder(context=ctx, output=str(tmp_path / 'bag'), topics=[TOPIC],
+                       parameter_overrides=[Parameter('case', value='normal')])
+        assert rec.set_parameters([Parameter('case', value='')])[0].successful
+        assert not rec.set_parameters([Parameter('case', value='no_such_case')])[0].successful
+        drawn = library().random(7).name
+        assert rec.set_parameters([Parameter('random_case_seed', value=7)])[0].successful
+        rec.close()
+        rec.destroy_node()
+        blind = Recorder(context=ctx, output=str(tmp_path / 'blind'), topics=[TOPIC],
+                         parameter_overrides=[Parameter('random_case_seed', value=7)])
+        blind.close()
+        blind.destroy_node()
+        for name, switch in (('none', False), ('none_then', True)):   # it cannot know
+            r = Recorder(context=ctx, output=str(tmp_path / name), topics=[TOPIC])
+            if switch:
+                assert r.set_parameters([Parameter('case', value='normal')])[0].successful
+            r.close()
+            r.destroy_node()
+    finally:
+        rclpy.shutdown(context=ctx)
+    assert bag_info(tmp_path / 'bag').custom_data['case'] == f'normal, default, {drawn}'
+    assert bag_info(tmp_path / 'blind').custom_data['case'] == drawn
+    assert 'case' not in bag_info(tmp_path / 'none').custom_data
+    assert bag_info(tmp_path / 'none_then').custom_data['case'] == 'unknown, normal'
+
+
+def test_the_session_tells_its_recorder_the_default_only_when_nothing_can_change_it(tmp_path):
+    from haptic_anfis.session import SessionSpec
+    assert SessionSpec().recorder_case_arguments() == ['-p', 'case:=default']
+    assert SessionSpec(case='normal').recorder_case_arguments() == ['-p', 'case:=normal']
+    assert SessionSpec(random_case=True, seed=3).recorder_case_arguments() == [
+        '-p', 'random_case_seed:=3']
+    mesh, driver = tmp_path / 'mesh.yaml', tmp_path / 'driver.yaml'
+    mesh.write_text('contact_detector:\n  ros__parameters:\n    mesh_path: my.stl\n')
+    driver.write_text('falcon_driver:\n  ros__parameters:\n    servo_priority: 0\n')
+    for other in (dict(params_files=(str(driver), str(mesh))), dict(scene='s.yaml'),
+                  dict(ros_args=('-p', 'model_path:=m.json')),
+                  dict(ros_args=('-p', 'force_server:model_path:=m.json')),
+                  dict(ros_args=('--params-file', 'x.yaml'))):
+        assert SessionSpec(**other).recorder_case_arguments() == [], other
+    # settings that do not touch the scene: still the default
+    assert SessionSpec(params_files=(str(driver),), ros_args=('-p', 'rate:=20.0')
+                       ).recorder_case_arguments() == ['-p', 'case:=default']
