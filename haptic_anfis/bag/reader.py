@@ -128,6 +128,11 @@ class TopicStats:
     rate_hz: float
 
 
+#: the custom data ``recorder`` of the package's recorder node: the bag's ``case`` and ``scene``
+#: entries are its (``exam report`` reads them)
+RECORDER_MARK = 'haptic_anfis recorder'
+
+
 @dataclass(frozen=True)
 class BagInfo:
     path: Path
@@ -167,8 +172,15 @@ def bag_info(path: str | Path) -> BagInfo:
             counts[(c.topic, c.msgtype)] = counts.get((c.topic, c.msgtype), 0) + c.msgcount
         topics = [TopicStats(t, ty, k, (k - 1) / dur if dur > 0 and k > 1 else 0.0)
                   for (t, ty), k in sorted(counts.items())]
+        if not p.is_dir():   # an MCAP file of a bag: its folder's metadata says its custom data
+            up = _metadata_yaml(p.parent)
+            custom = up.get('custom_data') if any(
+                Path(str(f)).name == p.name for f in up.get('relative_file_paths') or []) else None
+        else:
+            custom = meta.get('custom_data')
         return BagInfo(p, files, size, meta.get('storage_identifier', p.suffix.lstrip('.')),
-                       start, end, n, topics, dict(meta.get('custom_data') or {}), kept)
+                       start, end, n, topics, {k: str(v) for k, v in (custom or {}).items()},
+                       kept)
 
 
 def recorded_summary(path: str | Path) -> dict:

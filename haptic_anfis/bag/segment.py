@@ -42,6 +42,28 @@ def compressor(name: str):
     raise BagError(f'compression {name!r}: expected one of {", ".join(COMPRESSIONS)}')
 
 
+def _count_metadata(mcap: Path, n: int) -> None:
+    """Set the Statistics record's ``metadata_count`` of the closed ``mcap`` to ``n``: rosbags
+    counts its own record (``rosbag2``) only, the file also holds the :data:`CUSTOM_RECORD`
+    ones (not in the summary's metadata index: readers that want them scan the file). The
+    summary has no CRC (rosbags writes 0), so the 4 bytes are patched in place."""
+    with mcap.open('r+b') as fh:
+        fh.seek(-8 - 29, os.SEEK_END)   # the footer record: op, length, 2 offsets, CRC
+        op, _, _, summary_offset_start, _ = struct.unpack('<BQQQI', fh.read(29))
+        if op != 0x02 or not summary_offset_start:
+            return
+        fh.seek(summary_offset_start)
+        while True:   # Summary Offset records: op 0x0E, length, group opcode, start, length
+            head = fh.read(26)
+            if len(head) < 26 or head[0] != 0x0E:
+                return
+            group, start = head[9], struct.unpack('<Q', head[10:18])[0]
+            if group == 0x0B:   # Statistics: op, length, messages u64, schemas u16,
+                fh.seek(start + 1 + 8 + 8 + 2 + 4 + 4)   # channels u32, attachments u32
+                fh.write(struct.pack('<I', n))
+                return
+
+
 class Segment:
     """A bag directory being written from one thread (the writer thread of :class:`BagWriter`)."""
 
@@ -64,20 +86,26 @@ class Segment:
         for k, v in custom_data.items():
             self.w.set_custom_data(k, str(v))
         name, fn = compressor(compression)
+        self._custom_records = 0
         try:
             self.w.open()
             self.storage = self.w.storage
             if fn is not None:
                 self.storage.compression, self.storage.compressor = name, fn
+            if custom_data:   # in the file from its start: a crash keeps it for bag recover
+                self._custom_record(custom_data)
             self.storage.bio.flush()
         except BagError:
             raise
         except Exception as exc:  # permissions, disk, ...
+            storage = getattr(self.w, 'storage', None)
+            if storage is not None:
+                try:
+                    storage.bio.close()
+                except Exception:
+                    pass
             raise BagError(f'{path}: cannot create the bag: {exc}') from exc
         self.mcap = Path(self.storage.path)
-        if custom_data:   # in the file from its start: a crash keeps it for bag recover
-            self._custom_record(custom_data)
-            self.storage.bio.flush()
         self._lock = hold(self.mcap)   # bag info / recover: being recorded, not interrupted
         self.conns: dict[str, object] = {}
         # The last state known to be on disk (after a successful flush) ...
@@ -118,6 +146,7 @@ class Segment:
         write_uint32(rec, kv.tell())
         rec.write(kv.getbuffer())
         write_record(self.storage.bio, 0x0C, rec)
+        self._custom_records += 1
 
     @property
     def pending_bytes(self) -> int:
@@ -139,6 +168,8 @@ class Segment:
         self.flush()
         self.w.close()
         release(self._lock)
+        if self._custom_records:
+            _count_metadata(self.mcap, 1 + self._custom_records)
 
     def seal(self) -> str:
         """After a write failed: keep what is on disk as a readable bag; say what was done.

@@ -171,6 +171,7 @@ class BagWriter:
                         seg.add_connection(item[1], item[2])
                     elif item[0] is _CUSTOM:
                         seg.set_custom_data(item[1])
+                        self.chunks_flushed += 1
                         chunk_since = None   # it closed the pending chunk
                     else:
                         seg.write(*item)

@@ -39,9 +39,9 @@ def resolve_exam_case(case: str | None, need: tuple[str, ...] = ('model_path', '
 def recorded_case(bag, custom_data: dict, case: str | None) -> tuple[str | None, str]:
     """``(case to score against, note)`` for ``bag`` with its ``custom_data`` (metadata.yaml):
     ``case`` if given (the note says when the bag was recorded with another), else the scene
-    file or the case the recorder wrote (``scene``, ``case``; 'default' -> None); a bag without
-    them (recorded before the recorder wrote them, or by another recorder): None, the default,
-    with a note saying so.
+    file or the case the package's recorder wrote (``scene``, ``case``; 'default' -> None); a
+    bag without them (recorded before the recorder wrote them, or by another recorder, whose
+    keys of these names are not ours): None, the default, with a note saying so.
 
     Raises:
         BagError: no ``case`` given and the bag holds several cases (a session switched them);
@@ -49,12 +49,18 @@ def recorded_case(bag, custom_data: dict, case: str | None) -> tuple[str | None,
         CaseError: the bag's case is not in this library (or not ready).
     """
     from ..bag.errors import BagError
-    scene, recorded = custom_data.get('scene', ''), custom_data.get('case', '')
+    from ..bag.reader import RECORDER_MARK
+    ours = custom_data.get('recorder') == RECORDER_MARK
+    scene, recorded = ((custom_data.get('scene', ''), custom_data.get('case', '')) if ours
+                       else ('', ''))
     said = f'scene file {scene}' if scene else f'case {recorded}' if recorded else ''
     if case is not None:
         same = case in (recorded, scene) or scene and Path(case).resolve() == Path(scene)
         return case, ('' if not said or same else
                       f'scored against --case {case}; the bag was recorded with {said}')
+    if ',' in recorded:   # (with a scene file too: its exam switched case afterwards)
+        raise BagError(f'{bag}: the session switched cases while recording ({recorded}): give '
+                       '--case NAME to score it against one of them')
     if scene:
         if not Path(scene).is_file():
             raise BagError(f'{bag}: recorded with the scene file {scene}, which is gone: give '
@@ -64,9 +70,6 @@ def recorded_case(bag, custom_data: dict, case: str | None) -> tuple[str | None,
         return None, ('the bag does not say which case it was recorded with (a session given '
                       'parameter files or overrides, a recorder started on its own, or an older '
                       'version): scored against the default case; give --case if it was another')
-    if ',' in recorded:
-        raise BagError(f'{bag}: the session switched cases while recording ({recorded}): give '
-                       '--case NAME to score it against one of them')
     if recorded == 'default':
         return None, ''
     from ..cases import CaseError, library

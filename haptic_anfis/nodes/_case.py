@@ -6,7 +6,9 @@ session where the trainee must not know the case (the node then logs no case nam
 nodes' other parameters these two are writable: setting either on a running node (``ros2 param
 set /force_server case normal``, or ``Node.set_parameters``) switches the case. The node's
 ``switch(case)`` callback does the swap; a bad name is rejected (the parameter keeps its value,
-the node keeps running on the old case) with the reason in the result.
+the node keeps running on the old case) with the reason in the result. Setting one alone turns
+the other off: a name ends the random draw, a seed replaces the name (the browser page's blind
+choice sets only the seed, also on nodes started with ``case:=NAME``).
 """
 from __future__ import annotations
 
@@ -17,7 +19,7 @@ from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 from ..cases import Case, CaseError, resolve_case
 from .parameters import CASE_PARAMS  # declared writable: setting one switches the case
 
-__all__ = ['CASE_PARAMS', 'declare_case', 'describe', 'apply_case']
+__all__ = ['CASE_PARAMS', 'declare_case', 'describe', 'apply_case', 'requested_case']
 
 
 def declare_case(node, switch: Callable[[Case | None], None]) -> Case | None:
@@ -38,17 +40,11 @@ def declare_case(node, switch: Callable[[Case | None], None]) -> Case | None:
     node.get_logger().info(describe(case, seed))
 
     def on_set(params) -> SetParametersResult:
-        new = {p.name: p.value for p in params if p.name in ('case', 'random_case_seed')}
-        if not new:
-            return SetParametersResult(successful=True)
-        n = new.get('case', node.get_parameter('case').value)
-        s = new.get('random_case_seed', node.get_parameter('random_case_seed').value)
-        if 'case' in new and n and 'random_case_seed' not in new:
-            s = -1  # naming a case turns the random draw off
         try:
-            if not isinstance(n, str) or not isinstance(s, int):
-                raise CaseError(f'case must be a string and random_case_seed an integer, got '
-                                f'{n!r}, {s!r}')
+            asked = requested_case(node, params)
+            if asked is None:
+                return SetParametersResult(successful=True)
+            n, s = asked
             target = resolve_case(n, s)
             switch(target)
         except Exception as exc:  # keep running on the old case
@@ -59,6 +55,29 @@ def declare_case(node, switch: Callable[[Case | None], None]) -> Case | None:
 
     node.add_on_set_parameters_callback(on_set)
     return case
+
+
+def requested_case(node, params) -> tuple[str, int] | None:
+    """``(case, random_case_seed)`` a parameter set on ``node`` asks for (None: it sets
+    neither): the values set, the node's current ones for the other, except that a name set
+    alone ends the random draw and a seed set alone replaces the name.
+
+    Raises:
+        CaseError: a value of the wrong type.
+    """
+    new = {p.name: p.value for p in params if p.name in ('case', 'random_case_seed')}
+    if not new:
+        return None
+    n = new.get('case', node.get_parameter('case').value)
+    s = new.get('random_case_seed', node.get_parameter('random_case_seed').value)
+    if not isinstance(n, str) or not isinstance(s, int):
+        raise CaseError(f'case must be a string and random_case_seed an integer, got {n!r}, '
+                        f'{s!r}')
+    if 'case' in new and n and 'random_case_seed' not in new:
+        s = -1  # naming a case turns the random draw off
+    if 'random_case_seed' in new and s >= 0 and 'case' not in new:
+        n = ''  # a draw replaces the name (the page's blind choice)
+    return n, s
 
 
 def describe(case: Case | None, seed: int) -> str:

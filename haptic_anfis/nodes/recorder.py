@@ -23,12 +23,15 @@ import signal
 import threading
 import time
 
+from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from ..bag import BagError, BagWriter
+from ..bag.reader import RECORDER_MARK
 from ..bag.segment import COMPRESSIONS
 from ..bag.topics import DEFAULT_TOPICS, KNOWN_TYPES
-from ._case import CASE_PARAMS, declare_case  # noqa: F401 (CASE_PARAMS: in config)
+from ..cases import CaseError
+from ._case import CASE_PARAMS, requested_case
 from ._common import Param, declare_parameters, message_class, positive, run_node
 from .base import HapticNode
 from .polled import PolledSubscription
@@ -69,24 +72,49 @@ def default_output() -> str:
     return time.strftime('session_%Y%m%d-%H%M%S')
 
 
+def _case_label(name: str, seed: int) -> str:
+    """The case the loop nodes run for ``case`` / ``random_case_seed`` (as
+    :func:`haptic_anfis.cases.resolve_case` draws it; a draw that fails: 'unknown'), by name:
+    '' -> 'default'.
+
+    Raises:
+        CaseError: ``name`` is not a case of the library.
+    """
+    from ..cases import library
+    if seed >= 0:
+        try:
+            return library().random(seed).name
+        except CaseError:   # no case ready: the loop nodes refuse the draw too
+            return 'unknown'
+    if name:
+        library().get(name)   # CaseError for a name the library does not have
+    return name or 'default'
+
+
 class Recorder(HapticNode):
-    """Parameters in :data:`PARAMS` and the session's case (``case`` / ``random_case_seed``),
-    which the bag's custom data ``case`` names for ``exam report``: the case names in the order
-    the session switched to them, comma-separated (a blind session's too). Neither parameter
-    given: the recorder does not know the case (the nodes' own files) and writes none until a
-    switch (then 'unknown, NAME'). ``topics`` / ``output`` arguments override the parameters
-    (used by ``haptic-anfis sim --record``); ``custom_data`` adds to the bag's custom data
-    (``exam run``: the scene file)."""
+    """Parameters in :data:`PARAMS` and the session's case (``case`` / ``random_case_seed``, as
+    the loop nodes take them), which the bag's custom data ``case`` names for ``exam report``:
+    the case names in the order the session switched to them, comma-separated (a blind
+    session's too). Neither parameter given: the recorder does not know the case (the nodes'
+    own files) and writes none until a switch (then 'unknown, NAME'). The case is only a label
+    here: a case whose files are missing or whose scene changed is still named (the loop nodes
+    refuse it), so that recording never fails for it. ``topics`` / ``output`` arguments
+    override the parameters (used by ``haptic-anfis sim --record``); ``custom_data`` adds to
+    the bag's custom data (``exam run``: the scene file)."""
 
     def __init__(self, name: str = 'recorder', *, topics=None, output: str | None = None,
                  custom_data: dict[str, str] | None = None, **kw):
         super().__init__(name, **kw)
         p = self.params = declare_parameters(self, PARAMS)
-        case = declare_case(self, self._switch_case)
-        given = bool(self.get_parameter('case').value) or (
-            self.get_parameter('random_case_seed').value >= 0)
+        for c in CASE_PARAMS:   # writable: the session's case switches follow
+            self.declare_parameter(c.name, c.default,
+                                   ParameterDescriptor(description=c.description))
+        name = self.get_parameter('case').value
+        seed = self.get_parameter('random_case_seed').value
+        given = bool(name) or seed >= 0
         #: the cases of the session, in order (the first 'unknown' when none was given)
-        self.cases = [case.name if case else 'default'] if given else ['unknown']
+        self.cases = [_case_label(name, seed)] if given else ['unknown']
+        self.add_on_set_parameters_callback(self._on_set_case)
         self.output = output or p['output'] or default_output()
         wanted = list(topics) if topics is not None else p['topics']
         self.wanted = [self.resolve_topic_name(t) for t in wanted]
@@ -100,7 +128,7 @@ class Recorder(HapticNode):
             signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
         self.writer = BagWriter(self.output, flush_period=p['flush_period'],
                                 chunk_size=p['chunk_size'], max_queue=p['max_queue'],
-                                custom_data={'recorder': 'haptic_anfis recorder',
+                                custom_data={'recorder': RECORDER_MARK,
                                              **({'case': self.cases[0]} if given else {}),
                                              **(custom_data or {})},
                                 compression=p['compression'],
@@ -117,12 +145,17 @@ class Recorder(HapticNode):
         self.get_logger().info(f'recording to {self.output}: {", ".join(self.wanted)}'
                                + (' + every other topic' if self.all_topics else ''))
 
-    def _switch_case(self, case) -> None:
+    def _on_set_case(self, params) -> SetParametersResult:
         """The session switched its case (a writable parameter set): the bag says so."""
-        label = case.name if case else 'default'
-        if label != self.cases[-1]:
+        try:
+            asked = requested_case(self, params)
+            label = None if asked is None else _case_label(*asked)
+        except CaseError as exc:   # a wrong type, a name the library does not have
+            return SetParametersResult(successful=False, reason=str(exc))
+        if label is not None and label != self.cases[-1]:
             self.cases.append(label)
             self.writer.set_custom_data('case', ', '.join(self.cases))
+        return SetParametersResult(successful=True)
 
     def _discover(self) -> None:
         graph = dict(self.get_topic_names_and_types())

@@ -34,9 +34,10 @@ ONE_PROCESS_NODES = ('falcon_driver', 'contact_detector', 'force_server', 'visua
 #: nodes that take the case parameters (--case / --random-case)
 CASE_NODES = ('contact_detector', 'force_server', 'visualizer', 'examiner', 'web_view')
 DEFAULT_LAUNCH_NODES = 'falcon_driver,contact_detector,force_server,visualizer'
-#: node parameters by which a session renders another scene than its case (or the default)
+#: parameters of the case nodes by which a session renders (or scores) another scene than its
+#: case, or the default, when set to other than their defaults
 SCENE_PARAMETERS = ('case', 'random_case_seed', 'mesh_path', 'mesh_unit', 'dome_radii',
-                    'model_path', 'tumours', 'displacement_path')
+                    'model_path', 'tumours', 'displacement_path', 'scene')
 
 
 class SessionError(HapticAnfisError, ValueError):
@@ -219,22 +220,33 @@ class SessionSpec:
         """The recorder's case parameter, which it writes into the bag: the nodes' (see
         :meth:`case_arguments`), or ``case:=default`` when nothing changed the default scene (no
         case, no scene file, no parameter file or ``-p`` override setting one of
-        :data:`SCENE_PARAMETERS`); else none (the bag then does not name its case: the nodes
-        may render other files)."""
+        :data:`SCENE_PARAMETERS` of a case node to other than its default); else none (the bag
+        then does not name its case: the nodes may render other files)."""
         if self.case or self.random_case:
             return self.case_arguments()
         return [] if self.scene or self._scene_parameters_set() else ['-p', 'case:=default']
 
     def _scene_parameters_set(self) -> bool:
-        """A parameter file or ``-p`` override sets one of :data:`SCENE_PARAMETERS` (or the
-        overrides name a parameter file: not looked into)."""
+        """A parameter file or ``-p`` override sets one of :data:`SCENE_PARAMETERS` of a case
+        node (or of every node) to other than its default (or the overrides name a parameter
+        file: not looked into)."""
+        import yaml
+
         from ..nodes.parameters import read_parameter_file
-        if any(key in SCENE_PARAMETERS for f in self.params_files
-               for _, key, _, _ in read_parameter_file(f)):
-            return True
+        entries = [(section.rsplit('/', 1)[-1], key, v) for f in self.params_files
+                   for section, key, v, _ in read_parameter_file(f)]
         args = self.user_ros_args()
-        return '--params-file' in args or any(
-            a.split(':=', 1)[0].rsplit(':', 1)[-1] in SCENE_PARAMETERS for a in args if ':=' in a)
+        if '--params-file' in args:
+            return True
+        for a in (a for a in args if ':=' in a):
+            target, value = a.split(':=', 1)
+            node, _, key = target.rpartition(':')
+            try:
+                v = yaml.safe_load(value)
+            except yaml.YAMLError:
+                v = value
+            entries.append((node or '**', key, v))
+        return any(_changes_scene(node, key, v) for node, key, v in entries)
 
     def view_arguments(self, controls: bool) -> list[str]:
         """The web_view node's own ``-p`` arguments (its port; ``controls``: the session's
@@ -350,6 +362,19 @@ def spec_from_args(args: argparse.Namespace, command: str, **fields) -> SessionS
         if k in values:
             values[k] = tuple(values[k])
     return SessionSpec(**values)
+
+
+def _changes_scene(node: str, key: str, value) -> bool:
+    """Setting ``key`` to ``value`` on ``node`` ('**': every node) changes the scene a case
+    node renders or scores: one of :data:`SCENE_PARAMETERS`, not its default."""
+    if key not in SCENE_PARAMETERS:
+        return False
+    from ..nodes.registry import node_parameters
+    for n in (CASE_NODES if node == '**' else (node,) if node in CASE_NODES else ()):
+        default = next((p.default for p in node_parameters(n) if p.name == key), value)
+        if value != default:
+            return True
+    return False
 
 
 def recorder_settings(spec: SessionSpec, topics: Sequence[str]) -> tuple[list[str], list[str]]:
