@@ -312,6 +312,32 @@ KILLED = textwrap.dedent('''
 ''')
 
 
+def test_the_check_sees_one_state_while_another_process_creates_the_record(tmp_path):
+    """The race the test above met in CI once: between the check's reads of the version and of
+    the tables another process created the record (tables and version in one transaction); the
+    check saw tables without a version and called it "not a trainee record"."""
+    path = tmp_path / 'race.sqlite'
+    with sqlite3.connect(path) as c0:
+        c0.execute('PRAGMA journal_mode = WAL')   # as the record: a writer beside a reader
+    conn = sqlite3.connect(str(path), isolation_level=None)
+    other = sqlite3.connect(str(path), isolation_level=None)
+
+    class Racing:   # the other process creates the record right after the version is read
+        def execute(self, sql, *args):
+            cur = conn.execute(sql, *args)
+            if sql == 'PRAGMA user_version':
+                got = cur.fetchone()
+                rdb.migrate(other, path=path)
+                return SimpleNamespace(fetchone=lambda: got)
+            return cur
+    try:
+        assert rdb._check(path, Racing()) == 0   # the state before: nothing yet
+        assert rdb._check(path, conn) == rdb.SCHEMA_VERSION   # and after
+    finally:
+        conn.close()
+        other.close()
+
+
 def test_a_writer_killed_mid_session_stores_nothing(db, tmp_path, rng):
     store_session(db, 'jo', fake_report(rng))
     script = tmp_path / 'killed.py'

@@ -166,7 +166,19 @@ def _open(path: Path, create: bool) -> sqlite3.Connection:
 
 def _check(path: Path, conn: sqlite3.Connection) -> int:
     """The file's schema version, read without writing; RecordError for a newer schema or a
-    database that is not a trainee record (someone else's file is left as it was)."""
+    database that is not a trainee record (someone else's file is left as it was).
+
+    One read transaction: its reads see one state of the file. Read one by one, a process that
+    created the record between them (its tables and version in one transaction) made this one
+    see its tables without a version: "not a trainee record" (the concurrent-writers test)."""
+    conn.execute('BEGIN')   # deferred: no lock is taken for writing, nothing is written
+    try:
+        return _check_in_transaction(path, conn)
+    finally:
+        conn.execute('COMMIT')
+
+
+def _check_in_transaction(path: Path, conn: sqlite3.Connection) -> int:
     app = conn.execute('PRAGMA application_id').fetchone()[0]
     version = conn.execute('PRAGMA user_version').fetchone()[0]
     if version > SCHEMA_VERSION:
