@@ -185,8 +185,9 @@ def test_recorder_and_player_config_yaml_match_declared_parameters():
         mod = importlib.import_module(f'haptic_anfis.nodes.{node}')
         values = yaml.safe_load((ROOT / 'config' / f'{node}.yaml').read_text())[node][
             'ros__parameters']
-        assert list(values) == [p.name for p in mod.PARAMS], node
-        for p in mod.PARAMS:
+        params = list(mod.PARAMS) + list(getattr(mod, 'CASE_PARAMS', []))   # recorder: the case
+        assert list(values) == [p.name for p in params], node
+        for p in params:
             assert values[p.name] == p.default and type(values[p.name]) is type(p.default), p.name
 
 
