@@ -380,6 +380,19 @@ def test_a_forked_child_does_not_keep_a_closed_recording_locked(tmp_path):
         os.waitpid(pid, 0)
 
 
+def test_bag_info_ends_at_the_last_message(tmp_path):
+    """`bag info`'s end was 1 ns past the last message (rosbags' exclusive end)."""
+    bag = tmp_path / 'three'
+    with BagWriter(bag) as w:
+        w.add_topic('/falcon/measured_cp', 'geometry_msgs/msg/PoseStamped')
+        for i in range(3):
+            w.write('/falcon/measured_cp', _pose_bytes(i), 1_000_000_000 + i * 1_000_000)
+    for path in (bag, bag / 'three.mcap'):
+        info = bag_info(path)
+        assert (info.start_ns, info.end_ns) == (1_000_000_000, 1_002_000_000), path
+        assert info.duration_s == pytest.approx(0.002, abs=1e-12)
+
+
 def test_recover_from_inside_the_bag_directory(tmp_path, monkeypatch, capsys):
     """`bag recover .`: the path has no name to build the temporary bag's from; it was a
     traceback and a stray '..recovering' folder inside the bag."""

@@ -165,7 +165,8 @@ def bag_info(path: str | Path) -> BagInfo:
                  if f.is_file() and f.name not in files and f.name != 'metadata.yaml']
                 if p.is_dir() else [])
         n = reader.message_count
-        start, end = (reader.start_time, reader.end_time) if n else (0, 0)
+        # rosbags' end_time is just after the last message (an exclusive end): the last's own
+        start, end = (reader.start_time, reader.end_time - 1) if n else (0, 0)
         dur = max(end - start, 0) * 1e-9
         counts: dict[tuple[str, str], int] = {}
         for c in reader.connections:
