@@ -230,21 +230,14 @@ class SessionSpec:
         """A parameter file or ``-p`` override sets one of :data:`SCENE_PARAMETERS` of a case
         node (or of every node) to other than its default (or the overrides name a parameter
         file: not looked into)."""
-        import yaml
-
-        from ..nodes.parameters import read_parameter_file
+        from ..nodes.parameters import read_parameter_file, ros_args_sources
+        files, overrides, _ = ros_args_sources(self.user_ros_args())
+        if files:
+            return True
         entries = [(section.rsplit('/', 1)[-1], key, v) for f in self.params_files
                    for section, key, v, _ in read_parameter_file(f)]
-        args = self.user_ros_args()
-        if '--params-file' in args:
-            return True
-        for a in (a for a in args if ':=' in a):
-            target, value = a.split(':=', 1)
+        for target, v, _ in overrides:   # '-p [node:]name:=value', the value read as rcl does
             node, _, key = target.rpartition(':')
-            try:
-                v = yaml.safe_load(value)
-            except yaml.YAMLError:
-                v = value
             entries.append((node or '**', key, v))
         return any(_changes_scene(node, key, v) for node, key, v in entries)
 
