@@ -228,6 +228,11 @@ def main() -> int:
     ap.add_argument('--page', default='servo_load',
                     help='page name: docs/measurements/<page>.md (default servo_load)')
     a = ap.parse_args()
+    from haptic_anfis.view.browser import chromium
+    if a.view and chromium() is None:   # the browser's thread would fail, the rows go on
+        print('bench_servo_load: --view: no chromium on this machine (Debian: apt-get install '
+              'chromium, as .ci/run does); nothing measured', file=sys.stderr)
+        return 2
     configs = [(c.split(':')[0], int(c.split(':')[1]),
                 int(c.split(':')[2]) if c.count(':') > 1 else 0) for c in a.configs.split(',')]
     rows = []

@@ -49,8 +49,12 @@ def open_browser(url: str) -> subprocess.Popen:
     starve the `sim` graph there instead, and lowering its session's weight
     (``/proc/<pid>/autogroup``) made a 1 kHz loop in another session lose periods (issue 32)."""
     from haptic_anfis.view.browser import CHROMIUM_FLAGS, chromium
+    exe = chromium()
+    if exe is None:   # a row "with the browser" measured without one would be a false figure
+        raise SystemExit('no chromium on this machine: the browser view cannot be measured '
+                         '(Debian: apt-get install chromium, as .ci/run does)')
     profile = tempfile.mkdtemp(prefix='bench-view-chromium-')
-    return subprocess.Popen(['nice', '-n', '10', chromium(), *CHROMIUM_FLAGS,
+    return subprocess.Popen(['nice', '-n', '10', exe, *CHROMIUM_FLAGS,
                              f'--user-data-dir={profile}', '--window-size=1280,800',
                              '--remote-debugging-port=0',
                              '--disable-renderer-backgrounding',

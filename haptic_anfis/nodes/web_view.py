@@ -19,6 +19,7 @@ from __future__ import annotations
 import collections
 import random
 import time
+from dataclasses import dataclass
 
 import numpy as np
 from geometry_msgs.msg import PointStamped, PoseStamped, WrenchStamped
@@ -40,6 +41,8 @@ CONTACT_QUEUE = QoSProfile(depth=200, history=HistoryPolicy.KEEP_LAST,
                            reliability=ReliabilityPolicy.BEST_EFFORT)
 #: nodes whose case the instructor's choice switches (those that are running)
 CASE_NODES = ('contact_detector', 'force_server', 'visualizer', 'recorder')
+#: what the page says while the loop nodes load a case
+SWITCHING = 'switching to {} ...'
 
 
 def _port(v):
@@ -57,6 +60,10 @@ PARAMS = [
     Param('trainee', '', 'trainee id shown in the instructor panel'),
     Param('db', '', "trainee record file for the sessions the page stops ('' = the record's "
                     'default: $HAPTIC_ANFIS_DB, else the user data directory)'),
+    Param('case_switch_timeout', 15.0, "how long the instructor's case choice waits for every "
+          'running case node (contact_detector, force_server, visualizer, recorder) to load '
+          'the case [s]; one that refuses or has not answered by then cancels the choice (the '
+          'nodes that switched go back, the page says who failed)', positive),
 ]
 
 
@@ -93,6 +100,7 @@ class WebView(HapticNode):
         self.t_start = time.monotonic()
         self.running = True   # the session collects from the start; "start" begins afresh
         self._param_clients: dict = {}
+        self._switch = None   # the instructor's case choice while the loop nodes load it
         self.timer = self.create_timer(1.0 / p['rate'], self._frame)
         self.cov_timer = self.create_timer(1.0 / p['coverage_rate'], self._coverage)
         self.app.set_exam_running(True, self.blind, self.cv.name or '')
@@ -145,6 +153,8 @@ class WebView(HapticNode):
     def _frame(self) -> None:
         while self._requests:
             self._handle(*self._requests.popleft())
+        if self._switch is not None:
+            self._follow_switch()
         self._take()
         pose = None if self._pose is None else np.array(self._pose[1])
         force = None if self._force is None else np.array(self._force[1])
@@ -215,28 +225,53 @@ class WebView(HapticNode):
                               self.cv.session.grid.fraction())
 
     def _choose_case(self, name: str) -> None:
-        """The instructor chose ``name`` (or the blind entry): switch the loop nodes, then us."""
+        """The instructor chose ``name`` (or the blind entry): ask the running case nodes to
+        switch (:class:`~.case_switch.CaseSwitch`); the page follows once they all have
+        (:meth:`_follow_switch`). One choice at a time."""
         from rclpy.parameter import Parameter
 
         from ..view.app import BLIND
-        if name == BLIND:
-            params = [Parameter('random_case_seed', value=random.SystemRandom().randrange(2**31))]
-        else:
-            params = [Parameter('case', value=name)]
-        from rcl_interfaces.srv import SetParameters
-        for node in CASE_NODES:
-            cli = self._param_clients.get(node)
-            if cli is None:
-                cli = self._param_clients[node] = self.create_client(
-                    SetParameters, f'/{node}/set_parameters')
-            if cli.service_is_ready():
-                cli.call_async(SetParameters.Request(
-                    parameters=[p.to_parameter_msg() for p in params]))
-        res = self.set_parameters(params)[0]   # our own: switches via declare_case's callback
-        if not res.successful:
-            raise ValueError(res.reason)
-        self.blind = name == BLIND
-        self.app.message('blind random case chosen' if self.blind else f'case {name}')
+        from .case_switch import CaseSwitch
+        if self._switch is not None:
+            raise ValueError(f'{self._switch.label} is still being loaded; choose again when '
+                             'it is done')
+        blind = name == BLIND
+        params = [Parameter('random_case_seed', value=random.SystemRandom().randrange(2**31))
+                  if blind else Parameter('case', value=name)]
+        self._switch = _Choice(
+            CaseSwitch(self, CASE_NODES, params, self._param_clients, time.monotonic(),
+                       self.params['case_switch_timeout']),
+            'a blind random case' if blind else f'case {name}', blind,
+            [Parameter(n, value=self.get_parameter(n).value)
+             for n in ('case', 'random_case_seed')],
+            '' if self.blind else (self.cv.name or 'default'))
+        self.app.message(SWITCHING.format(self._switch.label))
+        self._follow_switch()
+
+    def _follow_switch(self) -> None:
+        """The case nodes' answers: all switched, the page switches too; one refused or silent,
+        the others go back to the case before, the page keeps it and says who failed."""
+        ch = self._switch
+        out = ch.switch.poll(time.monotonic())
+        if out is None:
+            return
+        self._switch = None
+        res = self.set_parameters(ch.switch.params)[0] if out.ok else None   # ours: switches
+        if res is not None and res.successful:                              # via declare_case
+            self.blind = ch.blind
+            self.get_logger().info(f'{ch.label}: {out.describe()}')
+            self.app.message(('blind random case chosen' if self.blind else ch.label)
+                             + f' ({out.describe()})')
+            return
+        from ..view.app import BLIND
+        back = ch.switch.revert(ch.before)
+        why = out.describe() if res is None else f'the page cannot show it: {res.reason}'
+        msg = (f'{ch.label} NOT chosen, the session stays on '
+               f'{ch.shown or "its blind case"}: {why}'
+               + (f' (sent back to it: {", ".join(back)})' if back else ''))
+        self.get_logger().error(msg)
+        self.app.show_case_choice(ch.shown or BLIND)
+        self.app.message(msg)
 
     def _load_case(self, case) -> None:
         from ..view.build import case_view
@@ -259,6 +294,18 @@ class WebView(HapticNode):
         for s in self._inputs.values():
             s.destroy()
         self.app.close()
+
+
+@dataclass
+class _Choice:
+    """The instructor's case choice while the loop nodes load it: the switch, what the page
+    calls it, whether it is blind, the parameters before (to go back to) and the case the
+    dropdown showed ('' = blind)."""
+    switch: object
+    label: str
+    blind: bool
+    before: list
+    shown: str
 
 
 def _stamp(m) -> float:

@@ -169,7 +169,9 @@ class ViewApp:
                 self.g_msg = g.add_markdown('')
             self.g_start.on_click(lambda _: self._call(self.on_start))
             self.g_stop.on_click(lambda _: self._call(self.on_stop))
-            self.g_case.on_update(lambda _: self._call(self.on_case, self.g_case.value))
+            # only the instructor's choices: a value set here (show_case_choice) is not one
+            self.g_case.on_update(lambda ev: ev.client is None
+                                  or self._call(self.on_case, self.g_case.value))
         with g.add_folder('Debrief', visible=False) as f:
             self.g_debrief = f
             self.g_numbers = g.add_markdown('')
@@ -189,6 +191,12 @@ class ViewApp:
             fn(*a)
         except Exception as exc:  # a control must not kill viser's thread: say it on the page
             self.message(f'error: {exc}')
+
+    def show_case_choice(self, name: str) -> None:
+        """Show ``name`` (a case or :data:`BLIND`) in the instructor's dropdown without
+        choosing it (a choice the loop nodes refused goes back to the case before)."""
+        if self.g_instructor is not None:
+            self.g_case.value = name
 
     def message(self, text: str) -> None:
         """A line under the instructor's controls (and in the status when there are none)."""
