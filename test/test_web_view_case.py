@@ -22,8 +22,11 @@ class FakeCaseNode:
     """A node named like a loop node with the case parameters: its switch takes ``delay`` [s]
     and raises ``refuse`` when given (a node that cannot load the case)."""
 
-    def __init__(self, ctx, name: str, refuse: str = '', delay: float = 0.0) -> None:
-        self.node = rclpy.create_node(name, context=ctx)
+    def __init__(self, ctx, name: str, refuse: str = '', delay: float = 0.0,
+                 case: str = '') -> None:
+        from rclpy.parameter import Parameter
+        self.node = rclpy.create_node(name, context=ctx,
+                                      parameter_overrides=[Parameter('case', value=case)])
         self.loaded: list = []
         self.refuse, self.delay = refuse, delay
         declare_case(self.node, self._switch)
@@ -106,19 +109,22 @@ def test_every_running_case_node_switches_then_the_page(page, loop_nodes):
     assert 'not running: visualizer, recorder' in msg, msg
     for f in fakes.values():
         assert f.loaded == ['normal'] and f.param('case') == 'normal'
+        assert f.param('random_case_seed') == -1
     wait_for(lambda: page.cv.name == 'normal', 30.0)   # the page shows the case it scores
     assert page.get_parameter('case').value == 'normal' and not page.blind
 
 
 def test_a_blind_choice_draws_the_same_case_everywhere(page, loop_nodes):
-    fakes = loop_nodes()
+    fakes = loop_nodes(force_server={'case': 'normal'})   # started with case:=normal
     from haptic_anfis.view.app import BLIND
     msg = choose(page, BLIND)
     assert msg.startswith('blind random case chosen'), msg
     seed = page.get_parameter('random_case_seed').value
     assert seed >= 0 and page.blind
-    for f in fakes.values():
+    wait_for(lambda: page.cv.name == fakes['force_server'].loaded[-1], 30.0)   # the same draw
+    for f in fakes.values():   # no old name left readable on any node
         assert f.param('random_case_seed') == seed and f.param('case') == ''
+        assert f.loaded[-1] == page.cv.name
 
 
 def test_a_refusal_sends_the_others_back_and_the_page_keeps_its_case(page, loop_nodes):

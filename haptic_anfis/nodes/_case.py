@@ -7,8 +7,9 @@ nodes' other parameters these two are writable: setting either on a running node
 set /force_server case normal``, or ``Node.set_parameters``) switches the case. The node's
 ``switch(case)`` callback does the swap; a bad name is rejected (the parameter keeps its value,
 the node keeps running on the old case) with the reason in the result. Setting one alone turns
-the other off: a name ends the random draw, a seed replaces the name (the browser page's blind
-choice sets only the seed, also on nodes started with ``case:=NAME``).
+the other off: a name ends the random draw, a seed replaces the name (``ros2 param set
+/force_server random_case_seed 7`` on a node started with ``case:=NAME``); the browser page sets
+both together, so that each node's parameters read back what it runs.
 """
 from __future__ import annotations
 

@@ -236,8 +236,11 @@ class WebView(HapticNode):
             raise ValueError(f'{self._switch.label} is still being loaded; choose again when '
                              'it is done')
         blind = name == BLIND
-        params = [Parameter('random_case_seed', value=random.SystemRandom().randrange(2**31))
-                  if blind else Parameter('case', value=name)]
+        # both, set together: every node's parameters then say what it runs (a seed alone
+        # would leave the old name readable with `ros2 param get`)
+        params = [Parameter('case', value='' if blind else name),
+                  Parameter('random_case_seed',
+                            value=random.SystemRandom().randrange(2**31) if blind else -1)]
         self._switch = _Choice(
             CaseSwitch(self, CASE_NODES, params, self._param_clients, time.monotonic(),
                        self.params['case_switch_timeout']),
