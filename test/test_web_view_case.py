@@ -104,6 +104,8 @@ def choose(page, name: str) -> str:
 
 def test_every_running_case_node_switches_then_the_page(page, loop_nodes):
     fakes = loop_nodes()
+    loads, load = [], page._load_case
+    page._load_case = lambda case: (loads.append(case), load(case))
     msg = choose(page, 'normal')
     assert 'switched: contact_detector, force_server' in msg, msg
     assert 'not running: visualizer, recorder' in msg, msg
@@ -112,6 +114,8 @@ def test_every_running_case_node_switches_then_the_page(page, loop_nodes):
         assert f.param('random_case_seed') == -1
     wait_for(lambda: page.cv.name == 'normal', 30.0)   # the page shows the case it scores
     assert page.get_parameter('case').value == 'normal' and not page.blind
+    time.sleep(0.3)
+    assert [c.name for c in loads] == ['normal']   # loaded once (both parameters in one set)
 
 
 def test_a_blind_choice_draws_the_same_case_everywhere(page, loop_nodes):
@@ -161,3 +165,10 @@ def test_a_second_choice_while_one_is_loading_is_refused_on_the_page(page, loop_
     page.app.on_case('two_lesions')
     wait_for(lambda: 'still being loaded' in page.app.g_msg.content, 10.0)
     wait_for(lambda: page.get_parameter('case').value == 'normal', 30.0)
+
+
+def test_a_page_started_blind_shows_the_blind_entry():
+    from haptic_anfis.nodes.web_view import web_view_in_thread
+    from haptic_anfis.view.app import BLIND
+    with web_view_in_thread({'port': free_port(), 'random_case_seed': 3}, 'x') as (node, _):
+        assert node.blind and node.app.g_case.value == BLIND

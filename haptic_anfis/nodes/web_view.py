@@ -84,8 +84,9 @@ class WebView(HapticNode):
                            controls=p['controls'], cases=[c.name for c in library().ready()])
         if p['controls']:
             self.app.g_trainee.value = p['trainee']
-            if case is not None and not self.blind:
-                self.app.g_case.value = case.name
+            if case is not None:
+                from ..view.app import BLIND
+                self.app.g_case.value = BLIND if self.blind else case.name
         self.app.on_start = lambda: self._requests.append(('start', None))
         self.app.on_stop = lambda: self._requests.append(('stop', None))
         self.app.on_case = lambda name: self._requests.append(('case', name))
@@ -154,7 +155,7 @@ class WebView(HapticNode):
         while self._requests:
             self._handle(*self._requests.popleft())
         if self._switch is not None:
-            self._follow_switch()
+            self._handle('switching', None)
         self._take()
         pose = None if self._pose is None else np.array(self._pose[1])
         force = None if self._force is None else np.array(self._force[1])
@@ -193,6 +194,8 @@ class WebView(HapticNode):
                 self.app.message('exam stopped: debrief below' + stored)
             elif what == 'case':
                 self._choose_case(arg)
+            elif what == 'switching':   # the loop nodes' answers to a case choice
+                self._follow_switch()
             elif what == 'switched':   # our own case parameter was set
                 self._load_case(arg)
         except Exception as exc:   # keep serving: say it on the page
@@ -254,13 +257,14 @@ class WebView(HapticNode):
     def _follow_switch(self) -> None:
         """The case nodes' answers: all switched, the page switches too; one refused or silent,
         the others go back to the case before, the page keeps it and says who failed."""
-        ch = self._switch
+        ch, self._switch = self._switch, None   # an error here ends the choice (said on the page)
         out = ch.switch.poll(time.monotonic())
         if out is None:
+            self._switch = ch
             return
-        self._switch = None
-        res = self.set_parameters(ch.switch.params)[0] if out.ok else None   # ours: switches
-        if res is not None and res.successful:                              # via declare_case
+        # ours, in one set: declare_case's callback switches once
+        res = self.set_parameters_atomically(ch.switch.params) if out.ok else None
+        if res is not None and res.successful:
             self.blind = ch.blind
             self.get_logger().info(f'{ch.label}: {out.describe()}')
             self.app.message(('blind random case chosen' if self.blind else ch.label)
