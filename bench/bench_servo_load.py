@@ -121,7 +121,8 @@ def browser_when_up(port: int, stop) -> 'threading.Thread':
 
 
 def run_one(kind: str, priority: int, duration: float, loop: str, d: Path,
-            graph_priority: int = 0, view: bool = False, force_mode: str = '') -> dict:
+            graph_priority: int = 0, view: bool = False, force_mode: str = '',
+            sim_args: tuple = ()) -> dict:
     """One run; the last JSON line of its output (or {'error': ...}). ``graph_priority`` > 0:
     the whole graph (every process and thread) runs SCHED_FIFO at it (``chrt -f``), the servo
     tick above it at ``priority``. ``view``: the browser view too (``--view``: the web_view
@@ -130,7 +131,7 @@ def run_one(kind: str, priority: int, duration: float, loop: str, d: Path,
     bag = d / f'bag_{kind}_{priority}_{time.monotonic_ns()}'
     if kind == 'sim':
         cmd = [*CLI, 'sim', '--duration', str(duration), '--json', '--record', str(bag),
-               '--params-file', str(pf)]
+               '--params-file', str(pf), *sim_args]
     else:
         cmd = [*CLI, 'launch', '--duration', str(duration), '--json', '--record', str(bag),
                '--params-file', str(pf), '--localhost', '--log-dir', str(d / f'log_{bag.name}')]
@@ -224,6 +225,9 @@ def main() -> int:
     ap.add_argument('--beside-tests', action='store_true',
                     help="the project's test suite (python -m pytest test) running beside "
                          'every run, restarted when it ends')
+    ap.add_argument('--sim-args', default='',
+                    help="more options for the sim rows, space-separated (e.g. "
+                         "'--recorder-process'); named in the rows' config")
     ap.add_argument('--no-page', action='store_true', help='print only')
     ap.add_argument('--page', default='servo_load',
                     help='page name: docs/measurements/<page>.md (default servo_load)')
@@ -254,9 +258,11 @@ def main() -> int:
                 time.sleep(1.0)
                 load0 = os.getloadavg()[0]
                 rt = rt_threads()
-                j = run_one(kind, prio, a.duration, loop, d, gprio, a.view, a.force_mode)
+                j = run_one(kind, prio, a.duration, loop, d, gprio, a.view, a.force_mode,
+                            tuple(a.sim_args.split()))
                 load = max(load0, os.getloadavg()[0])
-            r = row(f'{kind} prio {prio}' + (f' graph {gprio}' if gprio else '') + f' ({loop})',
+            r = row(f'{kind} prio {prio}' + (f' graph {gprio}' if gprio else '') + f' ({loop})'
+                    + (f' {a.sim_args}' if kind == 'sim' and a.sim_args else ''),
                     nbusy, load, j)
             r['rt_others'] = rt
             rows.append(r)
