@@ -214,3 +214,16 @@ def test_the_session_tells_its_recorder_the_default_only_when_nothing_can_change
     # settings that do not touch the scene: still the default
     assert SessionSpec(params_files=(str(driver),), ros_args=('-p', 'rate:=20.0')
                        ).recorder_case_arguments() == ['-p', 'case:=default']
+
+
+@pytest.mark.parametrize('value', ['no', 'on', 'yes', 'null', '0012', '1e3', '~'])
+def test_custom_data_reads_back_as_the_string_written(tmp_path, value):
+    """rosbags writes custom data unquoted; a value YAML 1.1 would read as a boolean, a null or a
+    number ('no', '0012') still reads back as written, as rosbag2's own reader (strings) does."""
+    bag = tmp_path / 'b'
+    w = BagWriter(bag, custom_data={**OURS, 'case': value})
+    w.add_topic(TOPIC, 'geometry_msgs/msg/PoseStamped')
+    w.write(TOPIC, _pose(0), 1_000_000_000)
+    w.close()
+    assert bag_info(bag).custom_data['case'] == value
+    assert bag_info(bag / 'b.mcap').custom_data['case'] == value

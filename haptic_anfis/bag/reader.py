@@ -204,8 +204,15 @@ def _metadata_yaml(p: Path) -> dict:
         return {}
     import yaml
     try:
-        doc = yaml.safe_load((p / 'metadata.yaml').read_text()) or {}
-        return doc.get('rosbag2_bagfile_information', {}) or {}
+        text = (p / 'metadata.yaml').read_text()
+        info = (yaml.safe_load(text) or {}).get('rosbag2_bagfile_information', {}) or {}
+        if info.get('custom_data'):
+            # strings, as rosbag2 reads them: rosbags writes them unquoted, and YAML 1.1 would
+            # read a case named 'no' or 'on' back as a boolean
+            raw = (yaml.load(text, Loader=yaml.BaseLoader) or {}).get(
+                'rosbag2_bagfile_information', {}) or {}
+            info['custom_data'] = raw.get('custom_data') or {}
+        return info
     except Exception:
         return {}
 
