@@ -8,6 +8,7 @@ import io
 import json
 import os
 import signal
+import shutil
 import sqlite3
 import subprocess
 import sys
@@ -112,6 +113,45 @@ def test_an_older_file_is_migrated_and_its_rows_kept(db):
     assert s['palpable_missed'] == 1 and s['not_palpable'] == [] and s['false_marks'] == 2
     with sqlite3.connect(db) as c:
         assert c.execute('PRAGMA user_version').fetchone()[0] == rdb.SCHEMA_VERSION
+
+
+def test_a_new_recording_at_a_path_used_before_is_a_new_session(db, rng):
+    """An instructor who deletes a bag and records to its path again: the new recording (its
+    first message later) is stored and counts; the same recording still counts once."""
+    rep = fake_report(rng, deep=100, case='x')
+    first = store_session(db, 'ann', rep, case_level=1, bag='/bags/s', bag_start_ns=1000)
+    with pytest.raises(AlreadyStored, match=f'session {first}'):
+        store_session(db, 'ann', rep, case_level=1, bag='/bags/s', bag_start_ns=1000)
+    second = store_session(db, 'ann', rep, case_level=1, bag='/bags/s', bag_start_ns=2000)
+    with pytest.raises(AlreadyStored, match=f'session {first}'):   # start unknown: one of them
+        store_session(db, 'ann', rep, case_level=1, bag='/bags/s')
+    h = history(db, 'ann')
+    assert [(s['session'], s['bag_start_ns']) for s in h] == [(first, 1000), (second, 2000)]
+    m = mastery(h, MasteryConfig({1: MasteryLevel(consecutive_sessions=3)}))
+    assert m['levels'][1]['sessions'] == 2
+    # a record holding one recording twice (from before the check) still counts it once
+    m = mastery(h + [dict(h[1], session=99)],
+                MasteryConfig({1: MasteryLevel(consecutive_sessions=3)}))
+    assert m['levels'][1]['sessions'] == 2
+
+
+def test_a_bag_stored_before_its_start_was_kept_still_counts_once(db, rng):
+    """A session stored by a version that kept no bag start (schema v2): scoring that path
+    again is refused as before, whatever the new start (it may be the same recording)."""
+    db.parent.mkdir(parents=True)
+    c = sqlite3.connect(db, isolation_level=None)
+    rdb.migrate(c, to=2)
+    c.execute("INSERT INTO trainees VALUES ('old', '2026-01-01T00:00:00+00:00')")
+    c.execute("INSERT INTO sessions (trainee_id, started_utc, stored_utc, source, case_name, "
+              "case_level, bag_path, coverage_light, coverage_medium, coverage_deep, lesions, "
+              "hits, misses, false_marks, score, verdict, duration_s, report_json) VALUES "
+              "('old', 't', 't', 'bag', 'x', 1, '/bags/s', 50, 40, 30, 1, 0, 1, 0, 12.5, "
+              "'retry', 60, '{}')")
+    c.close()
+    with pytest.raises(AlreadyStored):
+        store_session(db, 'old', fake_report(rng), case_level=1, bag='/bags/s', bag_start_ns=5)
+    (s,) = history(db, 'old')
+    assert s['bag_start_ns'] is None
 
 
 def test_a_newer_file_is_refused_untouched(db, rng):
@@ -533,9 +573,9 @@ def test_trainees_cli(db, tmp_path, rng, capsys):
     assert 'no trainee' in capsys.readouterr().out
 
 
-def pressing_bag(path: Path) -> Path:
+def pressing_bag(path: Path, t0_ns: int = 100_000_000_000) -> Path:
     """A 2 s bag of /contact samples pressing 10 mm deep along a line (built as test_exam_run
-    builds its hover bag)."""
+    builds its hover bag), its first message received at ``t0_ns``."""
     from haptic_anfis.bag import typestore
     from haptic_anfis.bag.writer import BagWriter
     from haptic_anfis.nodes import interfaces as ifc
@@ -550,7 +590,7 @@ def pressing_bag(path: Path) -> Path:
             v[ifc.I_DEPTH], v[ifc.I_IN_CONTACT] = 0.01, 1.0
             js = JS(H(T(100 + k // 100, (k % 100) * 10_000_000), 'tissue'),
                     list(ifc.CONTACT_FIELDS), v, np.zeros(0), np.zeros(0))
-            w.write('/contact', ts.serialize_cdr(js, JS.__msgtype__), 100_000_000_000 + k * 10**7)
+            w.write('/contact', ts.serialize_cdr(js, JS.__msgtype__), t0_ns + k * 10**7)
     return path
 
 
@@ -579,6 +619,13 @@ def test_exam_report_stores_the_full_report_and_a_bad_record_still_prints_it(db,
     out, err = capfd.readouterr()
     assert f'already stored as session {s["session"]}' in out and not err
     assert len(history(db, 'pat')) == 1
+    # the bag deleted and a new session recorded to its path: a session of its own
+    shutil.rmtree(bag)
+    pressing_bag(bag, t0_ns=200_000_000_000)
+    assert main(['exam', 'report', str(bag), '--trainee-id', 'pat', '--db', str(db)]) == 0
+    out, err = capfd.readouterr()
+    assert 'stored' in out and 'already' not in out and not err
+    assert [h['bag_start_ns'] for h in history(db, 'pat')] == [100_000_000_000, 200_000_000_000]
     # a bad id is refused before the exam, and --next needs an id
     assert main(['exam', 'report', str(bag), '--trainee-id', 'a b']) == 1
     assert 'trainee-id' in capfd.readouterr().err

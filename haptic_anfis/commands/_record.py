@@ -69,15 +69,19 @@ def case_parameter(args: argparse.Namespace, case) -> tuple[str, str | int]:
     raise ValueError('--next: no random-case seed draws the case chosen for the session')
 
 
-def _bag_start_utc(bag) -> str | None:
-    """When the bag's first message was written (UTC), if its clock is wall time."""
+def _bag_start(bag) -> tuple[str | None, int | None]:
+    """The bag's first message: when (UTC, if its clock is wall time) and its time [ns]
+    (which tells recordings made at the same path apart); None for what cannot be read."""
     from ..bag.reader import bag_info
     from ..record import utc_iso
     try:
-        start = bag_info(bag).start_ns
+        info = bag_info(bag)
     except Exception:   # noqa: BLE001 (the report already read it; a time is optional)
-        return None
-    return utc_iso(start * 1e-9) if start > 1e18 else None   # after 2001: wall clock, not sim time
+        return None, None
+    if not info.message_count:
+        return None, None
+    start = info.start_ns   # after 2001: wall clock, not sim time
+    return (utc_iso(start * 1e-9) if start > 1e18 else None), int(start)
 
 
 def store_report(args: argparse.Namespace, report: dict) -> int:
@@ -95,12 +99,12 @@ def store_report(args: argparse.Namespace, report: dict) -> int:
         return 1
     bag = getattr(args, 'bag', None) or getattr(args, 'record', None)
     source = 'bag' if args.exam_command == 'report' else 'run'
-    started = (_bag_start_utc(args.bag) if source == 'bag' else None) or getattr(
-        args, 'record_started_utc', None)
+    bag_utc, bag_ns = _bag_start(bag) if bag else (None, None)
+    started = (bag_utc if source == 'bag' else None) or getattr(args, 'record_started_utc', None)
     try:
         sid = store_session(args.db, args.trainee_id, report, source=source, started_utc=started,
                             case_level=level_of_case_name(report.get('case')),
-                            bag=str(Path(bag).resolve()) if bag else None)
+                            bag=str(Path(bag).resolve()) if bag else None, bag_start_ns=bag_ns)
     except AlreadyStored as exc:   # the report stands; the record keeps the bag's first one
         print(f'record         {exc}', flush=True)
         return 0

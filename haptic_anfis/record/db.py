@@ -81,7 +81,12 @@ ALTER TABLE sessions ADD COLUMN not_palpable TEXT NOT NULL DEFAULT '[]';
 ALTER TABLE sessions ADD COLUMN palpable_missed INTEGER;
 UPDATE sessions SET palpable_missed = misses;
 """
-MIGRATIONS: tuple[str, ...] = (_V1, _V2)
+# v3: which recording a bag path held (its first message's time [ns]): an instructor who records
+# to the same path again (after deleting the old bag) makes a new session, not a repeat of one.
+_V3 = """
+ALTER TABLE sessions ADD COLUMN bag_start_ns INTEGER;
+"""
+MIGRATIONS: tuple[str, ...] = (_V1, _V2, _V3)
 SCHEMA_VERSION = len(MIGRATIONS)
 
 

@@ -115,15 +115,18 @@ def mastery(sessions: list[dict], config: MasteryConfig = DEFAULT) -> dict:
     Returns ``{'mastered_level': int (0 = none), 'next_level': int, 'levels': {L: {'sessions',
     'met', 'streak' (current run), 'best_streak', 'needed', 'mastered'}}}``; sessions with no
     case level are not counted, nor a bag's second session (a recording scored again, in a
-    record from before :class:`~haptic_anfis.record.AlreadyStored`).
+    record from before :class:`~haptic_anfis.record.AlreadyStored`); two recordings made at one
+    path (``bag_start_ns`` differs) count as two.
     """
-    seen: set[str] = set()
+    seen: dict[str, set] = {}   # bag path -> the starts [ns] of its recordings (None: unknown)
     counted = []
     for s in sessions:
-        if s.get('bag') in seen:
-            continue
-        if s.get('bag'):
-            seen.add(s['bag'])
+        bag, ns = s.get('bag'), s.get('bag_start_ns')
+        starts = seen.get(bag, set()) if bag else set()
+        if starts and (ns is None or None in starts or ns in starts):
+            continue   # this recording again (a start unknown on either side counts as it)
+        if bag:
+            seen.setdefault(bag, set()).add(ns)
         counted.append(s)
     per = {}
     for L, th in sorted(config.levels.items()):

@@ -103,25 +103,32 @@ def session_row(report: dict, *, source: str, case_level: int | None = None,
 
 def store_session(db: str | os.PathLike | None, trainee_id: str, report: dict, *,
                   source: str = 'run', case_level: int | None = None, bag: str | None = None,
-                  started_utc: str | None = None) -> int:
+                  started_utc: str | None = None, bag_start_ns: int | None = None) -> int:
     """Store one scored session for ``trainee_id`` (created on its first session) in ONE
-    transaction; returns the session id.
+    transaction; returns the session id. ``bag_start_ns``: the bag's first message's time
+    [ns], which tells two recordings made at the same path apart.
 
     Raises:
         ValueError: bad trainee id or report; RecordError (a ValueError): the file;
             AlreadyStored (a RecordError): ``bag`` is already stored for this trainee (a
-            recording counts once toward mastery; nothing is stored).
+            recording counts once toward mastery; nothing is stored): the same path, and the
+            same first message where both sessions know it.
     """
     check_trainee_id(trainee_id)
     row = session_row(report, source=source, case_level=case_level, bag=bag,
                       started_utc=started_utc)
+    row['bag_start_ns'] = None if bag_start_ns is None else int(bag_start_ns)
     cols = ', '.join(row)
     marks = ', '.join(f':{k}' for k in row)
 
     def tx(conn):
         if row['bag_path'] is not None:
-            old = conn.execute('SELECT id FROM sessions WHERE trainee_id = ? AND bag_path = ? '
-                               'LIMIT 1', (trainee_id, row['bag_path'])).fetchone()
+            # a stored session that does not know its bag's start (stored before v3, or the bag
+            # unreadable) counts as this recording: better one session too few than one twice
+            old = conn.execute(
+                'SELECT id FROM sessions WHERE trainee_id = :t AND bag_path = :p AND ('
+                'bag_start_ns IS NULL OR :ns IS NULL OR bag_start_ns = :ns) ORDER BY id LIMIT 1',
+                {'t': trainee_id, 'p': row['bag_path'], 'ns': row['bag_start_ns']}).fetchone()
             if old is not None:
                 raise AlreadyStored(
                     f'bag {row["bag_path"]!r} is already stored as session {old[0]} of trainee '
@@ -160,7 +167,7 @@ def trainees(db: str | os.PathLike | None = None) -> list[dict]:
 _HISTORY_COLS = ('id', 'started_utc', 'source', 'case_name', 'case_level', 'bag_path',
                  'coverage_light', 'coverage_medium', 'coverage_deep', 'pattern', 'lesions',
                  'hits', 'misses', 'palpable_missed', 'not_palpable', 'false_marks', 'score',
-                 'verdict', 'duration_s', 'contact_s')
+                 'verdict', 'duration_s', 'contact_s', 'bag_start_ns')
 
 
 def _known(conn, db, trainee_id: str) -> None:
@@ -176,7 +183,8 @@ def history(db: str | os.PathLike | None, trainee_id: str, full: bool = False) -
     call):
 
     ``session`` (id), ``started_utc`` (ISO 8601, UTC), ``source`` ('run' / 'bag'), ``case``,
-    ``case_level``, ``bag``, ``coverage_pct`` {light, medium, deep} [%], ``pattern``,
+    ``case_level``, ``bag``, ``bag_start_ns`` (its first message [ns], None if not known),
+    ``coverage_pct`` {light, medium, deep} [%], ``pattern``,
     ``lesions``, ``hits``, ``misses``, ``palpable_missed``, ``not_palpable`` (names),
     ``false_marks``, ``sensitivity`` (found / palpable lesions, None without one), ``score``,
     ``verdict``, ``duration_s``, ``contact_s`` [s]; with ``full``, ``report`` (the stored exam
@@ -200,6 +208,7 @@ def history(db: str | os.PathLike | None, trainee_id: str, full: bool = False) -
         missed = d['palpable_missed'] if d['palpable_missed'] is not None else d['misses']
         h = {'session': d['id'], 'started_utc': d['started_utc'], 'source': d['source'],
              'case': d['case_name'], 'case_level': d['case_level'], 'bag': d['bag_path'],
+             'bag_start_ns': d['bag_start_ns'],
              'coverage_pct': {'light': d['coverage_light'], 'medium': d['coverage_medium'],
                               'deep': d['coverage_deep']},
              'pattern': d['pattern'], 'lesions': d['lesions'], 'hits': d['hits'],
