@@ -270,6 +270,9 @@ def parser() -> argparse.ArgumentParser:
                     help="separate processes: the driver's servo_priority (default: its "
                          'default, real-time where allowed; 0: as a user without real-time '
                          'rights, the graph under the normal scheduler too)')
+    ap.add_argument('--busy', type=int, default=0, metavar='N',
+                    help='N processes spinning on the CPU beside the runs (the load of other '
+                         "programs, as bench_servo_load's --busy; default 0: a quiet machine)")
     ap.add_argument('--page', default='soak',
                     help='page name: docs/measurements/<page>.md (default soak)')
     return ap
@@ -279,14 +282,17 @@ def main() -> int:
     a = parser().parse_args()
     work = Path(a.keep) if a.keep else Path(tempfile.mkdtemp(prefix='soak_'))
     work.mkdir(parents=True, exist_ok=True)
-    print(f'soak: {os.cpu_count()} CPUs, load average {os.getloadavg()}')
+    print(f'soak: {os.cpu_count()} CPUs, load average {os.getloadavg()}'
+          + (f'; {a.busy} busy processes spinning beside it' if a.busy else ''))
+    from _busy import busy
     try:
-        if a.one_minutes > 0:
-            one_process(a.one_minutes, a.interval, work, freeze=not a.no_freeze,
-                        force_mode=a.force_mode, in_process=not a.recorder_process)
-        if a.multi_minutes > 0:
-            multi_process(a.multi_minutes, a.interval, work, force_mode=a.force_mode,
-                          priority=a.servo_priority)
+        with busy(a.busy):   # ended with the runs, also on an error
+            if a.one_minutes > 0:
+                one_process(a.one_minutes, a.interval, work, freeze=not a.no_freeze,
+                            force_mode=a.force_mode, in_process=not a.recorder_process)
+            if a.multi_minutes > 0:
+                multi_process(a.multi_minutes, a.interval, work, force_mode=a.force_mode,
+                              priority=a.servo_priority)
     finally:
         if not a.keep:
             shutil.rmtree(work, ignore_errors=True)
