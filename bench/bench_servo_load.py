@@ -226,8 +226,8 @@ def main() -> int:
                     help="the project's test suite (python -m pytest test) running beside "
                          'every run, restarted when it ends')
     ap.add_argument('--sim-args', default='',
-                    help="more options for the sim rows, space-separated (e.g. "
-                         "'--recorder-process'); named in the rows' config")
+                    help="more options for the sim rows, space-separated, given with '=' "
+                         "(--sim-args=--recorder-process); named in the rows' config")
     ap.add_argument('--no-page', action='store_true', help='print only')
     ap.add_argument('--page', default='servo_load',
                     help='page name: docs/measurements/<page>.md (default servo_load)')

@@ -125,6 +125,8 @@ def test_a_new_recording_at_a_path_used_before_is_a_new_session(db, rng):
     second = store_session(db, 'ann', rep, case_level=1, bag='/bags/s', bag_start_ns=2000)
     with pytest.raises(AlreadyStored, match=f'session {first}'):   # start unknown: one of them
         store_session(db, 'ann', rep, case_level=1, bag='/bags/s')
+    with pytest.raises(AlreadyStored, match=f'session {second}'):   # a copy, scored elsewhere
+        store_session(db, 'ann', rep, case_level=1, bag='/copies/s', bag_start_ns=2000)
     h = history(db, 'ann')
     assert [(s['session'], s['bag_start_ns']) for s in h] == [(first, 1000), (second, 2000)]
     m = mastery(h, MasteryConfig({1: MasteryLevel(consecutive_sessions=3)}))
@@ -619,6 +621,11 @@ def test_exam_report_stores_the_full_report_and_a_bad_record_still_prints_it(db,
     out, err = capfd.readouterr()
     assert f'already stored as session {s["session"]}' in out and not err
     assert len(history(db, 'pat')) == 1
+    # its MCAP file named instead of its folder: the same recording
+    assert main(['exam', 'report', str(bag / 'bag.mcap'), '--trainee-id', 'pat', '--db',
+                 str(db)]) == 0
+    out, err = capfd.readouterr()
+    assert f'already stored as session {s["session"]}' in out and not err
     # the bag deleted and a new session recorded to its path: a session of its own
     shutil.rmtree(bag)
     pressing_bag(bag, t0_ns=200_000_000_000)

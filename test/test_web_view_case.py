@@ -11,28 +11,34 @@ import pytest
 rclpy = pytest.importorskip('rclpy')
 pytest.importorskip('viser')
 from rclpy.executors import MultiThreadedExecutor  # noqa: E402
+from rclpy.parameter import Parameter  # noqa: E402
 
 from haptic_anfis.nodes._case import declare_case  # noqa: E402
+from haptic_anfis.view.app import BLIND  # noqa: E402
 from haptic_anfis.view.browser import free_port  # noqa: E402
 
 pytestmark = pytest.mark.ros
+LOOP = ('contact_detector', 'force_server')
 
 
 class FakeCaseNode:
-    """A node named like a loop node with the case parameters: its switch takes ``delay`` [s]
-    and raises ``refuse`` when given (a node that cannot load the case)."""
+    """A node named like a case node with the case parameters: its switch waits for ``gate``
+    (a threading.Event, when given) and raises ``refuse`` when given (a node that cannot load
+    the case); ``loaded``: the cases it switched to."""
 
-    def __init__(self, ctx, name: str, refuse: str = '', delay: float = 0.0,
+    def __init__(self, ctx, name: str, refuse: str = '', gate: threading.Event | None = None,
                  case: str = '') -> None:
-        from rclpy.parameter import Parameter
         self.node = rclpy.create_node(name, context=ctx,
                                       parameter_overrides=[Parameter('case', value=case)])
         self.loaded: list = []
-        self.refuse, self.delay = refuse, delay
+        self.refuse, self.gate = refuse, gate
+        self.asked = threading.Event()
         declare_case(self.node, self._switch)
 
     def _switch(self, case) -> None:
-        time.sleep(self.delay)
+        self.asked.set()
+        if self.gate is not None:
+            assert self.gate.wait(60.0)
         if self.refuse:
             raise ValueError(self.refuse)
         self.loaded.append(None if case is None else case.name)
@@ -42,44 +48,56 @@ class FakeCaseNode:
 
 
 @pytest.fixture
-def page():
+def page_with():
+    """``page_with(timeout=15.0)``: a web_view node (its own context, spun by a thread) whose
+    case choice waits ``timeout`` [s] for the case nodes."""
+    from contextlib import ExitStack
+
     from haptic_anfis.nodes.web_view import web_view_in_thread
-    with web_view_in_thread({'port': free_port(), 'case_switch_timeout': 2.0},
-                            'instructor') as (node, _):
-        yield node
+    with ExitStack() as stack:
+        def make(timeout: float = 15.0):
+            return stack.enter_context(web_view_in_thread(
+                {'port': free_port(), 'case_switch_timeout': timeout}, 'instructor'))[0]
+        yield make
 
 
 @pytest.fixture
-def loop_nodes(page):
-    """contact_detector and force_server (fakes) spun beside the page; visualizer and recorder
-    not running. Returns a function making them: ``make(**{name: dict(refuse=, delay=)})``."""
+def loop_nodes():
+    """``loop_nodes(page, names=LOOP, **{name: dict(refuse=, gate=, case=)})``: fake case
+    nodes spun beside the page (each on a thread of its own: a slow one does not hold the
+    others); the page's graph lists them on return."""
     made: list = []
     stop = threading.Event()
-    ex = MultiThreadedExecutor(num_threads=4, context=page.context)   # a slow node alone
+    executors: list = []
 
-    def spin() -> None:
-        while not stop.is_set():
-            ex.spin_once(timeout_sec=0.01)
-
-    def make(**how) -> dict:
-        fakes = {n: FakeCaseNode(page.context, n, **how.get(n, {}))
-                 for n in ('contact_detector', 'force_server')}
+    def make(page, names=LOOP, **how) -> dict:
+        ex = MultiThreadedExecutor(num_threads=4, context=page.context)
+        executors.append(ex)
+        fakes = {n: FakeCaseNode(page.context, n, **how.get(n, {})) for n in names}
         for f in fakes.values():
             ex.add_node(f.node)
             made.append(f)
+
+        def spin() -> None:
+            while not stop.is_set():
+                ex.spin_once(timeout_sec=0.01)
         th = threading.Thread(target=spin, daemon=True)
         th.start()
         made.append(th)
-        wait_for(lambda: {'contact_detector', 'force_server'} <= {
-            n for n, _ in page.get_node_names_and_namespaces()}, 20.0)
+        wait_for(lambda: set(names) <= {n for n, _ in page.get_node_names_and_namespaces()},
+                 30.0)
         return fakes
 
     yield make
     stop.set()
     for m in made:
+        if isinstance(m, FakeCaseNode) and m.gate is not None:
+            m.gate.set()
+    for m in made:
         if isinstance(m, threading.Thread):
             m.join(5)
-    ex.shutdown(timeout_sec=1.0)
+    for ex in executors:
+        ex.shutdown(timeout_sec=1.0)
     for m in made:
         if isinstance(m, FakeCaseNode):
             m.node.destroy_node()
@@ -98,77 +116,98 @@ def choose(page, name: str) -> str:
     before = page.app.g_msg.content
     page.app.on_case(name)
     wait_for(lambda: page.app.g_msg.content not in (before, '')
-             and 'switching' not in page.app.g_msg.content and page._switch is None, 30.0)
+             and 'switching' not in page.app.g_msg.content and page._switch is None, 60.0)
     return page.app.g_msg.content
 
 
-def test_every_running_case_node_switches_then_the_page(page, loop_nodes):
-    fakes = loop_nodes()
+def test_every_running_case_node_switches_then_the_page(page_with, loop_nodes):
+    page = page_with()
+    fakes = loop_nodes(page, (*LOOP, 'recorder'))
     loads, load = [], page._load_case
     page._load_case = lambda case: (loads.append(case), load(case))
     msg = choose(page, 'normal')
-    assert 'switched: contact_detector, force_server' in msg, msg
-    assert 'not running: visualizer, recorder' in msg, msg
+    assert 'switched: contact_detector, force_server, recorder' in msg, msg
+    assert 'not running: visualizer, examiner' in msg, msg
     for f in fakes.values():
         assert f.loaded == ['normal'] and f.param('case') == 'normal'
         assert f.param('random_case_seed') == -1
     wait_for(lambda: page.cv.name == 'normal', 30.0)   # the page shows the case it scores
     assert page.get_parameter('case').value == 'normal' and not page.blind
+    assert page.app.g_case.value == 'normal'
     time.sleep(0.3)
     assert [c.name for c in loads] == ['normal']   # loaded once (both parameters in one set)
 
 
-def test_a_blind_choice_draws_the_same_case_everywhere(page, loop_nodes):
-    fakes = loop_nodes(force_server={'case': 'normal'})   # started with case:=normal
-    from haptic_anfis.view.app import BLIND
+def test_a_blind_choice_draws_the_same_case_everywhere(page_with, loop_nodes):
+    page = page_with()
+    fakes = loop_nodes(page, force_server={'case': 'normal'})   # started with case:=normal
     msg = choose(page, BLIND)
     assert msg.startswith('blind random case chosen'), msg
     seed = page.get_parameter('random_case_seed').value
-    assert seed >= 0 and page.blind
+    assert seed >= 0 and page.blind and page.app.g_case.value == BLIND
     wait_for(lambda: page.cv.name == fakes['force_server'].loaded[-1], 30.0)   # the same draw
     for f in fakes.values():   # no old name left readable on any node
         assert f.param('random_case_seed') == seed and f.param('case') == ''
         assert f.loaded[-1] == page.cv.name
 
 
-def test_a_refusal_sends_the_others_back_and_the_page_keeps_its_case(page, loop_nodes):
-    fakes = loop_nodes(force_server={'refuse': 'model file unreadable'})
+def test_a_refusal_sends_the_others_back_and_the_page_keeps_its_case(page_with, loop_nodes):
+    """The loop refuses: the switched nodes go back, the recorder is never asked (its bag
+    keeps one case), the dropdown shows the case kept, and the exam starts afresh on it (the
+    samples of the attempt were not collected)."""
+    page = page_with()
+    fakes = loop_nodes(page, (*LOOP, 'recorder'),
+                       force_server={'refuse': 'model file unreadable'})
     page.app.g_case.value = 'normal'   # as the instructor's dropdown shows it
+    t0 = page.t_start
     msg = choose(page, 'normal')
-    assert 'case normal NOT chosen' in msg and 'stays on default' in msg, msg
+    assert msg.startswith('case normal NOT chosen'), msg
     assert 'force_server refused: model file unreadable' in msg, msg
-    assert 'sent back to it: contact_detector' in msg, msg
+    assert 'not asked: recorder' in msg and 'sent back: contact_detector' in msg, msg
+    assert 'the exam starts afresh on case default' in msg, msg
     cd = fakes['contact_detector']
     wait_for(lambda: cd.param('case') == '', 10.0)   # the revert landed
     assert cd.loaded == ['normal', None]
+    assert fakes['recorder'].loaded == [] and not fakes['recorder'].asked.is_set()
     assert page.get_parameter('case').value == '' and page.cv.name in (None, 'default')
-    assert page.app.g_case.value == 'default'   # the dropdown shows the case kept ...
-    time.sleep(0.5)
-    assert page._switch is None and page.app.g_msg.content == msg   # ... without choosing it
+    assert page.app.g_case.value == 'default' and page.t_start > t0
+    time.sleep(0.5)   # the dropdown set by the page is no choice: nothing more happens
+    assert page._switch is None and page.app.g_msg.content == msg
 
 
-def test_a_node_that_does_not_answer_in_time_cancels_the_choice(page, loop_nodes):
-    fakes = loop_nodes(contact_detector={'delay': 3.0})   # case_switch_timeout is 2 s
+def test_a_node_that_does_not_answer_in_time_cancels_the_choice(page_with, loop_nodes):
+    page = page_with(timeout=10.0)   # force_server answers within it, even on a loaded machine
+    gate = threading.Event()   # contact_detector loads the case only when the test says so
+    fakes = loop_nodes(page, contact_detector={'gate': gate})
     msg = choose(page, 'normal')
     assert 'NOT chosen' in msg and 'switched: force_server' in msg, msg
     assert 'no answer from contact_detector' in msg, msg
-    assert 'sent back to it: force_server, contact_detector' in msg, msg
+    assert 'sent back: force_server, contact_detector' in msg, msg
+    gate.set()
     for f in fakes.values():   # the late switch lands, then the revert after it
-        wait_for(lambda f=f: f.param('case') == '' and f.loaded[-1:] == [None], 20.0)
+        wait_for(lambda f=f: f.param('case') == '' and f.loaded[-1:] == [None], 30.0)
+    assert fakes['contact_detector'].loaded == ['normal', None]
     assert page.get_parameter('case').value == ''
 
 
-def test_a_second_choice_while_one_is_loading_is_refused_on_the_page(page, loop_nodes):
-    loop_nodes(contact_detector={'delay': 1.0})
+def test_samples_are_not_collected_while_the_nodes_switch(page_with, loop_nodes):
+    """The loop may be on either case until every node answered: nothing goes into the
+    session then; a second choice meanwhile is refused and the dropdown shows the first."""
+    page = page_with()
+    gate = threading.Event()
+    fakes = loop_nodes(page, contact_detector={'gate': gate})
     page.app.on_case('normal')
-    wait_for(lambda: page._switch is not None, 10.0)
+    assert fakes['contact_detector'].asked.wait(30.0)
+    assert page._switch is not None and not page._collecting()
     page.app.on_case('two_lesions')
     wait_for(lambda: 'still being loaded' in page.app.g_msg.content, 10.0)
+    assert page.app.g_case.value == 'normal'
+    gate.set()
     wait_for(lambda: page.get_parameter('case').value == 'normal', 30.0)
+    assert page._collecting() and page.app.g_case.value == 'normal'
 
 
 def test_a_page_started_blind_shows_the_blind_entry():
     from haptic_anfis.nodes.web_view import web_view_in_thread
-    from haptic_anfis.view.app import BLIND
     with web_view_in_thread({'port': free_port(), 'random_case_seed': 3}, 'x') as (node, _):
         assert node.blind and node.app.g_case.value == BLIND

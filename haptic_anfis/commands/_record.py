@@ -69,7 +69,14 @@ def case_parameter(args: argparse.Namespace, case) -> tuple[str, str | int]:
     raise ValueError('--next: no random-case seed draws the case chosen for the session')
 
 
-def _bag_start(bag) -> tuple[str | None, int | None]:
+def _bag_folder(bag: str | Path) -> Path:
+    """The bag a path names, as the record keeps it: absolute, and a bag's MCAP file named by
+    its folder (``exam report BAG`` and ``exam report BAG/BAG.mcap`` are one recording)."""
+    p = Path(bag).resolve()
+    return p.parent if p.is_file() and (p.parent / 'metadata.yaml').is_file() else p
+
+
+def _bag_start(bag: str | Path) -> tuple[str | None, int | None]:
     """The bag's first message: when (UTC, if its clock is wall time) and its time [ns]
     (which tells recordings made at the same path apart); None for what cannot be read."""
     from ..bag.reader import bag_info
@@ -104,7 +111,7 @@ def store_report(args: argparse.Namespace, report: dict) -> int:
     try:
         sid = store_session(args.db, args.trainee_id, report, source=source, started_utc=started,
                             case_level=level_of_case_name(report.get('case')),
-                            bag=str(Path(bag).resolve()) if bag else None, bag_start_ns=bag_ns)
+                            bag=str(_bag_folder(bag)) if bag else None, bag_start_ns=bag_ns)
     except AlreadyStored as exc:   # the report stands; the record keeps the bag's first one
         print(f'record         {exc}', flush=True)
         return 0

@@ -31,6 +31,7 @@ from . import interfaces as ifc
 from ._case import declare_case
 from ._common import Param, declare_parameters, positive, run_node
 from .base import HapticNode
+from .case_switch import CaseSwitch
 from .polled import PolledSubscription
 
 #: newest sample, best effort
@@ -39,8 +40,9 @@ NEWEST = QoSProfile(depth=1, history=HistoryPolicy.KEEP_LAST,
 #: the contact samples since the last frame (1 kHz / 30 Hz ~ 33), best effort; older ones drop
 CONTACT_QUEUE = QoSProfile(depth=200, history=HistoryPolicy.KEEP_LAST,
                            reliability=ReliabilityPolicy.BEST_EFFORT)
-#: nodes whose case the instructor's choice switches (those that are running)
-CASE_NODES = ('contact_detector', 'force_server', 'visualizer', 'recorder')
+#: nodes whose case the instructor's choice switches (those that are running), in phases: the
+#: recorder (its case is the bag's label) only once every node of the loop has switched
+CASE_PHASES = (('contact_detector', 'force_server', 'visualizer', 'examiner'), ('recorder',))
 #: what the page says while the loop nodes load a case
 SWITCHING = 'switching to {} ...'
 
@@ -61,9 +63,9 @@ PARAMS = [
     Param('db', '', "trainee record file for the sessions the page stops ('' = the record's "
                     'default: $HAPTIC_ANFIS_DB, else the user data directory)'),
     Param('case_switch_timeout', 15.0, "how long the instructor's case choice waits for every "
-          'running case node (contact_detector, force_server, visualizer, recorder) to load '
-          'the case [s]; one that refuses or has not answered by then cancels the choice (the '
-          'nodes that switched go back, the page says who failed)', positive),
+          'running case node (contact_detector, force_server, visualizer, examiner; then the '
+          'recorder) to load the case [s]; one that refuses or has not answered by then cancels '
+          'the choice (the nodes that switched go back, the page says who failed)', positive),
 ]
 
 
@@ -111,7 +113,7 @@ class WebView(HapticNode):
     # -- inputs -----------------------------------------------------------------------------
 
     def _on_mark(self, m: PointStamped) -> None:
-        if self.running:
+        if self._collecting():
             q = m.point
             self.cv.session.add_mark(_stamp(m), (q.x, q.y, q.z))
 
@@ -136,10 +138,15 @@ class WebView(HapticNode):
                 self._malformed(exc)
                 continue
             self._contact = v
-            if self.running:
+            if self._collecting():
                 self.cv.session.add_contact_values(stamp * 1e-9, v)
-        if self.running and self._pose is not None:
+        if self._collecting() and self._pose is not None:
             self.cv.session.add_pose(*self._pose)
+
+    def _collecting(self) -> bool:
+        """Whether samples go into the session: while it runs, and not while a case choice is
+        being loaded (the loop nodes may then be on either case)."""
+        return self.running and self._switch is None
 
     def _malformed(self, exc: ValueError) -> None:
         self.malformed += 1
@@ -234,8 +241,8 @@ class WebView(HapticNode):
         from rclpy.parameter import Parameter
 
         from ..view.app import BLIND
-        from .case_switch import CaseSwitch
         if self._switch is not None:
+            self.app.show_case_choice(self._switch.entry)   # the dropdown shows the pending one
             raise ValueError(f'{self._switch.label} is still being loaded; choose again when '
                              'it is done')
         blind = name == BLIND
@@ -245,12 +252,12 @@ class WebView(HapticNode):
                   Parameter('random_case_seed',
                             value=random.SystemRandom().randrange(2**31) if blind else -1)]
         self._switch = _Choice(
-            CaseSwitch(self, CASE_NODES, params, self._param_clients, time.monotonic(),
+            CaseSwitch(self, CASE_PHASES, params, self._param_clients, time.monotonic(),
                        self.params['case_switch_timeout']),
-            'a blind random case' if blind else f'case {name}', blind,
+            'a blind random case' if blind else f'case {name}', blind, name,
             [Parameter(n, value=self.get_parameter(n).value)
              for n in ('case', 'random_case_seed')],
-            '' if self.blind else (self.cv.name or 'default'))
+            BLIND if self.blind else (self.cv.name or 'default'))
         self.app.message(SWITCHING.format(self._switch.label))
         self._follow_switch()
 
@@ -267,17 +274,22 @@ class WebView(HapticNode):
         if res is not None and res.successful:
             self.blind = ch.blind
             self.get_logger().info(f'{ch.label}: {out.describe()}')
+            self.app.show_case_choice(ch.entry)
             self.app.message(('blind random case chosen' if self.blind else ch.label)
                              + f' ({out.describe()})')
             return
         from ..view.app import BLIND
         back = ch.switch.revert(ch.before)
         why = out.describe() if res is None else f'the page cannot show it: {res.reason}'
-        msg = (f'{ch.label} NOT chosen, the session stays on '
-               f'{ch.shown or "its blind case"}: {why}'
-               + (f' (sent back to it: {", ".join(back)})' if back else ''))
+        kept = 'its blind case' if ch.shown == BLIND else f'case {ch.shown}'
+        # the samples of the attempt were not collected: the exam starts afresh on the case kept
+        msg = (f'{ch.label} NOT chosen: {why}'
+               + (f' (sent back: {", ".join(back)})' if back else '')
+               + f'; the exam starts afresh on {kept}')
         self.get_logger().error(msg)
-        self.app.show_case_choice(ch.shown or BLIND)
+        self.app.show_case_choice(ch.shown)
+        if self.running:
+            self._restart()
         self.app.message(msg)
 
     def _load_case(self, case) -> None:
@@ -306,11 +318,12 @@ class WebView(HapticNode):
 @dataclass
 class _Choice:
     """The instructor's case choice while the loop nodes load it: the switch, what the page
-    calls it, whether it is blind, the parameters before (to go back to) and the case the
-    dropdown showed ('' = blind)."""
-    switch: object
+    calls it, whether it is blind, its dropdown entry, the parameters before (to go back to)
+    and the dropdown entry before (a case name or the blind entry)."""
+    switch: CaseSwitch
     label: str
     blind: bool
+    entry: str
     before: list
     shown: str
 

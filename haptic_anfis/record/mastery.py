@@ -118,15 +118,18 @@ def mastery(sessions: list[dict], config: MasteryConfig = DEFAULT) -> dict:
     record from before :class:`~haptic_anfis.record.AlreadyStored`); two recordings made at one
     path (``bag_start_ns`` differs) count as two.
     """
-    seen: dict[str, set] = {}   # bag path -> the starts [ns] of its recordings (None: unknown)
+    paths: dict[str, set] = {}   # bag path -> the starts [ns] of its recordings (None: unknown)
+    starts: set[int] = set()
     counted = []
-    for s in sessions:
+    for s in sessions:   # one recording: store_session's rule
         bag, ns = s.get('bag'), s.get('bag_start_ns')
-        starts = seen.get(bag, set()) if bag else set()
-        if starts and (ns is None or None in starts or ns in starts):
-            continue   # this recording again (a start unknown on either side counts as it)
+        if (ns is not None and ns in starts) or (bag in paths and (ns is None
+                                                                   or None in paths[bag])):
+            continue
         if bag:
-            seen.setdefault(bag, set()).add(ns)
+            paths.setdefault(bag, set()).add(ns)
+            if ns is not None:
+                starts.add(ns)
         counted.append(s)
     per = {}
     for L, th in sorted(config.levels.items()):

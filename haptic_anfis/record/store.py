@@ -111,8 +111,8 @@ def store_session(db: str | os.PathLike | None, trainee_id: str, report: dict, *
     Raises:
         ValueError: bad trainee id or report; RecordError (a ValueError): the file;
             AlreadyStored (a RecordError): ``bag`` is already stored for this trainee (a
-            recording counts once toward mastery; nothing is stored): the same path, and the
-            same first message where both sessions know it.
+            recording counts once toward mastery; nothing is stored): the same first
+            message, or the same path where a session does not know its first message.
     """
     check_trainee_id(trainee_id)
     row = session_row(report, source=source, case_level=case_level, bag=bag,
@@ -123,11 +123,12 @@ def store_session(db: str | os.PathLike | None, trainee_id: str, report: dict, *
 
     def tx(conn):
         if row['bag_path'] is not None:
-            # a stored session that does not know its bag's start (stored before v3, or the bag
-            # unreadable) counts as this recording: better one session too few than one twice
+            # one recording: the same first message (wherever the bag is now), or the same path
+            # where a side does not know its start (stored before v3, or the bag unreadable):
+            # better one session too few than one twice
             old = conn.execute(
-                'SELECT id FROM sessions WHERE trainee_id = :t AND bag_path = :p AND ('
-                'bag_start_ns IS NULL OR :ns IS NULL OR bag_start_ns = :ns) ORDER BY id LIMIT 1',
+                'SELECT id FROM sessions WHERE trainee_id = :t AND (bag_start_ns = :ns OR ('
+                'bag_path = :p AND (bag_start_ns IS NULL OR :ns IS NULL))) ORDER BY id LIMIT 1',
                 {'t': trainee_id, 'p': row['bag_path'], 'ns': row['bag_start_ns']}).fetchone()
             if old is not None:
                 raise AlreadyStored(
