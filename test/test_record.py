@@ -117,24 +117,30 @@ def test_an_older_file_is_migrated_and_its_rows_kept(db):
 
 def test_a_new_recording_at_a_path_used_before_is_a_new_session(db, rng):
     """An instructor who deletes a bag and records to its path again: the new recording (its
-    first message later) is stored and counts; the same recording still counts once."""
+    first message later) is stored and counts; the same recording still counts once, also as
+    a copy scored at another path; simulated-time bags at other paths are not taken for it."""
+    wall = 1_795_000_000_000_000_000   # 2026, ns
     rep = fake_report(rng, deep=100, case='x')
-    first = store_session(db, 'ann', rep, case_level=1, bag='/bags/s', bag_start_ns=1000)
+    first = store_session(db, 'ann', rep, case_level=1, bag='/bags/s', bag_start_ns=wall)
     with pytest.raises(AlreadyStored, match=f'session {first}'):
-        store_session(db, 'ann', rep, case_level=1, bag='/bags/s', bag_start_ns=1000)
-    second = store_session(db, 'ann', rep, case_level=1, bag='/bags/s', bag_start_ns=2000)
+        store_session(db, 'ann', rep, case_level=1, bag='/bags/s', bag_start_ns=wall)
+    second = store_session(db, 'ann', rep, case_level=1, bag='/bags/s', bag_start_ns=wall + 9)
     with pytest.raises(AlreadyStored, match=f'session {first}'):   # start unknown: one of them
         store_session(db, 'ann', rep, case_level=1, bag='/bags/s')
     with pytest.raises(AlreadyStored, match=f'session {second}'):   # a copy, scored elsewhere
-        store_session(db, 'ann', rep, case_level=1, bag='/copies/s', bag_start_ns=2000)
+        store_session(db, 'ann', rep, case_level=1, bag='/copies/s', bag_start_ns=wall + 9)
+    sim = store_session(db, 'ann', rep, case_level=1, bag='/sim/a', bag_start_ns=100)
+    other = store_session(db, 'ann', rep, case_level=1, bag='/sim/b', bag_start_ns=100)
     h = history(db, 'ann')
-    assert [(s['session'], s['bag_start_ns']) for s in h] == [(first, 1000), (second, 2000)]
-    m = mastery(h, MasteryConfig({1: MasteryLevel(consecutive_sessions=3)}))
-    assert m['levels'][1]['sessions'] == 2
-    # a record holding one recording twice (from before the check) still counts it once
-    m = mastery(h + [dict(h[1], session=99)],
-                MasteryConfig({1: MasteryLevel(consecutive_sessions=3)}))
-    assert m['levels'][1]['sessions'] == 2
+    assert [(s['session'], s['bag_start_ns']) for s in h] == [
+        (first, wall), (second, wall + 9), (sim, 100), (other, 100)]
+    cfg = MasteryConfig({1: MasteryLevel(consecutive_sessions=3)})
+    assert mastery(h, cfg)['levels'][1]['sessions'] == 4
+    # a record holding one recording twice (from before the check): counted once, as the
+    # store decides, at the same path or as a copy elsewhere
+    dups = [dict(h[1], session=98), dict(h[1], session=99, bag='/copies/s')]
+    assert mastery(h + dups, cfg)['levels'][1]['sessions'] == 4
+    assert mastery(h + [dict(h[2], session=97, bag='/sim/c')], cfg)['levels'][1]['sessions'] == 5
 
 
 def test_a_bag_stored_before_its_start_was_kept_still_counts_once(db, rng):
@@ -600,6 +606,12 @@ def pressing_bag(path: Path, t0_ns: int = 100_000_000_000) -> Path:
 def test_exam_report_stores_the_full_report_and_a_bad_record_still_prints_it(db, tmp_path,
                                                                              capfd):
     bag = pressing_bag(tmp_path / 'bag')
+    # a bag named by its MCAP file is stored as its folder (one recording, one path)
+    other = tmp_path / 'other.sqlite'
+    assert main(['exam', 'report', str(bag / 'bag.mcap'), '--trainee-id', 'pat', '--db',
+                 str(other)]) == 0
+    assert [h['bag'] for h in history(other, 'pat')] == [str(bag.resolve())]
+    capfd.readouterr()
     assert main(['exam', 'report', str(bag), '--trainee-id', 'pat', '--db', str(db),
                  '--json']) == 0
     r = json.loads(capfd.readouterr().out.strip().splitlines()[-1])

@@ -24,14 +24,15 @@ LOOP = ('contact_detector', 'force_server')
 class FakeCaseNode:
     """A node named like a case node with the case parameters: its switch waits for ``gate``
     (a threading.Event, when given) and raises ``refuse`` when given (a node that cannot load
-    the case); ``loaded``: the cases it switched to."""
+    the case), ``refuse_back`` for its own default scene; ``loaded``: the cases it switched
+    to."""
 
     def __init__(self, ctx, name: str, refuse: str = '', gate: threading.Event | None = None,
-                 case: str = '') -> None:
+                 case: str = '', refuse_back: str = '') -> None:
         self.node = rclpy.create_node(name, context=ctx,
                                       parameter_overrides=[Parameter('case', value=case)])
         self.loaded: list = []
-        self.refuse, self.gate = refuse, gate
+        self.refuse, self.gate, self.refuse_back = refuse, gate, refuse_back
         self.asked = threading.Event()
         declare_case(self.node, self._switch)
 
@@ -41,6 +42,8 @@ class FakeCaseNode:
             assert self.gate.wait(60.0)
         if self.refuse:
             raise ValueError(self.refuse)
+        if self.refuse_back and case is None:   # takes a case, cannot go back to its own
+            raise ValueError(self.refuse_back)
         self.loaded.append(None if case is None else case.name)
 
     def param(self, name: str):
@@ -166,8 +169,7 @@ def test_a_refusal_sends_the_others_back_and_the_page_keeps_its_case(page_with, 
     assert 'not asked: recorder' in msg and 'sent back: contact_detector' in msg, msg
     assert 'the exam starts afresh on case default' in msg, msg
     cd = fakes['contact_detector']
-    wait_for(lambda: cd.param('case') == '', 10.0)   # the revert landed
-    assert cd.loaded == ['normal', None]
+    assert cd.param('case') == '' and cd.loaded == ['normal', None]   # answered before that
     assert fakes['recorder'].loaded == [] and not fakes['recorder'].asked.is_set()
     assert page.get_parameter('case').value == '' and page.cv.name in (None, 'default')
     assert page.app.g_case.value == 'default' and page.t_start > t0
@@ -176,18 +178,39 @@ def test_a_refusal_sends_the_others_back_and_the_page_keeps_its_case(page_with, 
 
 
 def test_a_node_that_does_not_answer_in_time_cancels_the_choice(page_with, loop_nodes):
+    """contact_detector is still loading at the timeout: the choice is refused, both are sent
+    back, and the page collects nothing until the late switch and then the revert landed."""
     page = page_with(timeout=10.0)   # force_server answers within it, even on a loaded machine
     gate = threading.Event()   # contact_detector loads the case only when the test says so
     fakes = loop_nodes(page, contact_detector={'gate': gate})
-    msg = choose(page, 'normal')
+    page.app.on_case('normal')
+    wait_for(lambda: 'sending back: force_server, contact_detector' in page.app.g_msg.content,
+             60.0)
+    msg = page.app.g_msg.content
     assert 'NOT chosen' in msg and 'switched: force_server' in msg, msg
     assert 'no answer from contact_detector' in msg, msg
-    assert 'sent back: force_server, contact_detector' in msg, msg
+    time.sleep(0.3)
+    assert page._switch is not None and not page._collecting()   # still on the new case
     gate.set()
-    for f in fakes.values():   # the late switch lands, then the revert after it
-        wait_for(lambda f=f: f.param('case') == '' and f.loaded[-1:] == [None], 30.0)
+    wait_for(lambda: page._switch is None, 60.0)
+    msg = page.app.g_msg.content
+    assert 'sent back: force_server, contact_detector' in msg, msg
+    assert 'the exam starts afresh on case default' in msg and page._collecting(), msg
+    for f in fakes.values():   # the late switch landed, then the revert after it
+        assert f.param('case') == '' and f.loaded[-1:] == [None]
     assert fakes['contact_detector'].loaded == ['normal', None]
     assert page.get_parameter('case').value == ''
+
+
+def test_a_node_that_cannot_be_sent_back_stops_the_exam(page_with, loop_nodes):
+    """force_server refuses the choice; contact_detector switched but then refuses the way
+    back: the loop may be split, so the page stops the exam and says so."""
+    page = page_with()
+    loop_nodes(page, force_server={'refuse': 'no model'},
+               contact_detector={'refuse_back': 'mesh file gone'})
+    msg = choose(page, 'normal')
+    assert 'sending back FAILED' in msg and 'contact_detector refused: mesh file gone' in msg
+    assert 'the exam is stopped' in msg and not page.running and not page._collecting()
 
 
 def test_samples_are_not_collected_while_the_nodes_switch(page_with, loop_nodes):
@@ -203,8 +226,9 @@ def test_samples_are_not_collected_while_the_nodes_switch(page_with, loop_nodes)
     wait_for(lambda: 'still being loaded' in page.app.g_msg.content, 10.0)
     assert page.app.g_case.value == 'normal'
     gate.set()
-    wait_for(lambda: page.get_parameter('case').value == 'normal', 30.0)
-    assert page._collecting() and page.app.g_case.value == 'normal'
+    wait_for(lambda: page._switch is None, 30.0)
+    assert page.get_parameter('case').value == 'normal' and page._collecting()
+    assert page.app.g_case.value == 'normal'
 
 
 def test_a_page_started_blind_shows_the_blind_entry():

@@ -81,14 +81,15 @@ def _bag_start(bag: str | Path) -> tuple[str | None, int | None]:
     (which tells recordings made at the same path apart); None for what cannot be read."""
     from ..bag.reader import bag_info
     from ..record import utc_iso
+    from ..record.store import WALL_CLOCK_NS
     try:
         info = bag_info(bag)
     except Exception:   # noqa: BLE001 (the report already read it; a time is optional)
         return None, None
     if not info.message_count:
         return None, None
-    start = info.start_ns   # after 2001: wall clock, not sim time
-    return (utc_iso(start * 1e-9) if start > 1e18 else None), int(start)
+    start = info.start_ns
+    return (utc_iso(start * 1e-9) if start >= WALL_CLOCK_NS else None), int(start)
 
 
 def store_report(args: argparse.Namespace, report: dict) -> int:

@@ -10,8 +10,8 @@ phases: the next phase is asked only when every node of the one before has switc
 recorder (last: its case is a label in the bag) never records a choice the loop refused.
 :meth:`CaseSwitch.poll`, called from the owner's timer, returns the :class:`SwitchOutcome` once
 every node has answered or the time is up. The owner then switches itself, or sends
-:meth:`CaseSwitch.revert` to the nodes that may have switched. Nothing here blocks: the owner's
-executor delivers the answers.
+:meth:`CaseSwitch.revert` to the nodes that may have switched and follows the revert the same
+way. Nothing here blocks: the owner's executor delivers the answers.
 """
 from __future__ import annotations
 
@@ -141,14 +141,19 @@ class CaseSwitch:
                 d.refused[name] = res.reason or 'refused'
         self._sent |= {n for n, f in self.futures.items() if f is not None}
 
-    def revert(self, params: Sequence) -> list[str]:
+    def revert(self, params: Sequence, now: float) -> CaseSwitch | None:
         """Send ``params`` (the case before) to every node that may have switched: those that
-        said so and those that had not answered (their request may still land). Returns their
-        names. Nothing is awaited: the owner reports the failed switch, not the revert."""
+        said so and those that had not answered (their request lands before the revert). Returns
+        the revert as a switch of its own, to follow as this one (its nodes: ``names``), or None
+        when no node was asked."""
         if self.outcome is None:
-            return []
-        names = [n for n in self.outcome.switched + self.outcome.silent
-                 if n in self._sent]
-        for name in names:
-            self._send(name, params)
-        return names
+            return None
+        names = [n for n in self.outcome.switched + self.outcome.silent if n in self._sent]
+        if not names:
+            return None
+        return CaseSwitch(self.node, [names], params, self.clients, now, self.timeout)
+
+    @property
+    def names(self) -> list[str]:
+        """The nodes this switch asks (every phase)."""
+        return [n for ph in self.phases for n in ph]

@@ -19,7 +19,7 @@ from __future__ import annotations
 import collections
 import random
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from geometry_msgs.msg import PointStamped, PoseStamped, WrenchStamped
@@ -62,10 +62,11 @@ PARAMS = [
     Param('trainee', '', 'trainee id shown in the instructor panel'),
     Param('db', '', "trainee record file for the sessions the page stops ('' = the record's "
                     'default: $HAPTIC_ANFIS_DB, else the user data directory)'),
-    Param('case_switch_timeout', 15.0, "how long the instructor's case choice waits for every "
-          'running case node (contact_detector, force_server, visualizer, examiner; then the '
-          'recorder) to load the case [s]; one that refuses or has not answered by then cancels '
-          'the choice (the nodes that switched go back, the page says who failed)', positive),
+    Param('case_switch_timeout', 15.0, "how long the instructor's case choice waits for the "
+          'running case nodes to load the case [s], per phase (contact_detector, force_server, '
+          'visualizer, examiner; then the recorder); one that refuses or has not answered by '
+          'then cancels the choice (the nodes that switched go back, the page says who failed)',
+          positive),
 ]
 
 
@@ -263,12 +264,25 @@ class WebView(HapticNode):
 
     def _follow_switch(self) -> None:
         """The case nodes' answers: all switched, the page switches too; one refused or silent,
-        the others go back to the case before, the page keeps it and says who failed."""
-        ch, self._switch = self._switch, None   # an error here ends the choice (said on the page)
-        out = ch.switch.poll(time.monotonic())
-        if out is None:
-            self._switch = ch
-            return
+        the others are sent back to the case before (no samples collected until they answered),
+        then the exam starts afresh on it; a node that cannot be sent back stops the exam.
+        ``_switch`` changes once, at the end (other threads read it: never None in between)."""
+        ch = self._switch
+        nxt = None   # what follows: the revert of a refused choice, else nothing
+        try:
+            out = ch.switch.poll(time.monotonic())
+            if out is None:
+                nxt = ch
+            elif ch.failed:   # the revert of a refused choice has been answered
+                self._reverted(ch, out)
+            else:
+                nxt = self._answered(ch, out)
+        finally:   # an error ends the choice (_handle says it on the page)
+            self._switch = nxt
+
+    def _answered(self, ch: _Choice, out) -> _Choice | None:
+        """Every case node answered ``ch``: the page switches, or the choice is refused and the
+        nodes that may have switched are sent back (returned: the revert to follow)."""
         # ours, in one set: declare_case's callback switches once
         res = self.set_parameters_atomically(ch.switch.params) if out.ok else None
         if res is not None and res.successful:
@@ -277,19 +291,40 @@ class WebView(HapticNode):
             self.app.show_case_choice(ch.entry)
             self.app.message(('blind random case chosen' if self.blind else ch.label)
                              + f' ({out.describe()})')
-            return
-        from ..view.app import BLIND
-        back = ch.switch.revert(ch.before)
+            return None
         why = out.describe() if res is None else f'the page cannot show it: {res.reason}'
-        kept = 'its blind case' if ch.shown == BLIND else f'case {ch.shown}'
-        # the samples of the attempt were not collected: the exam starts afresh on the case kept
-        msg = (f'{ch.label} NOT chosen: {why}'
-               + (f' (sent back: {", ".join(back)})' if back else '')
-               + f'; the exam starts afresh on {kept}')
+        msg = f'{ch.label} NOT chosen: {why}'
         self.get_logger().error(msg)
         self.app.show_case_choice(ch.shown)
+        back = ch.switch.revert(ch.before, time.monotonic())
+        if back is None:
+            self._reverted(replace(ch, failed=msg), None)
+            return None
+        self.app.message(f'{msg}; sending back: {", ".join(back.names)} ...')
+        return replace(ch, switch=back, failed=msg, label=f'the return to {self._kept(ch)}')
+
+    def _kept(self, ch: _Choice) -> str:
+        from ..view.app import BLIND
+        return 'its blind case' if ch.shown == BLIND else f'case {ch.shown}'
+
+    def _reverted(self, ch: _Choice, out) -> None:
+        """A refused choice's end: the nodes sent back answered (``out``; None: none to send
+        back). The samples of the attempt were not collected: a running exam starts afresh on
+        the case kept; a node that could not be sent back stops it (the loop may be split)."""
+        msg = ch.failed
+        if out is not None and not out.ok:
+            self.running = False
+            self.app.set_exam_running(False)
+            msg += (f'; sending back FAILED ({out.describe()}): the loop may not be on '
+                    f'{self._kept(ch)}; the exam is stopped: choose a case again')
+            self.get_logger().error(msg)
+            self.app.message(msg)
+            return
+        if out is not None:
+            msg += f'; sent back: {", ".join(out.switched)}'
         if self.running:
             self._restart()
+            msg += f'; the exam starts afresh on {self._kept(ch)}'
         self.app.message(msg)
 
     def _load_case(self, case) -> None:
@@ -315,17 +350,19 @@ class WebView(HapticNode):
         self.app.close()
 
 
-@dataclass
+@dataclass(frozen=True)
 class _Choice:
     """The instructor's case choice while the loop nodes load it: the switch, what the page
-    calls it, whether it is blind, its dropdown entry, the parameters before (to go back to)
-    and the dropdown entry before (a case name or the blind entry)."""
+    calls it, whether it is blind, its dropdown entry, the parameters before (to go back to),
+    the dropdown entry before (a case name or the blind entry); ``failed``: the page's line
+    once the choice was refused and ``switch`` is its revert."""
     switch: CaseSwitch
     label: str
     blind: bool
     entry: str
     before: list
     shown: str
+    failed: str = ''
 
 
 def _stamp(m) -> float:

@@ -16,6 +16,8 @@ from pathlib import Path
 
 import yaml
 
+from .store import same_recording
+
 __all__ = ['MasteryConfig', 'MasteryLevel', 'load_mastery_config', 'mastery', 'meets']
 
 
@@ -118,19 +120,11 @@ def mastery(sessions: list[dict], config: MasteryConfig = DEFAULT) -> dict:
     record from before :class:`~haptic_anfis.record.AlreadyStored`); two recordings made at one
     path (``bag_start_ns`` differs) count as two.
     """
-    paths: dict[str, set] = {}   # bag path -> the starts [ns] of its recordings (None: unknown)
-    starts: set[int] = set()
-    counted = []
-    for s in sessions:   # one recording: store_session's rule
-        bag, ns = s.get('bag'), s.get('bag_start_ns')
-        if (ns is not None and ns in starts) or (bag in paths and (ns is None
-                                                                   or None in paths[bag])):
-            continue
-        if bag:
-            paths.setdefault(bag, set()).add(ns)
-            if ns is not None:
-                starts.add(ns)
-        counted.append(s)
+    counted: list[dict] = []
+    for s in sessions:   # a recording counts once (store_session's rule)
+        if not any(same_recording(s.get('bag'), s.get('bag_start_ns'), c.get('bag'),
+                                  c.get('bag_start_ns')) for c in counted):
+            counted.append(s)
     per = {}
     for L, th in sorted(config.levels.items()):
         mine = [s for s in counted if s.get('case_level') == L]

@@ -16,9 +16,10 @@ from typing import IO
 
 from .db import RecordError, connect, resolve_db_path, write
 
-__all__ = ['CSV_COLUMNS', 'AlreadyStored', 'UnknownTrainee', 'check_trainee_id', 'delete_trainee',
-           'export_csv', 'history', 'not_palpable_of', 'session_report', 'session_row',
-           'store_session', 'trainees', 'utc_iso']
+__all__ = ['CSV_COLUMNS', 'WALL_CLOCK_NS', 'AlreadyStored', 'UnknownTrainee',
+           'check_trainee_id', 'delete_trainee', 'export_csv', 'history', 'not_palpable_of',
+           'same_recording', 'session_report', 'session_row', 'store_session', 'trainees',
+           'utc_iso']
 
 _ID = re.compile(r'^[A-Za-z0-9][A-Za-z0-9._@+-]{0,63}$')
 
@@ -101,6 +102,26 @@ def session_row(report: dict, *, source: str, case_level: int | None = None,
         raise ValueError(f'exam report: missing or bad field {exc}') from None
 
 
+#: first-message times from here on [ns] are wall clock (after 2001); earlier ones are a
+#: simulation's clock, which two recordings can share
+WALL_CLOCK_NS = 10**18
+
+
+def same_recording(path_a: str | None, start_a: int | None, path_b: str | None,
+                   start_b: int | None) -> bool:
+    """Whether two stored sessions' bags (absolute path, first message [ns] or None) are one
+    recording: the same wall-clock first message wherever the bag is now (a copy), or the same
+    path unless both know their first message and it differs (a bag deleted and recorded again
+    there). A side that does not know its start (stored before schema v3, or the bag
+    unreadable) counts as that recording: better one session too few than one twice.
+    :func:`store_session` asks the same in SQL."""
+    if path_a is None or path_b is None:
+        return False
+    if start_a is not None and start_a == start_b and start_a >= WALL_CLOCK_NS:
+        return True
+    return path_a == path_b and (start_a is None or start_b is None or start_a == start_b)
+
+
 def store_session(db: str | os.PathLike | None, trainee_id: str, report: dict, *,
                   source: str = 'run', case_level: int | None = None, bag: str | None = None,
                   started_utc: str | None = None, bag_start_ns: int | None = None) -> int:
@@ -111,8 +132,7 @@ def store_session(db: str | os.PathLike | None, trainee_id: str, report: dict, *
     Raises:
         ValueError: bad trainee id or report; RecordError (a ValueError): the file;
             AlreadyStored (a RecordError): ``bag`` is already stored for this trainee (a
-            recording counts once toward mastery; nothing is stored): the same first
-            message, or the same path where a session does not know its first message.
+            recording counts once toward mastery; nothing is stored): :func:`same_recording`.
     """
     check_trainee_id(trainee_id)
     row = session_row(report, source=source, case_level=case_level, bag=bag,
@@ -123,13 +143,12 @@ def store_session(db: str | os.PathLike | None, trainee_id: str, report: dict, *
 
     def tx(conn):
         if row['bag_path'] is not None:
-            # one recording: the same first message (wherever the bag is now), or the same path
-            # where a side does not know its start (stored before v3, or the bag unreadable):
-            # better one session too few than one twice
             old = conn.execute(
-                'SELECT id FROM sessions WHERE trainee_id = :t AND (bag_start_ns = :ns OR ('
-                'bag_path = :p AND (bag_start_ns IS NULL OR :ns IS NULL))) ORDER BY id LIMIT 1',
-                {'t': trainee_id, 'p': row['bag_path'], 'ns': row['bag_start_ns']}).fetchone()
+                'SELECT id FROM sessions WHERE trainee_id = :t AND ((bag_start_ns = :ns AND '
+                ':ns >= :wall) OR (bag_path = :p AND (bag_start_ns IS NULL OR :ns IS NULL OR '
+                'bag_start_ns = :ns))) ORDER BY id LIMIT 1',
+                {'t': trainee_id, 'p': row['bag_path'], 'ns': row['bag_start_ns'],
+                 'wall': WALL_CLOCK_NS}).fetchone()
             if old is not None:
                 raise AlreadyStored(
                     f'bag {row["bag_path"]!r} is already stored as session {old[0]} of trainee '
