@@ -79,6 +79,7 @@ def loop_nodes():
         fakes = {n: FakeCaseNode(page.context, n, **how.get(n, {})) for n in names}
         for f in fakes.values():
             ex.add_node(f.node)
+            f.executor = ex
             made.append(f)
 
         def spin() -> None:
@@ -102,7 +103,7 @@ def loop_nodes():
     for ex in executors:
         ex.shutdown(timeout_sec=1.0)
     for m in made:
-        if isinstance(m, FakeCaseNode):
+        if isinstance(m, FakeCaseNode) and not getattr(m, 'dead', False):
             m.node.destroy_node()
 
 
@@ -235,3 +236,62 @@ def test_a_page_started_blind_shows_the_blind_entry():
     from haptic_anfis.nodes.web_view import web_view_in_thread
     with web_view_in_thread({'port': free_port(), 'random_case_seed': 3}, 'x') as (node, _):
         assert node.blind and node.app.g_case.value == BLIND
+
+
+def test_a_restarted_case_node_is_given_the_case_chosen(page_with, loop_nodes):
+    """After a choice on the page, force_server dies and the session starts it again (a new
+    process, on the session's first case): the page gives it the case chosen."""
+    import json
+
+    from std_msgs.msg import String
+
+    from haptic_anfis.nodes.session import STATUS_QOS, STATUS_TOPIC
+    page = page_with()
+    fakes = loop_nodes(page)
+    feeder = rclpy.create_node('status_feeder', context=page.context)
+    try:
+        pub = feeder.create_publisher(String, STATUS_TOPIC, STATUS_QOS)
+
+        def say(pid: int) -> None:   # what force_server's process says when it is up
+            pub.publish(String(data=json.dumps({'node': 'force_server', 'state': 'ready',
+                                                'detail': '', 't': 1.0, 'pid': pid})))
+        wait_for(lambda: say(1001) or page._pids.get('force_server') == 1001, 30.0)
+        assert 'switched: contact_detector, force_server' in choose(page, 'normal')
+        old = fakes['force_server']
+        old.executor.remove_node(old.node)
+        old.node.destroy_node()
+        old.dead = True
+        wait_for(lambda: 'force_server' not in {
+            n for n, _ in page.get_node_names_and_namespaces()}, 30.0)
+        new = loop_nodes(page, ('force_server',))['force_server']   # on the first case again
+        assert new.param('case') == '' and new.loaded == []
+        say(1002)
+        wait_for(lambda: new.param('case') == 'normal', 60.0)
+        assert new.loaded == ['normal']
+        wait_for(lambda: page._switch is None, 30.0)
+        msg = page.app.g_msg.content
+        assert 'force_server (restarted) back on the case chosen' in msg, msg
+        assert page.running and page._collecting()
+    finally:
+        feeder.destroy_node()
+
+
+def test_a_restart_before_any_choice_is_left_alone(page_with, loop_nodes):
+    """Without a choice on the page the restarted node's own case is the session's: no set."""
+    import json
+
+    from std_msgs.msg import String
+
+    from haptic_anfis.nodes.session import STATUS_QOS, STATUS_TOPIC
+    page = page_with()
+    fakes = loop_nodes(page)
+    feeder = rclpy.create_node('status_feeder', context=page.context)
+    try:
+        pub = feeder.create_publisher(String, STATUS_TOPIC, STATUS_QOS)
+        for pid in (1001, 1002):
+            msg = String(data=json.dumps({'node': 'force_server', 'state': 'ready', 'pid': pid}))
+            wait_for(lambda: pub.publish(msg) or page._pids.get('force_server') == pid, 30.0)
+        time.sleep(0.3)
+        assert page._switch is None and not page._requests and fakes['force_server'].loaded == []
+    finally:
+        feeder.destroy_node()

@@ -64,15 +64,17 @@ class CaseSwitch:
     parameter service is already discovered; the others are ``absent``. ``clients``: the
     owner's ``{name: SetParametersAtomically client}`` cache (filled here). ``timeout`` [s]
     per phase, from ``now`` (monotonic) for the first: a node that has not answered by then is
-    ``silent``.
+    ``silent``. ``running``: every node named runs (none is ``absent``).
     """
 
     def __init__(self, node, phases: Sequence[Sequence[str]], params: Sequence, clients: dict,
-                 now: float, timeout: float) -> None:
+                 now: float, timeout: float, running: bool = False) -> None:
         self.node, self.params, self.clients = node, list(params), clients
         self.timeout = float(timeout)
         self.deadline = now + self.timeout
         listed = {n for n, _ in node.get_node_names_and_namespaces()}
+        if running:   # the caller knows they run (e.g. one said so): wait for every one
+            listed |= {n for ph in phases for n in ph}
         self.phases: list[list[str]] = []
         self.absent: list[str] = []
         for names in phases:
@@ -151,7 +153,8 @@ class CaseSwitch:
         names = [n for n in self.outcome.switched + self.outcome.silent if n in self._sent]
         if not names:
             return None
-        return CaseSwitch(self.node, [names], params, self.clients, now, self.timeout)
+        return CaseSwitch(self.node, [names], params, self.clients, now, self.timeout,
+                          running=True)
 
     @property
     def names(self) -> list[str]:

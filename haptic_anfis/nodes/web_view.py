@@ -25,6 +25,7 @@ import numpy as np
 from geometry_msgs.msg import PointStamped, PoseStamped, WrenchStamped
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
+from std_msgs.msg import String
 
 from . import cdr
 from . import interfaces as ifc
@@ -43,6 +44,7 @@ CONTACT_QUEUE = QoSProfile(depth=200, history=HistoryPolicy.KEEP_LAST,
 #: nodes whose case the instructor's choice switches (those that are running), in phases: the
 #: recorder (its case is the bag's label) only once every node of the loop has switched
 CASE_PHASES = (('contact_detector', 'force_server', 'visualizer', 'examiner'), ('recorder',))
+CASE_NODE_NAMES = frozenset(n for ph in CASE_PHASES for n in ph)
 #: what the page says while the loop nodes load a case
 SWITCHING = 'switching to {} ...'
 
@@ -98,6 +100,10 @@ class WebView(HapticNode):
             ('force', WrenchStamped, ifc.TOPIC_COMMAND, NEWEST),
             ('contact', JointState, ifc.TOPIC_CONTACT, CONTACT_QUEUE))}
         self.create_subscription(PointStamped, ifc.TOPIC_MARKS, self._on_mark, 10)
+        from .session import STATUS_QOS, STATUS_TOPIC
+        self._pids: dict[str, int] = {}   # case node -> the process it last said it runs in
+        self._chosen = False   # the instructor chose a case here: a restarted node needs it
+        self.create_subscription(String, STATUS_TOPIC, self._on_status, STATUS_QOS)
         self._pose = self._force = None   # newest (stamp [s], (x, y, z) [m] / [N])
         self._contact = None               # newest contact message's values
         self.malformed = 0                 # loop messages that could not be read
@@ -112,6 +118,18 @@ class WebView(HapticNode):
         print(f'web_view: open {self.app.url} in a browser', flush=True)
 
     # -- inputs -----------------------------------------------------------------------------
+
+    def _on_status(self, m: String) -> None:
+        """A case node in a new process (the session restarted it after it died) comes back on
+        the session's first case: after a choice on this page, it is given the page's."""
+        from .session import parse_status
+        d = parse_status(m.data) or {}
+        name, pid = d.get('node'), d.get('pid')
+        if name not in CASE_NODE_NAMES or not isinstance(pid, int):
+            return
+        old, self._pids[name] = self._pids.get(name), pid
+        if old is not None and old != pid and self._chosen:
+            self._requests.append(('restarted', name))
 
     def _on_mark(self, m: PointStamped) -> None:
         if self._collecting():
@@ -204,6 +222,8 @@ class WebView(HapticNode):
                 self._choose_case(arg)
             elif what == 'switching':   # the loop nodes' answers to a case choice
                 self._follow_switch()
+            elif what == 'restarted':   # a case node in a new process: give it our case
+                self._resync(arg)
             elif what == 'switched':   # our own case parameter was set
                 self._load_case(arg)
         except Exception as exc:   # keep serving: say it on the page
@@ -262,6 +282,25 @@ class WebView(HapticNode):
         self.app.message(SWITCHING.format(self._switch.label))
         self._follow_switch()
 
+    def _resync(self, name: str) -> None:
+        """Set the page's case on the restarted node ``name`` (after a choice in progress, if
+        one is: asked again then); no samples meanwhile, as for a choice."""
+        from rclpy.parameter import Parameter
+
+        from ..view.app import BLIND
+        if self._switch is not None:
+            self._requests.append(('restarted', name))   # after the one in progress
+            return
+        params = [Parameter(n, value=self.get_parameter(n).value)
+                  for n in ('case', 'random_case_seed')]
+        entry = BLIND if self.blind else (self.cv.name or 'default')
+        ch = _Choice(CaseSwitch(self, [[name]], params, self._param_clients, time.monotonic(),
+                                self.params['case_switch_timeout'], running=True),
+                     f'{name} (restarted) back on the case chosen', self.blind, entry, params,
+                     entry, resync=True)
+        self._switch = ch
+        self.app.message(SWITCHING.format(ch.label))
+
     def _follow_switch(self) -> None:
         """The case nodes' answers: all switched, the page switches too; one refused or silent,
         the others are sent back to the case before (no samples collected until they answered),
@@ -273,6 +312,8 @@ class WebView(HapticNode):
             out = ch.switch.poll(time.monotonic())
             if out is None:
                 nxt = ch
+            elif ch.resync:   # a restarted node given the page's case
+                self._resynced(ch, out)
             elif ch.failed:   # the revert of a refused choice has been answered
                 self._reverted(ch, out)
             else:
@@ -286,7 +327,7 @@ class WebView(HapticNode):
         # ours, in one set: declare_case's callback switches once
         res = self.set_parameters_atomically(ch.switch.params) if out.ok else None
         if res is not None and res.successful:
-            self.blind = ch.blind
+            self.blind, self._chosen = ch.blind, True
             self.get_logger().info(f'{ch.label}: {out.describe()}')
             self.app.show_case_choice(ch.entry)
             self.app.message(('blind random case chosen' if self.blind else ch.label)
@@ -302,6 +343,20 @@ class WebView(HapticNode):
             return None
         self.app.message(f'{msg}; sending back: {", ".join(back.names)} ...')
         return replace(ch, switch=back, failed=msg, label=f'the return to {self._kept(ch)}')
+
+    def _resynced(self, ch: _Choice, out) -> None:
+        """The restarted node answered: on the page's case again, or (refused, silent) the
+        loop is split: the exam stops, as when a revert fails."""
+        if out.ok:
+            self.app.message(f'{ch.label}: {out.describe()}')
+            self.get_logger().info(f'{ch.label}: {out.describe()}')
+            return
+        msg = (f'{ch.label} FAILED ({out.describe()}): the loop may not be on '
+               f'{self._kept(ch)}; the exam is stopped: choose a case again')
+        self.running = False
+        self.app.set_exam_running(False)
+        self.get_logger().error(msg)
+        self.app.message(msg)
 
     def _kept(self, ch: _Choice) -> str:
         from ..view.app import BLIND
@@ -363,6 +418,7 @@ class _Choice:
     before: list
     shown: str
     failed: str = ''
+    resync: bool = False   # a restarted node given the page's case (no choice of its own)
 
 
 def _stamp(m) -> float:
