@@ -272,34 +272,37 @@ class WebView(HapticNode):
         params = [Parameter('case', value='' if blind else name),
                   Parameter('random_case_seed',
                             value=random.SystemRandom().randrange(2**31) if blind else -1)]
+        before, shown = self._current_case()
         self._switch = _Choice(
             CaseSwitch(self, CASE_PHASES, params, self._param_clients, time.monotonic(),
                        self.params['case_switch_timeout']),
-            'a blind random case' if blind else f'case {name}', blind, name,
-            [Parameter(n, value=self.get_parameter(n).value)
-             for n in ('case', 'random_case_seed')],
-            BLIND if self.blind else (self.cv.name or 'default'))
+            'a blind random case' if blind else f'case {name}', blind, name, before, shown)
         self.app.message(SWITCHING.format(self._switch.label))
         self._follow_switch()
 
     def _resync(self, name: str) -> None:
         """Set the page's case on the restarted node ``name`` (after a choice in progress, if
         one is: asked again then); no samples meanwhile, as for a choice."""
-        from rclpy.parameter import Parameter
-
-        from ..view.app import BLIND
         if self._switch is not None:
             self._requests.append(('restarted', name))   # after the one in progress
             return
-        params = [Parameter(n, value=self.get_parameter(n).value)
-                  for n in ('case', 'random_case_seed')]
-        entry = BLIND if self.blind else (self.cv.name or 'default')
+        params, entry = self._current_case()
         ch = _Choice(CaseSwitch(self, [[name]], params, self._param_clients, time.monotonic(),
                                 self.params['case_switch_timeout'], running=True),
                      f'{name} (restarted) back on the case chosen', self.blind, entry, params,
                      entry, resync=True)
         self._switch = ch
         self.app.message(SWITCHING.format(ch.label))
+
+    def _current_case(self) -> tuple[list, str]:
+        """The page's case: its ``case`` / ``random_case_seed`` parameters (as rclpy
+        ``Parameter`` s) and its dropdown entry (a case name or the blind entry)."""
+        from rclpy.parameter import Parameter
+
+        from ..view.app import BLIND
+        return ([Parameter(n, value=self.get_parameter(n).value)
+                 for n in ('case', 'random_case_seed')],
+                BLIND if self.blind else (self.cv.name or 'default'))
 
     def _follow_switch(self) -> None:
         """The case nodes' answers: all switched, the page switches too; one refused or silent,
@@ -351,8 +354,13 @@ class WebView(HapticNode):
             self.app.message(f'{ch.label}: {out.describe()}')
             self.get_logger().info(f'{ch.label}: {out.describe()}')
             return
-        msg = (f'{ch.label} FAILED ({out.describe()}): the loop may not be on '
-               f'{self._kept(ch)}; the exam is stopped: choose a case again')
+        self._stop_split(ch, f'{ch.label} FAILED ({out.describe()})')
+
+    def _stop_split(self, ch: _Choice, msg: str) -> None:
+        """A node could not be put on the page's case: the loop may be split between two, so
+        the exam stops (nothing more collected) and the page says ``msg`` and why."""
+        msg += (f': the loop may not be on {self._kept(ch)}; the exam is stopped: choose a case '
+                'again')
         self.running = False
         self.app.set_exam_running(False)
         self.get_logger().error(msg)
@@ -368,12 +376,7 @@ class WebView(HapticNode):
         the case kept; a node that could not be sent back stops it (the loop may be split)."""
         msg = ch.failed
         if out is not None and not out.ok:
-            self.running = False
-            self.app.set_exam_running(False)
-            msg += (f'; sending back FAILED ({out.describe()}): the loop may not be on '
-                    f'{self._kept(ch)}; the exam is stopped: choose a case again')
-            self.get_logger().error(msg)
-            self.app.message(msg)
+            self._stop_split(ch, f'{msg}; sending back FAILED ({out.describe()})')
             return
         if out is not None:
             msg += f'; sent back: {", ".join(out.switched)}'

@@ -114,7 +114,7 @@ def same_recording(path_a: str | None, start_a: int | None, path_b: str | None,
     path unless both know their first message and it differs (a bag deleted and recorded again
     there). A side that does not know its start (stored before schema v3, or the bag
     unreadable) counts as that recording: better one session too few than one twice.
-    :func:`store_session` asks the same in SQL."""
+    :func:`store_session` and :func:`~haptic_anfis.record.mastery.mastery` ask this."""
     if path_a is None or path_b is None:
         return False
     if start_a is not None and start_a == start_b and start_a >= WALL_CLOCK_NS:
@@ -143,12 +143,13 @@ def store_session(db: str | os.PathLike | None, trainee_id: str, report: dict, *
 
     def tx(conn):
         if row['bag_path'] is not None:
-            old = conn.execute(
-                'SELECT id FROM sessions WHERE trainee_id = :t AND ((bag_start_ns = :ns AND '
-                ':ns >= :wall) OR (bag_path = :p AND (bag_start_ns IS NULL OR :ns IS NULL OR '
-                'bag_start_ns = :ns))) ORDER BY id LIMIT 1',
-                {'t': trainee_id, 'p': row['bag_path'], 'ns': row['bag_start_ns'],
-                 'wall': WALL_CLOCK_NS}).fetchone()
+            # the candidates (same path or same start), then same_recording decides: one rule
+            # for the store and for mastery()
+            old = next((r for r in conn.execute(
+                'SELECT id, bag_path, bag_start_ns FROM sessions WHERE trainee_id = :t AND '
+                '(bag_path = :p OR bag_start_ns = :ns) ORDER BY id',
+                {'t': trainee_id, 'p': row['bag_path'], 'ns': row['bag_start_ns']})
+                if same_recording(r[1], r[2], row['bag_path'], row['bag_start_ns'])), None)
             if old is not None:
                 raise AlreadyStored(
                     f'bag {row["bag_path"]!r} is already stored as session {old[0]} of trainee '
