@@ -43,6 +43,8 @@ CLI = [sys.executable, '-m', 'haptic_anfis.cli']
 COLS = ('config', 'busy', 'load', 'rt_others', 'rate_hz', 'periods_lost', 'max_gap_ms',
         'err_rms_pct', 'ripple_pct', 'ripple_ideal_pct', 'zero_ticks', 'dropout_ms', 'trips_contact',
         'expired', 'held', 'beyond', 'taken_over', 'lat_p99_ms', 'lat_max_ms')
+#: with --settle: the first seconds' own columns (the browser opening its page)
+SETTLE_COLS = ('settle_lost', 'settle_gap_ms')
 
 
 class TestSuite:
@@ -122,19 +124,25 @@ def browser_when_up(port: int, stop) -> 'threading.Thread':
 
 def run_one(kind: str, priority: int, duration: float, loop: str, d: Path,
             graph_priority: int = 0, view: bool = False, force_mode: str = '',
-            sim_args: tuple = ()) -> dict:
+            sim_args: tuple = (), settle: float = 0.0) -> dict:
     """One run; the last JSON line of its output (or {'error': ...}). ``graph_priority`` > 0:
     the whole graph (every process and thread) runs SCHED_FIFO at it (``chrt -f``), the servo
     tick above it at ``priority``. ``view``: the browser view too (``--view``: the web_view
-    node, and a headless chromium showing its page)."""
+    node, and a headless chromium showing its page). ``settle`` > 0: the run lasts ``settle``
+    seconds longer, and the figures the ticks carry are those of the last ``duration`` seconds
+    (``haptic-anfis loop --from``), with the first seconds' lost periods and longest gap as
+    ``settle_lost`` / ``settle_gap_ms``."""
     pf = params_file(d, priority, loop, force_mode)
     bag = d / f'bag_{kind}_{priority}_{time.monotonic_ns()}'
+    trace = d / f'trace_{bag.name}.npz'
+    run_s = str(duration + settle)
     if kind == 'sim':
-        cmd = [*CLI, 'sim', '--duration', str(duration), '--json', '--record', str(bag),
-               '--params-file', str(pf), *sim_args]
+        cmd = [*CLI, 'sim', '--duration', run_s, '--json', '--record', str(bag),
+               '--params-file', str(pf), '--trace', str(trace), *sim_args]
     else:
-        cmd = [*CLI, 'launch', '--duration', str(duration), '--json', '--record', str(bag),
-               '--params-file', str(pf), '--localhost', '--log-dir', str(d / f'log_{bag.name}')]
+        cmd = [*CLI, 'launch', '--duration', run_s, '--json', '--record', str(bag),
+               '--params-file', str(pf), '--localhost', '--log-dir', str(d / f'log_{bag.name}'),
+               '--trace', str(trace)]
     if priority <= 0:  # a user without real-time rights: the graph cannot have it either
         cmd += ['--graph-priority', '0']
     if graph_priority > 0:
@@ -158,7 +166,27 @@ def run_one(kind: str, priority: int, duration: float, loop: str, d: Path,
             stop.set()
             browser.join(timeout=60)
     j = last_json(r.stdout)
-    return j if j is not None else {'error': f'exit {r.returncode}: {(r.stdout + r.stderr)[-600:]}'}
+    if j is None:
+        return {'error': f'exit {r.returncode}: {(r.stdout + r.stderr)[-600:]}'}
+    if settle > 0:
+        j = settled(j, trace, pf, settle)
+    trace.unlink(missing_ok=True)
+    return j
+
+
+def settled(j: dict, trace: Path, pf: Path, settle: float) -> dict:
+    """``j`` with the figures the trace's ticks carry taken from ``settle`` seconds after the
+    first tick on, and the first ``settle`` seconds' ``settle_lost`` / ``settle_gap_ms``."""
+    from haptic_anfis.commands.loop import trace_report
+    from haptic_anfis.device.stats import tick_gaps
+    from haptic_anfis.device.trace import DISABLED, load_trace
+    rows, meta = load_trace(trace)
+    t = rows[rows[:, 7] != DISABLED, 0]
+    lost, gap = tick_gaps(t[t < t[0] + settle], meta.get('period', 1e-3))
+    w = trace_report(trace, [str(pf)], start=settle)
+    return {**j, **{k: w[k] for k in w if k not in w.get('whole_run', ())},
+            'rate_hz': w['rates_hz']['falcon/measured_cp'], 'rates_hz': w['rates_hz'],
+            'settle_lost': lost, 'settle_gap_ms': round(gap * 1e3, 2)}
 
 
 def last_json(out: str) -> dict | None:
@@ -190,7 +218,9 @@ def row(name: str, nbusy: int, load: float, j: dict) -> dict:
             'dropout_ms': f('longest_dropout_ms'), 'trips_contact': f('watchdog_trips_in_contact'),
             'expired': f('ticks_expired'), 'held': f('ticks_held'), 'beyond': f('ticks_beyond'),
             'taken_over': f('ticks_taken_over'),
-            'lat_p99_ms': f('latency_p99_ms'), 'lat_max_ms': f('latency_max_ms'), 'error': j.get('error')}
+            'lat_p99_ms': f('latency_p99_ms'), 'lat_max_ms': f('latency_max_ms'),
+            'settle_lost': f('settle_lost'), 'settle_gap_ms': f('settle_gap_ms'),
+            'error': j.get('error')}
 
 
 def fmt(v) -> str:
@@ -228,6 +258,12 @@ def main() -> int:
     ap.add_argument('--sim-args', default='',
                     help="more options for the sim rows, space-separated, given with '=' "
                          "(--sim-args=--recorder-process); named in the rows' config")
+    ap.add_argument('--settle', type=float, default=0.0, metavar='S',
+                    help='run S seconds longer and take the figures the servo ticks carry (rate, '
+                         'periods lost, gaps, force error, ripple, dropouts, expired models) '
+                         'from the last --duration seconds: the view running, not a browser '
+                         'opening its page; the first S seconds get columns of their own '
+                         '(settle_lost, settle_gap_ms). Default 0: the whole run')
     ap.add_argument('--no-page', action='store_true', help='print only')
     ap.add_argument('--page', default='servo_load',
                     help='page name: docs/measurements/<page>.md (default servo_load)')
@@ -240,7 +276,8 @@ def main() -> int:
     configs = [(c.split(':')[0], int(c.split(':')[1]),
                 int(c.split(':')[2]) if c.count(':') > 1 else 0) for c in a.configs.split(',')]
     rows = []
-    print(' '.join(f'{c:>12}' for c in COLS), flush=True)
+    cols = columns(a)
+    print(' '.join(f'{c:>12}' for c in cols), flush=True)
     suite = TestSuite() if a.beside_tests else None
     with tempfile.TemporaryDirectory(prefix='bench-servo-') as td, \
             contextlib.ExitStack() as stack:
@@ -259,14 +296,14 @@ def main() -> int:
                 load0 = os.getloadavg()[0]
                 rt = rt_threads()
                 j = run_one(kind, prio, a.duration, loop, d, gprio, a.view, a.force_mode,
-                            tuple(a.sim_args.split()))
+                            tuple(a.sim_args.split()), a.settle)
                 load = max(load0, os.getloadavg()[0])
             r = row(f'{kind} prio {prio}' + (f' graph {gprio}' if gprio else '') + f' ({loop})'
                     + (f' {a.sim_args}' if kind == 'sim' and a.sim_args else ''),
                     nbusy, load, j)
             r['rt_others'] = rt
             rows.append(r)
-            print(' '.join(f'{fmt(r[c]):>12}' for c in COLS), flush=True)
+            print(' '.join(f'{fmt(r[c]):>12}' for c in cols), flush=True)
             if r['error']:
                 print('  ', r['error'], flush=True)
             if not a.no_page:  # after every row: a run cut short keeps what it measured
@@ -276,10 +313,22 @@ def main() -> int:
     return 0
 
 
+def columns(a) -> tuple[str, ...]:
+    return COLS + (SETTLE_COLS if a.settle > 0 else ())
+
+
 def _page(a, rows: list[dict], planned: int):
-    head = '| ' + ' | '.join(COLS) + ' |\n|' + '---|' * len(COLS) + '\n'
-    body = head + ''.join('| ' + ' | '.join(fmt(r[c]) for c in COLS) + ' |\n' for r in rows)
-    notes = (f'\n{a.duration:g} s per run after the graph is ready, '
+    cols = columns(a)
+    head = '| ' + ' | '.join(cols) + ' |\n|' + '---|' * len(cols) + '\n'
+    body = head + ''.join('| ' + ' | '.join(fmt(r[c]) for c in cols) + ' |\n' for r in rows)
+    notes = (f'\n{a.duration:g} s per run after the graph is ready'
+             + (f' and {a.settle:g} s more (`settle`): the figures the servo ticks carry (rate, '
+                'periods lost, longest gap, force error, ripple, dropouts, expired) are the last '
+                f'{a.duration:g} s\' (`haptic-anfis loop --from {a.settle:g}`); `settle_lost` and '
+                '`settle_gap_ms` are the periods lost and the longest gap in the first '
+                f'{a.settle:g} s, while the browser opens its page; the driver\'s own counters '
+                '(trips_contact, held, beyond, taken_over, latencies) cover the whole run'
+                if a.settle > 0 else '') + ', '
              + (f'force mode {a.force_mode}' if a.force_mode else 'default force mode (local_model)')
              + ', recorder running'
              + (', each busy process in a session of its own' if a.busy_sessions else '')

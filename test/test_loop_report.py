@@ -27,3 +27,41 @@ def test_received_rates_cover_the_rows_the_trace_dropped(tmp_path, dropped):
     assert r['rates_hz']['falcon/servo_cf'] == pytest.approx(1000.0, rel=2e-3)
     assert r['rates_hz']['falcon/servo_cf_local'] == pytest.approx(1000.0, rel=2e-3)
     assert r['rates_hz']['falcon/measured_cp'] == pytest.approx(1000.0, rel=2e-3)
+
+
+def test_a_window_from_start_counts_its_own_ticks_and_names_the_whole_runs_counters(tmp_path):
+    """2 s of 1 kHz ticks with 50 periods lost at 0.5 s and 3 at 1.5 s, and 7 expired ticks
+    after 1 s: from 1 s on the window has its own rate, periods lost, longest gap and expired
+    count; the driver's counters (latency, held ...) are the whole run's and say so."""
+    from haptic_anfis.device.local_model import STATUS_NAMES
+    from haptic_anfis.device.stats import tick_gaps
+    t = np.arange(2000) * 1e-3
+    t[500:] += 50e-3
+    t[1500:] += 3e-3
+    rows = np.zeros((len(t), 8))
+    rows[:, 0] = t
+    rows[:, 1:4] = (0.0, 0.0, 0.5)
+    rows[:, 7] = STATUS_NAMES.index('free')
+    rows[1600:1607, 7] = STATUS_NAMES.index('expired')
+    rows[:3, 7] = -2                    # safety off before start: not counted
+    lost, gap = tick_gaps(rows[3:, 0], 1e-3)
+    assert lost == 53 and gap == pytest.approx(0.051)
+    stats = {'periods_lost': lost, 'max_gap_ms': gap * 1e3, 'latency_p99_ms': 2.0,
+             'ticks_held': 4, 'commands_received': 1997}
+    path = save_trace(tmp_path / 't.npz', rows, stats=stats, max_force=8.9, period=1e-3)
+    whole = trace_report(path)
+    assert whole['periods_lost'] == 53 and 'whole_run' not in whole
+    w = trace_report(path, start=1.0)
+    assert w['periods_lost'] == 3 and w['max_gap_ms'] == pytest.approx(4.0)
+    assert w['ticks_expired'] == 7 and w['from_s'] == 1.0
+    assert w['rates_hz']['falcon/servo_cf'] is None    # the received count is the whole run's
+    assert {'latency_p99_ms', 'ticks_held'} <= set(w['whole_run'])
+    assert w['ticks'] == int(np.sum(rows[3:, 0] >= rows[3, 0] + 1.0))
+    with pytest.raises(ValueError, match='--from 5 s: the trace has 2.0 s'):
+        trace_report(path, start=5.0)
+
+
+def test_tick_gaps_counts_a_gap_of_k_periods_as_k_minus_1_lost():
+    from haptic_anfis.device.stats import tick_gaps
+    assert tick_gaps(np.array([]), 1e-3) == (0, 0.0)
+    assert tick_gaps(np.array([0.0, 1.4e-3, 2.4e-3, 5.0e-3]), 1e-3) == (2, pytest.approx(2.6e-3))

@@ -203,7 +203,9 @@ def test_trainer_trains_writes_and_reloads(tmp_path):
 def test_sim_command_prints_loop_statistics(capfd, tmp_path):
     from haptic_anfis.cli import main
     bag = tmp_path / 'session'
-    assert main(['sim', '--duration', '3', '--no-viz', '--record', str(bag), '--json']) == 0
+    trace = tmp_path / 'ticks.npz'
+    assert main(['sim', '--duration', '3', '--no-viz', '--record', str(bag), '--json',
+                 '--trace', str(trace)]) == 0
     out = capfd.readouterr().out
     for key in ('servo loop', 'Hz', 'deadline misses', 'p50', 'p99', 'max applied', 'poses in contact',
                 'recorded'):
@@ -219,3 +221,11 @@ def test_sim_command_prints_loop_statistics(capfd, tmp_path):
     assert (bag / 'metadata.yaml').is_file()
     assert main(['sim', '--duration', '1', '--record', str(bag)]) == 1  # exists: clear error
     assert 'exists already' in capfd.readouterr().err
+    # --trace keeps the tick trace sim --json reported; loop --from reports a window of it
+    assert last['periods_lost'] is not None and trace.is_file()
+    assert main(['loop', str(trace), '--from', '1', '--json']) == 0
+    window = json.loads(capfd.readouterr().out.strip().splitlines()[-1])
+    assert window['from_s'] == 1.0 and 'latency_p99_ms' in window['whole_run']
+    assert 1000 < window['ticks'] < last['cycles'] - 900
+    assert main(['sim', '--duration', '1', '--trace', str(trace)]) == 1   # never overwritten
+    assert '--trace' in capfd.readouterr().err

@@ -127,6 +127,22 @@ def test_the_shipped_parameter_files_pass_against_every_nodes_declarations():
     assert check_parameter_sources(declared_parameters(), params) == []
 
 
+def test_every_node_ships_a_parameter_file_with_each_parameter_it_declares():
+    """README: every node's parameters are in config/NODE.yaml (rclpy's own two aside)."""
+    pytest.importorskip('rclpy')
+    import yaml
+
+    from haptic_anfis.nodes.parameters import ROS_BUILTIN
+    from haptic_anfis.nodes.registry import declared_parameters
+    from haptic_anfis.resources import config_dir
+    builtin = {p.name for p in ROS_BUILTIN}
+    for node, params in declared_parameters().items():
+        f = config_dir() / f'{node}.yaml'
+        assert f.is_file(), f'no config/{node}.yaml'
+        written = yaml.safe_load(f.read_text())[node]['ros__parameters']
+        assert list(written) == [p.name for p in params if p.name not in builtin], node
+
+
 def test_every_session_option_fills_a_spec_field_and_one_row_adds_one():
     import dataclasses
 

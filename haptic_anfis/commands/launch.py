@@ -28,7 +28,8 @@ def run(args: argparse.Namespace) -> int:
     spec = spec_from_args(args, NAME)
     spec.check()  # before the trace directory is made
     node_args: dict[str, list[str]] = {n: [] for n in spec.nodes}
-    trace = launch_trace_path(node_args, Path(spec.log_dir) if spec.log_dir else None)
+    trace = launch_trace_path(node_args, Path(spec.log_dir) if spec.log_dir else None,
+                              spec.trace)
     result = ProcessSession(spec, node_args).run()
     print_launch_report(trace, spec.params_files, args.json)
     if result.failed:

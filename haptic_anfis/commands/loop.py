@@ -50,6 +50,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help='ROS 2 parameter file(s) the nodes ran with (repeatable), so the replay '
                         'uses the same mesh, direction and model')
     p.add_argument('--json', action='store_true', help='print one JSON object as the last line')
+    p.add_argument('--from', dest='start', type=float, default=0.0, metavar='S',
+                   help="report the ticks from S seconds after the first (a session's steady "
+                        'state); the driver\'s own counters still cover the whole run, listed as '
+                        'whole_run')
 
 
 def ideal_forces(positions: np.ndarray, params_files=()) -> tuple[np.ndarray, np.ndarray]:
@@ -69,14 +73,36 @@ def ideal_forces(positions: np.ndarray, params_files=()) -> tuple[np.ndarray, np
     return F, contact
 
 
-def trace_report(trace: str | Path, params_files=()) -> dict:
-    """The report of one trace (keys in the module docstring)."""
+def trace_report(trace: str | Path, params_files=(), start: float = 0.0) -> dict:
+    """The report of one trace (keys in the module docstring).
+
+    ``start`` > 0 [s]: only the ticks from ``start`` seconds after the first one (a session's
+    steady state, e.g. once a browser has loaded the page). The figures the ticks carry are
+    then the window's (rate, periods lost, longest gap, force error, ripple, dropouts, expired
+    ticks); the driver's counters cover the whole run and are listed in ``whole_run``.
+
+    Raises:
+        ValueError: ``start`` leaves fewer than two ticks.
+    """
     from ..device.force_error import error_by_phase, force_error, ripple_and_dropouts
+    from ..device.local_model import STATUS_NAMES
+    from ..device.stats import tick_gaps
     from ..device.trace import DISABLED, load_trace
     rows, meta = load_trace(trace)
     kept = len(rows)
     rows = rows[rows[:, 7] != DISABLED]  # 0 N on purpose (before start, at shutdown)
     st = meta.get('stats', {})
+    if start > 0:
+        if len(rows) < 2 or rows[-1, 0] - rows[0, 0] <= start:
+            span = float(rows[-1, 0] - rows[0, 0]) if len(rows) > 1 else 0.0
+            raise ValueError(f'{trace}: --from {start:g} s: the trace has {span:.1f} s of ticks')
+        rows = rows[rows[:, 0] >= rows[0, 0] + start]
+        period = meta.get('period') or float(np.median(np.diff(rows[:, 0])))
+        lost, gap = tick_gaps(rows[:, 0], period)
+        windowed = {'periods_lost': lost, 'max_gap_ms': gap * 1e3,
+                    'ticks_expired': int(np.sum(rows[:, 7] == STATUS_NAMES.index('expired')))}
+        st = {k: v for k, v in st.items() if k not in ('commands_received', 'models_received')}
+        st.update(windowed)
     F, contact = ideal_forces(rows[:, 1:4], params_files)
     fmax = meta.get('max_force', math.inf)
     err = force_error(rows[:, 4:7], F, contact, max_force=fmax)
@@ -104,6 +130,16 @@ def trace_report(trace: str | Path, params_files=()) -> dict:
                                    'rejected_unknown_stamp', 'process_cpu_pct',
                                    'ticks_approach')},
          **err, 'ticks': int(len(rows))}
+    if start > 0:
+        r['from_s'] = start
+        r['whole_run'] = sorted(k for k in ('latency_p50_ms', 'latency_p99_ms', 'latency_max_ms',
+                                            'ticks_fresh', 'ticks_extrapolated', 'watchdog_trips',
+                                            'watchdog_trips_in_contact', 'deadline_misses',
+                                            'passivity_limited', 'ticks_held', 'ticks_beyond',
+                                            'ticks_taken_over', 'rejected_stale',
+                                            'rejected_future', 'rejected_unknown_stamp',
+                                            'process_cpu_pct', 'ticks_approach', 'trace_rows_lost')
+                                if r.get(k) is not None)
     return {k: r[k] for k in KEYS if k in r} | {k: v for k, v in r.items() if k not in KEYS}
 
 
@@ -130,7 +166,9 @@ def format_report(r: dict) -> str:
         f"{f(r.get('longest_dropout_ms'), 1)} ms)",
         f"  servo ticks: {r.get('ticks')} traced; periods lost {r.get('periods_lost')}, longest "
         f"gap {f(r.get('max_gap_ms'))} ms, taken over {r.get('ticks_taken_over')}",
-        _phase_line(r.get('force_error_by_phase'))])
+        _phase_line(r.get('force_error_by_phase'))]
+        + ([f"  from {r['from_s']:g} s after the first tick; the whole run's: "
+            + ', '.join(r['whole_run'])] if r.get('from_s') else []))
 
 
 def _phase_line(ph: dict | None) -> str:
@@ -147,7 +185,9 @@ def _phase_line(ph: dict | None) -> str:
 def run(args: argparse.Namespace) -> int:
     if not Path(args.trace).is_file():
         raise ValueError(f'{args.trace}: no such trace file')
-    r = trace_report(args.trace, args.params_file)
+    if args.start < 0:
+        raise ValueError(f'--from: expected seconds >= 0, got {args.start:g}')
+    r = trace_report(args.trace, args.params_file, args.start)
     print(format_report(r))
     if args.json:
         print(json.dumps(r))
@@ -155,14 +195,19 @@ def run(args: argparse.Namespace) -> int:
 
 
 # -- used by haptic-anfis launch (kept here so launch.py only calls two functions) --------------
-def launch_trace_path(extra: dict[str, list[str]], where: Path | None) -> Path | None:
+def launch_trace_path(extra: dict[str, list[str]], where: Path | None,
+                      trace: str | None = None) -> Path | None:
     """Ask the falcon driver of a launch (``extra``: node -> extra ROS args) to write its tick
-    trace: a new file in ``where`` (the log dir) or a temporary directory. None: no driver."""
+    trace: to ``trace`` (``--trace``), else a new file in ``where`` (the log dir) or a temporary
+    directory. None: no driver."""
     if 'falcon_driver' not in extra:
         return None
-    import tempfile
-    d = Path(where) if where else Path(tempfile.mkdtemp(prefix='haptic_anfis_loop_'))
-    path = (d / 'falcon_driver_trace.npz').resolve()
+    if trace:
+        path = Path(trace).resolve()
+    else:
+        import tempfile
+        d = Path(where) if where else Path(tempfile.mkdtemp(prefix='haptic_anfis_loop_'))
+        path = (d / 'falcon_driver_trace.npz').resolve()
     extra['falcon_driver'] += ['-p', f'trace_path:={path}']
     return path
 

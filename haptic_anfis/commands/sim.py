@@ -44,12 +44,15 @@ def run(args: argparse.Namespace) -> int:
     from ..session import OneProcessSession, spec_from_args
     from ..session.spec import ONE_PROCESS_NODES
     spec = spec_from_args(args, NAME, nodes=ONE_PROCESS_NODES)
-    trace = None
-    if args.json:  # the applied-force error needs every servo tick (commands/loop.py)
+    trace = keep = None
+    if args.json or spec.trace:  # the applied-force error needs every servo tick (loop.py)
         import dataclasses
         import tempfile
         from pathlib import Path
-        trace = Path(tempfile.mkdtemp(prefix='haptic-anfis-sim-')) / 'falcon_driver_trace.npz'
+        spec.check(check_parameters=False)   # before a temporary directory is made
+        keep = Path(spec.trace).resolve() if spec.trace else None
+        trace = keep or (Path(tempfile.mkdtemp(prefix='haptic-anfis-sim-'))
+                         / 'falcon_driver_trace.npz')
         spec = dataclasses.replace(spec, ros_args=(*spec.ros_args, '-p',
                                                    f'falcon_driver:trace_path:={trace}'))
     session = OneProcessSession(spec)
@@ -81,7 +84,7 @@ def run(args: argparse.Namespace) -> int:
     recorded = session.print_recorded()
     if args.json:
         out = json_summary(summary, recorded)
-        out.update(_trace_figures(trace, spec.params_files),
+        out.update(_trace_figures(trace, spec.params_files, remove=keep is None),
                    graph_scheduling=session.graph_scheduling,
                    own_session=os.getsid(0) == os.getpid())
         print(json.dumps(out), flush=True)
@@ -96,9 +99,9 @@ TRACE_KEYS = ('force_error_rms_pct', 'force_error_rms_n', 'force_error_p99_n',
               'ticks_taken_over', 'periods_lost', 'max_gap_ms')
 
 
-def _trace_figures(trace, params_files) -> dict:
-    """The applied-force error, ripple and dropout figures of the driver's tick trace (the
-    temporary trace is removed); {} without one."""
+def _trace_figures(trace, params_files, remove: bool = True) -> dict:
+    """The applied-force error, ripple and dropout figures of the driver's tick trace
+    (``remove``: a temporary trace, removed with its directory); {} without one."""
     if trace is None or not trace.is_file():
         return {}
     import shutil
@@ -107,7 +110,8 @@ def _trace_figures(trace, params_files) -> dict:
     try:
         r = trace_report(trace, params_files)
     finally:
-        shutil.rmtree(trace.parent, ignore_errors=True)
+        if remove:
+            shutil.rmtree(trace.parent, ignore_errors=True)
     return {k: r.get(k) for k in TRACE_KEYS}
 
 

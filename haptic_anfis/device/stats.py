@@ -183,3 +183,13 @@ class LoopStats:
                 NEXT_TICK * self.period),
             'max_force_N': self.max_force,
         }
+
+
+def tick_gaps(t: np.ndarray, period: float) -> tuple[int, float]:
+    """(periods lost, longest gap [s]) of tick times ``t`` [s], counted as :meth:`LoopStats.tick`
+    and the compiled tick count them: a gap of k periods between two ticks lost k - 1."""
+    gaps = np.diff(np.asarray(t, dtype=np.float64))
+    if gaps.size == 0:
+        return 0, 0.0
+    lost = np.floor(gaps / period + 0.5).astype(np.int64) - 1
+    return int(lost[lost > 0].sum()), float(gaps.max())

@@ -528,7 +528,8 @@ class FalconDriver(HapticNode):
         save_trace(self.trace_path, rows, stats=_jsonable(self.summary()),
                    status_names=list(STATUS_NAMES), max_force=self.params['max_force'] /
                    m.force_scale, frame_id=self.frame_id,
-                   ticks_dropped=self.servo.trace.dropped)  # the oldest, beyond the ring's bound
+                   ticks_dropped=self.servo.trace.dropped,  # the oldest, beyond the ring's bound
+                   period=1.0 / self.params['rate'])
         self.get_logger().info(f'servo tick trace: {len(rows)} ticks -> {self.trace_path}'
                                + (f' (the oldest {self.servo.trace.dropped} dropped: bounded)'
                                   if self.servo.trace.dropped else ''))

@@ -29,7 +29,7 @@ from std_msgs.msg import String
 
 from . import cdr
 from . import interfaces as ifc
-from ._case import declare_case
+from ._case import CASE_PARAMS, declare_case  # noqa: F401 (CASE_PARAMS: in config)
 from ._common import Param, declare_parameters, positive, run_node
 from .base import HapticNode
 from .case_switch import CaseSwitch

@@ -162,6 +162,13 @@ OPTIONS: tuple[Option, ...] = (
                                             'CAP_SYS_NICE or an rtprio limit (ulimit -r); '
                                             'refused, they keep the normal scheduler and a line '
                                             f'says so (default {GRAPH_PRIORITY})')),
+    Option(('--trace',), dict(default=None, metavar='NPZ',
+                              help="keep the falcon driver's servo tick trace in this new file "
+                                   '(every tick: time, probe, applied force, model status; '
+                                   '`haptic-anfis loop NPZ` reports it again, --from S a window '
+                                   'of it) (default: sim --json a temporary file, removed; '
+                                   'launch: in --log-dir, else a temporary directory)'),
+           commands=('sim', 'launch')),
     Option(('--ready-timeout',), dict(type=float, default=300.0,
                                       help='seconds to wait for the nodes to start and the first '
                                            'force command to reach the driver (default 300: a '
@@ -203,6 +210,7 @@ class SessionSpec:
     view_port: int = 8080
     view_hold: float | None = None
     graph_priority: int = GRAPH_PRIORITY
+    trace: str | None = None
 
     # -- derived ------------------------------------------------------------------------------
     @property
@@ -286,6 +294,11 @@ class SessionSpec:
         if self.record and Path(self.record).exists():
             raise SessionError(f'--record {self.record}: exists already; a recording needs a new '
                                'directory')
+        if self.trace is not None:
+            t = Path(self.trace)
+            if t.suffix != '.npz' or t.exists() or not t.parent.is_dir():
+                raise SessionError(f'--trace {self.trace}: expected a new .npz file in an '
+                                   'existing directory')
         self._check_case()
         if self.view:   # viser would move to the next free port and the URL shown be wrong
             from ..view.app import check_port
