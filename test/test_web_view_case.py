@@ -117,6 +117,9 @@ def wait_for(cond, timeout: float) -> None:
 def choose(page, name: str) -> str:
     """The instructor picks ``name`` in the dropdown; returns the page's line once the choice
     is settled."""
+    time.sleep(0.2)   # the page has taken what the nodes reported at their start
+    wait_for(lambda: not page._requests, 10.0)
+    time.sleep(0.1)
     before = page.app.g_msg.content
     page.app.on_case(name)
     wait_for(lambda: page.app.g_msg.content not in (before, '')
@@ -295,3 +298,38 @@ def test_a_restart_before_any_choice_is_left_alone(page_with, loop_nodes):
         assert page._switch is None and not page._requests and fakes['force_server'].loaded == []
     finally:
         feeder.destroy_node()
+
+
+def test_a_case_set_on_one_node_outside_the_page_stops_collecting_until_they_agree(
+        page_with, loop_nodes):
+    """``ros2 param set /force_server case normal`` beside the page: the trainee would press on
+    one case while the page scores another. The page says which node runs what and collects
+    nothing until the nodes agree again."""
+    page = page_with()
+    fakes = loop_nodes(page)
+    assert page._collecting()
+    fs = fakes['force_server'].node
+    assert fs.set_parameters([Parameter('case', value='normal')])[0].successful
+    wait_for(lambda: page._split != '', 30.0)
+    msg = page.app.g_msg.content
+    assert 'different cases' in msg and 'force_server on case normal' in msg, msg
+    assert "contact_detector on the page's case" in msg and not page._collecting()
+    assert page.cv.name != 'normal'   # the page keeps its case
+    assert fs.set_parameters([Parameter('case', value='')])[0].successful
+    wait_for(lambda: page._split == '', 30.0)
+    assert page._collecting() and 'collecting again' in page.app.g_msg.content
+
+
+def test_every_loop_node_set_outside_to_one_case_is_followed_by_the_page(page_with, loop_nodes):
+    page = page_with()
+    fakes = loop_nodes(page)
+    for f in fakes.values():
+        assert f.node.set_parameters([Parameter('case', value='normal')])[0].successful
+    wait_for(lambda: page.cv.name == 'normal', 60.0)
+    assert page.get_parameter('case').value == 'normal' and page.app.g_case.value == 'normal'
+    assert 'switched to case normal outside this page' in page.app.g_msg.content
+    wait_for(lambda: not page._requests, 10.0)
+    assert page._split == '' and page._collecting()
+    # then a choice on the page puts every node on its case, as before
+    assert 'switched: contact_detector, force_server' in choose(page, 'default')
+    assert all(f.param('case') == 'default' for f in fakes.values())

@@ -18,6 +18,7 @@ from typing import Callable
 from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 
 from ..cases import Case, CaseError, resolve_case
+from .case_watch import CASE_KEYS, effective_case
 from .parameters import CASE_PARAMS  # declared writable: setting one switches the case
 
 __all__ = ['CASE_PARAMS', 'declare_case', 'describe', 'apply_case', 'requested_case']
@@ -66,19 +67,15 @@ def requested_case(node, params) -> tuple[str, int] | None:
     Raises:
         CaseError: a value of the wrong type.
     """
-    new = {p.name: p.value for p in params if p.name in ('case', 'random_case_seed')}
+    new = {p.name: p.value for p in params if p.name in CASE_KEYS}
     if not new:
         return None
-    n = new.get('case', node.get_parameter('case').value)
-    s = new.get('random_case_seed', node.get_parameter('random_case_seed').value)
+    n, s = (new.get(k, node.get_parameter(k).value) for k in CASE_KEYS)
     if not isinstance(n, str) or not isinstance(s, int):
         raise CaseError(f'case must be a string and random_case_seed an integer, got {n!r}, '
                         f'{s!r}')
-    if 'case' in new and n and 'random_case_seed' not in new:
-        s = -1  # naming a case turns the random draw off
-    if 'random_case_seed' in new and s >= 0 and 'case' not in new:
-        n = ''  # a draw replaces the name (the page's blind choice)
-    return n, s
+    # naming a case turns the random draw off; a draw replaces the name (the page's blind choice)
+    return effective_case(new, (n, s))
 
 
 def describe(case: Case | None, seed: int) -> str:

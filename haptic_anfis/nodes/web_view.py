@@ -12,7 +12,10 @@ subscription (rare, must not be lost).
 The instructor's controls on the page: a case or a blind random one (set on the loop nodes'
 writable ``case`` / ``random_case_seed`` parameters, and on this node), start (a fresh session,
 the clock from zero) and stop (the session scored as ``exam report`` scores it, the debrief
-shown). The page's URL: ``http://host:port/``.
+shown). A case set on a loop node from outside the page (``ros2 param set``) is seen on
+``/parameter_events`` (:mod:`.case_watch`): the page follows when every running case node took
+one case, else it says which node runs what and collects nothing until they agree. The page's
+URL: ``http://host:port/``.
 """
 from __future__ import annotations
 
@@ -33,6 +36,7 @@ from ._case import CASE_PARAMS, declare_case  # noqa: F401 (CASE_PARAMS: in conf
 from ._common import Param, declare_parameters, positive, run_node
 from .base import HapticNode
 from .case_switch import CaseSwitch
+from .case_watch import CASE_KEYS, CaseWatch
 from .polled import PolledSubscription
 
 #: newest sample, best effort
@@ -104,6 +108,13 @@ class WebView(HapticNode):
         self._pids: dict[str, int] = {}   # case node -> the process it last said it runs in
         self._chosen = False   # the instructor chose a case here: a restarted node needs it
         self.create_subscription(String, STATUS_TOPIC, self._on_status, STATUS_QOS)
+        # a case set on a node from outside the page (ros2 param set): follow it or say so
+        from rcl_interfaces.msg import ParameterEvent
+        from rclpy.qos import qos_profile_parameter_events
+        self._watch = CaseWatch()
+        self._split = ''   # which node runs what, while the loop nodes' cases differ
+        self.create_subscription(ParameterEvent, '/parameter_events', self._on_parameter_event,
+                                 qos_profile_parameter_events)
         self._pose = self._force = None   # newest (stamp [s], (x, y, z) [m] / [N])
         self._contact = None               # newest contact message's values
         self.malformed = 0                 # loop messages that could not be read
@@ -130,6 +141,18 @@ class WebView(HapticNode):
         old, self._pids[name] = self._pids.get(name), pid
         if old is not None and old != pid and self._chosen:
             self._requests.append(('restarted', name))
+
+    def _on_parameter_event(self, ev) -> None:
+        """A case node's case parameters declared (at its start) or set (while it runs)."""
+        name = ev.node.rsplit('/', 1)[-1]
+        if name not in CASE_NODE_NAMES:
+            return
+        from rclpy.parameter import parameter_value_to_python
+        for declared, params in ((True, ev.new_parameters), (False, ev.changed_parameters)):
+            values = {p.name: parameter_value_to_python(p.value) for p in params
+                      if p.name in CASE_KEYS}
+            if values:
+                self._requests.append(('reported', (name, values, declared)))
 
     def _on_mark(self, m: PointStamped) -> None:
         if self._collecting():
@@ -164,8 +187,8 @@ class WebView(HapticNode):
 
     def _collecting(self) -> bool:
         """Whether samples go into the session: while it runs, and not while a case choice is
-        being loaded (the loop nodes may then be on either case)."""
-        return self.running and self._switch is None
+        being loaded or the loop nodes' cases differ (set outside the page)."""
+        return self.running and self._switch is None and not self._split
 
     def _malformed(self, exc: ValueError) -> None:
         self.malformed += 1
@@ -226,6 +249,9 @@ class WebView(HapticNode):
                 self._resync(arg)
             elif what == 'switched':   # our own case parameter was set
                 self._load_case(arg)
+            elif what == 'reported':   # a case node's case, as its parameter events say
+                self._watch.report(*arg)
+                self._check_cases()
         except Exception as exc:   # keep serving: say it on the page
             self.get_logger().error(f'{what}: {exc}')
             self.app.message(f'{what} failed: {exc}')
@@ -313,6 +339,10 @@ class WebView(HapticNode):
         nxt = None   # what follows: the revert of a refused choice, else nothing
         try:
             out = ch.switch.poll(time.monotonic())
+            if out is not None:   # what they run now, before their parameter events arrive
+                values = {p.name: p.value for p in ch.switch.params}
+                for name in out.switched:
+                    self._watch.report(name, values)
             if out is None:
                 nxt = ch
             elif ch.resync:   # a restarted node given the page's case
@@ -323,6 +353,49 @@ class WebView(HapticNode):
                 nxt = self._answered(ch, out)
         finally:   # an error ends the choice (_handle says it on the page)
             self._switch = nxt
+        if nxt is None:   # the choice's own line stays (it says what it left split, if any)
+            self._check_cases(quiet=True)
+
+    def _check_cases(self, quiet: bool = False) -> None:
+        """The cases the loop nodes reported against the page's (not during a choice: its own
+        answers decide): all on it, the page goes on (collecting again after a split); every
+        running one set from outside to one other case, the page takes it and the exam starts
+        afresh; else samples stop until they agree, and the page says which node runs what."""
+        if self._switch is not None:
+            return
+        page = tuple(self.get_parameter(k).value for k in CASE_KEYS)
+        running = set(self.get_node_names()) & CASE_NODE_NAMES
+        v = self._watch.verdict(page, running, self.blind)
+        if v.action == 'follow':
+            from rclpy.parameter import Parameter
+            res = self.set_parameters_atomically([Parameter(k, value=x)
+                                                  for k, x in zip(CASE_KEYS, v.case)])
+            if res.successful:   # the page loads it at the next frame ('switched')
+                self.blind, self._chosen, self._split = v.case[1] >= 0, True, ''
+                what = 'a random case' if self.blind else f'case {v.case[0] or "default"}'
+                from ..view.app import BLIND
+                self.app.show_case_choice(BLIND if self.blind else v.case[0] or 'default')
+                self._say(f'every loop node was switched to {what} outside this page: the page '
+                          'follows, the exam starts afresh')
+                return
+            v = replace(v, action='split', text=f'the page cannot show it: {res.reason}')
+        if v.action == 'split' and v.text != self._split:
+            self._split = v.text
+            if not quiet:
+                self._say(f'the loop nodes are on different cases (set outside this page): '
+                          f'{v.text}. Nothing is collected: choose a case here to put them on '
+                          'one', error=True)
+        elif v.action == 'ok' and self._split:
+            self._split = ''
+            if not quiet:
+                self._say("every loop node is on the page's case again: collecting again")
+
+    def _say(self, msg: str, error: bool = False) -> None:
+        if error:   # rclpy: one severity per call site
+            self.get_logger().warning(msg)
+        else:
+            self.get_logger().info(msg)
+        self.app.message(msg)
 
     def _answered(self, ch: _Choice, out) -> _Choice | None:
         """Every case node answered ``ch``: the page switches, or the choice is refused and the

@@ -194,8 +194,9 @@ class ViewApp:
 
     def show_case_choice(self, name: str) -> None:
         """Show ``name`` (a case or :data:`BLIND`) in the instructor's dropdown without
-        choosing it (a choice the loop nodes refused goes back to the case before)."""
-        if self.g_instructor is not None:
+        choosing it (a choice the loop nodes refused goes back to the case before); a name
+        the dropdown does not list (a case not ready) leaves it as it is."""
+        if self.g_instructor is not None and name in self.g_case.options:
             self.g_case.value = name
 
     def message(self, text: str) -> None:
