@@ -34,6 +34,8 @@ import tempfile
 import time
 from pathlib import Path
 
+import numpy as np
+
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _busy import busy  # noqa: E402
@@ -44,7 +46,7 @@ COLS = ('config', 'busy', 'load', 'rt_others', 'rate_hz', 'periods_lost', 'max_g
         'err_rms_pct', 'ripple_pct', 'ripple_ideal_pct', 'zero_ticks', 'dropout_ms', 'trips_contact',
         'expired', 'held', 'beyond', 'taken_over', 'lat_p99_ms', 'lat_max_ms')
 #: with --settle: the first seconds' own columns (the browser opening its page)
-SETTLE_COLS = ('settle_lost', 'settle_gap_ms')
+SETTLE_COLS = ('settle_lost', 'settle_gap_ms', 'browser_s')
 
 
 class TestSuite:
@@ -113,11 +115,13 @@ def browser_when_up(port: int, stop) -> 'threading.Thread':
             time.sleep(0.5)
         else:
             return
+        t.started = time.monotonic()
         b = open_browser(f'http://127.0.0.1:{port}/')
         stop.wait()
         close_browser(b)
 
     t = threading.Thread(target=run, daemon=True)
+    t.started = None   # when chromium was started (time.monotonic(): the trace's clock)
     t.start()
     return t
 
@@ -158,7 +162,8 @@ def run_one(kind: str, priority: int, duration: float, loop: str, d: Path,
         browser = browser_when_up(port, stop)
     env = dict(os.environ, PYTHONPATH=str(ROOT))
     try:
-        r = subprocess.run(cmd, capture_output=True, text=True, env=env, timeout=duration + 900)
+        r = subprocess.run(cmd, capture_output=True, text=True, env=env,
+                           timeout=duration + settle + 900)
     finally:
         if stop is not None:
             # Join: a daemon thread still closing its chromium when the benchmark exits leaves
@@ -169,24 +174,35 @@ def run_one(kind: str, priority: int, duration: float, loop: str, d: Path,
     if j is None:
         return {'error': f'exit {r.returncode}: {(r.stdout + r.stderr)[-600:]}'}
     if settle > 0:
-        j = settled(j, trace, pf, settle)
+        try:
+            j = settled(j, trace, pf, settle, browser.started if browser is not None else None)
+        except (OSError, ValueError) as exc:   # no trace, too short: this row says so
+            return {'error': f'--settle: {exc}'}
     trace.unlink(missing_ok=True)
     return j
 
 
-def settled(j: dict, trace: Path, pf: Path, settle: float) -> dict:
+def settled(j: dict, trace: Path, pf: Path, settle: float,
+            browser_at: float | None = None) -> dict:
     """``j`` with the figures the trace's ticks carry taken from ``settle`` seconds after the
-    first tick on, and the first ``settle`` seconds' ``settle_lost`` / ``settle_gap_ms``."""
+    first tick on, and the first ``settle`` seconds' ``settle_lost`` / ``settle_gap_ms``;
+    ``browser_s``: when the browser was started (``browser_at``, monotonic clock [s], the
+    trace's), after the first tick [s]."""
     from haptic_anfis.commands.loop import trace_report
     from haptic_anfis.device.stats import tick_gaps
     from haptic_anfis.device.trace import DISABLED, load_trace
     rows, meta = load_trace(trace)
     t = rows[rows[:, 7] != DISABLED, 0]
-    lost, gap = tick_gaps(t[t < t[0] + settle], meta.get('period', 1e-3))
+    # up to the window's first tick: the gap across the boundary is counted here
+    lost, gap = tick_gaps(t[:np.searchsorted(t, t[0] + settle) + 1], meta.get('period', 1e-3))
     w = trace_report(trace, [str(pf)], start=settle)
-    return {**j, **{k: w[k] for k in w if k not in w.get('whole_run', ())},
+    windowed = ('periods_lost', 'max_gap_ms', 'ticks_expired', 'force_error_rms_pct',
+                'ripple_windows_pct', 'ripple_windows_ideal_pct', 'zero_force_ticks',
+                'longest_dropout_ms', 'contact_ticks')
+    return {**j, **{k: w.get(k) for k in windowed},
             'rate_hz': w['rates_hz']['falcon/measured_cp'], 'rates_hz': w['rates_hz'],
-            'settle_lost': lost, 'settle_gap_ms': round(gap * 1e3, 2)}
+            'settle_lost': lost, 'settle_gap_ms': round(gap * 1e3, 2),
+            'browser_s': None if browser_at is None else round(browser_at - t[0], 1)}
 
 
 def last_json(out: str) -> dict | None:
@@ -220,6 +236,7 @@ def row(name: str, nbusy: int, load: float, j: dict) -> dict:
             'taken_over': f('ticks_taken_over'),
             'lat_p99_ms': f('latency_p99_ms'), 'lat_max_ms': f('latency_max_ms'),
             'settle_lost': f('settle_lost'), 'settle_gap_ms': f('settle_gap_ms'),
+            'browser_s': f('browser_s'),
             'error': j.get('error')}
 
 
@@ -326,7 +343,9 @@ def _page(a, rows: list[dict], planned: int):
                 'periods lost, longest gap, force error, ripple, dropouts, expired) are the last '
                 f'{a.duration:g} s\' (`haptic-anfis loop --from {a.settle:g}`); `settle_lost` and '
                 '`settle_gap_ms` are the periods lost and the longest gap in the first '
-                f'{a.settle:g} s, while the browser opens its page; the driver\'s own counters '
+                f'{a.settle:g} s, while the browser opens its page (`browser_s`: when the '
+                'benchmark started chromium, seconds after the first tick; it loads the page in '
+                'the seconds after); the driver\'s own counters '
                 '(trips_contact, held, beyond, taken_over, latencies) cover the whole run'
                 if a.settle > 0 else '') + ', '
              + (f'force mode {a.force_mode}' if a.force_mode else 'default force mode (local_model)')

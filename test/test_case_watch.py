@@ -16,13 +16,39 @@ def test_a_name_set_alone_ends_the_draw_and_a_seed_set_alone_replaces_the_name()
     assert effective_case({'case': ''}, ('', 7)) == ('', 7)   # '' alone keeps the draw
 
 
-def test_a_node_declaring_its_two_parameters_one_at_a_time_reports_its_case():
-    w = CaseWatch()
-    w.report('force_server', {'case': 'normal'}, declared=True)
-    w.report('force_server', {'random_case_seed': -1}, declared=True)
-    assert w.reported['force_server'] == ('normal', -1)
+def test_a_node_declaring_its_two_parameters_one_at_a_time_reports_its_case_once_whole():
+    """Half a declaration (``case`` '' without its seed) against a blind page is no split: the
+    watch waits for the other parameter."""
+    w = CaseWatch(start=('', 7))
+    w.report('force_server', {'case': ''}, declared=True)
+    assert 'force_server' not in w.reported
+    assert w.verdict(('', 7), LOOP, blind=True).action == 'ok'
+    w.report('force_server', {'random_case_seed': 7}, declared=True)
+    assert w.reported['force_server'] == ('', 7)
+    assert w.verdict(('', 7), LOOP, blind=True).action == 'ok'
     w.report('force_server', {'use_sim_time': False}, declared=True)   # not a case parameter
-    assert w.reported == {'force_server': ('normal', -1)}
+    assert w.reported == {'force_server': ('', 7)}
+
+
+def test_an_event_older_than_the_last_report_of_its_node_is_dropped():
+    w = CaseWatch()
+    w.report('force_server', {'case': 'normal', 'random_case_seed': -1}, stamp_ns=200)
+    w.report('force_server', {'case': 'other'}, stamp_ns=100)   # arrived late: older
+    assert w.reported['force_server'] == ('normal', -1)
+    w.report('force_server', {'case': ''}, stamp_ns=300)
+    assert w.reported['force_server'] == ('', -1)
+
+
+def test_a_node_that_never_reported_runs_the_session_s_case_not_the_page_s():
+    """``ros2 param set /web_view case normal``: the page moved alone; the nodes it never heard
+    from still run the session's case."""
+    w = CaseWatch(start=PAGE)
+    v = w.verdict(('normal', -1), LOOP)
+    assert v.action == 'split'
+    assert v.text == 'contact_detector on the default scene; force_server on the default scene'
+    w.report('contact_detector', {'case': 'normal'})
+    w.report('force_server', {'case': 'normal'})
+    assert w.verdict(('normal', -1), LOOP).action == 'ok'
 
 
 def test_every_node_on_the_page_s_case_is_ok_and_the_default_case_is_no_case():

@@ -168,7 +168,10 @@ def test_spec_check_names_the_bad_option(tmp_path):
                         (SessionSpec(nodes=('teleporter',)), "teleporter"),
                         (SessionSpec(params_files=(str(tmp_path / 'x.yaml'),)), 'no such file'),
                         (SessionSpec(record=str(tmp_path / 'bag')), 'exists already'),
-                        (SessionSpec(max_restarts=-1), '--max-restarts')]:
+                        (SessionSpec(max_restarts=-1), '--max-restarts'),
+                        (SessionSpec(trace=str(tmp_path / 'bag')), '--trace.*new .npz'),
+                        (SessionSpec(command='launch', nodes=('force_server',),
+                                     trace=str(tmp_path / 't.npz')), 'falcon driver writes')]:
         with pytest.raises(SessionError, match=match):
             spec.check(check_parameters=False)
 

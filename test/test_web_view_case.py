@@ -310,14 +310,28 @@ def test_a_case_set_on_one_node_outside_the_page_stops_collecting_until_they_agr
     assert page._collecting()
     fs = fakes['force_server'].node
     assert fs.set_parameters([Parameter('case', value='normal')])[0].successful
-    wait_for(lambda: page._split != '', 30.0)
+    wait_for(lambda: 'different cases' in page.app.g_msg.content, 30.0)
     msg = page.app.g_msg.content
-    assert 'different cases' in msg and 'force_server on case normal' in msg, msg
+    assert 'force_server on case normal' in msg, msg
     assert "contact_detector on the page's case" in msg and not page._collecting()
     assert page.cv.name != 'normal'   # the page keeps its case
     assert fs.set_parameters([Parameter('case', value='')])[0].successful
-    wait_for(lambda: page._split == '', 30.0)
-    assert page._collecting() and 'collecting again' in page.app.g_msg.content
+    wait_for(lambda: 'collecting again' in page.app.g_msg.content, 30.0)
+    assert page._split == '' and page._collecting()
+
+
+def test_a_case_set_on_the_page_alone_from_outside_says_the_loop_did_not_follow(
+        page_with, loop_nodes):
+    """``ros2 param set /web_view case normal``: the page draws the case, the loop nodes it
+    never heard from still run the session's: said, nothing collected."""
+    page = page_with()
+    loop_nodes(page)
+    assert page.set_parameters([Parameter('case', value='normal')])[0].successful
+    wait_for(lambda: 'different cases' in page.app.g_msg.content, 30.0)
+    msg = page.app.g_msg.content
+    assert 'contact_detector on the default scene; force_server on the default scene' in msg
+    wait_for(lambda: page.cv.name == 'normal', 30.0)   # loaded (the check may come first)
+    assert not page._collecting()
 
 
 def test_every_loop_node_set_outside_to_one_case_is_followed_by_the_page(page_with, loop_nodes):

@@ -51,9 +51,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         'uses the same mesh, direction and model')
     p.add_argument('--json', action='store_true', help='print one JSON object as the last line')
     p.add_argument('--from', dest='start', type=float, default=0.0, metavar='S',
-                   help="report the ticks from S seconds after the first (a session's steady "
-                        'state); the driver\'s own counters still cover the whole run, listed as '
-                        'whole_run')
+                   help="report the ticks from S seconds after the first one the trace kept (a "
+                        "session's steady state; a run longer than the trace's bound, ~10 min, "
+                        "kept its newest ticks only); the driver's own counters still cover the "
+                        'whole run, listed as whole_run')
 
 
 def ideal_forces(positions: np.ndarray, params_files=()) -> tuple[np.ndarray, np.ndarray]:

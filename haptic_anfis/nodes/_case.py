@@ -21,7 +21,15 @@ from ..cases import Case, CaseError, resolve_case
 from .case_watch import CASE_KEYS, effective_case
 from .parameters import CASE_PARAMS  # declared writable: setting one switches the case
 
-__all__ = ['CASE_PARAMS', 'declare_case', 'describe', 'apply_case', 'requested_case']
+__all__ = ['CASE_PARAMS', 'declare_case', 'declare_case_parameters', 'describe', 'apply_case',
+           'requested_case']
+
+
+def declare_case_parameters(node) -> None:
+    """Declare ``case`` and ``random_case_seed`` (writable) on ``node`` in one call: one
+    parameter event carries both, so a watcher (the browser page) never sees half a case."""
+    node.declare_parameters('', [(p.name, p.default, ParameterDescriptor(description=p.description))
+                                 for p in CASE_PARAMS])
 
 
 def declare_case(node, switch: Callable[[Case | None], None]) -> Case | None:
@@ -31,8 +39,7 @@ def declare_case(node, switch: Callable[[Case | None], None]) -> Case | None:
     Raises:
         CaseError (a ValueError): the initial parameters name no ready case.
     """
-    for p in CASE_PARAMS:
-        node.declare_parameter(p.name, p.default, ParameterDescriptor(description=p.description))
+    declare_case_parameters(node)
     name = node.get_parameter('case').value
     seed = node.get_parameter('random_case_seed').value
     try:

@@ -43,29 +43,49 @@ class Verdict:
 
 
 class CaseWatch:
-    """The case each case node last reported. Nodes that never reported are taken to run the
-    page's case (a node started before the page, never set since)."""
+    """The case each case node last reported. A node that never reported is taken to run
+    ``start``, the session's case (the page's own at its start): it started before the page
+    listened and was never set since.
 
-    def __init__(self) -> None:
+    Reports carry the time their event was stamped [ns]: an older one than a node's last is
+    dropped (an event that arrives after the answer of a newer set)."""
+
+    def __init__(self, start: tuple[str, int] = ('', -1)) -> None:
+        self.start = start
         self.reported: dict[str, tuple[str, int]] = {}
         self._set: set[str] = set()   # nodes whose last report was a set while running
+        self._stamp: dict[str, int] = {}
+        self._half: dict[str, dict] = {}   # a declaration seen without both parameters yet
 
-    def report(self, node: str, values: dict, declared: bool = False) -> None:
+    def report(self, node: str, values: dict, declared: bool = False,
+               stamp_ns: int | None = None) -> None:
         """``node`` reported ``values`` ({name: value} of :data:`CASE_KEYS`): set while it ran,
-        or ``declared`` at its start (its whole case)."""
+        or ``declared`` at its start (its whole case: both parameters, maybe in two events)."""
         values = {k: v for k, v in values.items() if k in CASE_KEYS}
         if not values:
             return
-        # a node declares its two parameters one at a time: each event adds to the last
-        self.reported[node] = effective_case(values, self.reported.get(node, ('', -1)))
-        (self._set.discard if declared else self._set.add)(node)
+        if stamp_ns is not None:
+            if stamp_ns < self._stamp.get(node, -1):
+                return
+            self._stamp[node] = stamp_ns
+        if declared:
+            values = self._half.pop(node, {}) | values
+            if len(values) < len(CASE_KEYS):   # half a case: wait for the other parameter
+                self._half[node] = values
+                return
+            self._set.discard(node)
+            self.reported[node] = effective_case(values, ('', -1))
+            return
+        self._set.add(node)
+        self.reported[node] = effective_case(values, self.reported.get(node, self.start))
 
     def verdict(self, page: tuple[str, int], running: set[str] | None = None,
                 blind: bool = False) -> Verdict:
         """Against the page's ``(case, random_case_seed)``; ``running``: the case nodes on the
         graph now (None: every node that reported); ``blind``: the page hides case names."""
         nodes = set(self.reported) if running is None else set(running)
-        off = {n: c for n, c in self.reported.items() if n in nodes and _key(c) != _key(page)}
+        runs = {n: self.reported.get(n, self.start) for n in nodes}
+        off = {n: c for n, c in runs.items() if _key(c) != _key(page)}
         if not off:
             return Verdict('ok')
         cases = {_key(c) for c in off.values()}

@@ -23,7 +23,7 @@ import signal
 import threading
 import time
 
-from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
+from rcl_interfaces.msg import SetParametersResult
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from ..bag import BagError, BagWriter
@@ -31,7 +31,7 @@ from ..bag.reader import RECORDER_MARK
 from ..bag.segment import COMPRESSIONS
 from ..bag.topics import DEFAULT_TOPICS, KNOWN_TYPES
 from ..cases import CaseError
-from ._case import CASE_PARAMS, requested_case
+from ._case import CASE_PARAMS, declare_case_parameters, requested_case  # noqa: F401 (config)
 from ._common import Param, declare_parameters, message_class, positive, run_node
 from .base import HapticNode
 from .polled import PolledSubscription
@@ -106,9 +106,7 @@ class Recorder(HapticNode):
                  custom_data: dict[str, str] | None = None, **kw):
         super().__init__(name, **kw)
         p = self.params = declare_parameters(self, PARAMS)
-        for c in CASE_PARAMS:   # writable: the session's case switches follow
-            self.declare_parameter(c.name, c.default,
-                                   ParameterDescriptor(description=c.description))
+        declare_case_parameters(self)   # writable: the session's case switches follow
         name = self.get_parameter('case').value
         seed = self.get_parameter('random_case_seed').value
         given = bool(name) or seed >= 0

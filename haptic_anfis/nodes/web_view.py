@@ -111,8 +111,9 @@ class WebView(HapticNode):
         # a case set on a node from outside the page (ros2 param set): follow it or say so
         from rcl_interfaces.msg import ParameterEvent
         from rclpy.qos import qos_profile_parameter_events
-        self._watch = CaseWatch()
+        self._watch = CaseWatch(tuple(self.get_parameter(k).value for k in CASE_KEYS))
         self._split = ''   # which node runs what, while the loop nodes' cases differ
+        self._checked = time.monotonic()
         self.create_subscription(ParameterEvent, '/parameter_events', self._on_parameter_event,
                                  qos_profile_parameter_events)
         self._pose = self._force = None   # newest (stamp [s], (x, y, z) [m] / [N])
@@ -152,7 +153,8 @@ class WebView(HapticNode):
             values = {p.name: parameter_value_to_python(p.value) for p in params
                       if p.name in CASE_KEYS}
             if values:
-                self._requests.append(('reported', (name, values, declared)))
+                stamp = ev.stamp.sec * 1_000_000_000 + ev.stamp.nanosec
+                self._requests.append(('reported', (name, values, declared, stamp)))
 
     def _on_mark(self, m: PointStamped) -> None:
         if self._collecting():
@@ -205,6 +207,8 @@ class WebView(HapticNode):
             self._handle(*self._requests.popleft())
         if self._switch is not None:
             self._handle('switching', None)
+        elif time.monotonic() - self._checked > 1.0:   # a node that left or came back
+            self._handle('check', None)
         self._take()
         pose = None if self._pose is None else np.array(self._pose[1])
         force = None if self._force is None else np.array(self._force[1])
@@ -249,8 +253,11 @@ class WebView(HapticNode):
                 self._resync(arg)
             elif what == 'switched':   # our own case parameter was set
                 self._load_case(arg)
+                self._check_cases()   # set from outside, on this node alone: the loop is not
             elif what == 'reported':   # a case node's case, as its parameter events say
                 self._watch.report(*arg)
+                self._check_cases()
+            elif what == 'check':
                 self._check_cases()
         except Exception as exc:   # keep serving: say it on the page
             self.get_logger().error(f'{what}: {exc}')
@@ -339,10 +346,11 @@ class WebView(HapticNode):
         nxt = None   # what follows: the revert of a refused choice, else nothing
         try:
             out = ch.switch.poll(time.monotonic())
-            if out is not None:   # what they run now, before their parameter events arrive
+            if out is not None:   # what they run now (their events may come later: older)
                 values = {p.name: p.value for p in ch.switch.params}
+                now = self.get_clock().now().nanoseconds
                 for name in out.switched:
-                    self._watch.report(name, values)
+                    self._watch.report(name, values, stamp_ns=now)
             if out is None:
                 nxt = ch
             elif ch.resync:   # a restarted node given the page's case
@@ -363,6 +371,7 @@ class WebView(HapticNode):
         afresh; else samples stop until they agree, and the page says which node runs what."""
         if self._switch is not None:
             return
+        self._checked = time.monotonic()
         page = tuple(self.get_parameter(k).value for k in CASE_KEYS)
         running = set(self.get_node_names()) & CASE_NODE_NAMES
         v = self._watch.verdict(page, running, self.blind)
@@ -378,16 +387,21 @@ class WebView(HapticNode):
                 self._say(f'every loop node was switched to {what} outside this page: the page '
                           'follows, the exam starts afresh')
                 return
-            v = replace(v, action='split', text=f'the page cannot show it: {res.reason}')
+            text = f'the page cannot show it ({res.reason})'
+            if text != self._split:
+                self._say(f'every loop node was switched to another case outside this page, but '
+                          f'{text}. Nothing is collected: choose a case here', error=True)
+                self._split = text
+            return
         if v.action == 'split' and v.text != self._split:
-            self._split = v.text
             if not quiet:
                 self._say(f'the loop nodes are on different cases (set outside this page): '
                           f'{v.text}. Nothing is collected: choose a case here to put them on '
                           'one', error=True)
+            self._split = v.text
         elif v.action == 'ok' and self._split:
             self._split = ''
-            if not quiet:
+            if not quiet and self.running:
                 self._say("every loop node is on the page's case again: collecting again")
 
     def _say(self, msg: str, error: bool = False) -> None:

@@ -166,8 +166,9 @@ OPTIONS: tuple[Option, ...] = (
                               help="keep the falcon driver's servo tick trace in this new file "
                                    '(every tick: time, probe, applied force, model status; '
                                    '`haptic-anfis loop NPZ` reports it again, --from S a window '
-                                   'of it) (default: sim --json a temporary file, removed; '
-                                   'launch: in --log-dir, else a temporary directory)'),
+                                   'of it; a driver the launch restarts writes it again) '
+                                   '(default: sim --json a temporary file, removed; launch: in '
+                                   '--log-dir, else a temporary directory)'),
            commands=('sim', 'launch')),
     Option(('--ready-timeout',), dict(type=float, default=300.0,
                                       help='seconds to wait for the nodes to start and the first '
@@ -299,6 +300,9 @@ class SessionSpec:
             if t.suffix != '.npz' or t.exists() or not t.parent.is_dir():
                 raise SessionError(f'--trace {self.trace}: expected a new .npz file in an '
                                    'existing directory')
+            if 'falcon_driver' not in self.nodes:
+                raise SessionError(f'--trace {self.trace}: the falcon driver writes it; '
+                                   f'--nodes has none ({", ".join(self.nodes)})')
         self._check_case()
         if self.view:   # viser would move to the next free port and the URL shown be wrong
             from ..view.app import check_port
