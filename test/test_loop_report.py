@@ -59,6 +59,9 @@ def test_a_window_from_start_counts_its_own_ticks_and_names_the_whole_runs_count
     assert w['ticks'] == int(np.sum(rows[3:, 0] >= rows[3, 0] + 1.0))
     with pytest.raises(ValueError, match='--from 5 s: the trace has 2.0 s'):
         trace_report(path, start=5.0)
+    rows[:, 7] = -1   # zero-order hold: no local model, so no expired count
+    zoh = save_trace(tmp_path / 'z.npz', rows, stats=dict(stats, mode='zoh'), max_force=8.9)
+    assert trace_report(zoh, start=1.0)['ticks_expired'] is None
 
 
 def test_tick_gaps_counts_a_gap_of_k_periods_as_k_minus_1_lost():

@@ -100,8 +100,9 @@ def trace_report(trace: str | Path, params_files=(), start: float = 0.0) -> dict
         rows = rows[rows[:, 0] >= rows[0, 0] + start]
         period = meta.get('period') or float(np.median(np.diff(rows[:, 0])))
         lost, gap = tick_gaps(rows[:, 0], period)
-        windowed = {'periods_lost': lost, 'max_gap_ms': gap * 1e3,
-                    'ticks_expired': int(np.sum(rows[:, 7] == STATUS_NAMES.index('expired')))}
+        expired = None if st.get('mode') == 'zoh' else \
+            int(np.sum(rows[:, 7] == STATUS_NAMES.index('expired')))   # zoh traces no model
+        windowed = {'periods_lost': lost, 'max_gap_ms': gap * 1e3, 'ticks_expired': expired}
         st = {k: v for k, v in st.items() if k not in ('commands_received', 'models_received')}
         st.update(windowed)
     F, contact = ideal_forces(rows[:, 1:4], params_files)
