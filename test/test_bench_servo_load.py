@@ -1,0 +1,41 @@
+"""The servo-load benchmark's settled rows (``--settle``): the window's figures from the tick
+trace, the first seconds' in columns of their own (a synthetic trace: no run needed)."""
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+BENCH = Path(__file__).resolve().parents[1] / 'bench'
+sys.path.insert(0, str(BENCH))
+from bench_servo_load import params_file, settled  # noqa: E402
+
+from haptic_anfis.device.local_model import STATUS_NAMES  # noqa: E402
+from haptic_anfis.device.trace import save_trace  # noqa: E402
+
+
+def test_the_window_s_figures_and_a_gap_across_the_boundary_counted_in_the_settle(tmp_path):
+    """4 s at 1 kHz after 3 disabled ticks: 20 periods lost at 1.0 s, 5 straddling the 2 s
+    boundary, 2 at 3.0 s. Settled at 2 s: the window has 2 lost, the settle 25 (the boundary's
+    gap included there, not lost between the two); the driver's whole-run counters stay."""
+    t = np.arange(4000) * 1e-3
+    t[1000:] += 20e-3
+    k = int(np.searchsorted(t, t[0] + 2.0)) - 2
+    t[k:] += 5e-3   # the gap ends just after the boundary
+    t[3000:] += 2e-3
+    t = np.concatenate([[-0.003, -0.002, -0.001], t])
+    rows = np.zeros((len(t), 8))
+    rows[:, 0] = t
+    rows[:, 1:4] = (0.0, 0.0, 0.5)       # free space
+    rows[:, 7] = STATUS_NAMES.index('free')
+    rows[:3, 7] = -2                      # safety off: not counted
+    path = save_trace(tmp_path / 't.npz', rows, stats={'ticks_held': 9}, max_force=8.9,
+                      period=1e-3)
+    j = {'rate_hz': 990.0, 'periods_lost': 27, 'ticks_held': 9, 'latency_p99_ms': 3.0}
+    pf = params_file(tmp_path, 0, 'auto')
+    s = settled(j, path, pf, 2.0, browser_at=t[3] - 1.5)
+    assert s['settle_lost'] == 25 and s['periods_lost'] == 2
+    assert s['settle_gap_ms'] == pytest.approx(21.0) and s['max_gap_ms'] == pytest.approx(3.0)
+    assert s['rate_hz'] == pytest.approx(1000 * (1 - 2 / 2000), abs=2.0)
+    assert s['ticks_held'] == 9 and s['latency_p99_ms'] == 3.0   # whole run, from the driver
+    assert s['browser_s'] == -1.5
