@@ -43,6 +43,16 @@ KEYS = ('force_mode', 'rates_hz', 'latency_p50_ms', 'latency_p99_ms', 'latency_m
         'force_error_p99_n', 'force_error_p99_pct', 'contact_ticks', 'deadline_misses',
         'rejected_stale', 'rejected_future', 'rejected_unknown_stamp')
 
+#: the driver's statistics the report carries (its trace's ``stats``)
+DRIVER_KEYS = ('latency_p50_ms', 'latency_p99_ms', 'latency_max_ms', 'ticks_fresh',
+               'ticks_extrapolated', 'ticks_expired', 'watchdog_trips',
+               'watchdog_trips_in_contact', 'deadline_misses', 'periods_lost', 'max_gap_ms',
+               'passivity_limited', 'servo_scheduling', 'trace_rows_lost', 'ticks_held',
+               'ticks_beyond', 'ticks_taken_over', 'rejected_stale', 'rejected_future',
+               'rejected_unknown_stamp', 'process_cpu_pct', 'ticks_approach')
+#: of those, the ones a window (``--from``) recounts from its own ticks
+WINDOWED = ('periods_lost', 'max_gap_ms', 'ticks_expired')
+
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument('trace', help='the .npz the falcon driver wrote (parameter trace_path)')
@@ -102,9 +112,8 @@ def trace_report(trace: str | Path, params_files=(), start: float = 0.0) -> dict
         lost, gap = tick_gaps(rows[:, 0], period)
         expired = None if st.get('mode') == 'zoh' else \
             int(np.sum(rows[:, 7] == STATUS_NAMES.index('expired')))   # zoh traces no model
-        windowed = {'periods_lost': lost, 'max_gap_ms': gap * 1e3, 'ticks_expired': expired}
         st = {k: v for k, v in st.items() if k not in ('commands_received', 'models_received')}
-        st.update(windowed)
+        st.update(zip(WINDOWED, (lost, gap * 1e3, expired)))
     F, contact = ideal_forces(rows[:, 1:4], params_files)
     fmax = meta.get('max_force', math.inf)
     err = force_error(rows[:, 4:7], F, contact, max_force=fmax)
@@ -122,26 +131,12 @@ def trace_report(trace: str | Path, params_files=(), start: float = 0.0) -> dict
          'rates_hz': {'falcon/measured_cp': round((len(rows) - 1) / secs, 1) if secs else None,
                       'falcon/servo_cf': rate('commands_received'),
                       'falcon/servo_cf_local': rate('models_received')},
-         **{k: st.get(k) for k in ('latency_p50_ms', 'latency_p99_ms', 'latency_max_ms',
-                                   'ticks_fresh', 'ticks_extrapolated', 'ticks_expired',
-                                   'watchdog_trips', 'watchdog_trips_in_contact',
-                                   'deadline_misses', 'periods_lost', 'max_gap_ms',
-                                   'passivity_limited', 'servo_scheduling', 'trace_rows_lost',
-                                   'ticks_held', 'ticks_beyond', 'ticks_taken_over',
-                                   'rejected_stale', 'rejected_future',
-                                   'rejected_unknown_stamp', 'process_cpu_pct',
-                                   'ticks_approach')},
+         **{k: st.get(k) for k in DRIVER_KEYS},
          **err, 'ticks': int(len(rows))}
-    if start > 0:
+    if start > 0:   # the driver's counters not recounted from the window's ticks
         r['from_s'] = start
-        r['whole_run'] = sorted(k for k in ('latency_p50_ms', 'latency_p99_ms', 'latency_max_ms',
-                                            'ticks_fresh', 'ticks_extrapolated', 'watchdog_trips',
-                                            'watchdog_trips_in_contact', 'deadline_misses',
-                                            'passivity_limited', 'ticks_held', 'ticks_beyond',
-                                            'ticks_taken_over', 'rejected_stale',
-                                            'rejected_future', 'rejected_unknown_stamp',
-                                            'process_cpu_pct', 'ticks_approach', 'trace_rows_lost')
-                                if r.get(k) is not None)
+        r['whole_run'] = sorted(k for k in DRIVER_KEYS if k not in WINDOWED
+                                and k != 'servo_scheduling' and r.get(k) is not None)
     return {k: r[k] for k in KEYS if k in r} | {k: v for k, v in r.items() if k not in KEYS}
 
 

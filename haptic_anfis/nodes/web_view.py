@@ -111,7 +111,7 @@ class WebView(HapticNode):
         # a case set on a node from outside the page (ros2 param set): follow it or say so
         from rcl_interfaces.msg import ParameterEvent
         from rclpy.qos import qos_profile_parameter_events
-        self._watch = CaseWatch(tuple(self.get_parameter(k).value for k in CASE_KEYS))
+        self._watch = CaseWatch(self._page_case())
         self._split = ''   # which node runs what, while the loop nodes' cases differ
         self._checked = time.monotonic()
         self.create_subscription(ParameterEvent, '/parameter_events', self._on_parameter_event,
@@ -333,9 +333,12 @@ class WebView(HapticNode):
         from rclpy.parameter import Parameter
 
         from ..view.app import BLIND
-        return ([Parameter(n, value=self.get_parameter(n).value)
-                 for n in ('case', 'random_case_seed')],
+        return ([Parameter(k, value=v) for k, v in zip(CASE_KEYS, self._page_case())],
                 BLIND if self.blind else (self.cv.name or 'default'))
+
+    def _page_case(self) -> tuple[str, int]:
+        """The page's own ``(case, random_case_seed)`` parameter values."""
+        return tuple(self.get_parameter(k).value for k in CASE_KEYS)
 
     def _follow_switch(self) -> None:
         """The case nodes' answers: all switched, the page switches too; one refused or silent,
@@ -372,18 +375,18 @@ class WebView(HapticNode):
         if self._switch is not None:
             return
         self._checked = time.monotonic()
-        page = tuple(self.get_parameter(k).value for k in CASE_KEYS)
         running = set(self.get_node_names()) & CASE_NODE_NAMES
-        v = self._watch.verdict(page, running, self.blind)
+        v = self._watch.verdict(self._page_case(), running, self.blind)
         if v.action == 'follow':
             from rclpy.parameter import Parameter
             res = self.set_parameters_atomically([Parameter(k, value=x)
                                                   for k, x in zip(CASE_KEYS, v.case)])
             if res.successful:   # the page loads it at the next frame ('switched')
                 self.blind, self._chosen, self._split = v.case[1] >= 0, True, ''
-                what = 'a random case' if self.blind else f'case {v.case[0] or "default"}'
                 from ..view.app import BLIND
-                self.app.show_case_choice(BLIND if self.blind else v.case[0] or 'default')
+                entry = BLIND if self.blind else v.case[0] or 'default'
+                self.app.show_case_choice(entry)
+                what = 'a random case' if self.blind else f'case {entry}'
                 self._say(f'every loop node was switched to {what} outside this page: the page '
                           'follows, the exam starts afresh')
                 return
@@ -438,8 +441,7 @@ class WebView(HapticNode):
         """The restarted node answered: on the page's case again, or (refused, silent) the
         loop is split: the exam stops, as when a revert fails."""
         if out.ok:
-            self.app.message(f'{ch.label}: {out.describe()}')
-            self.get_logger().info(f'{ch.label}: {out.describe()}')
+            self._say(f'{ch.label}: {out.describe()}')
             return
         self._stop_split(ch, f'{ch.label} FAILED ({out.describe()})')
 
