@@ -101,9 +101,7 @@ class ServoLoop:
 
     def _run(self) -> None:
         name_thread('servo-tick')
-        self.scheduling = set_realtime(self.priority)
-        if self.priority <= 0:
-            self.scheduling += request_short_slice()
+        self.scheduling = schedule_servo_thread(self.priority)
         self._scheduled.set()
         period, clock, stop = self.period, self.clock, self._stop
         deadline = clock()
@@ -131,9 +129,11 @@ class ServoLoop:
         self.device.write((0.0, 0.0, 0.0))
 
 
-def set_realtime(priority: int) -> str:
+def set_realtime(priority: int, rtkit: bool = False) -> str:
     """Schedule the calling thread SCHED_FIFO at ``priority`` (1-99; 0 = leave it as it is);
-    returns what was done, in words, for the log.
+    refused and ``rtkit``, ask RealtimeKit for SCHED_RR instead (:mod:`.rtkit`: no privilege
+    needed on a desktop Linux with rtkit-daemon, at most its priority 20). Returns what was
+    done, in words, for the log.
 
     Why: the servo thread sleeps to each 1 ms deadline; under the normal scheduler, when the
     machine's cores are busy (a visualizer or recorder process beside the loop, the loop's own
@@ -142,7 +142,8 @@ def set_realtime(priority: int) -> str:
     SCHED_FIFO 50: 997-998 Hz, 21-32 misses (README, *Tissue deformation*). The thread sleeps
     every tick, so it cannot starve the machine (and Linux throttles real-time threads at 95 %
     of each second). Needs CAP_SYS_NICE or an rtprio limit (``ulimit -r``,
-    /etc/security/limits.conf); without it the thread keeps the normal scheduler, and says so.
+    /etc/security/limits.conf), or rtkit; without them the thread keeps the normal scheduler,
+    and says so.
     """
     if priority <= 0:
         return 'normal scheduler (priority 0)'
@@ -150,15 +151,58 @@ def set_realtime(priority: int) -> str:
     try:
         os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(int(priority)))
     except (OSError, AttributeError) as exc:  # EPERM without the right; not Linux
-        return realtime_refused(priority, exc)
+        if not rtkit:
+            return realtime_refused(priority, exc)
+        from .rtkit import RealtimeKitError, make_thread_realtime
+        try:
+            got = make_thread_realtime(priority)
+        except RealtimeKitError as kit:
+            return realtime_refused(priority, exc, kit)
+        return f'SCHED_RR priority {got} from rtkit, in place of SCHED_FIFO {priority}'
     return f'SCHED_FIFO priority {priority}'
 
 
-def realtime_refused(priority: int, exc: BaseException) -> str:
-    """The log's words for a refused SCHED_FIFO ``priority``: why, and how to allow it."""
+def realtime_refused(priority: int, exc: BaseException, kit: BaseException | None = None) -> str:
+    """The log's words for a refused SCHED_FIFO ``priority``: why (and why rtkit did not grant
+    it, ``kit``), and how to allow it."""
     why = getattr(exc, 'strerror', None) or str(exc)
-    return (f'normal scheduler: SCHED_FIFO {priority} refused ({why}); allow it with '
+    also = f'; {kit}' if kit is not None else ''
+    return (f'normal scheduler: SCHED_FIFO {priority} refused ({why}{also}); allow it with '
             f'`ulimit -r {priority}` or an rtprio line in /etc/security/limits.conf')
+
+
+def realtime_policy(pid: int = 0) -> str:
+    """'SCHED_FIFO priority N' or 'SCHED_RR priority N' for thread/process ``pid`` (0: the
+    calling thread), '' under a normal policy or when it cannot be read."""
+    import os
+    try:
+        policy = os.sched_getscheduler(pid) & ~RESET_ON_FORK
+        names = {getattr(os, 'SCHED_FIFO', 1): 'SCHED_FIFO', getattr(os, 'SCHED_RR', 2): 'SCHED_RR'}
+        if policy not in names:
+            return ''
+        return f'{names[policy]} priority {os.sched_getparam(pid).sched_priority}'
+    except (OSError, AttributeError):
+        return ''
+
+
+def is_realtime() -> bool:
+    """Whether the calling thread runs under a real-time policy (SCHED_FIFO or SCHED_RR)."""
+    return bool(realtime_policy())
+
+
+#: Linux's SCHED_RESET_ON_FORK flag, or-ed into the policy (rtkit sets it).
+RESET_ON_FORK = 0x40000000
+
+
+def schedule_servo_thread(priority: int, rtkit: bool = True) -> str:
+    """The calling servo thread's scheduling, best first: SCHED_FIFO ``priority``; refused,
+    SCHED_RR from rtkit (``rtkit``); else the fair scheduler with a short time slice
+    (:func:`request_short_slice`), also when the real-time priority was asked and refused.
+    Returns what was done, in words, for the log."""
+    words = set_realtime(priority, rtkit=rtkit)
+    if not is_realtime():
+        words += request_short_slice()
+    return words
 
 
 def name_thread(name: str) -> None:

@@ -39,7 +39,7 @@ from .local_model import FALCON_MAX_STIFFNESS, LocalModelRenderer, RenderStats, 
     accept_values, rotating_mode, skew_vector, symmetric_part, tissue_stiffness_limit
 from .safety import IGNORED_DISABLED, OK, REJECTED_FRAME, REJECTED_NONFINITE, SafetyLayer, \
     SafetyStats
-from .servo import name_thread, request_short_slice, set_realtime
+from .servo import name_thread, realtime_policy, schedule_servo_thread
 from .stats import LoopStats
 from .trace import TickTrace
 
@@ -595,9 +595,7 @@ class NativeServoLoop:
                     _die_with_parent(signal.SIGKILL)
                 if self.device_factory is not None:
                     name_thread('servo-device')
-                    set_realtime(self.priority)  # the device loop: one thread (its USB I/O)
-                    if self.priority <= 0:
-                        request_short_slice()
+                    schedule_servo_thread(self.priority)  # the device loop: its USB I/O
                     code = dp.run_device_loop(
                         self.device_factory, self.cfg, self.st, self.times, self.points,
                         self.buttons, self.hand, self.cmd, self.model, self.ctl, self.out,
@@ -614,18 +612,16 @@ class NativeServoLoop:
             self._wait_open(pid)
         policy = ''
         for _ in range(100):  # how the child is scheduled, once it has set itself up
-            try:
-                if os.sched_getscheduler(pid) == os.SCHED_FIFO or self.priority <= 0:
-                    break
-            except OSError:
+            policy = realtime_policy(pid)
+            if policy or self.priority <= 0:
                 break
             time.sleep(0.01)
-        try:
-            fifo = os.sched_getscheduler(pid) == os.SCHED_FIFO
-            policy = (f'SCHED_FIFO priority {self.priority}' if fifo else
-                      'normal scheduler' + (' (SCHED_FIFO refused)' if self.priority > 0 else ''))
-        except OSError as exc:
-            policy = f'unknown ({exc})'
+        if not policy:
+            policy = 'normal scheduler' + (
+                f' (SCHED_FIFO {self.priority} refused, and no real-time priority from rtkit; '
+                'allow it with an rtprio limit: docs/nodes.md)' if self.priority > 0 else '')
+        elif policy.startswith('SCHED_RR'):
+            policy += f' from rtkit, in place of SCHED_FIFO {self.priority}'
         self.scheduling = (f'compiled tick in servo process {pid} (own session); {policy}'
                            + ('' if self.device_factory is not None else
                               f'; {self._workers_text()}'))
@@ -708,9 +704,7 @@ class NativeServoLoop:
                 os.sched_setaffinity(0, {cpu})  # this thread only
             except OSError:
                 pass  # a core taken away since: the worker still serves, unpinned
-        scheduling = set_realtime(self.priority)
-        if self.priority <= 0:
-            scheduling += request_short_slice()
+        scheduling = schedule_servo_thread(self.priority)
         if worker == 0 and not self.process:
             self.scheduling = f'compiled nogil tick; {scheduling}; {self._workers_text()}'
             self._scheduled.set()
@@ -724,9 +718,8 @@ class NativeServoLoop:
 
     def _run_bridge(self) -> None:
         name_thread('servo-bridge')
-        set_realtime(max(self.priority - 10, 1) if self.priority > 0 else 0)
-        if self.priority <= 0:
-            request_short_slice()
+        # below the ticks; Python, so not from rtkit (its run-time limit: see .rtkit)
+        schedule_servo_thread(max(self.priority - 10, 1) if self.priority > 0 else 0, rtkit=False)
         seen = -1.0
         period = self.period
         next_drain = 0

@@ -1,0 +1,104 @@
+"""Real-time priority without privilege: ask RealtimeKit (rtkit) over the system D-Bus (no ROS).
+
+Why (issue 32): SCHED_FIFO needs CAP_SYS_NICE or an rtprio limit, which a trainee's account on a
+lab PC has only if an administrator added one; without it the servo shares the cores with the
+browser and everything else under the fair scheduler, and loses periods. Desktop Linux
+distributions run ``rtkit-daemon`` (PipeWire and PulseAudio ask it for their audio threads). It
+makes a thread of the caller's own process SCHED_RR, up to its ``MaxRealtimePriority`` (20 by
+default), when polkit allows it (rtkit's default policy: a user with a local login session,
+active or not; not a remote one) and once the process's ``RLIMIT_RTTIME`` is at most its
+``RTTimeUSecMax`` (200 ms by default): a real-time thread that runs that long without blocking is
+killed, so a runaway thread cannot freeze the desktop; rtkit also takes the priority back from
+every thread it raised if its own canary thread starves.
+
+Only the servo's threads ask (the compiled tick workers, the real Falcon's device loop, the
+Python servo thread): each blocks every period. The graph's nodes do not: loading a case compiles
+models for seconds without blocking, which that limit would kill.
+
+The bus is spoken to with jeepney (pure Python, no C library, no event loop): one blocking
+connection per request, closed at once.
+"""
+from __future__ import annotations
+
+import os
+import resource
+import threading
+from typing import Any, Callable
+
+from ..errors import HapticAnfisError
+
+__all__ = ['RealtimeKitError', 'make_thread_realtime', 'SERVICE', 'OBJECT_PATH']
+
+SERVICE = 'org.freedesktop.RealtimeKit1'
+OBJECT_PATH = '/org/freedesktop/RealtimeKit1'
+
+#: D-Bus error names and what they mean here, for the one-line reason.
+_MEANING = {
+    'org.freedesktop.DBus.Error.ServiceUnknown': 'no rtkit-daemon on this machine',
+    'org.freedesktop.DBus.Error.NameHasNoOwner': 'no rtkit-daemon on this machine',
+    'org.freedesktop.DBus.Error.AccessDenied': 'rtkit refused (polkit: no local login session?)',
+    'org.freedesktop.DBus.Error.NoReply': 'rtkit did not answer',
+}
+
+
+class RealtimeKitError(HapticAnfisError, OSError):
+    """rtkit could not be asked, or refused: the message says which, in one line."""
+
+
+def make_thread_realtime(priority: int, tid: int | None = None, *,
+                         connect: Callable[[], Any] | None = None, timeout: float = 2.0) -> int:
+    """Ask rtkit to schedule thread ``tid`` of this process (default: the calling thread)
+    SCHED_RR at ``priority``, lowered to rtkit's ``MaxRealtimePriority``; returns the priority
+    granted. Lowers this process's ``RLIMIT_RTTIME`` to rtkit's ``RTTimeUSecMax`` first (never
+    raises it), as rtkit requires. ``connect`` returns an open jeepney blocking connection
+    (default: the system bus; tests pass their own). Raises :class:`RealtimeKitError`."""
+    if priority < 1:
+        raise ValueError(f'priority: got {priority}, expected 1-99')
+    try:
+        from jeepney import DBusAddress, new_method_call
+        from jeepney.io.blocking import open_dbus_connection
+        from jeepney.wrappers import DBusErrorResponse, unwrap_msg
+    except ImportError:
+        raise RealtimeKitError('rtkit: jeepney is not installed (pip install jeepney)') from None
+    if connect is None:
+        def connect():
+            return open_dbus_connection(bus='SYSTEM')
+    try:
+        conn = connect()
+    except (OSError, KeyError, ValueError) as exc:  # no bus socket; a malformed bus address
+        raise RealtimeKitError(f'rtkit: no system D-Bus ({exc})') from None
+    kit = DBusAddress(OBJECT_PATH, bus_name=SERVICE, interface=SERVICE)
+    props = DBusAddress(OBJECT_PATH, bus_name=SERVICE,
+                        interface='org.freedesktop.DBus.Properties')
+
+    def ask(address, method: str, signature: str, body: tuple) -> tuple:
+        reply = conn.send_and_get_reply(new_method_call(address, method, signature, body),
+                                        timeout=timeout)
+        return tuple(unwrap_msg(reply))  # an error reply raises DBusErrorResponse
+
+    def prop(name: str) -> int:
+        (value,) = ask(props, 'Get', 'ss', (SERVICE, name))
+        return int(value[1])  # a variant: (signature, value)
+    try:
+        with conn:
+            granted = max(1, min(int(priority), prop('MaxRealtimePriority')))
+            limit_rttime(prop('RTTimeUSecMax'))
+            tid = threading.get_native_id() if tid is None else int(tid)
+            ask(kit, 'MakeThreadRealtimeWithPID', 'ttu', (os.getpid(), tid, granted))
+    except DBusErrorResponse as exc:
+        why = _MEANING.get(exc.name, exc.name)
+        detail = f': {exc.data[0]}' if exc.data and isinstance(exc.data[0], str) else ''
+        raise RealtimeKitError(f'rtkit: {why}{detail}') from None
+    except (OSError, TimeoutError, ValueError, IndexError, TypeError) as exc:
+        raise RealtimeKitError(f'rtkit: {type(exc).__name__}: {exc}') from None
+    return granted
+
+
+def limit_rttime(usec: int) -> None:
+    """Lower this process's ``RLIMIT_RTTIME`` (soft and hard) to at most ``usec`` microseconds;
+    a lower limit already set is kept."""
+    soft, hard = resource.getrlimit(resource.RLIMIT_RTTIME)
+    inf = resource.RLIM_INFINITY
+    hard = usec if hard == inf else min(hard, usec)
+    soft = hard if soft == inf else min(soft, hard)
+    resource.setrlimit(resource.RLIMIT_RTTIME, (soft, hard))

@@ -1,0 +1,136 @@
+"""Real-time priority from RealtimeKit (haptic_anfis.device.rtkit) against a fake system bus, and
+the servo threads' choice of scheduling (device/servo.py): FIFO, else rtkit, else a short slice."""
+from __future__ import annotations
+
+import os
+import resource
+import sys
+import threading
+
+import pytest
+
+jeepney = pytest.importorskip('jeepney')
+
+from haptic_anfis.device import rtkit, servo  # noqa: E402
+from haptic_anfis.device.rtkit import RealtimeKitError, make_thread_realtime  # noqa: E402
+
+
+class FakeBus:
+    """A blocking jeepney connection that answers as rtkit-daemon would (or with ``error``)."""
+
+    def __init__(self, max_priority=20, usec=200_000, error=None,
+                 fail_on='MakeThreadRealtimeWithPID'):
+        self.max_priority, self.usec, self.error, self.fail_on = max_priority, usec, error, fail_on
+        self.calls, self.closed = [], False
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.closed = True
+
+    def send_and_get_reply(self, msg, timeout=None):
+        f = msg.header.fields
+        member = f[jeepney.HeaderFields.member]
+        self.calls.append((f[jeepney.HeaderFields.destination], member, msg.body, timeout))
+        if self.error and (member == self.fail_on or self.fail_on is None):
+            return jeepney.new_error(msg, self.error, 's', ('not allowed',))
+        if member == 'Get':
+            value = {'MaxRealtimePriority': ('i', self.max_priority),
+                     'RTTimeUSecMax': ('x', self.usec)}[msg.body[1]]
+            return jeepney.new_method_return(msg, 'v', (value,))
+        return jeepney.new_method_return(msg)
+
+
+@pytest.fixture
+def limits(monkeypatch):
+    """RLIMIT_RTTIME as this process would set it (recorded, not applied)."""
+    got = []
+    monkeypatch.setattr(rtkit, 'limit_rttime', got.append)
+    return got
+
+
+def test_asks_rtkit_for_this_thread_at_most_its_priority(limits):
+    bus = FakeBus(max_priority=20, usec=150_000)
+    assert make_thread_realtime(50, connect=lambda: bus, timeout=1.5) == 20
+    assert limits == [150_000] and bus.closed
+    dest, member, body, timeout = bus.calls[-1]
+    assert (dest, member, timeout) == (rtkit.SERVICE, 'MakeThreadRealtimeWithPID', 1.5)
+    assert body == (os.getpid(), threading.get_native_id(), 20)
+    assert make_thread_realtime(5, tid=1234, connect=lambda: FakeBus()) == 5  # below the max
+
+
+@pytest.mark.parametrize('error, words', [
+    ('org.freedesktop.DBus.Error.ServiceUnknown', 'no rtkit-daemon on this machine'),
+    ('org.freedesktop.DBus.Error.AccessDenied', 'rtkit refused (polkit'),
+    ('org.example.Odd', 'org.example.Odd: not allowed'),
+])
+def test_an_error_reply_is_one_line_naming_it(limits, error, words):
+    with pytest.raises(RealtimeKitError, match=r'^rtkit: ') as e:
+        make_thread_realtime(50, connect=lambda: FakeBus(error=error))
+    assert words in str(e.value) and '\n' not in str(e.value)
+
+
+def test_no_service_fails_before_any_limit_is_changed(limits):
+    with pytest.raises(RealtimeKitError, match='no rtkit-daemon'):
+        make_thread_realtime(50, connect=lambda: FakeBus(
+            error='org.freedesktop.DBus.Error.ServiceUnknown', fail_on=None))
+    assert limits == []
+
+
+def test_no_bus_and_no_jeepney_are_said(limits, monkeypatch):
+    def no_socket():
+        raise FileNotFoundError(2, 'No such file or directory')
+    with pytest.raises(RealtimeKitError, match=r'rtkit: no system D-Bus \(.*No such file'):
+        make_thread_realtime(50, connect=no_socket)
+    monkeypatch.setitem(sys.modules, 'jeepney', None)
+    with pytest.raises(RealtimeKitError, match='jeepney is not installed'):
+        make_thread_realtime(50)
+    with pytest.raises(ValueError, match='priority'):
+        make_thread_realtime(0)
+
+
+@pytest.mark.parametrize('before, usec, after', [
+    ((resource.RLIM_INFINITY, resource.RLIM_INFINITY), 200_000, (200_000, 200_000)),
+    ((50_000, resource.RLIM_INFINITY), 200_000, (50_000, 200_000)),
+    ((50_000, 100_000), 200_000, (50_000, 100_000)),        # lower already: kept
+    ((resource.RLIM_INFINITY, 300_000), 200_000, (200_000, 200_000)),
+])
+def test_the_run_time_limit_is_only_ever_lowered(monkeypatch, before, usec, after):
+    got = []
+    monkeypatch.setattr(resource, 'getrlimit', lambda which: before)
+    monkeypatch.setattr(resource, 'setrlimit', lambda which, lim: got.append((which, lim)))
+    rtkit.limit_rttime(usec)
+    assert got == [(resource.RLIMIT_RTTIME, after)]
+
+
+def test_servo_thread_falls_back_to_rtkit_then_to_a_short_slice(monkeypatch):
+    """FIFO refused: rtkit's SCHED_RR when it grants it (no short slice then); refused by both:
+    the fair scheduler with the short slice, and a line saying both reasons."""
+    def refuse(*a):
+        raise PermissionError(1, 'Operation not permitted')
+    monkeypatch.setattr(os, 'sched_setscheduler', refuse)
+    sliced = []
+    monkeypatch.setattr(servo, 'request_short_slice', lambda: sliced.append(1) or ', slice')
+    monkeypatch.setattr(rtkit, 'make_thread_realtime', lambda priority: min(priority, 20))
+    monkeypatch.setattr(servo, 'is_realtime', lambda: True)
+    said = servo.schedule_servo_thread(50)
+    assert said == 'SCHED_RR priority 20 from rtkit, in place of SCHED_FIFO 50' and not sliced
+    assert 'refused' in servo.set_realtime(50)  # rtkit only when asked for
+
+    def kit_refuses(priority):
+        raise RealtimeKitError('rtkit: no rtkit-daemon on this machine')
+    monkeypatch.setattr(rtkit, 'make_thread_realtime', kit_refuses)
+    monkeypatch.setattr(servo, 'is_realtime', lambda: False)
+    said = servo.schedule_servo_thread(50)
+    assert said.startswith('normal scheduler: SCHED_FIFO 50 refused (Operation not permitted; '
+                           'rtkit: no rtkit-daemon on this machine)') and said.endswith(', slice')
+    assert sliced == [1]
+    assert servo.schedule_servo_thread(0) == 'normal scheduler (priority 0), slice'
+
+
+def test_is_realtime_reads_the_policy_without_the_reset_on_fork_flag(monkeypatch):
+    monkeypatch.setattr(os, 'sched_getscheduler', lambda pid: os.SCHED_RR | servo.RESET_ON_FORK)
+    assert servo.is_realtime()
+    monkeypatch.setattr(os, 'sched_getscheduler', lambda pid: os.SCHED_OTHER)
+    assert not servo.is_realtime()
