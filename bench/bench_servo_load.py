@@ -44,7 +44,7 @@ from _page import write_page  # noqa: E402
 CLI = [sys.executable, '-m', 'haptic_anfis.cli']
 COLS = ('config', 'busy', 'load', 'rt_others', 'rate_hz', 'periods_lost', 'max_gap_ms',
         'err_rms_pct', 'ripple_pct', 'ripple_ideal_pct', 'zero_ticks', 'dropout_ms', 'trips_contact',
-        'expired', 'held', 'beyond', 'taken_over', 'lat_p99_ms', 'lat_max_ms')
+        'expired', 'held', 'beyond', 'taken_over', 'lat_p99_ms', 'lat_max_ms', 'sched')
 #: with --settle: the first seconds' own columns (the browser opening its page)
 SETTLE_COLS = ('settle_lost', 'settle_gap_ms', 'browser_s')
 
@@ -236,8 +236,37 @@ def row(name: str, nbusy: int, load: float, j: dict) -> dict:
             'taken_over': f('ticks_taken_over'),
             'lat_p99_ms': f('latency_p99_ms'), 'lat_max_ms': f('latency_max_ms'),
             'settle_lost': f('settle_lost'), 'settle_gap_ms': f('settle_gap_ms'),
-            'browser_s': f('browser_s'),
+            'browser_s': f('browser_s'), 'sched': sched_words(j.get('servo_scheduling')),
             'error': j.get('error')}
+
+
+def sched_words(text: str | None) -> str | None:
+    """The servo thread's scheduling in a column's words: 'FIFO 50', 'RR 20 rtkit' (from
+    RealtimeKit), 'normal' (the fair scheduler), from the driver's ``servo_scheduling``."""
+    import re
+    if not text:
+        return None
+    m = re.search(r'SCHED_(FIFO|RR) priority (\d+)', text)
+    if m is None:
+        return 'normal'
+    return f'{m[1]} {m[2]}' + (' rtkit' if 'rtkit' in text else '')
+
+
+def account() -> str:
+    """Who runs the benchmark, for the page: the user, whether it may set SCHED_FIFO itself
+    (root, CAP_SYS_NICE or an rtprio limit) and whether a RealtimeKit answers on the system bus."""
+    import pwd
+    import resource
+    uid = os.geteuid()
+    soft, _ = resource.getrlimit(resource.RLIMIT_RTPRIO)
+    may = uid == 0 or soft != 0
+    try:
+        from haptic_anfis.device.rtkit import RealtimeKitError, max_realtime_priority
+        kit = f'rtkit answers (max priority {max_realtime_priority()})'
+    except RealtimeKitError as exc:
+        kit = str(exc)
+    return (f'run as {pwd.getpwuid(uid).pw_name} (uid {uid}); SCHED_FIFO '
+            + ('allowed' if may else 'not allowed (no rtprio limit, not root)') + f'; {kit}')
 
 
 def fmt(v) -> str:
@@ -294,6 +323,7 @@ def main() -> int:
                 int(c.split(':')[2]) if c.count(':') > 1 else 0) for c in a.configs.split(',')]
     rows = []
     cols = columns(a)
+    print(account(), flush=True)
     print(' '.join(f'{c:>12}' for c in cols), flush=True)
     suite = TestSuite() if a.beside_tests else None
     with tempfile.TemporaryDirectory(prefix='bench-servo-') as td, \
@@ -370,7 +400,8 @@ def _page(a, rows: list[dict], planned: int):
              'probe beyond the model\'s validity radius (the depth followed, the offset across '
              'held at the radius); `taken_over`: ticks one tick worker took over from the other, '
              'which was preempted in the middle of its tick; `lat_p99_ms`, `lat_max_ms`: pose -> '
-             'local model latency, 99th percentile and largest. Targets (issue 32): rate >= '
+             'local model latency, 99th percentile and largest; `sched`: what the servo thread got '
+             '(FIFO N, RR N from rtkit, normal: the fair scheduler with a short slice). Targets (issue 32): rate >= '
              '995 Hz, zero_ticks 0, err_rms_pct <= 2, ripple_pct <= 1; quiet err_rms_pct <= 0.2.\n')
     if len(rows) < planned:
         notes += f'\n({len(rows)} of {planned} planned runs so far.)\n'

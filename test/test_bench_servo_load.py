@@ -8,7 +8,7 @@ import pytest
 
 BENCH = Path(__file__).resolve().parents[1] / 'bench'
 sys.path.insert(0, str(BENCH))
-from bench_servo_load import params_file, settled  # noqa: E402
+from bench_servo_load import params_file, sched_words, settled  # noqa: E402
 
 from haptic_anfis.device.local_model import STATUS_NAMES  # noqa: E402
 from haptic_anfis.device.trace import save_trace  # noqa: E402
@@ -39,3 +39,14 @@ def test_the_window_s_figures_and_a_gap_across_the_boundary_counted_in_the_settl
     assert s['rate_hz'] == pytest.approx(1000 * (1 - 2 / 2000), abs=2.0)
     assert s['ticks_held'] == 9 and s['latency_p99_ms'] == 3.0   # whole run, from the driver
     assert s['browser_s'] == -1.5
+
+
+def test_the_sched_column_says_what_the_servo_thread_got():
+    words = sched_words
+    assert words('compiled tick in servo process 7 (own session); SCHED_FIFO priority 50; '
+                 '2 tick workers on cores 0, 1') == 'FIFO 50'
+    assert words('compiled tick in servo process 7 (own session); SCHED_RR priority 20 from '
+                 'rtkit, in place of SCHED_FIFO 50; 2 tick workers') == 'RR 20 rtkit'
+    assert words('compiled tick in servo process 7 (own session); normal scheduler (SCHED_FIFO '
+                 '50 refused, and no real-time priority from rtkit; ...)') == 'normal'
+    assert words(None) is None

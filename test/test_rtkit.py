@@ -23,10 +23,7 @@ class FakeBus:
         self.max_priority, self.usec, self.error, self.fail_on = max_priority, usec, error, fail_on
         self.calls, self.closed = [], False
 
-    def __enter__(self):
-        return self
-
-    def __exit__(self, *exc):
+    def close(self):
         self.closed = True
 
     def send_and_get_reply(self, msg, timeout=None):
@@ -69,6 +66,13 @@ def test_an_error_reply_is_one_line_naming_it(limits, error, words):
     with pytest.raises(RealtimeKitError, match=r'^rtkit: ') as e:
         make_thread_realtime(50, connect=lambda: FakeBus(error=error))
     assert words in str(e.value) and '\n' not in str(e.value)
+
+
+def test_max_priority_says_whether_rtkit_answers():
+    assert rtkit.max_realtime_priority(connect=lambda: FakeBus(max_priority=15)) == 15
+    with pytest.raises(RealtimeKitError, match='no rtkit-daemon'):
+        rtkit.max_realtime_priority(connect=lambda: FakeBus(
+            error='org.freedesktop.DBus.Error.ServiceUnknown', fail_on=None))
 
 
 def test_no_service_fails_before_any_limit_is_changed(limits):

@@ -27,7 +27,8 @@ from typing import Any, Callable
 
 from ..errors import HapticAnfisError
 
-__all__ = ['RealtimeKitError', 'make_thread_realtime', 'SERVICE', 'OBJECT_PATH']
+__all__ = ['OBJECT_PATH', 'SERVICE', 'RealtimeKitError', 'limit_rttime', 'make_thread_realtime',
+           'max_realtime_priority']
 
 SERVICE = 'org.freedesktop.RealtimeKit1'
 OBJECT_PATH = '/org/freedesktop/RealtimeKit1'
@@ -54,44 +55,65 @@ def make_thread_realtime(priority: int, tid: int | None = None, *,
     (default: the system bus; tests pass their own). Raises :class:`RealtimeKitError`."""
     if priority < 1:
         raise ValueError(f'priority: got {priority}, expected 1-99')
-    try:
-        from jeepney import DBusAddress, new_method_call
-        from jeepney.io.blocking import open_dbus_connection
-        from jeepney.wrappers import DBusErrorResponse, unwrap_msg
-    except ImportError:
-        raise RealtimeKitError('rtkit: jeepney is not installed (pip install jeepney)') from None
-    if connect is None:
-        def connect():
-            return open_dbus_connection(bus='SYSTEM')
-    try:
-        conn = connect()
-    except (OSError, KeyError, ValueError) as exc:  # no bus socket; a malformed bus address
-        raise RealtimeKitError(f'rtkit: no system D-Bus ({exc})') from None
-    kit = DBusAddress(OBJECT_PATH, bus_name=SERVICE, interface=SERVICE)
-    props = DBusAddress(OBJECT_PATH, bus_name=SERVICE,
-                        interface='org.freedesktop.DBus.Properties')
-
-    def ask(address, method: str, signature: str, body: tuple) -> tuple:
-        reply = conn.send_and_get_reply(new_method_call(address, method, signature, body),
-                                        timeout=timeout)
-        return tuple(unwrap_msg(reply))  # an error reply raises DBusErrorResponse
-
-    def prop(name: str) -> int:
-        (value,) = ask(props, 'Get', 'ss', (SERVICE, name))
-        return int(value[1])  # a variant: (signature, value)
-    try:
-        with conn:
-            granted = max(1, min(int(priority), prop('MaxRealtimePriority')))
-            limit_rttime(prop('RTTimeUSecMax'))
-            tid = threading.get_native_id() if tid is None else int(tid)
-            ask(kit, 'MakeThreadRealtimeWithPID', 'ttu', (os.getpid(), tid, granted))
-    except DBusErrorResponse as exc:
-        why = _MEANING.get(exc.name, exc.name)
-        detail = f': {exc.data[0]}' if exc.data and isinstance(exc.data[0], str) else ''
-        raise RealtimeKitError(f'rtkit: {why}{detail}') from None
-    except (OSError, TimeoutError, ValueError, IndexError, TypeError) as exc:
-        raise RealtimeKitError(f'rtkit: {type(exc).__name__}: {exc}') from None
+    with _Bus(connect, timeout) as bus:
+        granted = max(1, min(int(priority), bus.prop('MaxRealtimePriority')))
+        limit_rttime(bus.prop('RTTimeUSecMax'))
+        tid = threading.get_native_id() if tid is None else int(tid)
+        bus.call('MakeThreadRealtimeWithPID', 'ttu', (os.getpid(), tid, granted))
     return granted
+
+
+def max_realtime_priority(*, connect: Callable[[], Any] | None = None,
+                          timeout: float = 2.0) -> int:
+    """rtkit's ``MaxRealtimePriority`` (whether it answers at all, for a report); raises
+    :class:`RealtimeKitError`."""
+    with _Bus(connect, timeout) as bus:
+        return bus.prop('MaxRealtimePriority')
+
+
+class _Bus:
+    """One blocking connection to rtkit for one request; every failure a RealtimeKitError."""
+
+    def __init__(self, connect: Callable[[], Any] | None, timeout: float) -> None:
+        try:
+            from jeepney import DBusAddress, new_method_call
+            from jeepney.io.blocking import open_dbus_connection
+            from jeepney.wrappers import DBusErrorResponse, unwrap_msg
+        except ImportError:
+            raise RealtimeKitError('rtkit: jeepney is not installed (pip install jeepney)') \
+                from None
+        self._new, self._unwrap, self._error = new_method_call, unwrap_msg, DBusErrorResponse
+        self.timeout = timeout
+        self.kit = DBusAddress(OBJECT_PATH, bus_name=SERVICE, interface=SERVICE)
+        self.props = DBusAddress(OBJECT_PATH, bus_name=SERVICE,
+                                 interface='org.freedesktop.DBus.Properties')
+        try:
+            self.conn = (connect or (lambda: open_dbus_connection(bus='SYSTEM')))()
+        except (OSError, KeyError, ValueError) as exc:  # no bus socket; a malformed address
+            raise RealtimeKitError(f'rtkit: no system D-Bus ({exc})') from None
+
+    def __enter__(self) -> '_Bus':
+        return self
+
+    def __exit__(self, kind, exc, tb) -> None:
+        self.conn.close()
+        if exc is None or isinstance(exc, RealtimeKitError):
+            return
+        if isinstance(exc, self._error):
+            why = _MEANING.get(exc.name, exc.name)
+            detail = f': {exc.data[0]}' if exc.data and isinstance(exc.data[0], str) else ''
+            raise RealtimeKitError(f'rtkit: {why}{detail}') from None
+        if isinstance(exc, (OSError, TimeoutError, ValueError, IndexError, TypeError)):
+            raise RealtimeKitError(f'rtkit: {type(exc).__name__}: {exc}') from None
+
+    def call(self, method: str, signature: str = '', body: tuple = (), address=None) -> tuple:
+        msg = self._new(address or self.kit, method, signature, body)
+        reply = self.conn.send_and_get_reply(msg, timeout=self.timeout)
+        return tuple(self._unwrap(reply))  # an error reply raises DBusErrorResponse
+
+    def prop(self, name: str) -> int:
+        (value,) = self.call('Get', 'ss', (SERVICE, name), self.props)
+        return int(value[1])  # a variant: (signature, value)
 
 
 def limit_rttime(usec: int) -> None:
