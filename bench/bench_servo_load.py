@@ -401,7 +401,8 @@ def _page(a, rows: list[dict], planned: int):
              'held at the radius); `taken_over`: ticks one tick worker took over from the other, '
              'which was preempted in the middle of its tick; `lat_p99_ms`, `lat_max_ms`: pose -> '
              'local model latency, 99th percentile and largest; `sched`: what the servo thread got '
-             '(FIFO N, RR N from rtkit, normal: the fair scheduler with a short slice). Targets (issue 32): rate >= '
+             '(FIFO N, RR N from rtkit, normal: the fair scheduler with a short slice). '
+             'Targets (issue 32): rate >= '
              '995 Hz, zero_ticks 0, err_rms_pct <= 2, ripple_pct <= 1; quiet err_rms_pct <= 0.2.\n')
     if len(rows) < planned:
         notes += f'\n({len(rows)} of {planned} planned runs so far.)\n'
