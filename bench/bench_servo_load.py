@@ -323,7 +323,8 @@ def main() -> int:
                 int(c.split(':')[2]) if c.count(':') > 1 else 0) for c in a.configs.split(',')]
     rows = []
     cols = columns(a)
-    print(account(), flush=True)
+    a.account = account()  # on the page too
+    print(a.account, flush=True)
     print(' '.join(f'{c:>12}' for c in cols), flush=True)
     suite = TestSuite() if a.beside_tests else None
     with tempfile.TemporaryDirectory(prefix='bench-servo-') as td, \
@@ -367,7 +368,8 @@ def columns(a) -> tuple[str, ...]:
 def _page(a, rows: list[dict], planned: int):
     cols = columns(a)
     head = '| ' + ' | '.join(cols) + ' |\n|' + '---|' * len(cols) + '\n'
-    body = head + ''.join('| ' + ' | '.join(fmt(r[c]) for c in cols) + ' |\n' for r in rows)
+    body = (f'{a.account}.\n\n' + head
+            + ''.join('| ' + ' | '.join(fmt(r[c]) for c in cols) + ' |\n' for r in rows))
     notes = (f'\n{a.duration:g} s per run after the graph is ready'
              + (f' and {a.settle:g} s more (`settle`): the figures the servo ticks carry (rate, '
                 'periods lost, longest gap, force error, ripple, dropouts, expired) are the last '
