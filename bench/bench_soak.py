@@ -246,6 +246,11 @@ def multi_process(minutes: float, interval: float, workdir: Path,
     first = max((i for i, line in enumerate(lines) if line.startswith('loop (')),
                 default=len(lines) - 1)
     print('\n'.join(lines[first:]))
+    driver_log = workdir / 'logs' / 'falcon_driver.log'
+    said = [line.split('servo thread: ', 1)[1]
+            for line in (driver_log.read_text().splitlines() if driver_log.exists() else ())
+            if 'servo thread: ' in line]
+    print(f'servo thread: {said[0] if said else "not said"}')
     print(f'bag {bag}: {dir_mb(bag):.1f} MB', flush=True)
 
 
@@ -284,6 +289,8 @@ def main() -> int:
     work.mkdir(parents=True, exist_ok=True)
     print(f'soak: {os.cpu_count()} CPUs, load average {os.getloadavg()}'
           + (f'; {a.busy} busy processes spinning beside it' if a.busy else ''))
+    from bench_servo_load import account
+    print(account())
     from _busy import busy
     try:
         with busy(a.busy):   # ended with the runs, also on an error
