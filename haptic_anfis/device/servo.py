@@ -171,27 +171,39 @@ def realtime_refused(priority: int, exc: BaseException, kit: BaseException | Non
             f'`ulimit -r {priority}` or an rtprio line in /etc/security/limits.conf')
 
 
+def realtime_priority(pid: int = 0) -> int:
+    """The real-time priority (SCHED_FIFO or SCHED_RR, whatever flag rtkit or-ed into the policy)
+    of thread/process ``pid`` (0: the calling thread); 0 under a normal policy or when it
+    cannot be read."""
+    rt = _realtime_of(pid)
+    return rt[1] if rt else 0
+
+
 def realtime_policy(pid: int = 0) -> str:
     """'SCHED_FIFO priority N' or 'SCHED_RR priority N' for thread/process ``pid`` (0: the
     calling thread), '' under a normal policy or when it cannot be read."""
+    rt = _realtime_of(pid)
+    return f'{rt[0]} priority {rt[1]}' if rt else ''
+
+
+def _realtime_of(pid: int) -> tuple[str, int] | None:
     import os
     try:
-        policy = os.sched_getscheduler(pid) & ~RESET_ON_FORK
-        names = {getattr(os, 'SCHED_FIFO', 1): 'SCHED_FIFO', getattr(os, 'SCHED_RR', 2): 'SCHED_RR'}
-        if policy not in names:
-            return ''
-        return f'{names[policy]} priority {os.sched_getparam(pid).sched_priority}'
+        name = _RT_POLICIES.get(os.sched_getscheduler(pid) & ~RESET_ON_FORK)
+        return (name, os.sched_getparam(pid).sched_priority) if name else None
     except (OSError, AttributeError):
-        return ''
+        return None
 
 
 def is_realtime() -> bool:
     """Whether the calling thread runs under a real-time policy (SCHED_FIFO or SCHED_RR)."""
-    return bool(realtime_policy())
+    return _realtime_of(0) is not None
 
 
 #: Linux's SCHED_RESET_ON_FORK flag, or-ed into the policy (rtkit sets it).
 RESET_ON_FORK = 0x40000000
+#: Linux's real-time policies by number
+_RT_POLICIES = {1: 'SCHED_FIFO', 2: 'SCHED_RR'}
 
 
 def schedule_servo_thread(priority: int, rtkit: bool = True) -> str:

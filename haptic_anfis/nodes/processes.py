@@ -82,8 +82,6 @@ VIEW_NODES = ('visualizer', 'web_view')
 #: normal scheduler whatever real-time threads do (``/proc/sys/kernel/sched_rt_runtime_us``).
 GRAPH_PRIORITY = 10
 
-_RT_POLICIES = tuple(getattr(os, n) for n in ('SCHED_FIFO', 'SCHED_RR') if hasattr(os, n))
-
 
 def _threads(pid: int | None = None) -> list[int]:
     try:
@@ -104,11 +102,11 @@ def set_graph_priority(priority: int, pid: int | None = None) -> str:
     and the words say how to allow it."""
     if priority <= 0:
         return 'normal scheduler (graph priority 0)'
+    from ..device.servo import realtime_priority
     done = []
     for tid in _threads(pid):
         try:
-            if (os.sched_getscheduler(tid) in _RT_POLICIES
-                    and os.sched_getparam(tid).sched_priority >= priority):
+            if realtime_priority(tid) >= priority:
                 continue
             os.sched_setscheduler(tid, os.SCHED_FIFO, os.sched_param(int(priority)))
             done.append(tid)
@@ -197,10 +195,8 @@ def stop_node(p: subprocess.Popen, timeout: float = 10.0, sig: int = signal.SIGI
 
 
 def _realtime() -> bool:
-    try:
-        return os.sched_getscheduler(0) in _RT_POLICIES
-    except (OSError, AttributeError):
-        return False
+    from ..device.servo import is_realtime
+    return is_realtime()
 
 
 class Supervisor:
