@@ -120,6 +120,41 @@ def set_graph_priority(priority: int, pid: int | None = None) -> str:
     return f'SCHED_FIFO priority {priority}'
 
 
+def graph_cores(names: Sequence[str], cpus: Sequence[int] | None = None) -> dict[str, int]:
+    """{node: the one CPU its threads are kept on}, round robin over ``cpus`` (None: the CPUs
+    this process may use) in the order of ``names``; {} with fewer than two CPUs (nothing to
+    choose). Why one CPU per node (issue 32, docs/sessions.md): with autogroups a node in a
+    session of its own gets its session's share on a CPU in proportion to the load it has there,
+    so a thread of it woken on the CPU where it has little load (a DDS receive thread, while
+    the executor thread runs on the other) got almost no share beside busy processes and waited
+    up to 1.3 s runnable (measured); on one CPU the node's whole share is where its threads
+    are."""
+    if cpus is None:
+        try:
+            cpus = sorted(os.sched_getaffinity(0))
+        except (AttributeError, OSError):  # not Linux
+            return {}
+    if len(cpus) < 2:
+        return {}
+    return {n: cpus[i % len(cpus)] for i, n in enumerate(names)}
+
+
+def keep_on_cpu(pid: int, cpu: int) -> str:
+    """Every thread of process ``pid`` onto CPU ``cpu`` only (the threads it starts later
+    inherit it); returns what was done, in words. A process's own threads need no right; a
+    refusal (or a process that ended) is said, not raised."""
+    done = 0
+    for tid in _threads(pid):
+        try:
+            os.sched_setaffinity(tid, {cpu})
+            done += 1
+        except ProcessLookupError:  # the thread has ended
+            continue
+        except (OSError, AttributeError) as exc:
+            return f'threads not kept on CPU {cpu} ({exc.__class__.__name__}: {exc})'
+    return f'threads kept on CPU {cpu}' if done else 'no thread to keep on a CPU'
+
+
 def clear_graph_priority(priority: int) -> None:
     """Back to the normal scheduler for every thread of this process at SCHED_FIFO
     ``priority`` (what :func:`set_graph_priority` set, and the threads that inherited it)."""
@@ -222,6 +257,9 @@ class Supervisor:
         self.stream = stream
         self.nice = {n: SIDE_NICE for n in VIEW_NODES} if nice is None else nice
         self.raised: dict[str, int] = {}  # node: the pid raised (a restart is raised again)
+        #: {node: its CPU} for the nodes on the haptic path, when they run under the normal
+        #: scheduler (:meth:`raise_priority`); set by the session from its node order
+        self.cores: dict[str, int] = {}
         self.procs: dict[str, subprocess.Popen] = {}
         self.args: dict[str, list[str]] = {}
         self.first_args: dict[str, list[str]] = {}
@@ -245,17 +283,26 @@ class Supervisor:
         self.restarts.setdefault(name, 0)
         return p
 
-    def raise_priority(self, priority: int, names: Sequence[str]) -> dict[str, str]:
+    def raise_priority(self, priority: int, names: Sequence[str], pin: bool = True
+                       ) -> dict[str, str]:
         """Every node of ``names`` not raised yet (since its last start), but the view nodes, at
-        SCHED_FIFO ``priority`` (:func:`set_graph_priority`); {node: what was done}."""
+        SCHED_FIFO ``priority`` (:func:`set_graph_priority`); where that leaves it under the
+        normal scheduler (``priority`` 0, or refused) and ``pin``, its threads kept on one CPU,
+        :attr:`cores` (:func:`graph_cores`, :func:`keep_on_cpu`); {node: what was done}."""
         done = {}
         for n in names:
             p = self.procs.get(n)
-            if priority <= 0 or n in VIEW_NODES or p is None or self.raised.get(n) == p.pid \
+            if n in VIEW_NODES or p is None or self.raised.get(n) == p.pid \
                     or p.poll() is not None:
                 continue
-            done[n] = set_graph_priority(priority, p.pid)
+            what = set_graph_priority(priority, p.pid)
             self.raised[n] = p.pid
+            from ..device.servo import realtime_priority
+            if pin and n in self.cores and not (priority > 0
+                                                and realtime_priority(p.pid) >= priority):
+                what += '; ' + keep_on_cpu(p.pid, self.cores[n])
+            if priority > 0 or 'kept on' in what:
+                done[n] = what
         return done
 
     def dead(self) -> list[tuple[str, int]]:

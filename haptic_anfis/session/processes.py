@@ -97,8 +97,8 @@ class ProcessSession:
         Raises:
             SessionError / CaseError / ParameterError: bad input (nothing started).
         """
-        from ..nodes.processes import (SESSION_CHECKED, Supervisor, node_env, on_stop_signals,
-                                       restore_signals)
+        from ..nodes.processes import (SESSION_CHECKED, VIEW_NODES, Supervisor, graph_cores,
+                                       node_env, on_stop_signals, restore_signals)
         from ..nodes.session import SessionMonitor
         s = self.spec
         s.check()
@@ -122,6 +122,8 @@ class ProcessSession:
         self.mon = SessionMonitor(domain_id=s.domain_id, enclave=(
             f"/{s.enclave_root.strip('/')}/launch_monitor" if s.enclave_root else None))
         self.sup = Supervisor(env, log_dir, max_restarts=s.max_restarts)
+        self.sup.cores = {} if s.no_graph_pinning else graph_cores(
+            [n for n in self.order if n not in VIEW_NODES])
         self.t0 = time.monotonic()
         try:
             from .domain import refuse_shared_domain
@@ -184,7 +186,7 @@ class ProcessSession:
         s, mon, sup = self.spec, self.mon, self.sup
         ready = [n for n in self.order if n in sup.procs and mon.state(n, sup.started_at[n])]
         for n, what in sup.raise_priority(s.graph_priority, ready).items():
-            if 'refused' in what or n not in self.graph_scheduling:
+            if 'refused' in what or 'not kept' in what or n not in self.graph_scheduling:
                 print(f'scheduling {n:<16} {what}', flush=True)
             self.graph_scheduling[n] = what
 

@@ -133,6 +133,12 @@ OPTIONS: tuple[Option, ...] = (
     Option(('--no-respawn',), dict(action='store_true',
                                    help='a node that exits on its own stops the launch (exit code '
                                         '1) instead of being restarted'), commands=('launch',)),
+    Option(('--no-graph-pinning',),
+           dict(action='store_true',
+                help='leave the threads of a node on the haptic path free to run on any CPU '
+                     'when it runs under the normal scheduler (default: each such node kept on '
+                     'one CPU, round robin, so a busy machine cannot leave one of its threads '
+                     'runnable but unscheduled for hundreds of ms)'), commands=('launch',)),
     Option(('--max-restarts',), dict(type=int, default=3,
                                      help='restarts allowed per node before the launch gives up '
                                           '(default 3)'), commands=('launch',)),
@@ -205,6 +211,7 @@ class SessionSpec:
     share_domain: bool = False
     log_dir: str | None = None
     no_respawn: bool = False
+    no_graph_pinning: bool = False
     max_restarts: int = 3
     enclave_root: str | None = None
     view: bool = False
