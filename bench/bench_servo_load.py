@@ -128,14 +128,14 @@ def browser_when_up(port: int, stop) -> 'threading.Thread':
 
 def run_one(kind: str, priority: int, duration: float, loop: str, d: Path,
             graph_priority: int = 0, view: bool = False, force_mode: str = '',
-            sim_args: tuple = (), settle: float = 0.0) -> dict:
+            sim_args: tuple = (), settle: float = 0.0, launch_args: tuple = ()) -> dict:
     """One run; the last JSON line of its output (or {'error': ...}). ``graph_priority`` > 0:
     the whole graph (every process and thread) runs SCHED_FIFO at it (``chrt -f``), the servo
     tick above it at ``priority``. ``view``: the browser view too (``--view``: the web_view
     node, and a headless chromium showing its page). ``settle`` > 0: the run lasts ``settle``
     seconds longer, and the figures the ticks carry are those of the last ``duration`` seconds
     (``haptic-anfis loop --from``), with the first seconds' lost periods and longest gap as
-    ``settle_lost`` / ``settle_gap_ms``."""
+    ``settle_lost`` / ``settle_gap_ms``. ``launch_args``: more options for ``launch``."""
     pf = params_file(d, priority, loop, force_mode)
     bag = d / f'bag_{kind}_{priority}_{time.monotonic_ns()}'
     trace = d / f'trace_{bag.name}.npz'
@@ -146,7 +146,7 @@ def run_one(kind: str, priority: int, duration: float, loop: str, d: Path,
     else:
         cmd = [*CLI, 'launch', '--duration', run_s, '--json', '--record', str(bag),
                '--params-file', str(pf), '--localhost', '--log-dir', str(d / f'log_{bag.name}'),
-               '--trace', str(trace)]
+               '--trace', str(trace), *launch_args]
     if priority <= 0:  # a user without real-time rights: the graph cannot have it either
         cmd += ['--graph-priority', '0']
     if graph_priority > 0:

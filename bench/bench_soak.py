@@ -205,7 +205,10 @@ def multi_process(minutes: float, interval: float, workdir: Path,
          '--record', str(bag), '--log-dir', str(workdir / 'logs'), *params],
         cwd=ROOT, env=env, stdout=out.open('w'), stderr=subprocess.STDOUT)
     ctx = Context()
-    rclpy.init(context=ctx, domain_id=domain)
+    from rclpy.signals import SignalHandlerOptions
+    # rclpy's handlers would only shut the context: Ctrl-C / SIGTERM must reach the finally
+    # blocks (the launch stopped, the busy processes ended)
+    rclpy.init(context=ctx, domain_id=domain, signal_handler_options=SignalHandlerOptions.NO)
     node = rclpy.create_node('soak_observer', context=ctx)
     poses: list[int] = []
     lats: list[float] = []
@@ -285,6 +288,8 @@ def parser() -> argparse.ArgumentParser:
 
 def main() -> int:
     a = parser().parse_args()
+    import signal
+    signal.signal(signal.SIGTERM, lambda *_: sys.exit(1))   # the finally blocks run
     work = Path(a.keep) if a.keep else Path(tempfile.mkdtemp(prefix='soak_'))
     work.mkdir(parents=True, exist_ok=True)
     print(f'soak: {os.cpu_count()} CPUs, load average {os.getloadavg()}'

@@ -283,12 +283,12 @@ class Supervisor:
         self.restarts.setdefault(name, 0)
         return p
 
-    def raise_priority(self, priority: int, names: Sequence[str], pin: bool = True
-                       ) -> dict[str, str]:
+    def raise_priority(self, priority: int, names: Sequence[str]) -> dict[str, str]:
         """Every node of ``names`` not raised yet (since its last start), but the view nodes, at
         SCHED_FIFO ``priority`` (:func:`set_graph_priority`); where that leaves it under the
-        normal scheduler (``priority`` 0, or refused) and ``pin``, its threads kept on one CPU,
-        :attr:`cores` (:func:`graph_cores`, :func:`keep_on_cpu`); {node: what was done}."""
+        normal scheduler (``priority`` 0, or refused), its threads kept on its CPU in
+        :attr:`cores`, if it has one there (:func:`keep_on_cpu`); {node: what was done}."""
+        from ..device.servo import realtime_priority
         done = {}
         for n in names:
             p = self.procs.get(n)
@@ -297,9 +297,7 @@ class Supervisor:
                 continue
             what = set_graph_priority(priority, p.pid)
             self.raised[n] = p.pid
-            from ..device.servo import realtime_priority
-            if pin and n in self.cores and not (priority > 0
-                                                and realtime_priority(p.pid) >= priority):
+            if n in self.cores and not (priority > 0 and realtime_priority(p.pid) >= priority):
                 what += '; ' + keep_on_cpu(p.pid, self.cores[n])
             if priority > 0 or 'kept on' in what:
                 done[n] = what
