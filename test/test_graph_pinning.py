@@ -1,6 +1,6 @@
 """Under the normal scheduler, each node on the haptic path is kept on one CPU (issue 32: beside
 busy processes a thread of a node in its own session, woken on the CPU where the node had little
-load, waited up to 1.3 s runnable and the models expired mid-press)."""
+load, waited runnable longer than model_hold_time and the models expired mid-press)."""
 from __future__ import annotations
 
 import argparse

@@ -127,8 +127,8 @@ def graph_cores(names: Sequence[str], cpus: Sequence[int] | None = None) -> dict
     session of its own gets its session's share on a CPU in proportion to the load it has there,
     so a thread of it woken on the CPU where it has little load (a DDS receive thread, while
     the executor thread runs on the other) got almost no share beside busy processes and waited
-    up to 1.3 s runnable (measured); on one CPU the node's whole share is where its threads
-    are."""
+    runnable longer than the driver's ``model_hold_time``; on one CPU the node's whole share is
+    where its threads are."""
     if cpus is None:
         try:
             cpus = sorted(os.sched_getaffinity(0))
