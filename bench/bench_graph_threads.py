@@ -3,8 +3,8 @@ unscheduled, with each node's threads free to run on any CPU and kept on one (is
 
 ``launch --record`` (the servo at its default priority, the graph's nodes under the normal
 scheduler as for a user without an rtprio limit: ``--graph-priority 0``), beside ``--busy``
-processes spinning in this benchmark's session, once per arm: ``free`` (``--no-graph-pinning``)
-and ``pinned`` (the default: each node on the haptic path kept on one CPU). A sampler in a
+processes spinning in this benchmark's session, once per arm: ``free`` (``--graph-pinning off``)
+and ``pinned`` (``--graph-pinning on``: each node on the haptic path kept on one CPU; the default, ``auto``, does so where the servo is real-time). A sampler in a
 session of its own reads every thread's ``/proc/<pid>/task/<tid>/schedstat`` and state every
 20 ms; a *runnable streak* is a run of samples in which a thread was runnable (state R) and got
 no CPU time; its length is the time from the sample before it to the sample after it. Printed
@@ -31,7 +31,7 @@ from _page import run_with_page  # noqa: E402
 from bench_servo_load import account, fmt, row, run_one  # noqa: E402
 
 NODES = ('recorder', 'force_server', 'contact_detector', 'falcon_driver')
-ARMS = {'free': ('--no-graph-pinning',), 'pinned': ()}
+ARMS = {'free': ('--graph-pinning', 'off'), 'pinned': ('--graph-pinning', 'on')}
 COLS = ('arm', 'node', 'longest_ms', 'thread', 'streaks_100ms')
 LOOP_COLS = ('arm', 'rate_hz', 'expired', 'zero_ticks', 'dropout_ms', 'trips_contact',
              'err_rms_pct', 'ripple_pct', 'lat_max_ms', 'max_gap_ms', 'sched')

@@ -47,6 +47,7 @@ def test_the_sched_column_says_what_the_servo_thread_got():
                  '2 tick workers on cores 0, 1') == 'FIFO 50'
     assert words('compiled tick in servo process 7 (own session); SCHED_RR priority 20 from '
                  'rtkit, in place of SCHED_FIFO 50; 2 tick workers') == 'RR 20 rtkit'
-    assert words('compiled tick in servo process 7 (own session); normal scheduler (SCHED_FIFO '
-                 '50 refused, and no real-time priority from rtkit; ...)') == 'normal'
+    assert words('compiled tick in servo process 7 (own session); normal scheduler: SCHED_FIFO '
+                 '50 refused (Operation not permitted; rtkit: no system D-Bus); allow it with '
+                 '`ulimit -r 50` ..., time slice 0.1 ms requested; 2 tick workers') == 'normal'
     assert words(None) is None

@@ -113,15 +113,121 @@ def test_graph_priority_zero_pins_and_pinning_off_does_not():
             p.wait()
 
 
+#: a falcon driver stand-in: it forks a servo process whose main thread is named as the tick
+#: worker is, real-time when asked ('rt'), as the driver's servo process is
+DRIVER = ('import ctypes, os, sys, time\n'
+          'if os.fork() == 0:\n'
+          '    ctypes.CDLL(None).prctl(15, b"servo-tick0", 0, 0, 0)\n'
+          '    if sys.argv[1] == "rt":\n'
+          '        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(3))\n'
+          '    print("up", flush=True)\n'
+          '    time.sleep(30)\n'
+          '    os._exit(0)\n'
+          'time.sleep(30)\n')
+
+
+def _driver(how: str) -> subprocess.Popen:
+    p = subprocess.Popen([sys.executable, '-c', DRIVER, how], stdout=subprocess.PIPE, text=True,
+                         start_new_session=True)
+    p.own_session = True
+    assert p.stdout.readline().strip() == 'up'
+    return p
+
+
+def _rt_allowed() -> bool:
+    r = subprocess.run([sys.executable, '-c', 'import os; os.sched_setscheduler(0, '
+                        'os.SCHED_FIFO, os.sched_param(3))'], capture_output=True)
+    return r.returncode == 0
+
+
+def _stop(procs) -> None:
+    """Kill the stand-ins, a driver with its servo process (the driver's session)."""
+    for p in procs:
+        if getattr(p, 'own_session', False):
+            os.killpg(p.pid, 9)
+        else:
+            p.kill()
+        p.wait()
+
+
+def test_servo_realtime_reads_the_servo_process_threads():
+    """Found in the driver's child (its servo process) by thread name; None where the driver
+    has no servo thread (not started)."""
+    plain = _threaded()
+    normal = _driver('normal')
+    procs = [plain, normal]
+    try:
+        assert processes.servo_realtime(plain.pid) is None
+        assert processes.servo_realtime(normal.pid) is False
+        if _rt_allowed():
+            procs.append(rt := _driver('rt'))
+            assert processes.servo_realtime(rt.pid) is True
+    finally:
+        _stop(procs)
+
+
+@two_cpus
+def test_nodes_are_left_free_when_the_servo_is_not_real_time_either():
+    """Graph and servo both under the normal scheduler: pinned nodes took their CPU's share from
+    the servo's tick workers (more periods lost), so they are left free, and the words say why."""
+    procs = {'falcon_driver': _driver('normal'), 'force_server': _threaded()}
+    try:
+        sup = processes.Supervisor({})
+        sup.procs.update(procs)
+        sup.cores = processes.graph_cores(list(procs), CPUS[:2])
+        done = sup.raise_priority(0, list(procs))
+        assert done == {n: 'normal scheduler (graph priority 0); threads left free: the servo '
+                           'loop is under the normal scheduler too' for n in procs}
+        assert _affinities(procs['force_server'].pid)[0] == set(CPUS)
+    finally:
+        _stop(procs.values())
+
+
+@two_cpus
+def test_pinning_on_pins_whatever_the_servo():
+    procs = {'falcon_driver': _driver('normal'), 'force_server': _threaded()}
+    try:
+        sup = processes.Supervisor({})
+        sup.procs.update(procs)
+        sup.pinning = 'on'
+        sup.cores = {'force_server': CPUS[0]}
+        assert sup.raise_priority(0, list(procs)) == {
+            'force_server': f'normal scheduler (graph priority 0); threads kept on CPU {CPUS[0]}'}
+    finally:
+        _stop(procs.values())
+
+
+@two_cpus
+@pytest.mark.skipif(not _rt_allowed(), reason='SCHED_FIFO refused here')
+def test_nodes_are_pinned_when_the_servo_is_real_time():
+    procs = {'falcon_driver': _driver('rt'), 'force_server': _threaded()}
+    try:
+        sup = processes.Supervisor({})
+        sup.procs.update(procs)
+        sup.cores = processes.graph_cores(list(procs), CPUS[:2])
+        done = sup.raise_priority(0, list(procs))
+        assert done['force_server'] == ('normal scheduler (graph priority 0); threads kept on '
+                                        f'CPU {CPUS[1]}')
+        assert set(map(frozenset, _affinities(procs['force_server'].pid))) == {
+            frozenset({CPUS[1]})}
+    finally:
+        _stop(procs.values())
+
+
 def test_launch_option():
-    """On by default in launch (the recommended configuration); --no-graph-pinning turns it
-    off; sim and exam run have one process for the graph and no such option."""
+    """auto by default in launch (the recommended configuration: pinned where the servo is
+    real-time); on / off force it; sim and exam run have one process for the graph and no such
+    option."""
     p = argparse.ArgumentParser()
     add_session_arguments(p, 'launch')
-    assert SessionSpec().no_graph_pinning is False
-    assert spec_from_args(p.parse_args([]), 'launch').no_graph_pinning is False
-    assert spec_from_args(p.parse_args(['--no-graph-pinning']), 'launch').no_graph_pinning
+    assert SessionSpec().graph_pinning == 'auto'
+    assert spec_from_args(p.parse_args([]), 'launch').graph_pinning == 'auto'
+    for how in ('on', 'off'):
+        assert spec_from_args(p.parse_args(['--graph-pinning', how]), 'launch'
+                              ).graph_pinning == how
+    with pytest.raises(SystemExit):
+        p.parse_args(['--graph-pinning', 'yes'])
     q = argparse.ArgumentParser()
     add_session_arguments(q, 'sim')
     with pytest.raises(SystemExit):
-        q.parse_args(['--no-graph-pinning'])
+        q.parse_args(['--graph-pinning', 'on'])

@@ -410,6 +410,37 @@ def test_loop_runs_on_its_thread_or_process_and_stops_at_zero_force(process):
 
 
 @pytest.mark.parametrize('process', [False, True])
+def test_a_refused_priority_is_said_with_rtkits_reason_on_thread_and_process(monkeypatch, process):
+    """SCHED_FIFO refused and rtkit refusing too: the loop's scheduling words are the servo
+    thread's own, with both reasons and the short-slice fallback, whether the thread is the
+    node's or the servo process's (which reports them through shared memory: the parent cannot
+    know rtkit's answer). The refusals are faked before the fork, so the child inherits them."""
+    import os
+
+    from haptic_anfis.device import rtkit
+    from haptic_anfis.device.rtkit import RealtimeKitError
+
+    def refuse(*_a):
+        raise PermissionError(1, 'Operation not permitted')
+
+    def kit_refuses(_priority):
+        raise RealtimeKitError('rtkit: refused by polkit (test)')
+
+    monkeypatch.setattr(os, 'sched_setscheduler', refuse)
+    monkeypatch.setattr(rtkit, 'make_thread_realtime', kit_refuses)
+    lp = loop(process=process, priority=50, workers=1)
+    lp.start()
+    try:
+        words = lp.scheduling
+    finally:
+        lp.stop()
+    assert ('servo process' in words) == process
+    assert 'SCHED_FIFO 50 refused (Operation not permitted; rtkit: refused by polkit (test))' \
+        in words
+    assert 'ulimit -r 50' in words
+
+
+@pytest.mark.parametrize('process', [False, True])
 def test_two_workers_serve_one_schedule_each_on_its_core(process):
     """Two tick workers (threads of the node, or of the servo process) on distinct cores share
     one schedule: every tick is traced once, in time order, and no period is served twice

@@ -39,7 +39,7 @@ from .local_model import FALCON_MAX_STIFFNESS, LocalModelRenderer, RenderStats, 
     accept_values, rotating_mode, skew_vector, symmetric_part, tissue_stiffness_limit
 from .safety import IGNORED_DISABLED, OK, REJECTED_FRAME, REJECTED_NONFINITE, SafetyLayer, \
     SafetyStats
-from .servo import name_thread, realtime_policy, schedule_servo_thread
+from .servo import name_thread, schedule_servo_thread
 from .stats import LoopStats
 from .trace import TickTrace
 
@@ -456,6 +456,8 @@ class NativeServoLoop:
         #: the real device's status and counters (:data:`~.device_process.DEV`), its message
         self.devst = zeros(dp.DEV_LEN, dtype=np.int64)
         self.devmsg = zeros(dp.MESSAGE_BYTES, dtype=np.uint8)
+        #: the servo process's own words for how its servo thread is scheduled (written there)
+        self.schedmsg = zeros(dp.MESSAGE_BYTES, dtype=np.uint8)
         self.device = dp.ProcessDevice(self.devst) if device_factory is not None else None
         #: called on the bridge thread when the real device is lost / back (a message)
         self.on_disconnect: Callable[[str], None] | None = None
@@ -595,7 +597,8 @@ class NativeServoLoop:
                     _die_with_parent(signal.SIGKILL)
                 if self.device_factory is not None:
                     name_thread('servo-device')
-                    schedule_servo_thread(self.priority)  # the device loop: its USB I/O
+                    # the device loop: its USB I/O
+                    dp.write_message(self.schedmsg, schedule_servo_thread(self.priority))
                     code = dp.run_device_loop(
                         self.device_factory, self.cfg, self.st, self.times, self.points,
                         self.buttons, self.hand, self.cmd, self.model, self.ctl, self.out,
@@ -610,19 +613,14 @@ class NativeServoLoop:
         self._pid = pid
         if self.device_factory is not None:
             self._wait_open(pid)
-        policy = ''
-        for _ in range(100):  # how the child is scheduled, once it has set itself up
-            policy = realtime_policy(pid)
-            if policy or self.priority <= 0:
-                break
+        # how the child's servo thread is scheduled, in its own words (with rtkit's reason when
+        # it refused), once it has set itself up: milliseconds, but rtkit's three D-Bus calls
+        # may each take their 2 s timeout when the bus hangs
+        end = time.monotonic() + 10.0
+        while not (words := dp.read_message(self.schedmsg)) and time.monotonic() < end:
             time.sleep(0.01)
-        if not policy:
-            policy = 'normal scheduler' + (
-                f' (SCHED_FIFO {self.priority} refused, and no real-time priority from rtkit; '
-                'allow it with an rtprio limit: docs/nodes.md)' if self.priority > 0 else '')
-        elif policy.startswith('SCHED_RR'):
-            policy += f' from rtkit, in place of SCHED_FIFO {self.priority}'
-        self.scheduling = (f'compiled tick in servo process {pid} (own session); {policy}'
+        self.scheduling = (f'compiled tick in servo process {pid} (own session); '
+                           f'{words or "scheduling not reported"}'
                            + ('' if self.device_factory is not None else
                               f'; {self._workers_text()}'))
 
@@ -705,7 +703,9 @@ class NativeServoLoop:
             except OSError:
                 pass  # a core taken away since: the worker still serves, unpinned
         scheduling = schedule_servo_thread(self.priority)
-        if worker == 0 and not self.process:
+        if worker == 0 and self.process:  # the parent reads it (_start_process)
+            dp.write_message(self.schedmsg, scheduling)
+        elif worker == 0:
             self.scheduling = f'compiled nogil tick; {scheduling}; {self._workers_text()}'
             self._scheduled.set()
         try:

@@ -155,6 +155,42 @@ def keep_on_cpu(pid: int, cpu: int) -> str:
     return f'threads kept on CPU {cpu}' if done else 'no thread to keep on a CPU'
 
 
+#: Names of the servo loop's threads (``device.servo.name_thread``): the tick workers and the
+#: real Falcon's device loop, on threads of the driver or in its servo process.
+SERVO_THREADS = ('servo-tick', 'servo-device')
+
+
+def servo_realtime(pid: int) -> bool | None:
+    """Whether the servo loop of the falcon driver process ``pid`` runs real-time (SCHED_FIFO,
+    or SCHED_RR from rtkit): any thread named as a servo thread (:data:`SERVO_THREADS`) in the
+    process or in a process it started (the servo process); None where none is found (the loop
+    not started yet, or not Linux)."""
+    from ..device.servo import realtime_priority
+    found = False
+    for p in (pid, *_children(pid)):
+        for tid in _threads(p):
+            try:
+                name = Path(f'/proc/{p}/task/{tid}/comm').read_text().strip()
+            except OSError:  # the thread has ended
+                continue
+            if name.startswith(SERVO_THREADS):
+                if realtime_priority(tid) > 0:
+                    return True
+                found = True
+    return False if found else None
+
+
+def _children(pid: int) -> list[int]:
+    """The processes that process ``pid``'s threads started (Linux's ``children`` files)."""
+    out = []
+    for tid in _threads(pid):
+        try:
+            out += map(int, Path(f'/proc/{pid}/task/{tid}/children').read_text().split())
+        except OSError:
+            continue
+    return out
+
+
 def clear_graph_priority(priority: int) -> None:
     """Back to the normal scheduler for every thread of this process at SCHED_FIFO
     ``priority`` (what :func:`set_graph_priority` set, and the threads that inherited it)."""
@@ -260,6 +296,9 @@ class Supervisor:
         #: {node: its CPU} for the nodes on the haptic path, when they run under the normal
         #: scheduler (:meth:`raise_priority`); set by the session from its node order
         self.cores: dict[str, int] = {}
+        #: 'auto': keep a node on its CPU in :attr:`cores` where the servo loop is real-time (or
+        #: its scheduling is not known); 'on': always (``launch --graph-pinning``)
+        self.pinning = 'auto'
         self.procs: dict[str, subprocess.Popen] = {}
         self.args: dict[str, list[str]] = {}
         self.first_args: dict[str, list[str]] = {}
@@ -287,8 +326,18 @@ class Supervisor:
         """Every node of ``names`` not raised yet (since its last start), but the view nodes, at
         SCHED_FIFO ``priority`` (:func:`set_graph_priority`); where that leaves it under the
         normal scheduler (``priority`` 0, or refused), its threads kept on its CPU in
-        :attr:`cores`, if it has one there (:func:`keep_on_cpu`); {node: what was done}."""
+        :attr:`cores`, if it has one there (:func:`keep_on_cpu`) and the servo loop is
+        real-time; {node: what was done}.
+
+        Why only then: kept on one CPU, a node's whole share is where its threads are, which
+        removed the models' long stalls beside busy processes with the servo real-time (rtkit);
+        with the servo under the normal scheduler too, the pinned nodes took that share from the
+        servo's tick workers on their CPU, and the loop lost more periods and had longer gaps
+        than with the nodes free (interleaved runs, docs/sessions.md)."""
         from ..device.servo import realtime_priority
+        driver = self.procs.get('falcon_driver')
+        servo_rt = (True if self.pinning == 'on' or driver is None
+                    else servo_realtime(driver.pid))
         done = {}
         for n in names:
             p = self.procs.get(n)
@@ -298,8 +347,10 @@ class Supervisor:
             what = set_graph_priority(priority, p.pid)
             self.raised[n] = p.pid
             if n in self.cores and not (priority > 0 and realtime_priority(p.pid) >= priority):
-                what += '; ' + keep_on_cpu(p.pid, self.cores[n])
-            if priority > 0 or 'kept on' in what:
+                what += '; ' + (keep_on_cpu(p.pid, self.cores[n]) if servo_rt is not False else
+                                'threads left free: the servo loop is under the normal '
+                                'scheduler too')
+            if priority > 0 or '; threads' in what:
                 done[n] = what
         return done
 

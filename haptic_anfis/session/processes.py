@@ -122,7 +122,8 @@ class ProcessSession:
         self.mon = SessionMonitor(domain_id=s.domain_id, enclave=(
             f"/{s.enclave_root.strip('/')}/launch_monitor" if s.enclave_root else None))
         self.sup = Supervisor(env, log_dir, max_restarts=s.max_restarts)
-        self.sup.cores = {} if s.no_graph_pinning else graph_cores(
+        self.sup.pinning = s.graph_pinning
+        self.sup.cores = {} if s.graph_pinning == 'off' else graph_cores(
             [n for n in self.order if n not in VIEW_NODES])
         self.t0 = time.monotonic()
         try:

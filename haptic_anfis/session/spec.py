@@ -133,12 +133,14 @@ OPTIONS: tuple[Option, ...] = (
     Option(('--no-respawn',), dict(action='store_true',
                                    help='a node that exits on its own stops the launch (exit code '
                                         '1) instead of being restarted'), commands=('launch',)),
-    Option(('--no-graph-pinning',),
-           dict(action='store_true',
-                help='leave the threads of a node on the haptic path free to run on any CPU '
-                     'when it runs under the normal scheduler (default: each such node kept on '
-                     'one CPU, round robin, so a busy machine cannot leave one of its threads '
-                     'runnable but unscheduled for hundreds of ms)'), commands=('launch',)),
+    Option(('--graph-pinning',),
+           dict(choices=('auto', 'on', 'off'), default='auto',
+                help='keep each node on the haptic path that runs under the normal scheduler on '
+                     'one CPU, round robin: auto (default) where the servo loop is real-time, '
+                     'so a busy machine cannot leave a node\'s thread runnable but unscheduled '
+                     'for hundreds of ms; with the servo under the normal scheduler too the '
+                     'pinned nodes cost it periods, so they are left free; on: always; off: '
+                     'never'), commands=('launch',)),
     Option(('--max-restarts',), dict(type=int, default=3,
                                      help='restarts allowed per node before the launch gives up '
                                           '(default 3)'), commands=('launch',)),
@@ -211,7 +213,7 @@ class SessionSpec:
     share_domain: bool = False
     log_dir: str | None = None
     no_respawn: bool = False
-    no_graph_pinning: bool = False
+    graph_pinning: str = 'auto'
     max_restarts: int = 3
     enclave_root: str | None = None
     view: bool = False
