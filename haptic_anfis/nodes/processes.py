@@ -335,9 +335,16 @@ class Supervisor:
         servo's tick workers on their CPU, and the loop lost more periods and had longer gaps
         than with the nodes free (interleaved runs, docs/sessions.md)."""
         from ..device.servo import realtime_priority
-        driver = self.procs.get('falcon_driver')
-        servo_rt = (True if self.pinning == 'on' or driver is None
-                    else servo_realtime(driver.pid))
+        servo_rt: list[bool | None] = []  # read once, and only when a node is to be pinned
+
+        def pin(pid: int, cpu: int) -> str:
+            if not servo_rt:
+                driver = self.procs.get('falcon_driver')
+                servo_rt.append(True if self.pinning == 'on' or driver is None
+                                else servo_realtime(driver.pid))
+            if servo_rt[0] is False:
+                return 'threads left free: the servo loop is under the normal scheduler too'
+            return keep_on_cpu(pid, cpu)
         done = {}
         for n in names:
             p = self.procs.get(n)
@@ -347,9 +354,7 @@ class Supervisor:
             what = set_graph_priority(priority, p.pid)
             self.raised[n] = p.pid
             if n in self.cores and not (priority > 0 and realtime_priority(p.pid) >= priority):
-                what += '; ' + (keep_on_cpu(p.pid, self.cores[n]) if servo_rt is not False else
-                                'threads left free: the servo loop is under the normal '
-                                'scheduler too')
+                what += '; ' + pin(p.pid, self.cores[n])
             if priority > 0 or '; threads' in what:
                 done[n] = what
         return done
