@@ -166,52 +166,49 @@ def test_servo_realtime_reads_the_servo_process_threads():
         _stop(procs)
 
 
+@pytest.fixture
+def graph():
+    """A supervisor with a driver stand-in (its servo real-time or not) and a force server,
+    each with its CPU; ``graph(how, pinning)`` -> (supervisor, procs). Killed after the test."""
+    made = []
+
+    def make(how: str, pinning: str = 'auto'):
+        procs = {'falcon_driver': _driver(how), 'force_server': _threaded()}
+        made.extend(procs.values())
+        sup = processes.Supervisor({})
+        sup.procs.update(procs)
+        sup.pinning = pinning
+        sup.cores = processes.graph_cores(list(procs), CPUS[:2])
+        return sup, procs
+    yield make
+    _stop(made)
+
+
 @two_cpus
-def test_nodes_are_left_free_when_the_servo_is_not_real_time_either():
+def test_nodes_are_left_free_when_the_servo_is_not_real_time_either(graph):
     """Graph and servo both under the normal scheduler: pinned nodes took their CPU's share from
     the servo's tick workers (more periods lost), so they are left free, and the words say why."""
-    procs = {'falcon_driver': _driver('normal'), 'force_server': _threaded()}
-    try:
-        sup = processes.Supervisor({})
-        sup.procs.update(procs)
-        sup.cores = processes.graph_cores(list(procs), CPUS[:2])
-        done = sup.raise_priority(0, list(procs))
-        assert done == {n: 'normal scheduler (graph priority 0); threads left free: the servo '
-                           'loop is under the normal scheduler too' for n in procs}
-        assert _affinities(procs['force_server'].pid)[0] == set(CPUS)
-    finally:
-        _stop(procs.values())
+    sup, procs = graph('normal')
+    assert sup.raise_priority(0, list(procs)) == {
+        n: 'normal scheduler (graph priority 0); threads left free: the servo loop is under the '
+           'normal scheduler too' for n in procs}
+    assert _affinities(procs['force_server'].pid)[0] == set(CPUS)
 
 
 @two_cpus
-def test_pinning_on_pins_whatever_the_servo():
-    procs = {'falcon_driver': _driver('normal'), 'force_server': _threaded()}
-    try:
-        sup = processes.Supervisor({})
-        sup.procs.update(procs)
-        sup.pinning = 'on'
-        sup.cores = {'force_server': CPUS[0]}
-        assert sup.raise_priority(0, list(procs)) == {
-            'force_server': f'normal scheduler (graph priority 0); threads kept on CPU {CPUS[0]}'}
-    finally:
-        _stop(procs.values())
+def test_pinning_on_pins_whatever_the_servo(graph):
+    sup, procs = graph('normal', pinning='on')
+    assert sup.raise_priority(0, list(procs))['force_server'] == (
+        f'normal scheduler (graph priority 0); threads kept on CPU {CPUS[1]}')
 
 
 @two_cpus
 @pytest.mark.skipif(not _rt_allowed(), reason='SCHED_FIFO refused here')
-def test_nodes_are_pinned_when_the_servo_is_real_time():
-    procs = {'falcon_driver': _driver('rt'), 'force_server': _threaded()}
-    try:
-        sup = processes.Supervisor({})
-        sup.procs.update(procs)
-        sup.cores = processes.graph_cores(list(procs), CPUS[:2])
-        done = sup.raise_priority(0, list(procs))
-        assert done['force_server'] == ('normal scheduler (graph priority 0); threads kept on '
-                                        f'CPU {CPUS[1]}')
-        assert set(map(frozenset, _affinities(procs['force_server'].pid))) == {
-            frozenset({CPUS[1]})}
-    finally:
-        _stop(procs.values())
+def test_nodes_are_pinned_when_the_servo_is_real_time(graph):
+    sup, procs = graph('rt')
+    assert sup.raise_priority(0, list(procs))['force_server'] == (
+        f'normal scheduler (graph priority 0); threads kept on CPU {CPUS[1]}')
+    assert set(map(frozenset, _affinities(procs['force_server'].pid))) == {frozenset({CPUS[1]})}
 
 
 def test_launch_option():
