@@ -24,10 +24,10 @@ import os
 import platform
 import sys
 from pathlib import Path
-from typing import Callable, Iterable
+from typing import Callable, Iterable, Mapping, Sequence
 
 __all__ = ['machine_line', 'reproduce_command', 'write_page', 'write_readme_block',
-           'printed_to_markdown', 'run_with_page', 'PAGES_DIR', 'README']
+           'markdown_table', 'printed_to_markdown', 'run_with_page', 'PAGES_DIR', 'README']
 
 PAGES_DIR = Path(__file__).resolve().parent.parent / 'docs' / 'measurements'
 README = Path(__file__).resolve().parent.parent / 'README.md'
@@ -96,6 +96,14 @@ def write_readme_block(name: str, body_md: str, command: str, readme: Path | Non
              f'{machine_line()}.)*\n')
     path.write_text(text[:i] + block + text[j:], encoding='utf-8')
     return path
+
+
+def markdown_table(rows: Iterable[Mapping], cols: Sequence[str],
+                   fmt: Callable[[object], str] = str) -> str:
+    """A Markdown table of ``rows`` (mappings) in columns ``cols``, each cell ``fmt(value)``
+    (a missing key: ``fmt(None)``)."""
+    return '\n'.join(['| ' + ' | '.join(cols) + ' |', '|' + '---|' * len(cols)]
+                     + ['| ' + ' | '.join(fmt(r.get(c)) for c in cols) + ' |' for r in rows])
 
 
 def printed_to_markdown(text: str) -> str:

@@ -23,7 +23,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _busy import busy  # noqa: E402
-from _page import run_with_page  # noqa: E402
+from _page import markdown_table, run_with_page  # noqa: E402
 from bench_servo_load import account, fmt, row, run_one  # noqa: E402
 
 ARMS = ('on', 'off')
@@ -33,11 +33,6 @@ COLS = ('config', 'load', 'rate_hz', 'periods_lost', 'max_gap_ms', 'err_rms_pct'
 #: the columns whose median per arm is printed
 MEDIAN_COLS = ('rate_hz', 'periods_lost', 'max_gap_ms', 'err_rms_pct', 'ripple_pct', 'held',
                'lat_p99_ms')
-
-
-def table(rows: list[dict], cols: tuple[str, ...]) -> str:
-    return '\n'.join(['| ' + ' | '.join(cols) + ' |', '|' + '---|' * len(cols)]
-                     + ['| ' + ' | '.join(fmt(r.get(c)) for c in cols) + ' |' for r in rows])
 
 
 def medians(rows: list[dict]) -> list[dict]:
@@ -87,9 +82,9 @@ def main() -> int:
                     if r.get('error'):
                         print('  ', r['error'], flush=True)
     print('\nevery run (columns as bench_servo_load\'s: the last --duration s of each run)')
-    print(table(rows, COLS))
+    print(markdown_table(rows, COLS, fmt))
     print('\nthe median of each arm')
-    print(table(medians(rows), ('config', 'runs', *MEDIAN_COLS)))
+    print(markdown_table(medians(rows), ('config', 'runs', *MEDIAN_COLS), fmt))
     return 0
 
 

@@ -27,7 +27,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _busy import busy  # noqa: E402
-from _page import run_with_page  # noqa: E402
+from _page import markdown_table, run_with_page  # noqa: E402
 from bench_servo_load import account, fmt, row, run_one  # noqa: E402
 
 NODES = ('recorder', 'force_server', 'contact_detector', 'falcon_driver')
@@ -135,9 +135,7 @@ def main() -> int:
                 stats.append({'arm': arm, 'node': n, **s})
             loops.append({**row(f'launch {arm}', a.busy, load, j), 'arm': arm})
     print('\nrunnable streaks (runnable, no CPU time) per node')
-    print('| ' + ' | '.join(COLS) + ' |\n|' + '---|' * len(COLS))
-    for s in stats:
-        print('| ' + ' | '.join(fmt(s[c]) for c in COLS) + ' |')
+    print(markdown_table(stats, COLS, fmt))
     print('\nthe loop (the driver\'s report; columns as bench_servo_load\'s)')
     print('| ' + ' | '.join(LOOP_COLS) + ' |\n|' + '---|' * len(LOOP_COLS))
     for r in loops:

@@ -63,3 +63,13 @@ def test_a_page_written_without_a_command_says_how_to_reproduce_it(tmp_path, mon
     monkeypatch.setattr(sys, 'argv', [str(BENCH / 'bench_demo.py'), '--busy', '8'])
     text = _page.write_page('demo', 'Demo', '| a |', pages_dir=tmp_path).read_text()
     assert 'Reproduce: `.venv/bin/python bench/bench_demo.py --busy 8`' in text
+
+
+def test_markdown_table_formats_every_cell_and_a_missing_key_as_none():
+    rows = [{'a': 1.234, 'b': 'x'}, {'a': None}]
+
+    def fmt(v) -> str:
+        return 'n/a' if v is None else (f'{v:.1f}' if isinstance(v, float) else str(v))
+    assert _page.markdown_table(rows, ('a', 'b'), fmt) == (
+        '| a | b |\n|---|---|\n| 1.2 | x |\n| n/a | n/a |')
+    assert _page.markdown_table([], ('a',)) == '| a |\n|---|'
