@@ -114,9 +114,11 @@ def child(kind: str, how: str, n: int) -> None:
     th.start()
     th.join()
     stop[0] = True
+    from haptic_anfis.device.stats import tick_gaps
     g = np.asarray(gaps[1:], dtype=np.float64) / 1e6
+    lost, _ = tick_gaps(np.concatenate(([0.0], np.cumsum(g))), 1.0)  # gaps in periods
     print(json.dumps({'rate_hz': 1000.0 * len(g) / g.sum(), 'max_gap_ms': float(g.max()),
-                      'periods_lost': int(np.maximum(np.round(g) - 1, 0).sum())}), flush=True)
+                      'periods_lost': lost}), flush=True)
 
 
 def main() -> int:

@@ -105,3 +105,27 @@ def test_share_of_answers_taken_at_the_next_tick():
     for x in [0.001] * 97 + [0.002] * 3:
         st.latency(x)
     assert st.summary()['latency_next_tick_pct'] == pytest.approx(97.0)
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.lists(st.floats(0.0, 0.05), min_size=1, max_size=60),
+       st.sampled_from([0.001, 0.002, 0.0005]))
+def test_the_three_counts_of_lost_periods_agree(gaps, period):
+    """LoopStats.tick, tick_gaps and the compiled tick's rule count the same periods lost."""
+    from haptic_anfis.device import native_tick as nt
+    from haptic_anfis.device.stats import periods_lost_in, tick_gaps
+    t = np.concatenate(([0.0], np.cumsum(gaps)))
+    s = LoopStats(period=period)
+    for x in t:
+        s.tick(float(x))
+    lost, longest = tick_gaps(t, period)
+    d = np.diff(t)  # the gaps as the counters see them (the cumulative sum rounds)
+    assert s.periods_lost == lost == sum(periods_lost_in(float(g), period) for g in d) \
+        == sum(nt._periods_lost_in(float(g), period) for g in d)
+    assert longest == pytest.approx(float(d.max()))
+
+
+def test_a_gap_of_k_periods_loses_k_minus_one():
+    from haptic_anfis.device.stats import periods_lost_in
+    assert [periods_lost_in(g * 1e-3, 1e-3) for g in (0.0, 0.4, 1.0, 1.49, 1.51, 3.0, 10.2)] \
+        == [0, 0, 0, 0, 1, 2, 9]

@@ -53,6 +53,7 @@ from llvmlite import binding as llvm
 import numpy as np
 
 from .local_model import hold_offset
+from .stats import periods_lost_in
 from .trace import DISABLED
 
 __all__ = ['CFG', 'CNT', 'OUT', 'CMD_LEN', 'MODEL_LEN', 'STATE_LEN', 'CTL', 'TRACE_COLS',
@@ -404,6 +405,7 @@ def _take(buf, scratch, seen):
 
 
 _hold_offset = nb.njit(nogil=True, cache=True)(hold_offset)
+_periods_lost_in = nb.njit(nogil=True, cache=True)(periods_lost_in)
 
 
 @nb.njit(nogil=True, cache=True)
@@ -587,12 +589,10 @@ def _compute(now, cfg, st, times, points, buttons, hand, cmd, model, ctl, cnt, s
     n = np.sqrt(fx * fx + fy * fy + fz * fz)
     if n * 1e6 > cnt[CNT.max_force_un]:
         cnt[CNT.max_force_un] = int(n * 1e6)
-    # timing counters: a gap of k periods lost k - 1 of them
+    # timing counters
     period = cfg[CFG.period]
     if st[S.t_prev] == st[S.t_prev]:
-        lost = int(np.floor(gap / period + 0.5)) - 1
-        if lost > 0:
-            cnt[CNT.periods_lost] += lost
+        cnt[CNT.periods_lost] += _periods_lost_in(gap, period)
         g_ns = int(gap * 1e9)
         if g_ns > cnt[CNT.max_gap_ns]:
             cnt[CNT.max_gap_ns] = g_ns

@@ -154,9 +154,7 @@ class LoopStats:
             self.t_first = now
         elif self.t_last is not None:
             gap = now - self.t_last
-            lost = int(gap / self.period + 0.5) - 1
-            if lost > 0:
-                self.periods_lost += lost
+            self.periods_lost += periods_lost_in(gap, self.period)
             if gap > self.max_gap:
                 self.max_gap = gap
         self.t_last = now
@@ -185,11 +183,19 @@ class LoopStats:
         }
 
 
+def periods_lost_in(gap: float, period: float) -> int:
+    """The servo periods lost in a ``gap`` [s] between two ticks of a loop of ``period`` [s]: a
+    gap of k periods (k rounded to the nearest whole number) lost k - 1. The one rule of
+    :meth:`LoopStats.tick`, :func:`tick_gaps` and the compiled tick (``native_tick``, which
+    compiles this function)."""
+    return max(int(math.floor(gap / period + 0.5)) - 1, 0)
+
+
 def tick_gaps(t: np.ndarray, period: float) -> tuple[int, float]:
-    """(periods lost, longest gap [s]) of tick times ``t`` [s], counted as :meth:`LoopStats.tick`
-    and the compiled tick count them: a gap of k periods between two ticks lost k - 1."""
+    """(periods lost, longest gap [s]) of tick times ``t`` [s]: :func:`periods_lost_in` summed
+    over the gaps, and the longest."""
     gaps = np.diff(np.asarray(t, dtype=np.float64))
     if gaps.size == 0:
         return 0, 0.0
-    lost = np.floor(gaps / period + 0.5).astype(np.int64) - 1
+    lost = np.floor(gaps / period + 0.5).astype(np.int64) - 1  # periods_lost_in, vectorised
     return int(lost[lost > 0].sum()), float(gaps.max())
