@@ -57,8 +57,11 @@ def main() -> int:
     ap.add_argument('--settle', type=float, default=10.0)
     ap.add_argument('--no-view', action='store_true', help='without the browser view')
     ap.add_argument('--page', default='graph_pinning')
+    ap.add_argument('--arms', default=','.join(ARMS),
+                    help="launch's --graph-pinning values to compare, interleaved (default on,off)")
     a = ap.parse_args()
     prios = [int(p) for p in a.servo_priorities.split(',') if p]
+    arms = [x for x in a.arms.split(',') if x]
     print(account())
     print(f'{a.busy} busy processes in this benchmark\'s session; browser view '
           f'{"off" if a.no_view else "on"}; {a.duration:g} s after {a.settle:g} s per run; '
@@ -68,7 +71,7 @@ def main() -> int:
         d = Path(tmp)
         for i in range(a.repeat):
             for prio in prios:
-                for arm in (ARMS if i % 2 == 0 else ARMS[::-1]):  # neither arm always first
+                for arm in (arms if i % 2 == 0 else arms[::-1]):  # no arm always first
                     with busy(a.busy):
                         time.sleep(1.0)
                         load = os.getloadavg()[0]

@@ -171,10 +171,13 @@ def one_process(minutes: float, interval: float, workdir: Path, freeze: bool = T
 
 
 def multi_process(minutes: float, interval: float, workdir: Path,
-                  force_mode: str | None = None, priority: int | None = None) -> None:
+                  force_mode: str | None = None, priority: int | None = None,
+                  graph_priority: int | None = None, graph_pinning: str | None = None) -> None:
     """``priority``: the driver's ``servo_priority`` (None: its default, real-time where
     allowed); 0 runs the session as a user without real-time rights does (the servo and the
-    graph under the normal scheduler: ``--graph-priority 0``)."""
+    graph under the normal scheduler: ``--graph-priority 0``). ``graph_priority``: launch's
+    ``--graph-priority`` (None: as ``priority`` says); 0 with ``priority`` 50 is the session of
+    a user whose servo rtkit raises while the graph stays under the normal scheduler."""
     import rclpy
     from geometry_msgs.msg import PoseStamped, WrenchStamped
     from rclpy.context import Context
@@ -197,8 +200,12 @@ def multi_process(minutes: float, interval: float, workdir: Path,
         params = ['--params-file', str(f)]
         print('separate processes: falcon_driver '
               + ', '.join(f'{k} {v}' for k, v in driver.items()))
-    if priority is not None and priority <= 0:  # no real-time rights: the graph has none either
-        params += ['--graph-priority', '0']
+    if graph_priority is None and priority is not None and priority <= 0:
+        graph_priority = 0  # no real-time rights: the graph has none either
+    if graph_priority is not None:
+        params += ['--graph-priority', str(graph_priority)]
+    if graph_pinning is not None:
+        params += ['--graph-pinning', graph_pinning]
     launch = subprocess.Popen(
         [sys.executable, '-m', 'haptic_anfis.cli', 'launch', '--nodes',
          'falcon_driver,contact_detector,force_server', '--domain-id', str(domain), '--localhost',
@@ -278,6 +285,13 @@ def parser() -> argparse.ArgumentParser:
                     help="separate processes: the driver's servo_priority (default: its "
                          'default, real-time where allowed; 0: as a user without real-time '
                          'rights, the graph under the normal scheduler too)')
+    ap.add_argument('--graph-priority', type=int, default=None, metavar='P',
+                    help="separate processes: launch's --graph-priority (default: 0 with "
+                         '--servo-priority 0, else launch\'s default); 0 with --servo-priority 50 '
+                         'is a user whose servo rtkit raises, the graph under the normal '
+                         'scheduler')
+    ap.add_argument('--graph-pinning', default=None, choices=('auto', 'on', 'off'),
+                    help="separate processes: launch's --graph-pinning (default: launch's)")
     ap.add_argument('--busy', type=int, default=0, metavar='N',
                     help='N processes spinning on the CPU beside the runs (the load of other '
                          "programs, as bench_servo_load's --busy; default 0: a quiet machine)")
@@ -304,7 +318,8 @@ def main() -> int:
                             force_mode=a.force_mode, in_process=not a.recorder_process)
             if a.multi_minutes > 0:
                 multi_process(a.multi_minutes, a.interval, work, force_mode=a.force_mode,
-                              priority=a.servo_priority)
+                              priority=a.servo_priority,
+                              graph_priority=a.graph_priority, graph_pinning=a.graph_pinning)
     finally:
         if not a.keep:
             shutil.rmtree(work, ignore_errors=True)
