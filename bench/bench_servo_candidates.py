@@ -114,11 +114,10 @@ def child(kind: str, how: str, n: int) -> None:
     th.start()
     th.join()
     stop[0] = True
-    from haptic_anfis.device.stats import tick_gaps
-    g = np.asarray(gaps[1:], dtype=np.float64) / 1e6
-    lost, _ = tick_gaps(np.concatenate(([0.0], np.cumsum(g))), 1.0)  # gaps in periods
+    from haptic_anfis.device.stats import periods_lost_in
+    g = np.asarray(gaps[1:], dtype=np.float64) / 1e6   # [ms]: in periods of 1 ms
     print(json.dumps({'rate_hz': 1000.0 * len(g) / g.sum(), 'max_gap_ms': float(g.max()),
-                      'periods_lost': lost}), flush=True)
+                      'periods_lost': sum(periods_lost_in(x, 1.0) for x in g)}), flush=True)
 
 
 def main() -> int:
