@@ -43,7 +43,9 @@ class FakeBus:
 def limits(monkeypatch):
     """RLIMIT_RTTIME as this process would set it (recorded, not applied)."""
     got = []
-    monkeypatch.setattr(rtkit, 'limit_rttime', got.append)
+    monkeypatch.setattr(rtkit, 'limit_rttime',
+                        lambda usec, pid=0, soft_usec=None: got.append(
+                            usec if (pid, soft_usec) == (0, None) else (usec, pid, soft_usec)))
     return got
 
 
@@ -131,6 +133,35 @@ def test_servo_thread_falls_back_to_rtkit_then_to_a_short_slice(monkeypatch):
                            'rtkit: no rtkit-daemon on this machine)') and said.endswith(', slice')
     assert sliced == [1]
     assert servo.schedule_servo_thread(0) == 'normal scheduler (priority 0), slice'
+
+
+def test_threads_of_another_process_over_one_connection_each_refusal_said(limits):
+    """The graph's nodes are raised by their launcher: threads of another process, the soft
+    limit below rtkit's; a refused thread (one that ended, rtkit's per-user limits) is named,
+    the others are raised."""
+    class Refuses(FakeBus):
+        def send_and_get_reply(self, msg, timeout=None):
+            if msg.body and msg.body[:2] == (4321, 12):
+                self.calls.append(('refused', msg.body))
+                return jeepney.new_error(msg, 'org.freedesktop.DBus.Error.Failed', 's',
+                                         ('Reached burst limit',))
+            return super().send_and_get_reply(msg, timeout)
+    bus = Refuses(max_priority=20, usec=200_000)
+    granted, refused = rtkit.make_threads_realtime(10, [11, 12, 13], 4321, soft_share=0.5,
+                                                   connect=lambda: bus)
+    assert granted == 10 and list(refused) == [12] and bus.closed
+    assert refused[12] == 'rtkit: org.freedesktop.DBus.Error.Failed: Reached burst limit'
+    assert limits == [(200_000, 4321, 100_000)]
+    asked = [c[2] for c in bus.calls if c[1] == 'MakeThreadRealtimeWithPID']
+    assert asked == [(4321, 11, 10), (4321, 13, 10)]
+
+
+def test_the_soft_limit_of_another_process_is_lowered_with_prlimit(monkeypatch):
+    got = []
+    monkeypatch.setattr(resource, 'prlimit', lambda pid, which, lim=None: got.append(
+        (pid, lim)) or (resource.RLIM_INFINITY, resource.RLIM_INFINITY))
+    rtkit.limit_rttime(200_000, pid=99, soft_usec=100_000)
+    assert got == [(99, None), (99, (100_000, 200_000))]
 
 
 def test_is_realtime_reads_the_policy_without_the_reset_on_fork_flag(monkeypatch):

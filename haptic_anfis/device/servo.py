@@ -10,9 +10,10 @@ the device gets zero force.
 """
 from __future__ import annotations
 
+import contextlib
 import threading
 import time
-from typing import Callable
+from typing import Callable, Iterator
 
 from .falcon import Device, DeviceState
 from .safety import SafetyLayer
@@ -204,6 +205,47 @@ def is_realtime() -> bool:
 RESET_ON_FORK = 0x40000000
 #: Linux's real-time policies by number
 _RT_POLICIES = {1: 'SCHED_FIFO', 2: 'SCHED_RR'}
+
+
+def to_normal_scheduler(tid: int = 0) -> bool:
+    """Thread ``tid`` (0: the calling thread) back to the normal scheduler; False where that
+    was refused or the thread has ended. A thread rtkit raised carries SCHED_RESET_ON_FORK,
+    which only a privileged thread may clear: it is kept."""
+    import os
+    try:
+        flag = os.sched_getscheduler(tid) & RESET_ON_FORK
+        os.sched_setscheduler(tid, os.SCHED_OTHER | flag, os.sched_param(0))
+    except (OSError, AttributeError):
+        return False
+    return True
+
+
+@contextlib.contextmanager
+def off_realtime() -> Iterator[None]:
+    """The calling thread under the normal scheduler for the block, then back to the real-time
+    priority it had (SCHED_FIFO again where allowed, else SCHED_RR from rtkit; neither: it stays
+    normal). Does nothing for a thread that is not real-time.
+
+    Why: a case switch (a new mesh, a new model) computes for hundreds of milliseconds without
+    blocking. At real-time priority that holds a core against everything under the normal
+    scheduler (the view, the desktop), and rtkit's run-time limit (``RLIMIT_RTTIME``, 200 ms)
+    would kill the node for it."""
+    import os
+    rt = _realtime_of(0)
+    if rt is None:
+        yield
+        return
+    policy, priority = os.sched_getscheduler(0), rt[1]
+    to_normal_scheduler(0)
+    try:
+        yield
+    finally:
+        try:
+            os.sched_setscheduler(0, policy, os.sched_param(priority))
+        except (OSError, AttributeError):
+            from .rtkit import RealtimeKitError, make_thread_realtime
+            with contextlib.suppress(RealtimeKitError):
+                make_thread_realtime(priority)
 
 
 def schedule_servo_thread(priority: int, rtkit: bool = True) -> str:

@@ -18,6 +18,7 @@ from typing import Callable
 from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 
 from ..cases import Case, CaseError, resolve_case
+from ..device.servo import off_realtime
 from .case_watch import CASE_KEYS, effective_case
 from .parameters import CASE_PARAMS  # declared writable: setting one switches the case
 
@@ -55,7 +56,8 @@ def declare_case(node, switch: Callable[[Case | None], None]) -> Case | None:
                 return SetParametersResult(successful=True)
             n, s = asked
             target = resolve_case(n, s)
-            switch(target)
+            with off_realtime():  # hundreds of ms of computing: never at real-time priority
+                switch(target)
         except Exception as exc:  # keep running on the old case
             node.get_logger().error(f'case switch rejected: {exc}')
             return SetParametersResult(successful=False, reason=str(exc))

@@ -26,6 +26,7 @@ from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
 
 from ..device.local_model import no_model
+from ..device.servo import off_realtime
 from ..pipeline.force import force_from_contact, load_model, local_model_from_contact
 from . import cdr
 from . import interfaces as ifc
@@ -185,7 +186,8 @@ class ForceServer(HapticNode):
         """Load ``model_path`` again; keep the current model if that fails."""
         t0 = time.perf_counter()
         try:
-            _, model = load_model(self.params)
+            with off_realtime():  # a load is long: never at real-time priority
+                _, model = load_model(self.params)
         except Exception as exc:  # any failure keeps the old model
             msg = f'kept the previous model: cannot load {self.model_path}: {exc}'
             self.get_logger().error(msg)

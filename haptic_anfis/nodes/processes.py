@@ -98,8 +98,12 @@ def set_graph_priority(priority: int, pid: int | None = None) -> str:
     starts with :func:`start_node` do not). A thread already real-time at ``priority`` or above
     keeps its own (the servo thread). Call it once the process is ready: a cold numba compile
     at real-time priority would hold a core for minutes. Returns what was done, in words, for
-    the log; refused (no CAP_SYS_NICE or rtprio limit), every thread keeps the normal scheduler
-    and the words say how to allow it."""
+    the log.
+
+    Refused (no CAP_SYS_NICE, no rtprio limit: a trainee's account), the threads that carry the
+    haptic path (:func:`haptic_path_threads`) ask rtkit for SCHED_RR instead, as the servo's
+    threads do (:func:`_graph_from_rtkit`); refused by rtkit too, every thread keeps the normal
+    scheduler and the words say how to allow it."""
     if priority <= 0:
         return 'normal scheduler (graph priority 0)'
     from ..device.servo import realtime_priority
@@ -115,9 +119,58 @@ def set_graph_priority(priority: int, pid: int | None = None) -> str:
         except (OSError, AttributeError) as exc:  # EPERM without the right; not Linux
             for t in done:
                 _normal(t)
-            from ..device.servo import realtime_refused
-            return realtime_refused(priority, exc)
+            return _graph_from_rtkit(priority, pid, exc)
     return f'SCHED_FIFO priority {priority}'
+
+
+#: Threads that carry the haptic path, by the names their libraries give them: Fast DDS's
+#: receive threads (``dds.udp.PORT``) and the driver's servo bridge; with the process's main
+#: thread (its executor).
+HAPTIC_PATH_THREADS = ('dds.udp.', 'servo-bridge')
+
+#: rtkit's soft run-time limit for a graph node, as a share of its hard one: a thread that
+#: computes this long at real-time priority without blocking gets SIGXCPU
+#: (:func:`guard_realtime_time`) before the hard limit's SIGKILL.
+RTTIME_SOFT_SHARE = 0.5
+
+
+def haptic_path_threads(pid: int | None = None) -> list[int]:
+    """The threads of process ``pid`` (None: this one) that carry the haptic path: its main
+    thread (the executor: callbacks run there) and those named in :data:`HAPTIC_PATH_THREADS`.
+
+    Why not every thread, as with SCHED_FIFO: rtkit serves at most 25 threads per user and 25
+    requests per 20 s (its defaults), and a node has a dozen threads, most asleep for good
+    (BLAS workers, discovery)."""
+    main = pid or os.getpid()
+    out = []
+    for tid in _threads(pid):
+        try:
+            name = Path(f'/proc/{main}/task/{tid}/comm').read_text().strip()
+        except OSError:  # the thread has ended
+            continue
+        if tid == main or name.startswith(HAPTIC_PATH_THREADS):
+            out.append(tid)
+    return out
+
+
+def _graph_from_rtkit(priority: int, pid: int | None, refused: BaseException) -> str:
+    """SCHED_FIFO ``priority`` was ``refused`` for process ``pid``: ask rtkit for SCHED_RR for
+    its haptic-path threads, with the soft run-time limit below rtkit's; the words for the
+    log."""
+    from ..device.rtkit import RealtimeKitError, make_threads_realtime
+    from ..device.servo import realtime_refused
+    tids = haptic_path_threads(pid)
+    try:
+        granted, failed = make_threads_realtime(priority, tids, pid, soft_share=RTTIME_SOFT_SHARE)
+    except RealtimeKitError as kit:
+        return realtime_refused(priority, refused, kit)
+    if len(failed) == len(tids):
+        return realtime_refused(priority, refused, RealtimeKitError(next(iter(failed.values()))))
+    words = (f'SCHED_RR priority {granted} from rtkit for {len(tids) - len(failed)} of its '
+             f'threads (executor, DDS receive, servo bridge), in place of SCHED_FIFO {priority}')
+    if failed:
+        words += f'; {len(failed)} not raised ({next(iter(failed.values()))})'
+    return words
 
 
 def graph_cores(names: Sequence[str], cpus: Sequence[int] | None = None) -> dict[str, int]:
@@ -192,23 +245,60 @@ def _children(pid: int) -> list[int]:
 
 
 def clear_graph_priority(priority: int) -> None:
-    """Back to the normal scheduler for every thread of this process at SCHED_FIFO
-    ``priority`` (what :func:`set_graph_priority` set, and the threads that inherited it)."""
+    """Back to the normal scheduler for every thread of this process at a real-time priority
+    of at most ``priority`` (what :func:`set_graph_priority` set, from SCHED_FIFO or rtkit, and
+    the threads that inherited it); a thread above it (the servo's) is left alone."""
     if priority <= 0:
         return
+    from ..device.servo import realtime_priority
     for tid in _threads():
-        try:
-            if (os.sched_getscheduler(tid) == os.SCHED_FIFO
-                    and os.sched_getparam(tid).sched_priority == priority):
-                _normal(tid)
-        except OSError:
-            continue
+        if 0 < realtime_priority(tid) <= priority:
+            _normal(tid)
 
 
 def _normal(tid: int) -> None:
+    from ..device.servo import to_normal_scheduler
+    to_normal_scheduler(tid)
+
+
+def guard_realtime_time(say=None) -> None:
+    """Catch SIGXCPU in this process (call it from the main thread): a thread of it ran at
+    real-time priority for rtkit's soft run-time limit without blocking. Every real-time thread
+    of the process but the servo's then goes back to the normal scheduler and ``say`` (default:
+    standard error) gets one line; without this handler SIGXCPU would end the node, and the hard
+    limit's SIGKILL would come next. A node that never asked rtkit never gets the signal.
+
+    Why: a graph node raised through rtkit (:func:`_graph_from_rtkit`) must never compute for
+    long at real-time priority; a case switch steps off it (``device.servo.off_realtime``), and
+    anything not foreseen is caught here instead of killing the node mid-session."""
+    import resource
+
+    def demote(signum, frame) -> None:
+        from ..device.servo import realtime_priority
+        n = 0
+        for tid in _threads():
+            try:
+                name = Path(f'/proc/self/task/{tid}/comm').read_text().strip()
+            except OSError:
+                continue
+            if not name.startswith(SERVO_THREADS) and realtime_priority(tid) > 0:
+                _normal(tid)
+                n += 1
+        ran = 'SIGXCPU'
+        hard = resource.getrlimit(resource.RLIMIT_RTTIME)[1]
+        if hard != resource.RLIM_INFINITY:  # the kernel raised the soft limit by 1 s: lower it
+            soft = int(hard * RTTIME_SOFT_SHARE)
+            resource.setrlimit(resource.RLIMIT_RTTIME, (soft, hard))
+            ran = (f'a thread ran {soft / 1e3:g} ms at real-time priority without blocking '
+                   '(RLIMIT_RTTIME)')
+        line = f'{ran}: {n} threads of this process back to the normal scheduler'
+        if say is None:
+            print(f'warning: {line}', file=sys.stderr, flush=True)
+        else:
+            say(line)
     try:
-        os.sched_setscheduler(tid, os.SCHED_OTHER, os.sched_param(0))
-    except OSError:
+        signal.signal(signal.SIGXCPU, demote)
+    except (AttributeError, ValueError, OSError):  # not POSIX; not the main thread
         pass
 
 

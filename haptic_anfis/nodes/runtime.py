@@ -16,7 +16,7 @@ from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from .executor import make_executor, settle_and_start
 from .middleware import use_loop_transport
 from .parameters import ParameterError
-from .processes import HOLD_FOR_RECORDER, RECORDED_TOPICS, SESSION_CHECKED
+from .processes import HOLD_FOR_RECORDER, RECORDED_TOPICS, SESSION_CHECKED, guard_realtime_time
 from .sigint import SigintStop
 
 __all__ = ['LOOP_QOS', 'stamp_ns', 'set_stamp', 'interrupted', 'run_node', 'message_class',
@@ -87,6 +87,7 @@ def run_node(factory: Callable[[], Any], args=None) -> int:
             node.readiness = Readiness(node)
             executor = make_executor()
             executor.add_node(node)
+            guard_realtime_time()  # before it can be raised: rtkit's run-time limit ends no node
             settle_and_start([node])
         except (ParameterError, ValueError, OSError) as exc:
             if interrupted():

@@ -146,7 +146,8 @@ class OneProcessSession:
             print(f'not ready after {s.ready_timeout:g} s: no force command reached the driver',
                   flush=True)
             return False
-        from ..nodes.processes import set_graph_priority
+        from ..nodes.processes import guard_realtime_time, set_graph_priority
+        guard_realtime_time()  # rtkit's run-time limit ends no graph
         # now, not before: a cold numba compile at real-time priority would hold a core
         self.graph_scheduling = set_graph_priority(s.graph_priority)
         if 'refused' in self.graph_scheduling:
