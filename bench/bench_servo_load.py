@@ -44,7 +44,8 @@ from _page import write_page  # noqa: E402
 CLI = [sys.executable, '-m', 'haptic_anfis.cli']
 COLS = ('config', 'busy', 'load', 'rt_others', 'rate_hz', 'periods_lost', 'max_gap_ms',
         'err_rms_pct', 'ripple_pct', 'ripple_ideal_pct', 'zero_ticks', 'dropout_ms', 'trips_contact',
-        'expired', 'held', 'beyond', 'taken_over', 'lat_p99_ms', 'lat_max_ms', 'sched')
+        'expired', 'held', 'beyond', 'taken_over', 'lat_p99_ms', 'lat_max_ms', 'sched',
+        'graph')
 #: with --settle: the first seconds' own columns (the browser opening its page)
 SETTLE_COLS = ('settle_lost', 'settle_gap_ms', 'browser_s')
 
@@ -237,6 +238,7 @@ def row(name: str, nbusy: int, load: float, j: dict) -> dict:
             'lat_p99_ms': f('latency_p99_ms'), 'lat_max_ms': f('latency_max_ms'),
             'settle_lost': f('settle_lost'), 'settle_gap_ms': f('settle_gap_ms'),
             'browser_s': f('browser_s'), 'sched': sched_words(j.get('servo_scheduling')),
+            'graph': graph_words(j.get('graph_scheduling')),
             'error': j.get('error')}
 
 
@@ -250,6 +252,17 @@ def sched_words(text: str | None) -> str | None:
     if m is None:
         return 'normal'
     return f'{m[1]} {m[2]}' + (' rtkit' if 'rtkit' in text else '')
+
+
+def graph_words(scheduling: str | dict | None) -> str | None:
+    """How the graph's nodes on the haptic path ran, in a column's words (``sim``: one process;
+    ``launch``: {node: words}, the distinct ones joined by '/'): as :func:`sched_words`, with
+    'pinned' where a node's threads were kept on one CPU."""
+    if not scheduling:
+        return None
+    texts = scheduling.values() if isinstance(scheduling, dict) else [scheduling]
+    words = {sched_words(t) + (' pinned' if 'kept on CPU' in t else '') for t in texts}
+    return '/'.join(sorted(words))
 
 
 def account() -> str:
@@ -403,7 +416,10 @@ def _page(a, rows: list[dict], planned: int):
              'held at the radius); `taken_over`: ticks one tick worker took over from the other, '
              'which was preempted in the middle of its tick; `lat_p99_ms`, `lat_max_ms`: pose -> '
              'local model latency, 99th percentile and largest; `sched`: what the servo thread got '
-             '(FIFO N, RR N from rtkit, normal: the fair scheduler with a short slice). '
+             '(FIFO N, RR N from rtkit, normal: the fair scheduler with a short slice); `graph`: '
+             'what the nodes on the haptic path got once ready (the same words, `pinned` where a '
+             'node\'s threads were kept on one CPU; distinct answers of the `launch` nodes '
+             'joined by /). '
              'Targets (issue 32): rate >= '
              '995 Hz, zero_ticks 0, err_rms_pct <= 2, ripple_pct <= 1; quiet err_rms_pct <= 0.2.\n')
     if len(rows) < planned:

@@ -195,3 +195,37 @@ def test_force_is_zero_at_the_swap_and_ramps_up(small_case_library, tmp_path):
         assert 0.0 < mid < out[-1][0] and fs._ramp_t0 is None  # ramped, then done
     finally:
         g.shutdown()
+
+
+def test_a_case_switch_and_a_reload_run_off_real_time_priority(small_case_library, tmp_path,
+                                                               monkeypatch):
+    """Loading a case computes for hundreds of milliseconds without blocking: never at real-time
+    priority (it would hold a core, and rtkit's run-time limit would end the node)."""
+    import contextlib
+
+    from haptic_anfis.nodes import _case, force_server
+    state = {'off': False, 'loads_off': []}
+
+    @contextlib.contextmanager
+    def off():
+        state['off'] = True
+        try:
+            yield
+        finally:
+            state['off'] = False
+    load = force_server.load_model
+
+    def watched(params):
+        state['loads_off'].append(state['off'])
+        return load(params)
+    monkeypatch.setattr(_case, 'off_realtime', off)
+    monkeypatch.setattr(force_server, 'off_realtime', off)
+    monkeypatch.setattr(force_server, 'load_model', watched)
+    g = _graph(tmp_path)
+    try:
+        assert g.force.set_parameters([Parameter('case', value='small')])[0].successful
+        assert g.force.reload()[0]
+    finally:
+        g.shutdown()
+    # the first load builds the node (before it is raised); the switch and the reload after
+    assert state['loads_off'] == [False, True, True] and not state['off']

@@ -136,6 +136,97 @@ def test_supervisor_raises_the_loop_nodes_once_and_never_a_view_node(monkeypatch
             p.wait()
 
 
+def test_refused_fifo_asks_rtkit_for_the_haptic_path_threads(monkeypatch):
+    """Without the right to SCHED_FIFO (a trainee's account) the graph's threads that carry the
+    haptic path ask rtkit for SCHED_RR, with the soft run-time limit below rtkit's; threads rtkit
+    refused are said; rtkit refusing them all, or absent, is the refusal's line with both
+    reasons. Fakes only: no policy changes."""
+    from haptic_anfis.device import rtkit
+    from haptic_anfis.device.rtkit import RealtimeKitError
+
+    def refuse(*a):
+        raise PermissionError(1, 'Operation not permitted')
+    monkeypatch.setattr(os, 'sched_setscheduler', refuse)
+    monkeypatch.setattr(processes, '_threads', lambda pid=None: [7, 8, 9, 10])
+    monkeypatch.setattr(processes, 'haptic_path_threads', lambda pid=None: [7, 8, 9])
+    asked = []
+
+    def kit(priority, tids, pid, soft_share):
+        asked.append((priority, list(tids), pid, soft_share))
+        return min(priority, 20), answer
+    monkeypatch.setattr(rtkit, 'make_threads_realtime', kit)
+    answer = {}
+    assert processes.set_graph_priority(10, 4321) == (
+        'SCHED_RR priority 10 from rtkit for 3 of its threads (executor, DDS receive, servo '
+        'bridge), in place of SCHED_FIFO 10')
+    assert asked == [(10, [7, 8, 9], 4321, processes.RTTIME_SOFT_SHARE)]
+    answer = {8: 'rtkit: org.freedesktop.DBus.Error.Failed: burst'}
+    assert processes.set_graph_priority(10, 4321).endswith(
+        'for 2 of its threads (executor, DDS receive, servo bridge), in place of SCHED_FIFO 10; '
+        '1 not raised (rtkit: org.freedesktop.DBus.Error.Failed: burst)')
+    answer = dict.fromkeys((7, 8, 9), 'rtkit: org.freedesktop.DBus.Error.Failed: burst')
+    said = processes.set_graph_priority(10, 4321)
+    assert said.startswith('normal scheduler: SCHED_FIFO 10 refused (Operation not permitted; '
+                           'rtkit: org.freedesktop.DBus.Error.Failed: burst)')
+
+    def absent(*a, **k):
+        raise RealtimeKitError('rtkit: no rtkit-daemon on this machine')
+    monkeypatch.setattr(rtkit, 'make_threads_realtime', absent)
+    assert 'rtkit: no rtkit-daemon on this machine)' in processes.set_graph_priority(10, 4321)
+
+
+def test_haptic_path_threads_are_the_main_one_and_those_named_for_it():
+    """The executor (the main thread), Fast DDS's receive threads and the servo bridge; not a
+    thread asleep for good under another name."""
+    import threading
+
+    from haptic_anfis.device.servo import name_thread
+    named, go = {}, threading.Event()
+
+    def run(name):
+        name_thread(name)
+        named[name] = threading.get_native_id()
+        go.wait()
+    threads = [threading.Thread(target=run, args=(n,)) for n in ('dds.udp.7411', 'servo-bridge',
+                                                                 'openblas-idle')]
+    for t in threads:
+        t.start()
+    try:
+        while len(named) < 3:
+            threading.Event().wait(0.01)
+        got = processes.haptic_path_threads()
+    finally:
+        go.set()
+        for t in threads:
+            t.join()
+    assert os.getpid() in got
+    assert named['dds.udp.7411'] in got and named['servo-bridge'] in got
+    assert named['openblas-idle'] not in got
+
+
+@needs_rt
+def test_a_thread_over_the_soft_run_time_limit_goes_normal_and_the_process_lives():
+    """SIGXCPU (a thread at real-time priority ran the soft RLIMIT_RTTIME without blocking): the
+    process's real-time threads go back to the normal scheduler, one line says so, and the
+    node is not ended (SIGXCPU's default) nor killed at the hard limit."""
+    r = subprocess.run([sys.executable, '-c', textwrap.dedent(f'''
+        import os, resource, time
+        from haptic_anfis.nodes.processes import guard_realtime_time
+        guard_realtime_time()
+        resource.setrlimit(resource.RLIMIT_RTTIME, (100_000, 200_000))
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param({PRIO}))
+        t = time.process_time()
+        while time.process_time() - t < 0.3:
+            pass
+        print(os.sched_getscheduler(0), resource.getrlimit(resource.RLIMIT_RTTIME))
+    ''')], capture_output=True, text=True, timeout=60)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.split()[0] == str(os.SCHED_OTHER)
+    assert r.stdout.strip().endswith('(100000, 200000)')  # the soft limit set again
+    assert ('a thread ran 100 ms at real-time priority without blocking (RLIMIT_RTTIME): 1 '
+            'threads of this process back to the normal scheduler') in r.stderr
+
+
 def test_sim_runs_its_graph_in_a_session_of_its_own_and_stops_on_ctrl_c(tmp_path):
     """``haptic-anfis sim`` from a command line re-runs itself in a session of its own (its
     CPU share no longer split with the terminal's other jobs); Ctrl-C (SIGINT) at the

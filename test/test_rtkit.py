@@ -169,3 +169,31 @@ def test_is_realtime_reads_the_policy_without_the_reset_on_fork_flag(monkeypatch
     assert servo.is_realtime()
     monkeypatch.setattr(os, 'sched_getscheduler', lambda pid: os.SCHED_OTHER)
     assert not servo.is_realtime()
+
+
+def test_off_realtime_steps_off_and_back_through_rtkit_when_fifo_is_refused(monkeypatch):
+    """A real-time thread runs the block under the normal scheduler (the reset-on-fork flag
+    rtkit set is kept: only a privileged thread may clear it), then gets its priority back:
+    SCHED_FIFO where allowed, else from rtkit; a thread that is not real-time is left alone.
+    Fakes only: this test process's own policy never changes."""
+    state = {'policy': os.SCHED_RR | servo.RESET_ON_FORK, 'prio': 10}
+    calls, kit = [], []
+
+    def setscheduler(tid, policy, param):
+        calls.append((policy, param.sched_priority))
+        if policy & ~servo.RESET_ON_FORK != os.SCHED_OTHER:
+            raise PermissionError(1, 'Operation not permitted')
+        state.update(policy=policy, prio=0)
+    monkeypatch.setattr(os, 'sched_getscheduler', lambda tid: state['policy'])
+    monkeypatch.setattr(os, 'sched_getparam', lambda tid: os.sched_param(state['prio']))
+    monkeypatch.setattr(os, 'sched_setscheduler', setscheduler)
+    monkeypatch.setattr(rtkit, 'make_thread_realtime', lambda priority: kit.append(priority))
+    with servo.off_realtime():
+        assert not servo.is_realtime()
+    assert calls == [(os.SCHED_OTHER | servo.RESET_ON_FORK, 0),
+                     (os.SCHED_RR | servo.RESET_ON_FORK, 10)]
+    assert kit == [10]
+    calls.clear()
+    with servo.off_realtime():  # normal already: nothing to do
+        pass
+    assert calls == [] and kit == [10]

@@ -30,8 +30,10 @@ def run(args: argparse.Namespace) -> int:
     node_args: dict[str, list[str]] = {n: [] for n in spec.nodes}
     trace = launch_trace_path(node_args, Path(spec.log_dir) if spec.log_dir else None,
                               spec.trace)
-    result = ProcessSession(spec, node_args).run()
-    print_launch_report(trace, spec.params_files, args.json)
+    session = ProcessSession(spec, node_args)
+    result = session.run()
+    print_launch_report(trace, spec.params_files, args.json,
+                        graph_scheduling=session.graph_scheduling)
     if result.failed:
         print('launch failed: ' + ', '.join(f'{n} (code {c})' for n, c in result.failed),
               flush=True)

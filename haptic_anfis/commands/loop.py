@@ -209,8 +209,10 @@ def launch_trace_path(extra: dict[str, list[str]], where: Path | None,
     return path
 
 
-def print_launch_report(trace: Path | None, params_files, as_json: bool) -> None:
-    """The loop report of a finished launch (nothing if the driver left no trace)."""
+def print_launch_report(trace: Path | None, params_files, as_json: bool,
+                        **extra) -> None:
+    """The loop report of a finished launch (nothing if the driver left no trace); ``extra``
+    goes into the JSON object (``graph_scheduling``: {node: how it was scheduled})."""
     if trace is None:
         return
     if not trace.is_file():
@@ -219,4 +221,4 @@ def print_launch_report(trace: Path | None, params_files, as_json: bool) -> None
     r = trace_report(trace, params_files)
     print(format_report(r), flush=True)
     if as_json:
-        print(json.dumps(r), flush=True)
+        print(json.dumps({**r, **extra}), flush=True)
