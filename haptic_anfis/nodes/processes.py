@@ -160,6 +160,8 @@ def _graph_from_rtkit(priority: int, pid: int | None, refused: BaseException) ->
     from ..device.rtkit import RealtimeKitError, make_threads_realtime
     from ..device.servo import realtime_refused
     tids = haptic_path_threads(pid)
+    if not tids:  # the process has ended
+        return realtime_refused(priority, refused)
     try:
         granted, failed = make_threads_realtime(priority, tids, pid, soft_share=RTTIME_SOFT_SHARE)
     except RealtimeKitError as kit:
@@ -261,11 +263,11 @@ def _normal(tid: int) -> None:
     to_normal_scheduler(tid)
 
 
-def guard_realtime_time(say=None) -> None:
+def guard_realtime_time() -> None:
     """Catch SIGXCPU in this process (call it from the main thread): a thread of it ran at
     real-time priority for rtkit's soft run-time limit without blocking. Every real-time thread
-    of the process but the servo's then goes back to the normal scheduler and ``say`` (default:
-    standard error) gets one line; without this handler SIGXCPU would end the node, and the hard
+    of the process but the servo's then goes back to the normal scheduler and standard error (the
+    node's log) gets one line; without this handler SIGXCPU would end the node, and the hard
     limit's SIGKILL would come next. A node that never asked rtkit never gets the signal.
 
     Why: a graph node raised through rtkit (:func:`_graph_from_rtkit`) must never compute for
@@ -291,11 +293,8 @@ def guard_realtime_time(say=None) -> None:
             resource.setrlimit(resource.RLIMIT_RTTIME, (soft, hard))
             ran = (f'a thread ran {soft / 1e3:g} ms at real-time priority without blocking '
                    '(RLIMIT_RTTIME)')
-        line = f'{ran}: {n} threads of this process back to the normal scheduler'
-        if say is None:
-            print(f'warning: {line}', file=sys.stderr, flush=True)
-        else:
-            say(line)
+        print(f'warning: {ran}: {n} threads of this process back to the normal scheduler',
+              file=sys.stderr, flush=True)
     try:
         signal.signal(signal.SIGXCPU, demote)
     except (AttributeError, ValueError, OSError):  # not POSIX; not the main thread
