@@ -8,7 +8,7 @@ import pytest
 
 BENCH = Path(__file__).resolve().parents[1] / 'bench'
 sys.path.insert(0, str(BENCH))
-from bench_servo_load import params_file, sched_words, settled  # noqa: E402
+from bench_servo_load import graph_words, params_file, sched_words, settled  # noqa: E402
 
 from haptic_anfis.device.local_model import STATUS_NAMES  # noqa: E402
 from haptic_anfis.device.trace import save_trace  # noqa: E402
@@ -51,3 +51,16 @@ def test_the_sched_column_says_what_the_servo_thread_got():
                  '50 refused (Operation not permitted; rtkit: no system D-Bus); allow it with '
                  '`ulimit -r 50` ..., time slice 0.1 ms requested; 2 tick workers') == 'normal'
     assert words(None) is None
+
+
+def test_the_graph_column_says_what_the_haptic_path_nodes_got():
+    """sim: one process's words; launch: {node: words}, the distinct answers joined."""
+    rr = ('SCHED_RR priority 10 from rtkit for 4 of its threads (executor, DDS receive, servo '
+          'bridge), in place of SCHED_FIFO 10')
+    pinned = ('normal scheduler: SCHED_FIFO 10 refused (Operation not permitted; rtkit: no '
+              'rtkit-daemon on this machine); allow it ...; threads kept on CPU 1')
+    assert graph_words('SCHED_FIFO priority 10') == 'FIFO 10'
+    assert graph_words({'force_server': rr, 'falcon_driver': rr}) == 'RR 10 rtkit'
+    assert graph_words({'force_server': rr, 'recorder': pinned}) == 'RR 10 rtkit/normal pinned'
+    assert graph_words('normal scheduler (graph priority 0)') == 'normal'
+    assert graph_words({}) is None and graph_words(None) is None
