@@ -392,16 +392,16 @@ class WebView(HapticNode):
                 return
             text = f'the page cannot show it ({res.reason})'
             if text != self._split:
+                self._split = text  # before it is said: whoever reads the line sees the state
                 self._say(f'every loop node was switched to another case outside this page, but '
                           f'{text}. Nothing is collected: choose a case here', error=True)
-                self._split = text
             return
         if v.action == 'split' and v.text != self._split:
+            self._split = v.text  # before it is said (a reader of the line saw it collecting)
             if not quiet:
                 self._say(f'the loop nodes are on different cases (set outside this page): '
                           f'{v.text}. Nothing is collected: choose a case here to put them on '
                           'one', error=True)
-            self._split = v.text
         elif v.action == 'ok' and self._split:
             self._split = ''
             if not quiet and self.running:
