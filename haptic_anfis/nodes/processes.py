@@ -92,6 +92,18 @@ def _threads(pid: int | None = None) -> list[int]:
         return [0] if pid is None else []
 
 
+def _thread_names(pid: int | None = None) -> dict[int, str]:
+    """{tid: name} of every thread of process ``pid`` (None: this one), the names the system
+    shows (``top -H``); a thread that ended meanwhile is left out."""
+    names = {}
+    for tid in _threads(pid):
+        try:
+            names[tid] = Path(f'/proc/{pid or "self"}/task/{tid}/comm').read_text().strip()
+        except OSError:  # the thread has ended
+            continue
+    return names
+
+
 def set_graph_priority(priority: int, pid: int | None = None) -> str:
     """Schedule every thread of process ``pid`` (None: this one) SCHED_FIFO at ``priority``
     (0: leave them as they are); the threads it starts later inherit it (the processes it
@@ -142,15 +154,8 @@ def haptic_path_threads(pid: int | None = None) -> list[int]:
     requests per 20 s (its defaults), and a node has a dozen threads, most asleep for good
     (BLAS workers, discovery)."""
     main = pid or os.getpid()
-    out = []
-    for tid in _threads(pid):
-        try:
-            name = Path(f'/proc/{main}/task/{tid}/comm').read_text().strip()
-        except OSError:  # the thread has ended
-            continue
-        if tid == main or name.startswith(HAPTIC_PATH_THREADS):
-            out.append(tid)
-    return out
+    return [tid for tid, name in _thread_names(pid).items()
+            if tid == main or name.startswith(HAPTIC_PATH_THREADS)]
 
 
 def _graph_from_rtkit(priority: int, pid: int | None, refused: BaseException) -> str:
@@ -223,11 +228,7 @@ def servo_realtime(pid: int) -> bool | None:
     from ..device.servo import realtime_priority
     found = False
     for p in (pid, *_children(pid)):
-        for tid in _threads(p):
-            try:
-                name = Path(f'/proc/{p}/task/{tid}/comm').read_text().strip()
-            except OSError:  # the thread has ended
-                continue
+        for tid, name in _thread_names(p).items():
             if name.startswith(SERVO_THREADS):
                 if realtime_priority(tid) > 0:
                     return True
@@ -278,11 +279,7 @@ def guard_realtime_time() -> None:
     def demote(signum, frame) -> None:
         from ..device.servo import realtime_priority
         n = 0
-        for tid in _threads():
-            try:
-                name = Path(f'/proc/self/task/{tid}/comm').read_text().strip()
-            except OSError:
-                continue
+        for tid, name in _thread_names().items():
             if not name.startswith(SERVO_THREADS) and realtime_priority(tid) > 0:
                 _normal(tid)
                 n += 1
