@@ -96,6 +96,7 @@ def params_file(d: Path, priority: int, loop: str, force_mode: str = '') -> Path
     f = d / f'driver_{priority}_{loop}_{force_mode or "default"}.yaml'
     f.write_text('falcon_driver:\n  ros__parameters:\n'
                  f'    servo_priority: {priority}\n    servo_loop: {loop}\n'
+                 '    trace_seconds: 0.0\n'  # every tick of the run: the figures cover it all
                  + (f'    force_mode: {force_mode}\n' if force_mode else ''))
     return f
 

@@ -68,3 +68,33 @@ def test_tick_gaps_counts_a_gap_of_k_periods_as_k_minus_1_lost():
     from haptic_anfis.device.stats import tick_gaps
     assert tick_gaps(np.array([]), 1e-3) == (0, 0.0)
     assert tick_gaps(np.array([0.0, 1.4e-3, 2.4e-3, 5.0e-3]), 1e-3) == (2, pytest.approx(2.6e-3))
+
+
+def test_a_trace_that_kept_only_its_newest_ticks_says_so_and_refuses_a_window(tmp_path):
+    """A long run's trace keeps its last ``trace_seconds``: the report names the dropped ticks,
+    and ``--from`` (seconds after the run's first tick) is refused rather than counted from the
+    first tick kept."""
+    rows = np.zeros((1000, 8))
+    rows[:, 0] = np.arange(1000) * 1e-3
+    rows[:, 1:4] = (0.0, 0.0, 0.5)
+    rows[:, 7] = 4
+    path = save_trace(tmp_path / 't.npz', rows, stats={}, ticks_dropped=5000, max_force=8.9)
+    from haptic_anfis.commands.loop import format_report
+    r = trace_report(path)
+    assert r['ticks_dropped'] == 5000 and r['ticks'] == 1000
+    assert '5000 older not kept: trace_seconds' in format_report(r)
+    with pytest.raises(ValueError, match='5000 older ones dropped'):
+        trace_report(path, start=0.5)
+
+
+@pytest.mark.parametrize('seconds, rows', [(2.0, 2000), (0.0, 0)])
+def test_the_drivers_trace_keeps_trace_seconds_of_ticks(seconds, rows):
+    """``trace_seconds`` bounds the driver's trace to that many seconds at its rate; 0 keeps
+    every tick; no ``trace_path``, no trace."""
+    pytest.importorskip('rclpy')
+    from haptic_anfis.nodes.falcon_driver import FalconDriver
+    t = FalconDriver._tick_trace({'trace_path': 'x.npz', 'rate': 1000.0,
+                                  'trace_seconds': seconds})
+    assert t.max_rows == rows
+    assert FalconDriver._tick_trace({'trace_path': '', 'rate': 1000.0,
+                                     'trace_seconds': seconds}) is None

@@ -103,6 +103,12 @@ def trace_report(trace: str | Path, params_files=(), start: float = 0.0) -> dict
     kept = len(rows)
     rows = rows[rows[:, 7] != DISABLED]  # 0 N on purpose (before start, at shutdown)
     st = meta.get('stats', {})
+    # a long run's trace keeps only its newest rows (the driver's ``trace_seconds``)
+    dropped = int(meta.get('ticks_dropped') or 0)
+    if start > 0 and dropped:
+        raise ValueError(f'{trace}: --from {start:g} s: the trace kept only its newest ticks '
+                         f'({dropped} older ones dropped: the driver\'s trace_seconds), so the '
+                         'first tick is not the run\'s')
     if start > 0:
         if len(rows) < 2 or rows[-1, 0] - rows[0, 0] <= start:
             span = float(rows[-1, 0] - rows[0, 0]) if len(rows) > 1 else 0.0
@@ -122,9 +128,8 @@ def trace_report(trace: str | Path, params_files=(), start: float = 0.0) -> dict
     err.update(ripple_and_dropouts(rows[:, 0], rows[:, 4:7], F, contact, max_force=fmax))
     # the trace and the received counts start at the first command (the driver resets them)
     secs = float(rows[-1, 0] - rows[0, 0]) if len(rows) > 1 else 0.0
-    # The received counts cover the whole run; a long run's trace keeps only its newest rows
-    # (``ticks_dropped``): their time is taken at the kept rows' tick rate.
-    dropped = int(meta.get('ticks_dropped') or 0)
+    # The received counts cover the whole run, the dropped rows' time is taken at the kept rows'
+    # tick rate.
     counted = secs * (kept + dropped) / kept if kept else 0.0
     rate = lambda k: round(st[k] / counted, 1) if counted > 0 and k in st else None  # noqa: E731
     r = {'force_mode': st.get('mode'),
@@ -132,7 +137,7 @@ def trace_report(trace: str | Path, params_files=(), start: float = 0.0) -> dict
                       'falcon/servo_cf': rate('commands_received'),
                       'falcon/servo_cf_local': rate('models_received')},
          **{k: st.get(k) for k in DRIVER_KEYS},
-         **err, 'ticks': int(len(rows))}
+         **err, 'ticks': int(len(rows)), 'ticks_dropped': dropped}
     if start > 0:   # the driver's counters not recounted from the window's ticks
         r['from_s'] = start
         r['whole_run'] = sorted(k for k in DRIVER_KEYS if k not in WINDOWED
@@ -161,7 +166,9 @@ def format_report(r: dict) -> str:
         f"50 ms mean (ideal force: {f(r.get('ripple_windows_ideal_pct'))} %); dropouts: "
         f"{r.get('zero_force_ticks')} ticks at 0 N with the ideal > 1 N (longest "
         f"{f(r.get('longest_dropout_ms'), 1)} ms)",
-        f"  servo ticks: {r.get('ticks')} traced; periods lost {r.get('periods_lost')}, longest "
+        f"  servo ticks: {r.get('ticks')} traced"
+        + (f" (the newest; {r['ticks_dropped']} older not kept: trace_seconds)"
+           if r.get('ticks_dropped') else '') + f"; periods lost {r.get('periods_lost')}, longest "
         f"gap {f(r.get('max_gap_ms'))} ms, taken over {r.get('ticks_taken_over')}",
         _phase_line(r.get('force_error_by_phase'))]
         + ([f"  from {r['from_s']:g} s after the first tick; the whole run's: "

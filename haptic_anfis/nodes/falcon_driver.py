@@ -132,6 +132,9 @@ PARAMS = [
           'frame (3000.0: the Falcon figure CHAI3D uses); the model is clamped to it', positive),
     Param('trace_path', '', "write every servo tick (time, position, applied force, model status) "
           "and the loop statistics to this .npz file at shutdown ('' = no trace)"),
+    Param('trace_seconds', 600.0, 'trace_path: the trace keeps the last this many seconds of '
+          'ticks (600 s at 1 kHz: ~39 MB); 0 = every tick of the run (~230 MB an hour)',
+          non_negative),
     Param('take_in_servo_thread', True, 'take falcon/servo_cf and falcon/servo_cf_local from '
           'their readers in the servo thread at the start of each tick (true), instead of in '
           'executor callbacks (false): no GIL hand-over per message'),
@@ -280,11 +283,11 @@ class FalconDriver(HapticNode):
         if self.native is not None:
             self.servo = self.native
             self.native.on_state = self._publish_state
-            self.native.trace = TickTrace() if self.trace_path else None
+            self.native.trace = self._tick_trace(p)
         else:
             self.servo = ServoLoop(self.device, self.safety, p['rate'],
                                    on_state=self._publish_state, render=self.input.render,
-                                   trace=TickTrace() if self.trace_path else None,
+                                   trace=self._tick_trace(p),
                                    priority=p['servo_priority'])
         self.get_logger().info(
             f"backend {p['backend']}, {p['rate']:.0f} Hz servo thread, max force "
@@ -354,9 +357,16 @@ class FalconDriver(HapticNode):
             p['rate'], p['max_force'], p['max_force_rate'], p['watchdog_timeout'],
             self.frame_id, p['force_mode'], p['max_stiffness'], p['model_validity_time'],
             p['model_validity_radius'], p['passivity_damping'], p['passivity_observer'],
-            p['model_hold_time'], trace=TickTrace() if p['trace_path'] else None,
+            p['model_hold_time'], trace=self._tick_trace(p),
             priority=p['servo_priority'], process=p['servo_loop'] == 'native_process',
             workers=p['servo_workers'], **kw)
+
+    @staticmethod
+    def _tick_trace(p) -> TickTrace | None:
+        """The servo tick trace ``trace_path`` asks for: the last ``trace_seconds`` of ticks."""
+        if not p['trace_path']:
+            return None
+        return TickTrace(max_rows=int(round(p['rate'] * p['trace_seconds'])))
 
     def _device_lost(self, why: str) -> None:
         """The Falcon backend lost the device (servo thread): zero the force; without reconnect,
