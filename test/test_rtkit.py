@@ -197,3 +197,20 @@ def test_off_realtime_steps_off_and_back_through_rtkit_when_fifo_is_refused(monk
     with servo.off_realtime():  # normal already: nothing to do
         pass
     assert calls == [] and kit == [10]
+
+
+def test_off_realtime_gives_a_privileged_thread_its_own_policy_back(monkeypatch):
+    """A thread allowed to set its policy comes back with the one it had (SCHED_RR stays RR,
+    not the SCHED_FIFO a fresh request asks for), and rtkit is not asked. Fakes only."""
+    state = {'policy': os.SCHED_RR, 'prio': 30}
+
+    def setscheduler(tid, policy, param):
+        state.update(policy=policy, prio=param.sched_priority)
+    monkeypatch.setattr(os, 'sched_getscheduler', lambda tid: state['policy'])
+    monkeypatch.setattr(os, 'sched_getparam', lambda tid: os.sched_param(state['prio']))
+    monkeypatch.setattr(os, 'sched_setscheduler', setscheduler)
+    monkeypatch.setattr(rtkit, 'make_thread_realtime', lambda priority: pytest.fail('rtkit'))
+    with servo.off_realtime():
+        assert state == {'policy': os.SCHED_OTHER, 'prio': 0}
+    assert state == {'policy': os.SCHED_RR, 'prio': 30}
+    assert servo.set_realtime(30, policy=os.SCHED_RR) == 'SCHED_RR priority 30'

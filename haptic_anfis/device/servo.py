@@ -130,11 +130,12 @@ class ServoLoop:
         self.device.write((0.0, 0.0, 0.0))
 
 
-def set_realtime(priority: int, rtkit: bool = False) -> str:
+def set_realtime(priority: int, rtkit: bool = False, policy: int | None = None) -> str:
     """Schedule the calling thread SCHED_FIFO at ``priority`` (1-99; 0 = leave it as it is);
     refused and ``rtkit``, ask RealtimeKit for SCHED_RR instead (:mod:`.rtkit`: no privilege
-    needed on a desktop Linux with rtkit-daemon, at most its priority 20). Returns what was
-    done, in words, for the log.
+    needed on a desktop Linux with rtkit-daemon, at most its priority 20). ``policy``: another
+    real-time policy to ask for first (as :func:`os.sched_getscheduler` gives it: a thread's
+    own, back). Returns what was done, in words, for the log.
 
     Why: the servo thread sleeps to each 1 ms deadline; under the normal scheduler, when the
     machine's cores are busy (a visualizer or recorder process beside the loop, the loop's own
@@ -150,7 +151,8 @@ def set_realtime(priority: int, rtkit: bool = False) -> str:
         return 'normal scheduler (priority 0)'
     import os
     try:
-        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(int(priority)))
+        policy = os.SCHED_FIFO if policy is None else policy
+        os.sched_setscheduler(0, policy, os.sched_param(int(priority)))
     except (OSError, AttributeError) as exc:  # EPERM without the right; not Linux
         if not rtkit:
             return realtime_refused(priority, exc)
@@ -160,7 +162,7 @@ def set_realtime(priority: int, rtkit: bool = False) -> str:
         except RealtimeKitError as kit:
             return realtime_refused(priority, exc, kit)
         return f'SCHED_RR priority {got} from rtkit, in place of SCHED_FIFO {priority}'
-    return f'SCHED_FIFO priority {priority}'
+    return f'{_RT_POLICIES.get(policy & ~RESET_ON_FORK, "SCHED_FIFO")} priority {priority}'
 
 
 def realtime_refused(priority: int, exc: BaseException, kit: BaseException | None = None) -> str:
@@ -240,12 +242,7 @@ def off_realtime() -> Iterator[None]:
     try:
         yield
     finally:
-        try:
-            os.sched_setscheduler(0, policy, os.sched_param(priority))
-        except (OSError, AttributeError):
-            from .rtkit import RealtimeKitError, make_thread_realtime
-            with contextlib.suppress(RealtimeKitError):
-                make_thread_realtime(priority)
+        set_realtime(priority, rtkit=True, policy=policy)
 
 
 def schedule_servo_thread(priority: int, rtkit: bool = True) -> str:
