@@ -440,7 +440,7 @@ def test_saved_samples_replay_into_the_same_report(tmp_path, surface, subject):
     a, b = s.report(), again.report()
     for k in ('coverage_pct', 'hits', 'misses', 'false_marks', 'pattern', 'path_length_m'):
         assert a[k] == b[k], k
-    assert again.forces == s.forces and again.marks == s.marks
+    assert np.array_equal(again.forces, s.forces) and np.array_equal(again.marks, s.marks)
     (tmp_path / 'bad.npz').write_bytes(b'not numpy')
     with pytest.raises(ValueError, match='bad.npz: not a samples file'):
         ExamSession(surface, subject, s.config).load_samples(tmp_path / 'bad.npz')
