@@ -190,16 +190,16 @@ def multi_process(minutes: float, interval: float, workdir: Path,
     bag, out = workdir / 'multi_process_bag', workdir / 'launch.out'
     env = node_env(domain, localhost=True)
     env['PYTHONPATH'] = str(ROOT)
-    params = []
     driver = {k: v for k, v in (('force_mode', force_mode), ('servo_priority', priority))
               if v is not None}
     if driver:
-        f = workdir / 'driver.yaml'
-        f.write_text('falcon_driver:\n  ros__parameters:\n'
-                     + ''.join(f'    {k}: {v}\n' for k, v in driver.items()))
-        params = ['--params-file', str(f)]
         print('separate processes: falcon_driver '
               + ', '.join(f'{k} {v}' for k, v in driver.items()))
+    driver['trace_seconds'] = 0.0   # every tick: the loop report covers the whole run
+    f = workdir / 'driver.yaml'
+    f.write_text('falcon_driver:\n  ros__parameters:\n'
+                 + ''.join(f'    {k}: {v}\n' for k, v in driver.items()))
+    params = ['--params-file', str(f)]
     if graph_priority is None and priority is not None and priority <= 0:
         graph_priority = 0  # no real-time rights: the graph has none either
     if graph_priority is not None:

@@ -4,6 +4,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from haptic_anfis.contact import load_mesh
 from haptic_anfis.exam import (ExamConfig, ExamSession, ExamSubject, Lesion, Surface, classify,
@@ -444,3 +446,34 @@ def test_saved_samples_replay_into_the_same_report(tmp_path, surface, subject):
     (tmp_path / 'bad.npz').write_bytes(b'not numpy')
     with pytest.raises(ValueError, match='bad.npz: not a samples file'):
         ExamSession(surface, subject, s.config).load_samples(tmp_path / 'bad.npz')
+
+
+def _resample_by_definition(yz, segment, step):
+    """resample as its docstring says it, one numpy point at a time (the reference)."""
+    out = []
+    for piece in np.split(np.arange(len(yz)), np.flatnonzero(np.diff(segment)) + 1):
+        if not len(piece):
+            continue
+        pts = [yz[piece[0]]]
+        for i in piece[1:]:
+            if np.hypot(*(yz[i] - pts[-1])) >= step:
+                pts.append(yz[i])
+        if len(pts) > 1:
+            out.append(np.array(pts))
+    return out
+
+
+@settings(derandomize=True, max_examples=150, deadline=None)
+@given(st.integers(0, 60), st.integers(0, 2**31 - 1), st.floats(1e-4, 5e-3))
+def test_the_path_resampling_keeps_the_points_a_step_apart_in_each_episode(n, seed, step):
+    """The resampled path (plain floats, fast enough for an hour of 1 kHz samples) is the
+    point-by-point definition's: per contact episode, each point kept is at least ``step``
+    from the one kept before it; episodes of a single kept point are left out."""
+    from haptic_anfis.exam.pattern import resample
+    rng = np.random.default_rng(seed)
+    yz = np.cumsum(rng.normal(0.0, 1e-3, (n, 2)), axis=0)
+    segment = np.cumsum(rng.random(n) < 0.1)
+    got, want = resample(yz, segment, step), _resample_by_definition(yz, segment, step)
+    assert len(got) == len(want)
+    for g, w in zip(got, want):
+        assert np.array_equal(g, w)

@@ -53,11 +53,15 @@ def resample(yz: np.ndarray, segment: np.ndarray, step: float) -> list[np.ndarra
     if len(yz) == 0:
         return out
     cuts = np.flatnonzero(np.diff(segment)) + 1
-    for piece in np.split(np.arange(len(yz)), cuts):
-        pts = [yz[piece[0]]]
-        for i in piece[1:]:
-            if np.hypot(*(yz[i] - pts[-1])) >= step:
-                pts.append(yz[i])
+    ys, zs = np.asarray(yz, float).T.tolist()   # plain floats: a sample costs ~0.2 us, not ~5
+    hypot = math.hypot
+    for a, b in zip([0, *cuts.tolist()], [*cuts.tolist(), len(ys)]):
+        py, pz = ys[a], zs[a]
+        pts = [(py, pz)]
+        for y, z in zip(ys[a + 1:b], zs[a + 1:b]):
+            if hypot(y - py, z - pz) >= step:
+                py, pz = y, z
+                pts.append((y, z))
         if len(pts) > 1:
             out.append(np.array(pts))
     return out

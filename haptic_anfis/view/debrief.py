@@ -73,14 +73,16 @@ class Debrief:
         self._first = np.full((len(g.centroids), len(LEVELS)), np.inf)
         grid = CoverageGrid(g.vertices, g.faces, session.region_radius, g.footprint_radius,
                             g.thresholds)
-        ins = c[:, 5] > 0.5
         edges = np.linspace(self.t0, self.t0 + self.duration, max(int(bins), 1) + 1)
-        rel = c[:, 0]
-        for a, b in zip(edges[:-1], edges[1:]):
-            sel = ins & (rel >= a) & ((rel < b) | (b == edges[-1]))
-            if sel.any():
+        # the samples are in time order: each bin is a slice [a, b), the last one closed
+        cut = np.searchsorted(c[:, 0], edges, side='left')
+        cut[-1] = len(c)
+        for lo, hi, b in zip(cut[:-1], cut[1:], edges[1:]):
+            part = c[lo:hi]
+            part = part[part[:, 5] > 0.5]
+            if len(part):
                 before = grid.covered.copy()
-                grid.add(c[sel, 1:4], c[sel, 4])
+                grid.add(part[:, 1:4], part[:, 4])
                 new = grid.covered & ~before
                 self._first[new] = b - self.t0
         self.lesions = [LesionMarker(e['name'], tuple(np.array(e['centre_mm']) * 1e-3),
