@@ -227,6 +227,38 @@ def test_a_thread_over_the_soft_run_time_limit_goes_normal_and_the_process_lives
             'threads of this process back to the normal scheduler') in r.stderr
 
 
+@needs_rt
+def test_leaving_real_time_keeps_the_servo_threads_and_lets_a_long_close_run():
+    """A node's shutdown (run_node, before close()) takes every real-time thread of its process
+    but the servo's back to the normal scheduler: a close that then computes past the hard
+    RLIMIT_RTTIME (the driver writing an hour's trace) is not SIGKILLed for it."""
+    r = subprocess.run([sys.executable, '-c', textwrap.dedent(f'''
+        import os, resource, threading, time
+        from haptic_anfis.device.servo import name_thread, realtime_priority
+        from haptic_anfis.nodes.processes import leave_realtime
+        resource.setrlimit(resource.RLIMIT_RTTIME, (100_000, 200_000))
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param({PRIO}))
+        tid, go = [], threading.Event()
+        def servo():
+            name_thread('servo-tick0')
+            tid.append(threading.get_native_id())
+            go.wait()
+        th = threading.Thread(target=servo)
+        th.start()
+        while not tid:
+            time.sleep(0.01)
+        n = leave_realtime()
+        t = time.process_time()
+        while time.process_time() - t < 0.3:   # past the hard limit, at the normal scheduler
+            pass
+        print(n, os.sched_getscheduler(0), realtime_priority(tid[0]))
+        go.set()
+        th.join()
+    ''')], capture_output=True, text=True, timeout=60)
+    assert r.returncode == 0, (r.returncode, r.stderr)
+    assert r.stdout.split() == ['1', str(os.SCHED_OTHER), str(PRIO)]
+
+
 def test_sim_runs_its_graph_in_a_session_of_its_own_and_stops_on_ctrl_c(tmp_path):
     """``haptic-anfis sim`` from a command line re-runs itself in a session of its own (its
     CPU share no longer split with the terminal's other jobs); Ctrl-C (SIGINT) at the

@@ -264,6 +264,20 @@ def _normal(tid: int) -> None:
     to_normal_scheduler(tid)
 
 
+def leave_realtime() -> int:
+    """Every real-time thread of this process but the servo's (:data:`SERVO_THREADS`) back to
+    the normal scheduler; returns how many. For what computes long without blocking where a
+    thread raised through rtkit would meet its run-time limit: a node's shutdown (the driver
+    writes its tick trace) and :func:`guard_realtime_time`'s handler."""
+    from ..device.servo import realtime_priority
+    n = 0
+    for tid, name in _thread_names().items():
+        if not name.startswith(SERVO_THREADS) and realtime_priority(tid) > 0:
+            _normal(tid)
+            n += 1
+    return n
+
+
 def guard_realtime_time() -> None:
     """Catch SIGXCPU in this process (call it from the main thread): a thread of it ran at
     real-time priority for rtkit's soft run-time limit without blocking. Every real-time thread
@@ -277,12 +291,7 @@ def guard_realtime_time() -> None:
     import resource
 
     def demote(signum, frame) -> None:
-        from ..device.servo import realtime_priority
-        n = 0
-        for tid, name in _thread_names().items():
-            if not name.startswith(SERVO_THREADS) and realtime_priority(tid) > 0:
-                _normal(tid)
-                n += 1
+        n = leave_realtime()
         ran = 'SIGXCPU'
         hard = resource.getrlimit(resource.RLIMIT_RTTIME)[1]
         if hard != resource.RLIM_INFINITY:  # the kernel raised the soft limit by 1 s: lower it

@@ -16,7 +16,8 @@ from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from .executor import make_executor, settle_and_start
 from .middleware import use_loop_transport
 from .parameters import ParameterError
-from .processes import HOLD_FOR_RECORDER, RECORDED_TOPICS, SESSION_CHECKED, guard_realtime_time
+from .processes import (HOLD_FOR_RECORDER, RECORDED_TOPICS, SESSION_CHECKED, guard_realtime_time,
+                        leave_realtime)
 from .sigint import SigintStop
 
 __all__ = ['LOOP_QOS', 'stamp_ns', 'set_stamp', 'interrupted', 'run_node', 'message_class',
@@ -115,6 +116,9 @@ def run_node(factory: Callable[[], Any], args=None) -> int:
     finally:
         stop.spinning = False  # a second Ctrl-C while closing: KeyboardInterrupt, as before
         try:
+            # closing computes (the driver writes an hour's tick trace: seconds of CPU); at
+            # rtkit's real-time priority its run-time limit would SIGKILL the node for it
+            leave_realtime()
             if executor is not None:
                 with contextlib.suppress(KeyboardInterrupt):  # a second Ctrl-C: still close
                     executor.shutdown(timeout_sec=1.0)
