@@ -55,7 +55,7 @@ def test_default_and_range():
 
 def test_priority_zero_changes_nothing():
     assert processes.set_graph_priority(0) == 'normal scheduler (graph priority 0)'
-    processes.clear_graph_priority(0)
+    assert processes.leave_realtime() == 0  # nothing real-time to leave
     assert os.sched_getscheduler(0) == os.SCHED_OTHER
 
 
@@ -66,10 +66,12 @@ def test_every_thread_raised_but_one_already_above_then_cleared():
     the raised ones to the normal scheduler and leaves the servo thread alone."""
     out = _run(f'''
         import os, threading
-        from haptic_anfis.nodes.processes import set_graph_priority, clear_graph_priority
+        from haptic_anfis.device.servo import name_thread
+        from haptic_anfis.nodes.processes import set_graph_priority, leave_realtime
         ev, seen = threading.Event(), {{}}
         started = {{k: threading.Event() for k in ('servo', 'worker', 'late')}}
         def servo():
+            name_thread('servo-tick0')
             os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param({PRIO + 2}))
             seen['servo'] = threading.get_native_id()
             started['servo'].set()
@@ -89,7 +91,7 @@ def test_every_thread_raised_but_one_already_above_then_cleared():
         threading.Thread(target=late).start()
         started['late'].wait()
         print(pol(0), pol(seen['servo']), pol(seen['worker']), seen['late'])
-        clear_graph_priority({PRIO})
+        leave_realtime()
         print(pol(0), pol(seen['servo']), pol(seen['worker']))
         ev.set()
     ''').splitlines()

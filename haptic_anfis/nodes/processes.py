@@ -247,18 +247,6 @@ def _children(pid: int) -> list[int]:
     return out
 
 
-def clear_graph_priority(priority: int) -> None:
-    """Back to the normal scheduler for every thread of this process at a real-time priority
-    of at most ``priority`` (what :func:`set_graph_priority` set, from SCHED_FIFO or rtkit, and
-    the threads that inherited it); a thread above it (the servo's) is left alone."""
-    if priority <= 0:
-        return
-    from ..device.servo import realtime_priority
-    for tid in _threads():
-        if 0 < realtime_priority(tid) <= priority:
-            _normal(tid)
-
-
 def _normal(tid: int) -> None:
     from ..device.servo import to_normal_scheduler
     to_normal_scheduler(tid)
@@ -268,7 +256,8 @@ def leave_realtime() -> int:
     """Every real-time thread of this process but the servo's (:data:`SERVO_THREADS`) back to
     the normal scheduler; returns how many. For what computes long without blocking where a
     thread raised through rtkit would meet its run-time limit: a node's shutdown (the driver
-    writes its tick trace) and :func:`guard_realtime_time`'s handler."""
+    writes its tick trace), ``sim``'s stop (what :func:`set_graph_priority` raised) and
+    :func:`guard_realtime_time`'s handler."""
     from ..device.servo import realtime_priority
     n = 0
     for tid, name in _thread_names().items():

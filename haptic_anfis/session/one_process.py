@@ -167,9 +167,11 @@ class OneProcessSession:
     def stop(self) -> dict[str, int]:
         """The device to zero force and the graph down first, then the side nodes (the recorder
         has every message sent to it); the side nodes' exit codes."""
-        from ..nodes.processes import clear_graph_priority
+        from ..nodes.processes import leave_realtime
         try:
-            clear_graph_priority(self.spec.graph_priority)  # the rest runs as it was started
+            # the shutdown computes (an hour's tick trace written): at rtkit's real-time
+            # priority its run-time limit would SIGKILL the session for it
+            leave_realtime()
             if self.graph is not None:
                 self.graph.shutdown()
         finally:
