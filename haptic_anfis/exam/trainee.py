@@ -19,6 +19,7 @@ import yaml
 
 from ..device.palpation import PalpationScript
 from ..resources import config_dir, config_file
+from ..rows import RowLog
 from .detector import Detection, detect_lumps
 
 TRAINEE_DIR = config_dir('trainees')
@@ -94,7 +95,7 @@ class TraineeController:
         self.detector_kw = detector_kw or {}
         self._after: tuple[float, PalpationScript] | None = None
         self._lock = threading.Lock()
-        self._samples: list[tuple] = []
+        self._samples = RowLog(5)   # felt at up to 1 kHz for the whole search
         self.t_now = 0.0
         self.detections: list[Detection] | None = None
         self.done_at: float | None = None
@@ -152,7 +153,7 @@ class TraineeController:
 
     def felt_array(self) -> np.ndarray:
         """(n, 5): every felt sample's contact point x, y, z [m], depth [m], |F| [N]."""
-        return np.array(self._samples, float).reshape(-1, 5)
+        return self._samples.array()
 
     @property
     def search_over(self) -> bool:
@@ -162,7 +163,7 @@ class TraineeController:
         """After the search: find lumps in the felt forces and queue a mark at each (once)."""
         if self.detections is not None:
             return self.detections
-        s = np.array(self._samples, float).reshape(-1, 5)
+        s = self._samples.array()
         self.detections = detect_lumps(s[:, :3], s[:, 3], s[:, 4], **self.detector_kw) \
             if self.mark_spec is not None and len(s) else []
         t0 = self.t_now + 0.05
