@@ -12,11 +12,12 @@
 from __future__ import annotations
 
 import contextlib
+import signal
 import subprocess
 import sys
 from typing import Iterator
 
-__all__ = ['busy']
+__all__ = ['busy', 'paused']
 
 
 @contextlib.contextmanager
@@ -32,3 +33,17 @@ def busy(n: int, sessions: bool = False) -> Iterator[list[subprocess.Popen]]:
             p.terminate()
         for p in procs:
             p.wait()
+
+
+@contextlib.contextmanager
+def paused(procs: list[subprocess.Popen]) -> Iterator[None]:
+    """The processes of :func:`busy` stopped (SIGSTOP) for the block, continued after it: the
+    benchmark's own analysis between runs (an hour's trace: minutes of CPU) is not what they
+    load."""
+    for p in procs:
+        p.send_signal(signal.SIGSTOP)
+    try:
+        yield
+    finally:
+        for p in procs:
+            p.send_signal(signal.SIGCONT)

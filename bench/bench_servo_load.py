@@ -38,7 +38,7 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _busy import busy  # noqa: E402
+from _busy import busy, paused  # noqa: E402
 from _page import write_page  # noqa: E402
 
 CLI = [sys.executable, '-m', 'haptic_anfis.cli']
@@ -130,14 +130,16 @@ def browser_when_up(port: int, stop) -> 'threading.Thread':
 
 def run_one(kind: str, priority: int, duration: float, loop: str, d: Path,
             graph_priority: int = 0, view: bool = False, force_mode: str = '',
-            sim_args: tuple = (), settle: float = 0.0, launch_args: tuple = ()) -> dict:
+            sim_args: tuple = (), settle: float = 0.0, launch_args: tuple = (),
+            idle=contextlib.nullcontext) -> dict:
     """One run; the last JSON line of its output (or {'error': ...}). ``graph_priority`` > 0:
     the whole graph (every process and thread) runs SCHED_FIFO at it (``chrt -f``), the servo
     tick above it at ``priority``. ``view``: the browser view too (``--view``: the web_view
     node, and a headless chromium showing its page). ``settle`` > 0: the run lasts ``settle``
     seconds longer, and the figures the ticks carry are those of the last ``duration`` seconds
     (``haptic-anfis loop --from``), with the first seconds' lost periods and longest gap as
-    ``settle_lost`` / ``settle_gap_ms``. ``launch_args``: more options for ``launch``."""
+    ``settle_lost`` / ``settle_gap_ms``. ``launch_args``: more options for ``launch``. ``idle``:
+    a context manager that holds the load still while the trace is read after the run."""
     pf = params_file(d, priority, loop, force_mode)
     bag = d / f'bag_{kind}_{priority}_{time.monotonic_ns()}'
     trace = d / f'trace_{bag.name}.npz'
@@ -177,7 +179,9 @@ def run_one(kind: str, priority: int, duration: float, loop: str, d: Path,
         return {'error': f'exit {r.returncode}: {(r.stdout + r.stderr)[-600:]}'}
     if settle > 0:
         try:
-            j = settled(j, trace, pf, settle, browser.started if browser is not None else None)
+            with idle():
+                j = settled(j, trace, pf, settle, browser.started if browser is not None
+                            else None)
         except (OSError, ValueError) as exc:   # no trace, too short: this row says so
             return {'error': f'--settle: {exc}'}
     trace.unlink(missing_ok=True)
@@ -353,12 +357,12 @@ def main() -> int:
             if suite is not None:
                 suite.ensure()
                 time.sleep(20.0 if suite.starts == 1 and not rows else 0.0)  # collecting tests
-            with busy(nbusy, a.busy_sessions):
+            with busy(nbusy, a.busy_sessions) as procs:
                 time.sleep(1.0)
                 load0 = os.getloadavg()[0]
                 rt = rt_threads()
                 j = run_one(kind, prio, a.duration, loop, d, gprio, a.view, a.force_mode,
-                            tuple(a.sim_args.split()), a.settle)
+                            tuple(a.sim_args.split()), a.settle, idle=lambda: paused(procs))
                 load = max(load0, os.getloadavg()[0])
             r = row(f'{kind} prio {prio}' + (f' graph {gprio}' if gprio else '') + f' ({loop})'
                     + (f' {a.sim_args}' if kind == 'sim' and a.sim_args else ''),
