@@ -279,6 +279,10 @@ def guard_realtime_time() -> None:
     anything not foreseen is caught here instead of killing the node mid-session."""
     import resource
 
+    # imported now, not in the handler: importing it (numpy with it) costs ~0.2 s of CPU, more
+    # than the 100 ms the handler has between rtkit's soft and hard limits
+    from ..device import servo  # noqa: F401
+
     def demote(signum, frame) -> None:
         n = leave_realtime()
         ran = 'SIGXCPU'
