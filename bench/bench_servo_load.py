@@ -104,16 +104,20 @@ def params_file(d: Path, priority: int, loop: str, force_mode: str = '') -> Path
 def browser_when_up(port: int, stop) -> 'threading.Thread':
     """A thread that waits until the page on ``port`` answers, then keeps a headless chromium
     on it (bench_view's, niced: it stands for the trainee's browser) until ``stop`` is set."""
-    import socket
     import threading
+    import urllib.request
 
     from bench_view import close_browser, open_browser
 
     def run() -> None:
         while not stop.is_set():
-            with socket.socket() as s:
-                if s.connect_ex(('127.0.0.1', port)) == 0:
+            # an HTTP request, as the browser's: a bare connect that closes unanswered leaves a
+            # websocket handshake traceback in the view's log
+            try:
+                with urllib.request.urlopen(f'http://127.0.0.1:{port}/', timeout=2.0):
                     break
+            except OSError:
+                pass
             time.sleep(0.5)
         else:
             return
