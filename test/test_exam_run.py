@@ -186,3 +186,24 @@ def test_marks_from_buttons_follow_the_drivers_clutch_rule(tmp_path):
     report, _ = session_from_bag(bag)
     assert len(report['marks']) == 1
     assert any('clutch' in n for n in report['notes'])
+
+
+@pytest.mark.parametrize('in_process', [True, False], ids=['examiner_in_process', 'own_process'])
+def test_an_exam_with_the_view_serves_the_debrief_after_it(tmp_path, capfd, in_process):
+    """exam run --view: the trainee's screen in a process of its own, then the debrief on the
+    same port. With --in-process the examiner is in the loop's process while a side process
+    (the view's) runs: the exam used to take it for the examiner's and failed at its start."""
+    from haptic_anfis.view.browser import free_port
+    pytest.importorskip('viser', reason='the view extra (pip install .[view]) is not installed')
+    port = free_port()
+    main(['exam', 'run', '--trainee', 'systematic', '--duration', '3', '--json', '--view',
+          '--view-port', str(port), '--view-hold', '0']
+         + (['--in-process'] if in_process else []))
+    out, err = capfd.readouterr()
+    # the report's JSON line, then the debrief's address
+    r = json.loads(next(ln for ln in reversed(out.splitlines()) if ln.startswith('{')))
+    assert r['examiner_process'] == ('loop' if in_process else 'own'), r
+    assert r['time_limit_reached'] and r['samples']['contact'] > 0, r
+    assert f'debrief at http://127.0.0.1:{port}' in out or f'debrief at http://localhost:{port}' \
+        in out, out[-2000:]
+    assert 'Traceback' not in err, err[-3000:]

@@ -116,3 +116,51 @@ def test_the_release_gate_holds_the_hand_after_the_first_force_command():
         assert g.spin_for(5.0, until=lambda: not g.driver.device.script.held)
     finally:
         g.shutdown()
+
+
+class _Subs:
+    """A driver node's graph view for hold_until_examiner: who subscribes to each topic."""
+
+    def __init__(self, names: list[str]) -> None:
+        self.names, self.release_gate = names, None
+
+    def get_subscriptions_info_by_topic(self, topic: str):
+        from types import SimpleNamespace
+        return [SimpleNamespace(node_name=n) for n in self.names]
+
+
+class _Graph:
+    """Spins ``until`` at most ``limit`` times (its timeout), counting the spins."""
+
+    def __init__(self, driver: _Subs, limit: int = 10_000) -> None:
+        self.driver, self.limit, self.spins = driver, limit, 0
+
+    def spin_for(self, seconds: float, until=None) -> bool:
+        for _ in range(self.limit):
+            if until():
+                return True
+            self.spins += 1
+        return False
+
+
+def test_the_exam_stops_waiting_for_an_examiner_whose_process_exited():
+    """exam run holds the trainee's hand until its examiner process has subscribed, up to the
+    session's ready timeout (minutes): an examiner that exits meanwhile ends the wait at once,
+    not at the timeout, and the hand stays held."""
+    from haptic_anfis.nodes.exam_side import hold_until_examiner
+    g = _Graph(_Subs(['recorder']))   # no examiner subscribed
+    dead: list[tuple[str, int]] = []
+
+    def gone() -> bool:
+        if g.spins == 5:
+            dead.append(('examiner', 1))
+        return bool(dead)
+    assert hold_until_examiner(g, 300.0, gone=gone) is False
+    assert g.spins == 5 and not g.driver.release_gate()
+    # subscribed: released, gone or not
+    g = _Graph(_Subs(['examiner']))
+    assert hold_until_examiner(g, 300.0, gone=lambda: False) is True
+    assert g.spins == 0 and g.driver.release_gate()
+    # never subscribed, never gone: the timeout (the fake graph's spin limit)
+    g = _Graph(_Subs([]), limit=50)
+    assert hold_until_examiner(g, 300.0) is False and g.spins == 50

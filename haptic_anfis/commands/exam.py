@@ -177,18 +177,25 @@ def _run_sim(args):
     limit = args.duration if args.duration is not None else 300.0
     driver = graph.driver
     side = session.side
-    if side is not None:
+    # the examiner in a process of its own; the side processes may also be only the view's
+    # (--in-process --view), with the examiner in this one
+    own = side_nodes is not None
+    if own:
         from ..nodes.exam_side import hold_until_examiner
         try:   # the examiner (another process) is up: hold the hand until it subscribed
-            if not hold_until_examiner(graph, 60.0, watch=examiner):
-                raise ValueError('exam: the examiner did not subscribe to the loop topics and '
-                                 'publish its heat map in 60 s' + ''.join(f'; {n} exited with code {c}'
-                                                  for n, c in side.dead()))
+            # as long as every other node may take to be ready: on a loaded machine its start
+            # (imports, mesh, kernels) took longer than a minute
+            if not hold_until_examiner(graph, spec.ready_timeout, watch=examiner,
+                                       gone=side.dead):
+                raise ValueError(
+                    'exam: the examiner did not subscribe to the loop topics and publish its heat '
+                    f'map in {spec.ready_timeout:g} s'
+                    + ''.join(f'; {n} exited with code {c}' for n, c in side.dead()))
         except BaseException:
             session.stop()
             raise
     shown = (f'{case.name if case else "default (scene " + (scene or "default") + ")"}, examiner '
-             + (f'in pid {side.pids["examiner"]}' if side else 'in this process'))
+             + (f'in pid {side.pids["examiner"]}' if own else 'in this process'))
     print(f'exam: trainee {args.trainee} ({controller.search.duration:.0f} s search), case '
           f'{"blind" if getattr(args, "blind", False) else shown}', flush=True)
     if controller.search.duration > limit:
@@ -202,7 +209,7 @@ def _run_sim(args):
         # The executor may run seconds behind the 1 kHz loop on a loaded machine: wait until the
         # examiner has every mark the driver published (a stop right after the last click lost it).
         graph.spin_for(MARK_DRAIN_S, lambda: _examiner_marks(examiner) >= driver.clutch.marks)
-        if side is None:
+        if not own:
             graph.spin_for(0.2)
         else:   # ... and every contact sample (it may run seconds behind: a 10 s deep queue)
             graph.spin_for(MARK_DRAIN_S, lambda: examiner.samples >= graph.contact.n_poses)
@@ -212,7 +219,7 @@ def _run_sim(args):
     finally:
         session.stop()   # the device to zero force; SIGINT: the examiner writes its report
     session.print_recorded()
-    if side is None:
+    if not own:
         report, exam_session = examiner.report(), examiner.session
         heat_maps = examiner.n_published
     else:
@@ -238,7 +245,7 @@ def _run_sim(args):
     report['heat_maps_published'] = heat_maps
     report['case'] = case.name if case else (scene or 'default')
     report['force_mode'] = args.force_mode
-    report['examiner_process'] = 'own' if side is not None else 'loop'
+    report['examiner_process'] = 'own' if own else 'loop'
     return report, exam_session, controller.felt_array()
 
 

@@ -65,12 +65,13 @@ def examiner_arguments(scene: str, exam_config: str, case: str | None, report_di
 
 
 def hold_until_examiner(graph, timeout: float, examiner: str = 'examiner',
-                        watch: CoverageWatch | None = None) -> bool:
+                        watch: CoverageWatch | None = None, gone=None) -> bool:
     """Hold the simulated hand of ``graph`` until the node ``examiner`` (another process)
     subscribes to every topic it scores and — with ``watch`` — has published its first heat map
     (its executor spins and its first fold is done: a subscribed examiner still starting up
     lost the first seconds of a short exam), so the session is scored from its first move;
-    spins the graph meanwhile. False if that did not happen within ``timeout`` s."""
+    spins the graph meanwhile. False if that did not happen within ``timeout`` s, or as soon
+    as ``gone()`` is true (its process exited)."""
     import threading
 
     from .side_nodes import recorder_matched
@@ -82,4 +83,5 @@ def hold_until_examiner(graph, timeout: float, examiner: str = 'examiner',
                 and (watch is None or watch.times):
             matched.set()
         return matched.is_set()
-    return graph.spin_for(timeout, until=check)
+    graph.spin_for(timeout, until=lambda: check() or bool(gone is not None and gone()))
+    return matched.is_set()
