@@ -113,7 +113,7 @@ def test_launch_respawns_killed_nodes_and_the_bag_is_complete(tmp_path):
     from haptic_anfis.bag import read_messages
     bag, out = tmp_path / 'bag', tmp_path / 'launch.out'
     p = subprocess.Popen([sys.executable, '-m', 'haptic_anfis.cli', 'launch', '--nodes',
-                          'falcon_driver,contact_detector,force_server', '--duration', '60',
+                          'falcon_driver,contact_detector,force_server', '--duration', '300',
                           '--domain-id', str(_domain + 1), '--localhost', '--record', str(bag),
                           '--log-dir', str(tmp_path / 'logs')], cwd=ROOT, env=_env(),
                          stdout=out.open('w'), stderr=subprocess.STDOUT)
@@ -128,9 +128,11 @@ def test_launch_respawns_killed_nodes_and_the_bag_is_complete(tmp_path):
             kills[node] = time.time()
             os.kill(pid, signal.SIGKILL)
             _wait_line(out, rf'restarted, .*node {node}', 60)
-            # allow the restart + discovery (>= 10 s) before the next kill
+            # allow the restart + discovery (>= 10 s) before the next kill, and force back
             time.sleep(12.0)
-        assert p.wait(300) == 0, out.read_text()
+        # Ctrl-C, not the end of --duration: the bag must be as complete (and the test shorter)
+        p.send_signal(signal.SIGINT)
+        assert p.wait(120) == 0, out.read_text()
     finally:
         if p.poll() is None:
             p.send_signal(signal.SIGINT)
@@ -241,7 +243,7 @@ def test_killed_recorder_restarts_into_a_new_bag_with_the_events(tmp_path):
     from haptic_anfis.cli import main as cli
     bag, out = tmp_path / 'bag', tmp_path / 'launch.out'
     p = subprocess.Popen([sys.executable, '-m', 'haptic_anfis.cli', 'launch', '--nodes',
-                          'falcon_driver,contact_detector,force_server', '--duration', '40',
+                          'falcon_driver,contact_detector,force_server', '--duration', '300',
                           '--domain-id', str(_domain + 5), '--localhost', '--record', str(bag),
                           '--enclave-root', '/haptic_anfis',
                           '--log-dir', str(tmp_path / 'logs')], cwd=ROOT, env=_env(),
@@ -251,7 +253,10 @@ def test_killed_recorder_restarts_into_a_new_bag_with_the_events(tmp_path):
         pid = int(_wait_line(out, r'started recorder +pid (\d+)', 5).group(1))
         time.sleep(2.0)
         os.kill(pid, signal.SIGKILL)
-        assert p.wait(300) == 0, out.read_text()
+        _wait_line(out, r'restarted, .*node recorder', 60)
+        time.sleep(5.0)   # the new bag records the loop a while
+        p.send_signal(signal.SIGINT)   # Ctrl-C ends the session: both bags closed
+        assert p.wait(120) == 0, out.read_text()
     finally:
         if p.poll() is None:
             p.send_signal(signal.SIGINT)
