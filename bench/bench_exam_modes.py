@@ -13,11 +13,16 @@ asserted (timings under load).
    while the probe presses; per kill, the seconds until the launch restarted it and until force
    commands (``falcon/servo_cf``) came back.
 
-``--busy N`` runs the exams beside N processes spinning on the CPU (issue 32.5: the exam passes
-under the servo benchmark's load); ``--force-modes`` picks the modes, ``--page`` the page.
+``--busy N`` runs the exams beside N processes spinning on the CPU, ``--beside-tests`` beside
+the project's test suite (what ``make test`` runs, restarted when it ends), ``--view`` with the
+trainee's screen (``exam run --view``) and a headless chromium on it: issue 32.5, the exam passes
+under the servo benchmark's load. ``--servo-priorities 50,0`` runs each exam with the driver's
+servo at each priority (0: the normal scheduler, the graph's nodes too); ``--force-modes`` picks
+the modes, ``--page`` the page.
 
 Run: ``.venv/bin/python bench/bench_exam_modes.py [--runs N] [--kills N] [--busy N]
-[--force-modes local_model] [--page exam_modes]``
+[--beside-tests] [--view] [--servo-priorities 50,0] [--force-modes local_model]
+[--page exam_modes]``
 """
 from __future__ import annotations
 
@@ -25,16 +30,19 @@ import argparse
 import json
 import os
 import re
+import shutil
 import signal
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from _beside import TestSuite, browser_when_up  # noqa: E402
 from _busy import busy  # noqa: E402
 from _launch import stop_launch  # noqa: E402
 from _page import write_page  # noqa: E402
@@ -49,23 +57,45 @@ def env(domain: int) -> dict:
     return e
 
 
-def exam(mode: str, in_process: bool, domain: int) -> dict:
+def exam(mode: str, in_process: bool, domain: int, priority: int | None = None,
+         view: bool = False) -> dict:
+    """One ``exam run --trainee systematic --json``; ``priority``: the driver's servo_priority
+    (None: its default; 0 also puts the graph's nodes under the normal scheduler); ``view``:
+    with the trainee's screen and a headless chromium on it."""
     cmd = [sys.executable, '-m', 'haptic_anfis.cli', 'exam', 'run', '--json', '--force-mode', mode]
     if in_process:
         cmd.append('--in-process')
+    work = Path(tempfile.mkdtemp(prefix='bench-exam-'))
+    if priority is not None:
+        pf = work / 'driver.yaml'
+        pf.write_text(f'falcon_driver:\n  ros__parameters:\n    servo_priority: {priority}\n')
+        cmd += ['--params-file', str(pf)] + (['--graph-priority', '0'] if priority == 0 else [])
+    stop = threading.Event()
+    if view:
+        from haptic_anfis.view.browser import free_port
+        port = free_port()
+        cmd += ['--view', '--view-port', str(port), '--view-hold', '0']
+        browser = browser_when_up(port, stop)
     load0 = os.getloadavg()[0]
     t0 = time.monotonic()
-    p = subprocess.run(cmd, cwd=ROOT, env=env(domain), capture_output=True, text=True,
-                       timeout=900)
+    try:
+        p = subprocess.run(cmd, cwd=ROOT, env=env(domain), capture_output=True, text=True,
+                           timeout=900)
+    finally:
+        stop.set()
+        if view:
+            browser.join(timeout=60)
+        shutil.rmtree(work, ignore_errors=True)
     wall = time.monotonic() - t0
+    head = {'mode': mode, 'in_process': in_process, 'priority': priority, 'view': view,
+            'browser': view and browser.started is not None}
     try:
         r = json.loads(p.stdout.strip().splitlines()[-1])
     except (IndexError, ValueError):
-        return {'mode': mode, 'in_process': in_process, 'error': (p.stdout + p.stderr)[-400:],
-                'wall_s': wall, 'load': load0}
+        return {**head, 'error': (p.stdout + p.stderr)[-400:], 'wall_s': wall, 'load': load0}
     hz = r.get('heat_map_hz') or (r['heat_maps_published'] / r['duration_s']
                                   if r['duration_s'] else 0.0)
-    return {'mode': mode, 'in_process': in_process, 'deep': r['coverage_pct']['deep'],
+    return {**head, 'deep': r['coverage_pct']['deep'],
             'hits': r['hits'], 'misses': r['misses'], 'false': r['false_marks'],
             'verdict': r['verdict'], 'heat_hz': hz, 'lost': r.get('examiner_lost_contacts'),
             'max_depth_mm': r['max_depth_mm'], 'contact_samples': r['samples']['contact'],
@@ -153,6 +183,14 @@ def main() -> None:
     ap.add_argument('--skip-exams', action='store_true')
     ap.add_argument('--busy', type=int, default=0,
                     help='processes spinning on the CPU beside every exam (default 0)')
+    ap.add_argument('--beside-tests', action='store_true',
+                    help="the project's test suite (python -m pytest test) running beside "
+                         'every exam')
+    ap.add_argument('--view', action='store_true',
+                    help="the trainee's screen too: exam run --view and a headless chromium on it")
+    ap.add_argument('--servo-priorities', default='',
+                    help="comma-separated servo_priority values to run each exam with (0: the "
+                         "normal scheduler, the graph's too; default: the driver's default)")
     ap.add_argument('--force-modes', default='zoh,local_model',
                     help='comma-separated force modes to run (default zoh,local_model)')
     ap.add_argument('--page', default='exam_modes',
@@ -160,26 +198,48 @@ def main() -> None:
     a = ap.parse_args()
     modes = [m for m in MODES if m[0] in a.force_modes.split(',')]
     domain = 150 + os.getpid() % 40
+    prios = [int(x) for x in a.servo_priorities.split(',')] if a.servo_priorities else [None]
+    if a.view:
+        from haptic_anfis.view.browser import chromium
+        if chromium() is None:   # a row "with the view" measured without a browser: false
+            raise SystemExit('bench_exam_modes: --view: no chromium on this machine (Debian: '
+                             'apt-get install chromium, as .ci/run does); nothing measured')
     rows = []
-    if not a.skip_exams:
-        for _ in range(a.runs):
-            for mode, inproc in modes:
-                with busy(a.busy):
-                    r = exam(mode, inproc, domain)
-                rows.append(r)
-                print(json.dumps(r), flush=True)
+    suite = TestSuite() if a.beside_tests else None
+    try:
+        for _ in range(0 if a.skip_exams else a.runs):
+            for prio in prios:
+                for mode, inproc in modes:
+                    if suite is not None:
+                        suite.ensure()
+                        time.sleep(20.0 if suite.starts == 1 and not rows else 0.0)  # collecting
+                    with busy(a.busy):
+                        r = exam(mode, inproc, domain, prio, a.view)
+                    rows.append(r)
+                    print(json.dumps(r), flush=True)
+    finally:
+        if suite is not None:
+            suite.stop()
     kills = respawn(a.kills, domain) if a.kills else []
     lines = ['`exam run --trainee systematic` (default case) per force mode and examiner process; '
              '"heat map" = its rate [Hz] (the examiner promises 5 Hz); "lost" = contact samples '
              'published that the side examiner\'s report does not hold; load = 1-minute load '
              'average at the start'
              + (f'; {a.busy} processes spinning on the CPU beside every exam' if a.busy else '')
-             + '.', '',
-             '| force mode | examiner | deep coverage % | hits / misses / false | verdict | '
+             + ('; the test suite (`python -m pytest test`) running beside every exam'
+                if a.beside_tests else '')
+             + ("; the trainee's screen (`exam run --view`) with a headless chromium on it "
+                '(software WebGL, a session of its own)' if a.view else '')
+             + '; servo: the driver\'s servo_priority (0: the normal scheduler for the servo and '
+             'the graph; default: its default, real-time where allowed).', '',
+             '| force mode | examiner | servo | deep coverage % | hits / misses / false | verdict | '
              'heat map [Hz] | lost | max depth [mm] | contact samples | wall [s] | load |',
-             '|---|---|---|---|---|---|---|---|---|---|---|']
+             '|---|---|---|---|---|---|---|---|---|---|---|---|']
     for r in rows:
         where = 'loop process' if r['in_process'] else 'own process'
+        where += f" | {'default' if r['priority'] is None else r['priority']}"
+        if r['view'] and not r['browser']:
+            where += ' (no browser: the page never answered)'
         if 'error' in r:
             lines.append(f"| {r['mode']} | {where} | failed: {r['error'][-120:]!r} | | | | | | | "
                          f"{r['wall_s']:.0f} | {r['load']:.1f} |")
@@ -204,6 +264,8 @@ def main() -> None:
     print(table)
     write_page(a.page, 'Exam in each force mode and process layout'
                + (f', beside {a.busy} busy processes' if a.busy else '')
+               + (', beside the test suite' if a.beside_tests else '')
+               + (', with the view' if a.view else '')
                + ('; force after a respawn' if kills else ''),
                table, command=('.venv/bin/python bench/bench_exam_modes.py '
                                + ' '.join(sys.argv[1:])).strip())

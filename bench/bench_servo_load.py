@@ -38,6 +38,7 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _beside import TestSuite, browser_when_up  # noqa: E402
 from _busy import busy, paused  # noqa: E402
 from _page import write_page  # noqa: E402
 
@@ -48,33 +49,6 @@ COLS = ('config', 'busy', 'load', 'rt_others', 'rate_hz', 'periods_lost', 'max_g
         'graph')
 #: with --settle: the first seconds' own columns (the browser opening its page)
 SETTLE_COLS = ('settle_lost', 'settle_gap_ms', 'browser_s')
-
-
-class TestSuite:
-    """The project's test suite running beside the runs (``--beside-tests``): restarted when it
-    ends, so every run has it beside it; its output is discarded."""
-
-    def __init__(self) -> None:
-        self.proc: subprocess.Popen | None = None
-        self.starts = 0
-
-    def ensure(self) -> None:
-        if self.proc is None or self.proc.poll() is not None:
-            self.proc = subprocess.Popen(
-                [sys.executable, '-m', 'pytest', 'test', '-q', '-p', 'no:cacheprovider'],
-                cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-                env=dict(os.environ, PYTHONPATH=str(ROOT)), start_new_session=True)
-            self.starts += 1
-
-    def stop(self) -> None:
-        if self.proc is not None and self.proc.poll() is None:
-            import signal
-            os.killpg(self.proc.pid, signal.SIGTERM)
-            try:
-                self.proc.wait(30)
-            except subprocess.TimeoutExpired:
-                os.killpg(self.proc.pid, signal.SIGKILL)
-                self.proc.wait()
 
 
 def rt_threads() -> int:
@@ -99,37 +73,6 @@ def params_file(d: Path, priority: int, loop: str, force_mode: str = '') -> Path
                  '    trace_seconds: 0.0\n'  # every tick of the run: the figures cover it all
                  + (f'    force_mode: {force_mode}\n' if force_mode else ''))
     return f
-
-
-def browser_when_up(port: int, stop) -> 'threading.Thread':
-    """A thread that waits until the page on ``port`` answers, then keeps a headless chromium
-    on it (bench_view's, niced: it stands for the trainee's browser) until ``stop`` is set."""
-    import threading
-    import urllib.request
-
-    from bench_view import close_browser, open_browser
-
-    def run() -> None:
-        while not stop.is_set():
-            # an HTTP request, as the browser's: a bare connect that closes unanswered leaves a
-            # websocket handshake traceback in the view's log
-            try:
-                with urllib.request.urlopen(f'http://127.0.0.1:{port}/', timeout=2.0):
-                    break
-            except OSError:
-                pass
-            time.sleep(0.5)
-        else:
-            return
-        t.started = time.monotonic()
-        b = open_browser(f'http://127.0.0.1:{port}/')
-        stop.wait()
-        close_browser(b)
-
-    t = threading.Thread(target=run, daemon=True)
-    t.started = None   # when chromium was started (time.monotonic(): the trace's clock)
-    t.start()
-    return t
 
 
 def run_one(kind: str, priority: int, duration: float, loop: str, d: Path,
