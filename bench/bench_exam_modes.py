@@ -89,10 +89,10 @@ def exam(mode: str, in_process: bool, domain: int, priority: int | None = None,
     wall = time.monotonic() - t0
     head = {'mode': mode, 'in_process': in_process, 'priority': priority, 'view': view,
             'browser': view and browser.started is not None}
-    try:
-        r = json.loads(p.stdout.strip().splitlines()[-1])
-    except (IndexError, ValueError):
-        return {**head, 'error': (p.stdout + p.stderr)[-400:], 'wall_s': wall, 'load': load0}
+    try:   # the report's line (with --view the debrief's address follows it)
+        r = json.loads(next(ln for ln in reversed(p.stdout.splitlines()) if ln.startswith('{')))
+    except (StopIteration, ValueError):
+        return {**head, 'error': (p.stdout + p.stderr)[-1500:], 'wall_s': wall, 'load': load0}
     hz = r.get('heat_map_hz') or (r['heat_maps_published'] / r['duration_s']
                                   if r['duration_s'] else 0.0)
     return {**head, 'deep': r['coverage_pct']['deep'],

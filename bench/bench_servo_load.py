@@ -78,7 +78,7 @@ def params_file(d: Path, priority: int, loop: str, force_mode: str = '') -> Path
 def run_one(kind: str, priority: int, duration: float, loop: str, d: Path,
             graph_priority: int = 0, view: bool = False, force_mode: str = '',
             sim_args: tuple = (), settle: float = 0.0, launch_args: tuple = (),
-            idle=contextlib.nullcontext) -> dict:
+            idle=contextlib.nullcontext, keep: bool = False) -> dict:
     """One run; the last JSON line of its output (or {'error': ...}). ``graph_priority`` > 0:
     the whole graph (every process and thread) runs SCHED_FIFO at it (``chrt -f``), the servo
     tick above it at ``priority``. ``view``: the browser view too (``--view``: the web_view
@@ -86,7 +86,8 @@ def run_one(kind: str, priority: int, duration: float, loop: str, d: Path,
     seconds longer, and the figures the ticks carry are those of the last ``duration`` seconds
     (``haptic-anfis loop --from``), with the first seconds' lost periods and longest gap as
     ``settle_lost`` / ``settle_gap_ms``. ``launch_args``: more options for ``launch``. ``idle``:
-    a context manager that holds the load still while the trace is read after the run."""
+    a context manager that holds the load still while the trace is read after the run.
+    ``keep``: leave the trace in ``d``, with the session's output."""
     pf = params_file(d, priority, loop, force_mode)
     bag = d / f'bag_{kind}_{priority}_{time.monotonic_ns()}'
     trace = d / f'trace_{bag.name}.npz'
@@ -131,7 +132,10 @@ def run_one(kind: str, priority: int, duration: float, loop: str, d: Path,
                             else None)
         except (OSError, ValueError) as exc:   # no trace, too short: this row says so
             return {'error': f'--settle: {exc}'}
-    trace.unlink(missing_ok=True)
+    if keep:   # the session's own output beside its trace, bag and logs
+        (d / f'{bag.name}.out').write_text(r.stdout + r.stderr)
+    else:
+        trace.unlink(missing_ok=True)
     return j
 
 
@@ -275,6 +279,10 @@ def main() -> int:
                          'from the last --duration seconds: the view running, not a browser '
                          'opening its page; the first S seconds get columns of their own '
                          '(settle_lost, settle_gap_ms). Default 0: the whole run')
+    ap.add_argument('--keep', metavar='DIR',
+                    help="keep each run's tick trace, bag and node logs in DIR (default: a "
+                         'temporary directory, deleted at the end): what an hour is read from '
+                         'afterwards')
     ap.add_argument('--no-page', action='store_true', help='print only')
     ap.add_argument('--page', default='servo_load',
                     help='page name: docs/measurements/<page>.md (default servo_load)')
@@ -292,7 +300,10 @@ def main() -> int:
     print(a.account, flush=True)
     print(' '.join(f'{c:>12}' for c in cols), flush=True)
     suite = TestSuite() if a.beside_tests else None
-    with tempfile.TemporaryDirectory(prefix='bench-servo-') as td, \
+    if a.keep:
+        Path(a.keep).mkdir(parents=True, exist_ok=True)
+    with (contextlib.nullcontext(a.keep) if a.keep
+          else tempfile.TemporaryDirectory(prefix='bench-servo-')) as td, \
             contextlib.ExitStack() as stack:
         if suite is not None:
             stack.callback(suite.stop)
@@ -309,7 +320,8 @@ def main() -> int:
                 load0 = os.getloadavg()[0]
                 rt = rt_threads()
                 j = run_one(kind, prio, a.duration, loop, d, gprio, a.view, a.force_mode,
-                            tuple(a.sim_args.split()), a.settle, idle=lambda: paused(procs))
+                            tuple(a.sim_args.split()), a.settle, idle=lambda: paused(procs),
+                            keep=bool(a.keep))
                 load = max(load0, os.getloadavg()[0])
             r = row(f'{kind} prio {prio}' + (f' graph {gprio}' if gprio else '') + f' ({loop})'
                     + (f' {a.sim_args}' if kind == 'sim' and a.sim_args else ''),
