@@ -207,3 +207,18 @@ def test_an_exam_with_the_view_serves_the_debrief_after_it(tmp_path, capfd, in_p
     assert f'debrief at http://127.0.0.1:{port}' in out or f'debrief at http://localhost:{port}' \
         in out, out[-2000:]
     assert 'Traceback' not in err, err[-3000:]
+
+
+def test_exam_run_from_a_command_line_runs_in_a_session_of_its_own():
+    """As sim: the loop's process gets a CPU share of its own, not its terminal's."""
+    import os
+    import subprocess
+    import sys
+
+    from haptic_anfis.nodes.processes import OWN_SESSION
+    env = {k: v for k, v in os.environ.items() if k != OWN_SESSION}
+    p = subprocess.run([sys.executable, '-m', 'haptic_anfis.cli', 'exam', 'run', '--trainee',
+                        'systematic', '--duration', '2', '--json'], env=env, cwd=ROOT,
+                       capture_output=True, text=True, timeout=300)
+    r = last_json(p.stdout)
+    assert r['own_session'] is True and r['time_limit_reached'], (p.stdout + p.stderr)[-2000:]
