@@ -191,12 +191,17 @@ def main() -> None:
     ap.add_argument('--servo-priorities', default='',
                     help="comma-separated servo_priority values to run each exam with (0: the "
                          "normal scheduler, the graph's too; default: the driver's default)")
+    ap.add_argument('--examiner', default='loop,own',
+                    help="comma-separated: where the examiner runs, the loop's process (loop, "
+                         '--in-process) or its own (own, the default of exam run); default both')
     ap.add_argument('--force-modes', default='zoh,local_model',
                     help='comma-separated force modes to run (default zoh,local_model)')
     ap.add_argument('--page', default='exam_modes',
                     help='page name: docs/measurements/<page>.md (default exam_modes)')
     a = ap.parse_args()
-    modes = [m for m in MODES if m[0] in a.force_modes.split(',')]
+    where = {'loop': True, 'own': False}
+    modes = [m for m in MODES if m[0] in a.force_modes.split(',')
+             and m[1] in {where[w] for w in a.examiner.split(',')}]
     domain = 150 + os.getpid() % 40
     prios = [int(x) for x in a.servo_priorities.split(',')] if a.servo_priorities else [None]
     if a.view:
