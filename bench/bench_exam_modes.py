@@ -199,9 +199,9 @@ def main() -> None:
     ap.add_argument('--page', default='exam_modes',
                     help='page name: docs/measurements/<page>.md (default exam_modes)')
     a = ap.parse_args()
-    where = {'loop': True, 'own': False}
+    layouts = {'loop': True, 'own': False}
     modes = [m for m in MODES if m[0] in a.force_modes.split(',')
-             and m[1] in {where[w] for w in a.examiner.split(',')}]
+             and m[1] in {layouts[w] for w in a.examiner.split(',')}]
     domain = 150 + os.getpid() % 40
     prios = [int(x) for x in a.servo_priorities.split(',')] if a.servo_priorities else [None]
     if a.view:

@@ -192,33 +192,32 @@ def test_marks_from_buttons_follow_the_drivers_clutch_rule(tmp_path):
 def test_an_exam_with_the_view_serves_the_debrief_after_it(tmp_path, capfd, in_process):
     """exam run --view: the trainee's screen in a process of its own, then the debrief on the
     same port. With --in-process the examiner is in the loop's process while a side process
-    (the view's) runs: the exam used to take it for the examiner's and failed at its start."""
-    from haptic_anfis.view.browser import free_port
-    pytest.importorskip('viser', reason='the view extra (pip install .[view]) is not installed')
-    port = free_port()
-    main(['exam', 'run', '--trainee', 'systematic', '--duration', '3', '--json', '--view',
-          '--view-port', str(port), '--view-hold', '0']
-         + (['--in-process'] if in_process else []))
-    out, err = capfd.readouterr()
-    # the report's JSON line, then the debrief's address
-    r = json.loads(next(ln for ln in reversed(out.splitlines()) if ln.startswith('{')))
-    assert r['examiner_process'] == ('loop' if in_process else 'own'), r
-    assert r['time_limit_reached'] and r['samples']['contact'] > 0, r
-    assert f'debrief at http://127.0.0.1:{port}' in out or f'debrief at http://localhost:{port}' \
-        in out, out[-2000:]
-    assert 'Traceback' not in err, err[-3000:]
-
-
-def test_exam_run_from_a_command_line_runs_in_a_session_of_its_own():
-    """As sim: the loop's process gets a CPU share of its own, not its terminal's."""
+    (the view's) runs: the exam used to take it for the examiner's and failed at its start.
+    That one runs from a real command line, which (as sim) re-runs the loop's process in a
+    session of its own: a CPU share of its own, not its terminal's."""
     import os
     import subprocess
     import sys
 
     from haptic_anfis.nodes.processes import OWN_SESSION
-    env = {k: v for k, v in os.environ.items() if k != OWN_SESSION}
-    p = subprocess.run([sys.executable, '-m', 'haptic_anfis.cli', 'exam', 'run', '--trainee',
-                        'systematic', '--duration', '2', '--json'], env=env, cwd=ROOT,
-                       capture_output=True, text=True, timeout=300)
-    r = last_json(p.stdout)
-    assert r['own_session'] is True and r['time_limit_reached'], (p.stdout + p.stderr)[-2000:]
+    from haptic_anfis.view.browser import free_port
+    pytest.importorskip('viser', reason='the view extra (pip install .[view]) is not installed')
+    port = free_port()
+    argv = ['exam', 'run', '--trainee', 'systematic', '--duration', '3', '--json', '--view',
+            '--view-port', str(port), '--view-hold', '0'] + (['--in-process'] if in_process else [])
+    if in_process:
+        env = {k: v for k, v in os.environ.items() if k != OWN_SESSION}
+        p = subprocess.run([sys.executable, '-m', 'haptic_anfis.cli', *argv], env=env, cwd=ROOT,
+                           capture_output=True, text=True, timeout=300)
+        out, err = p.stdout, p.stderr
+    else:
+        main(argv)
+        out, err = capfd.readouterr()
+    # the report's JSON line, then the debrief's address
+    r = json.loads(next(ln for ln in reversed(out.splitlines()) if ln.startswith('{')))
+    assert r['examiner_process'] == ('loop' if in_process else 'own'), r
+    assert r['own_session'] or not in_process, r
+    assert r['time_limit_reached'] and r['samples']['contact'] > 0, r
+    assert f'debrief at http://127.0.0.1:{port}' in out or f'debrief at http://localhost:{port}' \
+        in out, out[-2000:]
+    assert 'Traceback' not in err, err[-3000:]

@@ -72,14 +72,12 @@ def resolve_exam_case(case: str | None, need: tuple[str, ...] = ('model_path', '
 
 
 def run(args: argparse.Namespace) -> int:
-    if args.exam_command == 'run' and getattr(args, '_program', False):
+    if args.exam_command == 'run':
         # the loop's process in a session of its own, as sim's (a fair CPU share where the
         # kernel groups by session: beside 8 busy processes of the terminal's session and the
         # browser, the exam's start took minutes)
-        import sys
-
-        from ..nodes.processes import rerun_in_own_session
-        code = rerun_in_own_session(sys.argv[1:])
+        from ..nodes.processes import rerun_command_in_own_session
+        code = rerun_command_in_own_session(args)
         if code is not None:
             return code
     felt = None

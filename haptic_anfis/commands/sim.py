@@ -33,13 +33,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    if getattr(args, '_program', False):  # the graph in a session of its own (a fair CPU share)
-        import sys
-
-        from ..nodes.processes import rerun_in_own_session
-        code = rerun_in_own_session(sys.argv[1:])
-        if code is not None:
-            return code
+    from ..nodes.processes import rerun_command_in_own_session
+    code = rerun_command_in_own_session(args)  # the graph in a session of its own (fair CPU)
+    if code is not None:
+        return code
     from ..nodes.side_nodes import SideNodeError
     from ..session import OneProcessSession, spec_from_args
     from ..session.spec import ONE_PROCESS_NODES

@@ -525,6 +525,15 @@ def rerun_in_own_session(argv: Sequence[str]) -> int | None:
     return code if code >= 0 else 128 - code
 
 
+def rerun_command_in_own_session(args) -> int | None:
+    """:func:`rerun_in_own_session` of this program's command line when ``args`` were parsed
+    from it (``args._program``, set by :mod:`haptic_anfis.cli`); None when called from Python
+    (a test, a benchmark: those run where they are called) or in the re-run itself."""
+    if not getattr(args, '_program', False):
+        return None
+    return rerun_in_own_session(sys.argv[1:])
+
+
 #: The signals that stop a session: Ctrl-C, a kill, the terminal closed.
 STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
 
