@@ -39,7 +39,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _beside import TestSuite, browser_when_up  # noqa: E402
-from _busy import busy, paused  # noqa: E402
+from _busy import LoadSampler, busy, paused  # noqa: E402
 from _page import write_page  # noqa: E402
 
 CLI = [sys.executable, '-m', 'haptic_anfis.cli']
@@ -319,10 +319,12 @@ def main() -> int:
                 time.sleep(1.0)
                 load0 = os.getloadavg()[0]
                 rt = rt_threads()
-                j = run_one(kind, prio, a.duration, loop, d, gprio, a.view, a.force_mode,
-                            tuple(a.sim_args.split()), a.settle, idle=lambda: paused(procs),
-                            keep=bool(a.keep))
-                load = max(load0, os.getloadavg()[0])
+                with LoadSampler() as sampled:   # through the run, not after it
+                    j = run_one(kind, prio, a.duration, loop, d, gprio, a.view, a.force_mode,
+                                tuple(a.sim_args.split()), a.settle, idle=lambda: paused(procs),
+                                keep=bool(a.keep))
+                load = sampled.median if sampled.median is not None else \
+                    max(load0, os.getloadavg()[0])
             r = row(f'{kind} prio {prio}' + (f' graph {gprio}' if gprio else '') + f' ({loop})'
                     + (f' {a.sim_args}' if kind == 'sim' and a.sim_args else ''),
                     nbusy, load, j)
@@ -364,8 +366,9 @@ def _page(a, rows: list[dict], planned: int):
                 if a.beside_tests else '')
              + (', browser view running (web_view node and a headless chromium on its page)'
                 if a.view else '') + '; `busy`: processes spinning beside it on the '
-             f'machine\'s {os.cpu_count()} cores; `load`: the 1-minute load average (the machine '
-             'is shared: other users add to it); `rt_others`: user-space real-time threads of other '
+             f'machine\'s {os.cpu_count()} cores; `load`: the 1-minute load average, the median '
+             'of readings every 10 s through the run (the machine is shared: other users add to '
+             'it); `rt_others`: user-space real-time threads of other '
              'processes at the start of the run (other sessions\' servo threads: they run before '
              'any normal-priority thread, so the `prio 0` rows compete with them). `rate_hz`: servo ticks per second; '
              '`periods_lost`: 1 ms periods with no tick; `max_gap_ms`: the longest time between '

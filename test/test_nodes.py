@@ -230,8 +230,10 @@ def test_sim_command_prints_loop_statistics(capfd, tmp_path):
     # the window is the ticks from 1 s after the first (not a count that assumed 1 kHz in the
     # first second: a loaded machine's first second had 826 ticks)
     from haptic_anfis.device.trace import DISABLED, load_trace
-    rows, _ = load_trace(trace)
+    rows, meta = load_trace(trace)
     t = rows[rows[:, 7] != DISABLED, 0]
+    # ticks line up with a bag's (wall-clock) receive times
+    assert abs(meta['realtime_minus_monotonic_s'] - (time.time() - time.monotonic())) < 1.0
     assert 0 < window['ticks'] == int(np.sum(t >= t[0] + 1.0)) < len(t)
     assert main(['sim', '--duration', '1', '--trace', str(trace)]) == 1   # never overwritten
     assert '--trace' in capfd.readouterr().err

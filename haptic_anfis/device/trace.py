@@ -4,7 +4,9 @@ One row per tick: time [s] (the loop's monotonic clock), probe position (3,) [m]
 (3,) [N] in the frame the caller chooses, and the local-model status code of that tick
 (:data:`haptic_anfis.device.local_model.STATUS_NAMES`; -1 in zero-order-hold mode; :data:`DISABLED`
 while the safety layer is off: before start and at shutdown, when the device is told 0 N on
-purpose, so the force error leaves those ticks out). Rows go into
+purpose, so the force error leaves those ticks out). The driver's trace also stores
+``realtime_minus_monotonic_s``: add it to a tick's time for the wall-clock time a rosbag2 bag
+stamps messages with (to line a tick up with what the graph published then). Rows go into
 preallocated chunks (no allocation per tick in the servo thread); :meth:`TickTrace.arrays`
 concatenates them.
 """

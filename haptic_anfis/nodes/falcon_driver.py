@@ -539,7 +539,9 @@ class FalconDriver(HapticNode):
                    status_names=list(STATUS_NAMES), max_force=self.params['max_force'] /
                    m.force_scale, frame_id=self.frame_id,
                    ticks_dropped=self.servo.trace.dropped,  # the oldest, beyond the ring's bound
-                   period=1.0 / self.params['rate'])
+                   period=1.0 / self.params['rate'],
+                   # the ticks' monotonic times onto the wall clock a bag's receive times use
+                   realtime_minus_monotonic_s=time.time() - time.monotonic())
         self.get_logger().info(f'servo tick trace: {len(rows)} ticks -> {self.trace_path}'
                                + (f' (the oldest {self.servo.trace.dropped} dropped: bounded)'
                                   if self.servo.trace.dropped else ''))

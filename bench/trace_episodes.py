@@ -1,0 +1,142 @@
+"""Where a servo trace's bad moments came from: its longest expired-model runs and servo gaps,
+each lined up with what the graph's topics did then (issue 32).
+
+A run of ``bench_servo_load --keep DIR`` leaves, per run, the driver's tick trace
+(``trace_*.npz``) and the recorder's bag. For the ``--top`` longest episodes of each kind in the
+trace — runs of ticks rendered from an expired local model (older than ``model_hold_time``: the
+force is zero), and gaps between ticks longer than ``--gap-ms`` — this prints when it happened
+and, from the bag, for every recorded topic: the last message the recorder received before the
+episode and the first after it, and how old each was (receive time minus header stamp). A topic
+still flowing through an expired-model episode points at the node downstream of it; every topic
+silent at once, at the recorder too, points at the whole machine or the graph's process.
+
+Ticks are on the driver's monotonic clock, the bag on the wall clock: the trace's
+``realtime_minus_monotonic_s`` lines them up; a trace written before it existed is lined up by
+its ticks' positions against the pose messages, which carry each tick's wall-clock stamp.
+
+    .venv/bin/python bench/trace_episodes.py TRACE.npz [--bag BAG] [--top 10] [--gap-ms 10]
+
+Prints only (a diagnosis, not a benchmark: no page).
+"""
+from __future__ import annotations
+
+import argparse
+import struct
+import sys
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from haptic_anfis.bag.reader import read_messages  # noqa: E402
+from haptic_anfis.device.local_model import EXPIRED  # noqa: E402
+from haptic_anfis.device.trace import DISABLED, load_trace  # noqa: E402
+
+
+def runs(mask: np.ndarray) -> list[tuple[int, int]]:
+    """[start, end) index pairs of the runs of True in ``mask``."""
+    d = np.diff(np.concatenate(([0], mask.astype(np.int8), [0])))
+    return list(zip(np.flatnonzero(d == 1), np.flatnonzero(d == -1)))
+
+
+def episodes(rows: np.ndarray, gap_s: float, top: int) -> list[tuple[str, float, float]]:
+    """(kind, start [s, monotonic], duration [s]) of the ``top`` longest expired-model runs and
+    servo gaps longer than ``gap_s``, in time order."""
+    t, status = rows[:, 0], rows[:, 7]
+    found = []
+    for a, b in runs(status == EXPIRED):   # until the next tick with a usable model
+        found.append(('expired model', t[a], t[min(b, len(t) - 1)] - t[a]))
+    expired = sorted(found, key=lambda e: -e[2])[:top]
+    dt = np.diff(t)
+    idx = np.flatnonzero(dt > gap_s)
+    gaps = sorted((('servo gap', t[i], dt[i]) for i in idx), key=lambda e: -e[2])[:top]
+    return sorted(expired + gaps, key=lambda e: e[1])
+
+
+def clock_offset(rows: np.ndarray, meta: dict, bag: Path | None) -> float | None:
+    """Wall-clock minus monotonic [s]: the trace's own, or matched from the bag's poses."""
+    if 'realtime_minus_monotonic_s' in meta:
+        return float(meta['realtime_minus_monotonic_s'])
+    if bag is None:
+        return None
+    from scipy.spatial import cKDTree
+    # only ticks of a moving hand (> 1 um from both neighbours): a still hand's ticks lie
+    # within nanometres of each other, and a pose matched the wrong one by up to seconds
+    p = rows[:, 1:4]
+    step = np.linalg.norm(np.diff(p, axis=0), axis=1)
+    at = 1 + np.flatnonzero((step[:-1] > 1e-6) & (step[1:] > 1e-6))
+    tree = cKDTree(p[at])
+    offsets = []
+    for topic, _, _, msg in read_messages(bag, ['/falcon/measured_cp']):
+        q = msg.pose.position
+        d, i = tree.query((q.x, q.y, q.z))
+        if d < 1e-8:   # the same tick (its position, as published)
+            st = msg.header.stamp
+            offsets.append(st.sec + st.nanosec * 1e-9 - rows[at[i], 0])
+        if len(offsets) >= 2000:
+            break
+    return float(np.median(offsets)) if offsets else None
+
+
+def topic_times(bag: Path) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """topic -> (receive times [s, wall], header stamps [s, wall]). Every topic the recorder
+    takes starts with a std_msgs/Header: its stamp is read from the raw little-endian CDR (after
+    the 4-byte encapsulation header), not by deserialising an hour of messages."""
+    got: dict[str, tuple[list, list]] = {}
+    for topic, _, t_ns, raw in read_messages(bag, deserialize=False):
+        sec, nsec = struct.unpack_from('<iI', raw, 4)
+        r, s = got.setdefault(topic, ([], []))
+        r.append(t_ns)
+        s.append(sec * 1_000_000_000 + nsec)
+    return {k: (np.array(r) * 1e-9, np.array(s) * 1e-9) for k, (r, s) in got.items()}
+
+
+def around(times: tuple[np.ndarray, np.ndarray], start: float, end: float) -> str:
+    """The last message before ``start`` and the first after ``end`` [s, wall]: how long
+    before / after, and their age at the recorder."""
+    recv, stamp = times
+    i = np.searchsorted(recv, start)
+    j = np.searchsorted(recv, end, side='right')
+    ms = 1e3
+    before = (f'{(start - recv[i - 1]) * ms:7.1f} ms before (age '
+              f'{(recv[i - 1] - stamp[i - 1]) * ms:6.1f})' if i > 0 else '          none before')
+    after = (f'{(recv[j] - end) * ms:7.1f} ms after (age {(recv[j] - stamp[j]) * ms:6.1f})'
+             if j < len(recv) else 'none after')
+    return f'{before} | {j - i:5d} during | {after}'
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+    ap.add_argument('trace', type=Path, help="a falcon_driver tick trace (.npz)")
+    ap.add_argument('--bag', type=Path, help="the run's bag (default: bench_servo_load --keep's "
+                                             'name beside the trace, if there)')
+    ap.add_argument('--top', type=int, default=10, help='episodes of each kind (default 10)')
+    ap.add_argument('--gap-ms', type=float, default=10.0,
+                    help='servo gaps longer than this [ms] (default 10: the watchdog)')
+    a = ap.parse_args()
+    rows, meta = load_trace(a.trace)
+    rows = rows[rows[:, 7] != DISABLED]
+    bag = a.bag
+    if bag is None and a.trace.name.startswith('trace_'):
+        guess = a.trace.with_name(a.trace.name[len('trace_'):].removesuffix('.npz'))
+        bag = guess if guess.exists() else None
+    eps = episodes(rows, a.gap_ms * 1e-3, a.top)
+    print(f'{a.trace}: {len(rows)} ticks over {rows[-1, 0] - rows[0, 0]:.0f} s; '
+          f'{len(eps)} episodes' + (f'; bag {bag}' if bag else '; no bag'))
+    offset = clock_offset(rows, meta, bag) if bag else None
+    topics = topic_times(bag) if bag and offset is not None else {}
+    if bag and offset is None:
+        print('the bag could not be lined up with the trace (no matching pose)')
+    elif offset is not None:   # to find the episodes in the nodes' logs (wall-clock stamps)
+        print(f'first tick at {rows[0, 0] + offset:.3f} s wall clock (the logs\' stamps)')
+    for kind, t0, dur in eps:
+        print(f'\n{kind}: {dur * 1e3:.1f} ms at {t0 - rows[0, 0]:.3f} s after the first tick')
+        for topic, times in sorted(topics.items()):
+            print(f'  {topic:28s} {around(times, t0 + offset, t0 + dur + offset)}')
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

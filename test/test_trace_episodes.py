@@ -1,0 +1,85 @@
+"""bench/trace_episodes.py's arithmetic: the runs of expired-model ticks and the servo gaps of a
+trace, longest first then in time order, and what a topic did around one."""
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / 'bench'))
+from trace_episodes import around, episodes, runs  # noqa: E402
+
+from haptic_anfis.device.local_model import EXPIRED, FREE, FRESH  # noqa: E402
+
+
+def test_runs_of_true_at_the_edges_and_inside():
+    m = np.array([1, 1, 0, 0, 1, 0, 1, 1, 1], bool)
+    assert runs(m) == [(0, 2), (4, 5), (6, 9)]
+    assert runs(np.zeros(4, bool)) == []
+
+
+def trace(t, status):
+    rows = np.zeros((len(t), 8))
+    rows[:, 0], rows[:, 7] = t, status
+    return rows
+
+
+def test_the_longest_expired_runs_and_gaps_in_time_order():
+    t = np.arange(2000) * 1e-3
+    t[1000:] += 0.030                         # a 31 ms gap between ticks 999 and 1000
+    t[1500:] += 0.005                         # a 6 ms one: under the threshold
+    status = np.full(2000, FRESH)
+    status[100:150] = EXPIRED                 # 50 ms, until tick 150's fresh model
+    status[300:305] = EXPIRED                 # 5 ms
+    status[1990:] = EXPIRED                   # to the trace's end: 9 ms
+    status[500:510] = FREE
+    eps = episodes(trace(t, status), gap_s=0.010, top=2)
+    kinds = [(k, round(t0, 3), round(d, 3)) for k, t0, d in eps]
+    assert kinds == [('expired model', 0.1, 0.05), ('servo gap', 0.999, 0.031),
+                     ('expired model', 2.025, 0.009)], kinds
+
+
+def test_around_names_the_messages_either_side_and_counts_those_inside():
+    recv = np.array([1.0, 1.1, 1.5, 2.0])
+    stamp = recv - 0.002
+    s = around((recv, stamp), 1.2, 1.9)
+    assert '100.0 ms before (age    2.0)' in s and '    1 during' in s and '100.0 ms after' in s
+    assert 'none before' in around((recv, stamp), 0.5, 0.6)
+    assert 'none after' in around((recv, stamp), 2.5, 2.6)
+
+
+def test_the_bag_is_lined_up_by_a_moving_hands_ticks_not_a_still_one(tmp_path):
+    """Poses carry each tick's wall-clock stamp; a still hand's ticks lie nanometres apart, so
+    they are left out of the match (they lined a real trace up 8.9 s off)."""
+    from haptic_anfis.bag import typestore
+    from haptic_anfis.bag.writer import BagWriter
+    from trace_episodes import clock_offset
+    ts = typestore()
+    T, H = ts.types['builtin_interfaces/msg/Time'], ts.types['std_msgs/msg/Header']
+    P, Q = ts.types['geometry_msgs/msg/Point'], ts.types['geometry_msgs/msg/Quaternion']
+    Pose, PoseS = ts.types['geometry_msgs/msg/Pose'], ts.types['geometry_msgs/msg/PoseStamped']
+    rng = np.random.default_rng(3)
+    n, wall = 3000, 1_700_000_000.25            # wall clock - monotonic [s]
+    t = 50.0 + np.arange(n) * 1e-3
+    p = np.zeros((n, 3))
+    p[:, 0] = 0.01 + rng.normal(0, 1e-9, n)     # held still: nanometre noise
+    p[2000:, 1] = np.arange(1000) * 3e-5        # then a stroke at 30 mm/s
+    rows = trace(t, FRESH)
+    rows[:, 1:4] = p
+    # the bag starts with the hand held 3 s before the trace does (its rows begin at the
+    # first force command), at the same place
+    before = 47.0 + np.arange(3000) * 1e-3
+    pub = [(tb, (0.01 + rng.normal(0, 1e-9), 0.0, 0.0)) for tb in before[::2]] + \
+        [(t[i], p[i]) for i in range(0, n, 2)]  # the bridge publishes every other tick
+    with BagWriter(tmp_path / 'bag') as w:
+        w.add_topic('/falcon/measured_cp', PoseS.__msgtype__)
+        for tt, q in pub:
+            st = tt + wall
+            msg = PoseS(H(T(int(st), int(round(st % 1 * 1e9))), 'tissue'),
+                        # published through another mapping's rounding: nanometres off
+                        Pose(P(q[0] + 2e-9, q[1], q[2]), Q(0.0, 0.0, 0.0, 1.0)))
+            w.write('/falcon/measured_cp', ts.serialize_cdr(msg, PoseS.__msgtype__),
+                    int(st * 1e9) + 500_000)
+    assert abs(clock_offset(rows, {}, tmp_path / 'bag') - wall) < 1e-6
+    assert clock_offset(rows, {'realtime_minus_monotonic_s': 5.0}, tmp_path / 'bag') == 5.0
