@@ -31,6 +31,8 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from haptic_anfis.bag.reader import read_messages  # noqa: E402
+from haptic_anfis.bag.topics import (  # noqa: E402
+    JOINT_STATE_TYPE, JOY_TYPE, POINT_TYPE, POSE_TYPE, TWIST_TYPE, WRENCH_TYPE)
 from haptic_anfis.device.local_model import EXPIRED  # noqa: E402
 from haptic_anfis.device.trace import DISABLED, load_trace  # noqa: E402
 
@@ -80,17 +82,24 @@ def clock_offset(rows: np.ndarray, meta: dict, bag: Path | None) -> float | None
     return float(np.median(offsets)) if offsets else None
 
 
+#: the recorded types that start with a std_msgs/Header (the loop's; not the session's)
+HEADERED = {POSE_TYPE, TWIST_TYPE, WRENCH_TYPE, JOINT_STATE_TYPE, JOY_TYPE, POINT_TYPE}
+
+
 def topic_times(bag: Path) -> dict[str, tuple[np.ndarray, np.ndarray]]:
-    """topic -> (receive times [s, wall], header stamps [s, wall]). Every topic the recorder
-    takes starts with a std_msgs/Header: its stamp is read from the raw little-endian CDR (after
-    the 4-byte encapsulation header), not by deserialising an hour of messages."""
+    """topic -> (receive times [s, wall], header stamps [s, wall; NaN without a header]). The
+    stamp is read from the raw little-endian CDR (after the 4-byte encapsulation header), not by
+    deserialising an hour of messages."""
     got: dict[str, tuple[list, list]] = {}
-    for topic, _, t_ns, raw in read_messages(bag, deserialize=False):
-        sec, nsec = struct.unpack_from('<iI', raw, 4)
+    for topic, msgtype, t_ns, raw in read_messages(bag, deserialize=False):
         r, s = got.setdefault(topic, ([], []))
-        r.append(t_ns)
-        s.append(sec * 1_000_000_000 + nsec)
-    return {k: (np.array(r) * 1e-9, np.array(s) * 1e-9) for k, (r, s) in got.items()}
+        r.append(t_ns * 1e-9)
+        if msgtype in HEADERED:
+            sec, nsec = struct.unpack_from('<iI', raw, 4)
+            s.append(sec + nsec * 1e-9)
+        else:
+            s.append(float('nan'))
+    return {k: (np.array(r), np.array(s)) for k, (r, s) in got.items()}
 
 
 def around(times: tuple[np.ndarray, np.ndarray], start: float, end: float) -> str:
@@ -100,10 +109,12 @@ def around(times: tuple[np.ndarray, np.ndarray], start: float, end: float) -> st
     i = np.searchsorted(recv, start)
     j = np.searchsorted(recv, end, side='right')
     ms = 1e3
-    before = (f'{(start - recv[i - 1]) * ms:7.1f} ms before (age '
-              f'{(recv[i - 1] - stamp[i - 1]) * ms:6.1f})' if i > 0 else '          none before')
-    after = (f'{(recv[j] - end) * ms:7.1f} ms after (age {(recv[j] - stamp[j]) * ms:6.1f})'
-             if j < len(recv) else 'none after')
+
+    def age(k: int) -> str:
+        return '' if np.isnan(stamp[k]) else f' (age {(recv[k] - stamp[k]) * ms:6.1f})'
+    before = (f'{(start - recv[i - 1]) * ms:7.1f} ms before{age(i - 1)}' if i > 0
+              else '          none before')
+    after = f'{(recv[j] - end) * ms:7.1f} ms after{age(j)}' if j < len(recv) else 'none after'
     return f'{before} | {j - i:5d} during | {after}'
 
 

@@ -392,6 +392,29 @@ def test_stall_and_kill(mode):
     assert safety.stats.watchdog_trips_in_contact == 1
 
 
+@pytest.mark.parametrize('hold_time, taken', [(0.0, (True, False, False)),
+                                               (0.5, (True, True, False))])
+def test_a_late_model_is_taken_while_it_could_still_be_held(hold_time, taken):
+    """A model is refused at arrival only when it is older than it may be rendered: past
+    model_validity_time without a hold, past model_hold_time with one (the compiled tick's). A
+    model 0.2 s late is younger than the held one it would replace: refusing it let the held
+    model expire beside a busy machine (issue 32). Past the hold it is refused (issue 22)."""
+    mapping = WorkspaceMapping(1.0, (0.0, 0.0, 0.0), 1.0)
+    safety = SafetyLayer(10.0, 1000.0, 0.010, frame_id='tissue')
+    fi = ForceInput(safety, mapping, mode='local_model', validity_time=0.05, hold_time=hold_time)
+    n = np.array([1.0, 0, 0])
+    p = (-0.004, 0.0, 0.0)
+    lm = make((2.0, 0.0, 0.0), p, -500 * np.outer(n, n), (0, 0, 0), n, -n, 0.004)
+    got = []
+    for k, late in enumerate((0.02, 0.2, 0.6)):   # pose at t0, the model `late` s after it
+        t0 = 10.0 * (k + 1)
+        stamp = int(t0 * 1e9)
+        fi.on_pose(stamp, t0)
+        got.append(fi.model(lm, stamp, 'tissue', t0 + late) == 'ok')
+    assert tuple(got) == taken
+    assert fi.stamps.stats.rejected_stale == taken.count(False)
+
+
 def test_local_model_rides_out_latency_zoh_does_not():
     """A press at 0.1 m/s with every answer 15 ms late (past the 10 ms watchdog): the zero-order
     hold refuses every stale command and its force stays at zero; the local model follows the

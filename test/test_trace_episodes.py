@@ -83,3 +83,9 @@ def test_the_bag_is_lined_up_by_a_moving_hands_ticks_not_a_still_one(tmp_path):
                     int(st * 1e9) + 500_000)
     assert abs(clock_offset(rows, {}, tmp_path / 'bag') - wall) < 1e-6
     assert clock_offset(rows, {'realtime_minus_monotonic_s': 5.0}, tmp_path / 'bag') == 5.0
+
+
+def test_around_gives_no_age_for_a_topic_without_a_header():
+    recv = np.array([1.0, 2.0])
+    s = around((recv, np.full(2, np.nan)), 1.2, 1.9)
+    assert 'age' not in s and '200.0 ms before' in s and '100.0 ms after' in s

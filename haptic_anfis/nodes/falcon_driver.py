@@ -158,8 +158,9 @@ PARAMS = [
           'docs/servo_loop.md)', positive),
     Param('model_hold_time', 0.5, 'native, local_model: a model older than model_validity_time '
           'but not than this [s] is still rendered (the tissue does not move: an upstream stall '
-          'no longer drops the force to 0 N); then it expires and the watchdog ramps the force '
-          'to zero. <= model_validity_time: off', positive),
+          'no longer drops the force to 0 N), and one arriving that old is still taken; then it '
+          'expires and the watchdog ramps the force to zero. <= model_validity_time: off',
+          positive),
     Param('passivity_observer', False, 'native: run the passivity observer / controller '
           '(Hannaford & Ryu 2002) on the rendered port'),
     Param('servo_workers', 2, "native, native_process with the simulated Falcon: threads "
@@ -243,7 +244,10 @@ class FalconDriver(HapticNode):
         self.input = ForceInput(self.safety, self.mapping, p['force_mode'], p['max_stiffness'],
                                 p['model_validity_time'], p['model_validity_radius'],
                                 1.0 / p['rate'],
-                                clutch=None if self.native is not None else self.clutch)
+                                clutch=None if self.native is not None else self.clutch,
+                                # the compiled tick holds a model that old (the Python one not)
+                                hold_time=p['model_hold_time'] if self.native is not None
+                                else 0.0)
         if self.native is not None:
             self.input.renderer = self.native.renderer
         self.pub_pose = self.create_publisher(PoseStamped, ifc.TOPIC_POSE, LOOP_QOS)
