@@ -2,6 +2,7 @@
 against ``exam report --json``, the server's state, and bad input named in one line."""
 import json
 import socket
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -175,3 +176,29 @@ def test_debrief_lists_the_trainees_sessions_from_the_record(tmp_path, bag):
         assert str(db) in app.g_history_md.content
     finally:
         app.close()
+
+
+def test_a_hung_chromium_is_killed_and_another_capture_tried(tmp_path, monkeypatch):
+    """screenshot(): a chromium still running at its timeout (seen once in CI) counts as one
+    try, not as the test's or the shots' failure; all tries hung: one line saying so."""
+    import subprocess
+
+    from haptic_anfis.view import browser
+    calls = []
+
+    def fake_run(url, extra, budget_ms, size, timeout):
+        calls.append(budget_ms)
+        if len(calls) == 1:
+            raise subprocess.TimeoutExpired('chromium', timeout)
+        out = Path(extra[0].split('=', 1)[1])
+        out.write_bytes(b'png')
+        return subprocess.CompletedProcess([], 0, '', '')
+    monkeypatch.setattr(browser, '_run', fake_run)
+    assert browser.screenshot('http://x/', tmp_path / 'a.png').read_bytes() == b'png'
+    assert len(calls) == 2
+
+    def hang(*a):
+        raise subprocess.TimeoutExpired('chromium', 90)
+    monkeypatch.setattr(browser, '_run', hang)
+    with pytest.raises(RuntimeError, match='2 of them chromium hung past 90 s'):
+        browser.screenshot('http://x/', tmp_path / 'b.png', tries=2, timeout=90)
