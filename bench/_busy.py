@@ -14,6 +14,7 @@ from __future__ import annotations
 import contextlib
 import os
 import signal
+import statistics
 import subprocess
 import sys
 import threading
@@ -76,7 +77,4 @@ class LoadSampler:
     @property
     def median(self) -> float | None:
         """The samples' median (None before the first: a block shorter than ``every``)."""
-        if not self.samples:
-            return None
-        s = sorted(self.samples)
-        return (s[(len(s) - 1) // 2] + s[len(s) // 2]) / 2
+        return statistics.median(self.samples) if self.samples else None

@@ -33,14 +33,9 @@ sys.path.insert(0, str(ROOT))
 from haptic_anfis.bag.reader import read_messages  # noqa: E402
 from haptic_anfis.bag.topics import (  # noqa: E402
     JOINT_STATE_TYPE, JOY_TYPE, POINT_TYPE, POSE_TYPE, TWIST_TYPE, WRENCH_TYPE)
+from haptic_anfis.device.force_error import runs_of  # noqa: E402
 from haptic_anfis.device.local_model import EXPIRED  # noqa: E402
 from haptic_anfis.device.trace import DISABLED, load_trace  # noqa: E402
-
-
-def runs(mask: np.ndarray) -> list[tuple[int, int]]:
-    """[start, end) index pairs of the runs of True in ``mask``."""
-    d = np.diff(np.concatenate(([0], mask.astype(np.int8), [0])))
-    return list(zip(np.flatnonzero(d == 1), np.flatnonzero(d == -1)))
 
 
 def episodes(rows: np.ndarray, gap_s: float, top: int) -> list[tuple[str, float, float]]:
@@ -48,7 +43,7 @@ def episodes(rows: np.ndarray, gap_s: float, top: int) -> list[tuple[str, float,
     servo gaps longer than ``gap_s``, in time order."""
     t, status = rows[:, 0], rows[:, 7]
     found = []
-    for a, b in runs(status == EXPIRED):   # until the next tick with a usable model
+    for a, b in zip(*runs_of(status == EXPIRED)):   # until the next tick with a usable model
         found.append(('expired model', t[a], t[min(b, len(t) - 1)] - t[a]))
     expired = sorted(found, key=lambda e: -e[2])[:top]
     dt = np.diff(t)

@@ -8,15 +8,16 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / 'bench'))
-from trace_episodes import around, episodes, runs  # noqa: E402
+from trace_episodes import around, episodes  # noqa: E402
 
+from haptic_anfis.device.force_error import runs_of  # noqa: E402
 from haptic_anfis.device.local_model import EXPIRED, FREE, FRESH  # noqa: E402
 
 
 def test_runs_of_true_at_the_edges_and_inside():
     m = np.array([1, 1, 0, 0, 1, 0, 1, 1, 1], bool)
-    assert runs(m) == [(0, 2), (4, 5), (6, 9)]
-    assert runs(np.zeros(4, bool)) == []
+    assert [tuple(map(int, r)) for r in zip(*runs_of(m))] == [(0, 2), (4, 5), (6, 9)]
+    assert len(runs_of(np.zeros(4, bool))[0]) == 0
 
 
 def trace(t, status):

@@ -66,6 +66,12 @@ def force_error(applied: np.ndarray, ideal: np.ndarray, in_contact: np.ndarray,
             'force_rms_n': rms_f}
 
 
+def runs_of(mask) -> tuple[np.ndarray, np.ndarray]:
+    """(starts, ends) of the runs of True in the 1-D ``mask``: indices, ends exclusive."""
+    edges = np.diff(np.concatenate([[0], np.asarray(mask, dtype=np.int8), [0]]))
+    return np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
+
+
 def _clamped(ideal: np.ndarray, max_force: float) -> tuple[np.ndarray, np.ndarray]:
     """(ideal (n, 3) with magnitudes clamped to ``max_force`` [N], the clamped magnitudes (n,))."""
     n = np.linalg.norm(ideal, axis=1)
@@ -101,8 +107,8 @@ def error_by_phase(applied: np.ndarray, ideal: np.ndarray, in_contact: np.ndarra
                          f'{t.shape}')
     ideal, _ = _clamped(np.asarray(ideal, dtype=np.float64), max_force)
     e2 = np.sum((applied - ideal) ** 2, axis=1)
-    edges = np.diff(np.concatenate([[0], mask.astype(np.int8), [0]]))
-    starts, ends = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1) - 1  # inclusive
+    starts, ends = runs_of(mask)
+    ends = ends - 1  # inclusive
     phase = np.full(len(mask), -1)
     for a, b in zip(starts, ends):
         tt = t[a:b + 1]
@@ -150,8 +156,8 @@ def ripple_and_dropouts(times: np.ndarray, applied: np.ndarray, ideal: np.ndarra
     drop = mask & (n_app == 0.0) & (n_ideal > dropout_ideal)
     longest = 0.0
     if drop.any():
-        edges = np.diff(np.concatenate([[0], drop.astype(np.int8), [0]]))
-        for a, b in zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1) - 1):
+        starts, ends = runs_of(drop)
+        for a, b in zip(starts, ends - 1):
             longest = max(longest, float(t[b] - t[a]) + (float(np.median(np.diff(t)))
                                                          if len(t) > 1 else 0.0))
     out = {'zero_force_ticks': int(drop.sum()), 'longest_dropout_ms': 1e3 * longest}
