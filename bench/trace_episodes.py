@@ -9,12 +9,17 @@ and, from the bag, for every recorded topic: the last message the recorder recei
 episode and the first after it, and how old each was (receive time minus header stamp). A topic
 still flowing through an expired-model episode points at the node downstream of it; every topic
 silent at once, at the recorder too, points at the whole machine or the graph's process.
+``--longer-holds`` adds what each longer ``model_hold_time`` would have left of the expired runs:
+a run starts when the held model turns ``--hold`` seconds old and lasts until the next model, so
+under a hold of H its ticks younger than H would have rendered the held model (an upper bound:
+with a longer hold the driver also takes later models, which can end a run sooner).
 
 Ticks are on the driver's monotonic clock, the bag on the wall clock: the trace's
 ``realtime_minus_monotonic_s`` lines them up; a trace written before it existed is lined up by
 its ticks' positions against the pose messages, which carry each tick's wall-clock stamp.
 
     .venv/bin/python bench/trace_episodes.py TRACE.npz [--bag BAG] [--top 10] [--gap-ms 10]
+        [--hold 0.5 --longer-holds 0.75,1,1.5]
 
 Prints only (a diagnosis, not a benchmark: no page).
 """
@@ -50,6 +55,27 @@ def episodes(rows: np.ndarray, gap_s: float, top: int) -> list[tuple[str, float,
     idx = np.flatnonzero(dt > gap_s)
     gaps = sorted((('servo gap', t[i], dt[i]) for i in idx), key=lambda e: -e[2])[:top]
     return sorted(expired + gaps, key=lambda e: e[1])
+
+
+def longer_holds(rows: np.ndarray, hold: float,
+                 holds: list[float]) -> list[tuple[float, int, int, float]]:
+    """(H, runs, ticks, longest run [s]) of expired-model ticks left under a ``model_hold_time``
+    of each H in ``holds``, for a trace run with ``hold`` [s]: a tick ``s`` seconds into its run
+    rendered a model ``hold + s`` old (ticks of a run ending at the trace's end included)."""
+    t, status = rows[:, 0], rows[:, 7]
+    starts, ends = runs_of(status == EXPIRED)
+    out = []
+    for h in holds:
+        n_runs = n_ticks = 0
+        longest = 0.0
+        for a, b in zip(starts, ends):
+            left = t[a:b][hold + (t[a:b] - t[a]) >= h - 1e-9]   # its first tick: hold old
+            if len(left):
+                n_runs, n_ticks = n_runs + 1, n_ticks + len(left)
+                # until the next tick with a usable model, as ``episodes`` measures a run
+                longest = max(longest, float(t[min(b, len(t) - 1)] - left[0]))
+        out.append((h, n_runs, n_ticks, longest))
+    return out
 
 
 def clock_offset(rows: np.ndarray, meta: dict, bag: Path | None) -> float | None:
@@ -121,19 +147,26 @@ def main() -> int:
     ap.add_argument('--top', type=int, default=10, help='episodes of each kind (default 10)')
     ap.add_argument('--gap-ms', type=float, default=10.0,
                     help='servo gaps longer than this [ms] (default 10: the watchdog)')
+    ap.add_argument('--hold', type=float, default=0.5,
+                    help="the run's model_hold_time [s] (default 0.5: the driver's default)")
+    ap.add_argument('--longer-holds', default='',
+                    help='comma-separated model_hold_time values [s]: the expired-model ticks '
+                         'each would have left')
     a = ap.parse_args()
     rows, meta = load_trace(a.trace)
     rows = rows[rows[:, 7] != DISABLED]
     bag = a.bag
+    if bag is not None and not (bag / 'metadata.yaml').is_file():
+        ap.error(f'--bag {bag}: not a rosbag2 bag (expected a directory with metadata.yaml)')
     if bag is None and a.trace.name.startswith('trace_'):
         guess = a.trace.with_name(a.trace.name[len('trace_'):].removesuffix('.npz'))
         bag = guess if guess.exists() else None
     eps = episodes(rows, a.gap_ms * 1e-3, a.top)
     print(f'{a.trace}: {len(rows)} ticks over {rows[-1, 0] - rows[0, 0]:.0f} s; '
           f'{len(eps)} episodes' + (f'; bag {bag}' if bag else '; no bag'))
-    offset = clock_offset(rows, meta, bag) if bag else None
+    offset = clock_offset(rows, meta, bag) if bag and eps else None
     topics = topic_times(bag) if bag and offset is not None else {}
-    if bag and offset is None:
+    if bag and eps and offset is None:
         print('the bag could not be lined up with the trace (no matching pose)')
     elif offset is not None:   # to find the episodes in the nodes' logs (wall-clock stamps)
         print(f'first tick at {rows[0, 0] + offset:.3f} s wall clock (the logs\' stamps)')
@@ -141,6 +174,12 @@ def main() -> int:
         print(f'\n{kind}: {dur * 1e3:.1f} ms at {t0 - rows[0, 0]:.3f} s after the first tick')
         for topic, times in sorted(topics.items()):
             print(f'  {topic:28s} {around(times, t0 + offset, t0 + dur + offset)}')
+    if a.longer_holds:
+        print(f'\nexpired-model ticks left under a longer model_hold_time (run with {a.hold:g} s)')
+        holds = [a.hold] + [float(h) for h in a.longer_holds.split(',')]
+        for h, n_runs, n_ticks, longest in longer_holds(rows, a.hold, holds):
+            print(f'  {h:6.3g} s: {n_runs:4d} runs, {n_ticks:6d} ticks, '
+                  f'longest {longest * 1e3:7.1f} ms')
     return 0
 
 

@@ -90,3 +90,17 @@ def test_around_gives_no_age_for_a_topic_without_a_header():
     recv = np.array([1.0, 2.0])
     s = around((recv, np.full(2, np.nan)), 1.2, 1.9)
     assert 'age' not in s and '200.0 ms before' in s and '100.0 ms after' in s
+
+
+def test_a_longer_hold_leaves_the_ticks_past_it():
+    """A run of expired ticks begins when the held model is ``hold`` old: under a hold 30 ms
+    longer its first 30 ms would have rendered the model."""
+    from trace_episodes import longer_holds
+    t = np.arange(1000) * 1e-3
+    status = np.full(1000, FRESH)
+    status[100:150] = EXPIRED                 # 50 ms (the model 0.5-0.55 s old)
+    status[400:420] = EXPIRED                 # 20 ms
+    status[990:] = EXPIRED                    # to the end: 10 ticks
+    got = longer_holds(trace(t, status), 0.5, [0.5, 0.53, 0.6])
+    assert [(h, r, n) for h, r, n, _ in got] == [(0.5, 3, 80), (0.53, 1, 20), (0.6, 0, 0)], got
+    assert round(got[0][3], 3) == 0.05 and round(got[1][3], 3) == 0.02
