@@ -19,7 +19,7 @@ Ticks are on the driver's monotonic clock, the bag on the wall clock: the trace'
 its ticks' positions against the pose messages, which carry each tick's wall-clock stamp.
 
     .venv/bin/python bench/trace_episodes.py TRACE.npz [--bag BAG] [--top 10] [--gap-ms 10]
-        [--hold 0.5 --longer-holds 0.75,1,1.5]
+        [--longer-holds 0.75,1,1.5 [--hold S]]
 
 Prints only (a diagnosis, not a benchmark: no page).
 """
@@ -147,8 +147,9 @@ def main() -> int:
     ap.add_argument('--top', type=int, default=10, help='episodes of each kind (default 10)')
     ap.add_argument('--gap-ms', type=float, default=10.0,
                     help='servo gaps longer than this [ms] (default 10: the watchdog)')
-    ap.add_argument('--hold', type=float, default=0.5,
-                    help="the run's model_hold_time [s] (default 0.5: the driver's default)")
+    ap.add_argument('--hold', type=float,
+                    help="the run's model_hold_time [s] (default: the trace's own; 0.5, the "
+                         "driver's default then, for a trace from before it was written there)")
     ap.add_argument('--longer-holds', default='',
                     help='comma-separated model_hold_time values [s]: the expired-model ticks '
                          'each would have left')
@@ -175,9 +176,10 @@ def main() -> int:
         for topic, times in sorted(topics.items()):
             print(f'  {topic:28s} {around(times, t0 + offset, t0 + dur + offset)}')
     if a.longer_holds:
-        print(f'\nexpired-model ticks left under a longer model_hold_time (run with {a.hold:g} s)')
-        holds = [a.hold] + [float(h) for h in a.longer_holds.split(',')]
-        for h, n_runs, n_ticks, longest in longer_holds(rows, a.hold, holds):
+        hold = a.hold if a.hold is not None else meta.get('model_hold_time', 0.5)
+        print(f'\nexpired-model ticks left under a longer model_hold_time (run with {hold:g} s)')
+        holds = [hold] + [float(h) for h in a.longer_holds.split(',')]
+        for h, n_runs, n_ticks, longest in longer_holds(rows, hold, holds):
             print(f'  {h:6.3g} s: {n_runs:4d} runs, {n_ticks:6d} ticks, '
                   f'longest {longest * 1e3:7.1f} ms')
     return 0

@@ -156,11 +156,12 @@ PARAMS = [
           'the rendered stiffness, K <= 2 b / T with T the measured tick periods of the last '
           '~20 ms, energy-weighted (sum T^2 / sum T; Colgate & Schenkel 1997; '
           'docs/servo_loop.md)', positive),
-    Param('model_hold_time', 0.5, 'native, local_model: a model older than model_validity_time '
+    Param('model_hold_time', 1.0, 'native, local_model: a model older than model_validity_time '
           'but not than this [s] is still rendered (the tissue does not move: an upstream stall '
           'no longer drops the force to 0 N), and one arriving that old is still taken; then it '
-          'expires and the watchdog ramps the force to zero. <= model_validity_time: off',
-          positive),
+          'expires and the watchdog ramps the force to zero (also how long a paused driver or a '
+          'dead force server leaves the last model on the hand; docs/servo_loop.md). '
+          '<= model_validity_time: off', positive),
     Param('passivity_observer', False, 'native: run the passivity observer / controller '
           '(Hannaford & Ryu 2002) on the rendered port'),
     Param('servo_workers', 2, "native, native_process with the simulated Falcon: threads "
@@ -545,7 +546,8 @@ class FalconDriver(HapticNode):
                    ticks_dropped=self.servo.trace.dropped,  # the oldest, beyond the ring's bound
                    period=1.0 / self.params['rate'],
                    # the ticks' monotonic times onto the wall clock a bag's receive times use
-                   realtime_minus_monotonic_s=time.time() - time.monotonic())
+                   realtime_minus_monotonic_s=time.time() - time.monotonic(),
+                   model_hold_time=self.params['model_hold_time'])
         self.get_logger().info(f'servo tick trace: {len(rows)} ticks -> {self.trace_path}'
                                + (f' (the oldest {self.servo.trace.dropped} dropped: bounded)'
                                   if self.servo.trace.dropped else ''))
