@@ -48,32 +48,17 @@ def open_browser(url: str) -> subprocess.Popen:
     sets some of its processes' priorities itself; putting it in the benchmark's session made it
     starve the `sim` graph there instead, and lowering its session's weight
     (``/proc/<pid>/autogroup``) made a 1 kHz loop in another session lose periods (issue 32)."""
-    from haptic_anfis.view.browser import CHROMIUM_FLAGS, chromium
-    exe = chromium()
-    if exe is None:   # a row "with the browser" measured without one would be a false figure
+    from haptic_anfis.view.browser import chromium, open_chromium
+    if chromium() is None:   # a row "with the browser" measured without one would be a false figure
         raise SystemExit('no chromium on this machine: the browser view cannot be measured '
                          '(Debian: apt-get install chromium, as .ci/run does)')
-    profile = tempfile.mkdtemp(prefix='bench-view-chromium-')
-    return subprocess.Popen(['nice', '-n', '10', exe, *CHROMIUM_FLAGS,
-                             f'--user-data-dir={profile}', '--window-size=1280,800',
-                             '--remote-debugging-port=0',
-                             '--disable-renderer-backgrounding',
-                             '--disable-background-timer-throttling',
-                             '--disable-backgrounding-occluded-windows', url],
-                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-                            start_new_session=True)
+    return open_chromium(url, nice=10)
 
 
 def close_browser(browser: subprocess.Popen) -> None:
-    """Kill the chromium of :func:`open_browser` with every process it started (its zygote,
-    GPU and renderer processes outlive a killed browser process and kept loading the cores of
-    the runs after it)."""
-    import signal
-    try:
-        os.killpg(browser.pid, signal.SIGKILL)
-    except ProcessLookupError:
-        pass
-    browser.wait()
+    """Kill the chromium of :func:`open_browser` with every process it started."""
+    from haptic_anfis.view.browser import close_chromium
+    close_chromium(browser)
 
 
 def _blue_centre(img: np.ndarray):

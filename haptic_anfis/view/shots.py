@@ -4,8 +4,8 @@ Records ``haptic-anfis exam run --trainee systematic --duration S`` (the simulat
 palpates the default case), then serves two pages from that bag and captures them with headless
 chromium: the live page as it was halfway through the exam (the probe, its dent, force and gauge
 at that moment, the coverage painted so far — drawn by the same calls the web_view node makes
-each frame, held still for the capture: chromium's virtual time does not run out on a page that
-streams frames), and the debrief (``haptic-anfis view BAG``). Needs chromium.
+each frame, held still for the capture, so that two captures a second apart agree), and the
+debrief (``haptic-anfis view BAG``). Needs chromium.
 
     python -m haptic_anfis.view.shots [--out docs] [--duration 30]
 """
