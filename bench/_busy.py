@@ -52,13 +52,37 @@ def paused(procs: list[subprocess.Popen]) -> Iterator[None]:
             p.send_signal(signal.SIGCONT)
 
 
+def cpu_times() -> list[int] | None:
+    """The machine's CPU time counters (``/proc/stat``'s ``cpu`` line, in clock ticks: user nice
+    system idle iowait irq softirq steal ...), or None where there is no such file."""
+    try:
+        with open('/proc/stat') as f:
+            return [int(v) for v in f.readline().split()[1:]]
+    except (OSError, ValueError):
+        return None
+
+
+def steal_pct(before: list[int] | None, after: list[int] | None) -> float | None:
+    """The share of CPU time [%] the hypervisor gave other guests between two
+    :func:`cpu_times` readings ("steal", the 8th counter): a virtual machine's cores then run
+    nobody's threads here, the servo thread's neither (None: no readings or no time passed)."""
+    if not before or not after or len(before) < 8 or len(after) < 8:
+        return None
+    total = sum(after[:8]) - sum(before[:8])   # guest time is counted in user already
+    return 100.0 * (after[7] - before[7]) / total if total > 0 else None
+
+
 class LoadSampler:
     """The 1-minute load average read every ``every`` seconds while the block runs; ``median``
     afterwards. Read once at the start and once at the end (after the busy processes were
-    stopped for the benchmark's own analysis) it said 3.9-4.7 of hours that stood at 14-17."""
+    stopped for the benchmark's own analysis) it said 3.9-4.7 of hours that stood at 14-17.
+    ``steal``: the hypervisor's steal over the block [%] (:func:`steal_pct`): short rows of
+    issue 32 that missed on a quiet machine ran under 0-27 % steal."""
 
     def __init__(self, every: float = 10.0) -> None:
         self.every, self.samples = every, []
+        self.steal: float | None = None
+        self._cpu0: list[int] | None = None
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, daemon=True)
 
@@ -67,12 +91,14 @@ class LoadSampler:
             self.samples.append(os.getloadavg()[0])
 
     def __enter__(self) -> LoadSampler:
+        self._cpu0 = cpu_times()
         self._thread.start()
         return self
 
     def __exit__(self, *exc) -> None:
         self._stop.set()
         self._thread.join()
+        self.steal = steal_pct(self._cpu0, cpu_times())
 
     @property
     def median(self) -> float | None:

@@ -30,12 +30,13 @@ from _page import run_with_page  # noqa: E402
 
 sys.path.insert(0, str(ROOT))
 from haptic_anfis.nodes.falcon_driver import PARAMS as DRIVER_PARAMS  # noqa: E402
+from haptic_anfis.nodes.parameters import default_of  # noqa: E402
 
 #: [N] applied force above this counts as force on the hand
 FORCE_ON = 0.05
 #: [s] the driver's model_hold_time (its default): the killed server's last local model
 #: (recorded) may be rendered this long after its last command
-HOLD_S = next(p.default for p in DRIVER_PARAMS if p.name == 'model_hold_time')
+HOLD_S = default_of(DRIVER_PARAMS, 'model_hold_time')
 #: [s] margin for the watchdog's ramp to zero and the applied-force topic's own latency
 RAMP_S = 0.1
 

@@ -43,10 +43,10 @@ from _busy import LoadSampler, busy, paused  # noqa: E402
 from _page import write_page  # noqa: E402
 
 CLI = [sys.executable, '-m', 'haptic_anfis.cli']
-COLS = ('config', 'busy', 'load', 'rt_others', 'rate_hz', 'periods_lost', 'max_gap_ms',
-        'err_rms_pct', 'ripple_pct', 'ripple_ideal_pct', 'zero_ticks', 'dropout_ms', 'trips_contact',
-        'expired', 'held', 'beyond', 'taken_over', 'lat_p99_ms', 'lat_max_ms', 'sched',
-        'graph')
+COLS = ('config', 'busy', 'load', 'steal_pct', 'rt_others', 'rate_hz', 'periods_lost',
+        'max_gap_ms', 'err_rms_pct', 'ripple_pct', 'ripple_ideal_pct', 'zero_ticks', 'dropout_ms',
+        'trips_contact', 'expired', 'held', 'beyond', 'taken_over', 'lat_p99_ms', 'lat_max_ms',
+        'sched', 'graph')
 #: with --settle: the first seconds' own columns (the browser opening its page)
 SETTLE_COLS = ('settle_lost', 'settle_gap_ms', 'browser_s')
 
@@ -329,6 +329,7 @@ def main() -> int:
                     + (f' {a.sim_args}' if kind == 'sim' and a.sim_args else ''),
                     nbusy, load, j)
             r['rt_others'] = rt
+            r['steal_pct'] = None if sampled.steal is None else round(sampled.steal, 1)
             rows.append(r)
             print(' '.join(f'{fmt(r[c]):>12}' for c in cols), flush=True)
             if r['error']:
@@ -368,7 +369,9 @@ def _page(a, rows: list[dict], planned: int):
                 if a.view else '') + '; `busy`: processes spinning beside it on the '
              f'machine\'s {os.cpu_count()} cores; `load`: the 1-minute load average, the median '
              'of readings every 10 s through the run (the machine is shared: other users add to '
-             'it); `rt_others`: user-space real-time threads of other '
+             'it); `steal_pct`: CPU time the hypervisor gave other guests through the run, % of '
+             'the machine\'s (this is a virtual machine: its cores then run none of its threads, '
+             'the servo thread\'s neither); `rt_others`: user-space real-time threads of other '
              'processes at the start of the run (other sessions\' servo threads: they run before '
              'any normal-priority thread, so the `prio 0` rows compete with them). `rate_hz`: servo ticks per second; '
              '`periods_lost`: 1 ms periods with no tick; `max_gap_ms`: the longest time between '

@@ -26,6 +26,7 @@ Prints only (a diagnosis, not a benchmark: no page).
 from __future__ import annotations
 
 import argparse
+import math
 import struct
 import sys
 from pathlib import Path
@@ -139,6 +140,18 @@ def around(times: tuple[np.ndarray, np.ndarray], start: float, end: float) -> st
     return f'{before} | {j - i:5d} during | {after}'
 
 
+def seconds_list(text: str) -> list[float]:
+    """``--longer-holds``: comma-separated times [s], each finite and > 0."""
+    try:
+        values = [float(h) for h in text.split(',')]
+    except ValueError:
+        values = []
+    if not values or not all(math.isfinite(v) and v > 0 for v in values):
+        raise argparse.ArgumentTypeError(
+            f'{text!r}: expected comma-separated times in seconds > 0, such as 0.75,1,1.5')
+    return values
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     ap.add_argument('trace', type=Path, help="a falcon_driver tick trace (.npz)")
@@ -150,7 +163,7 @@ def main() -> int:
     ap.add_argument('--hold', type=float,
                     help="the run's model_hold_time [s] (default: the trace's own; 0.5, the "
                          "driver's default then, for a trace from before it was written there)")
-    ap.add_argument('--longer-holds', default='',
+    ap.add_argument('--longer-holds', type=seconds_list, default=[],
                     help='comma-separated model_hold_time values [s]: the expired-model ticks '
                          'each would have left')
     a = ap.parse_args()
@@ -178,7 +191,7 @@ def main() -> int:
     if a.longer_holds:
         hold = a.hold if a.hold is not None else meta.get('model_hold_time', 0.5)
         print(f'\nexpired-model ticks left under a longer model_hold_time (run with {hold:g} s)')
-        holds = [hold] + [float(h) for h in a.longer_holds.split(',')]
+        holds = [hold] + a.longer_holds
         for h, n_runs, n_ticks, longest in longer_holds(rows, hold, holds):
             print(f'  {h:6.3g} s: {n_runs:4d} runs, {n_ticks:6d} ticks, '
                   f'longest {longest * 1e3:7.1f} ms')

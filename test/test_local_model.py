@@ -392,16 +392,25 @@ def test_stall_and_kill(mode):
     assert safety.stats.watchdog_trips_in_contact == 1
 
 
-@pytest.mark.parametrize('hold_time, taken', [(0.0, (True, False, False)),
+@pytest.mark.parametrize('hold_time, taken', [(None, (True, False, False)),
+                                               (0.0, (True, False, False)),
                                                (0.5, (True, True, False))])
 def test_a_late_model_is_taken_while_it_could_still_be_held(hold_time, taken):
-    """A model is refused at arrival only when it is older than it may be rendered: past
-    model_validity_time without a hold, past model_hold_time with one (the compiled tick's). A
-    model 0.2 s late is younger than the held one it would replace: refusing it let the held
-    model expire beside a busy machine (issue 32). Past the hold it is refused (issue 22)."""
+    """A model is refused at arrival only when it is older than the renderer in use may render
+    it: past model_validity_time for the Python renderer (None) or the compiled tick without a
+    hold, past model_hold_time with one. A model 0.2 s late is younger than the held one it would
+    replace: refusing it let the held model expire beside a busy machine (issue 32). Past the
+    hold it is refused (issue 22)."""
     mapping = WorkspaceMapping(1.0, (0.0, 0.0, 0.0), 1.0)
     safety = SafetyLayer(10.0, 1000.0, 0.010, frame_id='tissue')
-    fi = ForceInput(safety, mapping, mode='local_model', validity_time=0.05, hold_time=hold_time)
+    fi = ForceInput(safety, mapping, mode='local_model', validity_time=0.05)
+    if hold_time is not None:   # the driver's compiled tick: its renderer takes the models
+        from haptic_anfis.device import HandParams
+        from haptic_anfis.device.palpation import PalpationScript
+        from haptic_anfis.device.servo_native import NativeServoLoop
+        still = PalpationScript(np.array([0.0, 1.0]), np.zeros((2, 3)), np.array([False]))
+        fi.renderer = NativeServoLoop(still, mapping, HandParams(), mode='local_model',
+                                      validity_time=0.05, hold_time=hold_time).renderer
     n = np.array([1.0, 0, 0])
     p = (-0.004, 0.0, 0.0)
     lm = make((2.0, 0.0, 0.0), p, -500 * np.outer(n, n), (0, 0, 0), n, -n, 0.004)

@@ -25,10 +25,11 @@ from geometry_msgs.msg import WrenchStamped  # noqa: E402
 
 from haptic_anfis.nodes import interfaces as ifc  # noqa: E402
 from haptic_anfis.nodes.falcon_driver import PARAMS as DRIVER_PARAMS  # noqa: E402
+from haptic_anfis.nodes.parameters import default_of  # noqa: E402
 from test_nodes_process import Observer, _domains, launch, stop  # noqa: E402
 
 #: [s] the driver's default model_hold_time
-HOLD_S = next(p.default for p in DRIVER_PARAMS if p.name == 'model_hold_time')
+HOLD_S = default_of(DRIVER_PARAMS, 'model_hold_time')
 
 pytestmark = pytest.mark.ros
 
@@ -121,7 +122,6 @@ def test_stall_and_kill_across_processes(tmp_path, mode):
     Issue 32: the servo tick runs in the driver's servo process (``servo_loop: auto``), which the
     SIGSTOP does not stop: it zeroes the force while the node is frozen — after the watchdog in
     zoh, after the held model's ``model_hold_time`` in local_model — and keeps it there."""
-    hold = HOLD_S
     domain = next(_domains)
     trace = tmp_path / 'trace.npz'
     procs = {}
@@ -141,7 +141,7 @@ def test_stall_and_kill_across_processes(tmp_path, mode):
         time.sleep(0.5)
         procs['force_server'].kill()
         procs['force_server'].wait(10)
-        time.sleep(hold)   # the last model is then past the hold: expired, never taken again
+        time.sleep(HOLD_S)   # the last model is then past the hold: expired, never taken again
         t_cont = time.monotonic()
         drv.send_signal(signal.SIGCONT)
         obs.wait(lambda: False, 1.0)
@@ -160,7 +160,7 @@ def test_stall_and_kill_across_processes(tmp_path, mode):
     assert np.linalg.norm(before[-50:, 4:7], axis=1).max() > 1.0  # it was pressing at the stop
     # while the node was frozen the servo process went on ticking and zeroed the force (0.1 s
     # margin for this shared machine's scheduling beyond the 10 ms watchdog / the hold time)
-    zero_from = t_stop + 0.1 + (0.0 if mode == 'zoh' else hold)
+    zero_from = t_stop + 0.1 + (0.0 if mode == 'zoh' else HOLD_S)
     frozen = rows[(rows[:, 0] > zero_from) & (rows[:, 0] < t_cont)]
     assert len(frozen) > 200, len(frozen)
     assert np.linalg.norm(frozen[:, 4:7], axis=1).max() <= 0.05

@@ -235,7 +235,8 @@ def test_sim_command_prints_loop_statistics(capfd, tmp_path):
     # ticks line up with a bag's (wall-clock) receive times
     assert abs(meta['realtime_minus_monotonic_s'] - (time.time() - time.monotonic())) < 1.0
     from haptic_anfis.nodes.falcon_driver import PARAMS
-    assert meta['model_hold_time'] == next(p.default for p in PARAMS if p.name == 'model_hold_time')
+    from haptic_anfis.nodes.parameters import default_of
+    assert meta['model_hold_time'] == default_of(PARAMS, 'model_hold_time')
     assert 0 < window['ticks'] == int(np.sum(t >= t[0] + 1.0)) < len(t)
     assert main(['sim', '--duration', '1', '--trace', str(trace)]) == 1   # never overwritten
     assert '--trace' in capfd.readouterr().err

@@ -6,6 +6,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / 'bench'))
 from trace_episodes import around, episodes  # noqa: E402
@@ -104,3 +105,15 @@ def test_a_longer_hold_leaves_the_ticks_past_it():
     got = longer_holds(trace(t, status), 0.5, [0.5, 0.53, 0.6])
     assert [(h, r, n) for h, r, n, _ in got] == [(0.5, 3, 80), (0.53, 1, 20), (0.6, 0, 0)], got
     assert round(got[0][3], 3) == 0.05 and round(got[1][3], 3) == 0.02
+
+
+@pytest.mark.parametrize('text', ['0.75,x', '', '1,-1', 'nan'])
+def test_longer_holds_that_are_no_times_get_one_line(text):
+    """--longer-holds 0.75,x: argparse's one line naming the option and what was expected, no
+    traceback."""
+    import argparse
+
+    from trace_episodes import seconds_list
+    with pytest.raises(argparse.ArgumentTypeError, match='expected comma-separated times'):
+        seconds_list(text)
+    assert seconds_list('0.75, 1,1.5') == [0.75, 1.0, 1.5]

@@ -33,9 +33,6 @@ class ForceInput:
         max_stiffness: device-frame stiffness bound [N/m] (default: the Falcon's, see
             :data:`~.local_model.FALCON_MAX_STIFFNESS`).
         validity_time, validity_radius: local model expiry [s], [m] (tissue frame).
-        hold_time: a model older than ``validity_time`` but not than this [s] is still
-            rendered (the compiled tick's ``model_hold_time``; 0: none, the Python renderer's
-            case), so one that old is still taken when it arrives.
         period: servo period [s] (a model no older than 1.5 periods is "fresh").
         stamps: the book of the driver's pose stamps (a new one by default).
         clutch: the grip buttons' state machine (:class:`.buttons.ClutchMark`), or None: its
@@ -46,8 +43,7 @@ class ForceInput:
     def __init__(self, safety: SafetyLayer, mapping: WorkspaceMapping, mode: str = 'local_model',
                  max_stiffness: float = FALCON_MAX_STIFFNESS, validity_time: float = 0.05,
                  validity_radius: float = 0.005, period: float = 0.001,
-                 stamps: StampBook | None = None, clutch: ClutchMark | None = None,
-                 hold_time: float = 0.0) -> None:
+                 stamps: StampBook | None = None, clutch: ClutchMark | None = None) -> None:
         if mode not in MODES:
             raise ValueError(f'mode: expected one of {MODES}, got {mode!r}')
         self.safety, self.mapping, self.mode = safety, mapping, mode
@@ -56,16 +52,18 @@ class ForceInput:
         self.renderer = LocalModelRenderer(
             tissue_stiffness_limit(max_stiffness, mapping.force_scale, mapping.scale),
             validity_time, validity_radius, fresh_age=1.5 * period)
-        #: a model older than this at arrival is refused: the command rule (watchdog timeout)
-        #: for the zero-order hold, for a local model the age up to which it is still rendered
-        #: (its validity time, or the hold time where the renderer holds one): refusing it
-        #: would only leave an older one. With the hold, refusing at the validity time left
-        #: the held model to expire while younger ones, late beside a busy machine, came in
-        #: (923 refused in an hour of sim without real-time priority; issue 32).
-        self.max_age = (safety.watchdog_timeout if mode == 'zoh'
-                        else max(validity_time, hold_time))
         self.last_in_contact = False
         self.commands_received = self.models_received = 0
+
+    @property
+    def max_age(self) -> float:
+        """A command or model older than this [s] at arrival is refused: the command rule
+        (watchdog timeout) for the zero-order hold; for a local model the age up to which the
+        renderer (the one in use: the compiled tick's holds a model) still renders one, since
+        refusing it would only leave an older one. With the compiled tick's hold, refusing at
+        the validity time left the held model to expire while younger ones, late beside a busy
+        machine, came in (923 refused in an hour of sim without real-time priority; issue 32)."""
+        return self.safety.watchdog_timeout if self.mode == 'zoh' else self.renderer.max_age
 
     # -- servo thread -----------------------------------------------------------------------
     def on_pose(self, stamp_ns: int, now: float) -> None:

@@ -623,6 +623,12 @@ class LocalModelRenderer:
         self._values = None  # the current model's flat values
         self.time: float | None = None  # the current model's time [s] (its pose's)
 
+    @property
+    def max_age(self) -> float:
+        """The oldest [s] a model is still rendered: its validity time (this renderer holds
+        none)."""
+        return self.validity_time
+
     def reset_stats(self) -> None:
         self.stats = RenderStats()
 

@@ -313,6 +313,12 @@ class NativeRenderer(LocalModelRenderer):
     def stats(self, value: RenderStats) -> None:
         self._py = value
 
+    @property
+    def max_age(self) -> float:
+        """The oldest [s] a model is still rendered: the compiled tick's hold time (held while
+        the probe stays near it; the validity time where there is no hold)."""
+        return float(self._loop.cfg[nt.CFG.hold_time])
+
     def reset_stats(self) -> None:
         self._py = RenderStats()
         self._base = self._loop.cnt.copy()

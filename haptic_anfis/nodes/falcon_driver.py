@@ -245,10 +245,7 @@ class FalconDriver(HapticNode):
         self.input = ForceInput(self.safety, self.mapping, p['force_mode'], p['max_stiffness'],
                                 p['model_validity_time'], p['model_validity_radius'],
                                 1.0 / p['rate'],
-                                clutch=None if self.native is not None else self.clutch,
-                                # the compiled tick holds a model that old (the Python one not)
-                                hold_time=p['model_hold_time'] if self.native is not None
-                                else 0.0)
+                                clutch=None if self.native is not None else self.clutch)
         if self.native is not None:
             self.input.renderer = self.native.renderer
         self.pub_pose = self.create_publisher(PoseStamped, ifc.TOPIC_POSE, LOOP_QOS)

@@ -21,7 +21,7 @@ from ..errors import HapticAnfisError
 __all__ = ['Param', 'ParameterError', 'CASE_PARAMS', 'ROS_BUILTIN', 'positive', 'non_negative',
            'one_of', 'finite_vector', 'declare_parameters', 'resolve_parameters', 'type_name',
            'value_type_name', 'check_value', 'read_parameter_file', 'parse_overrides',
-           'check_parameter_sources', 'ros_args_sources']
+           'check_parameter_sources', 'ros_args_sources', 'default_of']
 
 
 class ParameterError(HapticAnfisError, ValueError):
@@ -42,6 +42,24 @@ class Param:
     def type(self) -> str:
         """The ROS parameter type: bool, integer, double, string, or ``<type>_array``."""
         return type_name(self.default)
+
+
+_MISSING = object()
+
+
+def default_of(params: Iterable[Param], name: str, fallback: Any = _MISSING) -> Any:
+    """The default of the parameter ``name`` among ``params`` (a node's ``PARAMS``); ``fallback``
+    where none is named so.
+
+    Raises:
+        KeyError: no parameter ``name`` and no ``fallback``.
+    """
+    for p in params:
+        if p.name == name:
+            return p.default
+    if fallback is _MISSING:
+        raise KeyError(f'no parameter {name!r} among {[p.name for p in params]}')
+    return fallback
 
 
 def positive(v) -> str | None:

@@ -388,10 +388,10 @@ def _changes_scene(node: str, key: str, value) -> bool:
     node renders or scores: one of :data:`SCENE_PARAMETERS`, not its default."""
     if key not in SCENE_PARAMETERS:
         return False
+    from ..nodes.parameters import default_of
     from ..nodes.registry import node_parameters
     for n in (CASE_NODES if node == '**' else (node,) if node in CASE_NODES else ()):
-        default = next((p.default for p in node_parameters(n) if p.name == key), value)
-        if value != default:
+        if value != default_of(node_parameters(n), key, value):
             return True
     return False
 
