@@ -53,10 +53,12 @@ def session_trace(duration: float, d: Path) -> Path:
     return log / 'falcon_driver_trace.npz'
 
 
-def models_along(positions: np.ndarray) -> tuple[list, np.ndarray, np.ndarray]:
+def models_along(positions: np.ndarray, contact_overrides: dict | None = None
+                 ) -> tuple[list, np.ndarray, np.ndarray]:
     """(local model values per pose, ideal force (n, 3) [N], in contact (n,)) as the contact
-    detector and force server make them (default parameters)."""
-    cp, tracker, _, model = build_pipeline(())
+    detector and force server make them (default parameters, the detector's overridden by
+    ``contact_overrides``)."""
+    cp, tracker, _, model = build_pipeline((), contact_overrides)
     frame = cp['frame_id']
     models, F = [], np.zeros((len(positions), 3))
     contact = np.zeros(len(positions), dtype=bool)

@@ -13,13 +13,18 @@ silent at once, at the recorder too, points at the whole machine or the graph's 
 a run starts when the held model turns ``--hold`` seconds old and lasts until the next model, so
 under a hold of H its ticks younger than H would have rendered the held model (an upper bound:
 with a longer hold the driver also takes later models, which can end a run sooner).
+``--dropouts`` lists the runs of dropout ticks (in contact, the ideal force > 1 N, 0 N applied:
+``zero_ticks`` on the servo_load pages, over the ticks from ``--from`` s) with the render status
+of their ticks: ``expired`` (the hold ran out) or ``free`` (the model in hand said no contact:
+a press onset with the graph late). The ideal force is computed at every tick as ``haptic-anfis
+loop`` does (minutes for an hour).
 
 Ticks are on the driver's monotonic clock, the bag on the wall clock: the trace's
 ``realtime_minus_monotonic_s`` lines them up; a trace written before it existed is lined up by
 its ticks' positions against the pose messages, which carry each tick's wall-clock stamp.
 
     .venv/bin/python bench/trace_episodes.py TRACE.npz [--bag BAG] [--top 10] [--gap-ms 10]
-        [--longer-holds 0.75,1,1.5 [--hold S]]
+        [--longer-holds 0.75,1,1.5 [--hold S]] [--dropouts [--from 30]]
 
 Prints only (a diagnosis, not a benchmark: no page).
 """
@@ -40,7 +45,7 @@ from haptic_anfis.bag.reader import read_messages  # noqa: E402
 from haptic_anfis.bag.topics import (  # noqa: E402
     JOINT_STATE_TYPE, JOY_TYPE, POINT_TYPE, POSE_TYPE, TWIST_TYPE, WRENCH_TYPE)
 from haptic_anfis.device.force_error import runs_of  # noqa: E402
-from haptic_anfis.device.local_model import EXPIRED  # noqa: E402
+from haptic_anfis.device.local_model import EXPIRED, STATUS_NAMES  # noqa: E402
 from haptic_anfis.device.trace import DISABLED, load_trace  # noqa: E402
 
 
@@ -76,6 +81,20 @@ def longer_holds(rows: np.ndarray, hold: float,
                 # until the next tick with a usable model, as ``episodes`` measures a run
                 longest = max(longest, float(t[min(b, len(t) - 1)] - left[0]))
         out.append((h, n_runs, n_ticks, longest))
+    return out
+
+
+def dropout_runs(rows: np.ndarray, ideal: np.ndarray, contact: np.ndarray
+                 ) -> list[tuple[float, int, float, dict[str, int]]]:
+    """(start [s, monotonic], ticks, duration [s], ticks by render status name) of each run of
+    dropout ticks: in ``contact``, |``ideal``| > 1 N, 0 N applied (the trace's fx fy fz)."""
+    drop = contact & (np.linalg.norm(ideal, axis=1) > 1.0) & ~rows[:, 4:7].any(axis=1)
+    out = []
+    for a, b in zip(*runs_of(drop)):
+        codes, n = np.unique(rows[a:b, 7].astype(int), return_counts=True)
+        out.append((float(rows[a, 0]), int(b - a), float(rows[b - 1, 0] - rows[a, 0]),
+                    {STATUS_NAMES[c] if 0 <= c < len(STATUS_NAMES) else str(c): int(k)
+                     for c, k in zip(codes, n)}))
     return out
 
 
@@ -163,6 +182,11 @@ def main() -> int:
     ap.add_argument('--hold', type=float,
                     help="the run's model_hold_time [s] (default: the trace's own; 0.5, the "
                          "driver's default then, for a trace from before it was written there)")
+    ap.add_argument('--dropouts', action='store_true',
+                    help='list the dropout runs (0 N in contact, ideal > 1 N) by render status')
+    ap.add_argument('--from', dest='start', type=float, default=30.0,
+                    help='--dropouts: from this many seconds after the first tick (default 30: '
+                         "bench_servo_load's --settle)")
     ap.add_argument('--longer-holds', type=seconds_list, default=[],
                     help='comma-separated model_hold_time values [s]: the expired-model ticks '
                          'each would have left')
@@ -195,6 +219,16 @@ def main() -> int:
         for h, n_runs, n_ticks, longest in longer_holds(rows, hold, holds):
             print(f'  {h:6.3g} s: {n_runs:4d} runs, {n_ticks:6d} ticks, '
                   f'longest {longest * 1e3:7.1f} ms')
+    if a.dropouts:
+        from haptic_anfis.commands.loop import ideal_forces
+        w = rows[rows[:, 0] - rows[0, 0] >= a.start]
+        ideal, contact = ideal_forces(w[:, 1:4])
+        runs = dropout_runs(w, ideal, contact)
+        total = sum(n for _, n, _, _ in runs)
+        print(f'\ndropout runs from {a.start:g} s: {len(runs)} runs, {total} ticks')
+        for t0, n, dur, kinds in runs:
+            print(f'  {t0 - rows[0, 0]:9.3f} s: {n:5d} ticks, {dur * 1e3:7.1f} ms, '
+                  + ', '.join(f'{k} {v}' for k, v in kinds.items()))
     return 0
 
 

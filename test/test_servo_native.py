@@ -113,24 +113,29 @@ def test_a_torn_command_is_not_taken():
     assert lp.tick(0.002)[0] == pytest.approx(5.0)
 
 
-def model_values(rng):
+def model_values(rng, approach=False):
+    """A contact model 4 mm in, or (``approach``) the plane ahead of a free probe (depth 0,
+    F0 = 0, p0 the surface point)."""
     n = np.array([1.0, 0.0, 0.0])
     d = -n
     c0 = np.array([0.055, 0.0, 0.0])
-    depth0 = 0.004
+    depth0 = 0.0 if approach else 0.004
     p0 = c0 + depth0 * d
     A = rng.normal(size=(3, 3))
     K = -(A @ A.T) / np.linalg.norm(A @ A.T) * 800.0 + (A - A.T) * 50.0  # with a skew part
-    F0 = -K @ (p0 - c0) * 0.5 + rng.normal(size=3) * 0.1
+    F0 = np.zeros(3) if approach else -K @ (p0 - c0) * 0.5 + rng.normal(size=3) * 0.1
     return LocalModel(tuple(F0), tuple(p0), K, tuple(c0), tuple(n), tuple(d), depth0, True,
                       0.0).values()
 
 
+@pytest.mark.parametrize('approach', [False, True])
 @pytest.mark.parametrize('spread', [0.001, 0.004])  # 0.004: many probes beyond the radius
 @pytest.mark.parametrize('seed', range(3))
-def test_local_model_renders_as_the_python_renderer(seed, spread):
+def test_local_model_renders_as_the_python_renderer(seed, spread, approach):
+    """The compiled tick renders what LocalModelRenderer does, tick by tick: contact models and
+    approach planes (free past the radius along the plane), inside and beyond the radius."""
     rng = np.random.default_rng(seed)
-    v = model_values(rng)
+    v = model_values(rng, approach)
     lp = loop('local_model', max_force_rate=1e6, validity_time=1.0)
     ref = LocalModelRenderer(tissue_stiffness_limit(3000.0, 1.0, 1.5), 1.0, 0.005, 0.0015)
     lp.safety.start()
@@ -138,8 +143,10 @@ def test_local_model_renders_as_the_python_renderer(seed, spread):
     ref.offer_values(v, 0.0)
     p0 = np.array(v[3:6])
     t = 0.0
+    away = 0   # probes past an approach plane, further along it than the radius
     for _ in range(20):
         q = p0 + rng.normal(size=3) * spread
+        away += approach and q[0] < p0[0] and np.hypot(q[1] - p0[1], q[2] - p0[2]) > 0.005
         pin(lp, MAP.to_device(tuple(q)), t)
         lp.tick(t)
         want, status = ref.render(tuple(q), t)
@@ -153,7 +160,10 @@ def test_local_model_renders_as_the_python_renderer(seed, spread):
     assert lp.renderer.stats.ticks_fresh + lp.renderer.stats.ticks_extrapolated + \
         lp.renderer.stats.ticks_free > 0
     assert lp.cnt[nt.CNT.beyond] == ref.stats.ticks_beyond
-    assert (ref.stats.ticks_beyond > 0) == (spread > 0.002)
+    assert lp.cnt[nt.CNT.free] == ref.stats.ticks_free
+    if not approach:
+        assert (ref.stats.ticks_beyond > 0) == (spread > 0.002)
+    assert (away > 0) == (approach and spread > 0.002), away
 
 
 def test_non_finite_model_is_never_rendered():

@@ -117,3 +117,22 @@ def test_longer_holds_that_are_no_times_get_one_line(text):
     with pytest.raises(argparse.ArgumentTypeError, match='expected comma-separated times'):
         seconds_list(text)
     assert seconds_list('0.75, 1,1.5') == [0.75, 1.0, 1.5]
+
+
+def test_dropout_runs_are_zero_force_in_contact_named_by_status():
+    """A dropout tick: in contact, ideal > 1 N, 0 N applied; runs with their ticks' statuses."""
+    from trace_episodes import dropout_runs
+    t = np.arange(10) * 1e-3
+    status = np.array([FRESH, FREE, FREE, FRESH, EXPIRED, EXPIRED, FRESH, FREE, FREE, FRESH])
+    rows = trace(t, status)
+    rows[:, 4] = 2.0
+    rows[[1, 2, 4, 5, 7, 8], 4] = 0.0          # 0 N applied there
+    ideal = np.zeros((10, 3))
+    ideal[:, 0] = 3.0
+    ideal[8, 0] = 0.5                           # the ideal below 1 N: no dropout
+    contact = np.ones(10, dtype=bool)
+    contact[2] = False                          # not in contact: no dropout
+    got = dropout_runs(rows, ideal, contact)
+    assert [(n, kinds) for _, n, _, kinds in got] == [
+        (1, {'free': 1}), (2, {'expired': 2}), (1, {'free': 1})], got
+    assert got[1][0] == pytest.approx(0.004) and got[1][2] == pytest.approx(0.001)

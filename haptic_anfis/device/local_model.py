@@ -43,7 +43,12 @@ with these rules (:class:`LocalModelRenderer`):
   0; with a normal it is the tangent plane of the surface ahead of the probe (p0 = the point it
   will touch, F0 = 0, K the stiffness at depth 0+): zero force outside the plane, ``K (p - p0)``
   the instant the probe is past it — so a press is rendered from its first tick instead of one
-  force-server latency late. Without a normal (all zeros) it renders zero force.
+  force-server latency late. Without a normal (all zeros) it renders zero force. It is the
+  plane of one point: with the probe further than ``validity_radius`` from that point along the
+  plane (across the depth gradient, :func:`across_beyond`) it renders zero (free) — a convex surface lies
+  under its tangent plane, so a stale plane followed sideways (a late graph, a stroke in free
+  space) would press on the probe in free space; within the radius it is off by at most
+  r^2 / 2R, 0.3 mm on the default breast (R >= 45 mm).
 - Non-finite F0, p0, K, normal or direction: the model is rejected (the caller zeroes the force).
 - Expiry: a model older than ``validity_time`` (measured from the time of the driver's own pose it
   answers, not from its arrival) is expired: the renderer stops extrapolating and the caller
@@ -578,6 +583,16 @@ def hold_offset(gx: float, gy: float, gz: float, ex: float, ey: float, ez: float
     return nx + c * tx, ny + c * ty, nz + c * tz
 
 
+def across_beyond(gx: float, gy: float, gz: float, ex: float, ey: float, ez: float,
+                  r: float) -> bool:
+    """The probe's offset ``e`` [m] from a model's p0 has a part across the depth gradient ``g``
+    (:func:`hold_offset`'s) longer than ``r`` [m]. Compiled as it is for the native tick."""
+    gg = gx * gx + gy * gy + gz * gz
+    a = (gx * ex + gy * ey + gz * ez) / gg if gg > 1e-12 else 0.0
+    tx, ty, tz = ex - a * gx, ey - a * gy, ez - a * gz
+    return tx * tx + ty * ty + tz * tz > r * r
+
+
 @dataclass
 class RenderStats:
     """Tick counts by status, and models accepted/rejected, since construction or reset."""
@@ -684,7 +699,8 @@ class LocalModelRenderer:
 
         Status FRESH / EXTRAPOLATED: the model's force at p (beyond the validity radius: at p with
         its offset across the depth gradient held at the radius); FREE: zero (the model says no
-        contact, or p is out of the surface along the local normal); EXPIRED (too old) and
+        contact, p is out of the surface along the local normal, or an approach model's point is
+        more than the radius away across the direction); EXPIRED (too old) and
         NONE (no model yet): None — the caller holds the last force and its watchdog ramps it.
         """
         m = self._m
@@ -704,6 +720,10 @@ class LocalModelRenderer:
             st.ticks_free += 1
             return (0.0, 0.0, 0.0), FREE
         if ex * ex + ey * ey + ez * ez > self.validity_radius ** 2:
+            if depth0 == 0.0 and across_beyond(g[0], g[1], g[2], ex, ey, ez,
+                                               self.validity_radius):
+                st.ticks_free += 1   # an approach plane, away from its point (module doc)
+                return (0.0, 0.0, 0.0), FREE
             st.ticks_beyond += 1
             ex, ey, ez = hold_offset(g[0], g[1], g[2], ex, ey, ez, self.validity_radius)
         fresh = age <= self.fresh_age

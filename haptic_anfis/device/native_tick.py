@@ -18,7 +18,9 @@ It sleeps to absolute 1 ms deadlines with ``clock_nanosleep`` and reads the cloc
    server, contact detector, the bridge) no longer drops the force to 0 N. Beyond the validity
    radius the depth is followed exactly and the offset across the indentation direction held at
    the radius (:func:`.local_model.hold_offset`, counted as ``beyond``): a late model under a
-   fast stroke no longer drops the force to 0 N either. The stiffness's skew part (the tissue
+   fast stroke no longer drops the force to 0 N either; an approach model (the plane ahead of a
+   free probe) that far along its plane renders zero instead (:func:`.local_model.across_beyond`). The
+   stiffness's skew part (the tissue
    force turning with the probe) is rendered while the model is valid; a held model keeps it
    only where K has no rotating mode (:func:`.local_model.rotating_mode`): a free handle could
    spiral out along one.
@@ -52,7 +54,7 @@ import numba as nb
 from llvmlite import binding as llvm
 import numpy as np
 
-from .local_model import hold_offset
+from .local_model import across_beyond, hold_offset
 from .stats import periods_lost_in
 from .trace import DISABLED
 
@@ -405,6 +407,7 @@ def _take(buf, scratch, seen):
 
 
 _hold_offset = nb.njit(nogil=True, cache=True)(hold_offset)
+_across_beyond = nb.njit(nogil=True, cache=True)(across_beyond)
 _periods_lost_in = nb.njit(nogil=True, cache=True)(periods_lost_in)
 
 
@@ -431,6 +434,10 @@ def _render(cfg, st, cnt, qx, qy, qz, now, period):
         return 0.0, 0.0, 0.0
     r = cfg[CFG.validity_radius]
     if ex * ex + ey * ey + ez * ez > r * r:  # depth followed, the offset across held (module doc)
+        if depth0 == 0.0 and _across_beyond(st[S.m_g0], st[S.m_g1], st[S.m_g2], ex, ey, ez, r):
+            cnt[CNT.free] += 1   # an approach plane, away from its point (local_model's doc)
+            st[S.status] = FREE
+            return 0.0, 0.0, 0.0
         cnt[CNT.beyond] += 1
         ex, ey, ez = _hold_offset(st[S.m_g0], st[S.m_g1], st[S.m_g2], ex, ey, ez, r)
     if held:  # older than its validity, inside the hold time and the radius: still the tissue

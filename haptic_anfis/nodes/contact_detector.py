@@ -43,10 +43,11 @@ PARAMS = MESH_PARAMS + [
           positive),
     Param('max_depth', 0.0, 'cap on the reported depth [m] (0 = only the tissue thickness caps it)',
           non_negative),
-    Param('approach_distance', 0.005, 'while the probe is free and a front surface lies at most '
+    Param('approach_distance', 0.015, 'while the probe is free and a front surface lies at most '
           'this far [m] ahead along the direction, the contact message carries that surface point '
           'and its normal (the approach fields, in effort) so the force server can send the '
-          'plane before contact (0 = off)', non_negative),
+          'plane before contact (0 = off); 15 mm: a 30 mm/s press starts from the plane with '
+          'the graph up to 0.5 s late', non_negative),
 ]
 
 

@@ -1,0 +1,130 @@
+"""Press onsets with the graph late (issue 32): how many ticks of a trainee's trajectory render
+0 N in contact while the tissue pushes back > 1 N, when the servo loop renders models made some
+milliseconds earlier, for each contact_detector ``approach_distance``.
+
+A free probe's model carries the surface plane ahead of it only while that surface lies within
+``approach_distance`` along the indentation direction; the servo loop then renders the press from
+the tick the probe crosses the plane. With the graph L ms late (a busy machine without real-time
+priority: the no-RT launch hour's press-onset dropouts came with contacts 150-290 ms old), the
+model in hand at the crossing was made v L before it: at the hand script's 30 mm/s press, 4.5-8.7
+mm above the surface — beyond the shipped 5 mm, so the model said "free" and the loop rendered 0 N
+until a model from inside arrived. The models are made as the nodes make them (contact tracker,
+approach fields, force server) at every pose of a servo trace; the model made ``age`` ticks
+earlier is rendered at each tick (``LocalModelRenderer`` without expiry: the compiled tick holds a
+model up to ``model_hold_time``, 1 s). Counted: dropout ticks (in contact, ideal > 1 N, 0 N
+rendered, as ``zero_ticks`` on the servo_load pages) and phantom ticks (free, > 0.1 N rendered:
+a stale plane pressing on the probe in free space), as shipped and without the rule that an
+approach plane renders zero past ``model_validity_radius`` along it from its point
+(``local_model.across_beyond``). Asserts nothing; prints and writes
+docs/measurements/approach_late.md.
+
+    .venv/bin/python bench/bench_approach_late.py [--trace FILE] [--start S] [--seconds 60]
+        [--ages 50,150,250,500] [--distances 0.005,0.01,0.015,0.02] [--no-page]
+"""
+from __future__ import annotations
+
+import argparse
+import contextlib
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from _page import write_page
+from bench_model_age import models_along, rendered, session_trace
+from haptic_anfis.device import local_model
+from haptic_anfis.device.trace import DISABLED, load_trace
+
+
+@contextlib.contextmanager
+def without_the_plane_rule():
+    """The Python renderer with an approach plane rendered at any distance along it (the rule
+    as it was before: the offset held at the radius)."""
+    rule = local_model.across_beyond
+    local_model.across_beyond = lambda *a: False
+    try:
+        yield
+    finally:
+        local_model.across_beyond = rule
+
+
+def numbers(text: str) -> list[float]:
+    """A comma-separated list of numbers (argparse type)."""
+    try:
+        return [float(v) for v in text.split(',')]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f'{text!r}: expected comma-separated numbers') from None
+
+
+def counts(models, positions, times, F, contact, age: int) -> tuple[int, int, int, float]:
+    """(dropout ticks, their longest run, phantom ticks, RMS error % of the RMS ideal force)
+    rendering the model made ``age`` ticks earlier."""
+    f = rendered(models, positions, times, age, symmetric_only=False)
+    fn, Fn = np.linalg.norm(f, axis=1), np.linalg.norm(F, axis=1)
+    drop = contact & (Fn > 1.0) & (fn == 0.0)
+    longest, run = 0, 0
+    for x in drop:
+        run = run + 1 if x else 0
+        longest = max(longest, run)
+    phantom = int(((~contact) & (fn > 0.1)).sum())
+    e = np.linalg.norm(f[contact] - F[contact], axis=1)
+    rms = np.sqrt(np.mean(Fn[contact] ** 2))
+    return int(drop.sum()), longest, phantom, float(100 * np.sqrt(np.mean(e ** 2)) / rms)
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument('--trace', type=Path, help='a falcon_driver tick trace (.npz; default: a '
+                                               'launch of --seconds + 10 s, no real-time priority)')
+    ap.add_argument('--start', type=float, default=30.0,
+                    help='seconds into the trace to start (default 30: past the start-up)')
+    ap.add_argument('--seconds', type=float, default=60.0, help='seconds of trace (default 60)')
+    ap.add_argument('--ages', type=numbers, default=[50, 150, 250, 500],
+                    help='model ages [ms] (default 50,150,250,500)')
+    ap.add_argument('--distances', type=numbers, default=[0.005, 0.01, 0.015, 0.02],
+                    help='approach_distance values [m] (default 0.005,0.01,0.015,0.02)')
+    ap.add_argument('--no-page', action='store_true', help='print only')
+    a = ap.parse_args()
+    with tempfile.TemporaryDirectory(prefix='bench-approach-late-') as tmp:
+        if a.trace is None:
+            a.start = min(a.start, 5.0)
+        trace = a.trace or session_trace(a.start + a.seconds + 5.0, Path(tmp))
+        rows, _ = load_trace(trace)
+    rows = rows[rows[:, 7] != DISABLED]
+    t = rows[:, 0] - rows[0, 0]
+    rows = rows[(t >= a.start) & (t < a.start + a.seconds)]
+    if not len(rows):
+        raise SystemExit(f'{trace}: no ticks between {a.start:g} and {a.start + a.seconds:g} s')
+    times, positions = rows[:, 0], np.ascontiguousarray(rows[:, 1:4])
+    period = float(np.median(np.diff(times)))
+    lines = [f'{trace.name}: {len(rows)} ticks from {a.start:g} s, {a.seconds:g} s', '',
+             '| approach_distance (mm) | model age (ms) | dropout ticks | longest (ticks) '
+             '| phantom ticks | error (%) | without the rule: dropout ticks | phantom ticks |',
+             '|---|---|---|---|---|---|---|---|']
+    for dist in a.distances:
+        models, F, contact = models_along(positions, {'approach_distance': dist})
+        for age_ms in a.ages:
+            age = max(int(round(age_ms * 1e-3 / period)), 0)
+            drop, longest, phantom, err = counts(models, positions, times, F, contact, age)
+            with without_the_plane_rule():
+                drop0, _, phantom0, _ = counts(models, positions, times, F, contact, age)
+            lines.append(f'| {dist * 1e3:g} | {age_ms:g} | {drop} | {longest} | {phantom} | '
+                         f'{err:.2f} | {drop0} | {phantom0} |')
+            print(lines[-1], flush=True)
+    text = '\n'.join(lines)
+    print(text)
+    if not a.no_page:
+        body = (text + '\n\nThe trace: the hand script\'s presses (30 mm/s into the tissue from '
+                '8 mm above it), as a session\'s servo loop moved them. A model age is in servo '
+                'ticks (1 ms at the nominal rate). Dropout: in contact, the ideal force > 1 N, 0 N '
+                'rendered. Phantom: not in contact, > 0.1 N rendered. Error: RMS over the contact '
+                'ticks, % of the RMS ideal force. Without the rule: an approach plane rendered at '
+                'any distance along it from its point (the offset held at the radius, as before '
+                'the rule), the same models.\n')
+        write_page('approach_late', 'Press onsets with the graph late, by approach distance', body)
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
