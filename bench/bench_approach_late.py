@@ -1,6 +1,7 @@
 """Press onsets with the graph late (issue 32): how many ticks of a trainee's trajectory render
 0 N in contact while the tissue pushes back > 1 N, when the servo loop renders models made some
-milliseconds earlier, for each contact_detector ``approach_distance``.
+milliseconds earlier, for each contact_detector ``approach_distance`` and falcon_driver
+``model_approach_radius``.
 
 A free probe's model carries the surface plane ahead of it only while that surface lies within
 ``approach_distance`` along the indentation direction; the servo loop then renders the press from
@@ -13,13 +14,13 @@ approach fields, force server) at every pose of a servo trace; the model made ``
 earlier is rendered at each tick (``LocalModelRenderer`` without expiry: the compiled tick holds a
 model up to ``model_hold_time``, 1 s). Counted: dropout ticks (in contact, ideal > 1 N, 0 N
 rendered, as ``zero_ticks`` on the servo_load pages) and phantom ticks (free, > 0.1 N rendered:
-a stale plane pressing on the probe in free space), as shipped and without the rule that an
-approach plane renders zero past ``model_validity_radius`` along it from its point
-(``local_model.across_beyond``). Asserts nothing; prints and writes
-docs/measurements/approach_late.md.
+a stale plane pressing on the probe in free space), for each radius out to which an approach
+plane is rendered along it from its point (``local_model.across_beyond``; past it, zero) and
+without that rule. Asserts nothing; prints and writes docs/measurements/approach_late.md.
 
     .venv/bin/python bench/bench_approach_late.py [--trace FILE] [--start S] [--seconds 60]
-        [--ages 50,150,250,500] [--distances 0.005,0.01,0.015,0.02] [--no-page]
+        [--ages 250,500] [--distances 0.005,0.01,0.015,0.02]
+        [--radii 0.005,0.01,0.015,0.02,0.03] [--no-page]
 """
 from __future__ import annotations
 
@@ -31,9 +32,11 @@ from pathlib import Path
 
 import numpy as np
 
+from _args import positive_numbers
 from _page import write_page
 from bench_model_age import models_along, rendered, session_trace
 from haptic_anfis.device import local_model
+from haptic_anfis.device.force_error import runs_of
 from haptic_anfis.device.trace import DISABLED, load_trace
 
 
@@ -49,24 +52,17 @@ def without_the_plane_rule():
         local_model.across_beyond = rule
 
 
-def numbers(text: str) -> list[float]:
-    """A comma-separated list of numbers (argparse type)."""
-    try:
-        return [float(v) for v in text.split(',')]
-    except ValueError:
-        raise argparse.ArgumentTypeError(f'{text!r}: expected comma-separated numbers') from None
-
-
-def counts(models, positions, times, F, contact, age: int) -> tuple[int, int, int, float]:
+def counts(models, positions, times, F, contact, age: int, approach_radius: float
+           ) -> tuple[int, int, int, float]:
     """(dropout ticks, their longest run, phantom ticks, RMS error % of the RMS ideal force)
-    rendering the model made ``age`` ticks earlier."""
-    f = rendered(models, positions, times, age, symmetric_only=False)
+    rendering the model made ``age`` ticks earlier, approach planes out to ``approach_radius``
+    [m] along them."""
+    f = rendered(models, positions, times, age, symmetric_only=False,
+                 approach_radius=approach_radius)
     fn, Fn = np.linalg.norm(f, axis=1), np.linalg.norm(F, axis=1)
     drop = contact & (Fn > 1.0) & (fn == 0.0)
-    longest, run = 0, 0
-    for x in drop:
-        run = run + 1 if x else 0
-        longest = max(longest, run)
+    starts, ends = runs_of(drop)
+    longest = int((ends - starts).max()) if len(starts) else 0
     phantom = int(((~contact) & (fn > 0.1)).sum())
     e = np.linalg.norm(f[contact] - F[contact], axis=1)
     rms = np.sqrt(np.mean(Fn[contact] ** 2))
@@ -80,10 +76,15 @@ def main() -> int:
     ap.add_argument('--start', type=float, default=30.0,
                     help='seconds into the trace to start (default 30: past the start-up)')
     ap.add_argument('--seconds', type=float, default=60.0, help='seconds of trace (default 60)')
-    ap.add_argument('--ages', type=numbers, default=[50, 150, 250, 500],
-                    help='model ages [ms] (default 50,150,250,500)')
-    ap.add_argument('--distances', type=numbers, default=[0.005, 0.01, 0.015, 0.02],
-                    help='approach_distance values [m] (default 0.005,0.01,0.015,0.02)')
+    ap.add_argument('--ages', type=positive_numbers, default=[250, 500],
+                    help='model ages [ms] (default 250,500)')
+    ap.add_argument('--distances', type=positive_numbers, default=[0.005, 0.01, 0.015, 0.02],
+                    help='contact_detector approach_distance values [m] (default '
+                         '0.005,0.01,0.015,0.02)')
+    ap.add_argument('--radii', type=positive_numbers,
+                    default=[0.005, 0.01, 0.015, 0.02, 0.03],
+                    help='falcon_driver model_approach_radius values [m] (default '
+                         '0.005,0.01,0.015,0.02,0.03)')
     ap.add_argument('--no-page', action='store_true', help='print only')
     a = ap.parse_args()
     with tempfile.TemporaryDirectory(prefix='bench-approach-late-') as tmp:
@@ -99,18 +100,24 @@ def main() -> int:
     times, positions = rows[:, 0], np.ascontiguousarray(rows[:, 1:4])
     period = float(np.median(np.diff(times)))
     lines = [f'{trace.name}: {len(rows)} ticks from {a.start:g} s, {a.seconds:g} s', '',
-             '| approach_distance (mm) | model age (ms) | dropout ticks | longest (ticks) '
-             '| phantom ticks | error (%) | without the rule: dropout ticks | phantom ticks |',
-             '|---|---|---|---|---|---|---|---|']
+             '| approach_distance (mm) | model age (ms) | approach_radius (mm) | dropout ticks '
+             '| longest (ticks) | phantom ticks | error (%) |',
+             '|---|---|---|---|---|---|---|']
     for dist in a.distances:
         models, F, contact = models_along(positions, {'approach_distance': dist})
         for age_ms in a.ages:
             age = max(int(round(age_ms * 1e-3 / period)), 0)
-            drop, longest, phantom, err = counts(models, positions, times, F, contact, age)
+            for radius in a.radii:
+                drop, longest, phantom, err = counts(models, positions, times, F, contact, age,
+                                                     radius)
+                lines.append(f'| {dist * 1e3:g} | {age_ms:g} | {radius * 1e3:g} | {drop} | '
+                             f'{longest} | {phantom} | {err:.2f} |')
+                print(lines[-1], flush=True)
             with without_the_plane_rule():
-                drop0, _, phantom0, _ = counts(models, positions, times, F, contact, age)
-            lines.append(f'| {dist * 1e3:g} | {age_ms:g} | {drop} | {longest} | {phantom} | '
-                         f'{err:.2f} | {drop0} | {phantom0} |')
+                drop, longest, phantom, err = counts(models, positions, times, F, contact, age,
+                                                     a.radii[0])
+            lines.append(f'| {dist * 1e3:g} | {age_ms:g} | no rule | {drop} | {longest} | '
+                         f'{phantom} | {err:.2f} |')
             print(lines[-1], flush=True)
     text = '\n'.join(lines)
     print(text)
@@ -119,10 +126,11 @@ def main() -> int:
                 '8 mm above it), as a session\'s servo loop moved them. A model age is in servo '
                 'ticks (1 ms at the nominal rate). Dropout: in contact, the ideal force > 1 N, 0 N '
                 'rendered. Phantom: not in contact, > 0.1 N rendered. Error: RMS over the contact '
-                'ticks, % of the RMS ideal force. Without the rule: an approach plane rendered at '
-                'any distance along it from its point (the offset held at the radius, as before '
-                'the rule), the same models.\n')
-        write_page('approach_late', 'Press onsets with the graph late, by approach distance', body)
+                'ticks, % of the RMS ideal force. approach_radius: how far along an approach '
+                'plane from its point it is rendered; "no rule": at any distance (the offset '
+                'held at model_validity_radius, as before the rule), the same models.\n')
+        write_page('approach_late',
+                   'Press onsets with the graph late, by approach distance and radius', body)
     return 0
 
 

@@ -72,10 +72,10 @@ def models_along(positions: np.ndarray, contact_overrides: dict | None = None
 
 
 def rendered(models: list, positions: np.ndarray, times: np.ndarray, age: int,
-             symmetric_only: bool) -> np.ndarray:
+             symmetric_only: bool, **renderer_kw) -> np.ndarray:
     """The force at every pose from the model made ``age`` poses earlier (the first pose's
-    model for the first ``age``)."""
-    r = LocalModelRenderer(validity_time=1e9)
+    model for the first ``age``); ``renderer_kw``: :class:`LocalModelRenderer`'s arguments."""
+    r = LocalModelRenderer(validity_time=1e9, **renderer_kw)
     out = np.zeros((len(positions), 3))
     for i, p in enumerate(positions):
         j = max(i - age, 0)

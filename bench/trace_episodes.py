@@ -31,7 +31,6 @@ Prints only (a diagnosis, not a benchmark: no page).
 from __future__ import annotations
 
 import argparse
-import math
 import struct
 import sys
 from pathlib import Path
@@ -41,6 +40,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from _args import positive_numbers  # noqa: E402
 from haptic_anfis.bag.reader import read_messages  # noqa: E402
 from haptic_anfis.bag.topics import (  # noqa: E402
     JOINT_STATE_TYPE, JOY_TYPE, POINT_TYPE, POSE_TYPE, TWIST_TYPE, WRENCH_TYPE)
@@ -159,18 +159,6 @@ def around(times: tuple[np.ndarray, np.ndarray], start: float, end: float) -> st
     return f'{before} | {j - i:5d} during | {after}'
 
 
-def seconds_list(text: str) -> list[float]:
-    """``--longer-holds``: comma-separated times [s], each finite and > 0."""
-    try:
-        values = [float(h) for h in text.split(',')]
-    except ValueError:
-        values = []
-    if not values or not all(math.isfinite(v) and v > 0 for v in values):
-        raise argparse.ArgumentTypeError(
-            f'{text!r}: expected comma-separated times in seconds > 0, such as 0.75,1,1.5')
-    return values
-
-
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     ap.add_argument('trace', type=Path, help="a falcon_driver tick trace (.npz)")
@@ -187,7 +175,7 @@ def main() -> int:
     ap.add_argument('--from', dest='start', type=float, default=30.0,
                     help='--dropouts: from this many seconds after the first tick (default 30: '
                          "bench_servo_load's --settle)")
-    ap.add_argument('--longer-holds', type=seconds_list, default=[],
+    ap.add_argument('--longer-holds', type=positive_numbers, default=[],
                     help='comma-separated model_hold_time values [s]: the expired-model ticks '
                          'each would have left')
     a = ap.parse_args()

@@ -613,29 +613,35 @@ def test_approach_model_renders_from_the_plane_on():
 
 
 def test_an_approach_plane_renders_nothing_away_from_its_point():
-    """An approach model is the tangent plane at one point: followed past the validity radius
+    """An approach model is the tangent plane at one point: followed past ``approach_radius``
     ACROSS the direction (a stale plane under a sideways stroke) it renders zero, where the
-    surface lies under the plane; straight in past the radius, and a contact model any way past
-    it, still render (depth followed, the offset across held)."""
+    surface lies under the plane; inside it (past the validity radius: the offset across held),
+    straight in past both radii, and a contact model any way past them, it still renders."""
     n = unit([1.0, 0.2, 0.0])
     d = np.array([-1.0, 0.0, 0.0])
     s = np.array([0.03, 0.001, 0.0])
     g = depth_gradient(n, d)
     K = np.outer([300.0, 20.0, 0.0], g)
-    r = LocalModelRenderer(max_stiffness=1e5, validity_time=1.0, validity_radius=0.005)
+    r = LocalModelRenderer(max_stiffness=1e5, validity_time=1.0, validity_radius=0.005,
+                           approach_radius=0.008)
     r.offer(make((0, 0, 0), s, K, s, n, d, 0.0, zero=True))
     side = np.array([0.0, 0.0, 1.0])   # across d and in the plane's tangent direction
-    for deep, across, kind in ((0.006, 0.0, FRESH), (0.001, 0.004, FRESH),
-                               (0.001, 0.006, FREE)):
+    for deep, across, kind in ((0.009, 0.0, FRESH), (0.001, 0.004, FRESH),
+                               (0.001, 0.007, FRESH), (0.001, 0.009, FREE)):
         f, st = r.render(tuple(s + deep * d + across * side), 0.0)
         assert st == kind, (deep, across, st)
         assert (np.linalg.norm(f) > 0.1) == (kind == FRESH), (deep, across, f)
-    assert r.stats.ticks_beyond == 1 and r.stats.ticks_free == 1
-    assert not across_beyond(*g, *(0.006 * d), 0.005) and across_beyond(*g, *(0.006 * side), 0.005)
-    c = s + 0.002 * d   # a contact model 2 mm in: 6 mm across is held at the radius, not dropped
+    assert r.stats.ticks_beyond == 2 and r.stats.ticks_free == 1
+    assert not across_beyond(*g, *(0.009 * d), 0.008) and across_beyond(*g, *(0.009 * side), 0.008)
+    # a radius below the validity radius applies as well (it is its own test, not the hold's)
+    r2 = LocalModelRenderer(max_stiffness=1e5, validity_time=1.0, validity_radius=0.005,
+                            approach_radius=0.002)
+    r2.offer(make((0, 0, 0), s, K, s, n, d, 0.0, zero=True))
+    assert r2.render(tuple(s + 0.001 * d + 0.003 * side), 0.0)[1] == FREE
+    c = s + 0.002 * d   # a contact model 2 mm in: 9 mm across is held at the radius, not dropped
     r.offer(make((1.0, 0.0, 0.0), c, K, s, n, d, 0.002))
-    f, st = r.render(tuple(c + 0.006 * side), 0.0)
-    assert st == FRESH and f[0] > 0.5 and r.stats.ticks_beyond == 2
+    f, st = r.render(tuple(c + 0.009 * side), 0.0)
+    assert st == FRESH and f[0] > 0.5 and r.stats.ticks_beyond == 3
 
 
 def test_surface_ahead_of_a_free_probe():

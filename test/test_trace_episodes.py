@@ -110,13 +110,13 @@ def test_a_longer_hold_leaves_the_ticks_past_it():
 @pytest.mark.parametrize('text', ['0.75,x', '', '1,-1', 'nan'])
 def test_longer_holds_that_are_no_times_get_one_line(text):
     """--longer-holds 0.75,x: argparse's one line naming the option and what was expected, no
-    traceback."""
+    traceback (the list type the bench scripts share)."""
     import argparse
 
-    from trace_episodes import seconds_list
-    with pytest.raises(argparse.ArgumentTypeError, match='expected comma-separated times'):
-        seconds_list(text)
-    assert seconds_list('0.75, 1,1.5') == [0.75, 1.0, 1.5]
+    from _args import positive_numbers
+    with pytest.raises(argparse.ArgumentTypeError, match='expected comma-separated numbers > 0'):
+        positive_numbers(text)
+    assert positive_numbers('0.75, 1,1.5') == [0.75, 1.0, 1.5]
 
 
 def test_dropout_runs_are_zero_force_in_contact_named_by_status():

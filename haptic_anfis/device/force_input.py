@@ -14,8 +14,8 @@ import math
 
 from .buttons import ClutchMark
 from .falcon import DeviceState, WorkspaceMapping
-from .local_model import (FALCON_MAX_STIFFNESS, LocalModel, LocalModelRenderer, check_values,
-                          tissue_stiffness_limit)
+from .local_model import (APPROACH_RADIUS, FALCON_MAX_STIFFNESS, LocalModel, LocalModelRenderer,
+                          check_values, tissue_stiffness_limit)
 from .safety import OK, REJECTED_FRAME, SafetyLayer
 from .stamps import OK as STAMP_OK
 from .stamps import StampBook
@@ -33,6 +33,8 @@ class ForceInput:
         max_stiffness: device-frame stiffness bound [N/m] (default: the Falcon's, see
             :data:`~.local_model.FALCON_MAX_STIFFNESS`).
         validity_time, validity_radius: local model expiry [s], [m] (tissue frame).
+        approach_radius: how far [m] along an approach plane from its point it renders
+            (:class:`~.local_model.LocalModelRenderer`).
         period: servo period [s] (a model no older than 1.5 periods is "fresh").
         stamps: the book of the driver's pose stamps (a new one by default).
         clutch: the grip buttons' state machine (:class:`.buttons.ClutchMark`), or None: its
@@ -43,7 +45,8 @@ class ForceInput:
     def __init__(self, safety: SafetyLayer, mapping: WorkspaceMapping, mode: str = 'local_model',
                  max_stiffness: float = FALCON_MAX_STIFFNESS, validity_time: float = 0.05,
                  validity_radius: float = 0.005, period: float = 0.001,
-                 stamps: StampBook | None = None, clutch: ClutchMark | None = None) -> None:
+                 stamps: StampBook | None = None, clutch: ClutchMark | None = None,
+                 approach_radius: float = APPROACH_RADIUS) -> None:
         if mode not in MODES:
             raise ValueError(f'mode: expected one of {MODES}, got {mode!r}')
         self.safety, self.mapping, self.mode = safety, mapping, mode
@@ -51,7 +54,8 @@ class ForceInput:
         self.stamps = stamps if stamps is not None else StampBook()
         self.renderer = LocalModelRenderer(
             tissue_stiffness_limit(max_stiffness, mapping.force_scale, mapping.scale),
-            validity_time, validity_radius, fresh_age=1.5 * period)
+            validity_time, validity_radius, fresh_age=1.5 * period,
+            approach_radius=approach_radius)
         self.last_in_contact = False
         self.commands_received = self.models_received = 0
 

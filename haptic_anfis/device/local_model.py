@@ -44,11 +44,11 @@ with these rules (:class:`LocalModelRenderer`):
   will touch, F0 = 0, K the stiffness at depth 0+): zero force outside the plane, ``K (p - p0)``
   the instant the probe is past it — so a press is rendered from its first tick instead of one
   force-server latency late. Without a normal (all zeros) it renders zero force. It is the
-  plane of one point: with the probe further than ``validity_radius`` from that point along the
-  plane (across the depth gradient, :func:`across_beyond`) it renders zero (free) — a convex surface lies
-  under its tangent plane, so a stale plane followed sideways (a late graph, a stroke in free
-  space) would press on the probe in free space; within the radius it is off by at most
-  r^2 / 2R, 0.3 mm on the default breast (R >= 45 mm).
+  plane of one point: with the probe further than ``approach_radius`` (:data:`APPROACH_RADIUS`)
+  from that point along the plane (across the depth gradient, :func:`across_beyond`) it renders
+  zero (free) — a convex surface lies under its tangent plane, so a stale plane followed sideways
+  (a late graph, a stroke in free space) would press on the probe in free space; within the
+  radius it is off by at most r^2 / 2R, 2.5 mm at 15 mm on the default breast (R >= 45 mm).
 - Non-finite F0, p0, K, normal or direction: the model is rejected (the caller zeroes the force).
 - Expiry: a model older than ``validity_time`` (measured from the time of the driver's own pose it
   answers, not from its arrival) is expired: the renderer stops extrapolating and the caller
@@ -73,11 +73,18 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from numba.extending import register_jitable
 
 from ..interfaces import LM_C, LM_D, LM_DEPTH, LM_F0, LM_K, LM_N, LM_P0, LM_ZERO, LOCAL_MODEL_FIELDS
 
 #: Falcon stiffness bound [N/m], device frame (CHAI3D's Falcon m_maxLinearStiffness; see above).
 FALCON_MAX_STIFFNESS = 3000.0
+
+#: How far [m] along an approach plane from its point it is rendered (module doc): the plane lies
+#: r^2 / 2R above a convex surface of radius R there (2.5 mm at 15 mm on the default breast,
+#: R >= 45 mm); past it the probe is free. Chosen with bench/bench_approach_late.py: the largest
+#: radius measured that adds no tick pressing on a free probe (docs/servo_loop.md).
+APPROACH_RADIUS = 0.015
 
 #: Tick status codes (also the trace's status column).
 NONE, FRESH, EXTRAPOLATED, EXPIRED, FREE = 0, 1, 2, 3, 4
@@ -565,17 +572,26 @@ def accept_values(v, max_stiffness: float, stats, checked: bool = False):
             contact)
 
 
-def hold_offset(gx: float, gy: float, gz: float, ex: float, ey: float, ez: float, r: float
-                ) -> tuple[float, float, float]:
-    """The probe's offset ``e`` [m] from a model's p0 with its part across the depth gradient
-    ``g`` held at ``r`` [m]; its part along ``g`` (so the depth ``g . e``) unchanged. A depth
-    gradient has a length of 1 or more (1 / cos of the angle between the indentation direction
-    and the normal); one of length <= 1e-6 gives no direction: the whole offset is held. Compiled
-    as it is for the native tick (``native_tick``)."""
+@register_jitable
+def split_offset(gx: float, gy: float, gz: float, ex: float, ey: float, ez: float
+                 ) -> tuple[float, float, float, float, float, float]:
+    """The probe's offset ``e`` [m] from a model's p0 as (its part along the depth gradient
+    ``g``, its part across ``g``): six floats. A depth gradient has a length of 1 or more (1 / cos
+    of the angle between the indentation direction and the normal); one of length <= 1e-6 gives
+    no direction: the whole offset is across. Compiled into the native tick (``native_tick``)."""
     gg = gx * gx + gy * gy + gz * gz
     a = (gx * ex + gy * ey + gz * ez) / gg if gg > 1e-12 else 0.0
     nx, ny, nz = a * gx, a * gy, a * gz
-    tx, ty, tz = ex - nx, ey - ny, ez - nz
+    return nx, ny, nz, ex - nx, ey - ny, ez - nz
+
+
+@register_jitable
+def hold_offset(gx: float, gy: float, gz: float, ex: float, ey: float, ez: float, r: float
+                ) -> tuple[float, float, float]:
+    """The probe's offset ``e`` [m] from a model's p0 with its part across the depth gradient
+    ``g`` held at ``r`` [m] (:func:`split_offset`); its part along ``g`` (so the depth ``g . e``)
+    unchanged. Compiled into the native tick."""
+    nx, ny, nz, tx, ty, tz = split_offset(gx, gy, gz, ex, ey, ez)
     tt = tx * tx + ty * ty + tz * tz
     if tt <= r * r:
         return ex, ey, ez
@@ -583,13 +599,12 @@ def hold_offset(gx: float, gy: float, gz: float, ex: float, ey: float, ez: float
     return nx + c * tx, ny + c * ty, nz + c * tz
 
 
+@register_jitable
 def across_beyond(gx: float, gy: float, gz: float, ex: float, ey: float, ez: float,
                   r: float) -> bool:
     """The probe's offset ``e`` [m] from a model's p0 has a part across the depth gradient ``g``
-    (:func:`hold_offset`'s) longer than ``r`` [m]. Compiled as it is for the native tick."""
-    gg = gx * gx + gy * gy + gz * gz
-    a = (gx * ex + gy * ey + gz * ez) / gg if gg > 1e-12 else 0.0
-    tx, ty, tz = ex - a * gx, ey - a * gy, ez - a * gz
+    (:func:`split_offset`) longer than ``r`` [m]. Compiled into the native tick."""
+    _, _, _, tx, ty, tz = split_offset(gx, gy, gz, ex, ey, ez)
     return tx * tx + ty * ty + tz * tz > r * r
 
 
@@ -617,21 +632,27 @@ class LocalModelRenderer:
     Args:
         max_stiffness: tissue-frame stiffness bound [N/m] (:func:`tissue_stiffness_limit`).
         validity_time: a model older than this [s] (from the time of its pose) is expired.
-        validity_radius: a probe further than this [m] from the model's p0 is expired.
+        validity_radius: a probe further than this [m] from the model's p0 is rendered with its
+            offset across the depth gradient held at it (:func:`hold_offset`).
+        approach_radius: an approach model (depth 0: the plane ahead of a free probe) renders
+            zero with the probe further than this [m] along the plane from its point
+            (:func:`across_beyond`; the module doc).
         fresh_age: a model no older than this [s] counts as fresh (default 1.5 servo periods at
             1 kHz: it answers the previous tick's pose), older and valid as extrapolated.
     """
 
     def __init__(self, max_stiffness: float = FALCON_MAX_STIFFNESS / 1.5,
                  validity_time: float = 0.05, validity_radius: float = 0.005,
-                 fresh_age: float = 0.0015) -> None:
+                 fresh_age: float = 0.0015, approach_radius: float = APPROACH_RADIUS) -> None:
         for name, v in (('max_stiffness', max_stiffness), ('validity_time', validity_time),
-                        ('validity_radius', validity_radius), ('fresh_age', fresh_age)):
+                        ('validity_radius', validity_radius), ('fresh_age', fresh_age),
+                        ('approach_radius', approach_radius)):
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
                 raise ValueError(f'{name}: expected a finite number > 0, got {v!r}')
         self.max_stiffness = float(max_stiffness)
         self.validity_time = float(validity_time)
         self.validity_radius = float(validity_radius)
+        self.approach_radius = float(approach_radius)
         self.fresh_age = float(fresh_age)
         self.stats = RenderStats()
         self._m: tuple | None = None  # the prepared model (plain floats for the servo thread)
@@ -700,7 +721,7 @@ class LocalModelRenderer:
         Status FRESH / EXTRAPOLATED: the model's force at p (beyond the validity radius: at p with
         its offset across the depth gradient held at the radius); FREE: zero (the model says no
         contact, p is out of the surface along the local normal, or an approach model's point is
-        more than the radius away across the direction); EXPIRED (too old) and
+        more than ``approach_radius`` away across the direction); EXPIRED (too old) and
         NONE (no model yet): None — the caller holds the last force and its watchdog ramps it.
         """
         m = self._m
@@ -719,11 +740,10 @@ class LocalModelRenderer:
         if not contact or depth <= 0.0:  # out along the local normal: zero at once, any distance
             st.ticks_free += 1
             return (0.0, 0.0, 0.0), FREE
+        if depth0 == 0.0 and across_beyond(g[0], g[1], g[2], ex, ey, ez, self.approach_radius):
+            st.ticks_free += 1   # an approach plane, away from its point (module doc)
+            return (0.0, 0.0, 0.0), FREE
         if ex * ex + ey * ey + ez * ez > self.validity_radius ** 2:
-            if depth0 == 0.0 and across_beyond(g[0], g[1], g[2], ex, ey, ez,
-                                               self.validity_radius):
-                st.ticks_free += 1   # an approach plane, away from its point (module doc)
-                return (0.0, 0.0, 0.0), FREE
             st.ticks_beyond += 1
             ex, ey, ez = hold_offset(g[0], g[1], g[2], ex, ey, ez, self.validity_radius)
         fresh = age <= self.fresh_age

@@ -19,9 +19,9 @@ It sleeps to absolute 1 ms deadlines with ``clock_nanosleep`` and reads the cloc
    radius the depth is followed exactly and the offset across the indentation direction held at
    the radius (:func:`.local_model.hold_offset`, counted as ``beyond``): a late model under a
    fast stroke no longer drops the force to 0 N either; an approach model (the plane ahead of a
-   free probe) that far along its plane renders zero instead (:func:`.local_model.across_beyond`). The
-   stiffness's skew part (the tissue
-   force turning with the probe) is rendered while the model is valid; a held model keeps it
+   free probe) past ``approach_radius`` along its plane renders zero instead
+   (:func:`.local_model.across_beyond`). The stiffness's skew part (the tissue force turning with
+   the probe) is rendered while the model is valid; a held model keeps it
    only where K has no rotating mode (:func:`.local_model.rotating_mode`): a free handle could
    spiral out along one.
 4. Passivity: the model's stiffness is limited by the MEASURED tick period ``T``:
@@ -97,7 +97,8 @@ def _index(name: str, names: str) -> type:
 #: configuration (float64), written once before the loop starts
 CFG = _index('CFG', 'period max_force max_force_rate watchdog max_dt validity_time validity_radius '
              'fresh_age max_stiffness scale ox oy oz force_scale hand_m hand_k hand_c half '
-             'dt_max max_catch_up ramp damping mode observer loop dev_max_force hold_time device')
+             'dt_max max_catch_up ramp damping mode observer loop dev_max_force hold_time device '
+             'approach_radius')
 #: the loop's own state (float64)
 S = _index('S', 'x0 x1 x2 v0 v1 v2 f0 f1 f2 t_dev t_open script_off '
            'enabled target0 target1 target2 out0 out1 out2 last_cmd last_out tripped '
@@ -406,8 +407,6 @@ def _take(buf, scratch, seen):
     return s2 == s1 and scratch[0] == s1
 
 
-_hold_offset = nb.njit(nogil=True, cache=True)(hold_offset)
-_across_beyond = nb.njit(nogil=True, cache=True)(across_beyond)
 _periods_lost_in = nb.njit(nogil=True, cache=True)(periods_lost_in)
 
 
@@ -432,14 +431,15 @@ def _render(cfg, st, cnt, qx, qy, qz, now, period):
         cnt[CNT.free] += 1
         st[S.status] = FREE
         return 0.0, 0.0, 0.0
+    if depth0 == 0.0 and across_beyond(st[S.m_g0], st[S.m_g1], st[S.m_g2], ex, ey, ez,
+                                       cfg[CFG.approach_radius]):
+        cnt[CNT.free] += 1   # an approach plane, away from its point (local_model's doc)
+        st[S.status] = FREE
+        return 0.0, 0.0, 0.0
     r = cfg[CFG.validity_radius]
     if ex * ex + ey * ey + ez * ez > r * r:  # depth followed, the offset across held (module doc)
-        if depth0 == 0.0 and _across_beyond(st[S.m_g0], st[S.m_g1], st[S.m_g2], ex, ey, ez, r):
-            cnt[CNT.free] += 1   # an approach plane, away from its point (local_model's doc)
-            st[S.status] = FREE
-            return 0.0, 0.0, 0.0
         cnt[CNT.beyond] += 1
-        ex, ey, ez = _hold_offset(st[S.m_g0], st[S.m_g1], st[S.m_g2], ex, ey, ez, r)
+        ex, ey, ez = hold_offset(st[S.m_g0], st[S.m_g1], st[S.m_g2], ex, ey, ez, r)
     if held:  # older than its validity, inside the hold time and the radius: still the tissue
         cnt[CNT.held] += 1
     if age <= cfg[CFG.fresh_age]:

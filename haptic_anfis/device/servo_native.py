@@ -35,7 +35,7 @@ from . import native_tick as nt
 from . import device_process as dp
 from .buttons import ButtonEvents
 from .falcon import DeviceState, HandParams, WorkspaceMapping
-from .local_model import FALCON_MAX_STIFFNESS, LocalModelRenderer, RenderStats, \
+from .local_model import APPROACH_RADIUS, FALCON_MAX_STIFFNESS, LocalModelRenderer, RenderStats, \
     accept_values, rotating_mode, skew_vector, symmetric_part, tissue_stiffness_limit
 from .safety import IGNORED_DISABLED, OK, REJECTED_FRAME, REJECTED_NONFINITE, SafetyLayer, \
     SafetyStats
@@ -291,10 +291,11 @@ class NativeRenderer(LocalModelRenderer):
 
     def __init__(self, loop: 'NativeServoLoop', max_stiffness: float = FALCON_MAX_STIFFNESS / 1.5,
                  validity_time: float = 0.05, validity_radius: float = 0.005,
-                 fresh_age: float = 0.0015) -> None:
+                 fresh_age: float = 0.0015, approach_radius: float = APPROACH_RADIUS) -> None:
         self._loop = loop
         self._base = loop.cnt.copy()
-        super().__init__(max_stiffness, validity_time, validity_radius, fresh_age)
+        super().__init__(max_stiffness, validity_time, validity_radius, fresh_age,
+                         approach_radius)
 
     @property
     def stats(self) -> RenderStats:
@@ -368,8 +369,8 @@ class NativeServoLoop:
         rate: servo rate [Hz].
         max_force, max_force_rate, watchdog_timeout, frame_id: the safety layer's.
         mode: ``'local_model'`` or ``'zoh'``.
-        max_stiffness: device-frame stiffness bound [N/m]; validity_time [s], validity_radius [m]:
-            the local model's (:class:`~.local_model.LocalModelRenderer`).
+        max_stiffness: device-frame stiffness bound [N/m]; validity_time [s], validity_radius [m],
+            approach_radius [m]: the local model's (:class:`~.local_model.LocalModelRenderer`).
         damping: device damping b [N s/m] of the passivity bound K <= 2 b / T.
         observer: run the passivity observer / controller (Hannaford & Ryu 2002).
         hold_time: a model older than ``validity_time`` but not than this [s] is still rendered
@@ -409,7 +410,7 @@ class NativeServoLoop:
                  half_extent: float = 0.05, device_max_force: float | None = None,
                  process: bool = False, device_factory: Callable[[], object] | None = None,
                  open_timeout: float = 120.0, open_error: type[Exception] = OSError,
-                 workers: int = 2) -> None:
+                 workers: int = 2, approach_radius: float = APPROACH_RADIUS) -> None:
         if not rate > 0:
             raise ValueError(f'rate: expected > 0 Hz, got {rate!r}')
         if not 0 <= priority <= 99:
@@ -443,6 +444,7 @@ class NativeServoLoop:
         cfg[C.max_force], cfg[C.max_force_rate] = max_force, max_force_rate
         cfg[C.watchdog], cfg[C.max_dt] = watchdog_timeout, 0.005
         cfg[C.validity_time], cfg[C.validity_radius] = validity_time, validity_radius
+        cfg[C.approach_radius] = approach_radius
         cfg[C.fresh_age] = 1.5 * self.period
         cfg[C.max_stiffness] = tissue_stiffness_limit(max_stiffness, mapping.force_scale,
                                                       mapping.scale)
@@ -487,7 +489,7 @@ class NativeServoLoop:
         self.safety = NativeSafety(self, max_force, max_force_rate, watchdog_timeout, frame_id)
         self.renderer = NativeRenderer(self, tissue_stiffness_limit(
             max_stiffness, mapping.force_scale, mapping.scale), validity_time, validity_radius,
-            1.5 * self.period)
+            1.5 * self.period, approach_radius)
         self.clutch = NativeClutch(self)
         self.stats = NativeLoopStats(self.cnt, self.period)
         self.scheduling = ''

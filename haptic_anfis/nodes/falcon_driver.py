@@ -46,7 +46,7 @@ from ..device import (HandParams, PalpationScript, SafetyLayer, ServoLoop, Simul
 from ..device.buttons import ClutchMark
 from ..device.falcon import RATED_FORCE
 from ..device.force_input import MODES, ForceInput
-from ..device.local_model import FALCON_MAX_STIFFNESS, STATUS_NAMES
+from ..device.local_model import APPROACH_RADIUS, FALCON_MAX_STIFFNESS, STATUS_NAMES
 from ..device.safety import OK
 from ..device.start_gate import HeldScript
 from ..device.stamps import STALE
@@ -128,6 +128,10 @@ PARAMS = [
     Param('model_validity_radius', 0.005, 'local_model: beyond this [m] (tissue frame) from the '
           'model\'s position the depth is still followed but the offset across the indentation '
           'direction is held at it (no 0 N mid-press; counted as ticks_beyond)', positive),
+    Param('model_approach_radius', APPROACH_RADIUS, 'local_model: an approach model (the surface '
+          'plane ahead of a free probe) renders zero with the probe further than this [m] '
+          '(tissue frame) along the plane from its point: a convex surface lies under its tangent '
+          'plane, r^2 / 2R off at r', positive),
     Param('max_stiffness', FALCON_MAX_STIFFNESS, 'local_model: stiffness bound [N/m] in the DEVICE '
           'frame (3000.0: the Falcon figure CHAI3D uses); the model is clamped to it', positive),
     Param('trace_path', '', "write every servo tick (time, position, applied force, model status) "
@@ -245,7 +249,8 @@ class FalconDriver(HapticNode):
         self.input = ForceInput(self.safety, self.mapping, p['force_mode'], p['max_stiffness'],
                                 p['model_validity_time'], p['model_validity_radius'],
                                 1.0 / p['rate'],
-                                clutch=None if self.native is not None else self.clutch)
+                                clutch=None if self.native is not None else self.clutch,
+                                approach_radius=p['model_approach_radius'])
         if self.native is not None:
             self.input.renderer = self.native.renderer
         self.pub_pose = self.create_publisher(PoseStamped, ifc.TOPIC_POSE, LOOP_QOS)
@@ -361,7 +366,7 @@ class FalconDriver(HapticNode):
             p['model_validity_radius'], p['passivity_damping'], p['passivity_observer'],
             p['model_hold_time'], trace=self._tick_trace(p),
             priority=p['servo_priority'], process=p['servo_loop'] == 'native_process',
-            workers=p['servo_workers'], **kw)
+            workers=p['servo_workers'], approach_radius=p['model_approach_radius'], **kw)
 
     @staticmethod
     def _tick_trace(p) -> TickTrace | None:
