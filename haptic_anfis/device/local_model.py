@@ -572,6 +572,9 @@ def accept_values(v, max_stiffness: float, stats, checked: bool = False):
             contact)
 
 
+# split_offset, hold_offset and across_beyond are compiled into native_tick's cached kernels;
+# numba's cache does not see a change to a called function in another file: after changing one,
+# touch native_tick.py (or clear its __pycache__) so the kernels are rebuilt.
 @register_jitable
 def split_offset(gx: float, gy: float, gz: float, ex: float, ey: float, ez: float
                  ) -> tuple[float, float, float, float, float, float]:
