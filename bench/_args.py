@@ -15,5 +15,5 @@ def positive_numbers(text: str) -> list[float]:
         values = []
     if not values or not all(math.isfinite(v) and v > 0 for v in values):
         raise argparse.ArgumentTypeError(
-            f'{text!r}: expected comma-separated numbers > 0, such as 0.75,1,1.5')
+            f'{text!r}: expected comma-separated numbers > 0, such as 50,150,250')
     return values

@@ -637,11 +637,19 @@ def test_an_approach_plane_renders_nothing_away_from_its_point():
     r2 = LocalModelRenderer(max_stiffness=1e5, validity_time=1.0, validity_radius=0.005,
                             approach_radius=0.002)
     r2.offer(make((0, 0, 0), s, K, s, n, d, 0.0, zero=True))
-    assert r2.render(tuple(s + 0.001 * d + 0.003 * side), 0.0)[1] == FREE
+    assert r2.render(tuple(s + 0.001 * d + 0.003 * side), 0.0) == ((0.0, 0.0, 0.0), FREE)
+    assert r2.stats.ticks_free == 1 and r2.stats.ticks_beyond == 0
     c = s + 0.002 * d   # a contact model 2 mm in: 9 mm across is held at the radius, not dropped
     r.offer(make((1.0, 0.0, 0.0), c, K, s, n, d, 0.002))
     f, st = r.render(tuple(c + 0.009 * side), 0.0)
     assert st == FRESH and f[0] > 0.5 and r.stats.ticks_beyond == 3
+
+
+@pytest.mark.parametrize('radius', [0.0, -0.01, math.nan, math.inf, '0.01'])
+def test_an_approach_radius_that_is_no_length_is_refused(radius):
+    """approach_radius 0, negative, NaN, infinite or not a number: one ValueError naming it."""
+    with pytest.raises(ValueError, match='approach_radius: expected a finite number > 0'):
+        LocalModelRenderer(approach_radius=radius)
 
 
 def test_surface_ahead_of_a_free_probe():

@@ -14,7 +14,7 @@ from hypothesis import strategies as st
 from haptic_anfis.device import HandParams, WorkspaceMapping
 from haptic_anfis.device import native_tick as nt
 from haptic_anfis.device.force_error import ripple_and_dropouts
-from haptic_anfis.device.local_model import (EXPIRED, EXTRAPOLATED, FRESH, LocalModel,
+from haptic_anfis.device.local_model import (EXPIRED, EXTRAPOLATED, FREE, FRESH, LocalModel,
                                              LocalModelRenderer,
                                              tissue_stiffness_limit)
 from haptic_anfis.device.palpation import PalpationScript
@@ -166,6 +166,39 @@ def test_local_model_renders_as_the_python_renderer(seed, spread, approach):
     if not approach:
         assert (ref.stats.ticks_beyond > 0) == (spread > 0.002)
     assert (away > 0) == (approach and spread > 0.002), away
+
+
+@pytest.mark.parametrize('approach_radius, across, free', [
+    (0.006, 0.0055, False),   # past the validity radius (5 mm), inside its own: held, rendered
+    (0.006, 0.007, True),
+    (0.002, 0.003, True)])    # its own radius below the validity radius applies as well
+def test_the_tick_frees_an_approach_plane_past_its_own_radius(approach_radius, across, free):
+    """The compiled tick reads approach_radius (not the validity radius): a probe 1 mm past an
+    approach plane, ``across`` along it from its point, renders as the Python renderer does."""
+    v = model_values(np.random.default_rng(0), approach=True)
+    lp = loop('local_model', max_force_rate=1e6, validity_time=1.0,
+              approach_radius=approach_radius)
+    ref = LocalModelRenderer(tissue_stiffness_limit(3000.0, 1.0, 1.5), 1.0, 0.005, 0.0015,
+                             approach_radius=approach_radius)
+    lp.safety.start()
+    lp.renderer.offer_values(v, 0.0)
+    ref.offer_values(v, 0.0)
+    q = np.array(v[3:6]) + np.array([-0.001, across, 0.0])   # n = +x: 1 mm in, across along y
+    pin(lp, MAP.to_device(tuple(q)), 0.0)
+    lp.tick(0.0)
+    want, status = ref.render(tuple(q), 0.0)
+    assert status == (FREE if free else FRESH) == int(lp.st[nt.S.status])
+    np.testing.assert_allclose(lp.st[nt.S.target0:nt.S.target0 + 3], want, atol=1e-9)
+    assert (np.linalg.norm(want) > 0.1) != free, want
+    assert lp.cnt[nt.CNT.beyond] == ref.stats.ticks_beyond == (0 if free else 1)
+
+
+def test_the_tick_kernels_are_rebuilt_when_a_function_they_inline_changes():
+    """numba's cache keys the tick on native_tick.py alone: INLINED_SOURCE_HASH, kept in that
+    file, must be the hash of the functions it compiles in from other modules."""
+    got = nt.inlined_source_hash()
+    assert nt.INLINED_SOURCE_HASH == got, (
+        f'a function compiled into the tick changed: set native_tick.INLINED_SOURCE_HASH = {got!r}')
 
 
 def test_non_finite_model_is_never_rendered():

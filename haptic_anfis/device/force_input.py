@@ -33,13 +33,13 @@ class ForceInput:
         max_stiffness: device-frame stiffness bound [N/m] (default: the Falcon's, see
             :data:`~.local_model.FALCON_MAX_STIFFNESS`).
         validity_time, validity_radius: local model expiry [s], [m] (tissue frame).
-        approach_radius: how far [m] along an approach plane from its point it renders
-            (:class:`~.local_model.LocalModelRenderer`).
         period: servo period [s] (a model no older than 1.5 periods is "fresh").
         stamps: the book of the driver's pose stamps (a new one by default).
         clutch: the grip buttons' state machine (:class:`.buttons.ClutchMark`), or None: its
             offset moves the rendered position and its gain scales every force (zero while the
             clutch is held, no jump after it).
+        approach_radius: how far [m] along an approach plane from its point it renders
+            (:class:`~.local_model.LocalModelRenderer`).
     """
 
     def __init__(self, safety: SafetyLayer, mapping: WorkspaceMapping, mode: str = 'local_model',

@@ -53,11 +53,12 @@ with these rules (:class:`LocalModelRenderer`):
 - Expiry: a model older than ``validity_time`` (measured from the time of the driver's own pose it
   answers, not from its arrival) is expired: the renderer stops extrapolating and the caller
   holds the last force and lets the watchdog ramp it to zero, as the zero-order hold does.
-- Beyond ``validity_radius`` from ``p0`` (a late model under a fast stroke) the model is still
-  rendered, with the depth followed exactly and the offset across the indentation direction held
-  at the radius (:func:`hold_offset`): the force stays the tissue's at the probe's depth, a little
-  behind along the surface, where expiring it dropped the force to 0 N mid-press and brought it
-  back with a jolt when the next model came (issue 32). Counted (``ticks_beyond``).
+- Beyond ``validity_radius`` from ``p0`` (a late model under a fast stroke) the model (an
+  approach plane: only within ``approach_radius``, above) is still rendered, with the depth
+  followed exactly and the offset across the indentation direction held at the radius
+  (:func:`hold_offset`): the force stays the tissue's at the probe's depth, a little behind along
+  the surface, where expiring it dropped the force to 0 N mid-press and brought it back with a
+  jolt when the next model came (issue 32). Counted (``ticks_beyond``).
 
 The message (``falcon/servo_cf_local``, layout :data:`haptic_anfis.interfaces.LOCAL_MODEL_FIELDS`)
 is encoded and decoded here, beside :class:`LocalModel`: :func:`model_values` /
@@ -73,7 +74,6 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from numba.extending import register_jitable
 
 from ..interfaces import LM_C, LM_D, LM_DEPTH, LM_F0, LM_K, LM_N, LM_P0, LM_ZERO, LOCAL_MODEL_FIELDS
 
@@ -83,7 +83,8 @@ FALCON_MAX_STIFFNESS = 3000.0
 #: How far [m] along an approach plane from its point it is rendered (module doc): the plane lies
 #: r^2 / 2R above a convex surface of radius R there (2.5 mm at 15 mm on the default breast,
 #: R >= 45 mm); past it the probe is free. Chosen with bench/bench_approach_late.py: the largest
-#: radius measured that adds no tick pressing on a free probe (docs/servo_loop.md).
+#: radius measured that adds no tick pressing on a free probe with the graph 500 ms late
+#: (docs/servo_loop.md).
 APPROACH_RADIUS = 0.015
 
 #: Tick status codes (also the trace's status column).
@@ -572,28 +573,26 @@ def accept_values(v, max_stiffness: float, stats, checked: bool = False):
             contact)
 
 
-# split_offset, hold_offset and across_beyond are compiled into native_tick's cached kernels;
-# numba's cache does not see a change to a called function in another file: after changing one,
-# touch native_tick.py (or clear its __pycache__) so the kernels are rebuilt.
-@register_jitable
+# split_offset, hold_offset and across_beyond are compiled into native_tick's kernels (it
+# registers them; this module stays free of numba), whose cache keys on native_tick.py alone:
+# native_tick.INLINED_SOURCE_HASH (checked by a test) makes a change here change that file.
 def split_offset(gx: float, gy: float, gz: float, ex: float, ey: float, ez: float
                  ) -> tuple[float, float, float, float, float, float]:
     """The probe's offset ``e`` [m] from a model's p0 as (its part along the depth gradient
     ``g``, its part across ``g``): six floats. A depth gradient has a length of 1 or more (1 / cos
     of the angle between the indentation direction and the normal); one of length <= 1e-6 gives
-    no direction: the whole offset is across. Compiled into the native tick (``native_tick``)."""
+    no direction: the whole offset is across."""
     gg = gx * gx + gy * gy + gz * gz
     a = (gx * ex + gy * ey + gz * ez) / gg if gg > 1e-12 else 0.0
     nx, ny, nz = a * gx, a * gy, a * gz
     return nx, ny, nz, ex - nx, ey - ny, ez - nz
 
 
-@register_jitable
 def hold_offset(gx: float, gy: float, gz: float, ex: float, ey: float, ez: float, r: float
                 ) -> tuple[float, float, float]:
     """The probe's offset ``e`` [m] from a model's p0 with its part across the depth gradient
     ``g`` held at ``r`` [m] (:func:`split_offset`); its part along ``g`` (so the depth ``g . e``)
-    unchanged. Compiled into the native tick."""
+    unchanged."""
     nx, ny, nz, tx, ty, tz = split_offset(gx, gy, gz, ex, ey, ez)
     tt = tx * tx + ty * ty + tz * tz
     if tt <= r * r:
@@ -602,11 +601,10 @@ def hold_offset(gx: float, gy: float, gz: float, ex: float, ey: float, ez: float
     return nx + c * tx, ny + c * ty, nz + c * tz
 
 
-@register_jitable
 def across_beyond(gx: float, gy: float, gz: float, ex: float, ey: float, ez: float,
                   r: float) -> bool:
     """The probe's offset ``e`` [m] from a model's p0 has a part across the depth gradient ``g``
-    (:func:`split_offset`) longer than ``r`` [m]. Compiled into the native tick."""
+    (:func:`split_offset`) longer than ``r`` [m]."""
     _, _, _, tx, ty, tz = split_offset(gx, gy, gz, ex, ey, ez)
     return tx * tx + ty * ty + tz * tz > r * r
 

@@ -49,14 +49,34 @@ from __future__ import annotations
 import ctypes
 import ctypes.util
 import enum
+import hashlib
+import inspect
 
 import numba as nb
 from llvmlite import binding as llvm
+from numba.extending import register_jitable
 import numpy as np
 
-from .local_model import across_beyond, hold_offset
+from .local_model import across_beyond, hold_offset, split_offset
 from .stats import periods_lost_in
 from .trace import DISABLED
+
+#: Plain functions of the numba-free modules compiled into the kernels below (registered here).
+INLINED = (split_offset, hold_offset, across_beyond, periods_lost_in)
+for _f in INLINED:
+    register_jitable(_f)
+#: numba's cache keys a kernel on this file alone, not on the functions it calls from others: a
+#: change to one of INLINED must change this file, or a stale kernel runs. This is
+#: :func:`inlined_source_hash` (test_servo_native checks it; update it when they change).
+INLINED_SOURCE_HASH = '5bbbc5f8411c2e53'
+
+
+def inlined_source_hash() -> str:
+    """The first 16 hex digits of the SHA-256 of :data:`INLINED`'s source code."""
+    h = hashlib.sha256()
+    for f in INLINED:
+        h.update(inspect.getsource(f).encode())
+    return h.hexdigest()[:16]
 
 __all__ = ['CFG', 'CNT', 'OUT', 'CMD_LEN', 'MODEL_LEN', 'STATE_LEN', 'CTL', 'TRACE_COLS',
            'CFG_LEN', 'CTL_LEN', 'HAND_LEN', 'OUT_LEN', 'CNT_LEN', 'SCRATCH_LEN', 'LOCK_LEN',
@@ -407,9 +427,6 @@ def _take(buf, scratch, seen):
     return s2 == s1 and scratch[0] == s1
 
 
-_periods_lost_in = nb.njit(nogil=True, cache=True)(periods_lost_in)
-
-
 @nb.njit(nogil=True, cache=True)
 def _render(cfg, st, cnt, qx, qy, qz, now, period):
     """The local model's force (tissue frame) at the tissue position q, or NaN (nothing to offer:
@@ -599,7 +616,7 @@ def _compute(now, cfg, st, times, points, buttons, hand, cmd, model, ctl, cnt, s
     # timing counters
     period = cfg[CFG.period]
     if st[S.t_prev] == st[S.t_prev]:
-        cnt[CNT.periods_lost] += _periods_lost_in(gap, period)
+        cnt[CNT.periods_lost] += periods_lost_in(gap, period)
         g_ns = int(gap * 1e9)
         if g_ns > cnt[CNT.max_gap_ns]:
             cnt[CNT.max_gap_ns] = g_ns

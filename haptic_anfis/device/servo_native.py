@@ -287,7 +287,9 @@ class NativeSafety(SafetyLayer):
 class NativeRenderer(LocalModelRenderer):
     """:class:`~.local_model.LocalModelRenderer`'s receiving side over the compiled loop: a model
     is checked and conditioned here (once per model, as before) and written to the model buffer;
-    the compiled tick renders it. ``stats``: the tick counts by status come from the loop."""
+    the compiled tick renders it. ``stats``: the tick counts by status come from the loop. The
+    radii and times are the loop's configuration (``cfg``, written once): changing these
+    attributes afterwards changes nothing the tick does."""
 
     def __init__(self, loop: 'NativeServoLoop', max_stiffness: float = FALCON_MAX_STIFFNESS / 1.5,
                  validity_time: float = 0.05, validity_radius: float = 0.005,
