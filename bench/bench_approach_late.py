@@ -27,17 +27,14 @@ from __future__ import annotations
 import argparse
 import contextlib
 import sys
-import tempfile
-from pathlib import Path
 
 import numpy as np
 
 from _args import positive_numbers
 from _page import write_page
-from bench_model_age import models_along, rendered, session_trace
+from bench_model_age import add_trace_arguments, models_along, rendered, trace_window
 from haptic_anfis.device import local_model
 from haptic_anfis.device.force_error import runs_of
-from haptic_anfis.device.trace import DISABLED, load_trace
 
 
 @contextlib.contextmanager
@@ -71,11 +68,7 @@ def counts(models, positions, times, F, contact, age: int, approach_radius: floa
 
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument('--trace', type=Path, help='a falcon_driver tick trace (.npz; default: a '
-                                               'launch of --seconds + 10 s, no real-time priority)')
-    ap.add_argument('--start', type=float, default=30.0,
-                    help='seconds into the trace to start (default 30: past the start-up)')
-    ap.add_argument('--seconds', type=float, default=60.0, help='seconds of trace (default 60)')
+    add_trace_arguments(ap, 60.0)
     ap.add_argument('--ages', type=positive_numbers, default=[250, 500],
                     help='model ages [ms] (default 250,500)')
     ap.add_argument('--distances', type=positive_numbers, default=[0.005, 0.01, 0.015, 0.02],
@@ -87,19 +80,9 @@ def main() -> int:
                          '0.005,0.01,0.015,0.02,0.03)')
     ap.add_argument('--no-page', action='store_true', help='print only')
     a = ap.parse_args()
-    with tempfile.TemporaryDirectory(prefix='bench-approach-late-') as tmp:
-        if a.trace is None:
-            a.start = min(a.start, 5.0)
-        trace = a.trace or session_trace(a.start + a.seconds + 5.0, Path(tmp))
-        rows, _ = load_trace(trace)
-    rows = rows[rows[:, 7] != DISABLED]
-    t = rows[:, 0] - rows[0, 0]
-    rows = rows[(t >= a.start) & (t < a.start + a.seconds)]
-    if not len(rows):
-        raise SystemExit(f'{trace}: no ticks between {a.start:g} and {a.start + a.seconds:g} s')
-    times, positions = rows[:, 0], np.ascontiguousarray(rows[:, 1:4])
+    name, a.start, times, positions = trace_window(a)
     period = float(np.median(np.diff(times)))
-    lines = [f'{trace.name}: {len(rows)} ticks from {a.start:g} s, {a.seconds:g} s', '',
+    lines = [f'{name}: {len(times)} ticks from {a.start:g} s, {a.seconds:g} s', '',
              '| approach_distance (mm) | model age (ms) | approach_radius (mm) | dropout ticks '
              '| longest (ticks) | phantom ticks | error (%) |',
              '|---|---|---|---|---|---|---|']

@@ -53,6 +53,34 @@ def session_trace(duration: float, d: Path) -> Path:
     return log / 'falcon_driver_trace.npz'
 
 
+def add_trace_arguments(ap: argparse.ArgumentParser, seconds: float) -> None:
+    """``--trace``, ``--start`` and ``--seconds``: the part of a servo tick trace a benchmark
+    replays (:func:`trace_window`)."""
+    ap.add_argument('--trace', type=Path, help='a falcon_driver tick trace (.npz; default: a '
+                                               'launch of --seconds + 10 s, no real-time priority)')
+    ap.add_argument('--start', type=float, default=30.0,
+                    help='seconds into the trace to start (default 30: past the start-up)')
+    ap.add_argument('--seconds', type=float, default=seconds,
+                    help=f'seconds of trace (default {seconds:g})')
+
+
+def trace_window(a: argparse.Namespace) -> tuple[str, float, np.ndarray, np.ndarray]:
+    """(the trace's file name, the start used [s], tick times (n,) [s], probe positions (n, 3)
+    [m], tissue frame) of ``a.seconds`` of ``a.trace`` from ``a.start``
+    (:func:`add_trace_arguments`; without a trace: a session of its own, from 5 s), the ticks
+    with the safety layer off left out."""
+    start = a.start if a.trace is not None else min(a.start, 5.0)
+    with tempfile.TemporaryDirectory(prefix='bench-trace-') as tmp:
+        trace = a.trace or session_trace(start + a.seconds + 5.0, Path(tmp))
+        rows, _ = load_trace(trace)
+    rows = rows[rows[:, 7] != DISABLED]
+    t = rows[:, 0] - rows[0, 0]
+    rows = rows[(t >= start) & (t < start + a.seconds)]
+    if not len(rows):
+        raise SystemExit(f'{trace}: no ticks between {start:g} and {start + a.seconds:g} s')
+    return trace.name, start, rows[:, 0], np.ascontiguousarray(rows[:, 1:4])
+
+
 def models_along(positions: np.ndarray, contact_overrides: dict | None = None
                  ) -> tuple[list, np.ndarray, np.ndarray]:
     """(local model values per pose, ideal force (n, 3) [N], in contact (n,)) as the contact

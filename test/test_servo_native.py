@@ -383,6 +383,39 @@ def test_an_old_model_is_held_then_expires():
     assert f == (0.0, 0.0, 0.0)
 
 
+def test_a_held_model_expires_with_the_probe_past_the_hold_radius():
+    """Held (past its validity, inside the hold time) only within hold_radius of p0: a probe
+    that far away has left the place the model describes. A valid model is rendered there."""
+    lp = loop('local_model', max_force_rate=1e6, validity_time=0.05, hold_time=0.3,
+              hold_radius=0.02)
+    lp.safety.start()
+    K = np.diag([-1000.0, 0.0, 0.0])
+    v = LocalModel((2.0, 0.0, 0.0), (0.05, 0.0, 0.0), K, (0.055, 0.0, 0.0), (1.0, 0.0, 0.0),
+                   (-1.0, 0.0, 0.0), 0.005, False, 0.0).values()
+    lp.renderer.offer_values(v, 0.0)
+    far = MAP.to_device((0.05, 0.025, 0.0))  # 25 mm across: beyond the 5 mm validity radius too
+    for t in (0.0, 0.001, 0.04):  # valid: rendered with the offset across held at 5 mm
+        pin(lp, far, t)
+        f = lp.tick(t)
+    assert int(lp.st[nt.S.status]) != EXPIRED and f[0] == pytest.approx(2.0)
+    pin(lp, MAP.to_device((0.05, 0.019, 0.0)), 0.06)  # held, 19 mm: inside the hold radius
+    assert lp.tick(0.06)[0] == pytest.approx(2.0) and lp.cnt[nt.CNT.held] == 1
+    expired = lp.cnt[nt.CNT.expired]
+    pin(lp, far, 0.061)  # held, 25 mm: past it
+    lp.tick(0.061)
+    assert int(lp.st[nt.S.status]) == EXPIRED and lp.cnt[nt.CNT.expired] == expired + 1
+    for t in np.arange(0.062, 0.08, 0.001):  # the watchdog ramps the held force to zero
+        pin(lp, far, t)
+        f = lp.tick(t)
+    assert f == (0.0, 0.0, 0.0)
+
+
+@pytest.mark.parametrize('radius', [0.0, -0.01, float('nan'), float('inf'), '0.03'])
+def test_a_hold_radius_that_is_not_a_distance_is_refused(radius):
+    with pytest.raises(ValueError, match='hold_radius: expected a finite number > 0 m'):
+        loop('local_model', hold_radius=radius)
+
+
 @pytest.mark.parametrize('rotating', [False, True])
 def test_a_held_model_keeps_the_skew_part_unless_it_rotates(rotating):
     """The skew part of K (the tissue force turning with the probe) is rendered while the model

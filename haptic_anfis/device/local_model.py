@@ -87,6 +87,15 @@ FALCON_MAX_STIFFNESS = 3000.0
 #: (docs/servo_loop.md).
 APPROACH_RADIUS = 0.015
 
+#: [m] how far from its p0 the compiled tick renders a HELD model (older than its validity time,
+#: younger than the hold time: an upstream stall); further, it expires (the watchdog ramps the
+#: force to zero). A trainee who moved that far has left the place the model describes: a held
+#: plane followed down a convex surface's flank pressed on a free probe with up to 12 N (before
+#: the clamp) in 1 s stalls. Chosen with bench/bench_stall_hold.py on one session's trace: the
+#: smallest radius measured that adds no dropout tick in stalls up to 0.5 s (the longest
+#: pose -> model latency of the loaded hours: 0.4-0.57 s); checked on another (docs/servo_loop.md).
+HOLD_RADIUS = 0.03
+
 #: Tick status codes (also the trace's status column).
 NONE, FRESH, EXTRAPOLATED, EXPIRED, FREE = 0, 1, 2, 3, 4
 STATUS_NAMES = ('none', 'fresh', 'extrapolated', 'expired', 'free')

@@ -15,7 +15,9 @@ It sleeps to absolute 1 ms deadlines with ``clock_nanosleep`` and reads the cloc
    newest force command (zero-order hold), in the device frame. A model older than its validity
    time but younger than ``hold_time`` is still rendered (counted as ``held``): the tissue does
    not move, so its local linearisation stays right near p0, and an upstream stall (force
-   server, contact detector, the bridge) no longer drops the force to 0 N. Beyond the validity
+   server, contact detector, the bridge) no longer drops the force to 0 N. Only within
+   ``hold_radius`` of p0, though: further, a held model expires
+   (:data:`.local_model.HOLD_RADIUS`). Beyond the validity
    radius the depth is followed exactly and the offset across the indentation direction held at
    the radius (:func:`.local_model.hold_offset`, counted as ``beyond``): a late model under a
    fast stroke no longer drops the force to 0 N either; an approach model (the plane ahead of a
@@ -118,7 +120,7 @@ def _index(name: str, names: str) -> type:
 CFG = _index('CFG', 'period max_force max_force_rate watchdog max_dt validity_time validity_radius '
              'fresh_age max_stiffness scale ox oy oz force_scale hand_m hand_k hand_c half '
              'dt_max max_catch_up ramp damping mode observer loop dev_max_force hold_time device '
-             'approach_radius')
+             'approach_radius hold_radius')
 #: the loop's own state (float64)
 S = _index('S', 'x0 x1 x2 v0 v1 v2 f0 f1 f2 t_dev t_open script_off '
            'enabled target0 target1 target2 out0 out1 out2 last_cmd last_out tripped '
@@ -438,8 +440,9 @@ def _render(cfg, st, cnt, qx, qy, qz, now, period):
     age = now - st[S.m_t0]
     ex, ey, ez = qx - st[S.m_p0], qy - st[S.m_p1], qz - st[S.m_p2]
     held = age > cfg[CFG.validity_time]
-    if held and age > cfg[CFG.hold_time]:
-        cnt[CNT.expired] += 1
+    rh = cfg[CFG.hold_radius]
+    if held and (age > cfg[CFG.hold_time] or ex * ex + ey * ey + ez * ez > rh * rh):
+        cnt[CNT.expired] += 1   # too old, or held and the probe gone from where it was made
         st[S.status] = EXPIRED
         return np.nan, np.nan, np.nan
     depth0 = st[S.m_depth0]

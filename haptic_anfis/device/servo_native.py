@@ -35,8 +35,8 @@ from . import native_tick as nt
 from . import device_process as dp
 from .buttons import ButtonEvents
 from .falcon import DeviceState, HandParams, WorkspaceMapping
-from .local_model import APPROACH_RADIUS, FALCON_MAX_STIFFNESS, LocalModelRenderer, RenderStats, \
-    accept_values, rotating_mode, skew_vector, symmetric_part, tissue_stiffness_limit
+from .local_model import APPROACH_RADIUS, FALCON_MAX_STIFFNESS, HOLD_RADIUS, LocalModelRenderer, \
+    RenderStats, accept_values, rotating_mode, skew_vector, symmetric_part, tissue_stiffness_limit
 from .safety import IGNORED_DISABLED, OK, REJECTED_FRAME, REJECTED_NONFINITE, SafetyLayer, \
     SafetyStats
 from .servo import name_thread, schedule_servo_thread
@@ -376,7 +376,8 @@ class NativeServoLoop:
         damping: device damping b [N s/m] of the passivity bound K <= 2 b / T.
         observer: run the passivity observer / controller (Hannaford & Ryu 2002).
         hold_time: a model older than ``validity_time`` but not than this [s] is still rendered
-            while the probe is within ``validity_radius`` (``held`` ticks; <= validity_time: off).
+            (``held`` ticks; <= validity_time: off) while the probe is within ``hold_radius``
+            [m] of its p0 (:data:`~.local_model.HOLD_RADIUS`); then it expires.
         on_state: ``on_state(state: NativeState, force, now)`` on the bridge thread for the newest
             tick (force: device frame).
         trace: a :class:`~.trace.TickTrace` the bridge fills (tissue frame), or None.
@@ -412,7 +413,8 @@ class NativeServoLoop:
                  half_extent: float = 0.05, device_max_force: float | None = None,
                  process: bool = False, device_factory: Callable[[], object] | None = None,
                  open_timeout: float = 120.0, open_error: type[Exception] = OSError,
-                 workers: int = 2, approach_radius: float = APPROACH_RADIUS) -> None:
+                 workers: int = 2, approach_radius: float = APPROACH_RADIUS,
+                 hold_radius: float = HOLD_RADIUS) -> None:
         if not rate > 0:
             raise ValueError(f'rate: expected > 0 Hz, got {rate!r}')
         if not 0 <= priority <= 99:
@@ -421,6 +423,9 @@ class NativeServoLoop:
             raise ValueError(f"mode: expected 'zoh' or 'local_model', got {mode!r}")
         if not (math.isfinite(damping) and damping > 0):
             raise ValueError(f'damping: expected a finite number > 0 N s/m, got {damping!r}')
+        if not (isinstance(hold_radius, (int, float)) and math.isfinite(hold_radius)
+                and hold_radius > 0):
+            raise ValueError(f'hold_radius: expected a finite number > 0 m, got {hold_radius!r}')
         if not (isinstance(workers, int) and 1 <= workers <= 8):
             raise ValueError(f'workers: expected an integer from 1 to 8, got {workers!r}')
         self.period = 1.0 / rate
@@ -461,6 +466,7 @@ class NativeServoLoop:
         cfg[C.loop] = 1.0 if loop else 0.0
         cfg[C.dev_max_force] = max_force if device_max_force is None else device_max_force
         cfg[C.hold_time] = max(float(hold_time), validity_time)
+        cfg[C.hold_radius] = hold_radius
         cfg[C.device] = 1.0 if device_factory is not None else 0.0
         self.cfg = cfg
         #: the real device's status and counters (:data:`~.device_process.DEV`), its message

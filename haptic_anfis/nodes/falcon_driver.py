@@ -46,7 +46,7 @@ from ..device import (HandParams, PalpationScript, SafetyLayer, ServoLoop, Simul
 from ..device.buttons import ClutchMark
 from ..device.falcon import RATED_FORCE
 from ..device.force_input import MODES, ForceInput
-from ..device.local_model import APPROACH_RADIUS, FALCON_MAX_STIFFNESS, STATUS_NAMES
+from ..device.local_model import APPROACH_RADIUS, FALCON_MAX_STIFFNESS, HOLD_RADIUS, STATUS_NAMES
 from ..device.safety import OK
 from ..device.start_gate import HeldScript
 from ..device.stamps import STALE
@@ -166,6 +166,11 @@ PARAMS = [
           'expires and the watchdog ramps the force to zero (also how long a paused driver or a '
           'dead force server leaves the last model on the hand; docs/servo_loop.md). '
           '<= model_validity_time: off', positive),
+    Param('model_hold_radius', HOLD_RADIUS, 'native, local_model: a held model (older than '
+          'model_validity_time) is rendered only while the probe is within this [m] (tissue '
+          'frame) of the model\'s position; further it expires and the watchdog ramps the force '
+          'to zero (a held plane followed down the flank of a convex surface pressed on a free '
+          'probe; docs/servo_loop.md)', positive),
     Param('passivity_observer', False, 'native: run the passivity observer / controller '
           '(Hannaford & Ryu 2002) on the rendered port'),
     Param('servo_workers', 2, "native, native_process with the simulated Falcon: threads "
@@ -366,7 +371,8 @@ class FalconDriver(HapticNode):
             p['model_validity_radius'], p['passivity_damping'], p['passivity_observer'],
             p['model_hold_time'], trace=self._tick_trace(p),
             priority=p['servo_priority'], process=p['servo_loop'] == 'native_process',
-            workers=p['servo_workers'], approach_radius=p['model_approach_radius'], **kw)
+            workers=p['servo_workers'], approach_radius=p['model_approach_radius'],
+            hold_radius=p['model_hold_radius'], **kw)
 
     @staticmethod
     def _tick_trace(p) -> TickTrace | None:
