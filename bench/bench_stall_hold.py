@@ -16,7 +16,7 @@ same pose), and phantom ticks (not in contact, > 0.1 N rendered). Asserts nothin
 writes docs/measurements/stall_hold.md.
 
     .venv/bin/python bench/bench_stall_hold.py [--trace FILE] [--start 30] [--seconds 120]
-        [--every 4] [--stalls 0.25,0.5,1,1.5,2] [--holds 0.5,1,1.5,2] [--radii 0.02,0.03,1]
+        [--every 4] [--stalls 0.25,0.5,0.6,1,1.5,2] [--holds 0.5,1,1.5,2] [--radii 0.02,0.03,1]
         [--no-page]
 """
 from __future__ import annotations
@@ -50,8 +50,10 @@ def driver_loop(hold: float, radius: float = HOLD_RADIUS) -> NativeServoLoop:
                                d('force_scale'))
     still = PalpationScript(np.array([0.0, 1.0]), np.zeros((2, 3)), np.array([False]),
                             loop=False)
-    return NativeServoLoop(still, mapping, HandParams(), mode='local_model',
-                           max_force=d('max_force'), max_stiffness=d('max_stiffness'),
+    return NativeServoLoop(still, mapping, HandParams(), rate=d('rate'), mode='local_model',
+                           max_force=d('max_force'), max_force_rate=d('max_force_rate'),
+                           watchdog_timeout=d('watchdog_timeout'),
+                           max_stiffness=d('max_stiffness'), damping=d('passivity_damping'),
                            validity_time=d('model_validity_time'),
                            validity_radius=d('model_validity_radius'),
                            approach_radius=d('model_approach_radius'), hold_time=hold,
@@ -60,12 +62,14 @@ def driver_loop(hold: float, radius: float = HOLD_RADIUS) -> NativeServoLoop:
 
 def held_forces(lp: NativeServoLoop, model, t0: float, positions: np.ndarray,
                 times: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(tissue-frame force rendered (n, 3) [N], expired (n,)) at each pose of a stall whose only
-    model is ``model`` (26 values) of time ``t0`` [s]: the tick's target force before the
-    safety layer; an expired tick renders 0 N (the watchdog ramps the held force to 0 within its
-    10 ms)."""
+    """(force rendered (n, 3) [N], tissue frame; expired (n,)) at each pose (tissue frame [m])
+    of a stall at ``times`` [s] whose only model is ``model`` (26 values) of time ``t0`` [s], on
+    a loop of its own (``lp``, fresh: nothing carried from another stall): the tick's target
+    force before the safety layer. An expired tick is counted as 0 N at once: the watchdog's
+    10 ms and its ramp, which hold the last force a little longer on the device, are left out
+    (so a phantom that a hold radius ends lasts up to ~15 ticks longer than counted here)."""
     S = nt.S
-    lp.renderer.clear()
+    lp.safety.start()
     lp.renderer.offer_values(model, t0)
     out, expired = np.zeros((len(times), 3)), np.zeros(len(times), dtype=bool)
     for i, (p, t) in enumerate(zip(positions, times)):
@@ -76,13 +80,14 @@ def held_forces(lp: NativeServoLoop, model, t0: float, positions: np.ndarray,
         if int(lp.st[S.status]) == EXPIRED:
             expired[i] = True
         else:
-            out[i] = lp.st[S.target0:S.target0 + 3]
+            out[i] = lp.st[S.target0:S.target0 + 3] / lp.mapping.force_scale
     return out, expired
 
 
 def row(stall: float, hold: float, radius: float, stalls: list) -> str:
-    """One table row: the first ``stall`` seconds of each of ``stalls`` ((time since the stall's
-    start, rendered force, expired, ideal force, in contact) per tick)."""
+    """One table row: the first ``stall`` [s] of each of ``stalls`` ((time since the stall's
+    start [s], rendered force [N], expired, ideal force [N], in contact) per tick), for a
+    ``hold`` [s] and ``radius`` [m]."""
     drop = held = phantom = 0
     err2 = ref2 = all2 = allref2 = err_max = ph_max = 0.0
     for dt, f, expired, Fs, cs in stalls:
@@ -111,8 +116,8 @@ def main() -> int:
     add_trace_arguments(ap, 120.0)
     ap.add_argument('--every', type=float, default=4.0,
                     help='seconds between stall starts (default 4)')
-    ap.add_argument('--stalls', type=positive_numbers, default=[0.25, 0.5, 1.0, 1.5, 2.0],
-                    help='stall lengths [s] (default 0.25,0.5,1,1.5,2)')
+    ap.add_argument('--stalls', type=positive_numbers, default=[0.25, 0.5, 0.6, 1.0, 1.5, 2.0],
+                    help='stall lengths [s] (default 0.25,0.5,0.6,1,1.5,2)')
     ap.add_argument('--holds', type=positive_numbers, default=[0.5, 1.0, 1.5, 2.0],
                     help='model_hold_time values [s] (default 0.5,1,1.5,2)')
     ap.add_argument('--radii', type=positive_numbers, default=[0.02, HOLD_RADIUS, NO_RADIUS],
@@ -133,18 +138,17 @@ def main() -> int:
     lines = [f'{name}: {len(times)} ticks from {a.start:g} s, {a.seconds:g} s; {len(firsts)} '
              f'stalls, one every {a.every:g} s ({in_press} starting in a press, ideal > 1 N)', '',
              '| stall (s) | model_hold_time (s) | model_hold_radius (mm) | dropout ticks '
-             '| held ticks in contact | their error (%) | their max error (N) | phantom ticks '
-             '| max phantom (N) | error over the stalls (%) |',
+             '| ticks in contact, not expired | their error (%) | their max error (N) '
+             '| phantom ticks | max phantom (N) | error over the stalls (%) |',
              '|---|---|---|---|---|---|---|---|---|---|']
     table = {}
     for hold in a.holds:
         for radius in a.radii:
-            lp = driver_loop(hold, radius)
-            lp.safety.start()
             stalls = []
             for i0 in firsts:
                 sl = slice(i0, np.searchsorted(times, times[i0] + longest))
-                f, expired = held_forces(lp, models[i0], times[i0], positions[sl], times[sl])
+                f, expired = held_forces(driver_loop(hold, radius), models[i0], times[i0],
+                                         positions[sl], times[sl])
                 stalls.append((times[sl] - times[i0], f, expired, F[sl], contact[sl]))
             for stall in a.stalls:
                 table[stall, hold, radius] = row(stall, hold, radius, stalls)
@@ -155,10 +159,12 @@ def main() -> int:
     if not a.no_page:
         body = (text + '\n\nA stall: no model newer than its first pose\'s for its length; the '
                 'trajectory goes on as the trace has it (a trainee does not stop when the graph '
-                'does). Held ticks: rendered from the stall\'s model (valid for its '
-                'model_validity_time, then held). Dropout: in contact, ideal > 1 N, 0 N rendered '
+                'does). Each stall on a loop of its own. Ticks in contact, not expired: rendered '
+                'from the stall\'s model (valid for its model_validity_time, then held); an '
+                'expired tick counts as 0 N at once (the watchdog\'s 10 ms and ramp left out). '
+                'Dropout: in contact, ideal > 1 N, 0 N rendered '
                 '(expired, or the held model says free). Phantom: not in contact, > 0.1 N '
-                'rendered. Their error: RMS of |rendered - ideal| over the held contact ticks, % '
+                'rendered. Their error: RMS of |rendered - ideal| over those ticks, % '
                 'of the RMS ideal force over the same ticks; the ideal is the force server\'s '
                 'at the pose itself. Error over the stalls: the same over every stall tick in '
                 'contact or rendering a force (dropouts and phantoms included), % of the RMS '

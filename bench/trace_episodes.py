@@ -12,12 +12,14 @@ silent at once, at the recorder too, points at the whole machine or the graph's 
 ``--longer-holds`` adds what each longer ``model_hold_time`` would have left of the expired runs:
 a run starts when the held model turns ``--hold`` seconds old and lasts until the next model, so
 under a hold of H its ticks younger than H would have rendered the held model (an upper bound:
-with a longer hold the driver also takes later models, which can end a run sooner).
+with a longer hold the driver also takes later models, which can end a run sooner; and since
+``model_hold_radius`` (the trace's meta has it) a run can also be a held model with the probe
+too far from it, which no longer hold renders).
 ``--dropouts`` lists the runs of dropout ticks (in contact, the ideal force > 1 N, 0 N applied:
 ``zero_ticks`` on the servo_load pages, over the ticks from ``--from`` s) with the render status
-of their ticks: ``expired`` (the hold ran out) or ``free`` (the model in hand said no contact:
-a press onset with the graph late). The ideal force is computed at every tick as ``haptic-anfis
-loop`` does (minutes for an hour).
+of their ticks: ``expired`` (the hold ran out, or the probe left the hold radius) or ``free``
+(the model in hand said no contact: a press onset with the graph late). The ideal force is
+computed at every tick as ``haptic-anfis loop`` does (minutes for an hour).
 
 Ticks are on the driver's monotonic clock, the bag on the wall clock: the trace's
 ``realtime_minus_monotonic_s`` lines them up; a trace written before it existed is lined up by

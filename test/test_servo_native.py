@@ -404,13 +404,21 @@ def test_a_held_model_expires_with_the_probe_past_the_hold_radius():
     pin(lp, far, 0.061)  # held, 25 mm: past it
     lp.tick(0.061)
     assert int(lp.st[nt.S.status]) == EXPIRED and lp.cnt[nt.CNT.expired] == expired + 1
-    for t in np.arange(0.062, 0.08, 0.001):  # the watchdog ramps the held force to zero
+    later = np.arange(0.062, 0.0795, 0.001)
+    for t in later:  # the watchdog ramps the held force to zero
         pin(lp, far, t)
         f = lp.tick(t)
     assert f == (0.0, 0.0, 0.0)
+    pin(lp, MAP.to_device((0.06, 0.025, 0.0)), 0.08)  # out of the tissue there: free
+    assert lp.tick(0.08) == (0.0, 0.0, 0.0) and int(lp.st[nt.S.status]) == FREE
+    assert lp.cnt[nt.CNT.expired] == expired + 1 + len(later)  # not counted as expired
+    for t in (0.081, 0.082):  # back inside the radius, inside the hold time: rendered again
+        pin(lp, MAP.to_device((0.05, 0.0199, 0.0)), t)
+        f = lp.tick(t)
+    assert int(lp.st[nt.S.status]) == EXTRAPOLATED and f[0] == pytest.approx(2.0)
 
 
-@pytest.mark.parametrize('radius', [0.0, -0.01, float('nan'), float('inf'), '0.03'])
+@pytest.mark.parametrize('radius', [0.0, -0.01, float('nan'), float('inf'), '0.03', True])
 def test_a_hold_radius_that_is_not_a_distance_is_refused(radius):
     with pytest.raises(ValueError, match='hold_radius: expected a finite number > 0 m'):
         loop('local_model', hold_radius=radius)

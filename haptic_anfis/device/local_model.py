@@ -88,12 +88,14 @@ FALCON_MAX_STIFFNESS = 3000.0
 APPROACH_RADIUS = 0.015
 
 #: [m] how far from its p0 the compiled tick renders a HELD model (older than its validity time,
-#: younger than the hold time: an upstream stall); further, it expires (the watchdog ramps the
-#: force to zero). A trainee who moved that far has left the place the model describes: a held
-#: plane followed down a convex surface's flank pressed on a free probe with up to 12 N (before
-#: the clamp) in 1 s stalls. Chosen with bench/bench_stall_hold.py on one session's trace: the
-#: smallest radius measured that adds no dropout tick in stalls up to 0.5 s (the longest
-#: pose -> model latency of the loaded hours: 0.4-0.57 s); checked on another (docs/servo_loop.md).
+#: younger than the hold time: an upstream stall); further, a held model that would press on
+#: the probe is expired for those ticks (the watchdog ramps the force to zero; back inside the
+#: radius it is rendered again: the tissue has not moved). A trainee who moved that far has left
+#: the place the model describes: a held plane followed down a convex surface's flank pressed on
+#: a free probe with up to 12 N (before the clamp) in 1 s stalls. Chosen with
+#: bench/bench_stall_hold.py on one session's trace: the smallest radius measured that adds no
+#: dropout tick in stalls up to 0.5 s (the loaded hours' longest pose -> model latency:
+#: 0.40-0.57 s); checked on another (docs/servo_loop.md).
 HOLD_RADIUS = 0.03
 
 #: Tick status codes (also the trace's status column).

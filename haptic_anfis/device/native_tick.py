@@ -16,8 +16,9 @@ It sleeps to absolute 1 ms deadlines with ``clock_nanosleep`` and reads the cloc
    time but younger than ``hold_time`` is still rendered (counted as ``held``): the tissue does
    not move, so its local linearisation stays right near p0, and an upstream stall (force
    server, contact detector, the bridge) no longer drops the force to 0 N. Only within
-   ``hold_radius`` of p0, though: further, a held model expires
-   (:data:`.local_model.HOLD_RADIUS`). Beyond the validity
+   ``hold_radius`` of p0, though: with the probe further, a held model that would press on it
+   is expired for that tick (:data:`.local_model.HOLD_RADIUS`; back inside, it is rendered
+   again: the tissue has not moved). Beyond the validity
    radius the depth is followed exactly and the offset across the indentation direction held at
    the radius (:func:`.local_model.hold_offset`, counted as ``beyond``): a late model under a
    fast stroke no longer drops the force to 0 N either; an approach model (the plane ahead of a
@@ -440,9 +441,8 @@ def _render(cfg, st, cnt, qx, qy, qz, now, period):
     age = now - st[S.m_t0]
     ex, ey, ez = qx - st[S.m_p0], qy - st[S.m_p1], qz - st[S.m_p2]
     held = age > cfg[CFG.validity_time]
-    rh = cfg[CFG.hold_radius]
-    if held and (age > cfg[CFG.hold_time] or ex * ex + ey * ey + ez * ez > rh * rh):
-        cnt[CNT.expired] += 1   # too old, or held and the probe gone from where it was made
+    if held and age > cfg[CFG.hold_time]:
+        cnt[CNT.expired] += 1
         st[S.status] = EXPIRED
         return np.nan, np.nan, np.nan
     depth0 = st[S.m_depth0]
@@ -456,6 +456,13 @@ def _render(cfg, st, cnt, qx, qy, qz, now, period):
         cnt[CNT.free] += 1   # an approach plane, away from its point (local_model's doc)
         st[S.status] = FREE
         return 0.0, 0.0, 0.0
+    rh = cfg[CFG.hold_radius]
+    if held and ex * ex + ey * ey + ez * ez > rh * rh:
+        # held, and the probe gone from where it was made: expired while it is that far (a
+        # model that says free renders zero above, counted as free, as when it is valid)
+        cnt[CNT.expired] += 1
+        st[S.status] = EXPIRED
+        return np.nan, np.nan, np.nan
     r = cfg[CFG.validity_radius]
     if ex * ex + ey * ey + ez * ez > r * r:  # depth followed, the offset across held (module doc)
         cnt[CNT.beyond] += 1

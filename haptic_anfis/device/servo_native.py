@@ -377,7 +377,8 @@ class NativeServoLoop:
         observer: run the passivity observer / controller (Hannaford & Ryu 2002).
         hold_time: a model older than ``validity_time`` but not than this [s] is still rendered
             (``held`` ticks; <= validity_time: off) while the probe is within ``hold_radius``
-            [m] of its p0 (:data:`~.local_model.HOLD_RADIUS`); then it expires.
+            [m] of its p0 (:data:`~.local_model.HOLD_RADIUS`; further: expired for those
+            ticks); then it expires.
         on_state: ``on_state(state: NativeState, force, now)`` on the bridge thread for the newest
             tick (force: device frame).
         trace: a :class:`~.trace.TickTrace` the bridge fills (tissue frame), or None.
@@ -423,8 +424,8 @@ class NativeServoLoop:
             raise ValueError(f"mode: expected 'zoh' or 'local_model', got {mode!r}")
         if not (math.isfinite(damping) and damping > 0):
             raise ValueError(f'damping: expected a finite number > 0 N s/m, got {damping!r}')
-        if not (isinstance(hold_radius, (int, float)) and math.isfinite(hold_radius)
-                and hold_radius > 0):
+        if not (isinstance(hold_radius, (int, float)) and not isinstance(hold_radius, bool)
+                and math.isfinite(hold_radius) and hold_radius > 0):
             raise ValueError(f'hold_radius: expected a finite number > 0 m, got {hold_radius!r}')
         if not (isinstance(workers, int) and 1 <= workers <= 8):
             raise ValueError(f'workers: expected an integer from 1 to 8, got {workers!r}')

@@ -168,9 +168,10 @@ PARAMS = [
           '<= model_validity_time: off', positive),
     Param('model_hold_radius', HOLD_RADIUS, 'native, local_model: a held model (older than '
           'model_validity_time) is rendered only while the probe is within this [m] (tissue '
-          'frame) of the model\'s position; further it expires and the watchdog ramps the force '
-          'to zero (a held plane followed down the flank of a convex surface pressed on a free '
-          'probe; docs/servo_loop.md)', positive),
+          'frame) of the model\'s position; further it is expired for those ticks and the '
+          'watchdog ramps the force to zero (a held plane followed down the flank of a convex '
+          'surface pressed on a free probe; docs/servo_loop.md). 1.0 (more than the '
+          'workspace): off', positive),
     Param('passivity_observer', False, 'native: run the passivity observer / controller '
           '(Hannaford & Ryu 2002) on the rendered port'),
     Param('servo_workers', 2, "native, native_process with the simulated Falcon: threads "
@@ -555,7 +556,8 @@ class FalconDriver(HapticNode):
                    period=1.0 / self.params['rate'],
                    # the ticks' monotonic times onto the wall clock a bag's receive times use
                    realtime_minus_monotonic_s=time.time() - time.monotonic(),
-                   model_hold_time=self.params['model_hold_time'])
+                   model_hold_time=self.params['model_hold_time'],
+                   model_hold_radius=self.params['model_hold_radius'])
         self.get_logger().info(f'servo tick trace: {len(rows)} ticks -> {self.trace_path}'
                                + (f' (the oldest {self.servo.trace.dropped} dropped: bounded)'
                                   if self.servo.trace.dropped else ''))
