@@ -16,7 +16,7 @@ same pose), and phantom ticks (not in contact, > 0.1 N rendered). Asserts nothin
 writes docs/measurements/stall_hold.md.
 
     .venv/bin/python bench/bench_stall_hold.py [--trace FILE] [--start 30] [--seconds 120]
-        [--every 4] [--stalls 0.25,0.5,0.6,1,1.5,2] [--holds 0.5,1,1.5,2] [--radii 0.02,0.03,1]
+        [--every 4] [--stalls 0.25,0.5,0.6,1,1.5,2] [--holds 0.5,1,1.5,2] [--radii 0.02,0.03,0.04,1]
         [--no-page]
 """
 from __future__ import annotations
@@ -120,8 +120,8 @@ def main() -> int:
                     help='stall lengths [s] (default 0.25,0.5,0.6,1,1.5,2)')
     ap.add_argument('--holds', type=positive_numbers, default=[0.5, 1.0, 1.5, 2.0],
                     help='model_hold_time values [s] (default 0.5,1,1.5,2)')
-    ap.add_argument('--radii', type=positive_numbers, default=[0.02, HOLD_RADIUS, NO_RADIUS],
-                    help=f'model_hold_radius values [m] (default 0.02,{HOLD_RADIUS:g},'
+    ap.add_argument('--radii', type=positive_numbers, default=[0.02, 0.03, HOLD_RADIUS, NO_RADIUS],
+                    help=f'model_hold_radius values [m] (default 0.02,0.03,{HOLD_RADIUS:g},'
                          f'{NO_RADIUS:g}: {NO_RADIUS:g} is none)')
     ap.add_argument('--no-page', action='store_true', help='print only')
     a = ap.parse_args()

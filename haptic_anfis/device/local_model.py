@@ -94,9 +94,10 @@ APPROACH_RADIUS = 0.015
 #: the place the model describes: a held plane followed down a convex surface's flank pressed on
 #: a free probe with up to 12 N (before the clamp) in 1 s stalls. Chosen with
 #: bench/bench_stall_hold.py on one session's trace: the smallest radius measured that adds no
-#: dropout tick in stalls up to 0.5 s (the loaded hours' longest pose -> model latency:
-#: 0.40-0.57 s); checked on another (docs/servo_loop.md).
-HOLD_RADIUS = 0.03
+#: dropout tick in stalls up to 0.6 s (the loaded sessions' longest pose -> model latency:
+#: 0.40-0.57 s; 30 mm added some at 0.6 s, and cost a 0.54 s stall of a session 4 dropout
+#: ticks); checked on another (docs/servo_loop.md).
+HOLD_RADIUS = 0.04
 
 #: Tick status codes (also the trace's status column).
 NONE, FRESH, EXTRAPOLATED, EXPIRED, FREE = 0, 1, 2, 3, 4
