@@ -44,7 +44,9 @@ LATE_MS = 1.0
 GAP_MS = 1.9
 NODES = ('falcon_driver', 'contact_detector', 'force_server', 'recorder', 'visualizer',
          'web_view', 'examiner', 'trainer')
-_RUN = re.compile(r'^\s*([\d.]+)\s+\[(\d+)\]\s+(.+?)\[(\d+)(?:/(\d+))?\]\s+([\d.]+)\s+([\d.]+)'
+#: a ``perf sched timehist`` line (one switch out): end of the run [s], cpu, name, tid, pid, wait
+#: time, scheduler delay, run time [ms]
+TIMEHIST_LINE = re.compile(r'^\s*([\d.]+)\s+\[(\d+)\]\s+(.+?)\[(\d+)(?:/(\d+))?\]\s+([\d.]+)\s+([\d.]+)'
                   r'\s+([\d.]+)\s*$')
 
 
@@ -144,7 +146,7 @@ def parse(text: str) -> list[tuple[float, int, int, int, float, float]]:
     run time [ms]), in time order."""
     out = []
     for line in text.splitlines():
-        m = _RUN.match(line)
+        m = TIMEHIST_LINE.match(line)
         if m:
             t, cpu, _, a, b, _wait, sch, run = m.groups()
             tid, pid = (int(a), int(b)) if b else (int(a), int(a))

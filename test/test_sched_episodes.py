@@ -1,0 +1,51 @@
+"""bench/sched_episodes.py's arithmetic: late local models found in the recorder's receive times,
+and a scheduler trace's run / runnable / asleep stretches cut to each episode."""
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / 'bench'))
+from bench_sched_trace import TIMEHIST_LINE  # noqa: E402
+from sched_episodes import Episode, account, by_process, find_episodes  # noqa: E402
+
+
+def test_a_timehist_line_with_a_spaced_thread_name():
+    m = TIMEHIST_LINE.match('   79809.726371 [0001]  dq.builtins x[2412/2400]      412.500'
+                            '    300.250     50.000')
+    assert m.groups() == ('79809.726371', '0001', 'dq.builtins x', '2412', '2400', '412.500',
+                          '300.250', '50.000')
+
+
+def test_the_longest_gaps_between_local_models_in_time_order():
+    recv = np.array([0.0, 0.1, 0.7, 0.8, 1.1, 1.2, 2.2])   # gaps 0.6, 0.3, 1.0 > 0.25
+    contact = np.array([0.05, 0.2, 0.3, 0.4, 1.5])
+    eps = find_episodes(recv, contact, 0.25, 2, offset=100.0)
+    assert [(e.start, e.end, e.contacts) for e in eps] == [
+        (pytest.approx(-99.9), pytest.approx(-99.3), 3),
+        (pytest.approx(-98.8), pytest.approx(-97.8), 1)]
+
+
+def test_a_switch_out_is_cut_into_asleep_runnable_and_run_inside_the_episode():
+    """A thread that slept 10.05-10.15 s, waited for a CPU 10.15-10.45 and ran 10.45-10.5:
+    an episode 10.0-10.4 holds 100 ms asleep and 250 ms runnable of it, none run."""
+    ep = Episode(10.0, 10.4, 0)
+    names: dict[int, str] = {}
+    lines = [(5.0, 0, 'force_server', 7, 7, 1.0, 0.0, 1.0),        # before: names pid 7
+             (10.5, 1, 'recvUC', 9, 7, 400.0, 300.0, 50.0),
+             (10.3, 0, '<idle>', 0, 0, 0.0, 0.0, 200.0),             # idle 10.1-10.3
+             (11.0, 0, 'busy', 3, 3, 0.0, 0.0, 400.0)]               # ran 10.6-11.0: after
+    account([ep], iter(lines), names)
+    u = ep.threads[7, 9]
+    assert (u.run, u.runnable, u.asleep) == (pytest.approx(0.0), pytest.approx(250.0),
+                                             pytest.approx(100.0))
+    assert u.longest_wait == 300.0
+    assert ep.idle == pytest.approx(200.0)
+    assert (3, 3) not in ep.threads
+    assert names == {7: 'force_server', 3: 'busy'}
+    proc = by_process(ep, names)
+    assert list(proc) == ['force_server[7]'] and proc['force_server[7]'].runnable == \
+        pytest.approx(250.0)
