@@ -34,7 +34,7 @@ from _args import positive_numbers
 from _page import write_page
 from bench_model_age import add_trace_arguments, models_along, rendered, trace_window
 from haptic_anfis.device import local_model
-from haptic_anfis.device.force_error import runs_of
+from haptic_anfis.device.force_error import dropout_ticks, phantom_ticks, runs_of
 
 
 @contextlib.contextmanager
@@ -57,10 +57,10 @@ def counts(models, positions, times, F, contact, age: int, approach_radius: floa
     f = rendered(models, positions, times, age, symmetric_only=False,
                  approach_radius=approach_radius)
     fn, Fn = np.linalg.norm(f, axis=1), np.linalg.norm(F, axis=1)
-    drop = contact & (Fn > 1.0) & (fn == 0.0)
+    drop = dropout_ticks(fn, Fn, contact)
     starts, ends = runs_of(drop)
     longest = int((ends - starts).max()) if len(starts) else 0
-    phantom = int(((~contact) & (fn > 0.1)).sum())
+    phantom = int(phantom_ticks(fn, contact).sum())
     e = np.linalg.norm(f[contact] - F[contact], axis=1)
     rms = np.sqrt(np.mean(Fn[contact] ** 2))
     return int(drop.sum()), longest, phantom, float(100 * np.sqrt(np.mean(e ** 2)) / rms)

@@ -31,6 +31,7 @@ from _page import write_page
 from bench_model_age import add_trace_arguments, models_along, trace_window
 from haptic_anfis.device import HandParams, PalpationScript, WorkspaceMapping
 from haptic_anfis.device import native_tick as nt
+from haptic_anfis.device.force_error import dropout_ticks, phantom_ticks
 from haptic_anfis.device.local_model import EXPIRED, HOLD_RADIUS
 from haptic_anfis.device.servo_native import NativeServoLoop
 from haptic_anfis.nodes.falcon_driver import PARAMS
@@ -93,13 +94,13 @@ def row(stall: float, hold: float, radius: float, stalls: list) -> str:
     for dt, f, expired, Fs, cs in stalls:
         w = dt < stall
         fn, Fn = np.linalg.norm(f, axis=1), np.linalg.norm(Fs, axis=1)
-        drop += int((w & cs & (Fn > 1.0) & (fn == 0.0)).sum())
+        drop += int((w & dropout_ticks(fn, Fn, cs)).sum())
         h = w & cs & ~expired
         held += int(h.sum())
         e = np.linalg.norm(f[h] - Fs[h], axis=1)
         err2, ref2 = err2 + float(np.sum(e ** 2)), ref2 + float(np.sum(Fn[h] ** 2))
         err_max = max(err_max, float(e.max(initial=0.0)))
-        ph = w & ~cs & (fn > 0.1)
+        ph = w & phantom_ticks(fn, cs)
         phantom += int(ph.sum())
         ph_max = max(ph_max, float(fn[ph].max(initial=0.0)))
         every = w & (cs | (fn > 0.0))  # in contact, or rendering a force: what the hand feels

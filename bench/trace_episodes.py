@@ -46,7 +46,7 @@ from _args import positive_numbers  # noqa: E402
 from haptic_anfis.bag.reader import read_messages  # noqa: E402
 from haptic_anfis.bag.topics import (  # noqa: E402
     JOINT_STATE_TYPE, JOY_TYPE, POINT_TYPE, POSE_TYPE, TWIST_TYPE, WRENCH_TYPE)
-from haptic_anfis.device.force_error import runs_of  # noqa: E402
+from haptic_anfis.device.force_error import dropout_ticks, runs_of  # noqa: E402
 from haptic_anfis.device.local_model import EXPIRED, STATUS_NAMES  # noqa: E402
 from haptic_anfis.device.trace import DISABLED, load_trace  # noqa: E402
 
@@ -90,7 +90,8 @@ def dropout_runs(rows: np.ndarray, ideal: np.ndarray, contact: np.ndarray
                  ) -> list[tuple[float, int, float, dict[str, int]]]:
     """(start [s, monotonic], ticks, duration [s], ticks by render status name) of each run of
     dropout ticks: in ``contact``, |``ideal``| > 1 N, 0 N applied (the trace's fx fy fz)."""
-    drop = contact & (np.linalg.norm(ideal, axis=1) > 1.0) & ~rows[:, 4:7].any(axis=1)
+    drop = dropout_ticks(np.linalg.norm(rows[:, 4:7], axis=1), np.linalg.norm(ideal, axis=1),
+                         contact)
     out = []
     for a, b in zip(*runs_of(drop)):
         codes, n = np.unique(rows[a:b, 7].astype(int), return_counts=True)

@@ -11,7 +11,7 @@ import pytest
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / 'bench'))
 from trace_episodes import around, episodes  # noqa: E402
 
-from haptic_anfis.device.force_error import runs_of  # noqa: E402
+from haptic_anfis.device.force_error import dropout_ticks, phantom_ticks, runs_of  # noqa: E402
 from haptic_anfis.device.local_model import EXPIRED, FREE, FRESH  # noqa: E402
 
 
@@ -19,6 +19,16 @@ def test_runs_of_true_at_the_edges_and_inside():
     m = np.array([1, 1, 0, 0, 1, 0, 1, 1, 1], bool)
     assert [tuple(map(int, r)) for r in zip(*runs_of(m))] == [(0, 2), (4, 5), (6, 9)]
     assert len(runs_of(np.zeros(4, bool))[0]) == 0
+
+
+def test_dropout_and_phantom_ticks_at_their_edges():
+    """A dropout: in contact, exactly 0 N applied, the ideal above 1 N (1 N itself is not);
+    a phantom: not in contact, above 0.1 N applied (0.1 N itself is not)."""
+    applied = np.array([0.0, 0.0, 1e-9, 0.0, 0.1, 0.1001, 0.0])
+    ideal = np.array([1.0001, 1.0, 5.0, 5.0, 0.0, 0.0, 0.0])
+    contact = np.array([1, 1, 1, 0, 0, 0, 0], bool)
+    assert dropout_ticks(applied, ideal, contact).tolist() == [1, 0, 0, 0, 0, 0, 0]
+    assert phantom_ticks(applied, contact).tolist() == [0, 0, 0, 0, 0, 1, 0]
 
 
 def trace(t, status):

@@ -26,6 +26,24 @@ import math
 
 import numpy as np
 
+#: [N] a dropout tick: in contact, exactly 0 N applied while the ideal force is above this
+DROPOUT_IDEAL = 1.0
+#: [N] a phantom tick: not in contact and more than this applied (a force on a free probe)
+PHANTOM_FORCE = 0.1
+
+
+def dropout_ticks(applied_n: np.ndarray, ideal_n: np.ndarray, in_contact: np.ndarray,
+                  dropout_ideal: float = DROPOUT_IDEAL) -> np.ndarray:
+    """Mask of the dropout ticks: ``in_contact``, 0 N applied, the ideal force above
+    ``dropout_ideal`` (``applied_n``, ``ideal_n``: force magnitudes (n,) [N])."""
+    return np.asarray(in_contact, dtype=bool) & (applied_n == 0.0) & (ideal_n > dropout_ideal)
+
+
+def phantom_ticks(applied_n: np.ndarray, in_contact: np.ndarray) -> np.ndarray:
+    """Mask of the phantom ticks: not ``in_contact``, more than :data:`PHANTOM_FORCE` applied
+    (``applied_n``: force magnitudes (n,) [N])."""
+    return ~np.asarray(in_contact, dtype=bool) & (applied_n > PHANTOM_FORCE)
+
 
 def force_error(applied: np.ndarray, ideal: np.ndarray, in_contact: np.ndarray,
                 max_force: float = math.inf, min_force: float = 0.5) -> dict:
@@ -130,7 +148,7 @@ def error_by_phase(applied: np.ndarray, ideal: np.ndarray, in_contact: np.ndarra
 def ripple_and_dropouts(times: np.ndarray, applied: np.ndarray, ideal: np.ndarray,
                         in_contact: np.ndarray, max_force: float = math.inf,
                         mean_window: float = 0.05, window: float = 0.2, ripple: float = 0.1,
-                        dropout_ideal: float = 1.0) -> dict:
+                        dropout_ideal: float = DROPOUT_IDEAL) -> dict:
     """The buzz and the dropouts a hand feels (issue 32), over the ticks in contact.
 
     - ``ripple_windows_pct``: share of the ``window`` [s] (200 ms) windows of contact ticks in
@@ -153,7 +171,7 @@ def ripple_and_dropouts(times: np.ndarray, applied: np.ndarray, ideal: np.ndarra
                          f'{t.shape}')
     ideal, n_ideal = _clamped(np.asarray(ideal, dtype=np.float64), max_force)
     n_app = np.linalg.norm(applied, axis=1)
-    drop = mask & (n_app == 0.0) & (n_ideal > dropout_ideal)
+    drop = dropout_ticks(n_app, n_ideal, mask, dropout_ideal)
     longest = 0.0
     if drop.any():
         starts, ends = runs_of(drop)
