@@ -13,13 +13,20 @@ starved now and then)::
     perf sched record -k mono -m 256M -o DIR/perf.data &   # then the run; then kill -INT it
 
     .venv/bin/python bench/sched_episodes.py DIR/trace_*.npz DIR/perf.data [--bag BAG]
-        [--late-ms 200] [--top 10] [--threads 8]
+        [--late-ms 200] [--top 10] [--from 30] [--threads 8] [--pids NAME=PID,...]
 
-An episode: a gap longer than ``--late-ms`` between two local models as the recorder received
-them (the bag's ``/falcon/servo_cf_local``), whether /contact reached the recorder in it. For each
-of the ``--top`` longest, per process of the graph (its threads summed) the milliseconds spent
+The graph's processes are named from the run's node logs beside the trace (each node logs its
+process id when it starts, the driver its servo process's), or by ``--pids``.
+
+An episode: the force server answered no pose for longer than ``--late-ms`` (a gap between the
+header stamps of consecutive ``/falcon/servo_cf`` in the bag: the force, published with each local
+model, stamped with the pose it answers; the recorder's own lateness does not make one). The
+driver held its last model through it. /contact in it: poses the contact detector turned into
+contacts then (few: the detector or the driver was held up; many: the force server). For each of
+the ``--top`` longest, per process of the graph (its threads summed) the milliseconds spent
 running, runnable but waiting for a CPU, and asleep in the episode, with the longest single wait
-for a CPU; then the ``--threads`` threads of the whole machine that waited longest for a CPU, and
+for a CPU; the processes that ran most in it; the ``--threads`` threads of the whole machine that
+waited longest for a CPU; and
 how long the CPUs were idle. From ``perf sched timehist`` (read as ``bench_sched_trace`` reads
 it): for each switch out, the thread ran ``run`` ms before it, waited ``sch delay`` ms runnable
 before that and slept the rest of ``wait time``. Prints only (a diagnosis, not a benchmark: no
@@ -28,6 +35,8 @@ page).
 from __future__ import annotations
 
 import argparse
+import math
+import re
 import shutil
 import subprocess
 import sys
@@ -43,9 +52,11 @@ from bench_sched_trace import TIMEHIST_LINE  # noqa: E402
 from trace_episodes import clock_offset, topic_times  # noqa: E402
 from haptic_anfis.device.trace import DISABLED, load_trace  # noqa: E402
 
-#: the graph's processes by their command name (the entry point's name, cut to 15 characters)
-GRAPH = ('falcon_driver', 'contact_detecto', 'force_server', 'recorder', 'web_view')
-LOCAL_MODEL, CONTACT = '/falcon/servo_cf_local', '/contact'
+#: what the nodes' logs say when they start (session.Readiness) and where the servo runs
+STARTED = re.compile(r'\[(\w+)\]: started after [\d.]+ s: .*, process (\d+)')
+SERVO = re.compile(r'servo thread: compiled tick in servo process (\d+)')
+#: the force server's force, published with each local model; what reached it
+FORCE_OUT, CONTACT = '/falcon/servo_cf', '/contact'
 
 
 
@@ -60,9 +71,9 @@ class Use:
 
 @dataclass
 class Episode:
-    start: float   # [s, monotonic] the last local model before it, as the recorder got it
-    end: float     # [s, monotonic] the first after it
-    contacts: int  # /contact messages the recorder got in it
+    start: float   # [s, monotonic] the pose of the force server's last answer before it
+    end: float     # [s, monotonic] the pose of its first answer after it
+    contacts: int  # /contact messages for poses in it
     threads: dict[tuple[int, int], Use] = field(default_factory=dict)  # (pid, tid) -> use
     idle: float = 0.0   # [ms] CPU time idle in it (both CPUs summed)
 
@@ -72,17 +83,18 @@ def overlap(a: float, b: float, lo: float, hi: float) -> float:
     return max(0.0, min(b, hi) - max(a, lo)) * 1e3
 
 
-def find_episodes(recv_lm: np.ndarray, recv_contact: np.ndarray, late: float, top: int,
+def find_episodes(answered: np.ndarray, contacts: np.ndarray, late: float, top: int,
                   offset: float) -> list[Episode]:
-    """The ``top`` longest gaps > ``late`` [s] between local models (receive times [s, wall]),
-    as monotonic windows, in time order."""
-    gaps = np.diff(recv_lm)
+    """The ``top`` longest gaps > ``late`` [s] between the poses the force server answered
+    (``answered``, ``contacts``: header stamps [s, wall], increasing), as monotonic windows
+    (``offset``: wall minus monotonic [s]), in time order."""
+    gaps = np.diff(answered)
     idx = np.flatnonzero(gaps > late)
     idx = idx[np.argsort(-gaps[idx])][:top]
     out = []
     for i in sorted(idx):
-        a, b = recv_lm[i], recv_lm[i + 1]
-        n = int(np.searchsorted(recv_contact, b) - np.searchsorted(recv_contact, a, 'right'))
+        a, b = answered[i], answered[i + 1]
+        n = int(np.searchsorted(contacts, b) - np.searchsorted(contacts, a, 'right'))
         out.append(Episode(a - offset, b - offset, n))
     return out
 
@@ -102,12 +114,16 @@ def timehist_lines(perf_data: Path):
                        float(wait), float(delay), float(run))
 
 
-def account(episodes: list[Episode], lines, names: dict[int, str]) -> None:
+def account(episodes: list[Episode], lines, names: dict[int, str]
+            ) -> tuple[float, float, int]:
     """Adds each switch out's run / runnable / asleep stretches to the episodes they overlap;
-    fills ``names`` (pid -> the command name of its main thread)."""
+    fills ``names`` (pid -> the command name of its main thread). Returns the recording's span
+    (first and last switch out [s]) and its CPUs."""
     starts = np.array([e.start for e in episodes])
     first, last = (starts.min(), max(e.end for e in episodes)) if episodes else (0.0, -1.0)
-    for t, _, name, tid, pid, wait, delay, run in lines:
+    lo, hi, cpus = math.inf, -math.inf, 0
+    for t, cpu, name, tid, pid, wait, delay, run in lines:
+        lo, hi, cpus = min(lo, t), max(hi, t), max(cpus, cpu + 1)
         if tid == pid and tid and pid not in names:
             names[pid] = name
         ran_from = t - run * 1e-3
@@ -128,15 +144,28 @@ def account(episodes: list[Episode], lines, names: dict[int, str]) -> None:
             if w > 0:
                 u.longest_wait = max(u.longest_wait, delay)
             u.asleep += overlap(slept_from, waited_from, e.start, e.end)
+    return lo, hi, cpus
 
 
-def by_process(e: Episode, names: dict[int, str]) -> dict[str, Use]:
-    """The graph's processes' use in ``e``, their threads summed (longest wait: the longest)."""
+def node_pids(log_dir: Path) -> dict[int, str]:
+    """{process id: node name, and 'servo process'} from a run's node logs (``*.log``)."""
+    out = {}
+    for f in sorted(log_dir.glob('*.log')):
+        for line in f.read_text(errors='replace').splitlines():
+            if m := STARTED.search(line):
+                out[int(m.group(2))] = m.group(1)
+            elif m := SERVO.search(line):
+                out[int(m.group(1))] = 'servo process'
+    return out
+
+
+def by_process(e: Episode, names: dict[int, str], graph: set[int]) -> dict[str, Use]:
+    """The use in ``e`` of the processes in ``graph`` (or of all, if empty), their threads
+    summed (longest wait: the longest), by name[pid]."""
     out = {}
     for (pid, _), u in e.threads.items():
-        name = names.get(pid, '')
-        if name in GRAPH:
-            s = out.setdefault(f'{name}[{pid}]', Use())
+        if not graph or pid in graph:
+            s = out.setdefault(f'{names.get(pid, "?")}[{pid}]', Use())
             s.run, s.runnable, s.asleep = s.run + u.run, s.runnable + u.runnable, \
                 s.asleep + u.asleep
             s.longest_wait = max(s.longest_wait, u.longest_wait)
@@ -152,8 +181,14 @@ def main() -> int:
     ap.add_argument('--late-ms', type=float, default=200.0,
                     help='gaps between local models longer than this [ms] (default 200)')
     ap.add_argument('--top', type=int, default=10, help='the longest episodes (default 10)')
+    ap.add_argument('--from', dest='start', type=float, default=30.0,
+                    help="from this many seconds after the first tick (default 30: "
+                         "bench_servo_load's --settle)")
     ap.add_argument('--threads', type=int, default=8,
                     help='threads of the machine listed per episode, by time waiting for a CPU')
+    ap.add_argument('--pids', default='',
+                    help='NAME=PID,... the graph\'s processes (default: from the node logs '
+                         'beside the trace, log_<bag>/)')
     a = ap.parse_args()
     rows, meta = load_trace(a.trace)
     rows = rows[rows[:, 7] != DISABLED]
@@ -169,23 +204,41 @@ def main() -> int:
     if offset is None:
         ap.error(f'{bag}: could not be lined up with the trace (no matching pose)')
     topics = topic_times(bag)
-    if LOCAL_MODEL not in topics:
-        ap.error(f'{bag}: no {LOCAL_MODEL} recorded (the driver\'s force_mode local_model?)')
-    recv_contact = topics.get(CONTACT, (np.array([]),))[0]
-    eps = find_episodes(topics[LOCAL_MODEL][0], recv_contact, a.late_ms * 1e-3, a.top, offset)
-    print(f'{a.trace}: {len(eps)} episodes of local models more than {a.late_ms:g} ms apart '
-          f'(the longest {a.top})')
+    if FORCE_OUT not in topics:
+        ap.error(f'{bag}: no {FORCE_OUT} recorded')
+    contacts = np.sort(topics.get(CONTACT, (None, np.array([])))[1])
+    answered = np.sort(topics[FORCE_OUT][1])
+    answered = answered[answered >= rows[0, 0] + offset + a.start]
+    eps = find_episodes(answered, contacts, a.late_ms * 1e-3, a.top, offset)
+    print(f'{a.trace}: from {a.start:g} s after the first tick, the {len(eps)} longest gaps '
+          f'between the poses the force server answered, above {a.late_ms:g} ms')
+    try:
+        graph = {int(v): k for k, v in (kv.split('=') for kv in a.pids.split(',') if kv)}
+    except ValueError:
+        ap.error(f'--pids {a.pids!r}: expected NAME=PID,... (PID a number)')
+    log_dir = bag.with_name('log_' + bag.name)
+    graph = graph or (node_pids(log_dir) if log_dir.is_dir() else {})
+    print('graph processes: ' + (', '.join(f'{n} {p}' for p, n in sorted(graph.items()))
+                                 or 'unknown (no node logs with process ids; --pids)'))
     names: dict[int, str] = {}
-    account(eps, timehist_lines(a.perf), names)
+    lo, hi, cpus = account(eps, timehist_lines(a.perf), names)
+    names.update(graph)
+    print(f'{a.perf}: {lo - rows[0, 0]:.1f} to {hi - rows[0, 0]:.1f} s after the first tick, '
+          f'{cpus} CPUs')
     for e in eps:
         ms = (e.end - e.start) * 1e3
-        print(f'\n{ms:.0f} ms without a local model at {e.start - rows[0, 0]:.3f} s after the '
-              f'first tick; {e.contacts} /contact in it; CPUs idle {e.idle:.0f} ms of '
-              f'{2 * ms:.0f}')
+        print(f'\n{ms:.0f} ms of poses unanswered from {e.start - rows[0, 0]:.3f} s after the '
+              f'first tick; {e.contacts} /contact for them; CPUs idle {e.idle:.0f} ms of '
+              f'{cpus * ms:.0f}')
+        if e.start < lo or e.end > hi:
+            print('  not all in the recording: left out')
+            continue
         print('  process                 run ms  runnable ms  asleep ms  longest wait ms')
-        for name, u in sorted(by_process(e, names).items()):
+        for name, u in sorted(by_process(e, names, set(graph)).items()):
             print(f'  {name:22s} {u.run:7.0f} {u.runnable:12.0f} {u.asleep:10.0f} '
                   f'{u.longest_wait:16.1f}')
+        ran = sorted(by_process(e, names, set()).items(), key=lambda kv: -kv[1].run)[:6]
+        print('  ran most: ' + ', '.join(f'{n} {u.run:.0f} ms' for n, u in ran))
         print('  threads waiting longest for a CPU:')
         worst = sorted(e.threads.items(), key=lambda kv: -kv[1].runnable)[:a.threads]
         for (pid, tid), u in worst:

@@ -12,7 +12,9 @@ def test_supervisor_starts_the_view_nodes_niced_and_the_loop_nodes_not(monkeypat
     class _P:
         pid = 0
 
-    def fake_start_node(name, args, env=None, log=None, own_session=False, nice=0):
+    def fake_start_node(name, args, env=None, log=None, own_session=False, nice=0,
+                        stop_with_parent=None):
+        assert stop_with_parent  # no terminal signal reaches a launched node: SIGINT on death
         got[name] = (own_session, nice)
         return _P()
 
@@ -31,3 +33,25 @@ def test_supervisor_starts_the_view_nodes_niced_and_the_loop_nodes_not(monkeypat
     processes.Supervisor({}, nice={'force_server': 5}).start('web_view')
     assert got['web_view'] == (True, 0)
 
+
+
+def test_supervisor_starts_the_nodes_in_its_own_session_when_told(monkeypatch):
+    """``launch --node-sessions one``: the nodes in the launcher's session (the view nodes'
+    nice then counts against the loop's nodes), still stopped when the launcher dies."""
+    got = {}
+
+    class _P:
+        pid = 0
+
+    def fake_start_node(name, args, env=None, log=None, own_session=False, nice=0,
+                        stop_with_parent=None):
+        got[name] = (own_session, nice, stop_with_parent)
+        return _P()
+
+    monkeypatch.setattr(processes, 'start_node', fake_start_node)
+    sup = processes.Supervisor({})
+    sup.own_sessions = False
+    sup.start('force_server')
+    sup.start('web_view')
+    assert got == {'force_server': (False, 0, True),
+                   'web_view': (False, processes.SIDE_NICE, True)}

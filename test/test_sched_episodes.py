@@ -10,7 +10,7 @@ import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / 'bench'))
 from bench_sched_trace import TIMEHIST_LINE  # noqa: E402
-from sched_episodes import Episode, account, by_process, find_episodes  # noqa: E402
+from sched_episodes import Episode, account, by_process, find_episodes, node_pids  # noqa: E402
 
 
 def test_a_timehist_line_with_a_spaced_thread_name():
@@ -38,7 +38,7 @@ def test_a_switch_out_is_cut_into_asleep_runnable_and_run_inside_the_episode():
              (10.5, 1, 'recvUC', 9, 7, 400.0, 300.0, 50.0),
              (10.3, 0, '<idle>', 0, 0, 0.0, 0.0, 200.0),             # idle 10.1-10.3
              (11.0, 0, 'busy', 3, 3, 0.0, 0.0, 400.0)]               # ran 10.6-11.0: after
-    account([ep], iter(lines), names)
+    assert account([ep], iter(lines), names) == (5.0, 11.0, 2)
     u = ep.threads[7, 9]
     assert (u.run, u.runnable, u.asleep) == (pytest.approx(0.0), pytest.approx(250.0),
                                              pytest.approx(100.0))
@@ -46,6 +46,19 @@ def test_a_switch_out_is_cut_into_asleep_runnable_and_run_inside_the_episode():
     assert ep.idle == pytest.approx(200.0)
     assert (3, 3) not in ep.threads
     assert names == {7: 'force_server', 3: 'busy'}
-    proc = by_process(ep, names)
+    proc = by_process(ep, names, {7})
     assert list(proc) == ['force_server[7]'] and proc['force_server[7]'].runnable == \
         pytest.approx(250.0)
+
+
+def test_the_graphs_processes_from_the_node_logs(tmp_path):
+    (tmp_path / 'force_server.log').write_text(
+        '[INFO] [1795964801.5] [force_server]: no case\n'
+        '[INFO] [1795964806.8] [force_server]: started after 5.7 s: constructed (kernels '
+        'compiled, files loaded), process 25099\n')
+    (tmp_path / 'falcon_driver.log').write_text(
+        '[INFO] [1.0] [falcon_driver]: started after 2.9 s: constructed, process 25187\n'
+        '[WARN] [2.0] [falcon_driver]: servo thread: compiled tick in servo process 25332 (own '
+        'session); normal scheduler\n')
+    assert node_pids(tmp_path) == {25099: 'force_server', 25187: 'falcon_driver',
+                                   25332: 'servo process'}

@@ -23,6 +23,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.node_sessions == 'one':
+        from ..nodes.processes import rerun_command_in_own_session
+        code = rerun_command_in_own_session(args)  # the nodes' one session (fair CPU)
+        if code is not None:
+            return code
     from ..session import ProcessSession, spec_from_args
     from .loop import launch_trace_path, print_launch_report
     spec = spec_from_args(args, NAME)

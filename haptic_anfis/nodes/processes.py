@@ -311,13 +311,15 @@ def _in_child(stop_with_parent: bool, nice: int) -> None:
 
 def start_node(name: str, ros_args: Sequence[str] = (), env: Mapping[str, str] | None = None,
                log: IO | int | None = None, cwd: str | os.PathLike | None = None,
-               own_session: bool = False, nice: int = 0) -> subprocess.Popen:
+               own_session: bool = False, nice: int = 0,
+               stop_with_parent: bool | None = None) -> subprocess.Popen:
     """Start node ``name`` with ``--ros-args ros_args``: its console script when it sits next to
     this interpreter, else ``python -m haptic_anfis.nodes.<name>``. Its stdout and stderr go to
     ``log`` (a file object, ``subprocess.DEVNULL``, or inherited). ``own_session``: in its own
     session, so a Ctrl-C at the terminal reaches only the launcher, which stops the nodes in
-    order (the driver first) instead of all at once; the node then also gets SIGINT if the
-    launcher dies (Linux), since no terminal signal would reach it. ``nice`` > 0 lowers the
+    order (the driver first) instead of all at once. ``stop_with_parent`` (default: as
+    ``own_session``): the node gets SIGINT if the launcher dies (Linux), for a node that no
+    terminal signal reaches (a session of its own, or a launcher's that has no terminal). ``nice`` > 0 lowers the
     node's CPU priority (a node off the haptic loop yields the cores to it). Where the kernel
     groups processes by session (autogroups, ``/proc/sys/kernel/sched_autogroup_enabled``) a nice
     value counts only between the processes of one session, so a node in a session of its own
@@ -330,10 +332,11 @@ def start_node(name: str, ros_args: Sequence[str] = (), env: Mapping[str, str] |
     exe = BIN / name
     cmd = [str(exe)] if exe.exists() else [sys.executable, '-m', f'haptic_anfis.nodes.{name}']
     cmd += ['--ros-args', *ros_args] if ros_args else []
+    stop = own_session if stop_with_parent is None else stop_with_parent
     return subprocess.Popen(cmd, env=dict(env) if env is not None else node_env(), cwd=cwd,
                             start_new_session=own_session,
-                            preexec_fn=functools.partial(_in_child, own_session, nice)
-                            if own_session or nice or _realtime() else None,
+                            preexec_fn=functools.partial(_in_child, stop, nice)
+                            if stop or nice or _realtime() else None,
                             stdout=log, stderr=subprocess.STDOUT if log is not None else None)
 
 
@@ -387,6 +390,9 @@ class Supervisor:
         #: 'auto': keep a node on its CPU in :attr:`cores` where the servo loop is real-time (or
         #: its scheduling is not known); 'on': always (``launch --graph-pinning``)
         self.pinning = 'auto'
+        #: every node in a session of its own (True), or in this launcher's (False: the
+        #: launcher leads a session of its own; ``launch --node-sessions``)
+        self.own_sessions = True
         self.procs: dict[str, subprocess.Popen] = {}
         self.args: dict[str, list[str]] = {}
         self.first_args: dict[str, list[str]] = {}
@@ -402,8 +408,8 @@ class Supervisor:
             log = self.logs.get(name) or (self.log_dir / f'{name}.log').open('w')
             self.logs[name] = log
         p = start_node(name, list(args), env={**self.env, **(env or {})}, log=log,
-                       own_session=True, nice=self.nice if isinstance(self.nice, int)
-                       else self.nice.get(name, 0))
+                       own_session=self.own_sessions, stop_with_parent=True,
+                       nice=self.nice if isinstance(self.nice, int) else self.nice.get(name, 0))
         self.procs[name], self.args[name] = p, list(args)
         self.first_args.setdefault(name, list(args))
         self.started_at[name] = time.monotonic()

@@ -70,7 +70,9 @@ class Readiness:
         self.state = ''
         self.ready_after: float | None = None
         self._msg = String()
-        self.announce('started', 'constructed (kernels compiled, files loaded)')
+        # the process id: to find the node in ps, top or a scheduler trace (bench/sched_episodes)
+        self.announce('started', f'constructed (kernels compiled, files loaded), process '
+                                 f'{os.getpid()}')
         self._check()
         self.timer = node.create_timer(period, self._check)
 

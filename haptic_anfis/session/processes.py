@@ -123,6 +123,9 @@ class ProcessSession:
             f"/{s.enclave_root.strip('/')}/launch_monitor" if s.enclave_root else None))
         self.sup = Supervisor(env, log_dir, max_restarts=s.max_restarts)
         self.sup.pinning = s.graph_pinning
+        # one session for the graph only where this launcher leads one of its own (launch's
+        # re-run); called from Python (a test) it may share its caller's: each node its own
+        self.sup.own_sessions = s.node_sessions == 'each' or os.getsid(0) != os.getpid()
         self.sup.cores = {} if s.graph_pinning == 'off' else graph_cores(
             [n for n in self.order if n not in VIEW_NODES])
         self.t0 = time.monotonic()
