@@ -273,6 +273,9 @@ def main() -> int:
     ap.add_argument('--sim-args', default='',
                     help="more options for the sim rows, space-separated, given with '=' "
                          "(--sim-args=--recorder-process); named in the rows' config")
+    ap.add_argument('--launch-args', default='',
+                    help="more options for the launch rows, as --sim-args "
+                         "(--launch-args=--node-sessions=each)")
     ap.add_argument('--settle', type=float, default=0.0, metavar='S',
                     help='run S seconds longer and take the figures the servo ticks carry (rate, '
                          'periods lost, gaps, force error, ripple, dropouts, expired models) '
@@ -321,12 +324,14 @@ def main() -> int:
                 rt = rt_threads()
                 with LoadSampler() as sampled:   # through the run, not after it
                     j = run_one(kind, prio, a.duration, loop, d, gprio, a.view, a.force_mode,
-                                tuple(a.sim_args.split()), a.settle, idle=lambda: paused(procs),
-                                keep=bool(a.keep))
+                                tuple(a.sim_args.split()), a.settle,
+                                launch_args=tuple(a.launch_args.split()),
+                                idle=lambda: paused(procs), keep=bool(a.keep))
                 load = sampled.median if sampled.median is not None else \
                     max(load0, os.getloadavg()[0])
             r = row(f'{kind} prio {prio}' + (f' graph {gprio}' if gprio else '') + f' ({loop})'
-                    + (f' {a.sim_args}' if kind == 'sim' and a.sim_args else ''),
+                    + (f' {a.sim_args}' if kind == 'sim' and a.sim_args else '')
+                    + (f' {a.launch_args}' if kind == 'launch' and a.launch_args else ''),
                     nbusy, load, j)
             r['rt_others'] = rt
             r['steal_pct'] = None if sampled.steal is None else round(sampled.steal, 1)

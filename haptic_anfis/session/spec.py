@@ -142,14 +142,15 @@ OPTIONS: tuple[Option, ...] = (
                      'pinned nodes cost it periods, so they are left free; on: always; off: '
                      'never'), commands=('launch',)),
     Option(('--node-sessions',),
-           dict(choices=('one', 'each'), default='one',
-                help='one (default): the nodes share one session of their own (the launcher '
-                     're-runs itself in it), so where the kernel shares the CPU between sessions '
-                     "(autogroups) the graph's share is on every CPU its threads wake on; each: "
-                     'every node in a session of its own, where a node\'s thread woken on a CPU '
-                     'its session had little load on waited runnable for hundreds of ms on a '
-                     'busy machine. The servo process keeps a session of its own either way'),
-           commands=('launch',)),
+           dict(choices=('each', 'one'), default='each',
+                help='each (default): every node in a session of its own; one: the nodes share '
+                     'one session of their own (the launcher re-runs itself in it), so where '
+                     "the kernel shares the CPU between sessions (autogroups) the graph's share "
+                     'is on every CPU its threads wake on. Measured once without real-time '
+                     'priority beside 8 busy processes and the browser view, one made the models '
+                     'a little less late and cost the servo loop 12 % of its periods '
+                     '(docs/servo_loop.md). The servo process has a session of its own either '
+                     'way'), commands=('launch',)),
     Option(('--max-restarts',), dict(type=int, default=3,
                                      help='restarts allowed per node before the launch gives up '
                                           '(default 3)'), commands=('launch',)),
@@ -223,7 +224,7 @@ class SessionSpec:
     log_dir: str | None = None
     no_respawn: bool = False
     graph_pinning: str = 'auto'
-    node_sessions: str = 'one'
+    node_sessions: str = 'each'
     max_restarts: int = 3
     enclave_root: str | None = None
     view: bool = False
