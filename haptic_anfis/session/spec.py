@@ -147,10 +147,10 @@ OPTIONS: tuple[Option, ...] = (
                      'one session of their own (the launcher re-runs itself in it), so where '
                      "the kernel shares the CPU between sessions (autogroups) the graph's share "
                      'is on every CPU its threads wake on. Measured once without real-time '
-                     'priority beside 8 busy processes and the browser view, one made the models '
-                     'a little less late and cost the servo loop 12 % of its periods '
-                     '(docs/servo_loop.md). The servo process has a session of its own either '
-                     'way'), commands=('launch',)),
+                     'priority beside 8 busy processes and the browser view, one left the '
+                     'stretches without a model as long and cost the servo loop 12 % of its '
+                     'periods (docs/servo_loop.md). The servo process has a session of its own '
+                     'either way'), commands=('launch',)),
     Option(('--max-restarts',), dict(type=int, default=3,
                                      help='restarts allowed per node before the launch gives up '
                                           '(default 3)'), commands=('launch',)),
