@@ -45,9 +45,9 @@ GAP_MS = 1.9
 NODES = ('falcon_driver', 'contact_detector', 'force_server', 'recorder', 'visualizer',
          'web_view', 'examiner', 'trainer')
 #: a ``perf sched timehist`` line (one switch out): end of the run [s], cpu, name, tid, pid, wait
-#: time, scheduler delay, run time [ms]
-TIMEHIST_LINE = re.compile(r'^\s*([\d.]+)\s+\[(\d+)\]\s+(.+?)\[(\d+)(?:/(\d+))?\]\s+([\d.]+)\s+([\d.]+)'
-                  r'\s+([\d.]+)\s*$')
+#: time, scheduler delay, run time [ms], and with ``--state`` the state it left in (R: preempted)
+TIMEHIST_LINE = re.compile(r'^\s*([\d.]+)\s+\[(\d+)\]\s+(.+?)\[(\d+)(?:/(\d+))?\]'
+                           r'\s+([\d.]+)\s+([\d.]+)\s+([\d.]+)(?:\s+(\S+))?\s*$')
 
 
 def _cmdline(pid: int) -> str | None:
@@ -148,7 +148,7 @@ def parse(text: str) -> list[tuple[float, int, int, int, float, float]]:
     for line in text.splitlines():
         m = TIMEHIST_LINE.match(line)
         if m:
-            t, cpu, _, a, b, _wait, sch, run = m.groups()
+            t, cpu, _, a, b, _wait, sch, run = m.groups()[:8]
             tid, pid = (int(a), int(b)) if b else (int(a), int(a))
             out.append((float(t), int(cpu), tid, pid, float(sch), float(run)))
     return out

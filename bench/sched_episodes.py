@@ -27,9 +27,10 @@ the ``--top`` longest, per process of the graph (its threads summed) the millise
 running, runnable but waiting for a CPU, and asleep in the episode, with the longest single wait
 for a CPU; the processes that ran most in it; the ``--threads`` threads of the whole machine that
 waited longest for a CPU; and
-how long the CPUs were idle. From ``perf sched timehist`` (read as ``bench_sched_trace`` reads
-it): for each switch out, the thread ran ``run`` ms before it, waited ``sch delay`` ms runnable
-before that and slept the rest of ``wait time``. Prints only (a diagnosis, not a benchmark: no
+how long the CPUs were idle. From ``perf sched timehist --state`` (read as ``bench_sched_trace``
+reads it): for each switch out, the thread ran ``run`` ms before it, waited ``sch delay`` ms
+runnable before that and slept the rest of ``wait time`` (all of it runnable if it had last
+left its CPU preempted). Prints only (a diagnosis, not a benchmark: no
 page).
 """
 from __future__ import annotations
@@ -99,36 +100,56 @@ def find_episodes(answered: np.ndarray, contacts: np.ndarray, late: float, top: 
     return out
 
 
+#: perf's line for a CPU's idle task (no thread id): end of the idle stretch [s], cpu, its length
+IDLE_LINE = re.compile(r'^\s*([\d.]+)\s+\[(\d+)\]\s+<idle>\s+[\d.]+\s+[\d.]+\s+([\d.]+)')
+
+
+def parse_line(line: str) -> tuple | None:
+    """(t [s], cpu, name, tid, pid, wait, sch delay, run [ms], state) of one ``perf sched
+    timehist --state`` line (the idle task: name '<idle>', tid and pid 0); None for another."""
+    m = TIMEHIST_LINE.match(line)
+    if m:
+        t, cpu, name, tid, pid, wait, delay, run, state = m.groups()
+        return (float(t), int(cpu), name.strip(), int(tid), int(pid) if pid else int(tid),
+                float(wait), float(delay), float(run), state or '')
+    m = IDLE_LINE.match(line)
+    if m:
+        t, cpu, run = m.groups()
+        return float(t), int(cpu), '<idle>', 0, 0, 0.0, 0.0, float(run), ''
+    return None
+
+
 def timehist_lines(perf_data: Path):
-    """(t [s], cpu, name, tid, pid, wait, sch delay, run [ms]) for every switch out in the
-    recording (``perf sched timehist``)."""
-    cmd = ['perf', 'sched', 'timehist', '-i', str(perf_data)]
+    """:func:`parse_line` of every switch out in the recording."""
+    cmd = ['perf', 'sched', 'timehist', '-i', str(perf_data), '--state']
     with subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True,
                           bufsize=1 << 20) as p:
         for line in p.stdout:
-            m = TIMEHIST_LINE.match(line)
-            if m:
-                t, cpu, name, tid, pid, wait, delay, run = m.groups()
-                tid = int(tid)
-                yield (float(t), int(cpu), name.strip(), tid, int(pid) if pid else tid,
-                       float(wait), float(delay), float(run))
+            got = parse_line(line)
+            if got is not None:
+                yield got
 
 
 def account(episodes: list[Episode], lines, names: dict[int, str]
             ) -> tuple[float, float, int]:
     """Adds each switch out's run / runnable / asleep stretches to the episodes they overlap;
     fills ``names`` (pid -> the command name of its main thread). Returns the recording's span
-    (first and last switch out [s]) and its CPUs."""
+    (first and last switch out [s]) and its CPUs. A thread that left its CPU runnable (state R:
+    preempted) waited runnable all the time until it ran again: older perf versions (6.1 here) give
+    such a wait no scheduler delay (no wake-up), so its whole wait time counts as runnable."""
     starts = np.array([e.start for e in episodes])
     first, last = (starts.min(), max(e.end for e in episodes)) if episodes else (0.0, -1.0)
     lo, hi, cpus = math.inf, -math.inf, 0
-    for t, cpu, name, tid, pid, wait, delay, run in lines:
+    left: dict[int, str] = {}   # tid -> the state it last left its CPU in
+    for t, cpu, name, tid, pid, wait, delay, run, state in lines:
         lo, hi, cpus = min(lo, t), max(hi, t), max(cpus, cpu + 1)
         if tid == pid and tid and pid not in names:
             names[pid] = name
+        preempted = left.get(tid) == 'R'
+        left[tid] = state
         ran_from = t - run * 1e-3
-        waited_from = ran_from - delay * 1e-3
         slept_from = ran_from - wait * 1e-3
+        waited_from = slept_from if preempted else ran_from - delay * 1e-3
         if t < first or slept_from > last:
             continue
         for e in episodes[:np.searchsorted(starts, t, 'right')]:
@@ -142,7 +163,7 @@ def account(episodes: list[Episode], lines, names: dict[int, str]
             w = overlap(waited_from, ran_from, e.start, e.end)
             u.runnable += w
             if w > 0:
-                u.longest_wait = max(u.longest_wait, delay)
+                u.longest_wait = max(u.longest_wait, (ran_from - waited_from) * 1e3)
             u.asleep += overlap(slept_from, waited_from, e.start, e.end)
     return lo, hi, cpus
 

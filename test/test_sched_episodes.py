@@ -10,14 +10,15 @@ import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / 'bench'))
 from bench_sched_trace import TIMEHIST_LINE  # noqa: E402
-from sched_episodes import Episode, account, by_process, find_episodes, node_pids  # noqa: E402
+from sched_episodes import (Episode, account, by_process, find_episodes, node_pids,  # noqa: E402
+                            parse_line)
 
 
 def test_a_timehist_line_with_a_spaced_thread_name():
     m = TIMEHIST_LINE.match('   79809.726371 [0001]  dq.builtins x[2412/2400]      412.500'
                             '    300.250     50.000')
     assert m.groups() == ('79809.726371', '0001', 'dq.builtins x', '2412', '2400', '412.500',
-                          '300.250', '50.000')
+                          '300.250', '50.000', None)
 
 
 def test_the_longest_gaps_between_local_models_in_time_order():
@@ -34,21 +35,43 @@ def test_a_switch_out_is_cut_into_asleep_runnable_and_run_inside_the_episode():
     an episode 10.0-10.4 holds 100 ms asleep and 250 ms runnable of it, none run."""
     ep = Episode(10.0, 10.4, 0)
     names: dict[int, str] = {}
-    lines = [(5.0, 0, 'force_server', 7, 7, 1.0, 0.0, 1.0),        # before: names pid 7
-             (10.5, 1, 'recvUC', 9, 7, 400.0, 300.0, 50.0),
-             (10.3, 0, '<idle>', 0, 0, 0.0, 0.0, 200.0),             # idle 10.1-10.3
-             (11.0, 0, 'busy', 3, 3, 0.0, 0.0, 400.0)]               # ran 10.6-11.0: after
+    lines = [(5.0, 0, 'force_server', 7, 7, 1.0, 0.0, 1.0, 'S'),   # before: names pid 7
+             (10.5, 1, 'recvUC', 9, 7, 400.0, 300.0, 50.0, 'S'),
+             (10.3, 0, '<idle>', 0, 0, 0.0, 0.0, 200.0, ''),         # idle 10.1-10.3
+             (11.0, 0, 'busy', 3, 3, 0.0, 0.0, 400.0, 'R')]          # ran 10.6-11.0: after
     assert account([ep], iter(lines), names) == (5.0, 11.0, 2)
     u = ep.threads[7, 9]
     assert (u.run, u.runnable, u.asleep) == (pytest.approx(0.0), pytest.approx(250.0),
                                              pytest.approx(100.0))
-    assert u.longest_wait == 300.0
+    assert u.longest_wait == pytest.approx(300.0)
     assert ep.idle == pytest.approx(200.0)
     assert (3, 3) not in ep.threads
     assert names == {7: 'force_server', 3: 'busy'}
     proc = by_process(ep, names, {7})
     assert list(proc) == ['force_server[7]'] and proc['force_server[7]'].runnable == \
         pytest.approx(250.0)
+
+
+def test_lines_of_perf_sched_timehist_state_the_idle_task_and_a_header():
+    assert parse_line('   79809.726371 [0000]  migration/0[18]   0.000   0.009   0.013  S ') == (
+        79809.726371, 0, 'migration/0', 18, 18, 0.0, 0.009, 0.013, 'S')
+    assert parse_line('   79809.726639 [0001]  <idle>     0.000      0.000      0.200 ') == (
+        79809.726639, 1, '<idle>', 0, 0, 0.0, 0.0, 0.2, '')
+    assert parse_line('   79809.9 [0001]  python[25139/25099]  434.0  0.0  1.0  R') == (
+        79809.9, 1, 'python', 25139, 25099, 434.0, 0.0, 1.0, 'R')
+    assert parse_line('           time    cpu  task name     wait time  sch delay') is None
+
+
+def test_a_preempted_threads_whole_wait_is_runnable():
+    """Left its CPU preempted (R) at 10.0 s, ran again 10.4-10.45: perf 6.1 gives that wait no
+    scheduler delay; it is runnable all the same, not asleep."""
+    ep = Episode(10.0, 10.4, 0)
+    lines = [(10.0, 0, 'force_server', 7, 7, 0.0, 0.0, 5.0, 'R'),
+             (10.45, 0, 'force_server', 7, 7, 400.0, 0.0, 50.0, 'S')]
+    account([ep], iter(lines), {})
+    u = ep.threads[7, 7]
+    assert (u.runnable, u.asleep, u.longest_wait) == (pytest.approx(400.0), 0.0,
+                                                      pytest.approx(400.0))
 
 
 def test_the_graphs_processes_from_the_node_logs(tmp_path):

@@ -319,8 +319,9 @@ def start_node(name: str, ros_args: Sequence[str] = (), env: Mapping[str, str] |
     session, so a Ctrl-C at the terminal reaches only the launcher, which stops the nodes in
     order (the driver first) instead of all at once. ``stop_with_parent`` (default: as
     ``own_session``): the node gets SIGINT if the launcher dies (Linux), for a node that no
-    terminal signal reaches (a session of its own, or a launcher's that has no terminal). ``nice`` > 0 lowers the
-    node's CPU priority (a node off the haptic loop yields the cores to it). Where the kernel
+    terminal signal reaches (a session of its own, or a launcher's that has no terminal).
+    ``nice`` > 0 lowers the node's CPU priority (a node off the haptic loop yields the cores to
+    it). Where the kernel
     groups processes by session (autogroups, ``/proc/sys/kernel/sched_autogroup_enabled``) a nice
     value counts only between the processes of one session, so a node in a session of its own
     keeps its session's share; lowering the session's weight instead (``/proc/<pid>/autogroup``)
