@@ -14,6 +14,10 @@ starved now and then)::
 
     .venv/bin/python bench/sched_episodes.py DIR/trace_*.npz DIR/perf.data [--bag BAG]
         [--late-ms 200] [--top 10] [--from 30] [--threads 8] [--pids NAME=PID,...]
+        [--servo-gaps]
+
+With ``--servo-gaps`` the episodes are the ``--top`` longest gaps between servo ticks longer than
+10 ms (the watchdog) instead, summed into one table: who held the CPUs while no tick ran.
 
 The graph's processes are named from the run's node logs beside the trace (each node logs its
 process id when it starts, the driver its servo process's), or by ``--pids``.
@@ -58,6 +62,8 @@ STARTED = re.compile(r'\[(\w+)\]: started after [\d.]+ s: .*, process (\d+)')
 SERVO = re.compile(r'servo thread: compiled tick in servo process (\d+)')
 #: the force server's force, published with each local model; what reached it
 FORCE_OUT, CONTACT = '/falcon/servo_cf', '/contact'
+#: [s] --servo-gaps: gaps between servo ticks longer than this (the watchdog)
+GAP_S = 0.010
 
 
 
@@ -168,6 +174,34 @@ def account(episodes: list[Episode], lines, names: dict[int, str]
     return lo, hi, cpus
 
 
+def servo_gaps(rows: np.ndarray, start: float, top: int) -> list[Episode]:
+    """The ``top`` longest gaps between servo ticks longer than :data:`GAP_S`, from ``start``
+    [s] after the first tick, as episodes (monotonic, the trace's clock), in time order; prints
+    how many there were, and how many longer than 2 ms (a period lost)."""
+    t = rows[:, 0]
+    dt = np.diff(t)
+    late = t[:-1] >= t[0] + start
+    idx = np.flatnonzero(late & (dt > GAP_S))
+    print(f'servo gaps from {start:g} s: {len(idx)} longer than {GAP_S * 1e3:g} ms '
+          f'({dt[idx].sum():.2f} s in all), {int((late & (dt > 0.002)).sum())} longer than 2 ms')
+    idx = idx[np.argsort(-dt[idx])][:top]
+    return [Episode(t[i], t[i + 1], 0) for i in sorted(idx)]
+
+
+def summed(episodes: list[Episode]) -> Episode:
+    """One episode holding the sums of ``episodes``' uses (its span: their summed length;
+    longest wait: the longest)."""
+    out = Episode(0.0, sum(e.end - e.start for e in episodes), 0)
+    for e in episodes:
+        out.idle += e.idle
+        for k, u in e.threads.items():
+            s = out.threads.setdefault(k, Use())
+            s.run, s.runnable, s.asleep = s.run + u.run, s.runnable + u.runnable, \
+                s.asleep + u.asleep
+            s.longest_wait = max(s.longest_wait, u.longest_wait)
+    return out
+
+
 def node_pids(log_dir: Path) -> dict[int, str]:
     """{process id: node name, and 'servo process'} from a run's node logs (``*.log``)."""
     out = {}
@@ -207,6 +241,8 @@ def main() -> int:
                          "bench_servo_load's --settle)")
     ap.add_argument('--threads', type=int, default=8,
                     help='threads of the machine listed per episode, by time waiting for a CPU')
+    ap.add_argument('--servo-gaps', action='store_true',
+                    help='the --top longest gaps between servo ticks (> 10 ms) instead, summed')
     ap.add_argument('--pids', default='',
                     help='NAME=PID,... the graph\'s processes (default: from the node logs '
                          'beside the trace, log_<bag>/)')
@@ -230,9 +266,14 @@ def main() -> int:
     contacts = np.sort(topics.get(CONTACT, (None, np.array([])))[1])
     answered = np.sort(topics[FORCE_OUT][1])
     answered = answered[answered >= rows[0, 0] + offset + a.start]
-    eps = find_episodes(answered, contacts, a.late_ms * 1e-3, a.top, offset)
-    print(f'{a.trace}: from {a.start:g} s after the first tick, the {len(eps)} longest gaps '
-          f'between the poses the force server answered, above {a.late_ms:g} ms')
+    if a.servo_gaps:
+        eps = servo_gaps(rows, a.start, a.top)
+        print(f'{a.trace}: from {a.start:g} s after the first tick, the {len(eps)} longest servo '
+              f'gaps above {GAP_S * 1e3:g} ms')
+    else:
+        eps = find_episodes(answered, contacts, a.late_ms * 1e-3, a.top, offset)
+        print(f'{a.trace}: from {a.start:g} s after the first tick, the {len(eps)} longest gaps '
+              f'between the poses the force server answered, above {a.late_ms:g} ms')
     try:
         graph = {int(v): k for k, v in (kv.split('=') for kv in a.pids.split(',') if kv)}
     except ValueError:
@@ -246,14 +287,15 @@ def main() -> int:
     names.update(graph)
     print(f'{a.perf}: {lo - rows[0, 0]:.1f} to {hi - rows[0, 0]:.1f} s after the first tick, '
           f'{cpus} CPUs')
-    for e in eps:
+    inside = [e for e in eps if lo <= e.start and e.end <= hi]
+    if len(inside) < len(eps):
+        print(f'{len(eps) - len(inside)} episodes not all in the recording: left out')
+    for e in inside if not a.servo_gaps else [summed(inside)]:
         ms = (e.end - e.start) * 1e3
-        print(f'\n{ms:.0f} ms of poses unanswered from {e.start - rows[0, 0]:.3f} s after the '
-              f'first tick; {e.contacts} /contact for them; CPUs idle {e.idle:.0f} ms of '
-              f'{cpus * ms:.0f}')
-        if e.start < lo or e.end > hi:
-            print('  not all in the recording: left out')
-            continue
+        what = (f'{len(inside)} servo gaps, {ms:.0f} ms in all' if a.servo_gaps else
+                f'{ms:.0f} ms of poses unanswered from {e.start - rows[0, 0]:.3f} s after the '
+                f'first tick; {e.contacts} /contact for them')
+        print(f'\n{what}; CPUs idle {e.idle:.0f} ms of {cpus * ms:.0f}')
         print('  process                 run ms  runnable ms  asleep ms  longest wait ms')
         for name, u in sorted(by_process(e, names, set(graph)).items()):
             print(f'  {name:22s} {u.run:7.0f} {u.runnable:12.0f} {u.asleep:10.0f} '

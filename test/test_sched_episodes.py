@@ -10,8 +10,8 @@ import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / 'bench'))
 from bench_sched_trace import TIMEHIST_LINE  # noqa: E402
-from sched_episodes import (Episode, account, by_process, find_episodes, node_pids,  # noqa: E402
-                            parse_line)
+from sched_episodes import (Episode, Use, account, by_process, find_episodes,  # noqa: E402
+                            node_pids, parse_line, servo_gaps, summed)
 
 
 def test_a_timehist_line_with_a_spaced_thread_name():
@@ -85,3 +85,23 @@ def test_the_graphs_processes_from_the_node_logs(tmp_path):
         'session); normal scheduler\n')
     assert node_pids(tmp_path) == {25099: 'force_server', 25187: 'falcon_driver',
                                    25332: 'servo process'}
+
+
+def test_the_longest_servo_gaps_from_the_start_and_their_sum(capsys):
+    t = np.arange(0.0, 2.0, 0.001)
+    t = np.concatenate([t[t < 0.5], t[t >= 0.52]])         # 21 ms before --from: left out
+    t = np.concatenate([t[t < 1.2], t[t >= 1.2] + 0.05])   # 51 ms at 1.2 s
+    t = np.concatenate([t[t < 1.5], t[t >= 1.5] + 0.015])  # 16 ms at 1.5 s
+    t = np.concatenate([t[t < 1.7], t[t >= 1.7] + 0.002])  # 3 ms: a period lost, not a gap
+    rows = np.zeros((len(t), 8))
+    rows[:, 0] = t
+    eps = servo_gaps(rows, 1.0, 1)
+    assert [(e.start, e.end) for e in eps] == [(pytest.approx(1.199), pytest.approx(1.25))]
+    assert 'servo gaps from 1 s: 2 longer than 10 ms (0.07 s in all), 3 longer than 2 ms' in \
+        capsys.readouterr().out
+    a, b = Episode(0.0, 0.1, 0), Episode(1.0, 1.3, 0)
+    a.threads[1, 1], b.threads[1, 1] = Use(1.0, 2.0, 3.0, 4.0), Use(10.0, 20.0, 30.0, 2.0)
+    a.idle, b.idle = 5.0, 6.0
+    s = summed([a, b])
+    assert s.end - s.start == pytest.approx(0.4) and s.idle == 11.0
+    assert s.threads[1, 1] == Use(11.0, 22.0, 33.0, 4.0)
