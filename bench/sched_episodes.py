@@ -75,6 +75,13 @@ class Use:
     asleep: float = 0.0
     longest_wait: float = 0.0   # [ms] the longest single runnable stretch overlapping it
 
+    def add(self, other: 'Use') -> None:
+        """Sums ``other`` into this (longest wait: the longest)."""
+        self.run, self.runnable, self.asleep = (self.run + other.run,
+                                                self.runnable + other.runnable,
+                                                self.asleep + other.asleep)
+        self.longest_wait = max(self.longest_wait, other.longest_wait)
+
 
 @dataclass
 class Episode:
@@ -195,10 +202,7 @@ def summed(episodes: list[Episode]) -> Episode:
     for e in episodes:
         out.idle += e.idle
         for k, u in e.threads.items():
-            s = out.threads.setdefault(k, Use())
-            s.run, s.runnable, s.asleep = s.run + u.run, s.runnable + u.runnable, \
-                s.asleep + u.asleep
-            s.longest_wait = max(s.longest_wait, u.longest_wait)
+            out.threads.setdefault(k, Use()).add(u)
     return out
 
 
@@ -220,10 +224,7 @@ def by_process(e: Episode, names: dict[int, str], graph: set[int]) -> dict[str, 
     out = {}
     for (pid, _), u in e.threads.items():
         if not graph or pid in graph:
-            s = out.setdefault(f'{names.get(pid, "?")}[{pid}]', Use())
-            s.run, s.runnable, s.asleep = s.run + u.run, s.runnable + u.runnable, \
-                s.asleep + u.asleep
-            s.longest_wait = max(s.longest_wait, u.longest_wait)
+            out.setdefault(f'{names.get(pid, "?")}[{pid}]', Use()).add(u)
     return out
 
 
