@@ -18,15 +18,18 @@ too far from it, which no longer hold renders).
 ``--dropouts`` lists the runs of dropout ticks (in contact, the ideal force > 1 N, 0 N applied:
 ``zero_ticks`` on the servo_load pages, over the ticks from ``--from`` s) with the render status
 of their ticks: ``expired`` (the hold ran out, or the probe left the hold radius) or ``free``
-(the model in hand said no contact: a press onset with the graph late). The ideal force is
-computed at every tick as ``haptic-anfis loop`` does (minutes for an hour).
+(the model in hand said no contact: a press onset with the graph late). ``--ripple`` lists the
+ripple windows of the applied force (``ripple_pct``) that the ideal force did not have, each with
+what made it: a servo gap (the force held while the hand moved on) or a step at a tick on time (a
+new model, or a change of render status). The ideal force is computed at every tick as
+``haptic-anfis loop`` does (minutes for an hour).
 
 Ticks are on the driver's monotonic clock, the bag on the wall clock: the trace's
 ``realtime_minus_monotonic_s`` lines them up; a trace written before it existed is lined up by
 its ticks' positions against the pose messages, which carry each tick's wall-clock stamp.
 
     .venv/bin/python bench/trace_episodes.py TRACE.npz [--bag BAG] [--top 10] [--gap-ms 10]
-        [--longer-holds 0.75,1,1.5 [--hold S]] [--dropouts [--from 30]]
+        [--longer-holds 0.75,1,1.5 [--hold S]] [--dropouts] [--ripple] [--from 30]
 
 Prints only (a diagnosis, not a benchmark: no page).
 """
@@ -98,6 +101,42 @@ def dropout_runs(rows: np.ndarray, ideal: np.ndarray, contact: np.ndarray
         out.append((float(rows[a, 0]), int(b - a), float(rows[b - 1, 0] - rows[a, 0]),
                     {STATUS_NAMES[c] if 0 <= c < len(STATUS_NAMES) else str(c): int(k)
                      for c, k in zip(codes, n)}))
+    return out
+
+
+def ripple_causes(rows: np.ndarray, ideal: np.ndarray, contact: np.ndarray, gap_s: float,
+                  near_s: float = 0.025) -> list[dict]:
+    """What made each ripple window of the applied force that the ideal force did not have.
+
+    For each such window (:func:`~haptic_anfis.device.force_error.ripple_windows`: 200 ms in
+    contact with the applied force > 0.1 N from its centred 50 ms mean somewhere), around its
+    worst tick (``near_s`` either side): the largest one-tick jump of the error (applied minus
+    ideal) [N], the time before that tick [s] and the render status of the ticks either side of
+    it, and the longest servo gap there [s]. ``cause`` is 'servo gap' when a gap longer than
+    ``gap_s`` ends at the jump (the force held while the hand moved), else 'step' (a new model,
+    or a change of render status, at a tick on time).
+    """
+    from haptic_anfis.device.force_error import ripple_windows
+    t, f, status = rows[:, 0], rows[:, 4:7], rows[:, 7].astype(int)
+    counted, bad, worst, dev = ripple_windows(t, f, contact)
+    ideal_bad = ripple_windows(t, ideal, contact)[1]
+    err = f - ideal
+    jump = np.r_[0.0, np.linalg.norm(np.diff(err, axis=0), axis=1)]
+    dt = np.r_[0.0, np.diff(t)]
+
+    def name(c: int) -> str:
+        return STATUS_NAMES[c] if 0 <= c < len(STATUS_NAMES) else str(c)
+
+    out = []
+    for w in np.flatnonzero(counted & bad & ~ideal_bad[:len(bad)]):
+        i = worst[w]
+        a, b = np.searchsorted(t, [t[i] - near_s, t[i] + near_s])
+        j = a + int(np.argmax(jump[a:b]))
+        out.append({'t': float(t[i]), 'deviation_n': float(dev[i]),
+                    'jump_n': float(jump[j]), 'jump_dt_s': float(dt[j]),
+                    'jump_status': f'{name(status[j - 1])} -> {name(status[j])}',
+                    'longest_gap_s': float(dt[a:b].max()),
+                    'cause': 'servo gap' if dt[j] > gap_s else 'step'})
     return out
 
 
@@ -176,8 +215,14 @@ def main() -> int:
     ap.add_argument('--dropouts', action='store_true',
                     help='list the dropout runs (0 N in contact, ideal > 1 N) by render status')
     ap.add_argument('--from', dest='start', type=float, default=30.0,
-                    help='--dropouts: from this many seconds after the first tick (default 30: '
+                    help='--dropouts, --ripple: from this many seconds after the first tick (default 30: '
                          "bench_servo_load's --settle)")
+    ap.add_argument('--ripple', action='store_true',
+                    help='the ripple windows of the applied force that the ideal force did not '
+                         'have, from --from s: what made each (a servo gap longer than '
+                         '--ripple-gap-ms, or a step at a tick on time)')
+    ap.add_argument('--ripple-gap-ms', type=float, default=3.0,
+                    help='--ripple: a gap longer than this [ms] is a servo gap (default 3)')
     ap.add_argument('--longer-holds', type=positive_numbers, default=[],
                     help='comma-separated model_hold_time values [s]: the expired-model ticks '
                          'each would have left')
@@ -210,10 +255,21 @@ def main() -> int:
         for h, n_runs, n_ticks, longest in longer_holds(rows, hold, holds):
             print(f'  {h:6.3g} s: {n_runs:4d} runs, {n_ticks:6d} ticks, '
                   f'longest {longest * 1e3:7.1f} ms')
-    if a.dropouts:
+    if a.dropouts or a.ripple:
         from haptic_anfis.commands.loop import ideal_forces
         w = rows[rows[:, 0] - rows[0, 0] >= a.start]
         ideal, contact = ideal_forces(w[:, 1:4])
+    if a.ripple:
+        causes = ripple_causes(w, ideal, contact, a.ripple_gap_ms * 1e-3)
+        kinds = {k: sum(c['cause'] == k for c in causes) for k in ('servo gap', 'step')}
+        print(f'\nripple windows from {a.start:g} s the ideal force did not have: {len(causes)} '
+              f'({kinds["servo gap"]} at a servo gap, {kinds["step"]} at a step)')
+        for c in sorted(causes, key=lambda c: -c['deviation_n'])[:max(a.top, 1) * 3]:
+            print(f'  {c["t"] - rows[0, 0]:9.3f} s: {c["deviation_n"]:5.2f} N off the mean; '
+                  f'{c["cause"]}: error jumped {c["jump_n"]:5.2f} N after '
+                  f'{c["jump_dt_s"] * 1e3:5.1f} ms ({c["jump_status"]}); longest gap near '
+                  f'{c["longest_gap_s"] * 1e3:5.1f} ms')
+    if a.dropouts:
         runs = dropout_runs(w, ideal, contact)
         total = sum(n for _, n, _, _ in runs)
         print(f'\ndropout runs from {a.start:g} s: {len(runs)} runs, {total} ticks')

@@ -750,3 +750,115 @@ def test_ticks_with_the_safety_layer_off_are_traced_as_disabled():
     rows = lp.trace.arrays()
     assert forces[0] == forces[3] == 0.0 and forces[2] == pytest.approx(2.0)
     assert list(rows[:, 7]) == [DISABLED, FRESH, EXTRAPOLATED, DISABLED]
+
+
+def press_model(f0: float, t0: float, contact: bool = True) -> list:
+    """A model 5 mm into a wall along -x at x = 0.055 m: F0 = ``f0`` N along x, 1000 N/m (not
+    ``contact``: a model that says the probe is free)."""
+    if not contact:
+        return LocalModel((0.0, 0.0, 0.0), (0.05, 0.0, 0.0), np.zeros((3, 3)), (0.0, 0.0, 0.0),
+                          (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), 0.0, False, t0).values()
+    return LocalModel((f0, 0.0, 0.0), (0.05, 0.0, 0.0), np.diag([-1000.0, 0.0, 0.0]),
+                      (0.055, 0.0, 0.0), (1.0, 0.0, 0.0), (-1.0, 0.0, 0.0), 0.005, False,
+                      t0).values()
+
+
+def fade_run(blend_time: float, switch_at: float, later: bool, until: float = 0.06) -> list:
+    """The target force along x [N] at each tick of a probe held still: a 2 N model from t = 0,
+    a 3 N one offered at ``switch_at`` (made then), and (``later``) the same 3 N model offered
+    anew at every tick after it, each made at its tick (models on time, agreeing)."""
+    lp = loop('local_model', max_force_rate=1e6, blend_time=blend_time)
+    lp.safety.start()
+    q = MAP.to_device((0.05, 0.0, 0.0))
+    lp.renderer.offer_values(press_model(2.0, 0.0), 0.0)
+    out = []
+    for t in np.arange(0.0, until, 0.001):
+        if abs(t - switch_at) < 1e-9 or (later and t > switch_at):
+            lp.renderer.offer_values(press_model(3.0, t), t)
+        pin(lp, q, t)
+        lp.tick(t)
+        out.append(lp.st[nt.S.target0])
+    return out
+
+
+@pytest.mark.parametrize('blend_time, switch_at', [(0.0, 0.03), (0.01, 0.03), (0.05, 0.03),
+                                                   (0.05, 0.001)])
+def test_the_step_to_a_late_model_is_faded_over_the_old_models_age(blend_time, switch_at):
+    """A new model that disagrees with the old one at the probe (2 N -> 3 N) is reached as
+    exp(-t / tau) from the old model's force, tau the old model's age at the switch, at most
+    blend_time (0: at once); a model a tick old is taken within a few ticks."""
+    f = fade_run(blend_time, switch_at, later=False)
+    tau = min(switch_at, blend_time)
+    k = round(switch_at * 1e3)
+    assert f[:k] == pytest.approx([2.0] * k)
+    for i in range(k, len(f)):
+        left = 3.0 - f[i]
+        if tau:   # never past the new force; no slower than exp(-t / tau) (tau only shrinks)
+            assert 0.0 <= left <= np.exp(-(i - k) * 1e-3 / tau) + 1e-12
+        else:
+            assert left == pytest.approx(0.0)
+    if tau:
+        assert f[k] == pytest.approx(2.0)   # continuous at the switch
+        assert 3.0 - f[k + 1] == pytest.approx(np.exp(-0.001 / tau))
+    if switch_at < 0.002:
+        assert f[k + 5] == pytest.approx(3.0, abs=1e-3)
+
+
+def test_a_model_on_time_after_a_late_one_does_not_cut_its_fade_short():
+    f_alone = fade_run(0.05, 0.03, later=False)
+    f_more = fade_run(0.05, 0.03, later=True)
+    assert f_more[40] == pytest.approx(f_alone[40])   # 10 ms after the switch
+    assert 3.0 - f_more[40] > 0.5
+
+
+def test_only_the_models_disagreement_is_faded_not_the_probes_motion():
+    """The same model offered anew renders what it did: the probe's motion (the stiffness) is
+    rendered at once, the fade holds nothing; two models that agree leave no offset."""
+    lp = loop('local_model', max_force_rate=1e6, blend_time=0.02)
+    lp.safety.start()
+    for i, t in enumerate(np.arange(0.0, 0.02, 0.001)):
+        lp.renderer.offer_values(press_model(2.0, t), t)   # a new model every tick
+        x = 0.05 - 0.0001 * i   # 0.1 mm deeper every tick: 0.1 N more
+        pin(lp, MAP.to_device((x, 0.0, 0.0)), t)
+        lp.tick(t)
+        assert lp.st[nt.S.target0] == pytest.approx(2.0 + 1000.0 * (0.05 - x), abs=1e-9)
+    assert np.all(lp.st[nt.S.bl0:nt.S.bl0 + 3] == 0.0)
+
+
+@pytest.mark.parametrize('release', ['free', 'expired'])
+def test_a_release_is_never_faded(release):
+    """A new model that says free renders zero at once, and an expired one leaves the force to
+    the watchdog, as without the fade; the next press starts with no offset."""
+    lp = loop('local_model', max_force_rate=1e6, blend_time=0.02, validity_time=0.01,
+              hold_time=0.02)
+    lp.safety.start()
+    q = MAP.to_device((0.05, 0.0, 0.0))
+    lp.renderer.offer_values(press_model(2.0, 0.0), 0.0)
+    pin(lp, q, 0.0)
+    lp.tick(0.0)
+    lp.renderer.offer_values(press_model(4.0, 0.001), 0.001)
+    pin(lp, q, 0.001)
+    lp.tick(0.001)
+    assert lp.st[nt.S.target0] == pytest.approx(2.0)   # faded: the old model's force
+    if release == 'free':
+        lp.renderer.offer_values(press_model(4.0, 0.002, contact=False), 0.002)
+        pin(lp, q, 0.002)
+        lp.tick(0.002)
+        assert lp.st[nt.S.target0] == 0.0
+        assert int(lp.st[nt.S.status]) == FREE
+    else:
+        for t in np.arange(0.002, 0.03, 0.001):   # the model expires at 21 ms
+            pin(lp, q, t)
+            lp.tick(t)
+        assert int(lp.st[nt.S.status]) == EXPIRED
+    assert np.all(lp.st[nt.S.bl0:nt.S.bl0 + 3] == 0.0)
+    lp.renderer.offer_values(press_model(3.0, 0.04), 0.04)
+    pin(lp, q, 0.04)
+    lp.tick(0.04)
+    assert lp.st[nt.S.target0] == pytest.approx(3.0)   # no fade from before the release
+
+
+@pytest.mark.parametrize('blend_time', [-0.01, float('nan'), float('inf'), '0.02', True])
+def test_a_blend_time_that_is_not_a_time_is_refused(blend_time):
+    with pytest.raises(ValueError, match='blend_time: expected a finite number >= 0 s'):
+        loop('local_model', blend_time=blend_time)

@@ -184,24 +184,52 @@ def ripple_and_dropouts(times: np.ndarray, applied: np.ndarray, ideal: np.ndarra
     return out
 
 
-def _ripple_share(t, f, mask, mean_window, window, ripple) -> float | None:
-    """% of the windows (see :func:`ripple_and_dropouts`) whose deviation exceeds ``ripple``."""
-    if len(t) < 2:
-        return None
+def ripple_windows(times: np.ndarray, force: np.ndarray, in_contact: np.ndarray,
+                   mean_window: float = 0.05, window: float = 0.2, ripple: float = 0.1
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The windows :func:`ripple_and_dropouts` counts, one by one (to find what made each).
+
+    Args:
+        times: (n,) [s], increasing; force: (n, 3) [N]; in_contact: (n,) bool; the rest as
+            :func:`ripple_and_dropouts`.
+
+    Returns:
+        ``counted`` (w,) bool: window k (ticks with ``times - times[0]`` in [k, k+1) *
+        ``window``) is at least half in contact; ``bad`` (w,) bool: somewhere in it the force
+        leaves its centred moving mean by more than ``ripple``; ``worst`` (w,) int: the tick of
+        its largest deviation (-1 where the window holds no tick); ``deviation`` (n,) [N]: each tick's
+        (0 where its averaging window is not all in contact: the contact's edge).
+    """
+    t = np.asarray(times, dtype=np.float64)
+    f = np.asarray(force, dtype=np.float64)
+    mask = np.asarray(in_contact, dtype=bool)
     # centred moving mean of each component over mean_window, by time (cumulative sums)
     c = np.vstack([np.zeros((1, 3)), np.cumsum(f, axis=0)])
     lo = np.searchsorted(t, t - mean_window / 2, side='left')
     hi = np.searchsorted(t, t + mean_window / 2, side='right')
     mean = (c[hi] - c[lo]) / (hi - lo)[:, None]
-    dev = np.linalg.norm(f - mean, axis=1)
     # ticks whose averaging window is not all in contact measure the contact's edge: skip them
     cm = np.concatenate([[0], np.cumsum(mask)])
     inner = mask & ((cm[hi] - cm[lo]) == (hi - lo))
+    dev = np.where(inner, np.linalg.norm(f - mean, axis=1), 0.0)
     k = np.floor((t - t[0]) / window).astype(np.int64)
     nwin = int(k[-1]) + 1
     dur = np.bincount(k, weights=mask.astype(np.float64), minlength=nwin)
     per_tick = np.median(np.diff(t))
     counted = dur * per_tick >= window / 2
-    bad = np.bincount(k[inner & (dev > ripple)], minlength=nwin) > 0
+    bad = np.bincount(k[dev > ripple], minlength=nwin) > 0
+    worst = np.full(nwin, -1, dtype=np.int64)
+    # ticks sorted by window, then by deviation: each window's last is its worst
+    order = np.lexsort((dev, k))
+    last = np.flatnonzero(np.diff(k[order], append=nwin))
+    worst[k[order[last]]] = order[last]
+    return counted, bad, worst, dev
+
+
+def _ripple_share(t, f, mask, mean_window, window, ripple) -> float | None:
+    """% of the windows (see :func:`ripple_and_dropouts`) whose deviation exceeds ``ripple``."""
+    if len(t) < 2:
+        return None
+    counted, bad, _, _ = ripple_windows(t, f, mask, mean_window, window, ripple)
     n = int(counted.sum())
     return 100.0 * float((bad & counted).sum()) / n if n else None

@@ -121,7 +121,7 @@ def _index(name: str, names: str) -> type:
 CFG = _index('CFG', 'period max_force max_force_rate watchdog max_dt validity_time validity_radius '
              'fresh_age max_stiffness scale ox oy oz force_scale hand_m hand_k hand_c half '
              'dt_max max_catch_up ramp damping mode observer loop dev_max_force hold_time device '
-             'approach_radius hold_radius')
+             'approach_radius hold_radius blend_time')
 #: the loop's own state (float64)
 S = _index('S', 'x0 x1 x2 v0 v1 v2 f0 f1 f2 t_dev t_open script_off '
            'enabled target0 target1 target2 out0 out1 out2 last_cmd last_out tripped '
@@ -129,7 +129,7 @@ S = _index('S', 'x0 x1 x2 v0 v1 v2 f0 f1 f2 t_dev t_open script_off '
            'energy t_prev pt1 pt2 cmd_seen model_seen fault_seen enable_seen status '
            'm_f0 m_f1 m_f2 m_p0 m_p1 m_p2 m_k0 m_k1 m_k2 m_k3 m_k4 m_k5 m_k6 m_k7 m_k8 '
            'm_g0 m_g1 m_g2 m_d0 m_d1 m_d2 m_depth0 m_zero m_contact m_t0 m_valid m_knorm '
-           'm_w0 m_w1 m_w2 m_hold_skew')
+           'm_w0 m_w1 m_w2 m_hold_skew bl0 bl1 bl2 bl_tau')
 STATE_LEN = len(S)
 #: command buffer (float64 seqlock): seq, force (3,) device frame [N], its pose's time [s]
 CMD_LEN = 5
@@ -171,6 +171,10 @@ SCRATCH_LEN = max(CMD_LEN, MODEL_LEN, OUT_LEN)
 NONE, FRESH, EXTRAPOLATED, EXPIRED, FREE = 0, 1, 2, 3, 4  # local_model's status codes
 #: time constant [s] of the tick periods the passivity bound weighs (:func:`_passivity_period`)
 PASSIVITY_WINDOW = 0.02
+#: [N] the part of a step between two models that is taken at once (:func:`_render_blended`):
+#: models on time differ by less (hundredths of a newton), so they are rendered as they come; a
+#: step of s leaves the 50 ms mean by ~s / 2, a ripple window (> 0.1 N) from 0.2 N
+BLEND_DEADBAND = 0.05
 
 
 def new_state() -> np.ndarray:
@@ -499,6 +503,59 @@ def _render(cfg, st, cnt, qx, qy, qz, now, period):
 
 
 @nb.njit(nogil=True, cache=True)
+def _take_model(st, scratch):
+    """The model in ``scratch`` (a seqlock copy, all finite) becomes the current one."""
+    for i in range(MODEL_LEN - 1):
+        st[S.m_f0 + i] = scratch[1 + i]
+
+
+@nb.njit(nogil=True, cache=True)
+def _render_blended(cfg, st, cnt, scratch, switched, qx, qy, qz, now, period, gap):
+    """:func:`_render`, a new model (``switched``: in ``scratch``) taken on the way, with the
+    step between the two models faded out (module doc, 3.): where the old model and the new
+    both press on the probe, the force stays the old one's at this tick and the difference
+    decays as exp(-t / tau), tau the old model's age at the switch (at most
+    ``cfg[blend_time]``). A model that is late by A seconds brings the change of A seconds at
+    once; spread over about A, the force changes about as fast as it would have had the models
+    come on time, and a model a tick old is taken at once. tau only shrinks as the fade runs
+    (by the same factor as the difference), so a model on time right after a late one does not
+    cut the late one's fade short. Only the models' disagreement is faded, never the force's
+    change with the probe's position (each model's own stiffness renders that at once), and
+    never a release: a model that says free, an expired one or none renders zero (or NaN) at
+    once and the fade starts again from nothing."""
+    cap = cfg[CFG.blend_time]
+    ox = oy = oz = np.nan
+    age = 0.0
+    if switched:
+        if cap > 0.0:   # the old model's force here: its status and counts are not this tick's
+            age = now - st[S.m_t0]
+            ox, oy, oz = _render(cfg, st, np.zeros_like(cnt), qx, qy, qz, now, period)
+            if st[S.status] != FRESH and st[S.status] != EXTRAPOLATED:
+                ox = np.nan
+        _take_model(st, scratch)
+    fx, fy, fz = _render(cfg, st, cnt, qx, qy, qz, now, period)
+    if cap <= 0.0 or fx != fx or (st[S.status] != FRESH and st[S.status] != EXTRAPOLATED):
+        st[S.bl0] = st[S.bl1] = st[S.bl2] = st[S.bl_tau] = 0.0
+        return fx, fy, fz
+    tau = st[S.bl_tau]
+    decay = np.exp(-max(gap, 0.0) / tau) if tau > 0.0 else 0.0
+    st[S.bl0] *= decay
+    st[S.bl1] *= decay
+    st[S.bl2] *= decay
+    st[S.bl_tau] = tau * decay
+    if ox == ox:   # the step beyond BLEND_DEADBAND is faded, the rest taken at once
+        dx, dy, dz = ox - fx, oy - fy, oz - fz
+        dn = np.sqrt(dx * dx + dy * dy + dz * dz)
+        if dn > BLEND_DEADBAND:
+            c = 1.0 - BLEND_DEADBAND / dn
+            st[S.bl0] += c * dx
+            st[S.bl1] += c * dy
+            st[S.bl2] += c * dz
+            st[S.bl_tau] = max(st[S.bl_tau], min(max(age, 0.0), cap))
+    return fx + st[S.bl0], fy + st[S.bl1], fz + st[S.bl2]
+
+
+@nb.njit(nogil=True, cache=True)
 def _add_linear(st, f, c, s, skew, ex, ey, ez):
     """f += c (F0 + s S e + skew w x e): the model's linear field at offset e, its symmetric
     stiffness S scaled by s, its skew part by skew."""
@@ -561,6 +618,7 @@ def _compute(now, cfg, st, times, points, buttons, hand, cmd, model, ctl, cnt, s
         st[S.m_valid] = 0.0
         if st[S.enabled] > 0.5:
             _fault(st, cnt, False)
+    switched = False   # a new model in scratch, taken at the render (3.)
     if _take(model, scratch, st[S.model_seen]):
         st[S.model_seen] = scratch[0]
         ok = True
@@ -568,8 +626,7 @@ def _compute(now, cfg, st, times, points, buttons, hand, cmd, model, ctl, cnt, s
             if not np.isfinite(scratch[i]):
                 ok = False
         if ok:
-            for i in range(MODEL_LEN - 1):
-                st[S.m_f0 + i] = scratch[1 + i]
+            switched = True
         else:  # never render a non-finite model: zero at once
             st[S.m_valid] = 0.0
             if st[S.enabled] > 0.5:
@@ -586,7 +643,8 @@ def _compute(now, cfg, st, times, points, buttons, hand, cmd, model, ctl, cnt, s
     qx, qy, qz = _clutch(st, cnt, b0, b1, mx, my, mz)
     # 3. render (device frame)
     if cfg[CFG.mode] > 0.5:
-        fx, fy, fz = _render(cfg, st, cnt, qx, qy, qz, now, period)
+        fx, fy, fz = _render_blended(cfg, st, cnt, scratch, switched, qx, qy, qz, now, period,
+                                     gap)
         if fx == fx:
             if not np.isfinite(fx + fy + fz):
                 _fault(st, cnt)
@@ -594,6 +652,8 @@ def _compute(now, cfg, st, times, points, buttons, hand, cmd, model, ctl, cnt, s
                 g = _gain(cfg, st, fx != 0.0 or fy != 0.0 or fz != 0.0, now)
                 _command(st, g * fs * fx, g * fs * fy, g * fs * fz, now)
     else:
+        if switched:
+            _take_model(st, scratch)
         st[S.status] = -1.0
         if _take(cmd, scratch, st[S.cmd_seen]):
             st[S.cmd_seen] = scratch[0]

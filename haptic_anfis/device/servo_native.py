@@ -35,8 +35,9 @@ from . import native_tick as nt
 from . import device_process as dp
 from .buttons import ButtonEvents
 from .falcon import DeviceState, HandParams, WorkspaceMapping
-from .local_model import APPROACH_RADIUS, FALCON_MAX_STIFFNESS, HOLD_RADIUS, LocalModelRenderer, \
-    RenderStats, accept_values, rotating_mode, skew_vector, symmetric_part, tissue_stiffness_limit
+from .local_model import APPROACH_RADIUS, FALCON_MAX_STIFFNESS, HOLD_RADIUS, MODEL_BLEND_TIME, \
+    LocalModelRenderer, RenderStats, accept_values, rotating_mode, skew_vector, symmetric_part, \
+    tissue_stiffness_limit
 from .safety import IGNORED_DISABLED, OK, REJECTED_FRAME, REJECTED_NONFINITE, SafetyLayer, \
     SafetyStats
 from .servo import name_thread, schedule_servo_thread
@@ -379,6 +380,8 @@ class NativeServoLoop:
             (``held`` ticks; <= validity_time: off) while the probe is within ``hold_radius``
             [m] of its p0 (:data:`~.local_model.HOLD_RADIUS`; further: expired for those
             ticks); then it expires.
+        blend_time: the step between two successive models is faded out with this time
+            constant [s] (:data:`~.local_model.MODEL_BLEND_TIME`; 0: off, the new model at once).
         on_state: ``on_state(state: NativeState, force, now)`` on the bridge thread for the newest
             tick (force: device frame).
         trace: a :class:`~.trace.TickTrace` the bridge fills (tissue frame), or None.
@@ -415,7 +418,8 @@ class NativeServoLoop:
                  process: bool = False, device_factory: Callable[[], object] | None = None,
                  open_timeout: float = 120.0, open_error: type[Exception] = OSError,
                  workers: int = 2, approach_radius: float = APPROACH_RADIUS,
-                 hold_radius: float = HOLD_RADIUS) -> None:
+                 hold_radius: float = HOLD_RADIUS,
+                 blend_time: float = MODEL_BLEND_TIME) -> None:
         if not rate > 0:
             raise ValueError(f'rate: expected > 0 Hz, got {rate!r}')
         if not 0 <= priority <= 99:
@@ -427,6 +431,9 @@ class NativeServoLoop:
         if not (isinstance(hold_radius, (int, float)) and not isinstance(hold_radius, bool)
                 and math.isfinite(hold_radius) and hold_radius > 0):
             raise ValueError(f'hold_radius: expected a finite number > 0 m, got {hold_radius!r}')
+        if not (isinstance(blend_time, (int, float)) and not isinstance(blend_time, bool)
+                and math.isfinite(blend_time) and blend_time >= 0):
+            raise ValueError(f'blend_time: expected a finite number >= 0 s, got {blend_time!r}')
         if not (isinstance(workers, int) and 1 <= workers <= 8):
             raise ValueError(f'workers: expected an integer from 1 to 8, got {workers!r}')
         self.period = 1.0 / rate
@@ -468,6 +475,7 @@ class NativeServoLoop:
         cfg[C.dev_max_force] = max_force if device_max_force is None else device_max_force
         cfg[C.hold_time] = max(float(hold_time), validity_time)
         cfg[C.hold_radius] = hold_radius
+        cfg[C.blend_time] = blend_time
         cfg[C.device] = 1.0 if device_factory is not None else 0.0
         self.cfg = cfg
         #: the real device's status and counters (:data:`~.device_process.DEV`), its message

@@ -46,7 +46,8 @@ from ..device import (HandParams, PalpationScript, SafetyLayer, ServoLoop, Simul
 from ..device.buttons import ClutchMark
 from ..device.falcon import RATED_FORCE
 from ..device.force_input import MODES, ForceInput
-from ..device.local_model import APPROACH_RADIUS, FALCON_MAX_STIFFNESS, HOLD_RADIUS, STATUS_NAMES
+from ..device.local_model import APPROACH_RADIUS, FALCON_MAX_STIFFNESS, HOLD_RADIUS, \
+    MODEL_BLEND_TIME, STATUS_NAMES
 from ..device.safety import OK
 from ..device.start_gate import HeldScript
 from ..device.stamps import STALE
@@ -172,6 +173,11 @@ PARAMS = [
           'watchdog ramps the force to zero (a held plane followed down the flank of a convex '
           'surface pressed on a free probe; docs/servo_loop.md). 1.0 (more than the '
           'workspace): off', positive),
+    Param('model_blend_time', MODEL_BLEND_TIME, 'native, local_model: the step between two '
+          'successive local models is faded out with this time constant [s] where both press on '
+          'the probe (a model that comes late no longer jolts the hand: a step of 0.2 N is a '
+          'ripple window; a release is never faded; docs/servo_loop.md). 0: off',
+          non_negative),
     Param('passivity_observer', False, 'native: run the passivity observer / controller '
           '(Hannaford & Ryu 2002) on the rendered port'),
     Param('servo_workers', 2, "native, native_process with the simulated Falcon: threads "
@@ -373,7 +379,7 @@ class FalconDriver(HapticNode):
             p['model_hold_time'], trace=self._tick_trace(p),
             priority=p['servo_priority'], process=p['servo_loop'] == 'native_process',
             workers=p['servo_workers'], approach_radius=p['model_approach_radius'],
-            hold_radius=p['model_hold_radius'], **kw)
+            hold_radius=p['model_hold_radius'], blend_time=p['model_blend_time'], **kw)
 
     @staticmethod
     def _tick_trace(p) -> TickTrace | None:
@@ -557,7 +563,8 @@ class FalconDriver(HapticNode):
                    # the ticks' monotonic times onto the wall clock a bag's receive times use
                    realtime_minus_monotonic_s=time.time() - time.monotonic(),
                    model_hold_time=self.params['model_hold_time'],
-                   model_hold_radius=self.params['model_hold_radius'])
+                   model_hold_radius=self.params['model_hold_radius'],
+                   model_blend_time=self.params['model_blend_time'])
         self.get_logger().info(f'servo tick trace: {len(rows)} ticks -> {self.trace_path}'
                                + (f' (the oldest {self.servo.trace.dropped} dropped: bounded)'
                                   if self.servo.trace.dropped else ''))
