@@ -122,3 +122,24 @@ def test_bench_model_takes_per_output_structures(dataset_csv, tmp_path, capsys):
     assert '2-2-2/3-2-2/2-3-2' in text          # one structure per output (Fx/Fy/Fz)
     with pytest.raises(SystemExit):
         main(['bench', 'model', '--structures', '2-2-2/2-2-2'])
+
+
+def _parsers(parser, path=()):
+    """Every (command path, parser) of the command tree under ``parser``."""
+    import argparse
+    yield path, parser
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for name, sub in action.choices.items():
+                yield from _parsers(sub, (*path, name))
+
+
+def test_every_commands_help_prints():
+    """--help of every command and subcommand formats (a bare % in a help string made
+    argparse raise a TypeError for ``launch --help``)."""
+    from haptic_anfis.cli import build_parser
+    found = list(_parsers(build_parser()))
+    assert len(found) > 20
+    for path, parser in found:
+        text = parser.format_help()
+        assert 'usage:' in text, path

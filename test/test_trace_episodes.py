@@ -9,10 +9,11 @@ import numpy as np
 import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / 'bench'))
-from trace_episodes import around, episodes  # noqa: E402
+from trace_episodes import around, episodes, ripple_causes  # noqa: E402
 
-from haptic_anfis.device.force_error import dropout_ticks, phantom_ticks, runs_of  # noqa: E402
-from haptic_anfis.device.local_model import EXPIRED, FREE, FRESH  # noqa: E402
+from haptic_anfis.device.force_error import dropout_ticks, phantom_ticks, ripple_windows, \
+    runs_of  # noqa: E402
+from haptic_anfis.device.local_model import EXPIRED, EXTRAPOLATED, FREE, FRESH  # noqa: E402
 
 
 def test_runs_of_true_at_the_edges_and_inside():
@@ -146,3 +147,38 @@ def test_dropout_runs_are_zero_force_in_contact_named_by_status():
     assert [(n, kinds) for _, n, _, kinds in got] == [
         (1, {'free': 1}), (2, {'expired': 2}), (1, {'free': 1})], got
     assert got[1][0] == pytest.approx(0.004) and got[1][2] == pytest.approx(0.001)
+
+
+def test_ripple_windows_find_each_windows_worst_tick():
+    """A 0.4 N step at 0.55 s leaves its 50 ms mean by ~0.2 N: window 2 (0.4-0.6 s) is bad and
+    its worst tick is the step's; the windows either side stay under 0.1 N, and the last,
+    mostly out of contact, is not counted."""
+    t = np.arange(0.0, 1.0, 0.001)
+    f = np.zeros((len(t), 3))
+    f[:, 0] = 3.0
+    f[550:, 0] += 0.4
+    contact = t < 0.85
+    counted, bad, worst, dev = ripple_windows(t, f, contact)
+    assert counted.tolist() == [True, True, True, True, False]
+    assert bad.tolist() == [False, False, True, False, False]
+    assert worst[2] in (549, 550) and dev[worst[2]] == pytest.approx(0.2, abs=0.01)
+    assert dev[~contact].max() == 0.0
+
+
+def test_ripple_causes_tell_a_servo_gap_from_a_step():
+    """Two 0.4 N jumps of the applied force the ideal does not have: one after a 15 ms gap
+    between ticks (a servo gap), one at a tick on time (a step); a ripple window the ideal
+    force has too is not listed."""
+    t = np.arange(0.0, 2.0, 0.001)
+    t[500:] += 0.015
+    ideal = np.zeros((len(t), 3))
+    ideal[:, 0] = 3.0
+    ideal[1500:, 0] += 0.5                  # the tissue's own step: not the loop's
+    rows = trace(t, np.full(len(t), EXTRAPOLATED))
+    rows[:, 4:7] = ideal
+    rows[500:, 4] += 0.4
+    rows[1100:, 4] += 0.4
+    causes = ripple_causes(rows, ideal, np.ones(len(t), bool), gap_s=0.003)
+    got = [(c['cause'], round(c['jump_n'], 2), round(c['jump_dt_s'] * 1e3)) for c in causes]
+    assert got == [('servo gap', 0.4, 16), ('step', 0.4, 1)], got
+    assert causes[1]['jump_status'] == 'extrapolated -> extrapolated'

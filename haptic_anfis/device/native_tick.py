@@ -26,7 +26,10 @@ It sleeps to absolute 1 ms deadlines with ``clock_nanosleep`` and reads the cloc
    (:func:`.local_model.across_beyond`). The stiffness's skew part (the tissue force turning with
    the probe) is rendered while the model is valid; a held model keeps it
    only where K has no rotating mode (:func:`.local_model.rotating_mode`): a free handle could
-   spiral out along one.
+   spiral out along one. A new model that disagrees with the old one at the probe by more than
+   :data:`BLEND_DEADBAND` is not taken as a step: the excess is faded out over the old model's
+   age (at most ``blend_time``), so a model that comes late no longer jolts the hand
+   (:func:`_render_blended`; a release is never faded).
 4. Passivity: the model's stiffness is limited by the MEASURED tick period ``T``:
    ``K <= 2 (b - |B|) / T`` with ``b`` the device's damping and ``B`` the rendered damping
    (here 0) — Colgate & Schenkel 1997 (J. Robotic Systems 14(1):37-47), the discrete-time

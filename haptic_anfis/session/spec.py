@@ -148,7 +148,7 @@ OPTIONS: tuple[Option, ...] = (
                      "the kernel shares the CPU between sessions (autogroups) the graph's share "
                      'is on every CPU its threads wake on. Measured once without real-time '
                      'priority beside 8 busy processes and the browser view, one left the '
-                     'stretches without a model no shorter and cost the servo loop 14 % of its '
+                     'stretches without a model no shorter and cost the servo loop 14 %% of its '
                      'periods (docs/servo_loop.md). The servo process has a session of its own '
                      'either way'), commands=('launch',)),
     Option(('--max-restarts',), dict(type=int, default=3,
