@@ -4,7 +4,7 @@ from __future__ import annotations
 import argparse
 import math
 
-__all__ = ['positive_numbers']
+__all__ = ['non_negative_numbers', 'positive_numbers']
 
 
 def positive_numbers(text: str) -> list[float]:

@@ -134,7 +134,7 @@ def ripple_causes(rows: np.ndarray, ideal: np.ndarray, contact: np.ndarray, gap_
         j = a + int(np.argmax(jump[a:b]))
         out.append({'t': float(t[i]), 'deviation_n': float(dev[i]),
                     'jump_n': float(jump[j]), 'jump_dt_s': float(dt[j]),
-                    'jump_status': f'{name(status[j - 1])} -> {name(status[j])}',
+                    'jump_status': f'{name(status[max(j - 1, 0)])} -> {name(status[j])}',
                     'longest_gap_s': float(dt[a:b].max()),
                     'cause': 'servo gap' if dt[j] > gap_s else 'step'})
     return out
@@ -215,8 +215,8 @@ def main() -> int:
     ap.add_argument('--dropouts', action='store_true',
                     help='list the dropout runs (0 N in contact, ideal > 1 N) by render status')
     ap.add_argument('--from', dest='start', type=float, default=30.0,
-                    help='--dropouts, --ripple: from this many seconds after the first tick (default 30: '
-                         "bench_servo_load's --settle)")
+                    help='--dropouts, --ripple: from this many seconds after the first tick '
+                         "(default 30: bench_servo_load's --settle)")
     ap.add_argument('--ripple', action='store_true',
                     help='the ripple windows of the applied force that the ideal force did not '
                          'have, from --from s: what made each (a servo gap longer than '

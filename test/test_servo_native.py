@@ -763,18 +763,21 @@ def press_model(f0: float, t0: float, contact: bool = True) -> list:
                       t0).values()
 
 
-def fade_run(blend_time: float, switch_at: float, later: bool, until: float = 0.06) -> list:
+def fade_run(blend_time: float, switch_at: float, later: float | None = None,
+             until: float = 0.08) -> list:
     """The target force along x [N] at each tick of a probe held still: a 2 N model from t = 0,
-    a 3 N one offered at ``switch_at`` (made then), and (``later``) the same 3 N model offered
-    anew at every tick after it, each made at its tick (models on time, agreeing)."""
-    lp = loop('local_model', max_force_rate=1e6, blend_time=blend_time)
+    a 3 N one offered at ``switch_at`` (made then), and (``later``) a model of ``later`` N
+    offered anew at every tick after it, each made at its tick (models on time)."""
+    lp = loop('local_model', max_force_rate=1e6, blend_time=blend_time, hold_time=1.0)
     lp.safety.start()
     q = MAP.to_device((0.05, 0.0, 0.0))
     lp.renderer.offer_values(press_model(2.0, 0.0), 0.0)
     out = []
     for t in np.arange(0.0, until, 0.001):
-        if abs(t - switch_at) < 1e-9 or (later and t > switch_at):
+        if abs(t - switch_at) < 1e-9:
             lp.renderer.offer_values(press_model(3.0, t), t)
+        elif later is not None and t > switch_at:
+            lp.renderer.offer_values(press_model(later, t), t)
         pin(lp, q, t)
         lp.tick(t)
         out.append(lp.st[nt.S.target0])
@@ -783,32 +786,33 @@ def fade_run(blend_time: float, switch_at: float, later: bool, until: float = 0.
 
 @pytest.mark.parametrize('blend_time, switch_at', [(0.0, 0.03), (0.01, 0.03), (0.05, 0.03),
                                                    (0.05, 0.001)])
-def test_the_step_to_a_late_model_is_faded_over_the_old_models_age(blend_time, switch_at):
-    """A new model that disagrees with the old one at the probe (2 N -> 3 N) is reached as
-    exp(-t / tau) from the old model's force, tau the old model's age at the switch, at most
-    blend_time (0: at once); a model a tick old is taken within a few ticks."""
-    f = fade_run(blend_time, switch_at, later=False)
+def test_the_step_to_a_late_model_is_ramped_out_over_the_old_models_age(blend_time, switch_at):
+    """A new model that disagrees with the old one at the probe (2 N -> 3 N): 0.05 N of the
+    step is taken at once, the rest ramped out over tau, the old model's age at the switch, at
+    most blend_time (0: all at once); a model a tick old is taken within a few ticks."""
+    f = fade_run(blend_time, switch_at)
     tau = min(switch_at, blend_time)
     k = round(switch_at * 1e3)
     assert f[:k] == pytest.approx([2.0] * k)
-    for i in range(k, len(f)):
-        left = 3.0 - f[i]
-        if tau:   # never past the new force; no slower than exp(-t / tau) (tau only shrinks)
-            assert 0.0 <= left <= np.exp(-(i - k) * 1e-3 / tau) + 1e-12
-        else:
-            assert left == pytest.approx(0.0)
-    if tau:
-        assert f[k] == pytest.approx(2.0)   # continuous at the switch
-        assert 3.0 - f[k + 1] == pytest.approx(np.exp(-0.001 / tau))
-    if switch_at < 0.002:
-        assert f[k + 5] == pytest.approx(3.0, abs=1e-3)
+    if not tau:
+        assert f[k:] == pytest.approx([3.0] * (len(f) - k))
+        return
+    assert f[k] == pytest.approx(2.05)   # the deadband at once, the rest left to fade
+    assert 3.0 - f[k + 1] == pytest.approx(0.95 * np.exp(-0.001 / tau))
+    for i in range(k, len(f)):   # never past the new force; no slower than exp(-t / tau)
+        assert 0.0 <= 3.0 - f[i] <= 0.95 * np.exp(-(i - k) * 1e-3 / tau) + 1e-12
+    end = k + round(tau * 1e3) + 5   # a ramp over tau, and a tail of a few ticks
+    assert f[end] == pytest.approx(3.0, abs=1e-3)
+    if tau >= 0.01:   # a ramp, not a step: a third of the way in, most of it is still left
+        assert 3.0 - f[k + round(tau * 1e3 / 3)] > 0.5
 
 
 def test_a_model_on_time_after_a_late_one_does_not_cut_its_fade_short():
-    f_alone = fade_run(0.05, 0.03, later=False)
-    f_more = fade_run(0.05, 0.03, later=True)
-    assert f_more[40] == pytest.approx(f_alone[40])   # 10 ms after the switch
-    assert 3.0 - f_more[40] > 0.5
+    """Models on time right after a late one (3.1 N: another step, 1 ms old) keep the late
+    one's 30 ms ramp: the fade runs for the longer of the two times."""
+    f = fade_run(0.05, 0.03, later=3.1)
+    assert 3.1 - f[40] > 0.5   # 10 ms after the late switch, most of its 0.95 N still fading
+    assert abs(3.1 - f[79]) < 0.05   # 50 ms after it: ramped out
 
 
 def test_only_the_models_disagreement_is_faded_not_the_probes_motion():
@@ -825,37 +829,45 @@ def test_only_the_models_disagreement_is_faded_not_the_probes_motion():
     assert np.all(lp.st[nt.S.bl0:nt.S.bl0 + 3] == 0.0)
 
 
-@pytest.mark.parametrize('release', ['free', 'expired'])
-def test_a_release_is_never_faded(release):
-    """A new model that says free renders zero at once, and an expired one leaves the force to
-    the watchdog, as without the fade; the next press starts with no offset."""
+@pytest.mark.parametrize('release', ['free', 'expired', 'fault'])
+def test_a_release_or_a_fault_drops_the_fade(release):
+    """A new model that says free renders zero at once, an expired one leaves the force to the
+    watchdog, and a fault zeroes it, as without the fade; the next press starts with no
+    offset (the 2 N -> 4 N step before it was 30 ms late: a 20 ms fade)."""
     lp = loop('local_model', max_force_rate=1e6, blend_time=0.02, validity_time=0.01,
-              hold_time=0.02)
+              hold_time=0.05)
     lp.safety.start()
     q = MAP.to_device((0.05, 0.0, 0.0))
     lp.renderer.offer_values(press_model(2.0, 0.0), 0.0)
-    pin(lp, q, 0.0)
-    lp.tick(0.0)
-    lp.renderer.offer_values(press_model(4.0, 0.001), 0.001)
-    pin(lp, q, 0.001)
-    lp.tick(0.001)
-    assert lp.st[nt.S.target0] == pytest.approx(2.0)   # faded: the old model's force
+    for t in np.arange(0.0, 0.03, 0.001):
+        pin(lp, q, t)
+        lp.tick(t)
+    lp.renderer.offer_values(press_model(4.0, 0.03), 0.03)
+    pin(lp, q, 0.03)
+    lp.tick(0.03)
+    assert lp.st[nt.S.target0] == pytest.approx(2.05)   # fading: 1.95 N left
     if release == 'free':
-        lp.renderer.offer_values(press_model(4.0, 0.002, contact=False), 0.002)
-        pin(lp, q, 0.002)
-        lp.tick(0.002)
-        assert lp.st[nt.S.target0] == 0.0
-        assert int(lp.st[nt.S.status]) == FREE
-    else:
-        for t in np.arange(0.002, 0.03, 0.001):   # the model expires at 21 ms
+        lp.renderer.offer_values(press_model(4.0, 0.031, contact=False), 0.031)
+        pin(lp, q, 0.031)
+        lp.tick(0.031)
+        assert lp.st[nt.S.target0] == 0.0 and int(lp.st[nt.S.status]) == FREE
+        t_next = 0.032
+    elif release == 'expired':
+        for t in np.arange(0.031, 0.0815, 0.001):   # the 4 N model expires at 80 ms
             pin(lp, q, t)
             lp.tick(t)
         assert int(lp.st[nt.S.status]) == EXPIRED
-    assert np.all(lp.st[nt.S.bl0:nt.S.bl0 + 3] == 0.0)
-    lp.renderer.offer_values(press_model(3.0, 0.04), 0.04)
-    pin(lp, q, 0.04)
-    lp.tick(0.04)
-    assert lp.st[nt.S.target0] == pytest.approx(3.0)   # no fade from before the release
+        t_next = 0.082
+    else:
+        lp.safety.reject('a NaN pose')
+        t_next = 0.031
+    if release != 'fault':
+        assert np.all(lp.st[nt.S.bl0:nt.S.bl_tau + 1] == 0.0)
+    lp.renderer.offer_values(press_model(3.0, t_next), t_next)   # the fault: the same tick
+    pin(lp, q, t_next)
+    lp.tick(t_next)
+    assert np.all(lp.st[nt.S.bl0:nt.S.bl_tau + 1] == 0.0)
+    assert lp.st[nt.S.target0] == pytest.approx(3.0)   # no fade from before
 
 
 @pytest.mark.parametrize('blend_time', [-0.01, float('nan'), float('inf'), '0.02', True])

@@ -197,12 +197,18 @@ def ripple_windows(times: np.ndarray, force: np.ndarray, in_contact: np.ndarray,
         ``counted`` (w,) bool: window k (ticks with ``times - times[0]`` in [k, k+1) *
         ``window``) is at least half in contact; ``bad`` (w,) bool: somewhere in it the force
         leaves its centred moving mean by more than ``ripple``; ``worst`` (w,) int: the tick of
-        its largest deviation (-1 where the window holds no tick); ``deviation`` (n,) [N]: each tick's
-        (0 where its averaging window is not all in contact: the contact's edge).
+        its largest deviation (-1 where the window holds no tick); ``deviation`` (n,) [N]:
+        each tick's (0 where its averaging window is not all in contact: the contact's edge).
+
+    Raises:
+        ValueError: fewer than two ticks, or shapes that do not match (named).
     """
     t = np.asarray(times, dtype=np.float64)
     f = np.asarray(force, dtype=np.float64)
     mask = np.asarray(in_contact, dtype=bool)
+    if len(t) < 2 or f.shape != (len(t), 3) or mask.shape != t.shape:
+        raise ValueError(f'ripple_windows: expected times (n,) with n >= 2, force (n, 3) and '
+                         f'in_contact (n,), got {t.shape}, {f.shape}, {mask.shape}')
     # centred moving mean of each component over mean_window, by time (cumulative sums)
     c = np.vstack([np.zeros((1, 3)), np.cumsum(f, axis=0)])
     lo = np.searchsorted(t, t - mean_window / 2, side='left')

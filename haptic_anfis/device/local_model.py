@@ -99,13 +99,14 @@ APPROACH_RADIUS = 0.015
 #: ticks); checked on another (docs/servo_loop.md).
 HOLD_RADIUS = 0.04
 
-#: [s] the compiled tick fades the step between two successive models over this time constant:
-#: where both press on the probe, a new model's force at the probe is reached as
-#: exp(-t / MODEL_BLEND_TIME), not at once. Models a millisecond apart disagree by a hair; one
-#: that comes after the graph was late disagrees with the old model's extrapolation by tenths
-#: of a newton, and a step of 0.2 N or more already leaves the 50 ms mean by the issue's 0.1 N
-#: (a ripple window); 20 ms lets steps up to ~0.45 N through without one. Chosen with
-#: bench/bench_model_blend.py (docs/servo_loop.md).
+#: [s] the longest the compiled tick takes to ramp out the step between two successive models:
+#: where both press on the probe, a new model's force is reached over the old model's age at
+#: the switch, at most this, not at once (native_tick._render_blended). Models a millisecond
+#: apart disagree by a hair; one that comes after the graph was late disagrees with the old
+#: model's extrapolation by tenths of a newton, and a step of 0.2 N already leaves the 50 ms
+#: mean by the issue's 0.1 N (a ripple window); ramped over 20 ms, steps up to ~0.3 N make none.
+#: Chosen with bench/bench_model_blend.py: the quiet error stays within its 0.2 % target
+#: (docs/servo_loop.md).
 MODEL_BLEND_TIME = 0.02
 
 #: Tick status codes (also the trace's status column).

@@ -27,8 +27,8 @@ It sleeps to absolute 1 ms deadlines with ``clock_nanosleep`` and reads the cloc
    the probe) is rendered while the model is valid; a held model keeps it
    only where K has no rotating mode (:func:`.local_model.rotating_mode`): a free handle could
    spiral out along one. A new model that disagrees with the old one at the probe by more than
-   :data:`BLEND_DEADBAND` is not taken as a step: the excess is faded out over the old model's
-   age (at most ``blend_time``), so a model that comes late no longer jolts the hand
+   :data:`BLEND_DEADBAND` is not taken as a step: the excess is ramped out over the old
+   model's age (at most ``blend_time``), so a model that comes late no longer jolts the hand
    (:func:`_render_blended`; a release is never faded).
 4. Passivity: the model's stiffness is limited by the MEASURED tick period ``T``:
    ``K <= 2 (b - |B|) / T`` with ``b`` the device's damping and ``B`` the rendered damping
@@ -345,6 +345,7 @@ def _gain(cfg, st, nonzero, now):
 @nb.njit(nogil=True, cache=True)
 def _safety_reset(st, now, enabled):
     st[S.enabled] = 1.0 if enabled else 0.0
+    _drop_fade(st)
     for i in range(3):
         st[S.target0 + i] = 0.0
         st[S.out0 + i] = 0.0
@@ -373,6 +374,7 @@ def _fault(st, cnt, count=True):
     for i in range(3):
         st[S.target0 + i] = 0.0
         st[S.out0 + i] = 0.0
+    _drop_fade(st)
     st[S.last_cmd] = np.nan
     if count:
         cnt[CNT.rejected_nonfinite] += 1
@@ -513,19 +515,28 @@ def _take_model(st, scratch):
 
 
 @nb.njit(nogil=True, cache=True)
+def _drop_fade(st):
+    """No step left to fade (:func:`_render_blended`): a release, a fault, a reset."""
+    st[S.bl0] = st[S.bl1] = st[S.bl2] = st[S.bl_tau] = 0.0
+
+
+@nb.njit(nogil=True, cache=True)
 def _render_blended(cfg, st, cnt, scratch, switched, qx, qy, qz, now, period, gap):
     """:func:`_render`, a new model (``switched``: in ``scratch``) taken on the way, with the
     step between the two models faded out (module doc, 3.): where the old model and the new
-    both press on the probe, the force stays the old one's at this tick and the difference
-    decays as exp(-t / tau), tau the old model's age at the switch (at most
-    ``cfg[blend_time]``). A model that is late by A seconds brings the change of A seconds at
-    once; spread over about A, the force changes about as fast as it would have had the models
-    come on time, and a model a tick old is taken at once. tau only shrinks as the fade runs
-    (by the same factor as the difference), so a model on time right after a late one does not
-    cut the late one's fade short. Only the models' disagreement is faded, never the force's
-    change with the probe's position (each model's own stiffness renders that at once), and
-    never a release: a model that says free, an expired one or none renders zero (or NaN) at
-    once and the fade starts again from nothing."""
+    both press on the probe and differ there by more than :data:`BLEND_DEADBAND`, the force
+    at this tick is the old one's but that much, and the rest of the difference is ramped out
+    over tau, the old model's age at the switch (at most ``cfg[blend_time]``). A model late by
+    A seconds brings the change of A seconds at once; ramped out over about A, the force
+    changes about as fast as it would have had the models come on time, and a model a tick old
+    is taken within a tick or two. Each tick the difference shrinks by exp(-T / tau) and tau
+    by the same factor: a ramp to zero over tau, in effect, ending in a tail of a few ticks. A
+    switch while a fade runs adds its own difference and keeps the longer of the two times
+    left. Only the models' disagreement is faded, never the force's change with the probe's
+    position (the old model is rendered at this tick's position), and never a release: a
+    model that says free, an expired one or none renders zero (or NaN) at once and drops the
+    fade, as a fault or a reset of the safety layer does. A force that is not finite is
+    returned unfaded, for the caller's fault path."""
     cap = cfg[CFG.blend_time]
     ox = oy = oz = np.nan
     age = 0.0
@@ -533,12 +544,14 @@ def _render_blended(cfg, st, cnt, scratch, switched, qx, qy, qz, now, period, ga
         if cap > 0.0:   # the old model's force here: its status and counts are not this tick's
             age = now - st[S.m_t0]
             ox, oy, oz = _render(cfg, st, np.zeros_like(cnt), qx, qy, qz, now, period)
-            if st[S.status] != FRESH and st[S.status] != EXTRAPOLATED:
+            if (st[S.status] != FRESH and st[S.status] != EXTRAPOLATED) or \
+                    not np.isfinite(ox + oy + oz):
                 ox = np.nan
         _take_model(st, scratch)
     fx, fy, fz = _render(cfg, st, cnt, qx, qy, qz, now, period)
-    if cap <= 0.0 or fx != fx or (st[S.status] != FRESH and st[S.status] != EXTRAPOLATED):
-        st[S.bl0] = st[S.bl1] = st[S.bl2] = st[S.bl_tau] = 0.0
+    if cap <= 0.0 or not np.isfinite(fx + fy + fz) or \
+            (st[S.status] != FRESH and st[S.status] != EXTRAPOLATED):
+        _drop_fade(st)
         return fx, fy, fz
     tau = st[S.bl_tau]
     decay = np.exp(-max(gap, 0.0) / tau) if tau > 0.0 else 0.0
@@ -619,6 +632,7 @@ def _compute(now, cfg, st, times, points, buttons, hand, cmd, model, ctl, cnt, s
     if ctl[CTL.fault] != st[S.fault_seen]:
         st[S.fault_seen] = ctl[CTL.fault]
         st[S.m_valid] = 0.0
+        _drop_fade(st)
         if st[S.enabled] > 0.5:
             _fault(st, cnt, False)
     switched = False   # a new model in scratch, taken at the render (3.)

@@ -380,8 +380,9 @@ class NativeServoLoop:
             (``held`` ticks; <= validity_time: off) while the probe is within ``hold_radius``
             [m] of its p0 (:data:`~.local_model.HOLD_RADIUS`; further: expired for those
             ticks); then it expires.
-        blend_time: the step between two successive models is faded out with this time
-            constant [s] (:data:`~.local_model.MODEL_BLEND_TIME`; 0: off, the new model at once).
+        blend_time: the step between two successive models is ramped out over the old model's
+            age, at most this [s] (:data:`~.local_model.MODEL_BLEND_TIME`; 0: off, the new
+            model at once).
         on_state: ``on_state(state: NativeState, force, now)`` on the bridge thread for the newest
             tick (force: device frame).
         trace: a :class:`~.trace.TickTrace` the bridge fills (tissue frame), or None.

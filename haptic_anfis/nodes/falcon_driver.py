@@ -174,9 +174,10 @@ PARAMS = [
           'surface pressed on a free probe; docs/servo_loop.md). 1.0 (more than the '
           'workspace): off', positive),
     Param('model_blend_time', MODEL_BLEND_TIME, 'native, local_model: the step between two '
-          'successive local models is faded out with this time constant [s] where both press on '
-          'the probe (a model that comes late no longer jolts the hand: a step of 0.2 N is a '
-          'ripple window; a release is never faded; docs/servo_loop.md). 0: off',
+          'successive local models is ramped out over the old model\'s age, at most this [s], '
+          'where both press on the probe (a model that comes late no longer jolts the hand: a '
+          'step of 0.2 N is a ripple window; a release is never faded; docs/servo_loop.md). '
+          '0: off',
           non_negative),
     Param('passivity_observer', False, 'native: run the passivity observer / controller '
           '(Hannaford & Ryu 2002) on the rendered port'),
