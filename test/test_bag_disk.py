@@ -144,6 +144,12 @@ def test_recorder_node_says_so_once_and_stays_up_without_recording(tmp_path):
     errors = [ln for ln in text.splitlines() if 'File too large' in ln]
     assert len(errors) == 1 and 'STOPPED' in errors[0] and 'without recording' in errors[0], text
     assert 'Traceback' not in text
+    if not (bag / 'metadata.yaml').is_file():
+        # the last whole chunk ended within a footer's length of the limit: the file is left
+        # cut back without one, as Segment.seal documents, and bag recover rebuilds it (CI met
+        # this once; which chunk ends where depends on the timing)
+        assert 'no room to close it' in errors[0], text
+        recover_bag(bag)
     xs = _xs(bag)
     assert len(xs) > 100 and xs == [float(k) for k in range(len(xs))]
     assert bag_info(bag).message_count == len(xs)
