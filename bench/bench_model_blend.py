@@ -27,8 +27,7 @@ import numpy as np
 from _args import non_negative_numbers
 from _page import write_page
 from bench_model_age import add_trace_arguments, models_along, trace_window
-from bench_stall_hold import driver_loop
-from haptic_anfis.device import native_tick as nt
+from bench_stall_hold import driver_loop, tick_at
 from haptic_anfis.device.force_error import force_error, ripple_and_dropouts
 from haptic_anfis.nodes.falcon_driver import PARAMS
 from haptic_anfis.nodes.parameters import default_of
@@ -55,7 +54,6 @@ def replay(models: list, times: np.ndarray, positions: np.ndarray, newest: np.nd
     """The force the loop renders (n, 3) [N], tissue frame (the tick's target force, before
     the safety layer's rate limit), offered the model of pose ``newest[i]`` at tick i."""
     lp = driver_loop(default_of(PARAMS, 'model_hold_time'), blend_time=blend_time)
-    S = nt.S
     lp.safety.start()
     out = np.zeros((len(times), 3))
     offered = -1
@@ -64,11 +62,7 @@ def replay(models: list, times: np.ndarray, positions: np.ndarray, newest: np.nd
         if j != offered and j >= 0:
             lp.renderer.offer_values(models[j], float(times[j]))
             offered = j
-        lp.st[S.x0:S.x0 + 3] = lp.mapping.to_device(tuple(p))
-        lp.st[S.v0:S.v0 + 3] = 0.0
-        lp.st[S.t_dev] = t
-        lp.tick(float(t))
-        out[i] = lp.st[S.target0:S.target0 + 3] / lp.mapping.force_scale
+        out[i] = tick_at(lp, p, t)
     return out
 
 

@@ -72,20 +72,28 @@ def held_forces(lp: NativeServoLoop, model, t0: float, positions: np.ndarray,
     force before the safety layer. An expired tick is counted as 0 N at once: the watchdog's
     10 ms and its ramp, which hold the last force a little longer on the device, are left out
     (so a phantom that a hold radius ends lasts up to ~15 ticks longer than counted here)."""
-    S = nt.S
     lp.safety.start()
     lp.renderer.offer_values(model, t0)
     out, expired = np.zeros((len(times), 3)), np.zeros(len(times), dtype=bool)
     for i, (p, t) in enumerate(zip(positions, times)):
-        lp.st[S.x0:S.x0 + 3] = lp.mapping.to_device(tuple(p))  # the handle where the trainee was
-        lp.st[S.v0:S.v0 + 3] = 0.0
-        lp.st[S.t_dev] = t
-        lp.tick(float(t))
-        if int(lp.st[S.status]) == EXPIRED:
+        f = tick_at(lp, p, t)
+        if int(lp.st[nt.S.status]) == EXPIRED:
             expired[i] = True
         else:
-            out[i] = lp.st[S.target0:S.target0 + 3] / lp.mapping.force_scale
+            out[i] = f
     return out, expired
+
+
+def tick_at(lp: NativeServoLoop, p, t: float) -> np.ndarray:
+    """One tick of ``lp`` at time ``t`` [s] with the handle held at the tissue position ``p``
+    [m] (where the trainee was, at rest): the tick's target force (3,) [N], tissue frame,
+    before the safety layer's rate limit."""
+    S = nt.S
+    lp.st[S.x0:S.x0 + 3] = lp.mapping.to_device(tuple(p))
+    lp.st[S.v0:S.v0 + 3] = 0.0
+    lp.st[S.t_dev] = t
+    lp.tick(float(t))
+    return lp.st[S.target0:S.target0 + 3] / lp.mapping.force_scale
 
 
 def row(stall: float, hold: float, radius: float, stalls: list) -> str:
