@@ -15,7 +15,7 @@ from haptic_anfis.device import HandParams, WorkspaceMapping
 from haptic_anfis.device import native_tick as nt
 from haptic_anfis.device.force_error import ripple_and_dropouts
 from haptic_anfis.device.local_model import (EXPIRED, EXTRAPOLATED, FREE, FRESH, LocalModel,
-                                             LocalModelRenderer,
+                                             PASSIVITY_WINDOW, LocalModelRenderer,
                                              tissue_stiffness_limit)
 from haptic_anfis.device.palpation import PalpationScript
 from haptic_anfis.device.servo_native import NativeServoLoop
@@ -217,10 +217,11 @@ def test_non_finite_model_is_never_rendered():
     assert lp.safety.stats.rejected_nonfinite == 1
 
 
-def wall_loop():
-    """A loop with a 1500 N/m wall (device frame 1.5 x 1500 = 2250 N/m), the probe 1 mm in."""
+def wall_loop(**kw):
+    """A loop with a 1500 N/m wall (device frame 1.5 x 1500 = 2250 N/m), the probe 1 mm in
+    (``kw``: more of the loop's arguments)."""
     lp = loop('local_model', max_force_rate=1e6, validity_time=10.0, hold_time=20.0,
-              damping=1.5)
+              damping=1.5, **kw)
     lp.safety.start()
     n = (1.0, 0.0, 0.0)
     K = np.diag([-1500.0, 0.0, 0.0])
@@ -231,8 +232,8 @@ def wall_loop():
 
 
 def test_stiffness_is_limited_by_the_measured_period():
-    """Colgate & Schenkel: K <= 2 b / T, T the energy-weighted mean period of the last ~20 ms
-    (sum T^2 / sum T). A loop ticking every 5 ms with b = 1.5 N s/m gets 600 N/m; one late tick
+    """Colgate & Schenkel: K <= 2 b / T, T the energy-weighted mean period of the last
+    ``passivity_window`` (sum T^2 / sum T). A loop ticking every 5 ms with b = 1.5 N s/m gets 600 N/m; one late tick
     among nominal ones is limited far less than by its own gap."""
     S = nt.S
     lp, q = wall_loop()
@@ -253,7 +254,7 @@ def test_stiffness_is_limited_by_the_measured_period():
         pin(lp, q, t)
         lp.tick(t)
     assert lp.st[S.pt2] / lp.st[S.pt1] == pytest.approx(0.001)
-    lam = np.exp(-0.005 / nt.PASSIVITY_WINDOW)
+    lam = np.exp(-0.005 / PASSIVITY_WINDOW)
     t_eff = (lam * lp.st[S.pt2] + 0.005 ** 2) / (lam * lp.st[S.pt1] + 0.005)
     t += 0.005
     pin(lp, q, t)
@@ -267,6 +268,41 @@ def test_stiffness_is_limited_by_the_measured_period():
     assert lp.st[S.target0] == pytest.approx(1.0 + 1.5)
 
 
+def limited_after_one_gap(window: float, gap: float) -> tuple[np.ndarray, float]:
+    """(the stiffness scale (extrapolated force / unlimited) at each tick from the gap on, the
+    period the bound would use at the gap by the window's formula [s]) of a wall loop with
+    ``passivity_window`` = ``window`` [s]: 100 nominal ticks, one ``gap`` [s], 300 nominal."""
+    S = nt.S
+    lp, q = wall_loop(passivity_window=window)
+    times = np.r_[np.arange(100) * 0.001, 0.099 + gap + np.arange(300) * 0.001]
+    scale, t_eff = [], 0.0
+    for i, t in enumerate(times):
+        if i == 100:   # sum(T^2) / sum(T), the sums decayed over the gap, then the gap added
+            lam = np.exp(-gap / window)
+            t_eff = (lam * lp.st[S.pt2] + gap ** 2) / (lam * lp.st[S.pt1] + gap)
+        pin(lp, q, t)
+        lp.tick(t)
+        scale.append((lp.st[S.target0] - 1.0) / 1.5)
+    return np.array(scale[100:]), t_eff
+
+
+def test_the_passivity_window_sets_how_deep_and_how_long_one_late_tick_limits():
+    """A longer window: a 7.5 ms gap lowers the stiffness less; the bound comes back to
+    nominal either way. The scale right after the gap is the window's formula."""
+    (short, t_short), (long_, t_long) = (limited_after_one_gap(0.02, 0.0075),
+                                         limited_after_one_gap(0.1, 0.0075))
+    assert short[0] < long_[0] < 1.0
+    for s, t_eff in ((short[0], t_short), (long_[0], t_long)):
+        assert s == pytest.approx(2 * 1.5 / t_eff / 2250.0, rel=1e-9)   # K <= 2 b / T
+    assert short[-1] == long_[-1] == pytest.approx(1.0)
+
+
+@pytest.mark.parametrize('window', [0.0, -0.02, float('nan'), float('inf'), True, '0.05'])
+def test_a_bad_passivity_window_is_refused(window):
+    with pytest.raises(ValueError, match='passivity_window: expected a finite number > 0 s'):
+        wall_loop(passivity_window=window)
+
+
 @given(st.lists(st.floats(0.0002, 0.05), min_size=1, max_size=300))
 def test_passivity_period_is_the_energy_weighted_mean_of_the_recent_periods(gaps):
     """sum(T^2) / sum(T) of the capped periods, exponentially weighted from a nominal history:
@@ -275,10 +311,10 @@ def test_passivity_period_is_the_energy_weighted_mean_of_the_recent_periods(gaps
     lp = loop('local_model')
     cfg, state = lp.cfg, nt.new_state()
     cap, nominal = cfg[nt.CFG.watchdog], cfg[nt.CFG.period]
-    a, b = nt.PASSIVITY_WINDOW, nt.PASSIVITY_WINDOW * nominal
+    a, b = PASSIVITY_WINDOW, PASSIVITY_WINDOW * nominal
     for i, gap in enumerate(gaps):
         t = min(gap, cap)
-        lam = math.exp(-t / nt.PASSIVITY_WINDOW)
+        lam = math.exp(-t / PASSIVITY_WINDOW)
         a, b = lam * a + t, lam * b + t * t
         got = nt._passivity_period(cfg, state, gap)
         assert got == pytest.approx(b / a, rel=1e-9)

@@ -80,6 +80,14 @@ from ..interfaces import LM_C, LM_D, LM_DEPTH, LM_F0, LM_K, LM_N, LM_P0, LM_ZERO
 #: Falcon stiffness bound [N/m], device frame (CHAI3D's Falcon m_maxLinearStiffness; see above).
 FALCON_MAX_STIFFNESS = 3000.0
 
+#: [s] time constant of the tick periods the servo loop's passivity bound weighs (the measured
+#: period T = sum(T_k^2) / sum(T_k), exponentially weighted; docs/servo_loop.md *Passivity*). A
+#: late tick lowers the rendered stiffness for about this long; at 20 ms a gap of 7.5 ms at the
+#: stiffness bound cut the extrapolated force by a third and made ripple windows. Chosen with
+#: bench/bench_passivity_window.py on one run's trace (the shortest window that added no
+#: ripple window to the ideal force's own), checked on another's.
+PASSIVITY_WINDOW = 0.05
+
 #: How far [m] along an approach plane from its point it is rendered (module doc): the plane lies
 #: r^2 / 2R above a convex surface of radius R there (2.5 mm at 15 mm on the default breast,
 #: R >= 45 mm); past it the probe is free. Chosen with bench/bench_approach_late.py: the largest

@@ -34,7 +34,7 @@ It sleeps to absolute 1 ms deadlines with ``clock_nanosleep`` and reads the cloc
    ``K <= 2 (b - |B|) / T`` with ``b`` the device's damping and ``B`` the rendered damping
    (here 0) — Colgate & Schenkel 1997 (J. Robotic Systems 14(1):37-47), the discrete-time
    passivity condition of a virtual wall, ``b > K T / 2 + |B|`` — with ``T`` the energy-weighted
-   mean of the last ~20 ms of periods (:func:`_passivity_period`; it was the last gap alone,
+   mean of the last ~50 ms of periods (:func:`_passivity_period`; it was the last gap alone,
    which turned one late tick into a one-tick force step). Optional
    passivity observer / controller (Hannaford & Ryu 2002, IEEE T-RO 18(1):1-10): the energy the
    rendered port put out so far; when it turns negative a damping force takes it back.
@@ -124,7 +124,7 @@ def _index(name: str, names: str) -> type:
 CFG = _index('CFG', 'period max_force max_force_rate watchdog max_dt validity_time validity_radius '
              'fresh_age max_stiffness scale ox oy oz force_scale hand_m hand_k hand_c half '
              'dt_max max_catch_up ramp damping mode observer loop dev_max_force hold_time device '
-             'approach_radius hold_radius blend_time')
+             'approach_radius hold_radius blend_time passivity_window')
 #: the loop's own state (float64)
 S = _index('S', 'x0 x1 x2 v0 v1 v2 f0 f1 f2 t_dev t_open script_off '
            'enabled target0 target1 target2 out0 out1 out2 last_cmd last_out tripped '
@@ -172,8 +172,6 @@ LOCK_LEN = 16
 SCRATCH_LEN = max(CMD_LEN, MODEL_LEN, OUT_LEN)
 
 NONE, FRESH, EXTRAPOLATED, EXPIRED, FREE = 0, 1, 2, 3, 4  # local_model's status codes
-#: time constant [s] of the tick periods the passivity bound weighs (:func:`_passivity_period`)
-PASSIVITY_WINDOW = 0.02
 #: [N] the part of a step between two models that is taken at once (:func:`_render_blended`):
 #: models on time differ by less (hundredths of a newton), so they are rendered as they come; a
 #: step of s leaves the 50 ms mean by ~s / 2, a ripple window (> 0.1 N) from 0.2 N
@@ -590,17 +588,18 @@ def _add_linear(st, f, c, s, skew, ex, ey, ez):
 @nb.njit(nogil=True, cache=True)
 def _passivity_period(cfg, st, gap):
     """The period the passivity bound uses [s]: sum(T^2) / sum(T) over the periods T of the last
-    ~:data:`PASSIVITY_WINDOW` (exponentially weighted; each T capped at the watchdog time, past
+    ``cfg[passivity_window]`` (exponentially weighted; each T capped at the watchdog time, past
     which the force was ramped down). At a steady hand speed v a zero-order hold leaks
     K v^2 T^2 / 2 per period and the device's damping takes b v^2 T, so the window is passive
     when K <= 2 b sum(T) / sum(T^2): one late tick among nominal ones barely moves the bound
     (it leaked once, a bounded amount), a loop that keeps ticking late meets the per-period
     bound. The sums start as if the loop had run at its nominal period."""
     t = min(gap, cfg[CFG.watchdog])
+    w = cfg[CFG.passivity_window]
     if st[S.pt1] <= 0.0:
-        st[S.pt1] = PASSIVITY_WINDOW
-        st[S.pt2] = PASSIVITY_WINDOW * cfg[CFG.period]
-    lam = np.exp(-t / PASSIVITY_WINDOW)
+        st[S.pt1] = w
+        st[S.pt2] = w * cfg[CFG.period]
+    lam = np.exp(-t / w)
     st[S.pt1] = lam * st[S.pt1] + t
     st[S.pt2] = lam * st[S.pt2] + t * t
     return st[S.pt2] / st[S.pt1]

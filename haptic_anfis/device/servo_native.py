@@ -36,8 +36,8 @@ from . import device_process as dp
 from .buttons import ButtonEvents
 from .falcon import DeviceState, HandParams, WorkspaceMapping
 from .local_model import APPROACH_RADIUS, FALCON_MAX_STIFFNESS, HOLD_RADIUS, MODEL_BLEND_TIME, \
-    LocalModelRenderer, RenderStats, accept_values, rotating_mode, skew_vector, symmetric_part, \
-    tissue_stiffness_limit
+    PASSIVITY_WINDOW, LocalModelRenderer, RenderStats, accept_values, rotating_mode, skew_vector, \
+    symmetric_part, tissue_stiffness_limit
 from .safety import IGNORED_DISABLED, OK, REJECTED_FRAME, REJECTED_NONFINITE, SafetyLayer, \
     SafetyStats
 from .servo import name_thread, schedule_servo_thread
@@ -383,6 +383,9 @@ class NativeServoLoop:
         blend_time: the step between two successive models is ramped out over the old model's
             age, at most this [s] (:data:`~.local_model.MODEL_BLEND_TIME`; 0: off, the new
             model at once).
+        passivity_window: time constant [s] of the tick periods the passivity bound weighs
+            (``T = sum(T_k^2) / sum(T_k)``, exponentially weighted;
+            :data:`~.local_model.PASSIVITY_WINDOW`).
         on_state: ``on_state(state: NativeState, force, now)`` on the bridge thread for the newest
             tick (force: device frame).
         trace: a :class:`~.trace.TickTrace` the bridge fills (tissue frame), or None.
@@ -420,7 +423,8 @@ class NativeServoLoop:
                  open_timeout: float = 120.0, open_error: type[Exception] = OSError,
                  workers: int = 2, approach_radius: float = APPROACH_RADIUS,
                  hold_radius: float = HOLD_RADIUS,
-                 blend_time: float = MODEL_BLEND_TIME) -> None:
+                 blend_time: float = MODEL_BLEND_TIME,
+                 passivity_window: float = PASSIVITY_WINDOW) -> None:
         if not rate > 0:
             raise ValueError(f'rate: expected > 0 Hz, got {rate!r}')
         if not 0 <= priority <= 99:
@@ -435,6 +439,11 @@ class NativeServoLoop:
         if not (isinstance(blend_time, (int, float)) and not isinstance(blend_time, bool)
                 and math.isfinite(blend_time) and blend_time >= 0):
             raise ValueError(f'blend_time: expected a finite number >= 0 s, got {blend_time!r}')
+        if not (isinstance(passivity_window, (int, float))
+                and not isinstance(passivity_window, bool)
+                and math.isfinite(passivity_window) and passivity_window > 0):
+            raise ValueError('passivity_window: expected a finite number > 0 s, got '
+                             f'{passivity_window!r}')
         if not (isinstance(workers, int) and 1 <= workers <= 8):
             raise ValueError(f'workers: expected an integer from 1 to 8, got {workers!r}')
         self.period = 1.0 / rate
@@ -477,6 +486,7 @@ class NativeServoLoop:
         cfg[C.hold_time] = max(float(hold_time), validity_time)
         cfg[C.hold_radius] = hold_radius
         cfg[C.blend_time] = blend_time
+        cfg[C.passivity_window] = passivity_window
         cfg[C.device] = 1.0 if device_factory is not None else 0.0
         self.cfg = cfg
         #: the real device's status and counters (:data:`~.device_process.DEV`), its message

@@ -47,7 +47,7 @@ from ..device.buttons import ClutchMark
 from ..device.falcon import RATED_FORCE
 from ..device.force_input import MODES, ForceInput
 from ..device.local_model import APPROACH_RADIUS, FALCON_MAX_STIFFNESS, HOLD_RADIUS, \
-    MODEL_BLEND_TIME, STATUS_NAMES
+    MODEL_BLEND_TIME, PASSIVITY_WINDOW, STATUS_NAMES
 from ..device.safety import OK
 from ..device.start_gate import HeldScript
 from ..device.stamps import STALE
@@ -159,8 +159,12 @@ PARAMS = [
           one_of('auto', 'native', 'native_process', 'python')),
     Param('passivity_damping', 1.5, 'native: device damping b [N s/m] of the passivity bound on '
           'the rendered stiffness, K <= 2 b / T with T the measured tick periods of the last '
-          '~20 ms, energy-weighted (sum T^2 / sum T; Colgate & Schenkel 1997; '
+          'passivity_window, energy-weighted (sum T^2 / sum T; Colgate & Schenkel 1997; '
           'docs/servo_loop.md)', positive),
+    Param('passivity_window', PASSIVITY_WINDOW, 'native: time constant [s] of the tick periods '
+          'the passivity bound weighs (exponentially): one late tick lowers the rendered '
+          'stiffness for about this long, a loop that keeps ticking late gets the bound of its '
+          'period (docs/servo_loop.md)', positive),
     Param('model_hold_time', 1.0, 'native, local_model: a model older than model_validity_time '
           'but not than this [s] is still rendered (the tissue does not move: an upstream stall '
           'no longer drops the force to 0 N), and one arriving that old is still taken; then it '
@@ -380,7 +384,8 @@ class FalconDriver(HapticNode):
             p['model_hold_time'], trace=self._tick_trace(p),
             priority=p['servo_priority'], process=p['servo_loop'] == 'native_process',
             workers=p['servo_workers'], approach_radius=p['model_approach_radius'],
-            hold_radius=p['model_hold_radius'], blend_time=p['model_blend_time'], **kw)
+            hold_radius=p['model_hold_radius'], blend_time=p['model_blend_time'],
+            passivity_window=p['passivity_window'], **kw)
 
     @staticmethod
     def _tick_trace(p) -> TickTrace | None:
