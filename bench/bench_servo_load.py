@@ -41,6 +41,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _beside import TestSuite, browser_when_up  # noqa: E402
 from _busy import LoadSampler, busy, paused  # noqa: E402
 from _page import write_page  # noqa: E402
+from haptic_anfis.nodes.falcon_driver import PARAMS  # noqa: E402
+from haptic_anfis.nodes.parameters import default_of  # noqa: E402
 
 CLI = [sys.executable, '-m', 'haptic_anfis.cli']
 COLS = ('config', 'busy', 'load', 'steal_pct', 'rt_others', 'rate_hz', 'periods_lost',
@@ -398,6 +400,9 @@ def _page(a, rows: list[dict], planned: int):
              'what the nodes on the haptic path got once ready (the same words, `pinned` where a '
              'node\'s threads were kept on one CPU; distinct answers of the `launch` nodes '
              'joined by /). '
+             f'The driver ran with its defaults but for the columns above: model_blend_time '
+             f'{default_of(PARAMS, "model_blend_time"):g} s, passivity_window '
+             f'{default_of(PARAMS, "passivity_window"):g} s. '
              'Targets (issue 32): rate >= '
              '995 Hz, zero_ticks 0, err_rms_pct <= 2, ripple_pct <= 1; quiet err_rms_pct <= 0.2.\n')
     if len(rows) < planned:

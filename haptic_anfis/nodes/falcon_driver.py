@@ -570,7 +570,8 @@ class FalconDriver(HapticNode):
                    realtime_minus_monotonic_s=time.time() - time.monotonic(),
                    model_hold_time=self.params['model_hold_time'],
                    model_hold_radius=self.params['model_hold_radius'],
-                   model_blend_time=self.params['model_blend_time'])
+                   model_blend_time=self.params['model_blend_time'],
+                   passivity_window=self.params['passivity_window'])
         self.get_logger().info(f'servo tick trace: {len(rows)} ticks -> {self.trace_path}'
                                + (f' (the oldest {self.servo.trace.dropped} dropped: bounded)'
                                   if self.servo.trace.dropped else ''))
