@@ -21,13 +21,14 @@ and reaches the loop ``--latency-ms`` after its pose. Per window:
 
 Asserts nothing; prints and writes docs/measurements/passivity_window.md.
 
-    .venv/bin/python bench/bench_passivity_window.py [--trace FILE] [--start 30] [--seconds 60]
-        [--latency-ms 2] [--windows 0.02,0.05,0.1,0.2] [--no-page]
+    .venv/bin/python bench/bench_passivity_window.py [--trace FILE] [--more-traces FILE ...]
+        [--start 30] [--seconds 60] [--latency-ms 2] [--windows 0.02,0.05,0.1,0.2] [--no-page]
 """
 from __future__ import annotations
 
 import argparse
 import sys
+from pathlib import Path
 
 import numpy as np
 
@@ -76,15 +77,9 @@ def hold_energy(times: np.ndarray, positions: np.ndarray, forces: np.ndarray,
     return excess, float(run[-1])
 
 
-def main() -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    add_trace_arguments(ap, 60.0)
-    ap.add_argument('--latency-ms', type=float, default=2.0,
-                    help='pose -> model latency [ms] (default 2)')
-    ap.add_argument('--windows', type=positive_numbers, default=[0.02, 0.05, 0.1, 0.2],
-                    help='passivity_window values [s] (default 0.02,0.05,0.1,0.2)')
-    ap.add_argument('--no-page', action='store_true', help='print only')
-    a = ap.parse_args()
+def measure(a: argparse.Namespace) -> list[str]:
+    """The table of one trace (``a.trace``, ``a.start``, ``a.seconds``): one row per window and
+    one for the ideal force held."""
     name, a.start, times, positions = trace_window(a)
     gaps = np.diff(times)
     models, F, contact = models_along(positions)
@@ -98,6 +93,7 @@ def main() -> int:
              f'{gaps.max() * 1e3:.1f} ms', '',
              '| passivity_window (ms) | error (%) | ripple windows (%) | the ideal\'s own (%) '
              '| limited ticks | excess (uJ) | net (uJ) |', '|---|---|---|---|---|---|---|']
+    print(lines[0], flush=True)
     for w in a.windows:
         f, limited = replay_window(models, times, positions, newest, w)
         err = force_error(f, F, contact)
@@ -110,17 +106,36 @@ def main() -> int:
     ideal_excess, ideal_net = hold_energy(times, dev, fs * F, b)
     lines.append(f'| the ideal force, held | 0 | - | - | - | {ideal_excess * 1e6:.2f} '
                  f'| {ideal_net * 1e6:.1f} |')
+    return lines
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    add_trace_arguments(ap, 60.0)
+    ap.add_argument('--more-traces', type=Path, nargs='*', default=[],
+                    help='more traces, each replayed over the same --start and --seconds')
+    ap.add_argument('--latency-ms', type=float, default=2.0,
+                    help='pose -> model latency [ms] (default 2)')
+    ap.add_argument('--windows', type=positive_numbers, default=[0.02, 0.05, 0.1, 0.2],
+                    help='passivity_window values [s] (default 0.02,0.05,0.1,0.2)')
+    ap.add_argument('--no-page', action='store_true', help='print only')
+    a = ap.parse_args()
+    lines = []
+    for trace in [a.trace, *a.more_traces]:
+        lines += measure(argparse.Namespace(**{**vars(a), 'trace': trace})) + ['']
     text = '\n'.join(lines)
     print(text)
     if not a.no_page:
-        body = (text + '\n\nThe replay keeps the trace\'s tick times, so its servo gaps are '
+        b = default_of(PARAMS, 'passivity_damping')
+        body = (text + '\nThe replay keeps the trace\'s tick times, so its servo gaps are '
                 'the run\'s. Error and ripple windows as `haptic-anfis loop` counts them; the '
                 'ideal is the force server\'s at the pose itself. Energy in the device frame '
                 f'(damping b = {b:g} N s/m, `passivity_damping`): excess is the most the hold '
                 'put into the hand beyond what the damping took back over any stretch, net '
                 'the balance of the whole replay (negative: the damping took more). The last '
-                'row holds the ideal force itself (no bound, no model age). The rendered force '
-                'is the tick\'s target, before the safety layer\'s rate limit; the handle is '
+                'row of each table holds the ideal force itself (no bound, no model age). The '
+                'rendered force is the tick\'s target, before the safety layer (its rate limit, '
+                'and the watchdog the real device\'s stall guard runs past 10 ms); the handle is '
                 'pinned on the trajectory (no hand dynamics).\n')
         write_page('passivity_window', 'The passivity bound\'s window: what it buys and costs',
                    body)

@@ -41,8 +41,6 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _beside import TestSuite, browser_when_up  # noqa: E402
 from _busy import LoadSampler, busy, paused  # noqa: E402
 from _page import write_page  # noqa: E402
-from haptic_anfis.nodes.falcon_driver import PARAMS  # noqa: E402
-from haptic_anfis.nodes.parameters import default_of  # noqa: E402
 
 CLI = [sys.executable, '-m', 'haptic_anfis.cli']
 COLS = ('config', 'busy', 'load', 'steal_pct', 'rt_others', 'rate_hz', 'periods_lost',
@@ -161,7 +159,26 @@ def settled(j: dict, trace: Path, pf: Path, settle: float,
     return {**j, **{k: w.get(k) for k in windowed},
             'rate_hz': w['rates_hz']['falcon/measured_cp'], 'rates_hz': w['rates_hz'],
             'settle_lost': lost, 'settle_gap_ms': round(gap * 1e3, 2),
+            **{k: meta[k] for k in DRIVER_SETTINGS if k in meta},
             'browser_s': None if browser_at is None else round(browser_at - t[0], 1)}
+
+
+#: driver parameters the page names (from the runs' trace meta, else the driver's defaults)
+DRIVER_SETTINGS = ('model_blend_time', 'passivity_window')
+
+
+def driver_settings(rows: list[dict]) -> str:
+    """'name value s, ...' of :data:`DRIVER_SETTINGS` as the runs' traces recorded them (the
+    distinct values, joined by /), or the driver's defaults where no run recorded one."""
+    from haptic_anfis.nodes.falcon_driver import PARAMS
+    from haptic_anfis.nodes.parameters import default_of
+    out = []
+    for k in DRIVER_SETTINGS:
+        seen = sorted({r[k] for r in rows if r.get(k) is not None})
+        values = ('/'.join(f'{v:g}' for v in seen) + ' s') if seen else \
+            f'{default_of(PARAMS, k):g} s (the default)'
+        out.append(f'{k} {values}')
+    return ', '.join(out)
 
 
 def last_json(out: str) -> dict | None:
@@ -197,7 +214,7 @@ def row(name: str, nbusy: int, load: float, j: dict) -> dict:
             'settle_lost': f('settle_lost'), 'settle_gap_ms': f('settle_gap_ms'),
             'browser_s': f('browser_s'), 'sched': sched_words(j.get('servo_scheduling')),
             'graph': graph_words(j.get('graph_scheduling')),
-            'error': j.get('error')}
+            'error': j.get('error'), **{k: j.get(k) for k in DRIVER_SETTINGS}}
 
 
 def sched_words(text: str | None) -> str | None:
@@ -400,9 +417,7 @@ def _page(a, rows: list[dict], planned: int):
              'what the nodes on the haptic path got once ready (the same words, `pinned` where a '
              'node\'s threads were kept on one CPU; distinct answers of the `launch` nodes '
              'joined by /). '
-             f'The driver ran with its defaults but for the columns above: model_blend_time '
-             f'{default_of(PARAMS, "model_blend_time"):g} s, passivity_window '
-             f'{default_of(PARAMS, "passivity_window"):g} s. '
+             f'The driver ran with {driver_settings(rows)}. '
              'Targets (issue 32): rate >= '
              '995 Hz, zero_ticks 0, err_rms_pct <= 2, ripple_pct <= 1; quiet err_rms_pct <= 0.2.\n')
     if len(rows) < planned:

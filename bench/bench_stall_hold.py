@@ -48,7 +48,8 @@ def driver_loop(hold: float, radius: float = HOLD_RADIUS,
     """The compiled loop as falcon_driver builds it by default (mapping, hand, local model
     radii and times), with ``hold`` [s] as its ``model_hold_time``, ``radius`` [m] as its
     ``model_hold_radius`` and ``blend_time`` [s] (None: the default) as its
-    ``model_blend_time``, ``passivity_window`` [s] likewise; driven tick by tick (:func:`held_forces`), never started."""
+    ``model_blend_time``, ``passivity_window`` [s] likewise; driven tick by tick
+    (:func:`held_forces`), never started."""
     d = lambda name: default_of(PARAMS, name)  # noqa: E731
     mapping = WorkspaceMapping(d('workspace_scale'), tuple(d('workspace_offset')),
                                d('force_scale'))
@@ -62,7 +63,8 @@ def driver_loop(hold: float, radius: float = HOLD_RADIUS,
                            validity_radius=d('model_validity_radius'),
                            approach_radius=d('model_approach_radius'), hold_time=hold,
                            hold_radius=radius,
-                           blend_time=d('model_blend_time') if blend_time is None else blend_time,
+                           blend_time=(d('model_blend_time') if blend_time is None
+                                       else blend_time),
                            passivity_window=(d('passivity_window') if passivity_window is None
                                              else passivity_window))
 

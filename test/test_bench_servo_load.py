@@ -8,7 +8,8 @@ import pytest
 
 BENCH = Path(__file__).resolve().parents[1] / 'bench'
 sys.path.insert(0, str(BENCH))
-from bench_servo_load import graph_words, params_file, sched_words, settled  # noqa: E402
+from bench_servo_load import driver_settings, graph_words, params_file, sched_words, \
+    settled  # noqa: E402
 
 from haptic_anfis.device.local_model import STATUS_NAMES  # noqa: E402
 from haptic_anfis.device.trace import save_trace  # noqa: E402
@@ -30,7 +31,7 @@ def test_the_window_s_figures_and_a_gap_across_the_boundary_counted_in_the_settl
     rows[:, 7] = STATUS_NAMES.index('free')
     rows[:3, 7] = -2                      # safety off: not counted
     path = save_trace(tmp_path / 't.npz', rows, stats={'ticks_held': 9}, max_force=8.9,
-                      period=1e-3)
+                      period=1e-3, passivity_window=0.03)
     j = {'rate_hz': 990.0, 'periods_lost': 27, 'ticks_held': 9, 'latency_p99_ms': 3.0}
     pf = params_file(tmp_path, 0, 'auto')
     s = settled(j, path, pf, 2.0, browser_at=t[3] - 1.5)
@@ -39,6 +40,17 @@ def test_the_window_s_figures_and_a_gap_across_the_boundary_counted_in_the_settl
     assert s['rate_hz'] == pytest.approx(1000 * (1 - 2 / 2000), abs=2.0)
     assert s['ticks_held'] == 9 and s['latency_p99_ms'] == 3.0   # whole run, from the driver
     assert s['browser_s'] == -1.5
+    assert s['passivity_window'] == 0.03 and 'model_blend_time' not in s   # as the trace says
+
+
+def test_the_page_names_the_driver_settings_the_runs_recorded():
+    """Distinct values joined by /, the driver's default where no run recorded one."""
+    from haptic_anfis.nodes.falcon_driver import PARAMS
+    from haptic_anfis.nodes.parameters import default_of
+    text = driver_settings([{'passivity_window': 0.05}, {'passivity_window': 0.02},
+                            {'passivity_window': 0.05, 'model_blend_time': None}])
+    assert text == (f'model_blend_time {default_of(PARAMS, "model_blend_time"):g} s (the '
+                    'default), passivity_window 0.02/0.05 s')
 
 
 def test_the_sched_column_says_what_the_servo_thread_got():

@@ -15,7 +15,7 @@ from haptic_anfis.device import HandParams, WorkspaceMapping
 from haptic_anfis.device import native_tick as nt
 from haptic_anfis.device.force_error import ripple_and_dropouts
 from haptic_anfis.device.local_model import (EXPIRED, EXTRAPOLATED, FREE, FRESH, LocalModel,
-                                             PASSIVITY_WINDOW, LocalModelRenderer,
+                                             LocalModelRenderer,
                                              tissue_stiffness_limit)
 from haptic_anfis.device.palpation import PalpationScript
 from haptic_anfis.device.servo_native import NativeServoLoop
@@ -233,8 +233,8 @@ def wall_loop(**kw):
 
 def test_stiffness_is_limited_by_the_measured_period():
     """Colgate & Schenkel: K <= 2 b / T, T the energy-weighted mean period of the last
-    ``passivity_window`` (sum T^2 / sum T). A loop ticking every 5 ms with b = 1.5 N s/m gets 600 N/m; one late tick
-    among nominal ones is limited far less than by its own gap."""
+    ``passivity_window`` (sum T^2 / sum T). A loop ticking every 5 ms with b = 1.5 N s/m gets
+    600 N/m; one late tick among nominal ones is limited far less than by its own gap."""
     S = nt.S
     lp, q = wall_loop()
     pin(lp, q, 0.0)
@@ -254,7 +254,7 @@ def test_stiffness_is_limited_by_the_measured_period():
         pin(lp, q, t)
         lp.tick(t)
     assert lp.st[S.pt2] / lp.st[S.pt1] == pytest.approx(0.001)
-    lam = np.exp(-0.005 / PASSIVITY_WINDOW)
+    lam = np.exp(-0.005 / lp.cfg[nt.CFG.passivity_window])
     t_eff = (lam * lp.st[S.pt2] + 0.005 ** 2) / (lam * lp.st[S.pt1] + 0.005)
     t += 0.005
     pin(lp, q, t)
@@ -286,7 +286,7 @@ def limited_after_one_gap(window: float, gap: float) -> tuple[np.ndarray, float]
     return np.array(scale[100:]), t_eff
 
 
-def test_the_passivity_window_sets_how_deep_and_how_long_one_late_tick_limits():
+def test_the_passivity_window_sets_how_deep_one_late_tick_limits():
     """A longer window: a 7.5 ms gap lowers the stiffness less; the bound comes back to
     nominal either way. The scale right after the gap is the window's formula."""
     (short, t_short), (long_, t_long) = (limited_after_one_gap(0.02, 0.0075),
@@ -311,10 +311,11 @@ def test_passivity_period_is_the_energy_weighted_mean_of_the_recent_periods(gaps
     lp = loop('local_model')
     cfg, state = lp.cfg, nt.new_state()
     cap, nominal = cfg[nt.CFG.watchdog], cfg[nt.CFG.period]
-    a, b = PASSIVITY_WINDOW, PASSIVITY_WINDOW * nominal
+    w = cfg[nt.CFG.passivity_window]
+    a, b = w, w * nominal
     for i, gap in enumerate(gaps):
         t = min(gap, cap)
-        lam = math.exp(-t / PASSIVITY_WINDOW)
+        lam = math.exp(-t / w)
         a, b = lam * a + t, lam * b + t * t
         got = nt._passivity_period(cfg, state, gap)
         assert got == pytest.approx(b / a, rel=1e-9)

@@ -83,7 +83,7 @@ FALCON_MAX_STIFFNESS = 3000.0
 #: [s] time constant of the tick periods the servo loop's passivity bound weighs (the measured
 #: period T = sum(T_k^2) / sum(T_k), exponentially weighted; docs/servo_loop.md *Passivity*). A
 #: late tick lowers the rendered stiffness for about this long; at 20 ms a gap of 7.5 ms at the
-#: stiffness bound cut the extrapolated force by a third and made ripple windows. Chosen with
+#: stiffness bound scaled the extrapolated force to a third and made ripple windows. Chosen with
 #: bench/bench_passivity_window.py on one run's trace (the shortest window that added no
 #: ripple window to the ideal force's own), checked on another's.
 PASSIVITY_WINDOW = 0.05

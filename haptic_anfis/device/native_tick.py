@@ -34,8 +34,9 @@ It sleeps to absolute 1 ms deadlines with ``clock_nanosleep`` and reads the cloc
    ``K <= 2 (b - |B|) / T`` with ``b`` the device's damping and ``B`` the rendered damping
    (here 0) — Colgate & Schenkel 1997 (J. Robotic Systems 14(1):37-47), the discrete-time
    passivity condition of a virtual wall, ``b > K T / 2 + |B|`` — with ``T`` the energy-weighted
-   mean of the last ~50 ms of periods (:func:`_passivity_period`; it was the last gap alone,
-   which turned one late tick into a one-tick force step). Optional
+   mean of the last ``passivity_window`` (50 ms) of periods (:func:`_passivity_period`; it was
+   the last gap alone, which turned one late tick into a one-tick force step; now one late
+   tick lowers the stiffness less, at once, and it comes back over about the window). Optional
    passivity observer / controller (Hannaford & Ryu 2002, IEEE T-RO 18(1):1-10): the energy the
    rendered port put out so far; when it turns negative a damping force takes it back.
 5. Safety (:class:`haptic_anfis.device.safety.SafetyLayer`'s rules): non-finite -> zero at once,
@@ -591,9 +592,11 @@ def _passivity_period(cfg, st, gap):
     ``cfg[passivity_window]`` (exponentially weighted; each T capped at the watchdog time, past
     which the force was ramped down). At a steady hand speed v a zero-order hold leaks
     K v^2 T^2 / 2 per period and the device's damping takes b v^2 T, so the window is passive
-    when K <= 2 b sum(T) / sum(T^2): one late tick among nominal ones barely moves the bound
-    (it leaked once, a bounded amount), a loop that keeps ticking late meets the per-period
-    bound. The sums start as if the loop had run at its nominal period."""
+    when K <= 2 b sum(T) / sum(T^2). One late tick among nominal ones (a bounded leak, once)
+    lowers the bound less the longer the window (with a model at the guard's stiffness a
+    7.5 ms gap scales it to ~0.3 at 20 ms, ~0.5 at 50 ms), for about the window's time; a
+    loop that keeps ticking late meets the per-period bound once the window has filled. The
+    sums start as if the loop had run at its nominal period."""
     t = min(gap, cfg[CFG.watchdog])
     w = cfg[CFG.passivity_window]
     if st[S.pt1] <= 0.0:
