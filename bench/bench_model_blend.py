@@ -28,6 +28,7 @@ from _args import non_negative_numbers
 from _page import write_page
 from bench_model_age import add_trace_arguments, models_along, trace_window
 from bench_stall_hold import driver_loop, tick_at
+from haptic_anfis.device.servo_native import NativeServoLoop
 from haptic_anfis.device.force_error import force_error, ripple_and_dropouts
 from haptic_anfis.nodes.falcon_driver import PARAMS
 from haptic_anfis.nodes.parameters import default_of
@@ -53,7 +54,14 @@ def replay(models: list, times: np.ndarray, positions: np.ndarray, newest: np.nd
            blend_time: float) -> np.ndarray:
     """The force the loop renders (n, 3) [N], tissue frame (the tick's target force, before
     the safety layer's rate limit), offered the model of pose ``newest[i]`` at tick i."""
-    lp = driver_loop(default_of(PARAMS, 'model_hold_time'), blend_time=blend_time)
+    return replay_on(driver_loop(default_of(PARAMS, 'model_hold_time'), blend_time=blend_time),
+                     models, times, positions, newest)
+
+
+def replay_on(lp: NativeServoLoop, models: list, times: np.ndarray, positions: np.ndarray,
+              newest: np.ndarray) -> np.ndarray:
+    """:func:`replay` on a loop of the caller's (``lp``, fresh, never started): its safety
+    layer started, then one tick per pose, offered the model of pose ``newest[i]`` at tick i."""
     lp.safety.start()
     out = np.zeros((len(times), 3))
     offered = -1

@@ -35,8 +35,8 @@ import numpy as np
 from _args import positive_numbers
 from _page import write_page
 from bench_model_age import add_trace_arguments, models_along, trace_window
-from bench_model_blend import arrivals
-from bench_stall_hold import driver_loop, tick_at
+from bench_model_blend import arrivals, replay_on
+from bench_stall_hold import driver_loop
 from haptic_anfis.device import native_tick as nt
 from haptic_anfis.device.force_error import force_error, ripple_and_dropouts
 from haptic_anfis.nodes.falcon_driver import PARAMS
@@ -49,15 +49,7 @@ def replay_window(models: list, times: np.ndarray, positions: np.ndarray, newest
     limit; the ticks the passivity bound limited) with ``window`` [s] as its
     ``passivity_window``, offered the model of pose ``newest[i]`` at tick i."""
     lp = driver_loop(default_of(PARAMS, 'model_hold_time'), passivity_window=window)
-    lp.safety.start()
-    out = np.zeros((len(times), 3))
-    offered = -1
-    for i, (p, t) in enumerate(zip(positions, times)):
-        j = newest[i]
-        if j != offered and j >= 0:
-            lp.renderer.offer_values(models[j], float(times[j]))
-            offered = j
-        out[i] = tick_at(lp, p, t)
+    out = replay_on(lp, models, times, positions, newest)
     return out, int(lp.cnt[nt.CNT.passivity_limited])
 
 
