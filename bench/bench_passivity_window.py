@@ -36,7 +36,7 @@ from _args import positive_numbers
 from _page import write_page
 from bench_model_age import add_trace_arguments, models_along, trace_window
 from bench_model_blend import arrivals, replay_on
-from bench_stall_hold import driver_loop
+from bench_stall_hold import driver_loop, driver_mapping
 from haptic_anfis.device import native_tick as nt
 from haptic_anfis.device.force_error import force_error, ripple_and_dropouts
 from haptic_anfis.nodes.falcon_driver import PARAMS
@@ -76,9 +76,9 @@ def measure(a: argparse.Namespace) -> list[str]:
     gaps = np.diff(times)
     models, F, contact = models_along(positions)
     newest = arrivals(times, a.latency_ms * 1e-3, 1.0, 0.0)
-    lp = driver_loop(1.0)
-    dev = np.array([lp.mapping.to_device(tuple(p)) for p in positions])
-    fs, b = lp.mapping.force_scale, default_of(PARAMS, 'passivity_damping')
+    mapping = driver_mapping()
+    dev = np.array([mapping.to_device(tuple(p)) for p in positions])
+    fs, b = mapping.force_scale, default_of(PARAMS, 'passivity_damping')
     lines = [f'{name}: {len(times)} ticks from {a.start:g} s, {a.seconds:g} s; models '
              f'{a.latency_ms:g} ms after their pose; servo gaps > 3 ms: '
              f'{int(np.sum(gaps > 0.003))}, > 6 ms: {int(np.sum(gaps > 0.006))}, longest '

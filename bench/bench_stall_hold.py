@@ -42,6 +42,13 @@ from haptic_anfis.nodes.parameters import default_of
 NO_RADIUS = 1.0
 
 
+def driver_mapping() -> WorkspaceMapping:
+    """The workspace mapping and force scale as falcon_driver builds them by default."""
+    d = lambda name: default_of(PARAMS, name)  # noqa: E731
+    return WorkspaceMapping(d('workspace_scale'), tuple(d('workspace_offset')),
+                            d('force_scale'))
+
+
 def driver_loop(hold: float, radius: float = HOLD_RADIUS,
                 blend_time: float | None = None,
                 passivity_window: float | None = None) -> NativeServoLoop:
@@ -51,8 +58,7 @@ def driver_loop(hold: float, radius: float = HOLD_RADIUS,
     ``model_blend_time``, ``passivity_window`` [s] likewise; driven tick by tick
     (:func:`held_forces`), never started."""
     d = lambda name: default_of(PARAMS, name)  # noqa: E731
-    mapping = WorkspaceMapping(d('workspace_scale'), tuple(d('workspace_offset')),
-                               d('force_scale'))
+    mapping = driver_mapping()
     still = PalpationScript(np.array([0.0, 1.0]), np.zeros((2, 3)), np.array([False]),
                             loop=False)
     return NativeServoLoop(still, mapping, HandParams(), rate=d('rate'), mode='local_model',

@@ -362,6 +362,16 @@ def worker_cpus(n: int) -> list[int | None]:
     return order[:min(n, len(allowed))]
 
 
+def _check_number(name: str, value, unit: str, zero: bool = False) -> None:
+    """Raise ValueError naming ``name`` unless ``value`` is a finite number (not a bool) above 0,
+    or at least 0 with ``zero``; ``unit``: the unit the message names."""
+    ok = (isinstance(value, (int, float)) and not isinstance(value, bool)
+          and math.isfinite(value) and (value >= 0 if zero else value > 0))
+    if not ok:
+        raise ValueError(f'{name}: expected a finite number {">=" if zero else ">"} 0 {unit}, '
+                         f'got {value!r}')
+
+
 class NativeServoLoop:
     """The simulated Falcon's servo loop, compiled and GIL-free (module docstring).
 
@@ -433,17 +443,9 @@ class NativeServoLoop:
             raise ValueError(f"mode: expected 'zoh' or 'local_model', got {mode!r}")
         if not (math.isfinite(damping) and damping > 0):
             raise ValueError(f'damping: expected a finite number > 0 N s/m, got {damping!r}')
-        if not (isinstance(hold_radius, (int, float)) and not isinstance(hold_radius, bool)
-                and math.isfinite(hold_radius) and hold_radius > 0):
-            raise ValueError(f'hold_radius: expected a finite number > 0 m, got {hold_radius!r}')
-        if not (isinstance(blend_time, (int, float)) and not isinstance(blend_time, bool)
-                and math.isfinite(blend_time) and blend_time >= 0):
-            raise ValueError(f'blend_time: expected a finite number >= 0 s, got {blend_time!r}')
-        if not (isinstance(passivity_window, (int, float))
-                and not isinstance(passivity_window, bool)
-                and math.isfinite(passivity_window) and passivity_window > 0):
-            raise ValueError('passivity_window: expected a finite number > 0 s, got '
-                             f'{passivity_window!r}')
+        _check_number('hold_radius', hold_radius, 'm')
+        _check_number('blend_time', blend_time, 's', zero=True)
+        _check_number('passivity_window', passivity_window, 's')
         if not (isinstance(workers, int) and 1 <= workers <= 8):
             raise ValueError(f'workers: expected an integer from 1 to 8, got {workers!r}')
         self.period = 1.0 / rate
