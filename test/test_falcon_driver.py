@@ -172,3 +172,35 @@ def test_run_node_starts_a_nodes_loop_after_the_process_settled(tmp_path):
                        cwd=tmp_path)
     assert r.returncode == 0, r.stderr
     assert r.stdout.splitlines().count('frozen True spun False') == 1, r.stdout
+
+
+def test_a_negative_loop_check_period_is_refused(ctx):
+    with pytest.raises(ParameterError, match='loop_check_period'):
+        driver(ctx, loop_check_period=-1.0)
+
+
+def test_the_driver_warns_when_its_loop_falls_behind(ctx, monkeypatch):
+    """Every loop_check_period the driver checks its loop's counters (device/loop_health.py) and
+    warns, with what to do, when the window lost more than 0.5 % of its periods; the warnings
+    are counted in its summary (sim --json, the trace's statistics)."""
+    from types import SimpleNamespace
+    d = driver(ctx, loop_check_period=10.0)
+    try:
+        readings = [{'ticks': 1000, 'periods_lost': 0, 'gaps_past_watchdog': 0},
+                    {'ticks': 10940, 'periods_lost': 60, 'gaps_past_watchdog': 0}]
+        summary = d.servo.stats.summary
+        monkeypatch.setattr(d.servo.stats, 'summary',
+                            lambda: readings.pop(0) if readings else summary())
+        said = []
+        monkeypatch.setattr(d, 'get_logger', lambda: SimpleNamespace(warning=said.append))
+        d._check_loop()   # 1000 ticks, none lost since start_loop's reading: nothing to say
+        assert said == []
+        d._check_loop()
+        assert len(said) == 1
+        assert said[0].startswith('servo loop fell behind over the last 10 s: 0.60 % of its '
+                                  'periods lost (60 of 10000')
+        assert 'real-time' in said[0]
+        assert d.summary()['loop_warnings'] == 1
+    finally:
+        d.close()
+        d.destroy_node()

@@ -911,3 +911,20 @@ def test_a_release_or_a_fault_drops_the_fade(release):
 def test_a_blend_time_that_is_not_a_time_is_refused(blend_time):
     with pytest.raises(ValueError, match='blend_time: expected a finite number >= 0 s'):
         loop('local_model', blend_time=blend_time)
+
+
+def test_gaps_past_the_watchdog_are_counted_and_restart_with_the_window():
+    """The compiled tick counts gaps between ticks longer than the watchdog time (the driver's
+    live check, device/loop_health.py), as LoopStats does; a stats reset starts them again."""
+    lp = loop(watchdog_timeout=0.01)
+    lp.safety.start()
+    t = 0.0
+    for g in (0.001, 0.001, 0.015, 0.001, 0.0101, 0.001, 0.0099):
+        lp.tick(t)
+        t += g
+    lp.tick(t)
+    assert lp.stats.summary()['gaps_past_watchdog'] == 2
+    assert int(lp.cnt[nt.CNT.long_gaps]) == 2
+    lp.stats.reset()
+    lp.tick(t + 0.02)
+    assert lp.stats.summary()['gaps_past_watchdog'] == 1

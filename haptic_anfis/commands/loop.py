@@ -19,7 +19,10 @@ the plane ahead of a free probe), ``force_error_by_phase`` (onset / offset / ste
 the rest, each ``ticks``, ``rms_n``, ``share_pct`` of the squared error),
 ``ripple_windows_pct``, ``ripple_windows_ideal_pct``, ``zero_force_ticks``, ``longest_dropout_ms``
 (:func:`haptic_anfis.device.force_error.ripple_and_dropouts`), ``periods_lost`` (servo periods
-with no tick), ``max_gap_ms`` (the longest time between two ticks), ``ticks_taken_over`` (ticks
+with no tick), ``max_gap_ms`` (the longest time between two ticks), ``gaps_past_watchdog`` (gaps
+between two ticks longer than the watchdog time), ``loop_warnings`` (the driver's
+``loop_check_period`` windows that fell short: :mod:`haptic_anfis.device.loop_health`),
+``ticks_taken_over`` (ticks
 one tick worker took over from the other, preempted in the middle of its tick),
 ``process_cpu_pct`` (the driver process's CPU time over the window / its wall time, all threads:
 in one process, the whole graph's).
@@ -49,7 +52,8 @@ DRIVER_KEYS = ('latency_p50_ms', 'latency_p99_ms', 'latency_max_ms', 'ticks_fres
                'watchdog_trips_in_contact', 'deadline_misses', 'periods_lost', 'max_gap_ms',
                'passivity_limited', 'servo_scheduling', 'trace_rows_lost', 'ticks_held',
                'ticks_beyond', 'ticks_taken_over', 'rejected_stale', 'rejected_future',
-               'rejected_unknown_stamp', 'process_cpu_pct', 'ticks_approach')
+               'rejected_unknown_stamp', 'process_cpu_pct', 'ticks_approach',
+               'gaps_past_watchdog', 'loop_warnings')
 #: of those, the ones a window (``--from``) recounts from its own ticks
 WINDOWED = ('periods_lost', 'max_gap_ms', 'ticks_expired')
 

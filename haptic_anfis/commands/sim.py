@@ -123,6 +123,8 @@ def json_summary(s: dict, recorded: dict | None = None) -> dict:
            'latency_next_tick_pct': lp.get('latency_next_tick_pct'),
            'deadline_misses': lp['deadline_misses'], 'cycles': lp['ticks'],
            'periods_lost': lp.get('periods_lost'), 'max_gap_ms': lp.get('max_gap_ms'),
+           'gaps_past_watchdog': lp.get('gaps_past_watchdog'),
+           'loop_warnings': lp.get('loop_warnings'),
            'max_force_n': lp['max_force_N'], 'contact_s': contact_seconds(s),
            'seconds': lp['seconds'], 'commands': lp['latency_n'],
            'watchdog_trips': lp['watchdog_trips'], 'clamped': lp['clamped'],

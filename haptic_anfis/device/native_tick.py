@@ -162,7 +162,7 @@ CNT = _index('CNT', 'ticks periods_lost deadline_misses watchdog_trips watchdog_
              'clamped rejected_nonfinite none fresh extrapolated expired free approach '
              'passivity_limited observer_active max_gap_ns max_force_un marks clutches '
              'trace_w t_first_ns t_last_ns running held deadline_ns beyond claim_ns claim_at_ns '
-             'gen taken_over')
+             'gen taken_over long_gaps')
 #: trace row: t, device position (3,), applied force (3,) device frame, status (as TickTrace)
 TRACE_COLS = 8
 CFG_LEN, CTL_LEN, OUT_LEN, CNT_LEN = len(CFG), len(CTL), len(OUT), len(CNT)
@@ -709,6 +709,8 @@ def _compute(now, cfg, st, times, points, buttons, hand, cmd, model, ctl, cnt, s
         g_ns = int(gap * 1e9)
         if g_ns > cnt[CNT.max_gap_ns]:
             cnt[CNT.max_gap_ns] = g_ns
+        if gap > cfg[CFG.watchdog]:   # a gap the hand felt as a stop (LoopStats.long_gaps)
+            cnt[CNT.long_gaps] += 1
     else:
         cnt[CNT.t_first_ns] = int(now * 1e9)
     cnt[CNT.t_last_ns] = int(now * 1e9)

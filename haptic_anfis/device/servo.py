@@ -11,6 +11,7 @@ the device gets zero force.
 from __future__ import annotations
 
 import contextlib
+import math
 import threading
 import time
 from typing import Callable, Iterator
@@ -47,7 +48,8 @@ class ServoLoop:
         self.device, self.safety, self.on_state, self.clock = device, safety, on_state, clock
         self.render, self.trace, self.status = render, trace, -1
         self.period = 1.0 / rate
-        self.stats = LoopStats(period=self.period)
+        self.stats = LoopStats(period=self.period,
+                               watchdog=getattr(safety, 'watchdog_timeout', math.inf))
         self.errors = 0
         self.last_error: BaseException | None = None
         self.force = (0.0, 0.0, 0.0)

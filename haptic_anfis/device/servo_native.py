@@ -168,6 +168,7 @@ class NativeLoopStats(LoopStats):
                  deadline_misses=int(c[nt.CNT.deadline_misses] - b[nt.CNT.deadline_misses]),
                  periods_lost=int(c[nt.CNT.periods_lost] - b[nt.CNT.periods_lost]),
                  max_gap_ms=c[nt.CNT.max_gap_ns] * 1e-6,
+                 gaps_past_watchdog=int(c[nt.CNT.long_gaps] - b[nt.CNT.long_gaps]),
                  max_force_N=c[nt.CNT.max_force_un] * 1e-6,
                  passivity_limited=int(c[nt.CNT.passivity_limited]
                                        - b[nt.CNT.passivity_limited]),

@@ -133,6 +133,10 @@ class LoopStats:
     #: many; issue 32: the miss count undercounted lost ticks ~5x)
     periods_lost: int = 0
     max_gap: float = 0.0  # the longest time between two ticks [s]
+    #: gaps between two ticks longer than ``watchdog`` [s] (the safety layer's watchdog time:
+    #: a gap the hand feels as the force stopping; inf = none counted)
+    watchdog: float = math.inf
+    long_gaps: int = 0
     t_first: float | None = None
     t_last: float | None = None
     max_force: float = 0.0
@@ -143,7 +147,7 @@ class LoopStats:
 
     def reset(self) -> None:
         """Start a new measurement window (counters and latencies cleared)."""
-        self.ticks = self.deadline_misses = self.periods_lost = 0
+        self.ticks = self.deadline_misses = self.periods_lost = self.long_gaps = 0
         self.max_gap = 0.0
         self.t_first = self.t_last = None
         self.max_force = 0.0
@@ -157,6 +161,8 @@ class LoopStats:
             self.periods_lost += periods_lost_in(gap, self.period)
             if gap > self.max_gap:
                 self.max_gap = gap
+            if gap > self.watchdog:
+                self.long_gaps += 1
         self.t_last = now
         self.ticks += 1
 
@@ -172,6 +178,7 @@ class LoopStats:
             'rate_hz': (self.ticks - 1) / span if span > 0 else 0.0,
             'deadline_misses': self.deadline_misses,
             'periods_lost': self.periods_lost, 'max_gap_ms': self.max_gap * 1e3,
+            'gaps_past_watchdog': self.long_gaps,
             'latency_n': lat['n'],
             'latency_p50_ms': lat['p50'] * 1e3, 'latency_p99_ms': lat['p99'] * 1e3,
             'latency_max_ms': lat['max'] * 1e3,

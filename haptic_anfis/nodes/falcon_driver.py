@@ -48,6 +48,7 @@ from ..device.falcon import RATED_FORCE
 from ..device.force_input import MODES, ForceInput
 from ..device.local_model import APPROACH_RADIUS, FALCON_MAX_STIFFNESS, HOLD_RADIUS, \
     MODEL_BLEND_TIME, PASSIVITY_WINDOW, STATUS_NAMES
+from ..device.loop_health import LoopHealth
 from ..device.safety import OK
 from ..device.start_gate import HeldScript
 from ..device.stamps import STALE
@@ -196,6 +197,11 @@ PARAMS = [
           'the normal scheduler). Needs CAP_SYS_NICE or an rtprio limit (ulimit -r); without it '
           'the thread keeps the normal scheduler and a warning says how to allow it',
           lambda v: None if 0 <= v <= 99 else 'expected 0 to 99'),
+    Param('loop_check_period', 10.0, 'every this many seconds [s] the servo loop\'s counters '
+          'are checked, and a warning says when it lost more than 0.5 % of its periods (below '
+          '995 Hz at 1 kHz) or had a gap between ticks longer than watchdog_timeout in that '
+          'window (a machine starving the loop: the force the hand feels is late or held); 0 = '
+          'never', lambda v: None if math.isfinite(v) and v >= 0 else 'expected >= 0'),
 ]
 
 
@@ -318,6 +324,24 @@ class FalconDriver(HapticNode):
             f"{p['max_force']} N, watchdog {p['watchdog_timeout'] * 1e3:.1f} ms, force "
             f"{p['force_mode']}, {what}")
         self.started = False
+        self.health = LoopHealth(p['watchdog_timeout'])
+        if p['loop_check_period'] > 0:
+            self.create_timer(p['loop_check_period'], self._check_loop)
+
+    def _check_loop(self) -> None:
+        """Warn when the servo loop fell behind over the last ``loop_check_period``
+        (:class:`~haptic_anfis.device.loop_health.LoopHealth`), saying what to do about it."""
+        if not self.started:
+            return
+        short = self.health.check(self.servo.stats.summary(), self.params['loop_check_period'])
+        if short is None:
+            return
+        sched = self.servo.scheduling
+        why = ('the servo is real-time: the machine itself stalled (docs/servo_loop.md, '
+               '"Stalls of the machine itself")' if 'SCHED_' in sched and 'refused' not in sched
+               else 'the servo runs under the normal scheduler; real-time priority keeps the '
+                    'period (docs/nodes.md, "The servo thread\'s priority")')
+        self.get_logger().warning(f'{short}; {why}')
 
     def start_loop(self) -> None:
         """Start the servo loop (a real device is opened here: a FalconError / OSError). Called
@@ -331,6 +355,7 @@ class FalconDriver(HapticNode):
             return
         self.servo.start()
         self.started = True
+        self.health.check(self.servo.stats.summary(), 0.0)  # the first window starts here
         if 'refused' in self.servo.scheduling:  # one call site per severity (rclpy)
             self.get_logger().warning(f'servo thread: {self.servo.scheduling}')
         else:
@@ -533,7 +558,8 @@ class FalconDriver(HapticNode):
                  rejected_frame=ss.rejected_frame, watchdog_trips=ss.watchdog_trips,
                  watchdog_trips_in_contact=ss.watchdog_trips_in_contact,
                  clamped=ss.clamped, servo_errors=self.servo.errors,
-                 servo_scheduling=self.servo.scheduling, **self.input.summary())
+                 servo_scheduling=self.servo.scheduling, loop_warnings=self.health.warnings,
+                 **self.input.summary())
         if self.native is not None:
             s.update(trace_rows_lost=self.native.trace_lost,
                      bridge_rate_hz=self.native.bridge_gaps.summary()['rate_hz'])
