@@ -181,26 +181,33 @@ def test_a_negative_loop_check_period_is_refused(ctx):
 
 def test_the_driver_warns_when_its_loop_falls_behind(ctx, monkeypatch):
     """Every loop_check_period the driver checks its loop's counters (device/loop_health.py) and
-    warns, with what to do, when the window lost more than 0.5 % of its periods; the warnings
-    are counted in its summary (sim --json, the trace's statistics)."""
+    warns, with what to do, when the window lost more than 0.5 % of its periods (at most once a
+    minute); the windows checked and those behind are in its summary (sim --json, the trace)."""
     from types import SimpleNamespace
+
+    from haptic_anfis.device.loop_health import LoopHealth
     d = driver(ctx, loop_check_period=10.0)
     try:
+        d.health = LoopHealth(d.params['watchdog_timeout'])   # no reading from start_loop
         readings = [{'ticks': 1000, 'periods_lost': 0, 'gaps_past_watchdog': 0},
                     {'ticks': 10940, 'periods_lost': 60, 'gaps_past_watchdog': 0}]
         summary = d.servo.stats.summary
         monkeypatch.setattr(d.servo.stats, 'summary',
                             lambda: readings.pop(0) if readings else summary())
         said = []
-        monkeypatch.setattr(d, 'get_logger', lambda: SimpleNamespace(warning=said.append))
-        d._check_loop()   # 1000 ticks, none lost since start_loop's reading: nothing to say
+        monkeypatch.setattr(d, 'get_logger', lambda: SimpleNamespace(
+            warning=lambda msg, **kw: said.append((msg, kw))))
+        d._check_loop()   # the first reading starts the window
         assert said == []
         d._check_loop()
         assert len(said) == 1
-        assert said[0].startswith('servo loop fell behind over the last 10 s: 0.60 % of its '
-                                  'periods lost (60 of 10000')
-        assert 'real-time' in said[0]
-        assert d.summary()['loop_warnings'] == 1
+        msg, kw = said[0]
+        assert msg.startswith('servo loop fell behind over the last 10 s: 0.60 % of its periods '
+                              'lost (60 of 10000')
+        assert 'real-time' in msg and msg.endswith('(1 of 1 windows so far)')
+        assert kw == {'throttle_duration_sec': 60.0}
+        s = d.summary()
+        assert (s['loop_windows'], s['loop_windows_behind']) == (1, 1)
     finally:
         d.close()
         d.destroy_node()

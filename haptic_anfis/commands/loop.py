@@ -20,8 +20,9 @@ the rest, each ``ticks``, ``rms_n``, ``share_pct`` of the squared error),
 ``ripple_windows_pct``, ``ripple_windows_ideal_pct``, ``zero_force_ticks``, ``longest_dropout_ms``
 (:func:`haptic_anfis.device.force_error.ripple_and_dropouts`), ``periods_lost`` (servo periods
 with no tick), ``max_gap_ms`` (the longest time between two ticks), ``gaps_past_watchdog`` (gaps
-between two ticks longer than the watchdog time), ``loop_warnings`` (the driver's
-``loop_check_period`` windows that fell short: :mod:`haptic_anfis.device.loop_health`),
+between two ticks longer than the watchdog time), ``loop_windows`` and
+``loop_windows_behind`` (the driver's ``loop_check_period`` windows checked, and those that fell
+behind: :mod:`haptic_anfis.device.loop_health`),
 ``ticks_taken_over`` (ticks
 one tick worker took over from the other, preempted in the middle of its tick),
 ``process_cpu_pct`` (the driver process's CPU time over the window / its wall time, all threads:
@@ -53,7 +54,7 @@ DRIVER_KEYS = ('latency_p50_ms', 'latency_p99_ms', 'latency_max_ms', 'ticks_fres
                'passivity_limited', 'servo_scheduling', 'trace_rows_lost', 'ticks_held',
                'ticks_beyond', 'ticks_taken_over', 'rejected_stale', 'rejected_future',
                'rejected_unknown_stamp', 'process_cpu_pct', 'ticks_approach',
-               'gaps_past_watchdog', 'loop_warnings')
+               'gaps_past_watchdog', 'loop_windows', 'loop_windows_behind')
 #: of those, the ones a window (``--from``) recounts from its own ticks
 WINDOWED = ('periods_lost', 'max_gap_ms', 'ticks_expired')
 

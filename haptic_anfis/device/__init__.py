@@ -7,6 +7,8 @@ with a scripted virtual hand, servo-loop timing statistics.
 - :class:`PalpationScript`: the hand's scripted pattern (press, strips, circles) from YAML.
 - :class:`WorkspaceMapping`: device frame <-> tissue frame (scale, offset, force scale).
 - :class:`LoopStats`: rate, latency percentiles, deadline misses.
+- :mod:`.loop_health`: whether the loop kept its period over the last window (the driver's
+  live warning).
 
 A real Novint Falcon (not imported here; its USB library is the optional ``falcon`` extra):
 :mod:`.falcon_protocol` (packets), :mod:`.falcon_kinematics` (delta robot, SI units),

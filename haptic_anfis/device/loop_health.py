@@ -5,8 +5,9 @@ force the hand feels is late or held, and nothing else says so. :class:`LoopHeal
 readings of the loop's counters (:meth:`~.stats.LoopStats.summary`, cumulative) and names what
 fell short in between: the share of 1 ms periods lost above ``max_lost_pct`` (0.5 %: issue 32's
 995 Hz at 1 kHz) and gaps between ticks longer than the watchdog (the hand feels the force
-stop). The falcon_driver node logs it as a warning (``loop_check_period``), with what the servo
-thread's scheduling is and how to give it real-time priority. No ROS.
+stop). The falcon_driver node logs it as a warning (``loop_check_period``; at most one a minute,
+with how many windows fell behind so far), with what the servo thread's scheduling is and how to
+give it real-time priority. No ROS.
 """
 from __future__ import annotations
 
@@ -25,8 +26,9 @@ class LoopHealth:
     ``max_lost_pct``: the largest share of periods lost [%] a window may have."""
     watchdog: float
     max_lost_pct: float = MAX_LOST_PCT
-    #: windows that fell short so far
-    warnings: int = 0
+    #: windows checked so far, and of those the ones that fell behind
+    windows: int = 0
+    behind: int = 0
     _last: tuple[int, int, int] | None = field(default=None, repr=False)
 
     def __post_init__(self) -> None:
@@ -50,6 +52,7 @@ class LoopHealth:
         periods = ticks + lost
         if periods <= 0:
             return None
+        self.windows += 1
         short = []
         pct = 100.0 * lost / periods
         if pct > self.max_lost_pct:
@@ -61,5 +64,5 @@ class LoopHealth:
                          f'session {float(summary.get("max_gap_ms", 0.0)):.1f} ms)')
         if not short:
             return None
-        self.warnings += 1
+        self.behind += 1
         return f'servo loop fell behind over the last {seconds:g} s: ' + '; '.join(short)

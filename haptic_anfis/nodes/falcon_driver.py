@@ -200,9 +200,13 @@ PARAMS = [
     Param('loop_check_period', 10.0, 'every this many seconds [s] the servo loop\'s counters '
           'are checked, and a warning says when it lost more than 0.5 % of its periods (below '
           '995 Hz at 1 kHz) or had a gap between ticks longer than watchdog_timeout in that '
-          'window (a machine starving the loop: the force the hand feels is late or held); 0 = '
-          'never', lambda v: None if math.isfinite(v) and v >= 0 else 'expected >= 0'),
+          'window (a machine starving the loop: the force the hand feels is late or held; at '
+          'most one warning a minute, with the count of windows behind); 0 = never', lambda v: None if math.isfinite(v) and v >= 0 else 'expected >= 0'),
 ]
+
+
+#: the shortest time [s] between two warnings that the servo loop fell behind
+WARN_EVERY = 60.0
 
 
 def resolve_servo_loop(choice: str, backend: str = 'sim') -> str:
@@ -341,7 +345,10 @@ class FalconDriver(HapticNode):
                '"Stalls of the machine itself")' if 'SCHED_' in sched and 'refused' not in sched
                else 'the servo runs under the normal scheduler; real-time priority keeps the '
                     'period (docs/nodes.md, "The servo thread\'s priority")')
-        self.get_logger().warning(f'{short}; {why}')
+        # a starved machine falls behind most windows: once a minute says it, with the count
+        self.get_logger().warning(f'{short}; {why} ({self.health.behind} of '
+                                  f'{self.health.windows} windows so far)',
+                                  throttle_duration_sec=WARN_EVERY)
 
     def start_loop(self) -> None:
         """Start the servo loop (a real device is opened here: a FalconError / OSError). Called
@@ -558,7 +565,8 @@ class FalconDriver(HapticNode):
                  rejected_frame=ss.rejected_frame, watchdog_trips=ss.watchdog_trips,
                  watchdog_trips_in_contact=ss.watchdog_trips_in_contact,
                  clamped=ss.clamped, servo_errors=self.servo.errors,
-                 servo_scheduling=self.servo.scheduling, loop_warnings=self.health.warnings,
+                 servo_scheduling=self.servo.scheduling, loop_windows=self.health.windows,
+                 loop_windows_behind=self.health.behind,
                  **self.input.summary())
         if self.native is not None:
             s.update(trace_rows_lost=self.native.trace_lost,
