@@ -189,8 +189,9 @@ def test_the_driver_warns_when_its_loop_falls_behind(ctx, monkeypatch):
     d = driver(ctx, loop_check_period=10.0)
     try:
         d.health = LoopHealth(d.params['watchdog_timeout'])   # no reading from start_loop
-        readings = [{'ticks': 1000, 'periods_lost': 0, 'gaps_past_watchdog': 0},
-                    {'ticks': 10940, 'periods_lost': 60, 'gaps_past_watchdog': 0}]
+        readings = [{'ticks': 1000, 'periods_lost': 0, 'gaps_past_watchdog': 0, 'seconds': 1.0},
+                    {'ticks': 10940, 'periods_lost': 60, 'gaps_past_watchdog': 0,
+                     'seconds': 11.0}]
         summary = d.servo.stats.summary
         monkeypatch.setattr(d.servo.stats, 'summary',
                             lambda: readings.pop(0) if readings else summary())
@@ -202,12 +203,57 @@ def test_the_driver_warns_when_its_loop_falls_behind(ctx, monkeypatch):
         d._check_loop()
         assert len(said) == 1
         msg, kw = said[0]
-        assert msg.startswith('servo loop fell behind over the last 10 s: 0.60 % of its periods '
-                              'lost (60 of 10000')
-        assert 'real-time' in msg and msg.endswith('(1 of 1 windows so far)')
+        assert msg.startswith('servo loop fell behind over the last 10.0 s: 0.60 % of its '
+                              'periods lost (60 of 10000')
+        assert d.behind_because() in msg and msg.endswith('(1 of 1 windows so far)')
         assert kw == {'throttle_duration_sec': 60.0}
         s = d.summary()
         assert (s['loop_windows'], s['loop_windows_behind']) == (1, 1)
+    finally:
+        d.close()
+        d.destroy_node()
+
+
+@pytest.mark.parametrize('period, timers', [(10.0, 1), (0.0, 0)])
+def test_loop_check_period_sets_the_checks_timer(ctx, monkeypatch, period, timers):
+    from rclpy.node import Node
+
+    from haptic_anfis.nodes.falcon_driver import FalconDriver
+    made = []
+    create = Node.create_timer
+    monkeypatch.setattr(FalconDriver, 'create_timer',
+                        lambda self, *a, **kw: made.append(a[0]) or create(self, *a, **kw))
+    d = FalconDriver(context=ctx, parameter_overrides=[
+        Parameter('loop_check_period', value=period)])
+    try:
+        assert made.count(period) == timers
+    finally:
+        d.close()
+        d.destroy_node()
+
+
+def test_a_loop_check_period_under_a_second_is_refused(ctx):
+    with pytest.raises(ParameterError, match='loop_check_period'):
+        driver(ctx, loop_check_period=0.5)
+
+
+@pytest.mark.parametrize('loop, backend, scheduling, cause', [
+    ('native_process', 'sim', 'compiled tick in servo process 7 (own session); normal scheduler: '
+     'SCHED_FIFO 50 refused (no right); short time slice', 'runs under the normal scheduler'),
+    ('native_process', 'sim', 'compiled tick in servo process 7 (own session); normal scheduler '
+     '(priority 0)', 'runs under the normal scheduler'),
+    ('native_process', 'sim', 'compiled tick in servo process 7 (own session); SCHED_FIFO '
+     'priority 50', 'the machine itself stalled (docs'),
+    ('native_process', 'falcon', 'SCHED_RR priority 20 from rtkit, in place of SCHED_FIFO 50',
+     "the machine itself stalled, or the device's USB replies came late"),
+    ('python', 'sim', 'SCHED_FIFO priority 50', 'waits for the interpreter lock'),
+    ('native_process', 'sim', '', "the servo thread's scheduling: not reported")])
+def test_the_warning_names_the_likely_cause(ctx, loop, backend, scheduling, cause):
+    d = driver(ctx)
+    try:
+        d.servo_loop, d.params = loop, {**d.params, 'backend': backend}
+        d.servo.scheduling = scheduling
+        assert cause in d.behind_because()
     finally:
         d.close()
         d.destroy_node()

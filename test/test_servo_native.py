@@ -662,9 +662,10 @@ def test_any_order_of_claims_and_commits_keeps_one_tick_per_generation(events):
     """Two workers' steps in any order: each event is a worker's next step (wake and claim, or,
     with a claim pending, commit) and the time to the next event [us] (> 1000: a worker
     preempted mid-tick, its claim taken over). Whatever the order: one tick per commit, the
-    committed ticks in time order and traced once each, the state the last commit's."""
+    committed ticks in time order and traced once each, the state the last commit's, the gaps
+    past the watchdog (2 ms here) those between committed ticks."""
     from haptic_anfis.device.trace import TickTrace
-    lp = loop(trace=TickTrace())
+    lp = loop(trace=TickTrace(), watchdog_timeout=0.002)
     lp.safety.start()
     C, S = nt.CNT, nt.S
     period = int(lp.period * 1e9 + 0.5)
@@ -695,6 +696,7 @@ def test_any_order_of_claims_and_commits_keeps_one_tick_per_generation(events):
     if n:
         assert lp.st[S.t_prev] == pytest.approx(committed[-1] * 1e-9)
         assert lp.cnt[C.t_last_ns] == committed[-1]
+    assert lp.cnt[C.long_gaps] == int(np.sum(np.diff(np.array(committed) * 1e-9) > 0.002))
     lp._drain()
     assert lp.trace.arrays()[:, 0] == pytest.approx(np.array(committed) * 1e-9)
 

@@ -22,9 +22,8 @@ the rest, each ``ticks``, ``rms_n``, ``share_pct`` of the squared error),
 with no tick), ``max_gap_ms`` (the longest time between two ticks), ``gaps_past_watchdog`` (gaps
 between two ticks longer than the watchdog time), ``loop_windows`` and
 ``loop_windows_behind`` (the driver's ``loop_check_period`` windows checked, and those that fell
-behind: :mod:`haptic_anfis.device.loop_health`),
-``ticks_taken_over`` (ticks
-one tick worker took over from the other, preempted in the middle of its tick),
+behind: :mod:`haptic_anfis.device.loop_health`), ``ticks_taken_over`` (ticks one tick worker
+took over from the other, preempted in the middle of its tick),
 ``process_cpu_pct`` (the driver process's CPU time over the window / its wall time, all threads:
 in one process, the whole graph's).
 """

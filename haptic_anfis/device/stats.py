@@ -133,10 +133,13 @@ class LoopStats:
     #: many; issue 32: the miss count undercounted lost ticks ~5x)
     periods_lost: int = 0
     max_gap: float = 0.0  # the longest time between two ticks [s]
-    #: gaps between two ticks longer than ``watchdog`` [s] (the safety layer's watchdog time:
-    #: a gap the hand feels as the force stopping; inf = none counted)
+    #: the safety layer's watchdog time [s] (inf: no gap counted in ``long_gaps``)
     watchdog: float = math.inf
+    #: gaps between two ticks longer than ``watchdog``: each one a stop the hand may feel
     long_gaps: int = 0
+    #: windows started again by :meth:`reset` (never cleared: a reader of two summaries knows
+    #: whether they belong to one window, ``device/loop_health.py``)
+    resets: int = 0
     t_first: float | None = None
     t_last: float | None = None
     max_force: float = 0.0
@@ -148,6 +151,7 @@ class LoopStats:
     def reset(self) -> None:
         """Start a new measurement window (counters and latencies cleared)."""
         self.ticks = self.deadline_misses = self.periods_lost = self.long_gaps = 0
+        self.resets += 1
         self.max_gap = 0.0
         self.t_first = self.t_last = None
         self.max_force = 0.0
@@ -178,7 +182,7 @@ class LoopStats:
             'rate_hz': (self.ticks - 1) / span if span > 0 else 0.0,
             'deadline_misses': self.deadline_misses,
             'periods_lost': self.periods_lost, 'max_gap_ms': self.max_gap * 1e3,
-            'gaps_past_watchdog': self.long_gaps,
+            'gaps_past_watchdog': self.long_gaps, 'stats_resets': self.resets,
             'latency_n': lat['n'],
             'latency_p50_ms': lat['p50'] * 1e3, 'latency_p99_ms': lat['p99'] * 1e3,
             'latency_max_ms': lat['max'] * 1e3,

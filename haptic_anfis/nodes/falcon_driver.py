@@ -201,7 +201,9 @@ PARAMS = [
           'are checked, and a warning says when it lost more than 0.5 % of its periods (below '
           '995 Hz at 1 kHz) or had a gap between ticks longer than watchdog_timeout in that '
           'window (a machine starving the loop: the force the hand feels is late or held; at '
-          'most one warning a minute, with the count of windows behind); 0 = never', lambda v: None if math.isfinite(v) and v >= 0 else 'expected >= 0'),
+          'most one warning a minute, with the count of windows behind); 0 = never',
+          lambda v: None if v == 0 or (math.isfinite(v) and v >= 1) else
+          'expected 0 (never) or a finite number >= 1 s'),
 ]
 
 
@@ -329,26 +331,39 @@ class FalconDriver(HapticNode):
             f"{p['force_mode']}, {what}")
         self.started = False
         self.health = LoopHealth(p['watchdog_timeout'])
+        self.device_lost = False
         if p['loop_check_period'] > 0:
             self.create_timer(p['loop_check_period'], self._check_loop)
 
     def _check_loop(self) -> None:
-        """Warn when the servo loop fell behind over the last ``loop_check_period``
-        (:class:`~haptic_anfis.device.loop_health.LoopHealth`), saying what to do about it."""
+        """Warn when the servo loop fell behind since the last check
+        (:class:`~haptic_anfis.device.loop_health.LoopHealth`), saying the likely cause and what
+        to do; nothing while the device is lost (its loop skips ticks on purpose then)."""
         if not self.started:
             return
-        short = self.health.check(self.servo.stats.summary(), self.params['loop_check_period'])
-        if short is None:
+        short = self.health.check(self.servo.stats.summary())
+        if short is None or self.device_lost:
             return
-        sched = self.servo.scheduling
-        why = ('the servo is real-time: the machine itself stalled (docs/servo_loop.md, '
-               '"Stalls of the machine itself")' if 'SCHED_' in sched and 'refused' not in sched
-               else 'the servo runs under the normal scheduler; real-time priority keeps the '
-                    'period (docs/nodes.md, "The servo thread\'s priority")')
         # a starved machine falls behind most windows: once a minute says it, with the count
-        self.get_logger().warning(f'{short}; {why} ({self.health.behind} of '
+        self.get_logger().warning(f'{short}; {self.behind_because()} ({self.health.behind} of '
                                   f'{self.health.windows} windows so far)',
                                   throttle_duration_sec=WARN_EVERY)
+
+    def behind_because(self) -> str:
+        """The likely cause of a servo loop falling behind, and what to do, from how it runs."""
+        if self.servo_loop == 'python':
+            return ('the servo tick runs in Python (servo_loop: python) and waits for the '
+                    'interpreter lock; servo_loop: auto runs it compiled, in a process of its own')
+        sched = self.servo.scheduling
+        if 'SCHED_' in sched and 'refused' not in sched:
+            return ('the servo is real-time: the machine itself stalled'
+                    + (", or the device's USB replies came late" if self.params['backend']
+                       == 'falcon' else '') + ' (docs/servo_loop.md, "Stalls of the machine '
+                    'itself")')
+        if 'normal scheduler' in sched:
+            return ('the servo runs under the normal scheduler; real-time priority keeps the '
+                    'period (docs/nodes.md, "The servo thread\'s priority")')
+        return f'the servo thread\'s scheduling: {sched or "not reported"}'
 
     def start_loop(self) -> None:
         """Start the servo loop (a real device is opened here: a FalconError / OSError). Called
@@ -362,7 +377,7 @@ class FalconDriver(HapticNode):
             return
         self.servo.start()
         self.started = True
-        self.health.check(self.servo.stats.summary(), 0.0)  # the first window starts here
+        self.health.check(self.servo.stats.summary())  # the first window starts here
         if 'refused' in self.servo.scheduling:  # one call site per severity (rclpy)
             self.get_logger().warning(f'servo thread: {self.servo.scheduling}')
         else:
@@ -429,6 +444,7 @@ class FalconDriver(HapticNode):
     def _device_lost(self, why: str) -> None:
         """The Falcon backend lost the device (servo thread): zero the force; without reconnect,
         stop the node with exit status 1."""
+        self.device_lost = True
         self.safety.stop()
         self.get_logger().error(why)
         if not self.params['reconnect']:
@@ -436,6 +452,7 @@ class FalconDriver(HapticNode):
             self.finished = True
 
     def _device_back(self, msg: str) -> None:
+        self.device_lost = False
         self.get_logger().info(msg)
         self.safety.start(time.monotonic())  # force ramps up from zero
 
