@@ -175,5 +175,9 @@ TOPIC_TISSUE = 'visualization/tissue'
 TOPIC_MARKS = 'exam/marks'
 TOPIC_COVERAGE = 'exam/coverage'
 TOPIC_EXAM_REPORT = 'exam/report'
+#: ROS's diagnostics topic (diagnostic_msgs/DiagnosticArray): rqt_robot_monitor and the page show
+#: the servo loop's health from it (status :data:`LOOP_DIAGNOSTIC`)
+TOPIC_DIAGNOSTICS = '/diagnostics'
+LOOP_DIAGNOSTIC = 'falcon_driver: servo loop'
 SERVICE_RELOAD = '/force_server/reload'
 

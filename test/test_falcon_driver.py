@@ -198,6 +198,8 @@ def test_the_driver_warns_when_its_loop_falls_behind(ctx, monkeypatch):
         said = []
         monkeypatch.setattr(d, 'get_logger', lambda: SimpleNamespace(
             warning=lambda msg, **kw: said.append((msg, kw))))
+        d.pub_diag = SimpleNamespace(published=[])
+        d.pub_diag.publish = d.pub_diag.published.append
         d._check_loop()   # the first reading starts the window
         assert said == []
         d._check_loop()
@@ -209,6 +211,14 @@ def test_the_driver_warns_when_its_loop_falls_behind(ctx, monkeypatch):
         assert kw == {'throttle_duration_sec': 60.0}
         s = d.summary()
         assert (s['loop_windows'], s['loop_windows_behind']) == (1, 1)
+        # and on ROS's diagnostics topic, for the page and rqt_robot_monitor: each window checked
+        diag = d.pub_diag.published
+        from diagnostic_msgs.msg import DiagnosticStatus
+        assert len(diag) == 1 and diag[0].status[0].level == DiagnosticStatus.WARN
+        st = diag[0].status[0]
+        assert st.name == 'falcon_driver: servo loop' and st.message.startswith('servo loop fell')
+        v = {kv.key: kv.value for kv in st.values}
+        assert (v['windows'], v['windows_behind'], v['cause']) == ('1', '1', d.behind_because())
     finally:
         d.close()
         d.destroy_node()

@@ -10,7 +10,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from haptic_anfis.device.loop_health import LoopHealth
+from haptic_anfis.device.loop_health import LoopHealth, behind_text
 from haptic_anfis.device.stats import LoopStats
 
 
@@ -101,3 +101,10 @@ def test_it_warns_exactly_when_the_ticks_miss_the_rate_or_stop_past_the_watchdog
     expected = 100.0 * lost / (len(d) + lost) > 0.5 or bool(np.any(d > 0.01))
     assert (h.check(s.summary()) is not None) == expected
     assert s.summary()['gaps_past_watchdog'] == int(np.sum(d > 0.01))
+
+
+def test_the_pages_line_says_nothing_until_a_window_fell_behind():
+    assert behind_text(12, 0, 'anything') == ''
+    t = behind_text(12, 3, 'real-time priority keeps the period')
+    assert t.startswith('the force came late in 3 of 12 check windows so far')
+    assert t.endswith('; real-time priority keeps the period')

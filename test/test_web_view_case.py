@@ -347,3 +347,32 @@ def test_every_loop_node_set_outside_to_one_case_is_followed_by_the_page(page_wi
     # then a choice on the page puts every node on its case, as before
     assert 'switched: contact_detector, force_server' in choose(page, 'default')
     assert all(f.param('case') == 'default' for f in fakes.values())
+
+
+def test_the_page_says_when_the_drivers_loop_fell_behind():
+    """The falcon driver's report on ROS's diagnostics topic (status 'falcon_driver: servo
+    loop'): a line under the status once any window fell behind, none while none did; another
+    node's status and numbers that are not ours change nothing."""
+    from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+
+    from haptic_anfis.nodes import interfaces as ifc
+    from haptic_anfis.nodes.web_view import web_view_in_thread
+
+    def report(windows, behind, name=ifc.LOOP_DIAGNOSTIC):
+        st = DiagnosticStatus(name=name, level=DiagnosticStatus.WARN if behind else
+                              DiagnosticStatus.OK, message='...')
+        st.values = [KeyValue(key='windows', value=str(windows)),
+                     KeyValue(key='windows_behind', value=str(behind)),
+                     KeyValue(key='cause', value='the servo runs under the normal scheduler')]
+        return DiagnosticArray(status=[st])
+    with web_view_in_thread({'port': free_port()}, 'x') as (node, _):
+        assert ifc.TOPIC_DIAGNOSTICS in {s.topic_name for s in node.subscriptions}
+        node._on_diagnostics(report(2, 0))
+        assert node.app.state()['loop_text'] == ''
+        node._on_diagnostics(report(3, 1))
+        text = node.app.state()['loop_text']
+        assert text.startswith('**haptic loop behind**: the force came late in 1 of 3 check '
+                               'windows so far') and text.endswith('normal scheduler')
+        node._on_diagnostics(report(9, 9, name='some_other_node: status'))
+        node._on_diagnostics(report('x', 'y'))
+        assert node.app.state()['loop_text'] == text

@@ -14,7 +14,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
-__all__ = ['LoopHealth', 'MAX_LOST_PCT']
+__all__ = ['LoopHealth', 'MAX_LOST_PCT', 'behind_text']
 
 #: issue 32's rate target (995 Hz at 1 kHz) as the largest share of the periods lost [%]
 MAX_LOST_PCT = 0.5
@@ -68,3 +68,12 @@ class LoopHealth:
             return None
         self.behind += 1
         return f'servo loop fell behind over the last {now[4] - last[4]:.1f} s: ' + '; '.join(short)
+
+
+def behind_text(windows: int, behind: int, cause: str) -> str:
+    """The line a trainee's page shows from the driver's report: '' while no window fell
+    behind, else how many did and the ``cause`` (the driver's words: what to do)."""
+    if behind <= 0:
+        return ''
+    return (f'the force came late in {behind} of {windows} check windows so far (the machine '
+            f'starves the 1 kHz loop: what the hand feels is not the tissue alone); {cause}')

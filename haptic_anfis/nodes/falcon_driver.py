@@ -333,6 +333,8 @@ class FalconDriver(HapticNode):
         self.health = LoopHealth(p['watchdog_timeout'])
         self.device_lost = False
         if p['loop_check_period'] > 0:
+            from diagnostic_msgs.msg import DiagnosticArray
+            self.pub_diag = self.create_publisher(DiagnosticArray, ifc.TOPIC_DIAGNOSTICS, 10)
             self.create_timer(p['loop_check_period'], self._check_loop)
 
     def _check_loop(self) -> None:
@@ -341,13 +343,31 @@ class FalconDriver(HapticNode):
         to do; nothing while the device is lost (its loop skips ticks on purpose then)."""
         if not self.started:
             return
+        windows = self.health.windows
         short = self.health.check(self.servo.stats.summary())
+        if self.health.windows > windows and not self.device_lost:
+            self._publish_health(short)
         if short is None or self.device_lost:
             return
         # a starved machine falls behind most windows: once a minute says it, with the count
         self.get_logger().warning(f'{short}; {self.behind_because()} ({self.health.behind} of '
                                   f'{self.health.windows} windows so far)',
                                   throttle_duration_sec=WARN_EVERY)
+
+    def _publish_health(self, short: str | None) -> None:
+        """The window just checked on ROS's diagnostics topic: WARN with ``short`` when it fell
+        behind, else OK; the counts and the likely cause as values (the page shows them)."""
+        from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+        st = DiagnosticStatus(name=ifc.LOOP_DIAGNOSTIC, hardware_id=self.params['backend'])
+        st.level = DiagnosticStatus.WARN if short else DiagnosticStatus.OK
+        st.message = short or 'kept its period'
+        h = self.health
+        st.values = [KeyValue(key=k, value=str(v)) for k, v in (
+            ('windows', h.windows), ('windows_behind', h.behind),
+            ('cause', self.behind_because()), ('scheduling', self.servo.scheduling))]
+        msg = DiagnosticArray(status=[st])
+        msg.header.stamp = self.get_clock().now().to_msg()
+        self.pub_diag.publish(msg)
 
     def behind_because(self) -> str:
         """The likely cause of a servo loop falling behind, and what to do, from how it runs."""

@@ -104,6 +104,8 @@ class WebView(HapticNode):
             ('force', WrenchStamped, ifc.TOPIC_COMMAND, NEWEST),
             ('contact', JointState, ifc.TOPIC_CONTACT, CONTACT_QUEUE))}
         self.create_subscription(PointStamped, ifc.TOPIC_MARKS, self._on_mark, 10)
+        from diagnostic_msgs.msg import DiagnosticArray
+        self.create_subscription(DiagnosticArray, ifc.TOPIC_DIAGNOSTICS, self._on_diagnostics, 10)
         from .session import STATUS_QOS, STATUS_TOPIC
         self._pids: dict[str, int] = {}   # case node -> the process it last said it runs in
         self._chosen = False   # the instructor chose a case here: a restarted node needs it
@@ -155,6 +157,21 @@ class WebView(HapticNode):
             if values:
                 stamp = ev.stamp.sec * 1_000_000_000 + ev.stamp.nanosec
                 self._requests.append(('reported', (name, values, declared, stamp)))
+
+    def _on_diagnostics(self, m) -> None:
+        """The falcon driver's report on its servo loop (ROS's diagnostics topic): the page says
+        when the loop fell behind, so the trainee and the instructor know the force came late
+        (:func:`~haptic_anfis.device.loop_health.behind_text`); other statuses are not ours."""
+        from ..device.loop_health import behind_text
+        for st in m.status:
+            if st.name == ifc.LOOP_DIAGNOSTIC:
+                v = {kv.key: kv.value for kv in st.values}
+                try:
+                    text = behind_text(int(v.get('windows', 0)), int(v.get('windows_behind', 0)),
+                                       v.get('cause', ''))
+                except ValueError:   # not our driver's numbers: say nothing rather than wrong
+                    continue
+                self.app.show_loop_health(text)
 
     def _on_mark(self, m: PointStamped) -> None:
         if self._collecting():

@@ -151,6 +151,8 @@ class ViewApp:
     def _gui(self, controls: bool, cases: list[str]) -> None:
         g = self.server.gui
         self.g_status = g.add_markdown('**live** — waiting for the probe')
+        #: the haptic loop's health as the falcon driver reports it ('' while it keeps up)
+        self.g_loop = g.add_markdown('')
         with g.add_folder('Exam'):
             self.g_clock = g.add_markdown('clock 0:00')
             self.g_bar = g.add_progress_bar(0.0, color='gray')
@@ -205,6 +207,11 @@ class ViewApp:
             self.g_msg.content = text
         else:
             self.g_status.content = text
+
+    def show_loop_health(self, text: str) -> None:
+        """A line under the status that the haptic loop fell behind (``text``:
+        :func:`~haptic_anfis.device.loop_health.behind_text`), or none (``''``)."""
+        self.g_loop.content = f'**haptic loop behind**: {text}' if text else ''
 
     def set_exam_running(self, running: bool, blind: bool = False, case_name: str = '') -> None:
         """The live state of an exam: start / stop buttons, lesions hidden, status line."""
@@ -439,6 +446,7 @@ class ViewApp:
                 'numbers_text': self.g_numbers.content,
                 'coverage_text': self.g_cov.content, 'gauge_text': self.g_gauge.content,
                 'cue': self.g_cue.content, 'status': self.g_status.content,
+                'loop_text': self.g_loop.content,
                 'lesions': [(le.name, le.status) for le in self.debrief.lesions]
                 if self.debrief is not None else [],
                 'lesions_visible': bool(self._lesion_nodes),
