@@ -31,6 +31,11 @@ def test_systematic_trainee_covers_and_finds_the_lesion_from_forces(tmp_path, ca
     assert (tmp_path / 'report.png').is_file()
     assert json.loads((tmp_path / 'report.json').read_text())['score'] == r['score']
     pytest.systematic_score = r['score']
+    # the servo loop's figures over the exam, and a note exactly when a check window fell behind
+    loop = r['haptic_loop']
+    assert loop['rate_hz'] > 0 and loop['loop_windows'] >= 1, loop
+    assert any(n.startswith('haptic loop: ') for n in r['notes']) == (
+        loop['loop_windows_behind'] > 0), (loop, r['notes'])
 
 
 def test_systematic_trainee_marks_nothing_on_the_lesion_free_case(tmp_path, capfd):

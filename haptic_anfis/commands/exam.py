@@ -238,6 +238,9 @@ def _run_sim(args):
         report['examiner_lost_contacts'] = lost_contacts(graph.contact.n_poses, report,
                                                         examiner.samples)
     report['interrupted'] = interrupted
+    report['haptic_loop'], loop_note = haptic_loop(driver)
+    if loop_note:
+        report['notes'] = list(report.get('notes', [])) + [loop_note]
     if scene_note:
         report['notes'] = [scene_note] + list(report.get('notes', []))
     # cut off by --duration (or its 300 s default) before the trainee finished: not a whole exam
@@ -303,6 +306,23 @@ def _report_bag(args):
     return session_from_bag(args.bag, args.case, args.exam_config)
 
 
+#: the driver's loop figures an exam report carries (``haptic_loop``)
+LOOP_KEYS = ('rate_hz', 'periods_lost', 'max_gap_ms', 'gaps_past_watchdog', 'loop_windows',
+             'loop_windows_behind', 'servo_scheduling')
+
+
+def haptic_loop(driver) -> tuple[dict, str | None]:
+    """(the servo loop's figures over the exam, from the falcon driver's summary; a note for
+    the report when any of its ``loop_check_period`` windows fell behind, else None): the
+    instructor reading the report then knows whether the forces the trainee felt came late."""
+    from ..device.loop_health import behind_text
+    s = driver.summary()
+    loop = {k: s.get(k) for k in LOOP_KEYS}
+    text = behind_text(int(loop['loop_windows'] or 0), int(loop['loop_windows_behind'] or 0),
+                       driver.behind_because())
+    return loop, (f'haptic loop: {text}' if text else None)
+
+
 def print_report(r: dict) -> None:
     c = r['coverage_pct']
     print(f"coverage       light {c['light']:.1f} %, medium {c['medium']:.1f} %, deep "
@@ -316,6 +336,11 @@ def print_report(r: dict) -> None:
     for les in r['lesions']:
         print(f"  lesion {les['name']}: {'found' if les['found'] else les['missed']}")
     print(f"score          {r['score']:.1f} ({r['verdict']})")
+    loop = r.get('haptic_loop')   # exam run only: a bag's report has no loop figures
+    if loop and loop.get('rate_hz') is not None:
+        print(f"haptic loop    {loop['rate_hz']:.1f} Hz, {loop['loop_windows_behind']} of "
+              f"{loop['loop_windows']} check windows behind, {loop['gaps_past_watchdog']} gaps "
+              'past the watchdog')
     for line in r['feedback']:
         print(f'  - {line}')
     for n in r['notes']:
