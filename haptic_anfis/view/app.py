@@ -211,7 +211,9 @@ class ViewApp:
     def show_loop_health(self, text: str) -> None:
         """A line under the status that the haptic loop fell behind (``text``:
         :func:`~haptic_anfis.device.loop_health.behind_text`), or none (``''``)."""
-        self.g_loop.content = f'**haptic loop behind**: {text}' if text else ''
+        content = f'**haptic loop behind**: {text}' if text else ''
+        if content != self.g_loop.content:   # every update redraws the page for a while
+            self.g_loop.content = content
 
     def set_exam_running(self, running: bool, blind: bool = False, case_name: str = '') -> None:
         """The live state of an exam: start / stop buttons, lesions hidden, status line."""
