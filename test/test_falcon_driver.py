@@ -2,6 +2,7 @@
 and a whole run against the fake FTDI device. No hardware."""
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
 import time
@@ -247,20 +248,30 @@ def test_a_loop_check_period_under_a_second_is_refused(ctx):
         driver(ctx, loop_check_period=0.5)
 
 
-@pytest.mark.parametrize('loop, backend, scheduling, cause', [
-    ('native_process', 'sim', 'compiled tick in servo process 7 (own session); normal scheduler: '
-     'SCHED_FIFO 50 refused (no right); short time slice', 'runs under the normal scheduler'),
-    ('native_process', 'sim', 'compiled tick in servo process 7 (own session); normal scheduler '
-     '(priority 0)', 'runs under the normal scheduler'),
-    ('native_process', 'sim', 'compiled tick in servo process 7 (own session); SCHED_FIFO '
+@pytest.mark.parametrize('loop, backend, realtime, scheduling, cause', [
+    ('native_process', 'sim', False, 'compiled tick in servo process 7 (own session); normal '
+     'scheduler: SCHED_FIFO 50 refused (no right); short time slice',
+     'runs under the normal scheduler'),
+    ('native_process', 'sim', False, 'compiled tick in servo process 7 (own session); normal '
+     'scheduler (priority 0)', 'runs under the normal scheduler'),
+    ('native_process', 'sim', True, 'compiled tick in servo process 7 (own session); SCHED_FIFO '
      'priority 50', 'the machine itself stalled (docs'),
-    ('native_process', 'falcon', 'SCHED_RR priority 20 from rtkit, in place of SCHED_FIFO 50',
-     "the machine itself stalled, or the device's USB replies came late"),
-    ('python', 'sim', 'SCHED_FIFO priority 50', 'waits for the interpreter lock'),
-    ('native_process', 'sim', '', "the servo thread's scheduling: not reported")])
-def test_the_warning_names_the_likely_cause(ctx, loop, backend, scheduling, cause):
+    ('native_process', 'falcon', True, 'SCHED_RR priority 20 from rtkit, in place of SCHED_FIFO '
+     '50', "the machine itself stalled, or the device's USB replies came late"),
+    # demoted since the start (rtkit's run-time limit): the threads' policy now, not the line
+    ('native_process', 'sim', False, 'SCHED_RR priority 20 from rtkit, in place of SCHED_FIFO '
+     '50', 'runs under the normal scheduler'),
+    ('python', 'sim', True, 'SCHED_FIFO priority 50', 'waits for the interpreter lock'),
+    ('native_process', 'sim', None, '', "the servo thread's scheduling: not reported")])
+def test_the_warning_names_the_likely_cause(ctx, monkeypatch, loop, backend, realtime,
+                                            scheduling, cause):
+    """The cause follows the servo threads' policy as the kernel reports it
+    (``processes.servo_realtime``; None: no servo thread found)."""
+    from haptic_anfis.nodes import processes
     d = driver(ctx)
     try:
+        monkeypatch.setattr(processes, 'servo_realtime',
+                            lambda pid: realtime if pid == os.getpid() else None)
         d.servo_loop, d.params = loop, {**d.params, 'backend': backend}
         d.servo.scheduling = scheduling
         assert cause in d.behind_because()

@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import sys
 import time
 from typing import Callable
@@ -374,16 +375,19 @@ class FalconDriver(HapticNode):
         if self.servo_loop == 'python':
             return ('the servo tick runs in Python (servo_loop: python) and waits for the '
                     'interpreter lock; servo_loop: auto runs it compiled, in a process of its own')
-        sched = self.servo.scheduling
-        if 'SCHED_' in sched and 'refused' not in sched:
+        # the servo threads' policy as the kernel has it now (rtkit may have demoted them since
+        # the start's scheduling line)
+        from .processes import servo_realtime
+        realtime = servo_realtime(os.getpid())
+        if realtime:
             return ('the servo is real-time: the machine itself stalled'
                     + (", or the device's USB replies came late" if self.params['backend']
                        == 'falcon' else '') + ' (docs/servo_loop.md, "Stalls of the machine '
                     'itself")')
-        if 'normal scheduler' in sched:
+        if realtime is False:
             return ('the servo runs under the normal scheduler; real-time priority keeps the '
                     'period (docs/nodes.md, "The servo thread\'s priority")')
-        return f'the servo thread\'s scheduling: {sched or "not reported"}'
+        return f'the servo thread\'s scheduling: {self.servo.scheduling or "not reported"}'
 
     def start_loop(self) -> None:
         """Start the servo loop (a real device is opened here: a FalconError / OSError). Called
