@@ -455,6 +455,12 @@ def test_a_held_model_expires_with_the_probe_past_the_hold_radius():
     assert int(lp.st[nt.S.status]) == EXTRAPOLATED and f[0] == pytest.approx(2.0)
 
 
+@pytest.mark.parametrize('damping', [0.0, -1.5, float('nan'), float('inf'), '1.5', True])
+def test_a_damping_that_is_not_a_damping_is_refused(damping):
+    with pytest.raises(ValueError, match='damping: expected a finite number > 0 N s/m'):
+        loop('local_model', damping=damping)
+
+
 @pytest.mark.parametrize('radius', [0.0, -0.01, float('nan'), float('inf'), '0.03', True])
 def test_a_hold_radius_that_is_not_a_distance_is_refused(radius):
     with pytest.raises(ValueError, match='hold_radius: expected a finite number > 0 m'):

@@ -442,8 +442,7 @@ class NativeServoLoop:
             raise ValueError(f'priority: expected 0 (normal scheduling) to 99, got {priority!r}')
         if mode not in ('zoh', 'local_model'):
             raise ValueError(f"mode: expected 'zoh' or 'local_model', got {mode!r}")
-        if not (math.isfinite(damping) and damping > 0):
-            raise ValueError(f'damping: expected a finite number > 0 N s/m, got {damping!r}')
+        _check_number('damping', damping, 'N s/m')
         _check_number('hold_radius', hold_radius, 'm')
         _check_number('blend_time', blend_time, 's', zero=True)
         _check_number('passivity_window', passivity_window, 's')
