@@ -25,6 +25,7 @@ from haptic_anfis.record import (AlreadyStored, RecordError, case_level, delete_
                                  trainees)
 from haptic_anfis.record import db as rdb
 from haptic_anfis.record.draw import next_case
+from haptic_anfis.record.levels import has_palpable_lesion
 from haptic_anfis.record.mastery import MasteryConfig, MasteryLevel
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -463,9 +464,9 @@ def test_case_level_prefers_a_stated_level_else_count_and_size():
     assert all(case_level(c) == c.level for c in library().cases() if c.level is not None)
 
 
-def session(level, deep=95.0, missed=0, false_marks=0):
+def session(level, deep=95.0, missed=0, false_marks=0, lesions=1):
     return {'case_level': level, 'coverage_pct': {'deep': deep}, 'palpable_missed': missed,
-            'false_marks': false_marks}
+            'false_marks': false_marks, 'lesions': lesions, 'not_palpable': []}
 
 
 def test_mastery_needs_n_consecutive_sessions_meeting_the_level():
@@ -476,7 +477,8 @@ def test_mastery_needs_n_consecutive_sessions_meeting_the_level():
     m = mastery([ok, ok, weak, ok, ok, ok], cfg)
     assert m['mastered_level'] == 1 and m['next_level'] == 2
     assert m['levels'][1] == {'sessions': 6, 'met': 5, 'streak': 3, 'best_streak': 3,
-                              'needed': 3, 'mastered': True}
+                              'needed': 3, 'mastered': True, 'lesion_free': 0,
+                              'lesion_free_met': 0, 'void': 0}
     # a later weak session does not take it away; level 2 with one false mark is not met
     hist = [ok] * 3 + [weak] + [session(2, false_marks=1)] * 3
     assert mastery(hist, cfg)['mastered_level'] == 1
@@ -510,24 +512,26 @@ def test_next_case_climbs_a_level_after_mastery(db, rng):
     cfg = MasteryConfig({1: MasteryLevel(consecutive_sessions=2), 2: MasteryLevel(),
                          3: MasteryLevel()})
     c, level, m = next_case(db, 'nia', lib, cfg)       # no record yet: level 1
-    assert level == 1 and case_level(c) == 1 and m['mastered_level'] == 0
+    assert level == 1 and m['mastered_level'] == 0
+    assert case_level(c) == 1 or not has_palpable_lesion(c)   # a lesion-free case: any level
     assert next_case(db, 'nia', lib, cfg)[0] == c       # reproducible from the record
     for _ in range(2):
         store_session(db, 'nia', fake_report(rng, deep=95, case=c.name), case_level=1)
     c2, level2, _ = next_case(db, 'nia', lib, cfg)
-    assert level2 == 2 and case_level(c2) == 2
+    assert level2 == 2 and (case_level(c2) == 2 or not has_palpable_lesion(c2))
     # a configured level above the hardest case in the library draws from the hardest
     one = MasteryLevel(consecutive_sessions=1)
-    top = max(case_level(c) for c in lib.ready())
+    top = max(case_level(c) for c in lib.ready() if has_palpable_lesion(c))
     cfg_all = MasteryConfig({k: one for k in range(1, top + 2)})
     for k in range(2, top + 1):
         store_session(db, 'nia', fake_report(rng, deep=95), case_level=k)
     c3, level3, m3 = next_case(db, 'nia', lib, cfg_all)
-    assert m3['next_level'] == top + 1 and level3 == top and case_level(c3) == top
+    assert m3['next_level'] == top + 1 and level3 == top
+    assert case_level(c3) == top or not has_palpable_lesion(c3)
 
 
 def test_next_case_skips_a_level_without_cases_to_the_next_harder(db, rng):
-    fake = [SimpleNamespace(name=f'c{k}', level=k, tumours=()) for k in (1, 2, 3, 5)]
+    fake = [SimpleNamespace(name=f'c{k}', level=k, tumours=('lump',)) for k in (1, 2, 3, 5)]
     lib = SimpleNamespace(ready=lambda: fake)
     one = MasteryLevel(consecutive_sessions=1)
     cfg = MasteryConfig({k: one for k in range(1, 6)})
@@ -538,8 +542,8 @@ def test_next_case_skips_a_level_without_cases_to_the_next_harder(db, rng):
 
 
 def test_next_case_prefers_graded_cases_of_the_level(db):
-    old = SimpleNamespace(name='coarse', level=None, tumours=())   # level 1 by its lesions
-    new = SimpleNamespace(name='graded', level=1, tumours=())
+    old = SimpleNamespace(name='coarse', level=None, tumours=(SimpleNamespace(radius=0.01),))   # level 1: one lesion
+    new = SimpleNamespace(name='graded', level=1, tumours=(SimpleNamespace(radius=0.01),))
     lib = SimpleNamespace(ready=lambda: [old, new])
     for _ in range(3):
         c, level, _ = next_case(db, 'pia', lib, MasteryConfig({1: MasteryLevel()}))

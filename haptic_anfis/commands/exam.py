@@ -27,6 +27,11 @@ HELP = 'examination mode: run a simulated trainee through an exam, or score a re
 #: examiner
 MARK_DRAIN_S = 10.0
 
+#: [s] the longest ``exam run`` waits, once the exam is over, for the examiner in its own
+#: process to write its report (it says so every 10 s meanwhile): everything scored is kept
+#: unless the examiner is still writing after this long
+EXAMINER_FINISH_S = 600.0
+
 HEADLINE = ('coverage_pct', 'duration_s', 'contact_s', 'path_length_m', 'hits', 'misses',
             'false_marks', 'score', 'verdict', 'pattern')
 
@@ -116,6 +121,7 @@ def _run_sim(args):
     from rclpy.parameter import Parameter
 
     from ..exam.trainee import TraineeController, trainee_path
+    from ..exam.void import void_reason
     from ..nodes.examiner import Examiner
     from ..nodes.sim_trainee import SimTrainee
     from ..session import OneProcessSession, spec_from_args
@@ -226,7 +232,9 @@ def _run_sim(args):
         print('interrupted', flush=True)
         interrupted = True
     finally:
-        session.stop()   # the device to zero force; SIGINT: the examiner writes its report
+        # the device to zero force; SIGINT: the examiner writes its report, and it may take
+        # minutes on a loaded machine (the figure, the samples): wait for it, not a short grace
+        session.stop(finish={'examiner': EXAMINER_FINISH_S} if own else None)
     session.print_recorded()
     if not own:
         report, exam_session = examiner.report(), examiner.session
@@ -241,6 +249,8 @@ def _run_sim(args):
     report['haptic_loop'], loop_note = haptic_loop(driver)
     if loop_note:
         report['notes'] = list(report.get('notes', [])) + [loop_note]
+    # the machine's load must not count against the trainee: scored, kept, but void
+    report['void_reason'] = void_reason(report['haptic_loop'])
     if scene_note:
         report['notes'] = [scene_note] + list(report.get('notes', []))
     # cut off by --duration (or its 300 s default) before the trainee finished: not a whole exam
@@ -256,6 +266,8 @@ def _run_sim(args):
         'felt_samples': controller.felt}
     report['heat_maps_published'] = heat_maps
     report['case'] = case.name if case else (scene or 'default')
+    # drawn by --next: the record names the case to the instructor only
+    report['blind'] = bool(getattr(args, 'blind', False))
     report['force_mode'] = args.force_mode
     report['examiner_process'] = 'own' if own else 'loop'
     report['own_session'] = os.getsid(0) == os.getpid()
@@ -285,10 +297,12 @@ def _side_report(report_dir, out: str | None, view_args=None):
 
     from ..nodes.examiner import SAMPLES_FILE
     d = Path(report_dir.name)
-    try:
+    try:   # written last and whole: its presence says the samples and figure are there
         report = json.loads((d / 'report.json').read_text())
     except (OSError, ValueError) as exc:
-        raise ValueError(f'exam: the examiner wrote no report ({exc})') from None
+        raise ValueError(f'exam: the examiner (its own process) wrote no report within '
+                         f'{EXAMINER_FINISH_S:g} s of the end of the exam ({exc}); its log is '
+                         'above') from None
     if out and (d / 'report.png').is_file():
         Path(out).mkdir(parents=True, exist_ok=True)
         shutil.copy(d / 'report.png', Path(out) / 'report.png')
@@ -336,6 +350,8 @@ def print_report(r: dict) -> None:
     for les in r['lesions']:
         print(f"  lesion {les['name']}: {'found' if les['found'] else les['missed']}")
     print(f"score          {r['score']:.1f} ({r['verdict']})")
+    if r.get('void_reason'):
+        print(f"void           {r['void_reason']}")
     loop = r.get('haptic_loop')   # exam run only: a bag's report has no loop figures
     if loop and loop.get('rate_hz') is not None:
         print(f"haptic loop    {loop['rate_hz']:.1f} Hz, {loop['loop_windows_behind']} of "

@@ -2,8 +2,11 @@
 --trainee-id ID``).
 
     haptic-anfis trainees list
-    haptic-anfis trainees show ID
-    haptic-anfis trainees progress ID [--json] [--figure PNG]
+    haptic-anfis trainees show ID [--instructor]
+    haptic-anfis trainees progress ID [--json] [--figure PNG] [--instructor]
+
+What they print is what the trainee may see: a blind session's (``exam run --next``) case is
+named only with ``--instructor`` (and in ``export``, an instructor's file).
     haptic-anfis trainees export ID --csv [-o FILE]
     haptic-anfis trainees delete ID
 """
@@ -12,6 +15,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from pathlib import Path
 
 NAME = 'trainees'
 HELP = 'the trainee record: list trainees, show sessions, progress and mastery, export, delete'
@@ -37,6 +41,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     e.add_argument('-o', '--output', metavar='FILE', default=None, help='file (default stdout)')
     d = sub.add_parser('delete', help='remove a trainee and every session of it (privacy)')
     d.add_argument('id', metavar='ID')
+    for q in (s, g):
+        q.add_argument('--instructor', action='store_true',
+                       help="the instructor's view: name the case of a blind session (--next); "
+                            'without it the output is what the trainee may see')
     for q in (lst, s, g, e, d):   # --db also after the action
         q.add_argument('--db', default=argparse.SUPPRESS, metavar='PATH', help=argparse.SUPPRESS)
 
@@ -73,19 +81,25 @@ def _table(sessions: list[dict]) -> None:
               f"{s['case_level'] if s['case_level'] is not None else '-':>3} {c['light']:>6.1f} "
               f"{c['medium']:>6.1f} {c['deep']:>6.1f} {s['pattern'] or '-':<15} {s['hits']:>3} "
               f"{s['misses']:>4} {s['false_marks']:>5} {sens:>5} {s['score']:>6.1f} "
-              f"{s['verdict']:<7} {s['duration_s']:>7.1f}")
+              f"{'void' if s.get('void') else s['verdict']:<7} {s['duration_s']:>7.1f}")
+    for s in sessions:
+        if s.get('void'):
+            print(f"  session {s['session']} is void: {s['void']}")
 
 
 def _mastery_lines(m: dict) -> None:
     print(f"mastered level {m['mastered_level'] or 'none'}; next level {m['next_level']}")
     for L, v in m['levels'].items():
-        print(f"  level {L}: {v['sessions']} session(s), {v['met']} met the thresholds, "
-              f"{v['best_streak']}/{v['needed']} in a row{' - mastered' if v['mastered'] else ''}")
+        more = ''.join(f', {n} {what}' for n, what in (
+            (v.get('lesion_free', 0), 'without a lump'), (v.get('void', 0), 'void')) if n)
+        print(f"  level {L}: {v['sessions']} session(s) with a lump, {v['met']} met the "
+              f"thresholds, {v['best_streak']}/{v['needed']} in a row"
+              f"{' - mastered' if v['mastered'] else ''}{more}")
 
 
 def _show(args, db) -> int:
     from ..record import history, load_mastery_config, mastery
-    sessions = history(db, args.id)
+    sessions = history(db, args.id, instructor=args.instructor)
     print(f'trainee {args.id}: {len(sessions)} session(s) in {db}')
     _table(sessions)
     _mastery_lines(mastery(sessions, load_mastery_config()))
@@ -98,7 +112,7 @@ def _show(args, db) -> int:
 def _progress(args, db) -> int:
     from ..record import history, load_mastery_config, mastery
     cfg = load_mastery_config(args.exam_config)
-    sessions = history(db, args.id)
+    sessions = history(db, args.id, instructor=args.instructor)
     m = mastery(sessions, cfg)
     if args.figure:
         from ..record.figure import save_progress_figure
@@ -106,6 +120,7 @@ def _progress(args, db) -> int:
             import matplotlib  # noqa: F401
         except ImportError:
             raise ValueError('--figure needs matplotlib (pip install matplotlib)') from None
+        _figure_folder(args.figure)
         deep = {100 * lv.min_deep_coverage for lv in cfg.levels.values()}
         save_progress_figure(args.id, sessions, args.figure, m,
                              pass_deep_pct=deep.pop() if len(deep) == 1 else None)
@@ -117,6 +132,20 @@ def _progress(args, db) -> int:
     if args.figure:
         print(f'figure {args.figure}')
     return 0
+
+
+def _figure_folder(path: str) -> None:
+    """Create the folder of ``--figure PATH`` (a new folder is said in one line); ValueError
+    naming the path when it cannot be made or is a file."""
+    folder = Path(path).expanduser().parent
+    if folder.is_dir():
+        return
+    try:
+        folder.mkdir(parents=True)
+    except OSError as exc:
+        raise ValueError(f'--figure {path}: cannot create its folder {str(folder)!r} '
+                         f'({exc.strerror or exc})') from None
+    print(f'created folder {folder}', file=sys.stderr)
 
 
 def _export(args, db) -> int:

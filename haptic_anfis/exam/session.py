@@ -16,6 +16,7 @@ from ..interfaces import I_DEPTH, I_IN_CONTACT, ContactLayouts
 from ..rows import RowLog
 from .config import LEVELS, ExamConfig
 from .coverage import CoverageGrid
+from .files import write_atomic
 from .findings import match, project_marks
 from .lesions import ExamSubject, lesion_surface_points
 from .pattern import classify
@@ -92,8 +93,10 @@ class ExamSession:
         """The raw samples (contacts, forces, poses, marks; times in s, SI) to ``path``
         (``.npz``), for :meth:`load_samples` in another process (``exam run``'s examiner runs in
         one of its own; the debrief replays its samples)."""
-        np.savez(path, **{k: np.array(getattr(self, k), float).reshape(-1, n)
-                          for k, n in self.SAMPLES.items()})
+        arrays = {k: np.array(getattr(self, k), float).reshape(-1, n)
+                  for k, n in self.SAMPLES.items()}
+        # whole or absent: the other process reads it as soon as the name exists
+        write_atomic(path, lambda f: np.savez(f, **arrays))
 
     def load_samples(self, path) -> None:
         """Append the samples :meth:`save_samples` wrote and fold them into the coverage.

@@ -23,6 +23,7 @@ from std_msgs.msg import ColorRGBA
 from visualization_msgs.msg import Marker, MarkerArray
 
 from ..exam import ExamSession, Surface, load_exam_config, subject_from_scene
+from ..exam.files import write_text_atomic
 from ..exam.lesions import ExamSubject
 from ..pipeline.contact import load_surface
 from . import cdr
@@ -182,9 +183,12 @@ class Examiner(HapticNode):
     def close(self) -> None:
         """Write the report into ``report_dir`` (when set)."""
         if self.params['report_dir']:
-            write_report(self.session, self.params['report_dir'])
-            # the raw samples too: exam run --view replays them in its debrief
-            self.session.save_samples(Path(self.params['report_dir']) / SAMPLES_FILE)
+            out = Path(self.params['report_dir'])
+            out.mkdir(parents=True, exist_ok=True)
+            # the raw samples first (exam run --view replays them in its debrief): report.json,
+            # written last, says everything is there
+            self.session.save_samples(out / SAMPLES_FILE)
+            write_report(self.session, out)
 
 
 #: the raw samples' file in ``report_dir`` (:meth:`ExamSession.save_samples`)
@@ -217,13 +221,15 @@ def _patch_markers(session, frame_id: str):
 
 
 def write_report(session: ExamSession, out_dir, report: dict | None = None) -> dict:
-    """report.json + report.png of ``session`` into ``out_dir`` (created); returns the report."""
+    """report.png then report.json of ``session`` into ``out_dir`` (created); returns the
+    report. report.json comes last and whole (renamed into place): a reader that sees it has
+    the figure too."""
     from ..exam.figure import save_figure
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     report = report if report is not None else session.report()
-    (out / 'report.json').write_text(json.dumps(report, indent=1))
     save_figure(session, report, out / 'report.png')
+    write_text_atomic(out / 'report.json', json.dumps(report, indent=1))
     return report
 
 

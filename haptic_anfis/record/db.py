@@ -86,7 +86,14 @@ UPDATE sessions SET palpable_missed = misses;
 _V3 = """
 ALTER TABLE sessions ADD COLUMN bag_start_ns INTEGER;
 """
-MIGRATIONS: tuple[str, ...] = (_V1, _V2, _V3)
+# v4: a session whose haptic loop fell behind is void (haptic_anfis.exam.void): why, else NULL;
+# mastery leaves it out. A blind session (exam run --next): its case is named to the instructor
+# only, never in what the trainee sees of the record.
+_V4 = """
+ALTER TABLE sessions ADD COLUMN void_reason TEXT;
+ALTER TABLE sessions ADD COLUMN blind INTEGER NOT NULL DEFAULT 0;
+"""
+MIGRATIONS: tuple[str, ...] = (_V1, _V2, _V3, _V4)
 SCHEMA_VERSION = len(MIGRATIONS)
 
 

@@ -14,7 +14,8 @@ silicone models but 14 % of 3 mm ones). Pure Python, no ROS.
 """
 from __future__ import annotations
 
-__all__ = ['MAX_LEVEL', 'SMALL_DIAMETER', 'case_level', 'level_of_case_name']
+__all__ = ['MAX_LEVEL', 'SMALL_DIAMETER', 'case_level', 'has_palpable_lesion',
+           'level_of_case_name']
 
 #: [m] a lesion narrower than this is "small" for the derived level
 SMALL_DIAMETER = 0.012
@@ -44,6 +45,20 @@ def case_level(case) -> int:
     n = len(radii)
     small = any(2 * r < SMALL_DIAMETER for r in radii)
     return min(MAX_LEVEL, 1 + max(n - 1, 0) + int(small))
+
+
+def has_palpable_lesion(case) -> bool:
+    """Whether ``case`` (a library :class:`~haptic_anfis.cases.Case`, or a scene) has a lesion
+    the trainee can feel: one its FE grading calls palpable (``Case.grading()``); for a case
+    not graded, any lesion. A case without one trains specificity (cover the breast, mark
+    nothing); the graded library puts it at level 1 (its grading says "1 when nothing is
+    palpable"), and ``exam run --next`` draws it at every level."""
+    grading = getattr(case, 'grading', None)
+    g = grading() if callable(grading) else None
+    if g is not None:
+        return any(les.get('palpable') for les in g.get('lesions', ()))
+    scene = getattr(case, 'scene', case)
+    return bool(getattr(scene, 'tumours', ()))
 
 
 def level_of_case_name(name: str | None) -> int | None:

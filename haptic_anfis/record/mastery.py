@@ -3,8 +3,9 @@
 The thresholds live in ``config/exam.yaml`` under ``mastery`` (documented there). A session
 *meets* level L when its case is of level L and its deep coverage, palpable lesions found and
 false marks meet L's thresholds; level L is *mastered* once ``consecutive_sessions`` of the
-trainee's level-L sessions in a row meet it (a pass standard with retry: a later weak session
-does not take a mastered level away). The trainee's mastered level is the highest L with every
+trainee's level-L sessions with a palpable lesion in a row meet it (lumps must be found: a case
+without one never extends a streak, and failing one breaks it; a pass standard with retry: a
+later weak session does not take a mastered level away; a void session counts neither way). The trainee's mastered level is the highest L with every
 level 1..L mastered; the next level is one above (the top level stays the top). Pure, no ROS.
 """
 from __future__ import annotations
@@ -18,7 +19,8 @@ import yaml
 
 from .store import same_recording
 
-__all__ = ['MasteryConfig', 'MasteryLevel', 'load_mastery_config', 'mastery', 'meets']
+__all__ = ['MasteryConfig', 'MasteryLevel', 'lesion_free', 'load_mastery_config', 'mastery',
+           'meets']
 
 
 @dataclass(frozen=True)
@@ -111,33 +113,62 @@ def meets(session: dict, level: MasteryLevel) -> bool:
             and session['false_marks'] <= level.max_false_marks)
 
 
+def lesion_free(session: dict) -> bool:
+    """Whether the session's case had no palpable lesion (its report's lesions all not
+    palpable, or none): a specificity session."""
+    return session['lesions'] - len(session.get('not_palpable') or ()) <= 0
+
+
 def mastery(sessions: list[dict], config: MasteryConfig = DEFAULT) -> dict:
     """Mastery of a trainee from its sessions (oldest first, :func:`history` dicts).
 
-    Returns ``{'mastered_level': int (0 = none), 'next_level': int, 'levels': {L: {'sessions',
-    'met', 'streak' (current run), 'best_streak', 'needed', 'mastered'}}}``; sessions with no
-    case level are not counted, nor a bag's second session (a recording scored again, in a
-    record from before :class:`~haptic_anfis.record.AlreadyStored`); two recordings made at one
-    path (``bag_start_ns`` differs) count as two.
+    Lumps must be found: level L's streak counts only sessions on level-L cases with a palpable
+    lesion. A session on a case with none (:func:`lesion_free`: it trains specificity, drawn at
+    every level) never extends a streak, and one that misses the thresholds of the level the
+    trainee was working on at the time (the first not yet mastered) ends that level's streak.
+    A void session (its haptic loop fell behind, ``void``) counts neither way.
+
+    Returns ``{'mastered_level': int (0 = none), 'next_level': int, 'levels': {L: {'sessions'
+    (with a palpable lesion), 'met', 'streak' (current run), 'best_streak', 'needed',
+    'mastered', 'lesion_free' (specificity sessions while working on L), 'lesion_free_met',
+    'void'}}}``; sessions with no case level are not counted, nor a bag's second session (a
+    recording scored again, in a record from before :class:`~haptic_anfis.record.AlreadyStored`);
+    two recordings made at one path (``bag_start_ns`` differs) count as two.
     """
     counted: list[dict] = []
     for s in sessions:   # a recording counts once (store_session's rule)
         if not any(same_recording(s.get('bag'), s.get('bag_start_ns'), c.get('bag'),
                                   c.get('bag_start_ns')) for c in counted):
             counted.append(s)
-    per = {}
-    for L, th in sorted(config.levels.items()):
-        mine = [s for s in counted if s.get('case_level') == L]
-        streak = best = met = 0
-        for s in mine:
-            ok = meets(s, th)
-            met += ok
-            streak = streak + 1 if ok else 0
-            best = max(best, streak)
-        per[L] = {'sessions': len(mine), 'met': met, 'streak': streak, 'best_streak': best,
-                  'needed': th.consecutive_sessions, 'mastered': best >= th.consecutive_sessions}
+    per = {L: {'sessions': 0, 'met': 0, 'streak': 0, 'best_streak': 0,
+               'needed': th.consecutive_sessions, 'mastered': False, 'lesion_free': 0,
+               'lesion_free_met': 0, 'void': 0} for L, th in sorted(config.levels.items())}
+
+    def working() -> int:   # the first level not mastered yet (the top once all are)
+        return next((L for L in per if not per[L]['mastered']), config.top)
+    for s in counted:
+        free = lesion_free(s)
+        L = working() if free else s.get('case_level')
+        if L not in per:
+            continue
+        v = per[L]
+        if s.get('void'):
+            v['void'] += 1
+            continue
+        ok = meets(s, config.levels[L])
+        if free:
+            v['lesion_free'] += 1
+            v['lesion_free_met'] += ok
+            if not ok:
+                v['streak'] = 0
+            continue
+        v['sessions'] += 1
+        v['met'] += ok
+        v['streak'] = v['streak'] + 1 if ok else 0
+        v['best_streak'] = max(v['best_streak'], v['streak'])
+        v['mastered'] = v['best_streak'] >= v['needed']
     mastered = 0
-    for L in sorted(per):
+    for L in per:
         if not per[L]['mastered']:
             break
         mastered = L

@@ -16,7 +16,7 @@ from typing import IO
 
 from .db import RecordError, connect, resolve_db_path, write
 
-__all__ = ['CSV_COLUMNS', 'WALL_CLOCK_NS', 'AlreadyStored', 'UnknownTrainee',
+__all__ = ['BLIND_CASE', 'CSV_COLUMNS', 'WALL_CLOCK_NS', 'AlreadyStored', 'UnknownTrainee',
            'check_trainee_id', 'delete_trainee', 'export_csv', 'history', 'not_palpable_of',
            'same_recording', 'session_report', 'session_row', 'store_session', 'trainees',
            'utc_iso']
@@ -27,7 +27,7 @@ _ID = re.compile(r'^[A-Za-z0-9][A-Za-z0-9._@+-]{0,63}$')
 CSV_COLUMNS = ('session', 'started_utc', 'source', 'case', 'case_level', 'coverage_light_pct',
                'coverage_medium_pct', 'coverage_deep_pct', 'pattern', 'lesions', 'hits',
                'misses', 'palpable_missed', 'not_palpable', 'false_marks', 'sensitivity',
-               'score', 'verdict', 'duration_s', 'contact_s', 'bag')
+               'score', 'verdict', 'duration_s', 'contact_s', 'bag', 'void', 'blind')
 
 
 class UnknownTrainee(RecordError):
@@ -96,6 +96,8 @@ def session_row(report: dict, *, source: str, case_level: int | None = None,
             'duration_s': float(report['duration_s']),
             'contact_s': float(report.get('contact_s', 0.0)),
             'not_palpable': json.dumps(hidden), 'palpable_missed': palpable_missed,
+            'void_reason': report.get('void_reason') or None,
+            'blind': int(bool(report.get('blind'))),
             'report_json': json.dumps(report, allow_nan=False, default=str),
         }
     except (KeyError, TypeError) as exc:
@@ -188,7 +190,10 @@ def trainees(db: str | os.PathLike | None = None) -> list[dict]:
 _HISTORY_COLS = ('id', 'started_utc', 'source', 'case_name', 'case_level', 'bag_path',
                  'coverage_light', 'coverage_medium', 'coverage_deep', 'pattern', 'lesions',
                  'hits', 'misses', 'palpable_missed', 'not_palpable', 'false_marks', 'score',
-                 'verdict', 'duration_s', 'contact_s', 'bag_start_ns')
+                 'verdict', 'duration_s', 'contact_s', 'bag_start_ns', 'void_reason', 'blind')
+
+#: what the trainee's view of the record shows for a blind session's case
+BLIND_CASE = 'blind'
 
 
 def _known(conn, db, trainee_id: str) -> None:
@@ -198,7 +203,8 @@ def _known(conn, db, trainee_id: str) -> None:
                           f'{str(resolve_db_path(db))!r} (known: {", ".join(known) or "none"})')
 
 
-def history(db: str | os.PathLike | None, trainee_id: str, full: bool = False) -> list[dict]:
+def history(db: str | os.PathLike | None, trainee_id: str, full: bool = False,
+            instructor: bool = False) -> list[dict]:
     """The sessions of ``trainee_id``, oldest first (by their start; sessions stored in
     another order, a bag scored later, take their place), one dict each (the browser view's
     call):
@@ -208,8 +214,13 @@ def history(db: str | os.PathLike | None, trainee_id: str, full: bool = False) -
     ``coverage_pct`` {light, medium, deep} [%], ``pattern``,
     ``lesions``, ``hits``, ``misses``, ``palpable_missed``, ``not_palpable`` (names),
     ``false_marks``, ``sensitivity`` (found / palpable lesions, None without one), ``score``,
-    ``verdict``, ``duration_s``, ``contact_s`` [s]; with ``full``, ``report`` (the stored exam
-    report).
+    ``verdict``, ``duration_s``, ``contact_s`` [s], ``void`` (why the session does not count
+    toward mastery: its haptic loop fell behind; None for a session that counts), ``blind``
+    (drawn by ``exam run --next``); with ``full``, ``report`` (the stored exam report).
+
+    What the trainee may see unless ``instructor``: a blind session's ``case`` is
+    :data:`BLIND_CASE` (a case name gives its lesions' size and depth away) and its ``report``
+    names no case; ``instructor`` (the instructor's console, the blind draw) gives every name.
 
     Raises:
         RecordError: no record file, unknown trainee (the message names the file), bad file.
@@ -227,8 +238,10 @@ def history(db: str | os.PathLike | None, trainee_id: str, full: bool = False) -
         hidden = json.loads(d['not_palpable'] or '[]')
         palpable = d['lesions'] - len(hidden)
         missed = d['palpable_missed'] if d['palpable_missed'] is not None else d['misses']
+        hide = bool(d['blind']) and not instructor
         h = {'session': d['id'], 'started_utc': d['started_utc'], 'source': d['source'],
-             'case': d['case_name'], 'case_level': d['case_level'], 'bag': d['bag_path'],
+             'case': BLIND_CASE if hide else d['case_name'], 'case_level': d['case_level'],
+             'bag': d['bag_path'],
              'bag_start_ns': d['bag_start_ns'],
              'coverage_pct': {'light': d['coverage_light'], 'medium': d['coverage_medium'],
                               'deep': d['coverage_deep']},
@@ -237,9 +250,11 @@ def history(db: str | os.PathLike | None, trainee_id: str, full: bool = False) -
              'false_marks': d['false_marks'],
              'sensitivity': round((palpable - missed) / palpable, 4) if palpable > 0 else None,
              'score': d['score'], 'verdict': d['verdict'], 'duration_s': d['duration_s'],
-             'contact_s': d['contact_s']}
+             'contact_s': d['contact_s'], 'void': d['void_reason'], 'blind': bool(d['blind'])}
         if full:
             h['report'] = json.loads(r[-1])
+            if hide:
+                h['report']['case'] = BLIND_CASE
         out.append(h)
     return out
 
@@ -287,7 +302,7 @@ def delete_trainee(db: str | os.PathLike | None, trainee_id: str) -> int:
 def export_csv(db: str | os.PathLike | None, trainee_id: str, out: IO[str]) -> int:
     """Write ``trainee_id``'s sessions as CSV (:data:`CSV_COLUMNS`, a header row first) to
     ``out``; returns the number of sessions."""
-    rows = history(db, trainee_id)
+    rows = history(db, trainee_id, instructor=True)   # an instructor's or researcher's file
     w = csv.writer(out, lineterminator='\n')
     w.writerow(CSV_COLUMNS)
     for h in rows:
@@ -296,5 +311,6 @@ def export_csv(db: str | os.PathLike | None, trainee_id: str, out: IO[str]) -> i
                     c['light'], c['medium'], c['deep'], h['pattern'], h['lesions'], h['hits'],
                     h['misses'], h['palpable_missed'], ';'.join(h['not_palpable']),
                     h['false_marks'], '' if h['sensitivity'] is None else h['sensitivity'],
-                    h['score'], h['verdict'], h['duration_s'], h['contact_s'], h['bag'] or ''])
+                    h['score'], h['verdict'], h['duration_s'], h['contact_s'], h['bag'] or '',
+                    h['void'] or '', int(h['blind'])])
     return len(rows)

@@ -8,12 +8,14 @@ simulated hand until everything is ready, and stops them with the device at zero
 """
 from __future__ import annotations
 
+import signal
+import subprocess
 import time
 from typing import Callable, Mapping, Sequence
 
 from .spec import SessionSpec
 
-__all__ = ['OneProcessSession', 'open_graph', 'RECORDED_TOPICS']
+__all__ = ['OneProcessSession', 'finish_process', 'open_graph', 'RECORDED_TOPICS']
 
 
 def _recorded_topics() -> tuple[str, ...]:
@@ -42,6 +44,33 @@ def open_graph(spec: SessionSpec | None = None, *, overrides: dict | None = None
                        visualizer=spec.visualizer and spec.in_process
                        if visualizer is None else visualizer,
                        overrides=overrides, extra=extra)
+
+
+#: [s] between the lines saying a side node is still finishing its output
+FINISH_SAY_S = 10.0
+
+
+def finish_process(p: subprocess.Popen, name: str, limit: float,
+                   say: Callable[[str], None] = lambda line: print(line, flush=True)) -> int | None:
+    """Ask ``p`` (the side node ``name``) to stop as Ctrl-C would and wait until it exits, at
+    most ``limit`` s, saying every :data:`FINISH_SAY_S` s that it is still at work; its exit
+    code, or None (after one line saying so) when it is still running at the limit (the
+    caller's stop then kills it)."""
+    if p.poll() is None:
+        p.send_signal(signal.SIGINT)
+    t0 = time.monotonic()
+    while True:
+        left = limit - (time.monotonic() - t0)
+        if left <= 0:
+            if p.poll() is None:
+                say(f'{name}: still writing its output after {limit:g} s; stopping it')
+                return None
+            return p.returncode
+        try:
+            return p.wait(min(FINISH_SAY_S, left))
+        except subprocess.TimeoutExpired:
+            say(f'{name}: finishing its output ({time.monotonic() - t0:.0f} s so far, at most '
+                f'{limit:g} s)')
 
 
 class OneProcessSession:
@@ -164,9 +193,12 @@ class OneProcessSession:
         return ''.join(f', {n} in pid {pid}' for n, pid in (self.side.pids if self.side
                                                              else {}).items())
 
-    def stop(self) -> dict[str, int]:
+    def stop(self, finish: Mapping[str, float] | None = None) -> dict[str, int]:
         """The device to zero force and the graph down first, then the side nodes (the recorder
-        has every message sent to it); the side nodes' exit codes."""
+        has every message sent to it); the side nodes' exit codes. ``finish``: {side node: the
+        longest it may take [s]} for nodes whose output the caller needs (the examiner writes
+        its report when stopped): each is asked to stop first and waited for that long (a line
+        every :data:`FINISH_SAY_S` s), instead of the other nodes' short grace before a kill."""
         from ..nodes.processes import leave_realtime
         try:
             # the shutdown computes (an hour's tick trace written): at rtkit's real-time
@@ -176,6 +208,10 @@ class OneProcessSession:
                 self.graph.shutdown()
         finally:
             if self.side:
+                for name, limit in (finish or {}).items():
+                    p = self.side.sup.procs.get(name)
+                    if p is not None:
+                        finish_process(p, name, limit)
                 self.codes = self.side.stop()
         return self.codes
 
