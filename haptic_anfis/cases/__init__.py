@@ -5,8 +5,8 @@
 - :mod:`.generate`: FE sweep -> dataset, surface mesh, trained model (resumable, any executor).
 - :mod:`.summary`: the listing's figures, including each lesion's FE-vs-model contrast.
 """
-from .library import (DEFAULT_CASE, Case, CaseError, CaseLibrary, get_case, library, random_case,
-                      resolve_case)
+from .library import (CASE_DIR_ENV, DEFAULT_CASE, Case, CaseError, CaseLibrary, get_case, library,
+                      random_case, resolve_case, use_case_dir, user_case_dir)
 
-__all__ = ['DEFAULT_CASE', 'Case', 'CaseError', 'CaseLibrary', 'get_case', 'library',
-           'random_case', 'resolve_case']
+__all__ = ['CASE_DIR_ENV', 'DEFAULT_CASE', 'Case', 'CaseError', 'CaseLibrary', 'get_case',
+           'library', 'random_case', 'resolve_case', 'use_case_dir', 'user_case_dir']

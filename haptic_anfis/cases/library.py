@@ -24,6 +24,9 @@ from ..tissue.scene import SCENE_DIR, Scene, SceneError, load_scene
 from ..errors import HapticAnfisError
 
 DEFAULT_CASE = 'default'
+#: the environment variable naming the user's own case folder (``--case-dir`` sets it, so the
+#: nodes a command starts see the same cases)
+CASE_DIR_ENV = 'HAPTIC_ANFIS_CASE_DIR'
 #: radii of the default scene's breast [mm]: its surface is the package's default_surface.stl
 _DEFAULT_RADII_MM = (45, 70, 70)
 _NAME = re.compile(r'^[a-z0-9][a-z0-9_-]{0,63}$')
@@ -137,8 +140,50 @@ def surface_file_name(radii_m: tuple[float, float, float]) -> str:
     return 'surface_' + 'x'.join(f'{v:g}' for v in mm) + 'mm.stl'
 
 
+def user_case_dir() -> Path:
+    """The user's own case folder: ``$HAPTIC_ANFIS_CASE_DIR``, else
+    ``$XDG_DATA_HOME/haptic_anfis/cases`` (``~/.local/share`` when unset). Its layout: a scene
+    file ``<dir>/<name>.yaml`` per case and, made by ``cases generate``, the case's files in
+    ``<dir>/cases/<name>/`` (as the package's ``data/cases``); it need not exist."""
+    env = os.environ.get(CASE_DIR_ENV)
+    if env:
+        return Path(env).expanduser()
+    base = os.environ.get('XDG_DATA_HOME') or str(Path.home() / '.local' / 'share')
+    return Path(base) / 'haptic_anfis' / 'cases'
+
+
+def use_case_dir(path: str | os.PathLike | None) -> Path | None:
+    """``--case-dir PATH``: the user's case folder for this process and every node it starts
+    (:data:`CASE_DIR_ENV`, absolute); None (nothing changed) without one.
+
+    Raises:
+        CaseError: ``path`` exists and is not a folder.
+    """
+    if not path:
+        return None
+    p = Path(path).expanduser().resolve()
+    if p.exists() and not p.is_dir():
+        raise CaseError(f'--case-dir {str(path)!r}: expected a folder of scene files, got a file')
+    os.environ[CASE_DIR_ENV] = str(p)
+    return p
+
+
+#: ``--case-dir``'s help, wherever a command takes it
+CASE_DIR_HELP = ("a folder of one's own cases (scene files; cases generate writes their files "
+                 f"there) beside the package's (default ${CASE_DIR_ENV}, else "
+                 '$XDG_DATA_HOME/haptic_anfis/cases)')
+
+
+def add_case_dir_argument(parser) -> None:
+    """``--case-dir DIR`` (the user's own cases, beside the package's)."""
+    parser.add_argument('--case-dir', default=None, metavar='DIR', help=CASE_DIR_HELP)
+
+
 class CaseLibrary:
-    """Cases found in ``scene_dir`` (one YAML file each) with files under ``data_dir``.
+    """Cases found in ``scene_dir`` (one YAML file each) with files under ``data_dir``, and the
+    user's own in ``user_dir`` (:func:`user_case_dir`; scene files there, their files under
+    ``user_dir/cases``). A user's case named as a package case is not seen (the package's
+    wins, so a shipped name always means the shipped case; ``cases list`` says so).
 
     Args:
         scene_dir: directory of scene files (default: the package's ``config/scenes``).
@@ -150,26 +195,56 @@ class CaseLibrary:
 
     def __init__(self, scene_dir: str | os.PathLike = SCENE_DIR,
                  data_dir: str | os.PathLike = DATA_DIR,
-                 work_root: str | os.PathLike | None = None) -> None:
+                 work_root: str | os.PathLike | None = None,
+                 user_dir: str | os.PathLike | None = None) -> None:
         self.scene_dir = Path(scene_dir).resolve()
         self.data_dir = Path(data_dir).resolve()
         self.case_dir = self.data_dir / 'cases'
         self.work_root = Path(work_root if work_root is not None
                               else Path('.fe_work') / 'cases').resolve()
+        #: a surface of the default breast's size from elsewhere (the user's cases use the
+        #: package's), when ``data_dir`` has none
+        self.default_surface: Path | None = None
+        self.user = (CaseLibrary(user_dir, user_dir, work_root)
+                     if user_dir is not None and Path(user_dir).resolve() != self.scene_dir
+                     else None)
+        if self.user is not None:
+            self.user.default_surface = self.data_dir / 'default_surface.stl'
+
+    def _own_names(self) -> list[str]:
+        return sorted(p.stem for p in self.scene_dir.glob('*.yaml') if _NAME.match(p.stem))
+
+    def user_names(self) -> list[str]:
+        """The user's own cases (:func:`user_case_dir`) this library takes, sorted."""
+        if self.user is None:
+            return []
+        mine = set(self._own_names())
+        return [n for n in self.user._own_names() if n not in mine]
+
+    def shadowed(self) -> list[str]:
+        """The user's cases not taken because a package case has their name."""
+        if self.user is None:
+            return []
+        return sorted(set(self.user._own_names()) & set(self._own_names()))
 
     def names(self) -> list[str]:
-        """Every case name (scene file stems), sorted, ``default`` first."""
-        names = sorted(p.stem for p in self.scene_dir.glob('*.yaml') if _NAME.match(p.stem))
-        return sorted(names, key=lambda n: n != DEFAULT_CASE)
+        """Every case name (scene file stems; the user's after the package's), ``default``
+        first."""
+        names = sorted(self._own_names(), key=lambda n: n != DEFAULT_CASE)
+        return names + self.user_names()
 
     def get(self, name: str) -> Case:
         """The case called ``name`` (its files need not exist yet: see :meth:`Case.require`)."""
         if not isinstance(name, str) or not _NAME.match(name):
             raise CaseError(f'case name {name!r}: expected lower-case letters, digits, _ or -')
         scene_path = self.scene_dir / f'{name}.yaml'
+        if not scene_path.is_file() and name in self.user_names():
+            return self.user.get(name)
         if not scene_path.is_file():
-            raise CaseError(f'unknown case {name!r} (no scene file {str(scene_path)!r}); known '
-                            f'cases: {", ".join(self.names()) or "none"}')
+            where = (f'; own cases are read from {str(self.user.scene_dir)!r}'
+                     if self.user is not None else '')
+            raise CaseError(f'unknown case {name!r} (no scene file {str(scene_path)!r}{where}); '
+                            f'known cases: {", ".join(self.names()) or "none"}')
         work = self.work_root / name
         if name == DEFAULT_CASE:
             return Case(name, scene_path, self.data_dir / 'default_forces.csv',
@@ -180,6 +255,8 @@ class CaseLibrary:
         radii = case.scene.radii
         if tuple(round(r * 1e3, 6) for r in radii) == _DEFAULT_RADII_MM:
             mesh = self.data_dir / 'default_surface.stl'
+            if not mesh.is_file() and self.default_surface is not None:
+                mesh = self.default_surface   # a user's case: the package's surface
         else:
             mesh = self.case_dir / surface_file_name(radii)
         return Case(name, scene_path, case.dataset_path, case.model_path, mesh, work)
@@ -210,8 +287,8 @@ class CaseLibrary:
 
 
 def library() -> CaseLibrary:
-    """The package's shipped library."""
-    return CaseLibrary()
+    """The package's shipped library with the user's own cases (:func:`user_case_dir`)."""
+    return CaseLibrary(user_dir=user_case_dir())
 
 
 def get_case(name: str) -> Case:

@@ -15,6 +15,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+import textwrap
 import time
 from pathlib import Path
 
@@ -24,11 +25,17 @@ HELP = 'list the palpation case library, or generate cases (FE sweep, mesh, mode
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     sub = p.add_subparsers(dest='action', metavar='ACTION')
-    ls = sub.add_parser('list', help='one row per case: lesions, size, data, model, errors, speed')
+    ls = sub.add_parser('list', help='one row per case: level, lumps, ready, description (--wide: '
+                        'lesions, size, data, model, errors, speed)')
+    ls.add_argument('--wide', action='store_true',
+                    help='the wide table (lesions, breast, FE rows, model structure, errors, '
+                         'evaluation time; about 190 columns)')
     ls.add_argument('--json', action='store_true', help='a JSON list of objects instead')
     ls.add_argument('--markdown', action='store_true',
                     help="the README's table (rules and lesion contrast per case) instead")
     ls.add_argument('--no-timing', action='store_true', help='skip the evaluation-time measurement')
+    from ..cases.library import add_case_dir_argument
+    add_case_dir_argument(ls)
     sw = sub.add_parser('sweep', help='solve the missing FE points of cases into the committed '
                         'per-point store (fe_store/; resumable, parallel, local or dask)')
     sw.add_argument('names', nargs='*', help='cases (default: every graded case, i.e. every '
@@ -72,6 +79,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def _library_arguments(p: argparse.ArgumentParser) -> None:
+    from ..cases.library import add_case_dir_argument
+    add_case_dir_argument(p)
     p.add_argument('--scene-dir', type=Path, default=None,
                    help='scene files of another library (default config/scenes)')
     p.add_argument('--data-dir', type=Path, default=None,
@@ -79,14 +88,18 @@ def _library_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def _open_library(args: argparse.Namespace, **kw):
-    from ..cases import CaseLibrary
+    from ..cases import CaseLibrary, user_case_dir
     from ..tissue.dataset import DATA_DIR
     from ..tissue.scene import SCENE_DIR
 
-    return CaseLibrary(args.scene_dir or SCENE_DIR, args.data_dir or DATA_DIR, **kw)
+    # the package's cases and the user's own (--case-dir), or another library (--scene-dir)
+    return CaseLibrary(args.scene_dir or SCENE_DIR, args.data_dir or DATA_DIR, **kw,
+                       user_dir=None if args.scene_dir else user_case_dir())
 
 
 def run(args: argparse.Namespace) -> int:
+    from ..cases.library import use_case_dir
+    use_case_dir(args.case_dir)   # before anything reads the library; the nodes inherit it
     if args.action == 'list':
         return _list(args)
     if args.action == 'generate':
@@ -97,10 +110,51 @@ def run(args: argparse.Namespace) -> int:
     return 2
 
 
+#: [columns] the width ``cases list`` fits (a terminal beside an editor)
+LIST_WIDTH = 100
+
+
+def narrow_table(lib, width: int = LIST_WIDTH) -> str:
+    """``cases list``: one line per case within ``width`` columns: name, level, palpable /
+    all lesions, ready (model and mesh made from the scene as it is), its description (cut to
+    fit), then a line naming the user's own case folder."""
+    from ..cases import CaseError
+    head = f'{"case":<24} {"lvl":>3} {"lumps":>5} {"ready":<5} description'
+    lines = [head, '-' * width]
+    own = set(lib.user_names())
+    for c in lib.cases():
+        try:
+            g = c.grading()
+            n = len(c.scene.tumours)
+            felt = (sum(bool(x.get('palpable')) for x in g.get('lesions', ())) if g is not None
+                    else '?')
+            ready = 'no' if c.missing(('model_path', 'mesh_path')) else (
+                'stale' if c.scene_changed() else 'yes')
+            lvl, desc = ('-' if c.level is None else str(c.level)), c.description
+        except CaseError as exc:   # a broken scene file: said in its row
+            n, felt, ready, lvl, desc = 0, '?', 'no', '-', str(exc)
+        name = c.name + ('*' if c.name in own else '')
+        line = f'{name:<24} {lvl:>3} {f"{felt}/{n}":>5} {ready:<5} {desc}'
+        lines.append(line if len(line) <= width else line[:width - 3] + '...')
+    notes = ['lvl: difficulty 1-5 from the FE (- not graded); lumps: palpable / all lesions (? '
+             'not graded); ready: stale = scene edited since generated (cases generate NAME); '
+             '* your own case; --wide: the lesions, FE and model figures']
+    if lib.user is not None:
+        notes.append(f'own cases: {lib.user.scene_dir} ({len(own)})'
+                     + (f'; not used, a package case has the name: {", ".join(lib.shadowed())}'
+                        if lib.shadowed() else ''))
+    lines.append('-' * width)
+    lines += [w for n in notes for w in textwrap.wrap(n, width)]
+    return '\n'.join(lines)
+
+
 def _list(args: argparse.Namespace) -> int:
     from ..cases import library
     from ..cases.summary import case_summary, format_markdown, format_table
 
+    if not (args.wide or args.json or args.markdown):
+        print(narrow_table(library()))
+        return 0
     rows = [case_summary(c, timing=not args.no_timing) for c in library().cases()]
     if args.json:
         print(json.dumps(rows, indent=1))

@@ -56,6 +56,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help='case of the library (its surface and lesions) or a scene file (its '
                         'lesions) the session is scored against (default: the one the bag was '
                         'recorded with; the default case for a bag that does not say)')
+    from ..cases.library import add_case_dir_argument
+    add_case_dir_argument(b)
     _common(b)
     add_record_arguments(b)
 
@@ -77,6 +79,8 @@ def resolve_exam_case(case: str | None, need: tuple[str, ...] = ('model_path', '
 
 
 def run(args: argparse.Namespace) -> int:
+    from ..cases.library import use_case_dir
+    use_case_dir(args.case_dir)   # before anything reads the library; the nodes inherit it
     if args.exam_command == 'run':
         # the loop's process in a session of its own, as sim's (a fair CPU share where the
         # kernel groups by session: beside 8 busy processes of the terminal's session and the
@@ -219,6 +223,7 @@ def _run_sim(args):
               flush=True)
     interrupted = False   # the trainee record stores no half session
     t_start = time.monotonic()
+    loop_before = loop_counts(driver)   # a stall while the nodes started is not the exam's
     try:
         graph.spin_for(limit, lambda: controller.finished)
         # The executor may run seconds behind the 1 kHz loop on a loaded machine: wait until the
@@ -250,7 +255,11 @@ def _run_sim(args):
     if loop_note:
         report['notes'] = list(report.get('notes', [])) + [loop_note]
     # the machine's load must not count against the trainee: scored, kept, but void
-    report['void_reason'] = void_reason(report['haptic_loop'])
+    # (statistics reset meanwhile: what they count now is all after the start)
+    during = {k: v - loop_before[k] if v >= loop_before[k] else v
+              for k, v in loop_counts(driver).items()}
+    report['haptic_loop']['during_exam'] = during
+    report['void_reason'] = void_reason({**report['haptic_loop'], **during})
     if scene_note:
         report['notes'] = [scene_note] + list(report.get('notes', []))
     # cut off by --duration (or its 300 s default) before the trainee finished: not a whole exam
@@ -323,6 +332,17 @@ def _report_bag(args):
 #: the driver's loop figures an exam report carries (``haptic_loop``)
 LOOP_KEYS = ('rate_hz', 'periods_lost', 'max_gap_ms', 'gaps_past_watchdog', 'loop_windows',
              'loop_windows_behind', 'servo_scheduling')
+
+
+#: the loop counts that grow with time (check windows, those behind, gaps past the watchdog)
+LOOP_COUNTS = ('loop_windows', 'loop_windows_behind', 'gaps_past_watchdog')
+
+
+def loop_counts(driver) -> dict[str, int]:
+    """The driver's loop counts so far (:data:`LOOP_COUNTS`): taken at the exam's start and end,
+    their difference is the exam's own."""
+    s = driver.summary()
+    return {k: int(s.get(k) or 0) for k in LOOP_COUNTS}
 
 
 def haptic_loop(driver) -> tuple[dict, str | None]:

@@ -23,6 +23,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help='case of the library (its surface and lesions) or a scene file (its '
                         'lesions) the session is scored against (default: the one the bag was '
                         'recorded with; the default case for a bag that does not say)')
+    from ..cases.library import add_case_dir_argument
+    add_case_dir_argument(p)
     p.add_argument('--port', type=int, default=DEFAULT_PORT,
                    help=f'TCP port of the page (default {DEFAULT_PORT})')
     p.add_argument('--host', default='127.0.0.1',
@@ -39,6 +41,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from ..cases.library import use_case_dir
+    use_case_dir(args.case_dir)   # before anything reads the library; the nodes inherit it
     if args.duration is not None and not (args.duration > 0 and math.isfinite(args.duration)):
         raise ValueError(f'--duration: expected > 0 s, got {args.duration}')
     from ..view.build import open_bag_view, serve

@@ -21,6 +21,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Mapping, Sequence
 
+from ..cases.library import CASE_DIR_HELP
 from ..errors import HapticAnfisError
 from ..nodes.processes import GRAPH_PRIORITY
 
@@ -109,6 +110,7 @@ OPTIONS: tuple[Option, ...] = (
            helps={'exam': 'case of the library (haptic-anfis cases list: its model, surface and '
                           'lesions) or a scene file (its lesions, default model) (default: '
                           'default)'}, group=_CASE),
+    Option(('--case-dir',), dict(default=None, metavar='DIR', help=CASE_DIR_HELP), group=_CASE),
     Option(('--random-case',), dict(action='store_true',
                                     help='draw a case with --seed; its name is not shown (for a '
                                          'blind session)'), commands=('sim', 'launch'),
