@@ -20,10 +20,13 @@ Colours are ``#rrggbb`` strings; :func:`rgb255` gives (r, g, b) 0-255 for a page
 from __future__ import annotations
 
 __all__ = ['FINDING', 'LEVEL', 'LEVEL_LABEL', 'MARK', 'NOT_PRESSED', 'OUTCOME', 'PRESSURE_CMAP',
-           'SENSITIVITY', 'SKIN', 'TIME', 'rgb255']
+           'REGION', 'SENSITIVITY', 'SKIN', 'TIME', 'rgb255']
 
-#: never pressed to the light level (figures); the page shows the skin instead
-NOT_PRESSED = '#d9d9d9'
+#: never pressed to the light level (figures; lighter than light, so less pressed is always
+#: lighter, in grey too); the page shows the skin instead
+NOT_PRESSED = '#f2f2f2'
+#: the outline of the region to examine
+REGION = '#525252'
 #: untouched skin on the page
 SKIN = '#ecc4b2'
 #: the deepest level pressed, by level name (YlOrRd: lightness falls with depth)

@@ -40,8 +40,12 @@ def save_figure(session, report: dict, path: str | os.PathLike) -> None:
                         cmap=ListedColormap(colours), edgecolors='none')
     pc.set_clim(-0.5, len(LEVELS) + 0.5)
     ax.add_collection(pc)
+    for a in axes:   # the region to examine, outlined: what is left unpressed shows inside it
+        a.add_patch(plt.Circle((0, 0), R, fill=False, ls='--', lw=1, color=palette.REGION,
+                               zorder=0.5))
     cov = report['coverage_pct']
-    handles = [Patch(color=palette.NOT_PRESSED, label=palette.LEVEL_LABEL['none'])] + [
+    handles = [Patch(fc=palette.NOT_PRESSED, ec=palette.REGION, lw=0.5,
+                     label=palette.LEVEL_LABEL['none'])] + [
         Patch(color=palette.LEVEL[n], label=f"{n} (>= {report['levels_mm'][n]:.0f} mm): "
                                             f"{cov[n]:.0f} %") for n in LEVELS]
     ax.legend(handles=handles, title='deepest press (share of the region)', fontsize=8,
@@ -77,6 +81,7 @@ def save_figure(session, report: dict, path: str | os.PathLike) -> None:
     ring = dict(marker='o', ls='none', ms=11, mfc='none', mew=2.5)
     cross = dict(marker='X', ls='none', ms=10, mec='white')
     handles = [Line2D([], [], color='0.75', lw=1, label='probe path'),
+               Line2D([], [], color=palette.REGION, lw=1, ls='--', label='region to examine'),
                *(Line2D([], [], color=palette.FINDING[s], label=f'lesion {s}', **ring)
                  for s in palette.FINDING),
                *(Line2D([], [], color=palette.MARK[k], label=f'mark: {w}', **cross)
