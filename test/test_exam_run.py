@@ -36,6 +36,12 @@ def test_systematic_trainee_covers_and_finds_the_lesion_from_forces(tmp_path, ca
     assert loop['rate_hz'] > 0 and loop['loop_windows'] >= 1, loop
     assert any(n.startswith('haptic loop: ') for n in r['notes']) == (
         loop['loop_windows_behind'] > 0), (loop, r['notes'])
+    # void exactly when the loop fell behind during the exam itself (not while starting)
+    during = loop['during_exam']
+    assert 0 <= during['loop_windows_behind'] <= loop['loop_windows_behind'], loop
+    assert bool(r['void_reason']) == (during['loop_windows_behind'] > 0
+                                      or during['gaps_past_watchdog'] > 0), (loop, r)
+    assert r['blind'] is False
 
 
 def test_systematic_trainee_marks_nothing_on_the_lesion_free_case(tmp_path, capfd):
