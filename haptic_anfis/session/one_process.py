@@ -208,11 +208,13 @@ class OneProcessSession:
                 self.graph.shutdown()
         finally:
             if self.side:
-                for name, limit in (finish or {}).items():
-                    p = self.side.sup.procs.get(name)
-                    if p is not None:
-                        finish_process(p, name, limit)
-                self.codes = self.side.stop()
+                try:   # a Ctrl-C while waiting still stops every side node
+                    for name, limit in (finish or {}).items():
+                        p = self.side.sup.procs.get(name)
+                        if p is not None:
+                            finish_process(p, name, limit)
+                finally:
+                    self.codes = self.side.stop()
         return self.codes
 
     def recorded(self) -> dict | None:
