@@ -5,10 +5,11 @@ case — its surface and lesions — from ``case`` / ``random_case_seed`` (the c
 other case-aware nodes; setting either on a running examiner starts a new exam on that case) or,
 with no case, from ``scene`` and the mesh parameters (:func:`lesion_source`). Publishes a
 live coverage heat map on the mesh (``exam/coverage``, ``visualization_msgs/MarkerArray``: the
-palpable region's triangles coloured by the deepest level pressed — grey none, yellow light,
-orange medium, red deep — in ~16 mm patches, each sent when it changes and all every 2 s, plus a
-text marker with the coverage numbers, at ``rate`` Hz) and, on :meth:`Examiner.close`, writes the report
-(``report.json`` + ``report.png``) into ``report_dir``.
+palpable region's triangles coloured by the deepest level pressed — pale grey none, yellow
+light, orange medium, dark red deep (:mod:`haptic_anfis.palette`) — in ~16 mm patches, each
+sent when it changes and all every 2 s, plus a text marker with the coverage numbers, at
+``rate`` Hz) and, on :meth:`Examiner.close`, writes the report (``report.json`` +
+``report.png``) into ``report_dir``.
 """
 from __future__ import annotations
 
@@ -22,6 +23,7 @@ from sensor_msgs.msg import Joy, JointState
 from std_msgs.msg import ColorRGBA
 from visualization_msgs.msg import Marker, MarkerArray
 
+from .. import palette
 from ..exam import ExamSession, Surface, load_exam_config, subject_from_scene
 from ..exam.files import write_text_atomic
 from ..exam.lesions import ExamSubject
@@ -47,8 +49,11 @@ PARAMS = MESH_PARAMS + [
 SAMPLE_QOS = QoSProfile(depth=10000, history=HistoryPolicy.KEEP_LAST,
                         reliability=ReliabilityPolicy.RELIABLE)
 
-LEVEL_COLOURS = ((0.6, 0.6, 0.6, 0.5), (1.0, 0.9, 0.2, 0.8), (1.0, 0.55, 0.0, 0.85),
-                 (0.85, 0.1, 0.1, 0.9))
+#: the heat map's colour (RGBA 0-1) per deepest level pressed: none, light, medium, deep (the
+#: colours of every figure and the page, haptic_anfis.palette; untouched patches half clear)
+LEVEL_COLOURS = tuple((*(c / 255 for c in palette.rgb255(colour)), alpha) for colour, alpha in zip(
+    (palette.NOT_PRESSED, palette.LEVEL['light'], palette.LEVEL['medium'], palette.LEVEL['deep']),
+    (0.5, 0.8, 0.85, 0.9)))
 
 
 def lesion_source(p: dict, case=None) -> ExamSubject:

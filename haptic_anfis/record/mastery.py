@@ -5,8 +5,9 @@ The thresholds live in ``config/exam.yaml`` under ``mastery`` (documented there)
 false marks meet L's thresholds; level L is *mastered* once ``consecutive_sessions`` of the
 trainee's level-L sessions with a palpable lesion in a row meet it (lumps must be found: a case
 without one never extends a streak, and failing one breaks it; a pass standard with retry: a
-later weak session does not take a mastered level away; a void session counts neither way). The trainee's mastered level is the highest L with every
-level 1..L mastered; the next level is one above (the top level stays the top). Pure, no ROS.
+later weak session does not take a mastered level away; a void session counts neither way).
+The trainee's mastered level is the highest L with every level 1..L mastered; the next level is
+one above (the top level stays the top). Pure, no ROS.
 """
 from __future__ import annotations
 
