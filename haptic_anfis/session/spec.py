@@ -205,10 +205,13 @@ class SessionSpec:
     Times in seconds. ``duration`` None: the command's own end (exam: the trainee is done).
     ``ros_args``: the user's extra rclpy arguments (``-p name:=value`` ...) for every node.
     ``scene``: a scene file whose lesions an exam scores (``--case FILE.yaml``).
+    ``case_dir``: the user's own case folder (``--case-dir``; the command puts it in the
+    environment before anything reads the library, so every node it starts sees it too).
     """
     command: str = 'sim'
     nodes: tuple[str, ...] = ONE_PROCESS_NODES
     case: str = ''
+    case_dir: str | None = None
     random_case: bool = False
     seed: int | None = None
     scene: str = ''
