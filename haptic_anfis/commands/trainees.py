@@ -15,6 +15,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+import textwrap
 from pathlib import Path
 
 NAME = 'trainees'
@@ -69,22 +70,33 @@ def _list(args, db) -> int:
     return 0
 
 
+#: the search patterns in the table's one word each
+_PATTERN = {'vertical_strip': 'strips', 'spiral_circular': 'circles', 'radial': 'radial'}
+
+
 def _table(sessions: list[dict]) -> None:
-    print(f'{"#":>4} {"started (UTC)":<25} {"case":<22} {"lvl":>3} {"light":>6} {"medium":>6} '
-          f'{"deep":>6} {"pattern":<15} {"hit":>3} {"miss":>4} {"false":>5} {"sens":>5} '
-          f'{"score":>6} {"verdict":<7} {"time s":>7}')
+    """One line per session within 100 columns: when (UTC, to the minute), case, level,
+    coverage light/medium/deep [%], pattern, marks, sensitivity, score, verdict (void when the
+    loop fell behind: its reason below), time [s]."""
+    print(f'{"#":>4} {"started UTC":<11} {"case":<14} {"lvl":>3} {"cover l/m/d":>11} '
+          f'{"pattern":<7} {"hit":>3} {"miss":>4} {"false":>5} {"sens":>4} {"score":>5} '
+          f'{"verdict":<7} {"time s":>6}')
     for s in sessions:
         c = s['coverage_pct']
         sens = '-' if s['sensitivity'] is None else f"{100 * s['sensitivity']:.0f}%"
-        case = (s['case'] or '-')[-22:]
-        print(f"{s['session']:>4} {s['started_utc']:<25} {case:<22} "
-              f"{s['case_level'] if s['case_level'] is not None else '-':>3} {c['light']:>6.1f} "
-              f"{c['medium']:>6.1f} {c['deep']:>6.1f} {s['pattern'] or '-':<15} {s['hits']:>3} "
-              f"{s['misses']:>4} {s['false_marks']:>5} {sens:>5} {s['score']:>6.1f} "
-              f"{'void' if s.get('void') else s['verdict']:<7} {s['duration_s']:>7.1f}")
+        case = (s['case'] or '-')[-14:]
+        cover = '/'.join(f'{c[k]:.0f}' for k in ('light', 'medium', 'deep'))
+        when = (s['started_utc'] or '')[5:16].replace('T', ' ')
+        pattern = _PATTERN.get(s['pattern'], s['pattern'] or '-')[:7]
+        print(f"{s['session']:>4} {when:<11} {case:<14} "
+              f"{s['case_level'] if s['case_level'] is not None else '-':>3} {cover:>11} "
+              f"{pattern:<7} {s['hits']:>3} {s['misses']:>4} {s['false_marks']:>5} {sens:>4} "
+              f"{s['score']:>5.0f} {'void' if s.get('void') else s['verdict']:<7} "
+              f"{s['duration_s']:>6.0f}")
     for s in sessions:
         if s.get('void'):
-            print(f"  session {s['session']} is void: {s['void']}")
+            print(textwrap.fill(f"session {s['session']} is void: {s['void']}", 100,
+                                initial_indent='  ', subsequent_indent='    '))
 
 
 def _mastery_lines(m: dict) -> None:
