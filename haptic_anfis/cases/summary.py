@@ -15,6 +15,7 @@ import numpy as np
 
 from ..tissue.dataset import ForceDataset, load_dataset
 from ..anfis.timing import percentiles_us, time_calls
+from .force_mapping import case_force_mapping
 from .library import Case
 
 CONTRAST_DEPTH = 0.008  # [m]
@@ -113,8 +114,10 @@ def case_summary(case: Case, timing: bool = True, contrast: bool = True) -> dict
         'contrast': None, 'level': case.level, 'cv_rmse_n': None, 'cv_pct_range': None,
         'fe_points': _store_progress(case)}
     ds = None
+    row['force_mapping'] = None
     if case.dataset_path.is_file():
         ds = load_dataset(case.dataset_path)
+        row['force_mapping'] = case_force_mapping(case).as_dict()
         row['dataset_rows'] = len(ds)
         row['dataset_points'] = int(len(np.unique(ds.point)))
         row['fe_probe_cells'] = ds.provenance.get('mesh', {}).get('probe_cells')
@@ -162,11 +165,17 @@ def _lesion_text(l: dict[str, Any]) -> str:
     return text
 
 
+def _scale_text(m: dict[str, Any] | None) -> str:
+    """'x0.43' (the force scale), '-' without a dataset."""
+    return '-' if not m else f'x{m["force_scale"]:.2f}'
+
+
 def format_table(rows: list[dict[str, Any]]) -> str:
     """The human-readable listing."""
     head = (f'{"case":<24} {"lvl":>3} {"lesions":<30} {"breast mm":<10} {"E kPa":>5} {"rows":>5} '
             f'{"structure Fx/Fy/Fz":<24} {"rules":>5} {"params":>6} '
-            f'{"test RMSE N (% range) Fx, Fy, Fz":<42} {"CV % range":<16} {"p50 µs":>6}')
+            f'{"test RMSE N (% range) Fx, Fy, Fz":<42} {"CV % range":<16} {"p50 µs":>6} '
+            f'{"force":>6}')
     lines = [head, '-' * len(head)]
     for r in rows:
         les = ', '.join(_lesion_text(l) for l in r['lesions']) or 'none'
@@ -182,13 +191,16 @@ def format_table(rows: list[dict[str, Any]]) -> str:
         lines.append(f'{r["name"]:<24} {lvl:>3} {les:<30} {size:<10} {r["glandular_kpa"]:>5g} '
                      f'{r["dataset_rows"] or "-":>5} {st:<24} {r["rules"] or "-":>5} '
                      f'{r["parameters"] or "-":>6} {err:<42} {cv:<16} '
-                     f'{"-" if r["eval_p50_us"] is None else format(r["eval_p50_us"], ".2f"):>6}')
+                     f'{"-" if r["eval_p50_us"] is None else format(r["eval_p50_us"], ".2f"):>6} '
+                     f'{_scale_text(r.get("force_mapping")):>6}')
     lines.append('lesions: kind (m = malignant, b = benign, u = unstated), diameter @ centre depth '
                  'under the skin [mm]; graded cases add the FE contrast at the deep level vs the '
                  'lesion-free twin (% / N) and the difficulty dN (np = not palpable); lvl: case '
                  'level 1-5; CV % range: grouped-CV RMSE Fx/Fy/Fz (or FE points solved so far); '
                  '(scene changed): the scene file was edited since the case was generated '
-                 '(not ready until `cases generate NAME`)')
+                 '(not ready until `cases generate NAME`); force: the tissue -> device force '
+                 'scale a session of the case renders (its largest FE force at the deepest '
+                 'trained depth at 85 % of the clamp; --json: force_mapping)')
     return '\n'.join(lines)
 
 
