@@ -4,6 +4,7 @@
     haptic-anfis cases sweep [NAMES...] [--workers N] [--dask local|ADDRESS] [--status] [--coarse]
     haptic-anfis cases generate [NAMES...] [--workers N] [--coarse] [--dask local|ADDRESS]
                                 [--no-train | --train-only] [--config config/force_model.yaml]
+    haptic-anfis cases regrade [NAMES...] [--threshold PCT]
 
 Graded cases (scenes with lesion rings in their loading: every case but ``default``) are solved
 per point into the committed store ``fe_store/`` (resumable across sessions) and shipped only
@@ -29,6 +30,16 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     ls.add_argument('--markdown', action='store_true',
                     help="the README's table (rules and lesion contrast per case) instead")
     ls.add_argument('--no-timing', action='store_true', help='skip the evaluation-time measurement')
+    ls.add_argument('--threshold', type=_threshold, default=None, metavar='PCT',
+                    help="grade the lesions at this palpability threshold [%%] (a trainee's own, "
+                         '`haptic-anfis threshold`) instead of the stored grading')
+    rg = sub.add_parser('regrade', help="grade shipped cases again from their FE store (the "
+                        "dataset sidecar's grading; the models stay)")
+    rg.add_argument('names', nargs='*', help='cases (default: every shipped graded case)')
+    rg.add_argument('--threshold', type=_threshold, default=None, metavar='PCT',
+                    help="palpability threshold [%%] (default: config/exam.yaml's palpable_pct)")
+    rg.add_argument('--store', type=Path, default=None,
+                    help='per-point store root (default fe_store/ in the source tree)')
     sw = sub.add_parser('sweep', help='solve the missing FE points of cases into the committed '
                         'per-point store (fe_store/; resumable, parallel, local or dask)')
     sw.add_argument('names', nargs='*', help='cases (default: every graded case, i.e. every '
@@ -93,7 +104,9 @@ def run(args: argparse.Namespace) -> int:
         return _generate(args)
     if args.action == 'sweep':
         return _sweep(args)
-    print('haptic-anfis cases: give an action: list, sweep or generate', file=sys.stderr)
+    if args.action == 'regrade':
+        return _regrade(args)
+    print('haptic-anfis cases: give an action: list, sweep, generate or regrade', file=sys.stderr)
     return 2
 
 
@@ -101,7 +114,8 @@ def _list(args: argparse.Namespace) -> int:
     from ..cases import library
     from ..cases.summary import case_summary, format_markdown, format_table
 
-    rows = [case_summary(c, timing=not args.no_timing) for c in library().cases()]
+    rows = [case_summary(c, timing=not args.no_timing, threshold_pct=args.threshold)
+            for c in library().cases()]
     if args.json:
         print(json.dumps(rows, indent=1))
     elif args.markdown:
@@ -109,6 +123,46 @@ def _list(args: argparse.Namespace) -> int:
     else:
         print(format_table(rows))
     return 0
+
+
+def _threshold(text: str) -> float:
+    """A palpability threshold [%] from the command line."""
+    import math
+    try:
+        v = float(text)
+    except ValueError:
+        v = math.nan
+    if not (math.isfinite(v) and 0 < v < 1000):
+        raise argparse.ArgumentTypeError(f'expected a percentage > 0 (e.g. 22), got {text!r}')
+    return v
+
+
+def _regrade(args: argparse.Namespace) -> int:
+    """Grade shipped cases again from their store; one line per case with its level and where
+    each lesion is found."""
+    from ..cases import CaseError, library
+    from ..cases.build import regrade_case
+    from ..exam.config import load_exam_config
+
+    lib = library()
+    thr = args.threshold if args.threshold is not None else load_exam_config().palpable_pct
+    cases = ([lib.get(n) for n in args.names] if args.names else
+             [c for c in lib.cases() if c.scene.ring_diameters and c.grading() is not None])
+    failed = 0
+    for c in cases:
+        try:
+            g = regrade_case(c, store_root=args.store, threshold_pct=thr)
+        except CaseError as exc:
+            print(f'{c.name}: {exc}', flush=True)
+            failed += 1
+            continue
+        les = '; '.join(f'{e["lesion"]} ' + (f'd{e["difficulty"]} at {e["found_level"]} '
+                                             f'({e["found_depth_m"] * 1e3:g} mm, '
+                                             f'{e["contrast_pct"]:+.1f} %)' if e['palpable']
+                                             else e['reason'])
+                        for e in g['lesions']) or 'no lesion'
+        print(f'{c.name}: level {g["level"]}: {les}', flush=True)
+    return 1 if failed else 0
 
 
 def _executor(args: argparse.Namespace):
@@ -238,7 +292,8 @@ def _generate_graded(case, args: argparse.Namespace, executor, params: dict) -> 
         print(f'  refused: {exc}', flush=True)
         return False
     les = '; '.join(f'{g["lesion"]} {g["contrast_pct"]:+.1f} % ({g["contrast_n"]:+.3f} N) '
-                    + (f'difficulty {g["difficulty"]}' if g['palpable'] else 'not palpable')
+                    + (f'difficulty {g["difficulty"]} at {g["found_level"]}' if g['palpable']
+                       else 'below what this device renders')
                     for g in res.grades) or 'no lesion'
     print(f'  level {res.level}: {les}; grouped-CV RMSE '
           + ', '.join(f'{v:.3f} N ({p:.2f} %)' for v, p in zip(res.cv_rmse_n, res.cv_pct_range))

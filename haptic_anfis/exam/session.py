@@ -162,7 +162,8 @@ class ExamSession:
             if m.get('reason') and 'outside the surface' in m['reason']:
                 notes.append(f"mark {m['index']}: {m['reason']}")
         if any(not les.palpable for les in lesions):
-            notes.append('not palpable here (the FE contrast is below the force threshold): '
+            notes.append('below what this device renders (the FE contrast is under the '
+                         'stiffness a stylus can tell apart; not scored): '
                          + ', '.join(les.name for les in lesions if not les.palpable))
         score, parts = score_of(cov, fin, pat['pattern'], fin['palpable_lesions'], cfg)
         verdict, reasons = verdict_of(cov, fin, cfg)

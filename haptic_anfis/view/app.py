@@ -370,7 +370,7 @@ class ViewApp:
         self.debrief = None
 
     def show_debrief(self, debrief, trainee: str = '', db=None) -> None:
-        """Reveal the lesions (hit / missed / not palpable), the marks, the search path and the
+        """Reveal the lesions (hit / missed / below what this device renders), the marks, the search path and the
         report's numbers; the scrubber replays the session. ``trainee``: show the trainee's
         history (from the trainee record ``db``, None = its default file) beside it."""
         with self._lock:

@@ -14,13 +14,13 @@ import numpy as np
 from ..exam.config import LEVELS
 from ..exam.coverage import CoverageGrid
 
-__all__ = ['Debrief', 'LesionMarker', 'lesion_status', 'panel_numbers']
+__all__ = ['Debrief', 'LesionMarker', 'lesion_status', 'lesion_why', 'panel_numbers']
 
 
 @dataclass(frozen=True)
 class LesionMarker:
     """A lesion revealed: ``name``, ``centre`` (3,) [m], ``radius`` [m], ``surface`` (3,) [m]
-    (its projection on the skin), ``status``: 'hit', 'missed' or 'not palpable', ``why``."""
+    (its projection on the skin), ``status``: 'hit', 'missed' or 'below device', ``why``."""
     name: str
     centre: tuple
     radius: float
@@ -30,13 +30,25 @@ class LesionMarker:
 
 
 def lesion_status(entry: dict) -> str:
-    """'hit', 'not palpable' (the case grades the lesion as not palpable: a report entry with
-    ``palpable`` false) or 'missed'."""
+    """'hit', 'below device' (the case's grading says this device does not render it to a
+    stylus: a report entry with ``palpable`` false) or 'missed'."""
     if entry.get('found'):
         return 'hit'
     if entry.get('palpable') is False:
-        return 'not palpable'
+        return 'below device'
     return 'missed'
+
+
+def lesion_why(entry: dict) -> str:
+    """What the debrief says of a lesion: why it was missed (or why it is not scored) and the
+    pressure level from which it can be felt, e.g. 'never palpated deep; palpable from medium
+    pressure (5 mm)'."""
+    if entry.get('palpable') is False:
+        return '; '.join(v for v in (entry.get('missed'), entry.get('reason')) if v)
+    parts = [entry.get('missed') or ('found' if entry.get('found') else '')]
+    if entry.get('level'):
+        parts.append(f"palpable from {entry['level']} pressure ({entry['level_depth_mm']:g} mm)")
+    return '; '.join(p for p in parts if p)
 
 
 def panel_numbers(report: dict) -> dict:
@@ -87,7 +99,7 @@ class Debrief:
                 self._first[new] = b - self.t0
         self.lesions = [LesionMarker(e['name'], tuple(np.array(e['centre_mm']) * 1e-3),
                                      e['radius_mm'] * 1e-3, tuple(np.array(e['surface_mm']) * 1e-3),
-                                     lesion_status(e), e.get('missed', ''))
+                                     lesion_status(e), lesion_why(e))
                         for e in report['lesions']]
 
     def face_levels(self, t: float | None = None) -> np.ndarray:
