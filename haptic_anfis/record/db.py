@@ -86,7 +86,27 @@ UPDATE sessions SET palpable_missed = misses;
 _V3 = """
 ALTER TABLE sessions ADD COLUMN bag_start_ns INTEGER;
 """
-MIGRATIONS: tuple[str, ...] = (_V1, _V2, _V3)
+# v4: a trainee's own stiffness-discrimination threshold (`haptic-anfis threshold`), and what
+# predicts finding lumps: search time per area, time at each pressure level, the force when
+# palpating vs searching (the session's report holds the details; these are its headline figures).
+_V4 = """
+CREATE TABLE thresholds (
+    id            INTEGER PRIMARY KEY AUTOINCREMENT,
+    trainee_id    TEXT NOT NULL REFERENCES trainees(id) ON DELETE CASCADE,
+    measured_utc  TEXT NOT NULL,
+    threshold_pct REAL NOT NULL,
+    trials        INTEGER NOT NULL,
+    device        TEXT NOT NULL,
+    details_json  TEXT NOT NULL
+);
+CREATE INDEX thresholds_by_trainee ON thresholds(trainee_id, id);
+ALTER TABLE sessions ADD COLUMN time_at_level_json TEXT;
+ALTER TABLE sessions ADD COLUMN area_time_json TEXT;
+ALTER TABLE sessions ADD COLUMN force_palpating_n REAL;
+ALTER TABLE sessions ADD COLUMN force_searching_n REAL;
+ALTER TABLE sessions ADD COLUMN lesion_levels_json TEXT
+"""
+MIGRATIONS: tuple[str, ...] = (_V1, _V2, _V3, _V4)
 SCHEMA_VERSION = len(MIGRATIONS)
 
 

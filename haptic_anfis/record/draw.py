@@ -19,11 +19,14 @@ __all__ = ['next_case']
 
 
 def next_case(db: str | os.PathLike | None, trainee_id: str, lib=None,
-              config: MasteryConfig | None = None, exam_config: str | None = None):
+              config: MasteryConfig | None = None, exam_config: str | None = None,
+              threshold_pct: float | None = None):
     """``(case, level, mastery dict)`` for the trainee's next blind session; a trainee with no
     record yet starts at level 1; a next level above the hardest ready case draws from that; a
     level without a ready case draws from the next harder level that has one (``level`` says
     which level was drawn, the mastery dict's ``next_level`` what the record asks for).
+    ``threshold_pct``: the graded cases' levels at this palpability threshold [%] (the trainee's
+    own, ``haptic-anfis threshold``) instead of the stored grading's.
 
     Raises:
         ValueError: no ready case of that level (names the level and the levels there are);
@@ -41,7 +44,8 @@ def next_case(db: str | os.PathLike | None, trainee_id: str, lib=None,
     by_level: dict[int, list] = {}
     for c in lib.ready():
         try:
-            by_level.setdefault(case_level(c), []).append(c)
+            own = c.level_at(threshold_pct) if threshold_pct is not None else None
+            by_level.setdefault(own if own is not None else case_level(c), []).append(c)
         except (CaseError, ValueError):
             continue   # a broken scene is not drawn (cases list names it)
     if by_level and level > max(by_level):   # past the hardest case there is: stay there
