@@ -92,7 +92,9 @@ def test_the_threshold_goes_into_the_record_and_an_old_record_is_migrated(tmp_pa
     assert latest_threshold(db, 'ann') is None
     with connect(db) as c:
         assert c.execute('PRAGMA user_version').fetchone()[0] == SCHEMA_VERSION == 4
-    assert len(history(db, 'ann')) == 1   # the old session still reads
+    old = history(db, 'ann')
+    assert len(old) == 1 and old[0]['score'] == 90   # the old session still reads
+    assert old[0]['time_at_level_s'] is None and old[0]['force_palpating_n'] is None
     assert main(['threshold', '--trainee-id', 'ann', '--db', str(db), '--observer', '22',
                  '--json']) == 0
     res = json.loads(capsys.readouterr().out.strip().splitlines()[-1])

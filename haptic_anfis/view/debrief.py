@@ -54,14 +54,20 @@ def lesion_why(entry: dict) -> str:
 def panel_numbers(report: dict) -> dict:
     """The headline numbers the debrief panel shows, as the report has them (``exam report
     --json``): coverage per level [%], hits, misses, false marks, score, verdict, pattern,
-    duration [s]."""
+    duration [s], time per pressure level and per area [s], force palpating / searching [N]."""
     return {'coverage_light_pct': report['coverage_pct']['light'],
             'coverage_medium_pct': report['coverage_pct']['medium'],
             'coverage_deep_pct': report['coverage_pct']['deep'],
             'hits': report['hits'], 'misses': report['misses'],
             'false_marks': report['false_marks'], 'score': report['score'],
             'verdict': report['verdict'], 'pattern': report['pattern'],
-            'duration_s': report['duration_s']}
+            'duration_s': report['duration_s'],
+            # what predicts finding lumps (haptic_anfis.exam.effort; None in an older report)
+            'time_at_level_s': report.get('time_at_level_s'),
+            'area_time_s': report.get('area_time_s'),
+            'force_palpating_n': report.get('force_palpating_n'),
+            'force_searching_n': report.get('force_searching_n'),
+            'palpating_vs_searching_pct': report.get('palpating_vs_searching_pct')}
 
 
 class Debrief:
