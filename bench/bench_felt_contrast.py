@@ -15,7 +15,9 @@ tissue force the hand is given to feel, as the driver's gauge shows it).
 
 Felt contrast at depth d: |F_applied| over the lesion / over the mirror point - 1, each read at
 the tick where the probe's depth first reaches d; FE contrast: the FE dataset's |F| at the two
-loading points at d. Clamped ticks: ticks with the device force at the clamp (within 1e-6) while
+loading points at d; model contrast: the case's force model at the same two points and depth
+(what the chain is given to render: felt vs model isolates the chain, FE vs model the model's own
+error). Clamped ticks: ticks with the device force at the clamp (within 1e-6) while
 the probe is in contact and no deeper than the deepest trained depth. Rows for the force scale
 of :mod:`haptic_anfis.cases.force_mapping` ("case") and one to one ("1.0", the old default).
 
@@ -33,6 +35,7 @@ import numpy as np
 from _page import write_page
 from haptic_anfis.cases import library
 from haptic_anfis.cases.force_mapping import case_force_mapping
+from haptic_anfis.cases.grading import PALPABLE_PCT
 from haptic_anfis.device import HandParams, PalpationScript, WorkspaceMapping
 from haptic_anfis.device import native_tick as nt
 from haptic_anfis.device.servo_native import NativeServoLoop
@@ -132,6 +135,12 @@ def over_and_mirror(ds, centre_yz) -> tuple[tuple[float, float], tuple[float, fl
     return (float(yz[k, 0]), float(yz[k, 1])), (-float(yz[k, 0]), -float(yz[k, 1]))
 
 
+def model_at(model, radii, yz, depth: float) -> float:
+    """|F| [N] the case's force model gives at the surface point over ``yz`` [m], ``depth``."""
+    x = float(surface_height(np.array(yz[0]), np.array(yz[1]), radii))
+    return float(np.linalg.norm(model.predict(np.array([[x, yz[0], yz[1], depth]]))[0]))
+
+
 def stiffest_point(ds, palpable_radius: float, deepest: float) -> tuple[float, float]:
     sel = (np.abs(ds.X[:, 3] - deepest) < 1e-9) & (np.hypot(ds.X[:, 1], ds.X[:, 2])
                                                    <= palpable_radius + 1e-9)
@@ -170,11 +179,19 @@ def measure_case(case, scales: list[str]) -> tuple[list[str], list[str], list[di
                 fe = None if eo is None or em is None else eo / em - 1
                 err = None if felt is None or fe is None or abs(fe) < 1e-12 else felt / fe - 1
                 ok = err is not None and abs(err) <= CONTRAST_TOLERANCE
+                mo, mm = model_at(pipeline[3], sc.radii, over, d), model_at(pipeline[3], sc.radii,
+                                                                            mirror, d)
+                mod = mo / mm - 1
+                chain = None if felt is None or abs(mod) < 1e-12 else felt / mod - 1
+                palp = fe is not None and 100 * fe >= PALPABLE_PCT
                 rows.append(f'| {case.name} | {t.name} | {label} | {d * 1e3:g} | {pct(fe)} | '
-                            f'{pct(felt)} | {pct(err)} | {"ok" if ok else "**no**"} | '
+                            f'{pct(mod)} | {pct(felt)} | {pct(err)} | {pct(chain)} | '
+                            f'{"ok" if ok else "**no**"} | {"yes" if palp else "no"} | '
                             f'{"-" if fo is None else f"{fo:.2f}"} |')
                 found.append({'case': case.name, 'lesion': t.name, 'scale': scale, 'depth': d,
-                              'fe': fe, 'felt': felt, 'ok': ok})
+                              'fe': fe, 'felt': felt, 'ok': ok, 'palpable': palp,
+                              'chain_ok': chain is not None
+                              and abs(chain) <= CONTRAST_TOLERANCE})
         n_clamped = {k: clamped_within(p, deepest) for k, p in pressed.items()}
         reach = max(float(p['depth'][p['contact']].max(initial=0.0)) for p in pressed.values())
         peak = max(float(p['force'][p['contact'] & (p['depth'] <= deepest + 1e-9)].max(
@@ -209,13 +226,19 @@ def main() -> int:
     for scale in scales:
         mine = [f for f in lesion if f['scale'] == scale]
         cl = [f for f in found if f.get('clamped') is not None and f['scale'] == scale]
+        palp = [f for f in mine if f['palpable']]
         lines.append(f'- scale {scale}: {sum(f["ok"] for f in mine)} of {len(mine)} lesion x depth '
-                     f'rows within {100 * CONTRAST_TOLERANCE:g} % of the FE contrast; '
+                     f'rows within {100 * CONTRAST_TOLERANCE:g} % of the FE contrast '
+                     f'({sum(f["ok"] for f in palp)} of the {len(palp)} where the FE contrast '
+                     f'reaches the {PALPABLE_PCT:g} % palpability threshold; the felt within '
+                     f'{100 * CONTRAST_TOLERANCE:g} % of the force model\'s own contrast in '
+                     f'{sum(f["chain_ok"] for f in palp)} of those); '
                      f'{sum(1 for f in cl if f["clamped"])} of {len(cl)} cases with a tick at the '
                      f'clamp within the trained depth ({sum(f["clamped"] for f in cl)} ticks)')
-    head = ['| case | lesion | force scale | depth (mm) | FE contrast (%) | felt contrast (%) | '
-            'felt vs FE (%) | within 10 % | felt over lesion (N, tissue) |',
-            '|---|---|---|---|---|---|---|---|---|']
+    head = ['| case | lesion | force scale | depth (mm) | FE contrast (%) | model contrast (%) | '
+            'felt contrast (%) | felt vs FE (%) | felt vs model (%) | felt within 10 % of FE | '
+            f'FE >= {PALPABLE_PCT:g} % | felt over lesion (N, tissue) |',
+            '|---|---|---|---|---|---|---|---|---|---|---|---|']
     chead = ['| case | force scale | presses | ticks at the clamp within the trained depth | '
              'largest device force within it (N) | deepest probe depth reached (mm) |',
              '|---|---|---|---|---|---|']
