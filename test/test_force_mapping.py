@@ -61,6 +61,9 @@ def test_the_session_sets_the_drivers_scale_from_its_case_unless_the_user_does()
     low = SessionSpec(case=case.name, ros_args=('-p', 'max_force:=4.0')).force_mapping()
     assert low.max_force_n == 4.0 and low.force_scale == pytest.approx(want * 4.0 / RATED_FORCE)
     assert SessionSpec(nodes=('contact_detector', 'force_server')).driver_arguments() == []
+    from haptic_anfis.resources import config_file
+    shipped = SessionSpec(case=case.name, params_files=(str(config_file('falcon_driver.yaml')),))
+    assert shipped.force_mapping().force_scale == pytest.approx(want)   # its 1.0 is the default
 
 
 def test_cases_list_and_the_bag_record_the_mapping(capsys):
@@ -73,3 +76,15 @@ def test_cases_list_and_the_bag_record_the_mapping(capsys):
         case_force_mapping(library().get('lib_m_dense_idc20_d12')).force_scale)
     assert json.loads(_force_mapping_data('lib_m_dense_idc20_d12')['force_mapping']) == m
     assert _force_mapping_data('unknown') == {}
+
+
+def test_a_session_graph_renders_its_case_at_the_case_scale():
+    from haptic_anfis.session.one_process import open_graph
+    spec = SessionSpec(nodes=('falcon_driver', 'contact_detector', 'force_server'),
+                       case='lib_m_dense_idc25_d15')
+    g = open_graph(spec, visualizer=False)
+    try:
+        want = case_force_mapping(library().get('lib_m_dense_idc25_d15')).force_scale
+        assert g.driver.mapping.force_scale == pytest.approx(want)
+    finally:
+        g.shutdown()

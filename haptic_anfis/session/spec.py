@@ -245,13 +245,18 @@ class SessionSpec:
             return ['-p', f'random_case_seed:={int(self.seed)}']
         return ['-p', f'case:={self.case}'] if self.case else []
 
-    def user_parameter(self, node: str, key: str, default=None):
+    def user_parameter(self, node: str, key: str, default=None, shipped: bool = True):
         """The value the user gives ``key`` of ``node`` (the last of the parameter files' sections
         for it or for every node, then the ``-p`` overrides, as rcl applies them), else
-        ``default``."""
+        ``default``. ``shipped=False``: the package's own ``config/<node>.yaml`` does not count
+        (its values are the defaults, written out)."""
         from ..nodes.parameters import read_parameter_file, ros_args_sources
+        from ..resources import config_file
         value = default
+        own = Path(config_file(f'{node}.yaml')).resolve()
         for f in self.params_files:
+            if not shipped and Path(f).resolve() == own:
+                continue
             for section, k, v, _ in read_parameter_file(f):
                 if k == key and section.rsplit('/', 1)[-1] in (node, '**'):
                     value = v
@@ -267,9 +272,11 @@ class SessionSpec:
         session's case (the drawn one for ``--random-case``; the default case without one or
         with a scene file, whose forces the default model renders), against the driver's
         ``max_force``; None without a driver in the session or when the user sets
-        ``force_scale`` (that value is rendered)."""
+        ``force_scale`` (on the command line or in a parameter file other than the shipped
+        ``config/falcon_driver.yaml``, whose 1.0 is the node's default written out): that value
+        is rendered."""
         if 'falcon_driver' not in self.nodes or self.user_parameter(
-                'falcon_driver', 'force_scale') is not None:
+                'falcon_driver', 'force_scale', shipped=False) is not None:
             return None
         from ..cases.force_mapping import case_force_mapping
         from ..cases.library import DEFAULT_CASE, library
