@@ -19,6 +19,8 @@ import sys
 import time
 from pathlib import Path
 
+from .threshold import percentage
+
 NAME = 'cases'
 HELP = 'list the palpation case library, or generate cases (FE sweep, mesh, model)'
 
@@ -30,13 +32,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     ls.add_argument('--markdown', action='store_true',
                     help="the README's table (rules and lesion contrast per case) instead")
     ls.add_argument('--no-timing', action='store_true', help='skip the evaluation-time measurement')
-    ls.add_argument('--threshold', type=_threshold, default=None, metavar='PCT',
+    ls.add_argument('--threshold', type=percentage, default=None, metavar='PCT',
                     help="grade the lesions at this palpability threshold [%%] (a trainee's own, "
                          '`haptic-anfis threshold`) instead of the stored grading')
     rg = sub.add_parser('regrade', help="grade shipped cases again from their FE store (the "
                         "dataset sidecar's grading; the models stay)")
     rg.add_argument('names', nargs='*', help='cases (default: every shipped graded case)')
-    rg.add_argument('--threshold', type=_threshold, default=None, metavar='PCT',
+    rg.add_argument('--threshold', type=percentage, default=None, metavar='PCT',
                     help="palpability threshold [%%] (default: config/exam.yaml's palpable_pct)")
     rg.add_argument('--store', type=Path, default=None,
                     help='per-point store root (default fe_store/ in the source tree)')
@@ -123,18 +125,6 @@ def _list(args: argparse.Namespace) -> int:
     else:
         print(format_table(rows))
     return 0
-
-
-def _threshold(text: str) -> float:
-    """A palpability threshold [%] from the command line."""
-    import math
-    try:
-        v = float(text)
-    except ValueError:
-        v = math.nan
-    if not (math.isfinite(v) and 0 < v < 1000):
-        raise argparse.ArgumentTypeError(f'expected a percentage > 0 (e.g. 22), got {text!r}')
-    return v
 
 
 def _regrade(args: argparse.Namespace) -> int:

@@ -23,7 +23,8 @@ NAME = 'threshold'
 HELP = "measure a trainee's stiffness-discrimination threshold (2AFC staircase) on the device"
 
 
-def _pct(text: str) -> float:
+def percentage(text: str) -> float:
+    """A percentage > 0 from the command line (argparse ``type``; 22 = 22 %)."""
     try:
         v = float(text)
     except ValueError:
@@ -39,7 +40,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument('--backend', choices=('sim', 'falcon'), default='sim',
                    help="'sim': the simulated Falcon and a simulated observer; 'falcon': a "
                         'Novint Falcon and the trainee answering (default sim)')
-    p.add_argument('--observer', type=_pct, default=22.0, metavar='PCT',
+    p.add_argument('--observer', type=percentage, default=22.0, metavar='PCT',
                    help="sim: the simulated observer's threshold [%%] (default 22)")
     p.add_argument('--seed', type=int, default=0, help='seed of the press order (and of the '
                                                        'simulated observer)')
