@@ -56,7 +56,8 @@ def main() -> int:
                          f'{np.mean([t for _, t in got]):.0f} |')
             print(lines[-1], flush=True)
     text = (f'Staircase: 3-down-1-up, steps x{STEPS[0]:g} then x{STEPS[1]:g}, a step down '
-            f'{DOWN_RATIO:g} of a step up, 16 reversals, the geometric mean of the last 12.\n\n'
+            f'{DOWN_RATIO:g} of a step up, {Staircase().reversals} reversals, the geometric mean of the '
+            f'last {Staircase().averaged}.\n\n'
             + '\n'.join(lines))
     print(text)
     if not a.no_page:

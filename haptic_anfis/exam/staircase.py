@@ -54,10 +54,10 @@ class Staircase:
     """
 
     start: float = 0.6
-    reversals: int = 16
-    averaged: int = 12
+    reversals: int = 24
+    averaged: int = 20
     coarse_reversals: int = 3
-    max_trials: int = 120
+    max_trials: int = 200
     floor: float = 0.005
     ceiling: float = 3.0
     trials: list[tuple[float, bool]] = field(default_factory=list)
