@@ -228,6 +228,14 @@ def test_grading_and_gates_by_numbers():
               {'lesion': 'tiny', 'palpable': False, 'contrast_n': 0.001}]
     fails = gate_failures(ok, span, lesion)
     assert len(fails) == 1 and 'lesion idc' in fails[0] and '1/3 of its FE contrast' in fails[0]
+    # the gate weighs a lesion's strongest contrast at a depth where a stylus feels it
+    strong = {'lesion': 'deep', 'palpable': True, 'contrast_n': 0.01, 'threshold_pct': 22.0,
+              'contrasts': [{'contrast_n': 0.01, 'contrast_pct': 25.0},
+                            {'contrast_n': 0.2, 'contrast_pct': 30.0},
+                            {'contrast_n': 5.0, 'contrast_pct': 10.0}]}
+    assert gate_failures(ok, span, [strong]) == []
+    strong['contrasts'][1]['contrast_pct'] = 20.0   # no longer palpable there: 0.01 N remains
+    assert 'lesion deep' in gate_failures(ok, span, [strong])[0]
 
 
 def test_build_grades_gates_and_ships(swept, monkeypatch):
