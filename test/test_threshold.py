@@ -114,3 +114,17 @@ def test_next_grades_the_library_at_the_trainees_threshold(tmp_path):
     # at the finger's 7 % the 10 mm carcinoma 10 mm deep is level 2, at 22 % below the device
     c = lib.get('lib_m_dense_idc10_d10')
     assert c.level_at(7.0) == 2 and c.level_at(22.0) == 1
+
+
+def test_exam_run_next_draws_at_the_trainees_measured_threshold(tmp_path, capsys):
+    import argparse
+
+    from haptic_anfis.commands._record import prepare_record
+    from haptic_anfis.record.thresholds import store_threshold
+    db = tmp_path / 'r.sqlite'
+    store_threshold(db, 'cy', 7.0, 80, 'sim', {'threshold_pct': 7.0})
+    args = argparse.Namespace(trainee_id='cy', db=str(db), next=True, case='',
+                              exam_config=None)
+    prepare_record(args)
+    assert args.blind and args.case
+    assert "graded at the trainee's own threshold, 7.0 %" in capsys.readouterr().out
