@@ -10,10 +10,11 @@ every ratio, so a relative (Weber) contrast survives it; a clamp does not.
 **One scale per case, not one for the library.** The scale is chosen so that the case's largest
 FE force over its palpable disc at its deepest trained depth lands at ``HEADROOM`` of the clamp.
 One library-wide scale would be set by the stiffest case (lib_m_dense_idc25_d15: 25.9 N at 16 mm,
-s = 0.29) and would render a fatty breast's deep level (8 mm, about 4 N of tissue force) at
-1.2 N, and its light level at 0.3 N: below the 2.5-10 N over which force discrimination keeps its
-~7 % Weber fraction (Pang, Tan & Durlach 1991), where the JND grows. Per case, every case's deep
-level lands at 2-3 N and its deepest trained press at ``HEADROOM`` of the clamp. What is lost is
+s = 0.29) and would render the breasts' deep level (8 mm) at 1.1-2.0 N, and a fatty breast's
+light level at 0.3 N: below the 2.5-10 N over which force discrimination keeps its ~7 % Weber
+fraction (Pang, Tan & Durlach 1991), where the JND grows. Per case the deep level lands at
+1.7-3.3 N and every case's deepest trained press at ``HEADROOM`` of the clamp
+(docs/measurements/force_mapping.md, bench/bench_force_mapping.py). What is lost is
 the absolute stiffness between cases (a fatty breast no longer feels softer than a dense one);
 the lesson is the lump against its own breast, which a per-case scale keeps whole. The exam's
 levels stay in tissue depth and the gauge shows the tissue force (the driver divides by the
