@@ -1,6 +1,6 @@
 """The graded library: per-point store (atomic, resumable, refuses other scenes), retries and
 holes, lesion rings, grading (contrast vs the lesion-free twin, palpability, difficulty, level),
-the shipping gates, and the exam's 'not palpable here'."""
+the shipping gates, and the exam's 'below what this device renders'."""
 import concurrent.futures as cf
 import json
 import re
@@ -12,7 +12,8 @@ from test_cases import _library  # the same throw-away library of scene files
 from haptic_anfis.cases import CaseError, library
 from haptic_anfis.cases import build as build_mod
 from haptic_anfis.cases.build import build_case, gate_failures
-from haptic_anfis.cases.grading import PALPABLE_PCT, case_level, difficulty
+from haptic_anfis.cases.grading import (PALPABLE_PCT, case_level, difficulty, grade_contrasts,
+                                        regrade)
 from haptic_anfis.cases.sweeps import case_stores, store_status, stored_records, sweep_case_store
 from haptic_anfis.tissue.geometry import _disc_grid, loading_points
 from haptic_anfis.tissue.pointsweep import run_point_sweep, solve_point
@@ -196,8 +197,25 @@ def test_a_hole_refuses_the_case_naming_the_point(swept):
 
 
 def test_grading_and_gates_by_numbers():
+    assert PALPABLE_PCT == 22.0   # Tan et al. 1995: stiffness through a rigid stylus
     assert difficulty(PALPABLE_PCT - 0.01) is None and difficulty(float('nan')) is None
-    assert [difficulty(m * PALPABLE_PCT) for m in (1.0, 1.5, 2.5, 4.0, 6.0)] == [5, 4, 3, 2, 1]
+    # where a lesion is first palpable decides its difficulty (mm -> m)
+    mm = lambda c: {d * 1e-3: v for d, v in c.items()}  # noqa: E731
+    assert grade_contrasts(mm({2: 50, 5: 55}))['difficulty'] == 1        # light, 2x the threshold
+    g = grade_contrasts(mm({2: 30, 5: 35}))
+    assert g['difficulty'] == 2 and g['found_level'] == 'light' and g['found_depth_m'] == 0.002
+    g = grade_contrasts(mm({2: 10, 5: 23, 8: 30}))
+    assert g['difficulty'] == 2 and g['found_level'] == 'medium'
+    assert grade_contrasts(mm({2: 10, 5: 15, 8: 22, 16: 30}))['difficulty'] == 3
+    g = grade_contrasts(mm({2: 10, 8: 15, 12: 23, 16: 30}))
+    assert g['difficulty'] == 4 and g['found_level'] == 'deep'
+    assert grade_contrasts(mm({2: 10, 8: 15, 12: 20, 16: 23}))['difficulty'] == 5
+    g = grade_contrasts(mm({2: 5, 8: 9, 16: 14}))
+    assert not g['palpable'] and g['difficulty'] is None
+    assert g['reason'].startswith('below what this device renders: at most +14.0 % (at 16 mm)')
+    assert grade_contrasts(mm({2: 9}), threshold_pct=7.0)['palpable']   # a trainee's own
+    with pytest.raises(ValueError, match='palpability threshold'):
+        grade_contrasts(mm({2: 9}), threshold_pct=0.0)
     assert case_level([]) == 1
     assert case_level([{'palpable': True, 'difficulty': 2}, {'palpable': False,
                                                              'difficulty': None}]) == 2
@@ -210,6 +228,14 @@ def test_grading_and_gates_by_numbers():
               {'lesion': 'tiny', 'palpable': False, 'contrast_n': 0.001}]
     fails = gate_failures(ok, span, lesion)
     assert len(fails) == 1 and 'lesion idc' in fails[0] and '1/3 of its FE contrast' in fails[0]
+    # the gate weighs a lesion's strongest contrast at a depth where a stylus feels it
+    strong = {'lesion': 'deep', 'palpable': True, 'contrast_n': 0.01, 'threshold_pct': 22.0,
+              'contrasts': [{'contrast_n': 0.01, 'contrast_pct': 25.0},
+                            {'contrast_n': 0.2, 'contrast_pct': 30.0},
+                            {'contrast_n': 5.0, 'contrast_pct': 10.0}]}
+    assert gate_failures(ok, span, [strong]) == []
+    strong['contrasts'][1]['contrast_pct'] = 20.0   # no longer palpable there: 0.01 N remains
+    assert 'lesion deep' in gate_failures(ok, span, [strong])[0]
 
 
 def test_build_grades_gates_and_ships(swept, monkeypatch):
@@ -243,6 +269,14 @@ def test_build_grades_gates_and_ships(swept, monkeypatch):
     assert len(np.unique(ds.point)) == len(loading_points(case.scene))
     assert case.level == res.level and lib.levels() == {'tinygraded': res.level}
     assert case.grading()['lesions'][0]['contrast_n'] == pytest.approx(g['contrast_n'])
+    # every solved depth is kept, so the case can be graded at another threshold
+    assert [r['depth_m'] for r in g['contrasts']] == pytest.approx([0.002, 0.005, 0.008])
+    low = case.grading(threshold_pct=1e-3)
+    assert low['lesions'][0]['palpable'] and low['lesions'][0]['found_depth_m'] == 0.002
+    high = case.grading(threshold_pct=1e4)
+    assert not high['lesions'][0]['palpable'] and high['level'] == 1
+    assert high['below_device'] == ['idc'] and case.level_at(1e4) == 1
+    assert regrade(case.grading(), 1e-3) == low
     from haptic_anfis.cases.summary import case_summary
 
     row = case_summary(case, timing=False, contrast=False)
@@ -265,7 +299,7 @@ def test_exam_reports_a_non_palpable_lesion_neither_hit_nor_miss():
     assert fin['hits'] == 0 and fin['misses'] == 1 and fin['false_marks'] == 0
     assert fin['marks'][0]['result'] == 'not_palpable'
     small = fin['lesions'][1]
-    assert small['palpable'] is False and small['missed'] == 'not palpable here'
+    assert small['palpable'] is False and small['missed'] == 'below what this device renders'
     from haptic_anfis.exam.session import verdict_of
 
     cov = {'light': 1.0, 'medium': 1.0, 'deep': 1.0}
@@ -297,3 +331,35 @@ def test_every_shipped_case_is_at_the_validated_fidelity():
         assert not pv.get('reused'), case.name  # no far-field reuse
         assert max(pv['grouped_cv']['pct_range']) <= build_mod.RANGE_GATE_PCT, case.name
         assert case.level in (1, 2, 3, 4, 5), case.name
+
+
+def test_the_shipped_library_fills_every_level_and_names_where_each_lesion_is_felt():
+    """Graded at the stylus threshold every level 1-5 has a ready case; every graded lesion is
+    palpable from a pressure level or says why it is below what this device renders."""
+    lib = library()
+    levels = {c.level for c in lib.ready() if c.grading() is not None}
+    assert {1, 2, 3, 4, 5} <= levels
+    for c in lib.ready():
+        g = c.grading()
+        if g is None:
+            continue
+        assert g['threshold_pct'] == PALPABLE_PCT, c.name
+        for e in g['lesions']:
+            assert len(e['contrasts']) == 5, c.name
+            if e['palpable']:
+                assert e['found_level'] in ('light', 'medium', 'deep') and e['reason'] is None
+            else:
+                assert e['reason'].startswith('below what this device renders'), c.name
+
+
+def test_cases_list_grades_against_a_given_threshold(capsys):
+    from haptic_anfis.cli import main
+    assert main(['cases', 'list', '--json', '--no-timing', '--threshold', '7']) == 0
+    rows = {r['name']: r for r in json.loads(capsys.readouterr().out)}
+    # at the finger's 7 % the 10 mm carcinoma 10 mm deep is felt from light pressure
+    les = rows['lib_m_dense_idc10_d10']['lesions'][0]
+    assert les['palpable'] and les['found_level'] == 'light' and les['found_depth_mm'] == 2
+    assert rows['lib_m_dense_idc10_d10']['threshold_pct'] == 7.0
+    with pytest.raises(SystemExit):
+        main(['cases', 'list', '--no-timing', '--threshold', '0'])
+    assert 'expected a percentage > 0' in capsys.readouterr().err

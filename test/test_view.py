@@ -68,7 +68,19 @@ def test_probe_quaternion_stands_the_probe_out_of_the_tissue(d):
 def test_lesion_status():
     assert lesion_status({'found': True}) == 'hit'
     assert lesion_status({'found': False}) == 'missed'
-    assert lesion_status({'found': False, 'palpable': False}) == 'not palpable'
+    assert lesion_status({'found': False, 'palpable': False}) == 'below device'
+
+
+def test_the_debrief_says_from_which_pressure_level_a_lesion_is_felt():
+    from haptic_anfis.view.debrief import lesion_why
+    assert lesion_why({'found': False, 'missed': 'never palpated deep', 'level': 'medium',
+                       'level_depth_mm': 5.0}) == ('never palpated deep; palpable from medium '
+                                                   'pressure (5 mm)')
+    assert lesion_why({'found': True, 'level': 'light', 'level_depth_mm': 2.0}) == (
+        'found; palpable from light pressure (2 mm)')
+    assert lesion_why({'found': False, 'palpable': False,
+                       'missed': 'below what this device renders', 'reason': 'at most +4.1 %'}
+                      ) == 'below what this device renders; at most +4.1 %'
 
 
 def test_debrief_equals_exam_report_and_replays_in_time(bag, capfd):

@@ -6,11 +6,13 @@ Order (nothing is written into the package until every check passed):
    failed point refuses the case, naming it);
 2. the force dataset and the skin displacement file of the same solves (the displacement file's
    ``dataset_sha256`` ties them; the model records the dataset's hash, as for every case);
-3. grading (:mod:`.grading`): contrast, palpable, difficulty per lesion; the case level;
+3. grading (:mod:`.grading`): contrast per depth, palpable, the pressure level it is found at,
+   difficulty per lesion; the case level;
 4. the model, trained as every case's (``config/case_model.yaml``), then grouped cross-validation
    by loading point (5 folds x 3 seeds, the model's own structures refitted);
 5. gates (:func:`gate_failures`): grouped-CV RMSE <= 1 % of the force range on every axis and
-   <= 1/3 of each palpable lesion's contrast; shipped files <= 1 MB (forces as float32
+   <= 1/3 of each palpable lesion's contrast (its largest at a depth where it is palpable);
+   shipped files <= 1 MB (forces as float32
    decimals, displacement harmonics in 1 µm steps, float32, compressed). A failed gate raises
    :class:`~.library.CaseError` naming the figure.
 
@@ -32,7 +34,7 @@ import numpy as np
 from .library import Case, CaseError
 
 __all__ = ['RANGE_GATE_PCT', 'CONTRAST_GATE', 'SIZE_GATE_BYTES', 'BuildResult', 'build_case',
-           'gate_failures', 'grouped_cv']
+           'gate_failures', 'grouped_cv', 'regrade_case']
 
 RANGE_GATE_PCT = 1.0        # grouped-CV RMSE per axis, % of that axis's force range
 CONTRAST_GATE = 1.0 / 3.0   # grouped-CV RMSE (vector norm) as a fraction of a lesion's contrast
@@ -90,9 +92,15 @@ def gate_failures(cv_rmse: np.ndarray, span: np.ndarray, grades: Sequence[dict[s
                        f'({span[a]:.2f} N), above {RANGE_GATE_PCT:g} %')
     norm = float(np.linalg.norm(cv_rmse))
     for g in grades:
-        if g['palpable'] and norm > CONTRAST_GATE * g['contrast_n']:
+        if not g['palpable']:
+            continue
+        # its strongest contrast where a stylus feels it (the grading's per-depth figures)
+        rows = [r for r in g.get('contrasts') or ()
+                if r['contrast_pct'] >= g.get('threshold_pct', 0.0)]
+        c = max(r['contrast_n'] for r in rows) if rows else g['contrast_n']
+        if norm > CONTRAST_GATE * c:
             out.append(f'lesion {g["lesion"]}: grouped-CV RMSE {norm:.4f} N (|Fx, Fy, Fz|) is more '
-                       f'than 1/3 of its FE contrast {g["contrast_n"]:.4f} N')
+                       f'than 1/3 of its FE contrast {c:.4f} N')
     return out
 
 
@@ -112,7 +120,7 @@ def build_case(case: Case, *, store_root: str | os.PathLike | None = None, coars
                                        save_displacements)
     from ..tissue.sweep import records_to_dataset
     from .generate import _package_relative, write_case_mesh
-    from .grading import DEEP_DEPTH, PALPABLE_PCT, case_level, lesion_grades
+    from .grading import case_level, grading_record, lesion_grades
     from .sweeps import case_stores, stored_records
 
     scene = case.scene
@@ -128,9 +136,7 @@ def build_case(case: Case, *, store_root: str | os.PathLike | None = None, coars
         case=case.name, generator='haptic_anfis.cases.build.build_case',
         store={'dir': stores.main.dir.name, 'probe_cells': stores.probe_cells,
                'twin_points': len(twins)},
-        grading={'depth_m': DEEP_DEPTH, 'threshold_pct': PALPABLE_PCT, 'level': res.level,
-                 'lesions': res.grades,
-                 'basis': 'haptic_anfis.cases.grading (force JND 7 %, Jones 1989)'},
+        grading=grading_record(res.grades),
         cpu_time_s=float(sum(r.get('cpu_time_s', 0.0) for r in recs)))
     p = dict(train_params or {})
     test_fraction, seed = p.pop('test_fraction', 0.2), p.pop('seed', 0)
@@ -194,3 +200,34 @@ def _stage_root(case: Case) -> Path:
     d.mkdir(parents=True, exist_ok=True)
     return d
 
+
+
+def regrade_case(case: Case, *, store_root: str | os.PathLike | None = None,
+                 threshold_pct: float | None = None) -> dict[str, Any]:
+    """Grade a shipped case again from its committed store (:mod:`.grading`: every depth, the
+    shallowest palpable pressure level) and write the grading into its dataset sidecar, leaving
+    the dataset, the displacement file and the model as they are. Returns the new grading.
+
+    Raises:
+        CaseError: the case is not shipped, or its store lacks a point (naming it).
+    """
+    from ..tissue.dataset import sidecar_path
+    from .grading import PALPABLE_PCT, grading_record, lesion_grades
+    from .sweeps import case_stores, stored_records
+
+    side = sidecar_path(case.dataset_path)
+    if not side.is_file():
+        raise CaseError(f'case {case.name!r}: no dataset sidecar {str(side)!r} to regrade; make '
+                        f'it with `haptic-anfis cases generate {case.name}`')
+    doc = json.loads(side.read_text())
+    if doc.get('scene_sha256') not in (None, case.scene.sha256()):
+        raise CaseError(f'case {case.name!r}: its dataset was made from another version of its '
+                        f'scene file; regenerate it with `haptic-anfis cases generate '
+                        f'{case.name}`')
+    thr = PALPABLE_PCT if threshold_pct is None else float(threshold_pct)
+    recs, twins = stored_records(case_stores(case, store_root))
+    doc['grading'] = grading_record(lesion_grades(case.scene, recs, twins, thr), thr)
+    tmp = side.with_name(f'.{side.name}.tmp')
+    tmp.write_text(json.dumps(doc, indent=2) + '\n')
+    os.replace(tmp, side)
+    return doc['grading']

@@ -22,6 +22,7 @@ from pathlib import Path
 from ..tissue.dataset import DATA_DIR
 from ..tissue.scene import SCENE_DIR, Scene, SceneError, load_scene
 from ..errors import HapticAnfisError
+from .grading import regrade
 
 DEFAULT_CASE = 'default'
 #: the environment variable naming the user's own case folder (``--case-dir`` sets it, so the
@@ -100,22 +101,30 @@ class Case:
         from ..tissue.dataset import sidecar_path
         return _json_file(sidecar_path(self.dataset_path))
 
-    def grading(self) -> dict | None:
+    def grading(self, threshold_pct: float | None = None) -> dict | None:
         """The FE grading of a graded-library case (:mod:`.grading`, written by
         :func:`.build.build_case` into the dataset sidecar): ``level``, ``lesions`` (each with
-        ``contrast_n``, ``contrast_pct``, ``palpable``, ``difficulty``), ``threshold_pct``,
-        ``depth_m``; None for a case not built from the per-point store, or graded on another
+        its per-depth ``contrasts``, ``palpable``, ``found_level``, ``difficulty``, ``reason``),
+        ``threshold_pct``; graded again at ``threshold_pct`` [%] when given (a trainee's own
+        threshold); None for a case not built from the per-point store, or graded on another
         version of its scene file (:meth:`scene_changed`)."""
         d = self._sidecar()
         if d.get('scene_sha256') not in (None, self.scene.sha256()):
             return None
-        return d.get('grading')
+        g = d.get('grading')
+        if g is None or threshold_pct is None:
+            return g
+        return regrade(g, threshold_pct)
 
     @property
     def level(self) -> int | None:
         """Difficulty level 1 (easy) .. 5 (hard) from the FE (:mod:`.grading`); None when the case
         is not graded."""
-        g = self.grading()
+        return self.level_at(None)
+
+    def level_at(self, threshold_pct: float | None) -> int | None:
+        """:attr:`level` with the lesions graded at ``threshold_pct`` [%] (None: as stored)."""
+        g = self.grading(threshold_pct)
         return None if g is None else int(g['level'])
 
     def lesions_m(self) -> list[tuple[float, float, float, float]]:

@@ -15,17 +15,20 @@ import numpy as np
 
 from ..tissue.dataset import ForceDataset, load_dataset
 from ..anfis.timing import percentiles_us, time_calls
+from .force_mapping import case_force_mapping
 from .library import Case
 
 CONTRAST_DEPTH = 0.008  # [m]
 CONTRAST_TOLERANCE = 0.25  # relative
 
 
-def lesion_rows(case: Case) -> list[dict[str, Any]]:
+def lesion_rows(case: Case, threshold_pct: float | None = None) -> list[dict[str, Any]]:
     """Lesions of the case in the listing's units (mm, kPa), with the FE grading of a graded case
-    (``contrast_n``, ``contrast_pct``, ``palpable``, ``difficulty``; None when not graded)."""
+    at ``threshold_pct`` [%] (None: as stored): ``contrast_n``, ``contrast_pct`` (at the depth it
+    is found, else its largest), ``palpable``, ``difficulty``, ``found_level``,
+    ``found_depth_mm``, ``reason``; None when not graded."""
     out = []
-    graded = {g['lesion']: g for g in ((case.grading() or {}).get('lesions') or [])}
+    graded = {g['lesion']: g for g in ((case.grading(threshold_pct) or {}).get('lesions') or [])}
     for t in case.scene.tumours:
         from ..tissue.scene import surface_height
 
@@ -36,7 +39,9 @@ def lesion_rows(case: Case) -> list[dict[str, Any]]:
                     'radius_mm': round(t.radius * 1e3, 3), 'modulus_kpa': round(t.youngs / 1e3, 3)})
         g = graded.get(t.name, {})
         out[-1].update({k: g.get(k) for k in ('contrast_n', 'contrast_pct', 'palpable',
-                                              'difficulty')})
+                                              'difficulty', 'found_level', 'reason')})
+        found = g.get('found_depth_m')
+        out[-1]['found_depth_mm'] = None if found is None else round(found * 1e3, 3)
     return out
 
 
@@ -94,14 +99,17 @@ def eval_p50_us(model, ds: ForceDataset, n: int = 2000, seed: int = 0) -> float:
     return percentiles_us(time_calls(model.predict_one, q, n))[0]
 
 
-def case_summary(case: Case, timing: bool = True, contrast: bool = True) -> dict[str, Any]:
+def case_summary(case: Case, timing: bool = True, contrast: bool = True,
+                 threshold_pct: float | None = None) -> dict[str, Any]:
     """One row of ``cases list`` (also its ``--json`` object). Model fields are None while the
-    case has no model; dataset fields None while it has no dataset."""
+    case has no model; dataset fields None while it has no dataset. ``threshold_pct``: grade
+    the lesions at this palpability threshold [%] (None: the stored grading)."""
     from ..anfis import ForceModel
 
     scene = case.scene
     row: dict[str, Any] = {
-        'name': case.name, 'description': case.description, 'lesions': lesion_rows(case),
+        'name': case.name, 'description': case.description,
+        'lesions': lesion_rows(case, threshold_pct), 'threshold_pct': threshold_pct,
         'breast_radii_mm': [round(r * 1e3, 3) for r in scene.radii],
         'glandular_kpa': round(scene.material.youngs / 1e3, 3),
         'dataset_path': str(case.dataset_path), 'model_path': str(case.model_path),
@@ -110,11 +118,13 @@ def case_summary(case: Case, timing: bool = True, contrast: bool = True) -> dict
         'dataset_points': None,
         'fe_probe_cells': None, 'structures': None, 'rules': None, 'rules_per_output': None,
         'parameters': None, 'rmse_n': None, 'rmse_pct_range': None, 'eval_p50_us': None,
-        'contrast': None, 'level': case.level, 'cv_rmse_n': None, 'cv_pct_range': None,
+        'contrast': None, 'level': case.level_at(threshold_pct), 'cv_rmse_n': None, 'cv_pct_range': None,
         'fe_points': _store_progress(case)}
     ds = None
+    row['force_mapping'] = None
     if case.dataset_path.is_file():
         ds = load_dataset(case.dataset_path)
+        row['force_mapping'] = case_force_mapping(case).as_dict()
         row['dataset_rows'] = len(ds)
         row['dataset_points'] = int(len(np.unique(ds.point)))
         row['fe_probe_cells'] = ds.provenance.get('mesh', {}).get('probe_cells')
@@ -154,19 +164,27 @@ def _store_progress(case: Case) -> dict[str, int] | None:
 
 
 def _lesion_text(l: dict[str, Any]) -> str:
-    """'m25mm@15' plus, when graded, ' +12.3%/0.45N d3' (or ' +2.1% np': not palpable)."""
+    """'m25mm@15' plus, when graded, ' +42.3%/2.45N d2@5' (the contrast where it is found, its
+    difficulty, the depth [mm] it is first palpable at) or ' +12.1% bd' (below what this device
+    renders: its largest contrast)."""
     text = f'{l["kind"][0]}{2 * l["radius_mm"]:g}mm@{l["depth_mm"]:.0f}'
     if l.get('contrast_pct') is not None:
         text += (f' {l["contrast_pct"]:+.1f}%/{l["contrast_n"]:.2f}N '
-                 + (f'd{l["difficulty"]}' if l['palpable'] else 'np'))
+                 + (f'd{l["difficulty"]}@{l["found_depth_mm"]:g}' if l['palpable'] else 'bd'))
     return text
+
+
+def _scale_text(m: dict[str, Any] | None) -> str:
+    """'x0.43' (the force scale), '-' without a dataset."""
+    return '-' if not m else f'x{m["force_scale"]:.2f}'
 
 
 def format_table(rows: list[dict[str, Any]]) -> str:
     """The human-readable listing."""
     head = (f'{"case":<24} {"lvl":>3} {"lesions":<30} {"breast mm":<10} {"E kPa":>5} {"rows":>5} '
             f'{"structure Fx/Fy/Fz":<24} {"rules":>5} {"params":>6} '
-            f'{"test RMSE N (% range) Fx, Fy, Fz":<42} {"CV % range":<16} {"p50 µs":>6}')
+            f'{"test RMSE N (% range) Fx, Fy, Fz":<42} {"CV % range":<16} {"p50 µs":>6} '
+            f'{"force":>6}')
     lines = [head, '-' * len(head)]
     for r in rows:
         les = ', '.join(_lesion_text(l) for l in r['lesions']) or 'none'
@@ -182,13 +200,18 @@ def format_table(rows: list[dict[str, Any]]) -> str:
         lines.append(f'{r["name"]:<24} {lvl:>3} {les:<30} {size:<10} {r["glandular_kpa"]:>5g} '
                      f'{r["dataset_rows"] or "-":>5} {st:<24} {r["rules"] or "-":>5} '
                      f'{r["parameters"] or "-":>6} {err:<42} {cv:<16} '
-                     f'{"-" if r["eval_p50_us"] is None else format(r["eval_p50_us"], ".2f"):>6}')
+                     f'{"-" if r["eval_p50_us"] is None else format(r["eval_p50_us"], ".2f"):>6} '
+                     f'{_scale_text(r.get("force_mapping")):>6}')
     lines.append('lesions: kind (m = malignant, b = benign, u = unstated), diameter @ centre depth '
-                 'under the skin [mm]; graded cases add the FE contrast at the deep level vs the '
-                 'lesion-free twin (% / N) and the difficulty dN (np = not palpable); lvl: case '
+                 'under the skin [mm]; graded cases add the FE contrast vs the lesion-free twin '
+                 '(% / N) at the shallowest depth a stylus can feel it, the difficulty dN and '
+                 'that depth @mm (bd = below what this device renders: its largest contrast); '
+                 'lvl: case '
                  'level 1-5; CV % range: grouped-CV RMSE Fx/Fy/Fz (or FE points solved so far); '
                  '(scene changed): the scene file was edited since the case was generated '
-                 '(not ready until `cases generate NAME`)')
+                 '(not ready until `cases generate NAME`); force: the tissue -> device force '
+                 'scale a session of the case renders (its largest FE force at the deepest '
+                 'trained depth at 85 % of the clamp; --json: force_mapping)')
     return '\n'.join(lines)
 
 

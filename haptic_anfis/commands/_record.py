@@ -45,10 +45,15 @@ def prepare_record(args: argparse.Namespace) -> None:
     if args.case:
         raise ValueError(f'--next draws the case: give it or --case {args.case}, not both')
     from ..record.draw import next_case
-    case, level, m = next_case(args.db, args.trainee_id, exam_config=args.exam_config)
+    from ..record.thresholds import latest_threshold
+    own = latest_threshold(args.db, args.trainee_id)   # graded against the trainee's own
+    case, level, m = next_case(args.db, args.trainee_id, exam_config=args.exam_config,
+                               threshold_pct=own)
     args.case, args.blind = case.name, True
     print(f'record: trainee {args.trainee_id}, mastered level {m["mastered_level"] or "none"}: a '
-          f'blind case of level {level}', flush=True)
+          f'blind case of level {level}'
+          + (f' (graded at the trainee\'s own threshold, {own:.1f} %)' if own else ''),
+          flush=True)
 
 
 def case_parameter(args: argparse.Namespace, case) -> tuple[str, str | int]:

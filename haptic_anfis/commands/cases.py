@@ -4,6 +4,7 @@
     haptic-anfis cases sweep [NAMES...] [--workers N] [--dask local|ADDRESS] [--status] [--coarse]
     haptic-anfis cases generate [NAMES...] [--workers N] [--coarse] [--dask local|ADDRESS]
                                 [--no-train | --train-only] [--config config/force_model.yaml]
+    haptic-anfis cases regrade [NAMES...] [--threshold PCT]
 
 Graded cases (scenes with lesion rings in their loading: every case but ``default``) are solved
 per point into the committed store ``fe_store/`` (resumable across sessions) and shipped only
@@ -18,6 +19,8 @@ import sys
 import textwrap
 import time
 from pathlib import Path
+
+from .threshold import percentage
 
 NAME = 'cases'
 HELP = 'list the palpation case library, or generate cases (FE sweep, mesh, model)'
@@ -34,8 +37,18 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     ls.add_argument('--markdown', action='store_true',
                     help="the README's table (rules and lesion contrast per case) instead")
     ls.add_argument('--no-timing', action='store_true', help='skip the evaluation-time measurement')
+    ls.add_argument('--threshold', type=percentage, default=None, metavar='PCT',
+                    help="grade the lesions at this palpability threshold [%%] (a trainee's own, "
+                         '`haptic-anfis threshold`) instead of the stored grading')
     from ..cases.library import add_case_dir_argument
     add_case_dir_argument(ls)
+    rg = sub.add_parser('regrade', help="grade shipped cases again from their FE store (the "
+                        "dataset sidecar's grading; the models stay)")
+    rg.add_argument('names', nargs='*', help='cases (default: every shipped graded case)')
+    rg.add_argument('--threshold', type=percentage, default=None, metavar='PCT',
+                    help="palpability threshold [%%] (default: config/exam.yaml's palpable_pct)")
+    rg.add_argument('--store', type=Path, default=None,
+                    help='per-point store root (default fe_store/ in the source tree)')
     sw = sub.add_parser('sweep', help='solve the missing FE points of cases into the committed '
                         'per-point store (fe_store/; resumable, parallel, local or dask)')
     sw.add_argument('names', nargs='*', help='cases (default: every graded case, i.e. every '
@@ -106,7 +119,9 @@ def run(args: argparse.Namespace) -> int:
         return _generate(args)
     if args.action == 'sweep':
         return _sweep(args)
-    print('haptic-anfis cases: give an action: list, sweep or generate', file=sys.stderr)
+    if args.action == 'regrade':
+        return _regrade(args)
+    print('haptic-anfis cases: give an action: list, sweep, generate or regrade', file=sys.stderr)
     return 2
 
 
@@ -114,23 +129,25 @@ def run(args: argparse.Namespace) -> int:
 LIST_WIDTH = 100
 
 
-def narrow_table(lib, width: int = LIST_WIDTH) -> str:
+def narrow_table(lib, width: int = LIST_WIDTH, threshold_pct: float | None = None) -> str:
     """``cases list``: one line per case within ``width`` columns: name, level, palpable /
     all lesions, ready (model and mesh made from the scene as it is), its description (cut to
-    fit), then a line naming the user's own case folder."""
+    fit), then a line naming the user's own case folder. ``threshold_pct``: the lesions graded
+    at this palpability threshold [%] instead of the stored grading."""
     from ..cases import CaseError
     head = f'{"case":<24} {"lvl":>3} {"lumps":>5} {"ready":<5} description'
     lines = [head, '-' * width]
     own = set(lib.user_names())
     for c in lib.cases():
         try:
-            g = c.grading()
+            g = c.grading(threshold_pct)
             n = len(c.scene.tumours)
             felt = (sum(bool(x.get('palpable')) for x in g.get('lesions', ())) if g is not None
                     else '?')
             ready = 'no' if c.missing(('model_path', 'mesh_path')) else (
                 'stale' if c.scene_changed() else 'yes')
-            lvl, desc = ('-' if c.level is None else str(c.level)), c.description
+            level = c.level_at(threshold_pct)
+            lvl, desc = ('-' if level is None else str(level)), c.description
         except CaseError as exc:   # a broken scene file: said in its row
             n, felt, ready, lvl, desc = 0, '?', 'no', '-', str(exc)
         name = c.name + ('*' if c.name in own else '')
@@ -153,9 +170,10 @@ def _list(args: argparse.Namespace) -> int:
     from ..cases.summary import case_summary, format_markdown, format_table
 
     if not (args.wide or args.json or args.markdown):
-        print(narrow_table(library()))
+        print(narrow_table(library(), threshold_pct=args.threshold))
         return 0
-    rows = [case_summary(c, timing=not args.no_timing) for c in library().cases()]
+    rows = [case_summary(c, timing=not args.no_timing, threshold_pct=args.threshold)
+            for c in library().cases()]
     if args.json:
         print(json.dumps(rows, indent=1))
     elif args.markdown:
@@ -163,6 +181,34 @@ def _list(args: argparse.Namespace) -> int:
     else:
         print(format_table(rows))
     return 0
+
+
+def _regrade(args: argparse.Namespace) -> int:
+    """Grade shipped cases again from their store; one line per case with its level and where
+    each lesion is found."""
+    from ..cases import CaseError, library
+    from ..cases.build import regrade_case
+    from ..exam.config import load_exam_config
+
+    lib = library()
+    thr = args.threshold if args.threshold is not None else load_exam_config().palpable_pct
+    cases = ([lib.get(n) for n in args.names] if args.names else
+             [c for c in lib.cases() if c.scene.ring_diameters and c.grading() is not None])
+    failed = 0
+    for c in cases:
+        try:
+            g = regrade_case(c, store_root=args.store, threshold_pct=thr)
+        except CaseError as exc:
+            print(f'{c.name}: {exc}', flush=True)
+            failed += 1
+            continue
+        les = '; '.join(f'{e["lesion"]} ' + (f'd{e["difficulty"]} at {e["found_level"]} '
+                                             f'({e["found_depth_m"] * 1e3:g} mm, '
+                                             f'{e["contrast_pct"]:+.1f} %)' if e['palpable']
+                                             else e['reason'])
+                        for e in g['lesions']) or 'no lesion'
+        print(f'{c.name}: level {g["level"]}: {les}', flush=True)
+    return 1 if failed else 0
 
 
 def _executor(args: argparse.Namespace):
@@ -292,7 +338,8 @@ def _generate_graded(case, args: argparse.Namespace, executor, params: dict) -> 
         print(f'  refused: {exc}', flush=True)
         return False
     les = '; '.join(f'{g["lesion"]} {g["contrast_pct"]:+.1f} % ({g["contrast_n"]:+.3f} N) '
-                    + (f'difficulty {g["difficulty"]}' if g['palpable'] else 'not palpable')
+                    + (f'difficulty {g["difficulty"]} at {g["found_level"]}' if g['palpable']
+                       else 'below what this device renders')
                     for g in res.grades) or 'no lesion'
     print(f'  level {res.level}: {les}; grouped-CV RMSE '
           + ', '.join(f'{v:.3f} N ({p:.2f} %)' for v, p in zip(res.cv_rmse_n, res.cv_pct_range))

@@ -278,6 +278,8 @@ def _run_sim(args):
     # drawn by --next: the record names the case to the instructor only
     report['blind'] = bool(getattr(args, 'blind', False))
     report['force_mode'] = args.force_mode
+    mapping = spec.force_mapping()   # the tissue -> device force scale the driver rendered
+    report['force_mapping'] = None if mapping is None else mapping.as_dict()
     report['examiner_process'] = 'own' if own else 'loop'
     report['own_session'] = os.getsid(0) == os.getpid()
     return report, exam_session, controller.felt_array()
@@ -366,9 +368,25 @@ def print_report(r: dict) -> None:
           f"{r['pattern_detail']['strips']['gaps']})")
     print(f"time           {r['duration_s']:.1f} s, in contact {r['contact_s']:.1f} s, path "
           f"{r['path_length_m']:.2f} m, max depth {r['max_depth_mm']:.1f} mm")
+    lv = r.get('time_at_level_s')
+    if lv:   # what predicts finding lumps (exam/effort.py); not in a report made before it
+        print('pressure time  ' + ', '.join(f"{k.replace('_', ' ')} {v:.1f} s"
+                                             for k, v in lv.items()))
+        print('area time      ' + ', '.join(f'{k} {v:.1f} s'
+                                             for k, v in r['area_time_s'].items()))
+        fp, fs = r.get('force_palpating_n'), r.get('force_searching_n')
+        print(f"force          palpating {'-' if fp is None else f'{fp:.2f} N'} "
+              f"({r['palpating_s']:.1f} s), searching {'-' if fs is None else f'{fs:.2f} N'} "
+              f"({r['searching_s']:.1f} s)"
+              + ('' if r.get('palpating_vs_searching_pct') is None else
+                 f", palpating {r['palpating_vs_searching_pct']:+.0f} % (successful examiners "
+                 'press ~15 % harder palpating)'))
     print(f"findings       hits {r['hits']}, misses {r['misses']}, false marks {r['false_marks']}")
     for les in r['lesions']:
-        print(f"  lesion {les['name']}: {'found' if les['found'] else les['missed']}")
+        where = (f", felt from {les['level']} pressure ({les['level_depth_mm']:g} mm)"
+                 if les.get('level') else '')
+        print(f"  lesion {les['name']}: {'found' if les['found'] else les['missed']}{where}"
+              + (f" ({les['reason']})" if les.get('reason') else ''))
     print(f"score          {r['score']:.1f} ({r['verdict']})")
     if r.get('void_reason'):
         print(f"void           {r['void_reason']}")

@@ -25,7 +25,8 @@ DEFAULT_CONFIG = config_file('exam.yaml')  # source tree or installed share dir 
 @dataclass(frozen=True)
 class ExamConfig:
     """Depth thresholds per pressure level [m] (cumulative), probe footprint radius [m], region
-    radius [m] (0 = the scene's palpable radius), hit margin [m], mark tolerance [m], score weights."""
+    radius [m] (0 = the scene's palpable radius), hit margin [m], mark tolerance [m], score
+    weights, the palpability threshold [%] the library is graded at."""
     light: float = 0.002
     medium: float = 0.005
     deep: float = 0.008
@@ -38,6 +39,7 @@ class ExamConfig:
     w_pattern: float = 0.1
     false_mark_penalty: float = 10.0
     pass_deep_coverage: float = 0.9
+    palpable_pct: float = 22.0
 
     def __post_init__(self):
         for f in fields(self):
@@ -59,6 +61,9 @@ class ExamConfig:
                              f'{self.light}, {self.medium}, {self.deep} m')
         if self.footprint_radius <= 0:
             raise ValueError('exam config footprint_radius: expected > 0 m')
+        if self.palpable_pct <= 0:
+            raise ValueError(f'exam config palpable_pct: expected a percentage > 0 (22 = 22 %), '
+                             f'got {self.palpable_pct!r}')
 
     @property
     def thresholds(self) -> tuple[float, float, float]:

@@ -25,14 +25,21 @@ def project_marks(detector, marks: np.ndarray, tolerance: float) -> tuple[np.nda
     return out, why
 
 
+#: how a lesion the device does not render to a stylus is reported (not "not palpable": people
+#: find 3-5 mm lumps in silicone models by shape and mobility, which the simulator does not render)
+BELOW_DEVICE = 'below what this device renders'
+
+
 def match(lesions, lesion_points: np.ndarray, mark_points: np.ndarray, invalid: list,
           margin: float, palpated_deep: list[bool]) -> dict:
     """Findings: each valid mark within lesion radius + ``margin`` of a lesion's surface point is
     a hit (on the nearest such lesion; more marks on a found lesion are 'repeat' marks, not false);
     other marks are false; each lesion not hit is a miss, 'missed although palpated deep' when
-    ``palpated_deep[k]`` else 'never palpated deep'. A lesion the FE says is not palpable
-    (``palpable`` False) is neither hit nor miss: it is reported 'not palpable here', and a mark
-    on it is neither a hit nor a false mark."""
+    ``palpated_deep[k]`` else 'never palpated deep'. A lesion the FE grading says the device
+    does not render to a stylus (``palpable`` False) is neither hit nor miss: it is reported
+    'below what this device renders' with the grading's reason, and a mark on it is neither a
+    hit nor a false mark. Each lesion says at which pressure level it is first palpable
+    (``level``, ``level_depth_mm``; None when ungraded)."""
     found = [None] * len(lesions)
     marks = []
     for i, (p, bad) in enumerate(zip(mark_points, invalid)):
@@ -64,9 +71,13 @@ def match(lesions, lesion_points: np.ndarray, mark_points: np.ndarray, invalid: 
              'radius_mm': round(les.radius * 1e3, 2),
              'surface_mm': [round(float(c) * 1e3, 2) for c in lesion_points[k]],
              'found': found[k] is not None, 'palpated_deep': bool(palpated_deep[k]),
-             'palpable': bool(getattr(les, 'palpable', True))}
+             'palpable': bool(getattr(les, 'palpable', True)),
+             'level': getattr(les, 'level', None),
+             'level_depth_mm': (None if getattr(les, 'level_depth', None) is None
+                                else round(les.level_depth * 1e3, 2))}
         if not e['palpable']:
-            e['missed'] = 'not palpable here'
+            e['missed'] = BELOW_DEVICE
+            e['reason'] = getattr(les, 'reason', None)
         elif found[k] is None:
             e['missed'] = ('missed although palpated deep' if palpated_deep[k]
                            else 'never palpated deep')

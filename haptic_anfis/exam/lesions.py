@@ -11,12 +11,17 @@ import numpy as np
 @dataclass(frozen=True)
 class Lesion:
     """A lesion to find: ``name``, ``centre`` (3,) [m] tissue frame, ``radius`` [m]; ``palpable``
-    False when the case's FE says a probe cannot feel it (scored neither hit nor miss, reported
-    as 'not palpable here')."""
+    False when the case's FE grading says the device does not render it to a stylus (scored
+    neither hit nor miss, reported as below what this device renders, with ``reason``);
+    ``level``: the pressure level ('light', 'medium', 'deep') and ``level_depth`` [m] the tissue
+    depth at which it is first palpable (None: ungraded)."""
     name: str
     centre: tuple[float, float, float]
     radius: float
     palpable: bool = True
+    level: str | None = None
+    level_depth: float | None = None
+    reason: str | None = None
 
 
 @dataclass(frozen=True)
@@ -38,16 +43,17 @@ def subject_from_scene(path: str | os.PathLike | None = None) -> ExamSubject:
     from ..tissue.scene import DEFAULT_SCENE, load_scene
     p = Path(path) if path else DEFAULT_SCENE
     sc = load_scene(p)
-    palpable = _fe_palpable(p)
+    graded = _fe_grades(p)
     les = tuple(Lesion(t.name, tuple(float(c) for c in t.centre), float(t.radius),
-                       palpable.get(t.name, True))
+                       **graded.get(t.name, {}))
                 for t in sc.tumours)
     return ExamSubject(les, float(sc.palpable_radius), float(sc.probe_radius), str(p))
 
 
-def _fe_palpable(scene_path: Path) -> dict[str, bool]:
-    """{lesion name: palpable} from the FE grading of the library case whose scene file this
-    is (haptic_anfis.cases.grading); {} (all palpable) for an ungraded scene."""
+def _fe_grades(scene_path: Path) -> dict[str, dict]:
+    """{lesion name: {palpable, level, level_depth, reason}} from the FE grading of the library
+    case whose scene file this is (haptic_anfis.cases.grading); {} (all palpable, no level) for
+    an ungraded scene."""
     from ..cases import CaseError, library
 
     lib = library()
@@ -57,7 +63,8 @@ def _fe_palpable(scene_path: Path) -> dict[str, bool]:
         return {}
     if case.scene_path.resolve() != scene_path.resolve():
         return {}
-    return {g['lesion']: bool(g['palpable'])
+    return {g['lesion']: {'palpable': bool(g['palpable']), 'level': g.get('found_level'),
+                          'level_depth': g.get('found_depth_m'), 'reason': g.get('reason')}
             for g in ((case.grading() or {}).get('lesions') or [])}
 
 

@@ -16,6 +16,7 @@ from ..interfaces import I_DEPTH, I_IN_CONTACT, ContactLayouts
 from ..rows import RowLog
 from .config import LEVELS, ExamConfig
 from .coverage import CoverageGrid
+from .effort import effort
 from .files import write_atomic
 from .findings import match, project_marks
 from .lesions import ExamSubject, lesion_surface_points
@@ -165,11 +166,15 @@ class ExamSession:
             if m.get('reason') and 'outside the surface' in m['reason']:
                 notes.append(f"mark {m['index']}: {m['reason']}")
         if any(not les.palpable for les in lesions):
-            notes.append('not palpable here (the FE contrast is below the force threshold): '
+            notes.append('below what this device renders (the FE contrast is under the '
+                         'stiffness a stylus can tell apart; not scored): '
                          + ', '.join(les.name for les in lesions if not les.palpable))
         score, parts = score_of(cov, fin, pat['pattern'], fin['palpable_lesions'], cfg)
         verdict, reasons = verdict_of(cov, fin, cfg)
+        eff = effort(c, f[np.argsort(f[:, 0], kind='stable')], cfg.thresholds,
+                     cfg.footprint_radius)
         return {
+            **eff,
             'coverage_pct': {k: round(100 * v, 2) for k, v in cov.items()},
             'duration_s': round(duration, 3), 'contact_s': round(contact_s, 3),
             'path_length_m': round(path_len, 4),

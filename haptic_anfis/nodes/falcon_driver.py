@@ -80,7 +80,9 @@ PARAMS = [
           'position', positive),
     Param('workspace_offset', [0.03, 0.0, 0.0], 'tissue-frame position of the device origin [m]',
           finite_vector(3)),
-    Param('force_scale', 1.0, 'device force = force_scale * commanded (tissue) force', positive),
+    Param('force_scale', 1.0, 'device force = force_scale * commanded (tissue) force; sim, launch '
+          "and exam run set it from their case (haptic_anfis.cases.force_mapping: the case's "
+          'largest trained FE force at 85 % of max_force) unless it is given', positive),
     Param('palpation_script', '', "sim: YAML palpation pattern ('' = config/palpation.yaml)"),
     Param('hold_until_force', True, 'sim: hold the virtual hand at the script start (and the force '
           'at zero) until the first valid force command arrives, i.e. until the contact detector '
@@ -328,7 +330,8 @@ class FalconDriver(HapticNode):
                                    priority=p['servo_priority'])
         self.get_logger().info(
             f"backend {p['backend']}, {p['rate']:.0f} Hz servo thread, max force "
-            f"{p['max_force']} N, watchdog {p['watchdog_timeout'] * 1e3:.1f} ms, force "
+            f"{p['max_force']} N, force scale {p['force_scale']:g}, watchdog "
+            f"{p['watchdog_timeout'] * 1e3:.1f} ms, force "
             f"{p['force_mode']}, {what}")
         self.started = False
         self.health = LoopHealth(p['watchdog_timeout'])

@@ -19,6 +19,7 @@ and exits with status 1 when stopped.
 """
 from __future__ import annotations
 
+import json
 import signal
 import threading
 import time
@@ -30,7 +31,8 @@ from ..bag import BagError, BagWriter
 from ..bag.reader import RECORDER_MARK
 from ..bag.segment import COMPRESSIONS
 from ..bag.topics import DEFAULT_TOPICS, KNOWN_TYPES
-from ..cases import CaseError
+from ..cases import CaseError, library
+from ..cases.force_mapping import case_force_mapping
 from ._case import CASE_PARAMS, declare_case_parameters, requested_case  # noqa: F401 (config)
 from ._common import Param, declare_parameters, message_class, positive, run_node
 from .base import HapticNode
@@ -91,6 +93,18 @@ def _case_label(name: str, seed: int) -> str:
     return name or 'default'
 
 
+def _force_mapping_data(label: str) -> dict[str, str]:
+    """The bag's ``force_mapping`` custom data for the case ``label``: the tissue -> device force
+    scale a session of that case renders unless its ``force_scale`` is set
+    (:mod:`haptic_anfis.cases.force_mapping`), as JSON; {} for an unknown case or one without a
+    dataset."""
+    try:
+        m = case_force_mapping(library().get(label))
+    except CaseError:
+        return {}
+    return {'force_mapping': json.dumps(m.as_dict())}
+
+
 class Recorder(HapticNode):
     """Parameters in :data:`PARAMS` and the session's case (``case`` / ``random_case_seed``, as
     the loop nodes take them), which the bag's custom data ``case`` names for ``exam report``:
@@ -128,6 +142,7 @@ class Recorder(HapticNode):
                                 chunk_size=p['chunk_size'], max_queue=p['max_queue'],
                                 custom_data={'recorder': RECORDER_MARK,
                                              **({'case': self.cases[0]} if given else {}),
+                                             **_force_mapping_data(self.cases[0]),
                                              **(custom_data or {})},
                                 compression=p['compression'],
                                 fallback_dir=p['fallback_output_dir'] or None,

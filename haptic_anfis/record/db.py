@@ -86,14 +86,34 @@ UPDATE sessions SET palpable_missed = misses;
 _V3 = """
 ALTER TABLE sessions ADD COLUMN bag_start_ns INTEGER;
 """
-# v4: a session whose haptic loop fell behind is void (haptic_anfis.exam.void): why, else NULL;
+# v4: a trainee's own stiffness-discrimination threshold (`haptic-anfis threshold`), and what
+# predicts finding lumps: search time per area, time at each pressure level, the force when
+# palpating vs searching (the session's report holds the details; these are its headline figures).
+_V4 = """
+CREATE TABLE thresholds (
+    id            INTEGER PRIMARY KEY AUTOINCREMENT,
+    trainee_id    TEXT NOT NULL REFERENCES trainees(id) ON DELETE CASCADE,
+    measured_utc  TEXT NOT NULL,
+    threshold_pct REAL NOT NULL,
+    trials        INTEGER NOT NULL,
+    device        TEXT NOT NULL,
+    details_json  TEXT NOT NULL
+);
+CREATE INDEX thresholds_by_trainee ON thresholds(trainee_id, id);
+ALTER TABLE sessions ADD COLUMN time_at_level_json TEXT;
+ALTER TABLE sessions ADD COLUMN area_time_json TEXT;
+ALTER TABLE sessions ADD COLUMN force_palpating_n REAL;
+ALTER TABLE sessions ADD COLUMN force_searching_n REAL;
+ALTER TABLE sessions ADD COLUMN lesion_levels_json TEXT
+"""
+# v5: a session whose haptic loop fell behind is void (haptic_anfis.exam.void): why, else NULL;
 # mastery leaves it out. A blind session (exam run --next): its case is named to the instructor
 # only, never in what the trainee sees of the record.
-_V4 = """
+_V5 = """
 ALTER TABLE sessions ADD COLUMN void_reason TEXT;
 ALTER TABLE sessions ADD COLUMN blind INTEGER NOT NULL DEFAULT 0;
 """
-MIGRATIONS: tuple[str, ...] = (_V1, _V2, _V3, _V4)
+MIGRATIONS: tuple[str, ...] = (_V1, _V2, _V3, _V4, _V5)
 SCHEMA_VERSION = len(MIGRATIONS)
 
 

@@ -37,12 +37,14 @@ def draw_seed(trainee_id: str, sessions: int) -> int:
 
 
 def next_case(db: str | os.PathLike | None, trainee_id: str, lib=None,
-              config: MasteryConfig | None = None, exam_config: str | None = None):
+              config: MasteryConfig | None = None, exam_config: str | None = None,
+              threshold_pct: float | None = None):
     """``(case, level, mastery dict)`` for the trainee's next blind session; a trainee with no
     record yet starts at level 1; a next level above the hardest level with a palpable case
     draws from that; a level without one draws from the next harder level that has one
     (``level`` says which level was drawn, the mastery dict's ``next_level`` what the record
-    asks for).
+    asks for). ``threshold_pct``: the graded cases' levels at this palpability threshold [%]
+    (the trainee's own, ``haptic-anfis threshold``) instead of the stored grading's.
 
     Raises:
         ValueError: no ready case with a palpable lesion at any level (names the levels there
@@ -63,7 +65,8 @@ def next_case(db: str | os.PathLike | None, trainee_id: str, lib=None,
     for c in lib.ready():
         try:
             if has_palpable_lesion(c):
-                by_level.setdefault(case_level(c), []).append(c)
+                own = c.level_at(threshold_pct) if threshold_pct is not None else None
+                by_level.setdefault(own if own is not None else case_level(c), []).append(c)
             else:
                 free.append(c)
         except (CaseError, ValueError):

@@ -99,9 +99,20 @@ def session_row(report: dict, *, source: str, case_level: int | None = None,
             'void_reason': report.get('void_reason') or None,
             'blind': int(bool(report.get('blind'))),
             'report_json': json.dumps(report, allow_nan=False, default=str),
+            # what predicts finding lumps (haptic_anfis.exam.effort); None in an older report
+            'time_at_level_json': _json_or_none(report.get('time_at_level_s')),
+            'area_time_json': _json_or_none(report.get('area_time_s')),
+            'force_palpating_n': report.get('force_palpating_n'),
+            'force_searching_n': report.get('force_searching_n'),
+            'lesion_levels_json': json.dumps({str(les.get('name')): les.get('level')
+                                              for les in lesions}),
         }
     except (KeyError, TypeError) as exc:
         raise ValueError(f'exam report: missing or bad field {exc}') from None
+
+
+def _json_or_none(v) -> str | None:
+    return None if v is None else json.dumps(v)
 
 
 #: first-message times from here on [ns] are wall clock (after 2001); earlier ones are a
@@ -190,10 +201,16 @@ def trainees(db: str | os.PathLike | None = None) -> list[dict]:
 _HISTORY_COLS = ('id', 'started_utc', 'source', 'case_name', 'case_level', 'bag_path',
                  'coverage_light', 'coverage_medium', 'coverage_deep', 'pattern', 'lesions',
                  'hits', 'misses', 'palpable_missed', 'not_palpable', 'false_marks', 'score',
-                 'verdict', 'duration_s', 'contact_s', 'bag_start_ns', 'void_reason', 'blind')
+                 'verdict', 'duration_s', 'contact_s', 'bag_start_ns', 'time_at_level_json',
+                 'area_time_json', 'force_palpating_n', 'force_searching_n',
+                 'lesion_levels_json', 'void_reason', 'blind')
 
 #: what the trainee's view of the record shows for a blind session's case
 BLIND_CASE = 'blind'
+
+
+def _loads(text: str | None):
+    return None if text is None else json.loads(text)
 
 
 def _known(conn, db, trainee_id: str) -> None:
@@ -214,9 +231,12 @@ def history(db: str | os.PathLike | None, trainee_id: str, full: bool = False,
     ``coverage_pct`` {light, medium, deep} [%], ``pattern``,
     ``lesions``, ``hits``, ``misses``, ``palpable_missed``, ``not_palpable`` (names),
     ``false_marks``, ``sensitivity`` (found / palpable lesions, None without one), ``score``,
-    ``verdict``, ``duration_s``, ``contact_s`` [s], ``void`` (why the session does not count
-    toward mastery: its haptic loop fell behind; None for a session that counts), ``blind``
-    (drawn by ``exam run --next``); with ``full``, ``report`` (the stored exam report).
+    ``verdict``, ``duration_s``, ``contact_s`` [s], ``time_at_level_s`` and ``area_time_s``
+    ({name: s}), ``force_palpating_n`` / ``force_searching_n`` [N], ``lesion_levels`` ({lesion:
+    the pressure level it is felt from}; these None for a session stored before schema v4),
+    ``void`` (why the session does not count toward mastery: its haptic loop fell behind; None
+    for a session that counts), ``blind`` (drawn by ``exam run --next``); with ``full``,
+    ``report`` (the stored exam report).
 
     What the trainee may see unless ``instructor``: a blind session's ``case`` is
     :data:`BLIND_CASE` (a case name gives its lesions' size and depth away) and its ``report``
@@ -250,7 +270,15 @@ def history(db: str | os.PathLike | None, trainee_id: str, full: bool = False,
              'false_marks': d['false_marks'],
              'sensitivity': round((palpable - missed) / palpable, 4) if palpable > 0 else None,
              'score': d['score'], 'verdict': d['verdict'], 'duration_s': d['duration_s'],
-             'contact_s': d['contact_s'], 'void': d['void_reason'], 'blind': bool(d['blind'])}
+             'contact_s': d['contact_s'],
+             # schema v4 (None for a session stored before): time per pressure level and per
+             # area [s], mean force palpating / searching [N], each lesion's pressure level
+             'time_at_level_s': _loads(d['time_at_level_json']),
+             'area_time_s': _loads(d['area_time_json']),
+             'force_palpating_n': d['force_palpating_n'],
+             'force_searching_n': d['force_searching_n'],
+             'lesion_levels': _loads(d['lesion_levels_json']),
+             'void': d['void_reason'], 'blind': bool(d['blind'])}
         if full:
             h['report'] = json.loads(r[-1])
             if hide:

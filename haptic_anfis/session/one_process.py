@@ -39,7 +39,8 @@ def open_graph(spec: SessionSpec | None = None, *, overrides: dict | None = None
     """
     from ..nodes.graph import build_graph
     spec = spec or SessionSpec(nodes=('falcon_driver', 'contact_detector', 'force_server'))
-    args = [*spec.params_arguments(), *spec.user_ros_args(), *spec.case_arguments()]
+    args = [*spec.params_arguments(), *spec.user_ros_args(), *spec.case_arguments(),
+            *spec.driver_arguments()]
     return build_graph([program, '--ros-args', *args] if args else [program],
                        visualizer=spec.visualizer and spec.in_process
                        if visualizer is None else visualizer,

@@ -57,6 +57,8 @@ class ProcessSession:
         self.spec = spec
         self.extra: dict[str, list[str]] = {n: (spec.case_arguments() if n in CASE_NODES
                                                 else []) for n in spec.nodes}
+        if 'falcon_driver' in self.extra:   # the case's force scale (cases/force_mapping.py)
+            self.extra['falcon_driver'] += spec.driver_arguments()
         for n, a in (node_args or {}).items():
             self.extra.setdefault(n, []).extend(a)
         if spec.view:   # --view: the browser page as one more node

@@ -250,6 +250,53 @@ class SessionSpec:
             return ['-p', f'random_case_seed:={int(self.seed)}']
         return ['-p', f'case:={self.case}'] if self.case else []
 
+    def user_parameter(self, node: str, key: str, default=None, shipped: bool = True):
+        """The value the user gives ``key`` of ``node`` (the last of the parameter files' sections
+        for it or for every node, then the ``-p`` overrides, as rcl applies them), else
+        ``default``. ``shipped=False``: the package's own ``config/<node>.yaml`` does not count
+        (its values are the defaults, written out)."""
+        from ..nodes.parameters import read_parameter_file, ros_args_sources
+        from ..resources import config_file
+        value = default
+        own = Path(config_file(f'{node}.yaml')).resolve()
+        for f in self.params_files:
+            if not shipped and Path(f).resolve() == own:
+                continue
+            for section, k, v, _ in read_parameter_file(f):
+                if k == key and section.rsplit('/', 1)[-1] in (node, '**'):
+                    value = v
+        _, overrides, _ = ros_args_sources(self.user_ros_args())
+        for target, v, _ in overrides:
+            n, _, k = target.rpartition(':')
+            if k == key and n in ('', node):
+                value = v
+        return value
+
+    def force_mapping(self):
+        """The driver's :class:`~haptic_anfis.cases.force_mapping.ForceMapping` for the
+        session's case (the drawn one for ``--random-case``; the default case without one or
+        with a scene file, whose forces the default model renders), against the driver's
+        ``max_force``; None without a driver in the session or when the user sets
+        ``force_scale`` (on the command line or in a parameter file other than the shipped
+        ``config/falcon_driver.yaml``, whose 1.0 is the node's default written out): that value
+        is rendered."""
+        if 'falcon_driver' not in self.nodes or self.user_parameter(
+                'falcon_driver', 'force_scale', shipped=False) is not None:
+            return None
+        from ..cases.force_mapping import case_force_mapping
+        from ..cases.library import DEFAULT_CASE, library
+        from ..device.falcon import RATED_FORCE
+        lib = library()
+        case = (lib.random(int(self.seed)) if self.random_case
+                else lib.get(self.case or DEFAULT_CASE))
+        max_force = self.user_parameter('falcon_driver', 'max_force', RATED_FORCE)
+        return case_force_mapping(case, float(max_force))
+
+    def driver_arguments(self) -> list[str]:
+        """``-p falcon_driver:force_scale:=S`` from :meth:`force_mapping` ([] = none)."""
+        m = self.force_mapping()
+        return [] if m is None else ['-p', f'falcon_driver:force_scale:={m.force_scale!r}']
+
     def recorder_case_arguments(self) -> list[str]:
         """The recorder's case parameter, which it writes into the bag: the nodes' (see
         :meth:`case_arguments`), or ``case:=default`` when nothing changed the default scene (no

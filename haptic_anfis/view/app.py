@@ -370,7 +370,7 @@ class ViewApp:
         self.debrief = None
 
     def show_debrief(self, debrief, trainee: str = '', db=None) -> None:
-        """Reveal the lesions (hit / missed / not palpable), the marks, the search path and the
+        """Reveal the lesions (hit / missed / below what this device renders), the marks, the search path and the
         report's numbers; the scrubber replays the session. ``trainee``: show the trainee's
         history (from the trainee record ``db``, None = its default file) beside it."""
         with self._lock:
@@ -467,7 +467,23 @@ def numbers_markdown(n: dict) -> str:
             ('coverage medium %', n['coverage_medium_pct']),
             ('coverage deep %', n['coverage_deep_pct']), ('pattern', n['pattern']),
             ('duration s', n['duration_s'])]
+    rows += effort_rows(n)
     return '\n'.join(f'- {k}: **{v}**' for k, v in rows)
+
+
+def effort_rows(n: dict) -> list[tuple[str, object]]:
+    """What predicts finding lumps (haptic_anfis.exam.effort) as (label, value) rows: time at
+    each pressure level and per area [s], the force palpating vs searching [N]; none for a
+    report without them."""
+    rows: list[tuple[str, object]] = []
+    for key, label in (('time_at_level_s', 'time at {} s'), ('area_time_s', 'time over {} s')):
+        rows += [(label.format(k.replace('_', ' ')), v) for k, v in (n.get(key) or {}).items()]
+    if n.get('force_palpating_n') is not None or n.get('force_searching_n') is not None:
+        rows.append(('force palpating / searching N',
+                     f"{n.get('force_palpating_n')} / {n.get('force_searching_n')}"
+                     + (f" ({n['palpating_vs_searching_pct']:+.0f} %)"
+                        if n.get('palpating_vs_searching_pct') is not None else '')))
+    return rows
 
 
 #: the history table's columns: (heading, the row's value)

@@ -14,13 +14,13 @@ import numpy as np
 from ..exam.config import LEVELS
 from ..exam.coverage import CoverageGrid
 
-__all__ = ['Debrief', 'LesionMarker', 'lesion_status', 'panel_numbers']
+__all__ = ['Debrief', 'LesionMarker', 'lesion_status', 'lesion_why', 'panel_numbers']
 
 
 @dataclass(frozen=True)
 class LesionMarker:
     """A lesion revealed: ``name``, ``centre`` (3,) [m], ``radius`` [m], ``surface`` (3,) [m]
-    (its projection on the skin), ``status``: 'hit', 'missed' or 'not palpable', ``why``."""
+    (its projection on the skin), ``status``: 'hit', 'missed' or 'below device', ``why``."""
     name: str
     centre: tuple
     radius: float
@@ -30,26 +30,44 @@ class LesionMarker:
 
 
 def lesion_status(entry: dict) -> str:
-    """'hit', 'not palpable' (the case grades the lesion as not palpable: a report entry with
-    ``palpable`` false) or 'missed'."""
+    """'hit', 'below device' (the case's grading says this device does not render it to a
+    stylus: a report entry with ``palpable`` false) or 'missed'."""
     if entry.get('found'):
         return 'hit'
     if entry.get('palpable') is False:
-        return 'not palpable'
+        return 'below device'
     return 'missed'
+
+
+def lesion_why(entry: dict) -> str:
+    """What the debrief says of a lesion: why it was missed (or why it is not scored) and the
+    pressure level from which it can be felt, e.g. 'never palpated deep; palpable from medium
+    pressure (5 mm)'."""
+    if entry.get('palpable') is False:
+        return '; '.join(v for v in (entry.get('missed'), entry.get('reason')) if v)
+    parts = [entry.get('missed') or ('found' if entry.get('found') else '')]
+    if entry.get('level'):
+        parts.append(f"palpable from {entry['level']} pressure ({entry['level_depth_mm']:g} mm)")
+    return '; '.join(p for p in parts if p)
 
 
 def panel_numbers(report: dict) -> dict:
     """The headline numbers the debrief panel shows, as the report has them (``exam report
     --json``): coverage per level [%], hits, misses, false marks, score, verdict, pattern,
-    duration [s]."""
+    duration [s], time per pressure level and per area [s], force palpating / searching [N]."""
     return {'coverage_light_pct': report['coverage_pct']['light'],
             'coverage_medium_pct': report['coverage_pct']['medium'],
             'coverage_deep_pct': report['coverage_pct']['deep'],
             'hits': report['hits'], 'misses': report['misses'],
             'false_marks': report['false_marks'], 'score': report['score'],
             'verdict': report['verdict'], 'pattern': report['pattern'],
-            'duration_s': report['duration_s']}
+            'duration_s': report['duration_s'],
+            # what predicts finding lumps (haptic_anfis.exam.effort; None in an older report)
+            'time_at_level_s': report.get('time_at_level_s'),
+            'area_time_s': report.get('area_time_s'),
+            'force_palpating_n': report.get('force_palpating_n'),
+            'force_searching_n': report.get('force_searching_n'),
+            'palpating_vs_searching_pct': report.get('palpating_vs_searching_pct')}
 
 
 class Debrief:
@@ -87,7 +105,7 @@ class Debrief:
                 self._first[new] = b - self.t0
         self.lesions = [LesionMarker(e['name'], tuple(np.array(e['centre_mm']) * 1e-3),
                                      e['radius_mm'] * 1e-3, tuple(np.array(e['surface_mm']) * 1e-3),
-                                     lesion_status(e), e.get('missed', ''))
+                                     lesion_status(e), lesion_why(e))
                         for e in report['lesions']]
 
     def face_levels(self, t: float | None = None) -> np.ndarray:

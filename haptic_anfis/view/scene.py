@@ -20,7 +20,7 @@ LEVEL_RGB = np.array([SKIN_RGB, (250, 222, 70), (245, 140, 30), (200, 25, 35)], 
 #: the dent darkens a corner towards this colour at ``colour_depth`` of displacement
 DEEP_DARK = np.array([110, 40, 40], float)
 #: lesion markers revealed in the debrief
-LESION_RGB = {'hit': (20, 170, 60), 'missed': (150, 0, 200), 'not palpable': (120, 120, 120)}
+LESION_RGB = {'hit': (20, 170, 60), 'missed': (150, 0, 200), 'below device': (120, 120, 120)}
 #: marks: a hit, another mark on a found lesion, a false mark
 MARK_RGB = {'hit': (20, 170, 60), 'repeat': (0, 170, 200), 'false': (20, 20, 20)}
 
