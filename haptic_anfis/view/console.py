@@ -67,11 +67,12 @@ class ConsoleApp:
         self.g_start.on_click(lambda _: self._call(self.on_start))
         self.g_stop.on_click(lambda _: self._call(self.on_stop))
         # only the instructor's choices: a value set here (show_case_choice) is not one
-        self.g_case.on_update(lambda ev: ev.client is None
-                              or self._call(self.on_case, self.g_case.value))
+        # (a client may send a value the dropdown does not list: not a choice either)
+        self.g_case.on_update(lambda ev: ev.client is None or self.g_case.value not in
+                              self.g_case.options or self._call(self.on_case, self.g_case.value))
         self.g_refresh.on_click(lambda _: self.refresh())
         self.g_csv.on_click(lambda ev: self._export(ev.client))
-        self.g_pick.on_update(lambda _: self._show_curves(self.g_pick.value))
+        self.g_pick.on_update(lambda _: self._show_curves(str(self.g_pick.value)))
         self.refresh()
 
     @property

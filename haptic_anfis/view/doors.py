@@ -25,8 +25,12 @@ A door checks, for every HTTP request and websocket handshake:
 
 A websocket connection whose handler fails (a malformed message: viser's ``deserialize``
 raises, or a text frame) is logged in ONE line (``haptic_anfis.view`` logger, at most one line
-per ``LOG_EVERY`` seconds per door, with the count) and closed; the server keeps serving. Refused
-requests are counted and logged the same way.
+per ``LOG_EVERY`` seconds per door, with the count) and closed; the server keeps serving. A
+message that decodes but fails in viser's handler (a GUI update of a property that does not
+exist) fails in a task of the server's event loop: the loop's exception handler (asyncio's hook)
+logs it the same way instead of asyncio's traceback; viser's warning for a field of the wrong
+type is not printed (the message is then handled, or fails, as above). Refused requests are
+counted and logged the same way.
 """
 from __future__ import annotations
 
@@ -38,6 +42,7 @@ import secrets
 import socket
 import threading
 import time
+import warnings
 from dataclasses import dataclass, field
 from http import HTTPStatus
 from pathlib import Path
@@ -218,7 +223,8 @@ class _Namespace:
 
 def install() -> None:
     """Replace viser's module reference to ``websockets`` by one whose ``asyncio.server.serve``
-    is :func:`_guarded_serve` (idempotent).
+    is :func:`_guarded_serve` (idempotent); viser's warning for a message field of the wrong
+    type is not printed (a client's message: the door counts what fails).
 
     Raises:
         DoorError: viser's server module does not reach ``websockets`` where expected.
@@ -233,6 +239,7 @@ def install() -> None:
             raise DoorError("viser's server module does not use websockets.asyncio.server.serve:"
                             ' the pages cannot be guarded with this viser version')
         _real = real
+        warnings.filterwarnings('ignore', message=r'\[viser\] .* does not match annotation')
         server = _Namespace(real.asyncio.server, serve=_guarded_serve)
         _infra.websockets = _Namespace(real, asyncio=_Namespace(real.asyncio, server=server))
 
@@ -278,4 +285,11 @@ def guarded_server(port: int, host: str, label: str, token: str = ''):
         close_door(door)
         raise DoorError(f'{label}: viser did not serve port {port} through its door; refusing to '
                         'serve it unguarded')
+
+    def failed_task(loop, context) -> None:   # a client's message failed in viser's handler
+        exc = context.get('exception')
+        door.failed += 1
+        door.note('failed', f"a client's message failed: {type(exc).__name__}: {exc}"
+                  if exc is not None else str(context.get('message')))
+    server.get_event_loop().set_exception_handler(failed_task)
     return server, door
