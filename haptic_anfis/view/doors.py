@@ -210,6 +210,15 @@ def _guarded_serve(handler: Callable, host: str, port: int, *args: Any,
                                       **kwargs)
 
 
+class _QuietHandshakes(logging.Filter):
+    """Drops websockets' records of handshakes that failed or were refused (viser drops the same
+    two, but only once a request reached its own handler)."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        msg = record.getMessage()
+        return not (msg == 'opening handshake failed' or msg.startswith('connection rejected'))
+
+
 class _Namespace:
     """A read-through view of a module with some attributes replaced."""
 
@@ -239,6 +248,9 @@ def install() -> None:
             raise DoorError("viser's server module does not use websockets.asyncio.server.serve:"
                             ' the pages cannot be guarded with this viser version')
         _real = real
+        # a browser's speculative connection that closes before its request, and every refusal
+        # of ours, would be a traceback / a line of websockets' own each: the door counts them
+        logging.getLogger('websockets.server').addFilter(_QuietHandshakes())
         warnings.filterwarnings('ignore', message=r'\[viser\] .* does not match annotation')
         server = _Namespace(real.asyncio.server, serve=_guarded_serve)
         _infra.websockets = _Namespace(real, asyncio=_Namespace(real.asyncio, server=server))
