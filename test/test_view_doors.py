@@ -204,3 +204,20 @@ def test_guarded_server_closes_its_door(monkeypatch):
     close_door(door)
     from haptic_anfis.view import doors
     assert port not in doors._doors
+
+
+def test_the_sessions_console_options_are_checked_before_any_node_starts(tmp_path):
+    from haptic_anfis.session import SessionError, SessionSpec
+    p = free_port()
+    with pytest.raises(SessionError, match='--console-port .*the same as --view-port'):
+        SessionSpec(command='sim', view=True, view_port=p, console_port=p).check(
+            check_parameters=False)
+    short = tmp_path / 'token'
+    short.write_text('short\n')
+    with pytest.raises(DoorError, match='at least 16'):
+        SessionSpec(command='launch', view=True, view_port=p, console_port=free_port(),
+                    console_token_file=str(short)).check(check_parameters=False)
+    args = SessionSpec(command='sim', view=True, console_port=9001,
+                       console_token_file=str(short)).view_arguments(controls=True)
+    assert 'console_port:=9001' in args and f'console_token_file:={short}' in args
+    assert not any('console' in a for a in SessionSpec(command='exam').view_arguments(False))
