@@ -238,14 +238,18 @@ def _private_file(path: Path) -> None:
 
 def _narrow(path: Path, mode: int = 0o600) -> None:
     """Take away group and other access to ``path`` (and its ``-wal`` / ``-shm`` files) if it
-    belongs to this user and grants any; another user's file is left as it is."""
+    belongs to this user and grants any; another user's file is left as it is, and so is one on
+    a read-only filesystem (it can still be read)."""
     for p in (path, Path(f'{path}-wal'), Path(f'{path}-shm')):
         try:
             st = p.stat()
         except FileNotFoundError:
             continue
         if st.st_uid == os.getuid() and stat.S_IMODE(st.st_mode) & 0o077:
-            os.chmod(p, mode)
+            try:
+                os.chmod(p, mode)
+            except OSError:   # a read-only filesystem: it cannot be narrowed, nor written
+                pass
 
 
 def _check(path: Path, conn: sqlite3.Connection) -> int:
