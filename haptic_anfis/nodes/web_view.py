@@ -18,7 +18,7 @@ parameters, and on this node), the trainee id, start (a fresh session, the clock
 stop (the session scored as ``exam report`` scores it, stored for the trainee, the debrief shown
 on the trainee's page), and the class's record. The token comes from ``console_token_file``,
 else ``$HAPTIC_ANFIS_CONSOLE_TOKEN``, else a new random one; the console's address is printed on
-stdout at start (never logged to a file). Both servers answer only their own origin
+stdout at start (not into ROS's log files). Both servers answer only their own origin
 (:mod:`haptic_anfis.view.doors`). A case set on a loop node from outside the page (``ros2 param
 set``) is seen on ``/parameter_events`` (:mod:`.case_watch`): the page follows when every running
 case node took one case, else the console says which node runs what and nothing is collected
@@ -143,7 +143,7 @@ class WebView(HapticNode):
         self._running_shown(True)
         self.get_logger().info(f'page at {self.app.url}')
         print(f'web_view: open {self.app.url} in a browser', flush=True)
-        if self.console is not None:   # stdout only: the token stays out of the log files
+        if self.console is not None:   # stdout only: the token stays out of ROS's log files
             print(f"web_view: instructor's console at {self.console.url} (token from "
                   f'{self._token_from}; give it to the instructor only)', flush=True)
 
