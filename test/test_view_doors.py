@@ -221,3 +221,18 @@ def test_the_sessions_console_options_are_checked_before_any_node_starts(tmp_pat
                        console_token_file=str(short)).view_arguments(controls=True)
     assert 'console_port:=9001' in args and f'console_token_file:={short}' in args
     assert not any('console' in a for a in SessionSpec(command='exam').view_arguments(False))
+
+
+def test_a_launch_gives_its_web_view_one_token_for_every_restart(monkeypatch):
+    import os
+
+    from haptic_anfis.session import SessionSpec
+    from haptic_anfis.session.processes import ProcessSession
+    from haptic_anfis.view.doors import TOKEN_ENV
+    monkeypatch.delenv(TOKEN_ENV, raising=False)
+    spec = SessionSpec(command='launch', nodes=('falcon_driver', 'web_view'))
+    ProcessSession(spec)
+    token = os.environ[TOKEN_ENV]
+    assert load_token() == (token, f'${TOKEN_ENV}')   # what the node (and a restart) reads
+    ProcessSession(spec)
+    assert os.environ[TOKEN_ENV] == token
