@@ -196,6 +196,15 @@ def test_the_console_shows_the_class_and_exports_it(console):
     img = console.g_curves.image
     assert img.ndim == 3 and img.shape[2] == 3 and np.ptp(img) > 0
 
+    class Clicker:   # the client that pressed 'export CSV'
+        sent = None
+
+        def send_file_download(self, name, content):
+            self.sent = (name, content)
+    who = Clicker()
+    console._export(who)
+    assert who.sent == ('class_overview.csv', console.overview_csv().encode())
+
 
 def test_guarded_server_closes_its_door(monkeypatch):
     port = free_port()
