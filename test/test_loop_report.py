@@ -98,3 +98,32 @@ def test_the_drivers_trace_keeps_trace_seconds_of_ticks(seconds, rows):
     assert t.max_rows == rows
     assert FalconDriver._tick_trace({'trace_path': '', 'rate': 1000.0,
                                      'trace_seconds': seconds}) is None
+
+
+def test_the_ideal_force_is_the_sessions_own_case(tmp_path):
+    """A press rendered exactly as the random case (seed 3) renders it: against that case's
+    surface and model the applied-force error is 0 % with no dropout; against the default scene
+    (what the report took before it read the session's case) the same ticks have no contact."""
+    from haptic_anfis.commands.loop import ideal_forces, ideal_overrides
+    from haptic_anfis.device.local_model import STATUS_NAMES
+    from haptic_anfis.session import SessionSpec
+    spec = SessionSpec(command='sim', random_case=True, seed=3)
+    overrides = ideal_overrides(spec.case_arguments())
+    assert overrides['force_server'] == {'random_case_seed': 3}
+    n = 1500   # 1.5 s at 1 kHz: down 12 mm through the surface's apex and back up
+    x = 0.062 - 0.012 * np.sin(np.linspace(0.0, np.pi, n))
+    positions = np.column_stack([x, np.zeros(n), np.zeros(n)])
+    F, contact = ideal_forces(positions, (), overrides)
+    assert contact.sum() > 500 and np.abs(F).max() > 1.0
+    rows = np.zeros((n, 8))
+    rows[:, 0] = np.arange(n) * 1e-3
+    rows[:, 1:4], rows[:, 4:7] = positions, F
+    rows[:, 7] = STATUS_NAMES.index('fresh')
+    path = save_trace(tmp_path / 't.npz', rows, stats={'mode': 'local_model'}, max_force=8.9,
+                      period=1e-3)
+    own = trace_report(path, overrides=overrides)
+    assert own['force_error_rms_pct'] == pytest.approx(0.0, abs=1e-9)
+    assert own['zero_force_ticks'] == 0 and own['contact_ticks'] == int(contact.sum())
+    default = trace_report(path)
+    # the default surface lies below this press: none of its ticks is in contact there
+    assert default['contact_ticks'] == 0 and default['force_error_rms_pct'] is None

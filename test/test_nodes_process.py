@@ -148,6 +148,12 @@ def test_graph_across_processes(tmp_path):
 @pytest.mark.parametrize('node, args, match', [
     ('falcon_driver', ['-p', 'max_force:=-1.0'], 'max_force: -1.0: expected a finite value > 0'),
     ('falcon_driver', ['-p', 'rate:=1000'], 'rate: got 1000 (an integer), expected a double'),
+    ('falcon_driver', ['-p', 'max_force:=1e9'], 'max_force: 1000000000.0: expected a finite '
+     'value > 0 and <= 8.9 N'),
+    ('falcon_driver', ['-p', 'watchdog_timeout:=1e9'], 'watchdog_timeout: 1000000000.0: '
+     'expected a finite value >= 0.001 and <= 0.05 s'),
+    ('falcon_driver', ['-p', 'rate:=1e9'], 'rate: 1000000000.0: expected a finite value >= 100 '
+     'and <= 1000 Hz'),
     ('falcon_driver', ['-p', 'max_force:=lots'],
      "max_force: got 'lots' (a string), expected a double such as 8.9"),
     ('force_server', ['-p', 'modle_path:=x'], "unknown parameter 'modle_path'"),

@@ -120,11 +120,11 @@ def choose(page, name: str) -> str:
     time.sleep(0.2)   # the page has taken what the nodes reported at their start
     wait_for(lambda: not page._requests, 10.0)
     time.sleep(0.1)
-    before = page.app.g_msg.content
-    page.app.on_case(name)
-    wait_for(lambda: page.app.g_msg.content not in (before, '')
-             and 'switching' not in page.app.g_msg.content and page._switch is None, 60.0)
-    return page.app.g_msg.content
+    before = page.console.last_message
+    page.console.on_case(name)
+    wait_for(lambda: page.console.last_message not in (before, '')
+             and 'switching' not in page.console.last_message and page._switch is None, 60.0)
+    return page.console.last_message
 
 
 def test_every_running_case_node_switches_then_the_page(page_with, loop_nodes):
@@ -140,7 +140,7 @@ def test_every_running_case_node_switches_then_the_page(page_with, loop_nodes):
         assert f.param('random_case_seed') == -1
     wait_for(lambda: page.cv.name == 'normal', 30.0)   # the page shows the case it scores
     assert page.get_parameter('case').value == 'normal' and not page.blind
-    assert page.app.g_case.value == 'normal'
+    assert page.console.g_case.value == 'normal'
     time.sleep(0.3)
     assert [c.name for c in loads] == ['normal']   # loaded once (both parameters in one set)
 
@@ -151,7 +151,7 @@ def test_a_blind_choice_draws_the_same_case_everywhere(page_with, loop_nodes):
     msg = choose(page, BLIND)
     assert msg.startswith('blind random case chosen'), msg
     seed = page.get_parameter('random_case_seed').value
-    assert seed >= 0 and page.blind and page.app.g_case.value == BLIND
+    assert seed >= 0 and page.blind and page.console.g_case.value == BLIND
     wait_for(lambda: page.cv.name == fakes['force_server'].loaded[-1], 30.0)   # the same draw
     for f in fakes.values():   # no old name left readable on any node
         assert f.param('random_case_seed') == seed and f.param('case') == ''
@@ -165,7 +165,7 @@ def test_a_refusal_sends_the_others_back_and_the_page_keeps_its_case(page_with, 
     page = page_with()
     fakes = loop_nodes(page, (*LOOP, 'recorder'),
                        force_server={'refuse': 'model file unreadable'})
-    page.app.g_case.value = 'normal'   # as the instructor's dropdown shows it
+    page.console.g_case.value = 'normal'   # as the instructor's dropdown shows it
     t0 = page.t_start
     msg = choose(page, 'normal')
     assert msg.startswith('case normal NOT chosen'), msg
@@ -176,9 +176,9 @@ def test_a_refusal_sends_the_others_back_and_the_page_keeps_its_case(page_with, 
     assert cd.param('case') == '' and cd.loaded == ['normal', None]   # answered before that
     assert fakes['recorder'].loaded == [] and not fakes['recorder'].asked.is_set()
     assert page.get_parameter('case').value == '' and page.cv.name in (None, 'default')
-    assert page.app.g_case.value == 'default' and page.t_start > t0
+    assert page.console.g_case.value == 'default' and page.t_start > t0
     time.sleep(0.5)   # the dropdown set by the page is no choice: nothing more happens
-    assert page._switch is None and page.app.g_msg.content == msg
+    assert page._switch is None and page.console.last_message == msg
 
 
 def test_a_node_that_does_not_answer_in_time_cancels_the_choice(page_with, loop_nodes):
@@ -187,17 +187,17 @@ def test_a_node_that_does_not_answer_in_time_cancels_the_choice(page_with, loop_
     page = page_with(timeout=10.0)   # force_server answers within it, even on a loaded machine
     gate = threading.Event()   # contact_detector loads the case only when the test says so
     fakes = loop_nodes(page, contact_detector={'gate': gate})
-    page.app.on_case('normal')
-    wait_for(lambda: 'sending back: force_server, contact_detector' in page.app.g_msg.content,
+    page.console.on_case('normal')
+    wait_for(lambda: 'sending back: force_server, contact_detector' in page.console.last_message,
              60.0)
-    msg = page.app.g_msg.content
+    msg = page.console.last_message
     assert 'NOT chosen' in msg and 'switched: force_server' in msg, msg
     assert 'no answer from contact_detector' in msg, msg
     time.sleep(0.3)
     assert page._switch is not None and not page._collecting()   # still on the new case
     gate.set()
     wait_for(lambda: page._switch is None, 60.0)
-    msg = page.app.g_msg.content
+    msg = page.console.last_message
     assert 'sent back: force_server, contact_detector' in msg, msg
     assert 'the exam starts afresh on case default' in msg and page._collecting(), msg
     for f in fakes.values():   # the late switch landed, then the revert after it
@@ -223,22 +223,22 @@ def test_samples_are_not_collected_while_the_nodes_switch(page_with, loop_nodes)
     page = page_with()
     gate = threading.Event()
     fakes = loop_nodes(page, contact_detector={'gate': gate})
-    page.app.on_case('normal')
+    page.console.on_case('normal')
     assert fakes['contact_detector'].asked.wait(30.0)
     assert page._switch is not None and not page._collecting()
-    page.app.on_case('two_lesions')
-    wait_for(lambda: 'still being loaded' in page.app.g_msg.content, 10.0)
-    assert page.app.g_case.value == 'normal'
+    page.console.on_case('two_lesions')
+    wait_for(lambda: 'still being loaded' in page.console.last_message, 10.0)
+    assert page.console.g_case.value == 'normal'
     gate.set()
     wait_for(lambda: page._switch is None, 30.0)
     assert page.get_parameter('case').value == 'normal' and page._collecting()
-    assert page.app.g_case.value == 'normal'
+    assert page.console.g_case.value == 'normal'
 
 
 def test_a_page_started_blind_shows_the_blind_entry():
     from haptic_anfis.nodes.web_view import web_view_in_thread
     with web_view_in_thread({'port': free_port(), 'random_case_seed': 3}, 'x') as (node, _):
-        assert node.blind and node.app.g_case.value == BLIND
+        assert node.blind and node.console.g_case.value == BLIND
 
 
 def test_a_restarted_case_node_is_given_the_case_chosen(page_with, loop_nodes):
@@ -272,7 +272,7 @@ def test_a_restarted_case_node_is_given_the_case_chosen(page_with, loop_nodes):
         wait_for(lambda: new.param('case') == 'normal', 60.0)
         assert new.loaded == ['normal']
         wait_for(lambda: page._switch is None, 30.0)
-        msg = page.app.g_msg.content
+        msg = page.console.last_message
         assert 'force_server (restarted) back on the case chosen' in msg, msg
         assert page.running and page._collecting()
     finally:
@@ -310,13 +310,13 @@ def test_a_case_set_on_one_node_outside_the_page_stops_collecting_until_they_agr
     assert page._collecting()
     fs = fakes['force_server'].node
     assert fs.set_parameters([Parameter('case', value='normal')])[0].successful
-    wait_for(lambda: 'different cases' in page.app.g_msg.content, 30.0)
-    msg = page.app.g_msg.content
+    wait_for(lambda: 'different cases' in page.console.last_message, 30.0)
+    msg = page.console.last_message
     assert 'force_server on case normal' in msg, msg
     assert "contact_detector on the page's case" in msg and not page._collecting()
     assert page.cv.name != 'normal'   # the page keeps its case
     assert fs.set_parameters([Parameter('case', value='')])[0].successful
-    wait_for(lambda: 'collecting again' in page.app.g_msg.content, 30.0)
+    wait_for(lambda: 'collecting again' in page.console.last_message, 30.0)
     assert page._split == '' and page._collecting()
 
 
@@ -327,8 +327,8 @@ def test_a_case_set_on_the_page_alone_from_outside_says_the_loop_did_not_follow(
     page = page_with()
     loop_nodes(page)
     assert page.set_parameters([Parameter('case', value='normal')])[0].successful
-    wait_for(lambda: 'different cases' in page.app.g_msg.content, 30.0)
-    msg = page.app.g_msg.content
+    wait_for(lambda: 'different cases' in page.console.last_message, 30.0)
+    msg = page.console.last_message
     assert 'contact_detector on the default scene; force_server on the default scene' in msg
     wait_for(lambda: page.cv.name == 'normal', 30.0)   # loaded (the check may come first)
     assert not page._collecting()
@@ -340,8 +340,8 @@ def test_every_loop_node_set_outside_to_one_case_is_followed_by_the_page(page_wi
     for f in fakes.values():
         assert f.node.set_parameters([Parameter('case', value='normal')])[0].successful
     wait_for(lambda: page.cv.name == 'normal', 60.0)
-    assert page.get_parameter('case').value == 'normal' and page.app.g_case.value == 'normal'
-    assert 'switched to case normal outside this page' in page.app.g_msg.content
+    assert page.get_parameter('case').value == 'normal' and page.console.g_case.value == 'normal'
+    assert 'switched to case normal outside this page' in page.console.last_message
     wait_for(lambda: not page._requests, 10.0)
     assert page._split == '' and page._collecting()
     # then a choice on the page puts every node on its case, as before

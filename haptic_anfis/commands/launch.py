@@ -40,6 +40,7 @@ def run(args: argparse.Namespace) -> int:
     session = ProcessSession(spec, node_args)
     result = session.run()
     print_launch_report(trace, spec.params_files, args.json,
+                        [*spec.case_arguments(), *spec.user_ros_args()],
                         graph_scheduling=session.graph_scheduling)
     if result.failed:
         print('launch failed: ' + ', '.join(f'{n} (code {c})' for n, c in result.failed),

@@ -33,6 +33,7 @@ import argparse
 import json
 import math
 from pathlib import Path
+from typing import Any, Mapping, Sequence
 
 import numpy as np
 
@@ -64,6 +65,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help='ROS 2 parameter file(s) the nodes ran with (repeatable), so the replay '
                         'uses the same mesh, direction and model')
     p.add_argument('--json', action='store_true', help='print one JSON object as the last line')
+    p.add_argument('--case', default='', metavar='NAME',
+                   help='the case the session ran (sim / launch --case): its surface and model '
+                        'make the ideal force (default: the parameter files\' or the default '
+                        'scene)')
+    p.add_argument('--random-case', action='store_true',
+                   help='the session drew its case with --random-case --seed N')
+    p.add_argument('--seed', type=int, default=None, help='seed of --random-case')
     p.add_argument('--from', dest='start', type=float, default=0.0, metavar='S',
                    help="report the ticks from S seconds after the first one the trace kept (a "
                         "session's steady state; a run longer than the trace's bound, ~10 min, "
@@ -71,13 +79,38 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         'whole run, listed as whole_run')
 
 
-def ideal_forces(positions: np.ndarray, params_files=()) -> tuple[np.ndarray, np.ndarray]:
+#: the nodes whose parameters make the ideal force (the contact tracker, the force model)
+IDEAL_NODES = ('contact_detector', 'force_server')
+
+
+def ideal_overrides(ros_args: Sequence[str] = ()) -> dict[str, dict[str, Any]]:
+    """{node: {parameter: value}} of :data:`IDEAL_NODES` from ``-p [node:]name:=value``
+    arguments (a session's case arguments and the user's overrides), as rcl gives them to each
+    node: a global name to every node that declares it, ``node:name`` to that node alone."""
+    from ..nodes.parameters import CASE_PARAMS, parse_overrides
+    from ..nodes.registry import node_parameters
+    out: dict[str, dict[str, Any]] = {n: {} for n in IDEAL_NODES}
+    for target, v, _ in parse_overrides(list(ros_args)):
+        node, _, name = target.rpartition(':')
+        for n in IDEAL_NODES:
+            declared = {p.name for p in (*node_parameters(n), *CASE_PARAMS)}
+            if node in ('', n) and name in declared:
+                out[n][name] = v
+    return out
+
+
+def ideal_forces(positions: np.ndarray, params_files=(),
+                 overrides: Mapping[str, Mapping[str, Any]] | None = None
+                 ) -> tuple[np.ndarray, np.ndarray]:
     """(F (n, 3) [N], in_contact (n,) bool): the contact tracker and force model (configured from
-    ``params_files`` as the contact_detector and force_server nodes are) over the probe
+    ``params_files`` and ``overrides`` ({node: {name: value}}, :func:`ideal_overrides`) as the
+    contact_detector and force_server nodes are, the session's case included) over the probe
     ``positions`` (n, 3) [m], tissue frame, in order."""
     from ..nodes.resim import build_pipeline
     from ..pipeline.replay import pose_to_force
-    cp, tracker, _, model = build_pipeline(params_files)
+    ov = overrides or {}
+    cp, tracker, _, model = build_pipeline(params_files, dict(ov.get('contact_detector', {})),
+                                           dict(ov.get('force_server', {})))
     n = len(positions)
     F = np.zeros((n, 3))
     contact = np.zeros(n, dtype=bool)
@@ -88,8 +121,10 @@ def ideal_forces(positions: np.ndarray, params_files=()) -> tuple[np.ndarray, np
     return F, contact
 
 
-def trace_report(trace: str | Path, params_files=(), start: float = 0.0) -> dict:
-    """The report of one trace (keys in the module docstring).
+def trace_report(trace: str | Path, params_files=(), start: float = 0.0,
+                 overrides: Mapping[str, Mapping[str, Any]] | None = None) -> dict:
+    """The report of one trace (keys in the module docstring); the ideal force from the session's
+    ``params_files`` and ``overrides`` (its case: :func:`ideal_overrides`).
 
     ``start`` > 0 [s]: only the ticks from ``start`` seconds after the first one (a session's
     steady state, e.g. once a browser has loaded the page). The figures the ticks carry are
@@ -124,7 +159,7 @@ def trace_report(trace: str | Path, params_files=(), start: float = 0.0) -> dict
             int(np.sum(rows[:, 7] == STATUS_NAMES.index('expired')))   # zoh traces no model
         st = {k: v for k, v in st.items() if k not in ('commands_received', 'models_received')}
         st.update(zip(WINDOWED, (lost, gap * 1e3, expired)))
-    F, contact = ideal_forces(rows[:, 1:4], params_files)
+    F, contact = ideal_forces(rows[:, 1:4], params_files, overrides)
     fmax = meta.get('max_force', math.inf)
     err = force_error(rows[:, 4:7], F, contact, max_force=fmax)
     err['force_error_by_phase'] = error_by_phase(rows[:, 4:7], F, contact, rows[:, 0],
@@ -195,7 +230,9 @@ def run(args: argparse.Namespace) -> int:
         raise ValueError(f'{args.trace}: no such trace file')
     if args.start < 0:
         raise ValueError(f'--from: expected seconds >= 0, got {args.start:g}')
-    r = trace_report(args.trace, args.params_file, args.start)
+    from ..cases.library import case_node_arguments
+    r = trace_report(args.trace, args.params_file, args.start,
+                     ideal_overrides(case_node_arguments(args)))
     print(format_report(r))
     if args.json:
         print(json.dumps(r))
@@ -221,15 +258,16 @@ def launch_trace_path(extra: dict[str, list[str]], where: Path | None,
 
 
 def print_launch_report(trace: Path | None, params_files, as_json: bool,
-                        **extra) -> None:
-    """The loop report of a finished launch (nothing if the driver left no trace); ``extra``
-    goes into the JSON object (``graph_scheduling``: {node: how it was scheduled})."""
+                        ros_args: Sequence[str] = (), **extra) -> None:
+    """The loop report of a finished launch (nothing if the driver left no trace); ``ros_args``:
+    the nodes' ``-p`` arguments (the case's: :func:`ideal_overrides`); ``extra`` goes into the
+    JSON object (``graph_scheduling``: {node: how it was scheduled})."""
     if trace is None:
         return
     if not trace.is_file():
         print(f'loop report: the falcon driver wrote no trace ({trace})', flush=True)
         return
-    r = trace_report(trace, params_files)
+    r = trace_report(trace, params_files, overrides=ideal_overrides(ros_args))
     print(format_report(r), flush=True)
     if as_json:
         print(json.dumps({**r, **extra}), flush=True)

@@ -83,7 +83,7 @@ def run(args: argparse.Namespace) -> int:
     recorded = session.print_recorded()
     if args.json:
         out = json_summary(summary, recorded)
-        out.update(_trace_figures(trace, spec.params_files, remove=keep is None),
+        out.update(_trace_figures(trace, spec, remove=keep is None),
                    graph_scheduling=session.graph_scheduling,
                    own_session=os.getsid(0) == os.getpid())
         print(json.dumps(out), flush=True)
@@ -98,16 +98,18 @@ TRACE_KEYS = ('force_error_rms_pct', 'force_error_rms_n', 'force_error_p99_n',
               'ticks_taken_over', 'periods_lost', 'max_gap_ms')
 
 
-def _trace_figures(trace, params_files, remove: bool = True) -> dict:
-    """The applied-force error, ripple and dropout figures of the driver's tick trace
-    (``remove``: a temporary trace, removed with its directory); {} without one."""
+def _trace_figures(trace, spec, remove: bool = True) -> dict:
+    """The applied-force error, ripple and dropout figures of the driver's tick trace, the ideal
+    force from the session ``spec``'s parameter files, case and overrides (``remove``: a
+    temporary trace, removed with its directory); {} without one."""
     if trace is None or not trace.is_file():
         return {}
     import shutil
 
-    from .loop import trace_report
+    from .loop import ideal_overrides, trace_report
     try:
-        r = trace_report(trace, params_files)
+        r = trace_report(trace, spec.params_files, overrides=ideal_overrides(
+            [*spec.case_arguments(), *spec.user_ros_args()]))
     finally:
         if remove:
             shutil.rmtree(trace.parent, ignore_errors=True)

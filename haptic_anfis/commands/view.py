@@ -62,7 +62,9 @@ def run(args: argparse.Namespace) -> int:
 def exam_debrief(args: argparse.Namespace, report: dict, session) -> None:
     """After ``exam run --view`` (the live page's node stopped with the session): serve the
     debrief of ``report`` / ``session`` (an :class:`~haptic_anfis.exam.ExamSession`) on the same
-    port (the open page reconnects to it) for ``--view-hold`` seconds or until Ctrl-C."""
+    port (the open page reconnects to it) for ``--view-hold`` seconds or until Ctrl-C. It is the
+    trainee's page: no trainee history there (the instructor's ``view BAG --trainee ID``, or
+    ``trainees show``, has it)."""
     if not getattr(args, 'view', False):
         return
     from ..view.app import ViewApp
@@ -80,7 +82,7 @@ def exam_debrief(args: argparse.Namespace, report: dict, session) -> None:
             if time.monotonic() > end:
                 raise
             time.sleep(0.2)
-    app.show_debrief(Debrief(report, session), getattr(args, 'trainee_id', None) or '',
-                     getattr(args, 'db', None))
+    # the trainee's page: the debrief alone, never the record (an earlier blind case's name)
+    app.show_debrief(Debrief(report, session))
     print(f'debrief at {app.url} (Ctrl-C to stop)', flush=True)
     serve(app, getattr(args, 'view_hold', None))

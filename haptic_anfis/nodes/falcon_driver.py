@@ -47,6 +47,7 @@ from ..device import (HandParams, PalpationScript, SafetyLayer, ServoLoop, Simul
 from ..device.buttons import ClutchMark
 from ..device.falcon import RATED_FORCE
 from ..device.force_input import MODES, ForceInput
+from ..device.limits import check_max_force, check_rate, check_watchdog
 from ..device.local_model import APPROACH_RADIUS, FALCON_MAX_STIFFNESS, HOLD_RADIUS, \
     MODEL_BLEND_TIME, PASSIVITY_WINDOW, STATUS_NAMES
 from ..device.loop_health import LoopHealth
@@ -68,14 +69,16 @@ PARAMS = [
     Param('backend', 'sim', "device backend: 'sim' (simulated Falcon with a scripted virtual hand) "
           "or 'falcon' (a Novint Falcon over USB; needs pip install 'haptic_anfis[falcon]')",
           one_of(*BACKENDS)),
-    Param('rate', 1000.0, 'servo loop rate [Hz]', positive),
+    Param('rate', 1000.0, 'servo loop rate [Hz], 100-1000 (what the Falcon runs; '
+          'haptic_anfis.device.limits)', check_rate),
     Param('frame_id', 'tissue', 'frame of the published pose/velocity/force and of accepted '
           'force commands (others are rejected)'),
     Param('max_force', RATED_FORCE, 'device force limit [N]; commands are clamped to it (default: the '
-          "Falcon's rated force, > 2 lbf = 8.9 N per Novint's specification)", positive),
+          "Falcon's rated force, > 2 lbf = 8.9 N per Novint's specification, also its bound: "
+          'haptic_anfis.device.limits)', check_max_force),
     Param('max_force_rate', 1000.0, 'largest change of the applied force [N/s]', positive),
     Param('watchdog_timeout', 0.010, 'no force command for this long [s] ramps the force to zero '
-          '(at max_force_rate)', positive),
+          '(at max_force_rate); 0.001-0.05 (haptic_anfis.device.limits)', check_watchdog),
     Param('workspace_scale', 1.5, 'tissue position = workspace_offset + workspace_scale * device '
           'position', positive),
     Param('workspace_offset', [0.03, 0.0, 0.0], 'tissue-frame position of the device origin [m]',
@@ -240,6 +243,10 @@ class FalconDriver(HapticNode):
         super().__init__(name, **kw)
         p = self.params = declare_parameters(self, PARAMS)
         p['servo_loop'] = self.servo_loop = resolve_servo_loop(p['servo_loop'], p['backend'])
+        why = check_max_force(p['max_force'], p['backend'])  # the declaration took any backend's
+        if why:
+            raise ParameterError(f"{name}: bad parameters: parameter 'max_force' = "
+                                 f"{p['max_force']!r}: {why}")
         if p['gil_switch_interval'] > 0:
             # A busy thread (bag writer, executor callbacks) keeps the GIL up to this long while
             # the 1 kHz servo thread waits: with a recorder in the same process the worst

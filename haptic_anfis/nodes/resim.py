@@ -61,14 +61,27 @@ class ResimResult:
 
 
 def build_pipeline(params_files=(), contact_overrides=None, force_overrides=None):
-    """(contact_detector params, tracker, model path, model) as the nodes would build them."""
+    """(contact_detector params, tracker, model path, model) as the nodes would build them,
+    with the case their ``case`` / ``random_case_seed`` parameters select (files or overrides)
+    in place of their own mesh and model files, as the nodes take it.
+
+    Raises:
+        ParameterError: a bad parameter; CaseError: an unknown case.
+    """
+    from ..cases import resolve_case
     from ..pipeline.contact import make_tracker
     from ..pipeline.force import load_model
     from . import contact_detector as cd
     from . import force_server as fs
+    from ._case import apply_case
     from ._common import resolve_parameters
-    pc = resolve_parameters(cd.PARAMS, 'contact_detector', params_files, contact_overrides)
-    pf = resolve_parameters(fs.PARAMS, 'force_server', params_files, force_overrides)
+    from .parameters import CASE_PARAMS
+    pc = resolve_parameters(cd.PARAMS + CASE_PARAMS, 'contact_detector', params_files,
+                            contact_overrides)
+    pf = resolve_parameters(fs.PARAMS + CASE_PARAMS, 'force_server', params_files,
+                            force_overrides)
+    pc = apply_case(pc, resolve_case(pc['case'], pc['random_case_seed']))
+    pf = apply_case(pf, resolve_case(pf['case'], pf['random_case_seed']))
     tracker = make_tracker(pc)
     model_path, model = load_model(pf)
     return pc, tracker, model_path, model

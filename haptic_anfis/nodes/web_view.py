@@ -9,13 +9,20 @@ displacements, the coverage painted per pressure level (folded at ``coverage_rat
 and cue, the exam clock; lesions stay hidden until the debrief. ``exam/marks`` is a plain
 subscription (rare, must not be lost).
 
-The instructor's controls on the page: a case or a blind random one (set on the loop nodes'
-writable ``case`` / ``random_case_seed`` parameters, and on this node), start (a fresh session,
-the clock from zero) and stop (the session scored as ``exam report`` scores it, the debrief
-shown). A case set on a loop node from outside the page (``ros2 param set``) is seen on
-``/parameter_events`` (:mod:`.case_watch`): the page follows when every running case node took
-one case, else it says which node runs what and collects nothing until they agree. The page's
-URL: ``http://host:port/``.
+Two doors. The trainee's page (``http://host:port/``) shows the exam, live and its debrief, and
+nothing else. The instructor's controls are on the instructor's console (``controls``: its own
+page and port, ``console_port``, bound to ``console_host``, 127.0.0.1 by default, behind a secret
+token: ``http://console_host:console_port/<token>/``; :mod:`haptic_anfis.view.console`): a case
+or a blind random one (set on the loop nodes' writable ``case`` / ``random_case_seed``
+parameters, and on this node), the trainee id, start (a fresh session, the clock from zero) and
+stop (the session scored as ``exam report`` scores it, stored for the trainee, the debrief shown
+on the trainee's page), and the class's record. The token comes from ``console_token_file``,
+else ``$HAPTIC_ANFIS_CONSOLE_TOKEN``, else a new random one; the console's address is printed on
+stdout at start (not into ROS's log files). Both servers answer only their own origin
+(:mod:`haptic_anfis.view.doors`). A case set on a loop node from outside the page (``ros2 param
+set``) is seen on ``/parameter_events`` (:mod:`.case_watch`): the page follows when every running
+case node took one case, else the console says which node runs what and nothing is collected
+until they agree.
 """
 from __future__ import annotations
 
@@ -49,8 +56,13 @@ CONTACT_QUEUE = QoSProfile(depth=200, history=HistoryPolicy.KEEP_LAST,
 #: recorder (its case is the bag's label) only once every node of the loop has switched
 CASE_PHASES = (('contact_detector', 'force_server', 'visualizer', 'examiner'), ('recorder',))
 CASE_NODE_NAMES = frozenset(n for ph in CASE_PHASES for n in ph)
-#: what the page says while the loop nodes load a case
+#: what the console says while the loop nodes load a case
 SWITCHING = 'switching to {} ...'
+#: what the trainee's page says meanwhile (no case name: a blind draw stays blind)
+PAGE_SWITCHING = 'the case is being switched: nothing is collected meanwhile'
+#: what the trainee's page says while the loop nodes' cases differ
+PAGE_SPLIT = 'the loop nodes are not on one case: nothing is collected until the instructor ' \
+    'chooses one'
 
 
 def _port(v):
@@ -64,8 +76,15 @@ PARAMS = [
     Param('coverage_rate', 5.0, 'coverage map repaint rate [Hz]', positive),
     Param('exam_config', '', "scoring settings ('' = config/exam.yaml)"),
     Param('dent', True, 'draw the dent under the probe (FE skin displacements)'),
-    Param('controls', True, "show the instructor's panel (case, trainee id, start / stop)"),
-    Param('trainee', '', 'trainee id shown in the instructor panel'),
+    Param('controls', True, "serve the instructor's console (case, trainee id, start / stop, "
+          "the class's record) on console_port; false: the trainee's page alone"),
+    Param('console_port', 8081, "TCP port of the instructor's console", _port),
+    Param('console_host', '127.0.0.1', "address the instructor's console listens on "
+          "('0.0.0.0': every interface; it still needs the token)"),
+    Param('console_token_file', '', "file whose first line is the console's token (>= 16 "
+          "letters, digits, - or _); '' = $HAPTIC_ANFIS_CONSOLE_TOKEN, else a new random one, "
+          'printed at start'),
+    Param('trainee', '', "trainee id preset on the instructor's console"),
     Param('db', '', "trainee record file for the sessions the page stops ('' = the record's "
                     'default: $HAPTIC_ANFIS_DB, else the user data directory)'),
     Param('case_switch_timeout', 15.0, "how long the instructor's case choice waits for the "
@@ -89,16 +108,10 @@ class WebView(HapticNode):
         from ..view.app import ViewApp
         self.app = ViewApp(self.cv.vertices, self.cv.faces, self.cv.region_faces,
                            self.cv.config.thresholds, port=p['port'], host=p['host'],
-                           title='haptic_anfis', deformation=self.cv.deformation,
-                           controls=p['controls'], cases=[c.name for c in library().ready()])
+                           title='haptic_anfis', deformation=self.cv.deformation)
+        self.console = None
         if p['controls']:
-            self.app.g_trainee.value = p['trainee']
-            if case is not None:
-                from ..view.app import BLIND
-                self.app.g_case.value = BLIND if self.blind else case.name
-        self.app.on_start = lambda: self._requests.append(('start', None))
-        self.app.on_stop = lambda: self._requests.append(('stop', None))
-        self.app.on_case = lambda name: self._requests.append(('case', name))
+            self.console = self._open_console(p, [c.name for c in library().ready()], case)
         self._inputs = {k: PolledSubscription(self, t, topic, q) for k, t, topic, q in (
             ('pose', PoseStamped, ifc.TOPIC_POSE, NEWEST),
             ('force', WrenchStamped, ifc.TOPIC_COMMAND, NEWEST),
@@ -127,9 +140,43 @@ class WebView(HapticNode):
         self._switch = None   # the instructor's case choice while the loop nodes load it
         self.timer = self.create_timer(1.0 / p['rate'], self._frame)
         self.cov_timer = self.create_timer(1.0 / p['coverage_rate'], self._coverage)
-        self.app.set_exam_running(True, self.blind, self.cv.name or '')
+        self._running_shown(True)
         self.get_logger().info(f'page at {self.app.url}')
         print(f'web_view: open {self.app.url} in a browser', flush=True)
+        if self.console is not None:   # stdout only: the token stays out of ROS's log files
+            print(f"web_view: instructor's console at {self.console.url} (token from "
+                  f'{self._token_from}; give it to the instructor only)', flush=True)
+
+    def _open_console(self, p: dict, cases: list[str], case):
+        """The instructor's console with its controls wired to this node's requests."""
+        from ..view.app import BLIND
+        from ..view.console import ConsoleApp
+        from ..view.doors import load_token
+        token, self._token_from = load_token(p['console_token_file'])
+        console = ConsoleApp(p['console_port'], token, cases, host=p['console_host'],
+                             db=p['db'] or None)
+        console.g_trainee.value = p['trainee']
+        if case is not None:
+            console.show_case_choice(BLIND if self.blind else case.name)
+        console.on_start = lambda: self._requests.append(('start', None))
+        console.on_stop = lambda: self._requests.append(('stop', None))
+        console.on_case = lambda name: self._requests.append(('case', name))
+        return console
+
+    def _tell(self, msg: str, page: str | None = None) -> None:
+        """``msg`` to the instructor (the console; without one, the log has it), ``page`` (if
+        given) on the trainee's page: what a trainee may read (no trainee id, no case a blind
+        exam hides, no record)."""
+        if self.console is not None:
+            self.console.message(msg)
+        if page is not None:
+            self.app.message(page)
+
+    def _running_shown(self, running: bool) -> None:
+        """The trainee's page and the console's buttons for an exam running or not."""
+        self.app.set_exam_running(running, self.blind, self.cv.name or '')
+        if self.console is not None:
+            self.console.set_running(running)
 
     # -- inputs -----------------------------------------------------------------------------
 
@@ -248,20 +295,20 @@ class WebView(HapticNode):
         try:
             if what == 'start':
                 self._restart()
-                self.app.set_exam_running(True, self.blind, self.cv.name or '')
-                self.app.message('exam started')
+                self._running_shown(True)
+                self._tell('exam started')
             elif what == 'stop':
                 self.running = False
-                self.app.set_exam_running(False)
+                self._running_shown(False)
                 from ..view.debrief import Debrief
                 report = self.cv.session.report()
                 report['case'] = 'blind case' if self.blind else (self.cv.name or 'default')
-                trainee = (self.app.g_trainee.value or '').strip() \
-                    if self.app.g_instructor is not None else ''
+                trainee = self.console.trainee if self.console is not None else ''
                 stored = self._store(trainee, report) if trainee else ''
-                self.app.show_debrief(Debrief(report, self.cv.session), trainee,
-                                      self.params['db'] or None)
-                self.app.message('exam stopped: debrief below' + stored)
+                self.app.show_debrief(Debrief(report, self.cv.session))   # no record here
+                self._tell("exam stopped: the debrief is on the trainee's page" + stored)
+                if self.console is not None:
+                    self.console.refresh(select=trainee or None)
             elif what == 'case':
                 self._choose_case(arg)
             elif what == 'switching':   # the loop nodes' answers to a case choice
@@ -278,7 +325,7 @@ class WebView(HapticNode):
                 self._check_cases()
         except Exception as exc:   # keep serving: say it on the page
             self.get_logger().error(f'{what}: {exc}')
-            self.app.message(f'{what} failed: {exc}')
+            self._tell(f'{what} failed: {exc}')
 
     def _store(self, trainee: str, report: dict) -> str:
         """Store the stopped exam in the trainee record (issue 31) under ``trainee``, with the
@@ -313,7 +360,7 @@ class WebView(HapticNode):
 
         from ..view.app import BLIND
         if self._switch is not None:
-            self.app.show_case_choice(self._switch.entry)   # the dropdown shows the pending one
+            self._show_case_choice(self._switch.entry)   # the dropdown shows the pending one
             raise ValueError(f'{self._switch.label} is still being loaded; choose again when '
                              'it is done')
         blind = name == BLIND
@@ -327,7 +374,7 @@ class WebView(HapticNode):
             CaseSwitch(self, CASE_PHASES, params, self._param_clients, time.monotonic(),
                        self.params['case_switch_timeout']),
             'a blind random case' if blind else f'case {name}', blind, name, before, shown)
-        self.app.message(SWITCHING.format(self._switch.label))
+        self._tell(SWITCHING.format(self._switch.label), page=PAGE_SWITCHING)
         self._follow_switch()
 
     def _resync(self, name: str) -> None:
@@ -342,7 +389,7 @@ class WebView(HapticNode):
                      f'{name} (restarted) back on the case chosen', self.blind, entry, params,
                      entry, resync=True)
         self._switch = ch
-        self.app.message(SWITCHING.format(ch.label))
+        self._tell(SWITCHING.format(ch.label), page=PAGE_SWITCHING)
 
     def _current_case(self) -> tuple[list, str]:
         """The page's case: its ``case`` / ``random_case_seed`` parameters (as rclpy
@@ -402,7 +449,7 @@ class WebView(HapticNode):
                 self.blind, self._chosen, self._split = v.case[1] >= 0, True, ''
                 from ..view.app import BLIND
                 entry = BLIND if self.blind else v.case[0] or 'default'
-                self.app.show_case_choice(entry)
+                self._show_case_choice(entry)
                 what = 'a random case' if self.blind else f'case {entry}'
                 self._say(f'every loop node was switched to {what} outside this page: the page '
                           'follows, the exam starts afresh')
@@ -425,11 +472,17 @@ class WebView(HapticNode):
                 self._say("every loop node is on the page's case again: collecting again")
 
     def _say(self, msg: str, error: bool = False) -> None:
+        """``msg`` in the log and to the instructor; an error says on the trainee's page that
+        nothing is collected (without the node and case names)."""
         if error:   # rclpy: one severity per call site
             self.get_logger().warning(msg)
         else:
             self.get_logger().info(msg)
-        self.app.message(msg)
+        self._tell(msg, page=PAGE_SPLIT if error else None)
+
+    def _show_case_choice(self, entry: str) -> None:
+        if self.console is not None:
+            self.console.show_case_choice(entry)
 
     def _answered(self, ch: _Choice, out) -> _Choice | None:
         """Every case node answered ``ch``: the page switches, or the choice is refused and the
@@ -439,19 +492,19 @@ class WebView(HapticNode):
         if res is not None and res.successful:
             self.blind, self._chosen = ch.blind, True
             self.get_logger().info(f'{ch.label}: {out.describe()}')
-            self.app.show_case_choice(ch.entry)
-            self.app.message(('blind random case chosen' if self.blind else ch.label)
-                             + f' ({out.describe()})')
+            self._show_case_choice(ch.entry)
+            self._tell(('blind random case chosen' if self.blind else ch.label)
+                       + f' ({out.describe()})')
             return None
         why = out.describe() if res is None else f'the page cannot show it: {res.reason}'
         msg = f'{ch.label} NOT chosen: {why}'
         self.get_logger().error(msg)
-        self.app.show_case_choice(ch.shown)
+        self._show_case_choice(ch.shown)
         back = ch.switch.revert(ch.before, time.monotonic())
         if back is None:
             self._reverted(replace(ch, failed=msg), None)
             return None
-        self.app.message(f'{msg}; sending back: {", ".join(back.names)} ...')
+        self._tell(f'{msg}; sending back: {", ".join(back.names)} ...')
         return replace(ch, switch=back, failed=msg, label=f'the return to {self._kept(ch)}')
 
     def _resynced(self, ch: _Choice, out) -> None:
@@ -468,9 +521,9 @@ class WebView(HapticNode):
         msg += (f': the loop may not be on {self._kept(ch)}; the exam is stopped: choose a case '
                 'again')
         self.running = False
-        self.app.set_exam_running(False)
+        self._running_shown(False)
         self.get_logger().error(msg)
-        self.app.message(msg)
+        self._tell(msg, page='the exam is stopped: the instructor chooses a case again')
 
     def _kept(self, ch: _Choice) -> str:
         from ..view.app import BLIND
@@ -489,7 +542,7 @@ class WebView(HapticNode):
         if self.running:
             self._restart()
             msg += f'; the exam starts afresh on {self._kept(ch)}'
-        self.app.message(msg)
+        self._tell(msg)
 
     def _load_case(self, case) -> None:
         from ..view.build import case_view
@@ -498,7 +551,7 @@ class WebView(HapticNode):
         self.app.deformation = self.cv.deformation
         self.app.set_surface(self.cv.vertices, self.cv.faces, self.cv.region_faces)
         self._restart()
-        self.app.set_exam_running(True, self.blind, self.cv.name or '')
+        self._running_shown(True)
 
     def ready_condition(self) -> tuple[bool, str]:
         from .session import inputs_matched
@@ -512,6 +565,8 @@ class WebView(HapticNode):
         for s in self._inputs.values():
             s.destroy()
         self.app.close()
+        if self.console is not None:
+            self.console.close()
 
 
 @dataclass(frozen=True)
@@ -538,9 +593,11 @@ def web_view_in_thread(parameters: dict, other: str = 'view_feeder'):
     """A :class:`WebView` with ``parameters`` ({name: value}) spun by a thread of its own, and a
     plain node ``other`` on its context (to publish the loop topics to it): a context manager
     yielding ``(web_view, other)`` (:func:`~haptic_anfis.nodes.executor.node_in_thread`). For
-    tests and benches (the node's real home is its own process)."""
+    tests and benches (the node's real home is its own process). The instructor's console
+    gets a free port unless ``parameters`` name one (two tests at once on the default clash)."""
+    from ..view.browser import free_port
     from .executor import node_in_thread
-    return node_in_thread(WebView, parameters, other)
+    return node_in_thread(WebView, {'console_port': free_port(), **parameters}, other)
 
 
 def main(args=None) -> None:

@@ -9,6 +9,7 @@ sessions, mastery by case level.
 - :mod:`.levels`: :func:`case_level` (the graded library's ``level``, else lesion count and size).
 - :mod:`.mastery`: thresholds per level from ``config/exam.yaml``, :func:`mastery`.
 - :mod:`.figure`: the learning-curve PNG.
+- :mod:`.overview`: the class at a glance (stalled, drifting), as rows and CSV.
 """
 from .db import RecordError, default_db_path, resolve_db_path
 from .levels import case_level, level_of_case_name

@@ -10,11 +10,25 @@ newer one refused. ``PRAGMA application_id`` marks the file as ours.
 
 Every failure (not a database, corrupt, locked past the retries, disk full, newer schema) is a
 :class:`RecordError` whose message is one line naming the file. Pure Python (``sqlite3``), no ROS.
+
+Private: the record holds people's results, so the file is created 0600 (its WAL and shared-memory
+files take its mode: SQLite gives them the database's), and a folder the record creates is 0700,
+as is the default folder (``.../haptic_anfis``) however it was made. A file that already exists
+and belongs to this user is narrowed to 0600 when it is opened (a record made before this rule
+was 0644); a folder the user chose (``--db``) is left as it is: it is theirs.
+
+A full disk: SQLite says "database or disk is full", or, opening a WAL file whose shared-memory
+index cannot be made, "disk I/O error"; either, with the file's filesystem out of space, is
+said as a full disk. Reading (``trainees list``) still works on a full disk: when the shared-memory
+index cannot be made and no write-ahead log is pending, the file is read as an immutable one
+(``immutable=1``: no lock, no index; nothing can be written then anyway).
 """
 from __future__ import annotations
 
+import errno
 import os
 import sqlite3
+import stat
 import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
@@ -34,6 +48,9 @@ APPLICATION_ID = 0x48416E52
 BUSY_TIMEOUT_S = 5.0
 #: attempts of one transaction while the file stays busy (``BUSY_TIMEOUT_S`` each)
 RETRIES = 6
+#: [bytes] an I/O error with less than this free on the record's filesystem is a full disk (the
+#: shared-memory index SQLite makes at the first open of a WAL file is 32 KiB)
+FULL_BELOW = 64 * 1024
 
 T = TypeVar('T')
 
@@ -131,14 +148,44 @@ def resolve_db_path(db: str | os.PathLike | None = None) -> Path:
     return Path(env) if env else default_db_path()
 
 
+def _free_bytes(path: Path) -> int | None:
+    """Bytes this user may still write on the filesystem of ``path`` (its nearest existing
+    folder); None when it cannot be asked."""
+    for p in (path, *path.parents):
+        if p.exists():
+            try:
+                st = os.statvfs(p)
+            except OSError:
+                return None
+            return st.f_bavail * st.f_frsize
+    return None
+
+
+def _disk_full(path: Path, exc: BaseException) -> bool:
+    """Whether ``exc`` means the record's filesystem is full: ENOSPC / EDQUOT, SQLite's
+    SQLITE_FULL, or an SQLite I/O error with (almost) no space left."""
+    if isinstance(exc, OSError):
+        return exc.errno in (errno.ENOSPC, errno.EDQUOT)
+    name = getattr(exc, 'sqlite_errorname', '') or ''
+    if name == 'SQLITE_FULL' or 'disk is full' in str(exc).lower():
+        return True
+    if name.startswith('SQLITE_IOERR'):
+        free = _free_bytes(path)
+        return free is not None and free < FULL_BELOW
+    return False
+
+
 def _fail(path: Path, exc: BaseException) -> RecordError:
     msg = str(exc)
     low = msg.lower()
-    if 'locked' in low or 'busy' in low:
+    if _disk_full(path, exc):
+        free = _free_bytes(path)
+        why = ('disk full (' + (f'{free} bytes free on its filesystem' if free is not None
+                                and free < FULL_BELOW else msg)
+               + '): nothing is written to a full disk; free some space and try again')
+    elif 'locked' in low or 'busy' in low:
         why = (f'locked by another process (still busy after {RETRIES} tries of '
                f'{BUSY_TIMEOUT_S:g} s)')
-    elif 'full' in low:
-        why = f'disk full, nothing stored ({msg})'
     elif 'not a database' in low or 'malformed' in low or 'corrupt' in low:
         why = f'not a readable SQLite trainee record ({msg})'
     elif 'readonly' in low or 'unable to open' in low or 'permission' in low:
@@ -174,11 +221,13 @@ def _open(path: Path, create: bool) -> sqlite3.Connection:
                           'record\'s SQLite file, e.g. <folder>/trainees.sqlite)')
     if not create and not path.is_file():
         raise RecordError(f'trainee record {str(path)!r}: no such file (nothing stored yet)')
-    if create:
-        try:
-            path.parent.mkdir(parents=True, exist_ok=True)
-        except OSError as exc:
-            raise _fail(path, exc) from None
+    try:
+        if create:
+            _private_folder(path.parent)
+            _private_file(path)
+        _narrow(path)
+    except OSError as exc:
+        raise _fail(path, exc) from None
     # isolation_level=None: we issue BEGIN / COMMIT ourselves (one transaction per session)
     conn = sqlite3.connect(str(path), timeout=BUSY_TIMEOUT_S, isolation_level=None)
     try:
@@ -196,6 +245,40 @@ def _open(path: Path, create: bool) -> sqlite3.Connection:
     return conn
 
 
+def _private_folder(folder: Path) -> None:
+    """Make ``folder`` 0700 if missing; narrow the default record folder to 0700 as well."""
+    if not folder.exists():
+        folder.mkdir(parents=True, mode=0o700)
+        os.chmod(folder, 0o700)   # mkdir's mode passes through the umask
+    elif folder == default_db_path().parent:
+        _narrow(folder, 0o700)
+
+
+def _private_file(path: Path) -> None:
+    """Create the empty record file 0600 before SQLite opens it (SQLite would make it 0644;
+    an empty file is an empty database to it)."""
+    try:
+        os.close(os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600))
+    except FileExistsError:
+        pass
+
+
+def _narrow(path: Path, mode: int = 0o600) -> None:
+    """Take away group and other access to ``path`` (and its ``-wal`` / ``-shm`` files) if it
+    belongs to this user and grants any; another user's file is left as it is, and so is one on
+    a read-only filesystem (it can still be read)."""
+    for p in (path, Path(f'{path}-wal'), Path(f'{path}-shm')):
+        try:
+            st = p.stat()
+        except FileNotFoundError:
+            continue
+        if st.st_uid == os.getuid() and stat.S_IMODE(st.st_mode) & 0o077:
+            try:
+                os.chmod(p, mode)
+            except OSError:   # a read-only filesystem: it cannot be narrowed, nor written
+                pass
+
+
 def _check(path: Path, conn: sqlite3.Connection) -> int:
     """The file's schema version, read without writing; RecordError for a newer schema or a
     database that is not a trainee record (someone else's file is left as it was).
@@ -205,9 +288,15 @@ def _check(path: Path, conn: sqlite3.Connection) -> int:
     see its tables without a version: "not a trainee record" (the concurrent-writers test)."""
     conn.execute('BEGIN')   # deferred: no lock is taken for writing, nothing is written
     try:
-        return _check_in_transaction(path, conn)
-    finally:
-        conn.execute('COMMIT')
+        version = _check_in_transaction(path, conn)
+    except BaseException:
+        try:
+            conn.execute('ROLLBACK')
+        except sqlite3.OperationalError:   # SQLite ended it itself (a full disk): the cause
+            pass                           # is the error raised, not "no transaction"
+        raise
+    conn.execute('COMMIT')
+    return version
 
 
 def _check_in_transaction(path: Path, conn: sqlite3.Connection) -> int:
@@ -253,7 +342,8 @@ def migrate(conn: sqlite3.Connection, to: int = SCHEMA_VERSION,
         conn.execute('COMMIT')
         return old
     except BaseException:
-        conn.execute('ROLLBACK')
+        if conn.in_transaction:   # SQLite rolls back itself on some errors (a full disk)
+            conn.execute('ROLLBACK')
         raise
 
 
@@ -268,13 +358,42 @@ def connect(db: str | os.PathLike | None = None, create: bool = False
         RecordError: missing / corrupt / locked / newer-schema / full file, naming it.
     """
     path = resolve_db_path(db)
-    conn = _retrying(path, lambda: _open(path, create))
+    try:
+        conn = _retrying(path, lambda: _open(path, create))
+    except RecordError:
+        conn = None if create else _open_immutable(path)
+        if conn is None:
+            raise
     try:
         yield conn
     except sqlite3.Error as exc:
         raise _fail(path, exc) from None
     finally:
         conn.close()
+
+
+def _open_immutable(path: Path) -> sqlite3.Connection | None:
+    """A read-only connection to a record on a full disk (SQLite could not make its
+    shared-memory index): ``immutable=1`` needs no index and no lock. None when the disk is not
+    full, a write-ahead log is pending (its rows would be missed) or the schema is not current
+    (it could not be migrated)."""
+    wal = Path(f'{path}-wal')
+    if not path.is_file() or (wal.exists() and wal.stat().st_size > 0):
+        return None
+    free = _free_bytes(path)
+    if free is None or free >= FULL_BELOW:
+        return None
+    from urllib.parse import quote
+    conn = sqlite3.connect(f'file:{quote(str(path.resolve()))}?immutable=1', uri=True,
+                           isolation_level=None)
+    try:
+        if _check(path, conn) != SCHEMA_VERSION:
+            conn.close()
+            return None
+    except (sqlite3.Error, RecordError):
+        conn.close()
+        return None
+    return conn
 
 
 def write(db: str | os.PathLike | None, fn: Callable[[sqlite3.Connection], T]) -> T:

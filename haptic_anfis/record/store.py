@@ -10,7 +10,7 @@ from __future__ import annotations
 import csv
 import json
 import os
-import re
+import unicodedata
 from datetime import datetime, timezone
 from typing import IO
 
@@ -21,7 +21,8 @@ __all__ = ['BLIND_CASE', 'CSV_COLUMNS', 'WALL_CLOCK_NS', 'AlreadyStored', 'Unkno
            'same_recording', 'session_report', 'session_row', 'store_session', 'trainees',
            'utc_iso']
 
-_ID = re.compile(r'^[A-Za-z0-9][A-Za-z0-9._@+-]{0,63}$')
+#: what a trainee id may hold besides letters and digits (of any script)
+ID_PUNCTUATION = '._@+-'
 
 #: the columns of ``trainees export --csv`` (one row per session, oldest first)
 CSV_COLUMNS = ('session', 'started_utc', 'source', 'case', 'case_level', 'coverage_light_pct',
@@ -44,11 +45,20 @@ class AlreadyStored(RecordError):
 
 
 def check_trainee_id(trainee_id: str) -> str:
-    """``trainee_id`` if it is 1-64 letters, digits or ``._@+-`` (starting with a letter or
-    digit); else ValueError naming it. Use a pseudonym: the record needs no real name."""
-    if not isinstance(trainee_id, str) or not _ID.fullmatch(trainee_id):
-        raise ValueError(f'--trainee-id {trainee_id!r}: expected 1-64 letters, digits or ._@+- '
-                         '(starting with a letter or digit)')
+    """``trainee_id`` if it is 1-64 letters or digits of any script (``str.isalnum``: a trainee
+    writes their pseudonym in their own alphabet, "Zoë", "Łukasz", "明") or ``._@+-``, starting
+    with a letter or digit, in Unicode's composed form (NFC: one id is one string, whichever way
+    a keyboard typed "ë"); else ValueError naming it. No space, no control or markup
+    character. Use a pseudonym: the record needs no real name."""
+    ok = (isinstance(trainee_id, str) and 1 <= len(trainee_id) <= 64
+          and trainee_id[0].isalnum()
+          and all(c.isalnum() or c in ID_PUNCTUATION for c in trainee_id))
+    if not ok:
+        raise ValueError(f'--trainee-id {trainee_id!r}: expected 1-64 letters (of any '
+                         f'alphabet), digits or {ID_PUNCTUATION} (starting with a letter or digit)')
+    if unicodedata.normalize('NFC', trainee_id) != trainee_id:
+        raise ValueError(f'--trainee-id {trainee_id!r}: expected composed Unicode (NFC), e.g. '
+                         f'{unicodedata.normalize("NFC", trainee_id)!r}')
     return trainee_id
 
 

@@ -13,10 +13,12 @@
 from __future__ import annotations
 
 import os
+import secrets
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from ..view.doors import TOKEN_ENV
 from .spec import CASE_NODES, SessionSpec, recorder_settings
 
 __all__ = ['ProcessSession', 'ProcessResult', 'ORDER', 'NO_RESPAWN', 'recorded_topics']
@@ -64,6 +66,10 @@ class ProcessSession:
         if spec.view:   # --view: the browser page as one more node
             self.extra.setdefault('web_view', spec.case_arguments()).extend(
                 spec.view_arguments(controls=True))
+        if 'web_view' in self.extra and not spec.console_token_file:
+            # one console token for the session: a web_view the launch restarts keeps the
+            # instructor's address (the node takes it from the environment it inherits)
+            os.environ.setdefault(TOKEN_ENV, secrets.token_urlsafe(24))
         self.notes: list[str] = []
         self.recorded: list[str] = []  # the topics the session's recorder records
         if spec.record:

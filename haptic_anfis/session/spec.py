@@ -168,6 +168,17 @@ OPTIONS: tuple[Option, ...] = (
     Option(('--view-port',), dict(type=int, default=8080,
                                   help='TCP port of the page with --view (default 8080)'),
            group=_VIEW),
+    Option(('--console-port',), dict(type=int, default=8081,
+                                     help="TCP port of the instructor's console with --view "
+                                          '(default 8081; bound to 127.0.0.1, behind a token '
+                                          'printed at start)'),
+           commands=('sim', 'launch'), group=_VIEW),
+    Option(('--console-token-file',), dict(default='', metavar='FILE',
+                                           help="with --view: the instructor console's token is "
+                                                'the first line of FILE (default: '
+                                                '$HAPTIC_ANFIS_CONSOLE_TOKEN, else a new random '
+                                                'one)'),
+           commands=('sim', 'launch'), group=_VIEW),
     Option(('--view-hold',), dict(type=float, default=None, metavar='S',
                                   help='with --view: serve the debrief this many seconds after '
                                        'the exam (default: until Ctrl-C)'),
@@ -234,6 +245,8 @@ class SessionSpec:
     enclave_root: str | None = None
     view: bool = False
     view_port: int = 8080
+    console_port: int = 8081
+    console_token_file: str = ''
     view_hold: float | None = None
     graph_priority: int = GRAPH_PRIORITY
     trace: str | None = None
@@ -323,10 +336,15 @@ class SessionSpec:
         return any(_changes_scene(node, key, v) for node, key, v in entries)
 
     def view_arguments(self, controls: bool) -> list[str]:
-        """The web_view node's own ``-p`` arguments (its port; ``controls``: the session's
-        buttons on the page)."""
-        return ['-p', f'port:={int(self.view_port)}',
+        """The web_view node's own ``-p`` arguments (its port; ``controls``: the instructor's
+        console, on its port, with its token file)."""
+        args = ['-p', f'port:={int(self.view_port)}',
                 '-p', f"controls:={'true' if controls else 'false'}"]
+        if controls:
+            args += ['-p', f'console_port:={int(self.console_port)}']
+            if self.console_token_file:
+                args += ['-p', f'console_token_file:={Path(self.console_token_file).resolve()}']
+        return args
 
     def params_arguments(self) -> list[str]:
         """``--params-file ABS`` for every parameter file (absolute: a node may run elsewhere)."""
@@ -379,6 +397,14 @@ class SessionSpec:
         if self.view:   # viser would move to the next free port and the URL shown be wrong
             from ..view.app import check_port
             check_port(self.view_port, flag='--view-port')
+            if self.command != 'exam':   # the instructor's console (exam run has none)
+                if self.console_port == self.view_port:
+                    raise SessionError(f'--console-port {self.console_port}: the same as '
+                                       "--view-port; the console needs a port of its own")
+                check_port(self.console_port, flag='--console-port')
+                if self.console_token_file:
+                    from ..view.doors import load_token
+                    load_token(self.console_token_file)   # DoorError: one line naming it
         if check_parameters:
             self.check_parameters()
         return self

@@ -1,12 +1,16 @@
 """The trainee's screen in a browser (no ROS): the breast with the dent under the probe, the
-coverage painted per pressure level, the force gauge and cue, the instructor's controls, and the
-debrief of a session (lesions revealed, marks, path, score, a replay scrubber), served by
-``viser``.
+coverage painted per pressure level, the force gauge and cue, and the debrief of a session
+(lesions revealed, marks, path, score, a replay scrubber); and the instructor's console on a page
+of its own behind a token; served by ``viser`` behind a door that checks who connects.
 
 - :mod:`.scene`: colours, camera framing, probe orientation (plain arrays).
 - :mod:`.gauge`: the force gauge's bands and the trainee's cue.
 - :mod:`.debrief`: a scored session as the page shows it at any replay time.
-- :mod:`.app`: :class:`ViewApp`, the viser page.
+- :mod:`.app`: :class:`ViewApp`, the trainee's page.
+- :mod:`.console`: :class:`~.console.ConsoleApp`, the instructor's console; :mod:`.curves` its
+  learning curves.
+- :mod:`.doors`: Host / Origin / token checks in front of every viser server, one log line per
+  malformed message; :mod:`.escape`: user texts shown as text.
 - :mod:`.build`: a case's or a bag's page.
 - :mod:`.browser`: headless chromium screenshots for tests, benches and the docs.
 """

@@ -5,11 +5,13 @@ Why viser (PyPI ``viser``): a Python server with a bundled three.js client — m
 colours, GUI panels, a scene a browser reconnecting later receives whole (the server replays its
 current state) — so no hand-written WebGL and no RViz, which the ROS wheels here do not include.
 
-One :class:`ViewApp` serves one port. The caller feeds it: :meth:`ViewApp.show_live` at its own
-rate (the web_view node: newest pose / contact / force, ~30 Hz) and :meth:`ViewApp.show_debrief`
-with a :class:`~haptic_anfis.view.debrief.Debrief`. The instructor's controls call back
-``on_start`` / ``on_stop`` / ``on_case`` (set by the owner; run on viser's threads).
-Tissue frame, metres.
+One :class:`ViewApp` serves one port: the trainee's page, the exam live and its debrief and
+nothing else (the instructor's controls are on a page of their own, :mod:`.console`). The caller
+feeds it: :meth:`ViewApp.show_live` at its own rate (the web_view node: newest pose / contact /
+force, ~30 Hz) and :meth:`ViewApp.show_debrief` with a
+:class:`~haptic_anfis.view.debrief.Debrief`. The server answers only its own origin
+(:mod:`.doors`); every text shown that a user typed or a file named is escaped
+(:func:`.escape.md`). Tissue frame, metres.
 """
 from __future__ import annotations
 
@@ -23,10 +25,12 @@ import numpy as np
 
 from ..errors import HapticAnfisError
 from ..exam.config import LEVELS
+from .doors import guarded_server
+from .escape import md
 from .gauge import DEVICE_MAX_FORCE, gauge
 from .scene import LESION_RGB, MARK_RGB, SkinPaint, frame_camera, probe_quaternion
 
-__all__ = ['BLIND', 'PROBE_LENGTH', 'ViewApp', 'ViewError', 'check_port', 'coverage_fractions',
+__all__ = ['BLIND', 'PROBE_LENGTH', 'md', 'ViewApp', 'ViewError', 'check_port', 'coverage_fractions',
            'trainee_history']
 
 #: the dropdown's entry for a blind random case
@@ -101,17 +105,13 @@ class ViewApp:
             faces (indices into ``faces``); thresholds: (light, medium, deep) [m].
         deformation: a :class:`~haptic_anfis.tissue.deformation.DeformationModel` for the dent
             (None: no dent drawn).
-        controls: show the instructor's panel (case, trainee id, start / stop).
-        cases: the case names for the instructor's dropdown.
     """
 
     def __init__(self, vertices, faces, region_faces, thresholds, port: int = 8080,
                  host: str = '127.0.0.1', title: str = 'haptic_anfis', deformation=None,
-                 controls: bool = False, cases: list[str] | None = None,
                  max_force: float = DEVICE_MAX_FORCE) -> None:
         check_port(port, host)
         import trimesh
-        import viser
         self._trimesh = trimesh
         self.port, self.host = int(port), host
         self.thresholds = tuple(float(t) for t in thresholds)
@@ -120,10 +120,9 @@ class ViewApp:
         self.stats = ViewStats()
         self.mode = 'live'
         self.debrief = None
-        self.on_start = self.on_stop = self.on_case = None
         self._lock = threading.RLock()
         self._light_since = None
-        self.server = viser.ViserServer(host=host, port=self.port, label=title, verbose=False)
+        self.server, self.door = guarded_server(self.port, host, title)
         s = self.server
         self.n_connects = 0   # pages that connected (a reconnect counts again)
 
@@ -131,7 +130,7 @@ class ViewApp:
         def _(client) -> None:
             self.n_connects += 1
         s.scene.set_up_direction('+z')
-        self._gui(controls, cases or [])
+        self._gui()
         self.set_surface(vertices, faces, region_faces)
         probe = trimesh.creation.cylinder(radius=0.008, height=PROBE_LENGTH, sections=32)
         probe.apply_translation((0, 0, PROBE_LENGTH / 2))   # face at z = 0, body along +z
@@ -148,7 +147,7 @@ class ViewApp:
 
     # -- GUI --------------------------------------------------------------------------------
 
-    def _gui(self, controls: bool, cases: list[str]) -> None:
+    def _gui(self) -> None:
         g = self.server.gui
         self.g_status = g.add_markdown('**live** — waiting for the probe')
         #: the haptic loop's health as the falcon driver reports it ('' while it keeps up)
@@ -159,21 +158,6 @@ class ViewApp:
             self.g_gauge = g.add_markdown(self._gauge_text(None))
             self.g_cue = g.add_markdown('')
             self.g_cov = g.add_markdown(self._coverage_text({k: 0.0 for k in LEVELS}))
-        self.g_instructor = None
-        if controls:
-            with g.add_folder('Instructor') as f:
-                self.g_instructor = f
-                self.g_case = g.add_dropdown('case', [BLIND, *cases],
-                                             initial_value=cases[0] if cases else BLIND)
-                self.g_trainee = g.add_text('trainee id', '')
-                self.g_start = g.add_button('start exam', color='green')
-                self.g_stop = g.add_button('stop exam', color='red', disabled=True)
-                self.g_msg = g.add_markdown('')
-            self.g_start.on_click(lambda _: self._call(self.on_start))
-            self.g_stop.on_click(lambda _: self._call(self.on_stop))
-            # only the instructor's choices: a value set here (show_case_choice) is not one
-            self.g_case.on_update(lambda ev: ev.client is None
-                                  or self._call(self.on_case, self.g_case.value))
         with g.add_folder('Debrief', visible=False) as f:
             self.g_debrief = f
             self.g_numbers = g.add_markdown('')
@@ -182,49 +166,29 @@ class ViewApp:
             self.g_lesions = g.add_markdown('')
             self.g_feedback = g.add_markdown('')
         self.g_time.on_update(lambda _: self.scrub(self.g_time.value))
-        self.g_history = g.add_folder('Trainee history', visible=False)
-        with self.g_history:
-            self.g_history_md = g.add_markdown('')
-
-    def _call(self, fn, *a) -> None:
-        if fn is None:
-            return
-        try:
-            fn(*a)
-        except Exception as exc:  # a control must not kill viser's thread: say it on the page
-            self.message(f'error: {exc}')
-
-    def show_case_choice(self, name: str) -> None:
-        """Show ``name`` (a case or :data:`BLIND`) in the instructor's dropdown without
-        choosing it (a choice the loop nodes refused goes back to the case before); a name
-        the dropdown does not list (a case not ready) leaves it as it is."""
-        if self.g_instructor is not None and name in self.g_case.options:
-            self.g_case.value = name
+        # made only by a debrief shown with a trainee (haptic-anfis view BAG --trainee-id, the
+        # instructor's review of a recording): the live trainee's page never has it
+        self.g_history = self.g_history_md = None
 
     def message(self, text: str) -> None:
-        """A line under the instructor's controls (and in the status when there are none)."""
-        if self.g_instructor is not None:
-            self.g_msg.content = text
-        else:
-            self.g_status.content = text
+        """A line in the page's status (escaped: shown as the characters given)."""
+        self.g_status.content = md(text)
 
     def show_loop_health(self, text: str) -> None:
         """A line under the status that the haptic loop fell behind (``text``:
         :func:`~haptic_anfis.device.loop_health.behind_text`), or none (``''``)."""
-        content = f'**haptic loop behind**: {text}' if text else ''
+        content = f'**haptic loop behind**: {md(text)}' if text else ''
         if content != self.g_loop.content:   # every update redraws the page for a while
             self.g_loop.content = content
 
     def set_exam_running(self, running: bool, blind: bool = False, case_name: str = '') -> None:
-        """The live state of an exam: start / stop buttons, lesions hidden, status line."""
+        """The live state of an exam: lesions hidden, status line."""
         with self._lock:
-            if self.g_instructor is not None:
-                self.g_start.disabled, self.g_stop.disabled = running, not running
             if running:
                 self.mode = 'live'
                 self._clear_debrief()
                 shown = 'blind case' if blind else (case_name or 'default case')
-                self.g_status.content = f'**exam running** — {shown}; lesions hidden'
+                self.g_status.content = f'**exam running** — {md(shown)}; lesions hidden'
 
     def _gauge_text(self, gg) -> str:
         lv = ' | '.join(f'{k} >= {t * 1e3:.0f} mm' for k, t in zip(LEVELS, self.thresholds))
@@ -366,7 +330,8 @@ class ViewApp:
             self._path.remove()
             self._path = None
         self.g_debrief.visible = False
-        self.g_history.visible = False
+        if self.g_history is not None:
+            self.g_history.visible = False
         self.debrief = None
 
     def show_debrief(self, debrief, trainee: str = '', db=None) -> None:
@@ -393,18 +358,23 @@ class ViewApp:
                     f'/lesions/{k}_label', f'{les.name}: {les.status}',
                     position=tuple(np.asarray(les.surface) + (0.012, 0, 0.006))))
             self.g_lesions.content = '\n'.join(
-                f'- lesion **{les.name}**: {les.status}' + (f' ({les.why})' if les.why else '')
+                f'- lesion **{md(les.name)}**: {md(les.status)}'
+                + (f' ({md(les.why)})' if les.why else '')
                 for les in debrief.lesions) or '- the case has no lesion'
-            self.g_feedback.content = '\n'.join(f'- {line}' for line in r['feedback']) \
+            self.g_feedback.content = '\n'.join(f'- {md(line)}' for line in r['feedback']) \
                 or '- pass: every lesion found, deep coverage met'
             self.g_time.max = max(round(debrief.duration, 1), 0.1)
             self.g_time.value = self.g_time.max
             self.g_debrief.visible = True
             hist = trainee_history(trainee, db) if trainee else None
             if hist is not None:
+                if self.g_history is None:
+                    g = self.server.gui
+                    with g.add_folder('Trainee history') as self.g_history:
+                        self.g_history_md = g.add_markdown('')
                 self.g_history_md.content = history_markdown(trainee, hist)
                 self.g_history.visible = True
-            self.g_status.content = (f"**debrief** — score {r['score']:.1f} ({r['verdict']}); "
+            self.g_status.content = (f"**debrief** — score {r['score']:.1f} ({md(r['verdict'])}); "
                                      'drag the replay time to replay the session')
             self.scrub(debrief.duration)
 
@@ -455,7 +425,9 @@ class ViewApp:
                 'skin_frames': self.stats.skin_frames, 'clients': len(self.server.get_clients())}
 
     def close(self) -> None:
+        from .doors import close_door
         self.server.stop()
+        close_door(self.door)
 
 
 def numbers_markdown(n: dict) -> str:
@@ -468,7 +440,7 @@ def numbers_markdown(n: dict) -> str:
             ('coverage deep %', n['coverage_deep_pct']), ('pattern', n['pattern']),
             ('duration s', n['duration_s'])]
     rows += effort_rows(n)
-    return '\n'.join(f'- {k}: **{v}**' for k, v in rows)
+    return '\n'.join(f'- {k}: **{md(v) if isinstance(v, str) else v}**' for k, v in rows)
 
 
 def effort_rows(n: dict) -> list[tuple[str, object]]:
@@ -499,13 +471,13 @@ _HISTORY_COLUMNS = (
 def history_markdown(trainee: str, rows: list[dict]) -> str:
     """The trainee's last ten sessions as a Markdown table (:func:`trainee_history` rows)."""
     if rows and 'error' in rows[0]:
-        return f"trainee record: {rows[0]['error']}"
+        return f"trainee record: {md(rows[0]['error'])}"
     if not rows:
-        return f'no earlier session of **{trainee}**'
+        return f'no earlier session of **{md(trainee)}**'
     head = '| ' + ' | '.join(h for h, _ in _HISTORY_COLUMNS) + ' |\n|' + '---|' * len(
         _HISTORY_COLUMNS)
-    return f'**{trainee}**: {len(rows)} sessions\n\n' + head + ''.join(
-        '\n| ' + ' | '.join(str(f(r)) for _, f in _HISTORY_COLUMNS) + ' |' for r in rows[-10:])
+    return f'**{md(trainee)}**: {len(rows)} sessions\n\n' + head + ''.join(
+        '\n| ' + ' | '.join(md(f(r)) for _, f in _HISTORY_COLUMNS) + ' |' for r in rows[-10:])
 
 
 def coverage_fractions(grid, face_levels) -> dict:

@@ -72,10 +72,8 @@ def main(argv: list[str] | None = None) -> int:
             return 1
         d = bag_debrief(bag)
         cv = case_view(None)
-        from ..cases import library
         app = ViewApp(cv.vertices, cv.faces, cv.region_faces, cv.config.thresholds,
-                      port=free_port(), deformation=cv.deformation, controls=True,
-                      cases=[c.name for c in library().ready()])
+                      port=free_port(), deformation=cv.deformation)
         try:
             app.set_exam_running(True)
             # the first moment past the middle with the probe pressing (the dent shows)
