@@ -249,7 +249,7 @@ def account() -> str:
     soft, _ = resource.getrlimit(resource.RLIMIT_RTPRIO)
     may = uid == 0 or soft != 0
     try:
-        from haptic_anfis.device.rtkit import RealtimeKitError, max_realtime_priority
+        from haptic_anfis.realtime.rtkit import RealtimeKitError, max_realtime_priority
         kit = f'rtkit answers (max priority {max_realtime_priority()})'
     except RealtimeKitError as exc:
         kit = str(exc)

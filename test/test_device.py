@@ -274,7 +274,8 @@ def test_servo_thread_real_time_priority_or_a_clear_refusal(monkeypatch):
     import os
     import threading
 
-    from haptic_anfis.device.servo import ServoLoop, set_realtime
+    from haptic_anfis.device.servo import ServoLoop
+    from haptic_anfis.realtime.scheduling import set_realtime
     assert set_realtime(0) == 'normal scheduler (priority 0)'
     got = {}
 

@@ -204,7 +204,7 @@ def test_an_exam_with_the_view_serves_the_debrief_after_it(tmp_path, capfd, in_p
     import subprocess
     import sys
 
-    from haptic_anfis.nodes.processes import OWN_SESSION
+    from haptic_anfis.realtime.processes import OWN_SESSION
     from haptic_anfis.view.browser import free_port
     pytest.importorskip('viser', reason='the view extra (pip install .[view]) is not installed')
     port = free_port()

@@ -267,7 +267,7 @@ def test_the_warning_names_the_likely_cause(ctx, monkeypatch, loop, backend, rea
                                             scheduling, cause):
     """The cause follows the servo threads' policy as the kernel reports it
     (``processes.servo_realtime``; None: no servo thread found)."""
-    from haptic_anfis.nodes import processes
+    from haptic_anfis.realtime import processes
     d = driver(ctx)
     try:
         monkeypatch.setattr(processes, 'servo_realtime',

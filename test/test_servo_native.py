@@ -546,8 +546,8 @@ def test_a_refused_priority_is_said_with_rtkits_reason_on_thread_and_process(mon
     know rtkit's answer). The refusals are faked before the fork, so the child inherits them."""
     import os
 
-    from haptic_anfis.device import rtkit
-    from haptic_anfis.device.rtkit import RealtimeKitError
+    from haptic_anfis.realtime import rtkit
+    from haptic_anfis.realtime.rtkit import RealtimeKitError
 
     def refuse(*_a):
         raise PermissionError(1, 'Operation not permitted')
@@ -577,7 +577,7 @@ def test_two_workers_serve_one_schedule_each_on_its_core(process):
     import os
     import time
 
-    from haptic_anfis.device.servo_native import worker_cpus
+    from haptic_anfis.realtime.scheduling import worker_cpus
     from haptic_anfis.device.trace import TickTrace
     lp = loop(process=process, trace=TickTrace(), workers=2)
     cpus = worker_cpus(2)
@@ -723,7 +723,7 @@ def test_the_first_tick_is_claimed_once():
 def test_worker_cores_are_distinct_and_never_more_than_allowed(monkeypatch):
     import os
 
-    from haptic_anfis.device.servo_native import worker_cpus
+    from haptic_anfis.realtime.scheduling import worker_cpus
     monkeypatch.setattr(os, 'sched_getaffinity', lambda pid: {0, 1, 2, 3})
     assert worker_cpus(2) == [0, 3]
     assert worker_cpus(4) == [0, 3, 1, 2]

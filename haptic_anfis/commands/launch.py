@@ -24,7 +24,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     if args.node_sessions == 'one':
-        from ..nodes.processes import rerun_command_in_own_session
+        from ..realtime.processes import rerun_command_in_own_session
         code = rerun_command_in_own_session(args)  # the nodes' one session
         if code is not None:
             return code

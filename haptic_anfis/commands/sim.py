@@ -33,7 +33,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..nodes.processes import rerun_command_in_own_session
+    from ..realtime.processes import rerun_command_in_own_session
     code = rerun_command_in_own_session(args)  # the graph in a session of its own (fair CPU)
     if code is not None:
         return code

@@ -40,9 +40,9 @@ from .local_model import APPROACH_RADIUS, FALCON_MAX_STIFFNESS, HOLD_RADIUS, MOD
     symmetric_part, tissue_stiffness_limit
 from .safety import IGNORED_DISABLED, OK, REJECTED_FRAME, REJECTED_NONFINITE, SafetyLayer, \
     SafetyStats
-from .servo import name_thread, schedule_servo_thread
 from .stats import LoopStats
 from .trace import TickTrace
+from ..realtime.scheduling import name_thread, schedule_servo_thread, worker_cpus
 
 __all__ = ['NativeServoLoop', 'NativeSafety', 'NativeRenderer', 'NativeState', 'NativeClutch',
            'NativeLoopStats', 'script_arrays', 'spectral_norm_sym', 'FALCON_DAMPING']
@@ -345,22 +345,6 @@ class NativeRenderer(LocalModelRenderer):
                                       *skew_vector(k), 0.0 if rotating_mode(k) else 1.0))
         self.time = t
         self._py.models += 1
-
-
-def worker_cpus(n: int) -> list[int | None]:
-    """The cores for ``n`` tick workers: distinct cores this process may run on, the first and
-    the last of them first (on most machines different physical cores, whose interrupts and
-    busy neighbours differ); fewer when fewer are allowed. ``[None]`` (one worker, unpinned)
-    where affinity is not available."""
-    import os
-    try:
-        allowed = sorted(os.sched_getaffinity(0))
-    except (AttributeError, OSError):
-        return [None]
-    if n <= 1 or len(allowed) <= 1:
-        return [None]
-    order = [allowed[0], allowed[-1], *allowed[1:-1]]
-    return order[:min(n, len(allowed))]
 
 
 def _check_number(name: str, value, unit: str, zero: bool = False) -> None:

@@ -377,7 +377,7 @@ class FalconDriver(HapticNode):
                     'interpreter lock; servo_loop: auto runs it compiled, in a process of its own')
         # the servo threads' policy as the kernel has it now (rtkit may have demoted them since
         # the start's scheduling line)
-        from .processes import servo_realtime
+        from ..realtime.processes import servo_realtime
         realtime = servo_realtime(os.getpid())
         if realtime:
             return ('the servo is real-time: the machine itself stalled'

@@ -26,7 +26,7 @@ from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
 
 from ..device.local_model import no_model
-from ..device.servo import off_realtime
+from ..realtime.scheduling import off_realtime
 from ..pipeline.force import force_from_contact, load_model, local_model_from_contact
 from . import cdr
 from . import interfaces as ifc
