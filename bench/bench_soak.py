@@ -183,8 +183,8 @@ def multi_process(minutes: float, interval: float, workdir: Path,
     from rclpy.context import Context
 
     from haptic_anfis.realtime.processes import node_env
-    from haptic_anfis.nodes import interfaces as ifc
-    from haptic_anfis.nodes._common import LOOP_QOS, stamp_ns
+    from haptic_anfis import interfaces as ifc
+    from haptic_anfis.nodes.runtime import LOOP_QOS, stamp_ns
     from haptic_anfis.nodes.executor import make_executor
     domain = 170 + os.getpid() % 40
     bag, out = workdir / 'multi_process_bag', workdir / 'launch.out'

@@ -12,7 +12,7 @@ from hypothesis import strategies as st
 from haptic_anfis.device import (HandParams, PalpationScript, SafetyLayer, ServoLoop,
                                  SimulatedFalcon, WorkspaceMapping, dome_height)
 from haptic_anfis.device.safety import OK, REJECTED_FRAME, REJECTED_NONFINITE
-from haptic_anfis.nodes._common import config_file
+from haptic_anfis.resources import config_file
 
 DT = 0.001
 

@@ -120,7 +120,7 @@ def test_report_of_a_session_that_never_touched_with_a_mark_in_the_air(tmp_path,
     say so, exit 0."""
     from haptic_anfis.bag import typestore
     from haptic_anfis.bag.writer import BagWriter
-    from haptic_anfis.nodes import interfaces as ifc
+    from haptic_anfis import interfaces as ifc
     ts = typestore()
     T, H = ts.types['builtin_interfaces/msg/Time'], ts.types['std_msgs/msg/Header']
     JS = ts.types['sensor_msgs/msg/JointState']

@@ -16,7 +16,7 @@ from rclpy.parameter import Parameter  # noqa: E402
 
 from haptic_anfis.device import falcon_kinematics as k  # noqa: E402
 from haptic_anfis.device import falcon_usb  # noqa: E402
-from haptic_anfis.nodes._common import ParameterError  # noqa: E402
+from haptic_anfis.nodes.parameters import ParameterError  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 

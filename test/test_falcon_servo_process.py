@@ -40,7 +40,7 @@ def _wait(cond, seconds=10.0):
 pytest.importorskip('rclpy')
 from test_falcon_driver import driver  # noqa: E402  (the same node)
 
-from haptic_anfis.nodes._common import ParameterError  # noqa: E402
+from haptic_anfis.nodes.parameters import ParameterError  # noqa: E402
 
 
 def test_falcon_runs_in_a_servo_process_by_default_and_stops_at_zero(ctx, monkeypatch):

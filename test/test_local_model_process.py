@@ -23,7 +23,7 @@ from haptic_anfis.device.trace import DISABLED, load_trace  # noqa: E402
 
 from geometry_msgs.msg import WrenchStamped  # noqa: E402
 
-from haptic_anfis.nodes import interfaces as ifc  # noqa: E402
+from haptic_anfis import interfaces as ifc  # noqa: E402
 from haptic_anfis.nodes.falcon_driver import PARAMS as DRIVER_PARAMS  # noqa: E402
 from haptic_anfis.nodes.parameters import default_of  # noqa: E402
 from test_nodes_process import Observer, _domains, launch, stop  # noqa: E402

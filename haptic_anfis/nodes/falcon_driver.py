@@ -7,7 +7,7 @@ clutch and button 1 the mark (:class:`haptic_anfis.device.buttons.ClutchMark`; a
 as ``exam/marks``, ``geometry_msgs/PointStamped`` at the probe tip); subscribes to the
 force command ``falcon/servo_cf`` (``geometry_msgs/WrenchStamped``, tissue frame) and the local
 force model ``falcon/servo_cf_local`` (``sensor_msgs/JointState``, layout in
-:mod:`haptic_anfis.nodes.interfaces`). ``force_mode``: ``local_model`` (default) evaluates the
+:mod:`haptic_anfis.interfaces`). ``force_mode``: ``local_model`` (default) evaluates the
 newest local model at every servo tick's position; ``zoh`` holds the newest command (the
 zero-order hold). Either goes through the safety layer (:class:`haptic_anfis.device.SafetyLayer`:
 clamp, rate limit, watchdog, NaN/wrong-frame rejection). A command or model is judged by the age
@@ -55,12 +55,13 @@ from ..device.start_gate import HeldScript
 from ..device.stamps import STALE
 from ..device.trace import TickTrace, save_trace
 from . import cdr
-from . import interfaces as ifc
+from .. import interfaces as ifc
 from .base import HapticNode
 from .polled import PolledSubscription
-from ._common import (LOOP_QOS, Param, ParameterError, config_file, declare_parameters,
-                      finite_vector,
-                      non_negative, one_of, positive, run_node, set_stamp)
+from ..resources import config_file
+from .parameters import (Param, ParameterError, declare_parameters, finite_vector, non_negative,
+                         one_of, positive)
+from .runtime import LOOP_QOS, run_node, set_stamp
 
 BACKENDS = ('sim', 'falcon')
 

@@ -1,11 +1,11 @@
 """``force_server``: contact in, force command out (:class:`haptic_anfis.anfis.ForceModel`).
 
-Subscribes to ``contact`` (``sensor_msgs/JointState``, see :mod:`haptic_anfis.nodes.interfaces`),
+Subscribes to ``contact`` (``sensor_msgs/JointState``, see :mod:`haptic_anfis.interfaces`),
 evaluates the Fx, Fy, Fz ANFIS models on the compiled path (compiled and warmed when the model is
 loaded, before the first message) and publishes ``falcon/servo_cf`` (``geometry_msgs/
 WrenchStamped``, tissue frame) with the contact's stamp: zero when not in contact (or on a malformed
 contact / NaN input), and with it ``falcon/servo_cf_local`` (``sensor_msgs/JointState``, layout
-in :mod:`haptic_anfis.nodes.interfaces`): the local force model at the contact — F0, p0 and the
+in :mod:`haptic_anfis.interfaces`): the local force model at the contact — F0, p0 and the
 stiffness K = dF/dp through the contact geometry — that the falcon driver renders at every servo
 tick. The service ``~/reload`` (``std_srvs/Trigger``) re-reads ``model_path``: the new model
 replaces the old in one reference swap between two messages (a load takes ~1-2 ms); a bad file
@@ -29,10 +29,10 @@ from ..device.local_model import no_model
 from ..realtime.scheduling import off_realtime
 from ..pipeline.force import force_from_contact, load_model, local_model_from_contact
 from . import cdr
-from . import interfaces as ifc
+from .. import interfaces as ifc
 from ._case import CASE_PARAMS, apply_case, declare_case  # noqa: F401 (CASE_PARAMS: in config)
-from ._common import (LOOP_QOS, Param, declare_parameters, non_negative, positive, run_node,
-                      set_stamp, stamp_ns)
+from .parameters import Param, declare_parameters, non_negative, positive
+from .runtime import LOOP_QOS, run_node, set_stamp, stamp_ns
 from .base import HapticNode
 
 PARAMS = [

@@ -66,7 +66,7 @@ def build_pipeline(params_files=(), contact_overrides=None, force_overrides=None
     from ..pipeline.force import load_model
     from . import contact_detector as cd
     from . import force_server as fs
-    from ._common import resolve_parameters
+    from .parameters import resolve_parameters
     pc = resolve_parameters(cd.PARAMS, 'contact_detector', params_files, contact_overrides)
     pf = resolve_parameters(fs.PARAMS, 'force_server', params_files, force_overrides)
     tracker = make_tracker(pc)

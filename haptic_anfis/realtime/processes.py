@@ -16,14 +16,13 @@ import time
 from pathlib import Path
 from typing import IO, Mapping, Sequence
 
-from .. import nodes
 from . import rtkit
 from .scheduling import is_realtime, realtime_priority, realtime_refused, to_normal_scheduler
 
 #: The nodes' console scripts sit next to the interpreter in a virtualenv (bin/); on a colcon
 #: install they are in lib/haptic_anfis/ instead, and nodes are started as modules.
 BIN = Path(sys.executable).parent
-NODES_DIR = Path(nodes.__file__).resolve().parent
+NODES_DIR = Path(__file__).resolve().parent.parent / 'nodes'  # haptic_anfis/nodes
 #: Set by a session runner in its node processes' environment: the session checked the parameters
 #: against every one of its nodes (a global key only another node declares is then no error in
 #: the node's own check, ``haptic_anfis.nodes.runtime.check_node_arguments``).
