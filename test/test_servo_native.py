@@ -21,6 +21,7 @@ from haptic_anfis.device.palpation import PalpationScript
 from haptic_anfis.device.servo_native import NativeServoLoop
 from haptic_anfis.device.start_gate import HeldScript
 from haptic_anfis.device.stats import LoopStats
+from haptic_anfis.interfaces import LM_P0, LOCAL_MODEL
 
 MAP = WorkspaceMapping(1.5, (0.03, 0.0, 0.0), 1.0)
 
@@ -143,7 +144,7 @@ def test_local_model_renders_as_the_python_renderer(seed, spread, approach):
     lp.safety.start()
     lp.renderer.offer_values(v, 0.0)
     ref.offer_values(v, 0.0)
-    p0 = np.array(v[3:6])
+    p0 = np.array(v[LM_P0])
     t = 0.0
     away = 0   # probes past an approach plane, further along it than the radius
     for _ in range(20):
@@ -183,7 +184,7 @@ def test_the_tick_frees_an_approach_plane_past_its_own_radius(approach_radius, a
     lp.safety.start()
     lp.renderer.offer_values(v, 0.0)
     ref.offer_values(v, 0.0)
-    q = np.array(v[3:6]) + np.array([-0.001, across, 0.0])   # n = +x: 1 mm in, across along y
+    q = np.array(v[LM_P0]) + np.array([-0.001, across, 0.0])   # n = +x: 1 mm in, across along y
     pin(lp, MAP.to_device(tuple(q)), 0.0)
     lp.tick(0.0)
     want, status = ref.render(tuple(q), 0.0)
@@ -201,17 +202,41 @@ def test_the_tick_kernels_are_rebuilt_when_a_function_they_inline_changes():
         f'a function compiled into the tick changed: set native_tick.INLINED_SOURCE_HASH = {got!r}')
 
 
+def test_a_model_offered_is_written_to_the_model_buffer_by_field_name():
+    """The renderer fills the compiled tick's model buffer by the fields of
+    native_tick.MODEL_SLOT, and the tick takes it into the state's m_* members in that order."""
+    lp = loop('local_model', max_force_rate=1e6)
+    lp.safety.start()
+    v = model_values(np.random.default_rng(1))
+    lm = np.asarray(v).view(LOCAL_MODEL)[0]
+    lp.renderer.offer_values(v, 0.25)
+    m = lp.model.view(nt.MODEL_SLOT)[0]
+    assert m['seq'] == 2.0 and m['valid'] == 1.0 and m['t0'] == 0.25
+    np.testing.assert_array_equal(m['f'], lm['f0'])
+    np.testing.assert_array_equal(m['p'], lm['p0'])
+    np.testing.assert_array_equal(m['d'], lm['direction'])
+    assert m['depth0'] == lm['depth'] and m['contact'] == 1.0 and m['knorm'] > 0.0
+    K = lm['k'].reshape(3, 3)
+    np.testing.assert_allclose(m['k'].reshape(3, 3), (K + K.T) / 2, atol=1e-9)  # 800 N/m: no clamp
+    lp.tick(0.0)
+    for i, name in enumerate(nt.MODEL_SLOT.names[1:]):
+        at = nt.S[f'm_{name}' if not m[name].shape else f'm_{name}0']
+        want = np.atleast_1d(m[name])
+        np.testing.assert_array_equal(lp.st[at:at + len(want)], want, err_msg=name)
+
+
 def test_non_finite_model_is_never_rendered():
     lp = loop('local_model', max_force_rate=1e6)
     lp.safety.start()
-    v = list(model_values(np.random.default_rng(0)))
-    nt_values = [*v[:6], *v[6:15], 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, v[24], 1.0, 1.0, 0.0, 1.0, 1.0,
-                 0.0, 0.0, 0.0, 1.0]
-    assert len(nt_values) == nt.MODEL_LEN - 1
-    nt_values[0] = math.nan
+    lm = np.asarray(model_values(np.random.default_rng(0))).view(LOCAL_MODEL)[0]
+    slot = np.zeros(1, nt.MODEL_SLOT)
+    m = slot[0]
+    m['f'], m['p'], m['k'], m['depth0'] = lm['f0'], lm['p0'], lm['k'], lm['depth']
+    m['zero'] = m['contact'] = m['valid'] = m['knorm'] = m['hold_skew'] = 1.0
+    m['f'][0] = math.nan
     from haptic_anfis.device.servo_native import _seq_write
-    _seq_write(lp.model, nt_values)
-    pin(lp, MAP.to_device(tuple(v[3:6])), 0.0)
+    _seq_write(lp.model, slot.view(np.float64)[1:])
+    pin(lp, MAP.to_device(tuple(lm['p0'])), 0.0)
     assert lp.tick(0.0) == (0.0, 0.0, 0.0)
     assert int(lp.st[nt.S.status]) == 0  # no model
     assert lp.safety.stats.rejected_nonfinite == 1

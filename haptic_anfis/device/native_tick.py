@@ -121,6 +121,31 @@ def _index(name: str, names: str) -> type:
     return enum.IntEnum(name, names, start=0)
 
 
+#: The model buffer (float64 seqlock), its one layout: seq; the model as the tick renders it, in
+#: the tissue frame: f [N] and p [m] (F0 and p0), k (9: the conditioned stiffness's symmetric
+#: part, row-major [N/m]), g (the depth's gradient), d (the indentation direction), depth0 [m],
+#: zero (1: zero at the surface), contact (1: renders past its plane), t0 (its pose's time [s]),
+#: valid (0 = cleared), knorm (the symmetric part's spectral norm [N/m]), w (3: its skew part,
+#: A e = w x e [N/m]; local_model module doc), hold_skew (1: a held model keeps the skew part, K
+#: having no rotating mode). Python writes it by field name
+#: (:class:`~.servo_native.NativeRenderer`); the loop state holds a copy of all but ``seq`` as
+#: :data:`S`'s ``m_<field><i>`` members, whose names and order derive from it.
+MODEL_SLOT = np.dtype([('seq', 'f8'), ('f', 'f8', 3), ('p', 'f8', 3), ('k', 'f8', 9),
+                       ('g', 'f8', 3), ('d', 'f8', 3), ('depth0', 'f8'), ('zero', 'f8'),
+                       ('contact', 'f8'), ('t0', 'f8'), ('valid', 'f8'), ('knorm', 'f8'),
+                       ('w', 'f8', 3), ('hold_skew', 'f8')])
+MODEL_LEN = MODEL_SLOT.itemsize // 8
+
+
+def _flat_names(layout: np.dtype) -> list[str]:
+    """A float64 record layout's flat names: a scalar field's name, a vector's ``name0``, ..."""
+    out: list[str] = []
+    for name in layout.names:
+        sub = layout[name]
+        out += [name] if not sub.shape else [f'{name}{i}' for i in range(sub.shape[0])]
+    return out
+
+
 #: configuration (float64), written once before the loop starts
 CFG = _index('CFG', 'period max_force max_force_rate watchdog max_dt validity_time validity_radius '
              'fresh_age max_stiffness scale ox oy oz force_scale hand_m hand_k hand_c half '
@@ -131,17 +156,12 @@ S = _index('S', 'x0 x1 x2 v0 v1 v2 f0 f1 f2 t_dev t_open script_off '
            'enabled target0 target1 target2 out0 out1 out2 last_cmd last_out tripped '
            'held frozen0 frozen1 frozen2 off0 off1 off2 wait_zero ramp_start mark_prev '
            'energy t_prev pt1 pt2 cmd_seen model_seen fault_seen enable_seen status '
-           'm_f0 m_f1 m_f2 m_p0 m_p1 m_p2 m_k0 m_k1 m_k2 m_k3 m_k4 m_k5 m_k6 m_k7 m_k8 '
-           'm_g0 m_g1 m_g2 m_d0 m_d1 m_d2 m_depth0 m_zero m_contact m_t0 m_valid m_knorm '
-           'm_w0 m_w1 m_w2 m_hold_skew bl0 bl1 bl2 bl_tau')
+           + ' '.join(f'm_{n}' for n in _flat_names(MODEL_SLOT)[1:]) + ' bl0 bl1 bl2 bl_tau')
 STATE_LEN = len(S)
+#: the state's copy of the model buffer's first field after ``seq``
+_M0 = S['m_' + _flat_names(MODEL_SLOT)[1]]
 #: command buffer (float64 seqlock): seq, force (3,) device frame [N], its pose's time [s]
 CMD_LEN = 5
-#: model buffer (float64 seqlock): seq, f0 p0 K(9: the conditioned stiffness's symmetric part) g d
-#: (tissue), depth0, zero, contact, t0, valid (0 = cleared), |K| (the symmetric part's spectral
-#: norm, tissue frame [N/m]), w (3: its skew part, A e = w x e [N/m]; local_model module doc),
-#: hold_skew (1: a held model keeps the skew part, K having no rotating mode)
-MODEL_LEN = 1 + 3 + 3 + 9 + 3 + 3 + 6 + 3 + 1
 #: control (int64): stop, release (the held script), fault generation (zero at once),
 #: enable generation and enabled (SafetyLayer.start / stop)
 CTL = _index('CTL', 'stop release fault enable_gen enabled external')
@@ -508,9 +528,10 @@ def _render(cfg, st, cnt, qx, qy, qz, now, period):
 
 @nb.njit(nogil=True, cache=True)
 def _take_model(st, scratch):
-    """The model in ``scratch`` (a seqlock copy, all finite) becomes the current one."""
+    """The model in ``scratch`` (a seqlock copy, all finite) becomes the current one (the
+    state's ``m_*`` members are the model buffer's fields in its order: :data:`S`)."""
     for i in range(MODEL_LEN - 1):
-        st[S.m_f0 + i] = scratch[1 + i]
+        st[_M0 + i] = scratch[1 + i]
 
 
 @nb.njit(nogil=True, cache=True)
