@@ -186,9 +186,8 @@ def test_the_servo_process_never_collects_the_parents_garbage(ctx, monkeypatch):
             ftdi_class(fake)))
 
     monkeypatch.setattr(falcon_usb, 'import_ftdi', lambda: ftdi_class(fake))
-    from haptic_anfis.nodes.falcon_driver import FalconDriver
-    monkeypatch.setattr(FalconDriver, '_falcon_factory', staticmethod(
-        lambda p: lambda **kw: factory_collecting()))
+    from haptic_anfis.device import driver_loops
+    monkeypatch.setattr(driver_loops, 'falcon_factory', lambda p: lambda **kw: factory_collecting())
     gc.disable()
     try:
         _Finalised(shm)  # unreachable at once: garbage

@@ -27,7 +27,8 @@ process of its own): device, local model, clutch, safety and the passivity bound
 the Python side above (publishing, taking commands and models) is a bridge thread that may fall
 behind without costing a tick (docs/servo_loop.md). The real Falcon's USB I/O runs with that
 compiled tick in the servo process (:mod:`haptic_anfis.device.device_process`): a frozen node
-cannot leave force on the motors.
+cannot leave force on the motors. The loop, with its safety layer, clutch and force input, comes
+from the table :data:`haptic_anfis.device.driver_loops.LOOPS` by ``backend`` and ``servo_loop``.
 """
 from __future__ import annotations
 
@@ -42,23 +43,23 @@ import numpy as np
 from geometry_msgs.msg import PointStamped, PoseStamped, TwistStamped, WrenchStamped
 from sensor_msgs.msg import JointState, Joy
 
-from ..device import (HandParams, PalpationScript, SafetyLayer, ServoLoop, SimulatedFalcon,
-                      WorkspaceMapping)
-from ..device.buttons import ClutchMark
+from .. import interfaces as ifc
+from ..device import PalpationScript, WorkspaceMapping
+from ..device.driver_loops import LOOPS, Hooks
 from ..device.falcon import RATED_FORCE
-from ..device.force_input import MODES, ForceInput
+from ..device.force_input import MODES
 from ..device.local_model import APPROACH_RADIUS, FALCON_MAX_STIFFNESS, HOLD_RADIUS, \
     MODEL_BLEND_TIME, PASSIVITY_WINDOW, STATUS_NAMES
-from ..device.loop_health import LoopHealth
+from ..device.loop_health import LoopHealth, behind_because
 from ..device.safety import OK
 from ..device.start_gate import HeldScript
 from ..device.stamps import STALE
-from ..device.trace import TickTrace, save_trace
+from ..device.trace import save_trace
+from ..realtime import processes
+from ..resources import config_file
 from . import cdr
-from .. import interfaces as ifc
 from .base import HapticNode
 from .polled import PolledSubscription
-from ..resources import config_file
 from .parameters import (Param, ParameterError, declare_parameters, finite_vector, non_negative,
                          one_of, positive)
 from .runtime import LOOP_QOS, run_node, set_stamp
@@ -248,7 +249,7 @@ class FalconDriver(HapticNode):
         self.mapping = WorkspaceMapping(p['workspace_scale'], tuple(p['workspace_offset']),
                                         p['force_scale'])
         if p['backend'] == 'falcon':
-            self.device = self._make_falcon(p) if p['servo_loop'] == 'python' else None
+            script = None
             what = (f"Falcon {p['device_serial'] or 'index ' + str(p['device_index'])}, homing "
                     f"{'on' if p['homing'] else 'off'}, gravity compensation "
                     f"{p['gravity_mass'] if p['gravity_compensation'] else 'off'}")
@@ -256,34 +257,13 @@ class FalconDriver(HapticNode):
             script_path = p['palpation_script'] or str(config_file('palpation.yaml'))
             script = PalpationScript.from_yaml(script_path)  # ValueError naming the file -> exit 1
             script = HeldScript(script, held=p['hold_until_force'])
-            self.device = SimulatedFalcon(script, self.mapping,
-                                          HandParams(p['hand_mass'], p['hand_stiffness'],
-                                                     p['hand_damping']),
-                                          max_force=p['max_force'])
             what = f'script {script_path} ({script.duration:.1f} s)'
-        self.native = None
-        if p['backend'] == 'falcon' and p['servo_loop'] != 'python':
-            self.native = self._make_native(p, None, self._falcon_factory(p))
-            self.device, self.safety = self.native.device, self.native.safety
-            self.native.on_disconnect, self.native.on_reconnect = (self._device_lost,
-                                                                   self._device_back)
-            self.clutch = self.native.clutch
-        elif p['backend'] == 'sim' and p['servo_loop'] != 'python':
-            self.native = self._make_native(p, script)
-            self.device, self.safety = self.native, self.native.safety
-            self.clutch = self.native.clutch  # the clutch / mark rules run in the compiled tick
-        else:
-            self.safety = SafetyLayer(p['max_force'], p['max_force_rate'],
-                                      p['watchdog_timeout'], frame_id=self.frame_id)
-            # Button 0 clutch (zero force, mapping follows the hand), button 1 mark (exam/marks).
-            self.clutch = ClutchMark()
-        self.input = ForceInput(self.safety, self.mapping, p['force_mode'], p['max_stiffness'],
-                                p['model_validity_time'], p['model_validity_radius'],
-                                1.0 / p['rate'],
-                                clutch=None if self.native is not None else self.clutch,
-                                approach_radius=p['model_approach_radius'])
-        if self.native is not None:
-            self.input.renderer = self.native.renderer
+        loop = LOOPS[p['backend'], p['servo_loop']](
+            p, self.mapping, self.frame_id, script,
+            Hooks(self._publish_state, self.get_logger().info, self._device_lost,
+                  self._device_back))
+        self.servo, self.device, self.safety = loop.servo, loop.device, loop.safety
+        self.clutch, self.input, self.native = loop.clutch, loop.input, loop.native
         self.pub_pose = self.create_publisher(PoseStamped, ifc.TOPIC_POSE, LOOP_QOS)
         self.pub_twist = self.create_publisher(TwistStamped, ifc.TOPIC_TWIST, LOOP_QOS)
         self.pub_applied = self.create_publisher(WrenchStamped, ifc.TOPIC_APPLIED, LOOP_QOS)
@@ -318,15 +298,6 @@ class FalconDriver(HapticNode):
         self.finished = False
         self.exit_code = 0
         self.trace_path = p['trace_path']
-        if self.native is not None:
-            self.servo = self.native
-            self.native.on_state = self._publish_state
-            self.native.trace = self._tick_trace(p)
-        else:
-            self.servo = ServoLoop(self.device, self.safety, p['rate'],
-                                   on_state=self._publish_state, render=self.input.render,
-                                   trace=self._tick_trace(p),
-                                   priority=p['servo_priority'])
         self.get_logger().info(
             f"backend {p['backend']}, {p['rate']:.0f} Hz servo thread, max force "
             f"{p['max_force']} N, watchdog {p['watchdog_timeout'] * 1e3:.1f} ms, force "
@@ -372,23 +343,12 @@ class FalconDriver(HapticNode):
         self.pub_diag.publish(msg)
 
     def behind_because(self) -> str:
-        """The likely cause of a servo loop falling behind, and what to do, from how it runs."""
-        if self.servo_loop == 'python':
-            return ('the servo tick runs in Python (servo_loop: python) and waits for the '
-                    'interpreter lock; servo_loop: auto runs it compiled, in a process of its own')
-        # the servo threads' policy as the kernel has it now (rtkit may have demoted them since
-        # the start's scheduling line)
-        from ..realtime.processes import servo_realtime
-        realtime = servo_realtime(os.getpid())
-        if realtime:
-            return ('the servo is real-time: the machine itself stalled'
-                    + (", or the device's USB replies came late" if self.params['backend']
-                       == 'falcon' else '') + ' (docs/servo_loop.md, "Stalls of the machine '
-                    'itself")')
-        if realtime is False:
-            return ('the servo runs under the normal scheduler; real-time priority keeps the '
-                    'period (docs/nodes.md, "The servo thread\'s priority")')
-        return f'the servo thread\'s scheduling: {self.servo.scheduling or "not reported"}'
+        """The likely cause of a servo loop falling behind, and what to do, from how it runs
+        (the servo threads' policy as the kernel has it now: rtkit may have demoted them since
+        the start's scheduling line)."""
+        realtime = None if self.servo_loop == 'python' else processes.servo_realtime(os.getpid())
+        return behind_because(self.servo_loop, self.params['backend'], realtime,
+                              self.servo.scheduling)
 
     def start_loop(self) -> None:
         """Start the servo loop (a real device is opened here: a FalconError / OSError). Called
@@ -407,64 +367,6 @@ class FalconDriver(HapticNode):
             self.get_logger().warning(f'servo thread: {self.servo.scheduling}')
         else:
             self.get_logger().info(f'servo thread: {self.servo.scheduling}')
-
-    def _make_falcon(self, p):
-        """The USB backend on a thread of this node (``servo_loop: python``). Connecting,
-        firmware upload and homing happen when the servo loop opens it; a FalconError (an
-        OSError) stops the node at start with its message."""
-        return self._falcon_factory(p)(log=self.get_logger().info,
-                                       on_disconnect=self._device_lost,
-                                       on_reconnect=self._device_back)
-
-    @staticmethod
-    def _falcon_factory(p):
-        """A callable building the USB backend from the parameters; it holds no ROS object, so
-        the servo process can call it (its log and hooks are that process's own). The USB
-        library is imported here, before any servo process is forked: a missing library is
-        this node's one-line error (FalconUnavailableError) at start."""
-        import dataclasses
-        import functools
-
-        from ..device.falcon_kinematics import GEOMETRY
-        from ..device.falcon_usb import FalconUSB, import_ftdi
-        import_ftdi()
-        return functools.partial(
-            FalconUSB, firmware_path=p['firmware_path'], device_index=p['device_index'],
-            serial=p['device_serial'], firmware_attempts=p['firmware_attempts'],
-            homing=p['homing'], homing_timeout=p['homing_timeout'],
-            gravity_compensation=p['gravity_compensation'], gravity_mass=p['gravity_mass'],
-            max_force=p['max_force'], stall_timeout=p['stall_timeout'],
-            disconnect_after=p['disconnect_after'], reconnect=p['reconnect'],
-            reconnect_period=p['reconnect_period'], max_motor_command=p['max_motor_command'],
-            geometry=dataclasses.replace(GEOMETRY, counts_per_nm=p['counts_per_nm']))
-
-    def _make_native(self, p, script, device_factory=None):
-        """The compiled, GIL-free servo loop (device/servo_native.py): with the simulated Falcon,
-        or with the real one opened in the servo process (``device_factory``)."""
-        from ..device.servo_native import NativeServoLoop
-        kw = {}
-        if device_factory is not None:
-            from ..device.falcon_usb import FalconError
-            kw = dict(device_factory=device_factory, open_error=FalconError,
-                      open_timeout=p['homing_timeout'] + 60.0)  # firmware upload + homing
-        return NativeServoLoop(
-            script, self.mapping, HandParams(p['hand_mass'], p['hand_stiffness'],
-                                             p['hand_damping']),
-            p['rate'], p['max_force'], p['max_force_rate'], p['watchdog_timeout'],
-            self.frame_id, p['force_mode'], p['max_stiffness'], p['model_validity_time'],
-            p['model_validity_radius'], p['passivity_damping'], p['passivity_observer'],
-            p['model_hold_time'], trace=self._tick_trace(p),
-            priority=p['servo_priority'], process=p['servo_loop'] == 'native_process',
-            workers=p['servo_workers'], approach_radius=p['model_approach_radius'],
-            hold_radius=p['model_hold_radius'], blend_time=p['model_blend_time'],
-            passivity_window=p['passivity_window'], **kw)
-
-    @staticmethod
-    def _tick_trace(p) -> TickTrace | None:
-        """The servo tick trace ``trace_path`` asks for: the last ``trace_seconds`` of ticks."""
-        if not p['trace_path']:
-            return None
-        return TickTrace(max_rows=int(round(p['rate'] * p['trace_seconds'])))
 
     def _device_lost(self, why: str) -> None:
         """The Falcon backend lost the device (servo thread): zero the force; without reconnect,

@@ -1,0 +1,171 @@
+"""The servo loops a driver runs, chosen from a table by backend and ``servo_loop`` (no ROS).
+
+:data:`LOOPS` maps (backend, servo loop) to a builder; each builder returns a :class:`DriverLoop`:
+the loop with the parts the driver wires to its topics (its safety layer, clutch and force
+input), built for that loop from the start, so the driver never swaps one part for another.
+
+- ``native`` / ``native_process`` with the simulated Falcon: the compiled tick
+  (:class:`~.servo_native.NativeServoLoop`) on threads of the driver, or in a servo process of
+  its own; its safety layer, renderer and clutch are the compiled tick's.
+- ``native_process`` with the real Falcon: the same, the USB I/O in the servo process
+  (:mod:`.device_process`).
+- ``python``: the Python tick (:class:`~.servo.ServoLoop`) with the Python rules
+  (:class:`~.safety.SafetyLayer`, :class:`~.buttons.ClutchMark`,
+  :class:`~.local_model.LocalModelRenderer`), on a thread of the driver.
+
+``p`` is the driver's parameters (``haptic_anfis.nodes.falcon_driver.PARAMS`` resolved).
+"""
+from __future__ import annotations
+
+import dataclasses
+import functools
+from typing import Callable
+
+from . import falcon_usb
+from .buttons import ClutchMark
+from .falcon import HandParams, SimulatedFalcon, WorkspaceMapping
+from .falcon_kinematics import GEOMETRY
+from .force_input import ForceInput
+from .safety import SafetyLayer
+from .servo import ServoLoop
+from .servo_native import NativeServoLoop
+from .trace import TickTrace
+
+
+@dataclasses.dataclass
+class DriverLoop:
+    """A servo loop and the parts a driver wires to it (device frame inside, tissue frame at
+    the topics through :class:`~.force_input.ForceInput`)."""
+
+    #: start / stop / stats / trace / scheduling / running / errors
+    servo: ServoLoop | NativeServoLoop
+    #: the device as the driver sees it: the simulated one (its ``script``), the compiled loop
+    #: (its ``script``) or the servo process's device counters; None for the Python Falcon's
+    #: own thread before it opens
+    device: object
+    safety: SafetyLayer
+    #: ``update(buttons, mapped, now) -> (tissue position, events)``, ``held``
+    clutch: object
+    input: ForceInput
+    #: the compiled loop when it is one (its bridge, trace and hold state), else None
+    native: NativeServoLoop | None
+
+
+@dataclasses.dataclass
+class Hooks:
+    """What the loop calls in the driver: ``on_state(state, force, now)`` for each tick read,
+    ``log(message)``, and the real device's ``on_disconnect(message)`` /
+    ``on_reconnect(message)``."""
+
+    on_state: Callable
+    log: Callable[[str], None] = print
+    on_disconnect: Callable[[str], None] | None = None
+    on_reconnect: Callable[[str], None] | None = None
+
+
+def tick_trace(p: dict) -> TickTrace | None:
+    """The servo tick trace ``trace_path`` asks for: the last ``trace_seconds`` of ticks."""
+    if not p['trace_path']:
+        return None
+    return TickTrace(max_rows=int(round(p['rate'] * p['trace_seconds'])))
+
+
+def falcon_factory(p: dict) -> Callable[..., object]:
+    """A callable building the USB backend from the parameters; it holds no ROS object, so the
+    servo process can call it (its log and hooks are that process's own). The USB library is
+    imported here, before any servo process is forked: a missing library is the driver's
+    one-line error (FalconUnavailableError) at start."""
+    falcon_usb.import_ftdi()
+    return functools.partial(
+        falcon_usb.FalconUSB, firmware_path=p['firmware_path'], device_index=p['device_index'],
+        serial=p['device_serial'], firmware_attempts=p['firmware_attempts'],
+        homing=p['homing'], homing_timeout=p['homing_timeout'],
+        gravity_compensation=p['gravity_compensation'], gravity_mass=p['gravity_mass'],
+        max_force=p['max_force'], stall_timeout=p['stall_timeout'],
+        disconnect_after=p['disconnect_after'], reconnect=p['reconnect'],
+        reconnect_period=p['reconnect_period'], max_motor_command=p['max_motor_command'],
+        geometry=dataclasses.replace(GEOMETRY, counts_per_nm=p['counts_per_nm']))
+
+
+def _hand(p: dict) -> HandParams:
+    return HandParams(p['hand_mass'], p['hand_stiffness'], p['hand_damping'])
+
+
+def _input(p: dict, mapping: WorkspaceMapping, safety: SafetyLayer, renderer=None,
+           clutch: ClutchMark | None = None) -> ForceInput:
+    return ForceInput(safety, mapping, p['force_mode'], p['max_stiffness'],
+                      p['model_validity_time'], p['model_validity_radius'], 1.0 / p['rate'],
+                      clutch=clutch, approach_radius=p['model_approach_radius'],
+                      renderer=renderer)
+
+
+def _native(p: dict, mapping: WorkspaceMapping, frame_id: str, script, hooks: Hooks,
+            **kw) -> DriverLoop:
+    """The compiled, GIL-free servo loop (:mod:`.servo_native`): with the simulated Falcon
+    (``script``), or with the real one opened in the servo process (``kw``: its
+    ``device_factory``)."""
+    loop = NativeServoLoop(
+        script, mapping, _hand(p), p['rate'], p['max_force'], p['max_force_rate'],
+        p['watchdog_timeout'], frame_id, p['force_mode'], p['max_stiffness'],
+        p['model_validity_time'], p['model_validity_radius'], p['passivity_damping'],
+        p['passivity_observer'], p['model_hold_time'], on_state=hooks.on_state,
+        trace=tick_trace(p), priority=p['servo_priority'],
+        process=p['servo_loop'] == 'native_process', workers=p['servo_workers'],
+        approach_radius=p['model_approach_radius'], hold_radius=p['model_hold_radius'],
+        blend_time=p['model_blend_time'], passivity_window=p['passivity_window'], **kw)
+    # the clutch / mark rules and the renderer run in the compiled tick
+    return DriverLoop(loop, loop.device if script is None else loop, loop.safety, loop.clutch,
+                      _input(p, mapping, loop.safety, renderer=loop.renderer), loop)
+
+
+def _python(p: dict, mapping: WorkspaceMapping, frame_id: str, device, hooks: Hooks
+            ) -> DriverLoop:
+    """The Python tick on a thread of the driver, with the Python rules."""
+    safety = SafetyLayer(p['max_force'], p['max_force_rate'], p['watchdog_timeout'],
+                         frame_id=frame_id)
+    clutch = ClutchMark()  # button 0 clutch (zero force, mapping follows the hand), 1 mark
+    inp = _input(p, mapping, safety, clutch=clutch)
+    servo = ServoLoop(device, safety, p['rate'], on_state=hooks.on_state, render=inp.render,
+                      trace=tick_trace(p), priority=p['servo_priority'])
+    return DriverLoop(servo, device, safety, clutch, inp, None)
+
+
+def sim_native(p: dict, mapping: WorkspaceMapping, frame_id: str, script, hooks: Hooks
+               ) -> DriverLoop:
+    return _native(p, mapping, frame_id, script, hooks)
+
+
+def sim_python(p: dict, mapping: WorkspaceMapping, frame_id: str, script, hooks: Hooks
+               ) -> DriverLoop:
+    device = SimulatedFalcon(script, mapping, _hand(p), max_force=p['max_force'])
+    return _python(p, mapping, frame_id, device, hooks)
+
+
+def falcon_native(p: dict, mapping: WorkspaceMapping, frame_id: str, script, hooks: Hooks
+                  ) -> DriverLoop:
+    built = _native(p, mapping, frame_id, None, hooks, device_factory=falcon_factory(p),
+                    open_error=falcon_usb.FalconError,
+                    open_timeout=p['homing_timeout'] + 60.0)  # firmware upload + homing
+    built.native.on_disconnect, built.native.on_reconnect = hooks.on_disconnect, \
+        hooks.on_reconnect
+    return built
+
+
+def falcon_python(p: dict, mapping: WorkspaceMapping, frame_id: str, script, hooks: Hooks
+                  ) -> DriverLoop:
+    """The USB backend on a thread of the driver. Connecting, firmware upload and homing happen
+    when the servo loop opens it; a FalconError (an OSError) stops the driver at start."""
+    device = falcon_factory(p)(log=hooks.log, on_disconnect=hooks.on_disconnect,
+                               on_reconnect=hooks.on_reconnect)
+    return _python(p, mapping, frame_id, device, hooks)
+
+
+#: (backend, servo_loop) -> builder(p, mapping, frame_id, script, hooks) -> DriverLoop; the
+#: script is the simulated hand's (None with the real Falcon)
+LOOPS: dict[tuple[str, str], Callable[..., DriverLoop]] = {
+    ('sim', 'native'): sim_native,
+    ('sim', 'native_process'): sim_native,
+    ('sim', 'python'): sim_python,
+    ('falcon', 'native_process'): falcon_native,
+    ('falcon', 'python'): falcon_python,
+}
