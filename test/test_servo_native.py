@@ -381,8 +381,8 @@ def test_stop_leaves_zero_force_and_trace_rows():
     lp.tick(0.0)
     assert lp.tick(0.001)[0] == pytest.approx(2.0)
     lp.ctl[nt.CTL.stop] = 1
-    nt.run(lp.cfg, lp.st, lp.times, lp.points, lp.buttons, lp.hand, lp.cmd, lp.model, lp.ctl,
-           lp.out, lp.cnt, lp.ring, lp._scratch, np.zeros(2, dtype=np.int64), lp._lock)
+    nt.run(lp.cfg, lp.st, lp.cnt, lp.hand_script, lp.buffers, lp._scratch,
+           np.zeros(2, dtype=np.int64), lp._lock)
     assert tuple(lp.st[nt.S.f0:nt.S.f0 + 3]) == (0.0, 0.0, 0.0)
     lp._drain()
     rows = lp.trace.arrays()
@@ -658,8 +658,7 @@ def test_a_worker_stalled_in_its_tick_is_taken_over_and_its_result_dropped():
     a, b = worker_arrays(lp), worker_arrays(lp)
 
     def compute(w, now):
-        return nt._compute(now * 1e-9, lp.cfg, w[0], lp.times, lp.points, lp.buttons, lp.hand,
-                           lp.cmd, lp.model, lp.ctl, w[1], w[3])
+        return nt._compute(now * 1e-9, lp.cfg, w[0], w[1], lp.hand_script, lp.buffers, w[3])
 
     ok, da, ga = nt._claim(t0, period, lp.ctl, lp.st, lp.cnt, a[0], a[1], a[2])
     assert ok and da == t0
@@ -673,7 +672,7 @@ def test_a_worker_stalled_in_its_tick_is_taken_over_and_its_result_dropped():
     assert lp.cnt[C.taken_over] == 1 and lp.cnt[C.deadline_misses] == 1
     _, *q = compute(b, late)
     assert nt._commit(gb, db, period, lp.st, lp.cnt, b[0], b[1], b[2])
-    nt._publish(late * 1e-9, lp.st, lp.out, lp.cnt, lp.ring, b[3], 0, *q)
+    nt._publish(late * 1e-9, lp.st, lp.cnt, lp.buffers, b[3], 0, *q)
     assert not nt._commit(ga, da, period, lp.st, lp.cnt, a[0], a[1], a[2])  # dropped
     assert lp.st[S.t_prev] == pytest.approx(late * 1e-9)
     assert lp.cnt[C.ticks] == 1 and lp.cnt[C.trace_w] == 1 and lp.cnt[C.gen] == 1
@@ -709,8 +708,8 @@ def test_any_order_of_claims_and_commits_keeps_one_tick_per_generation(events):
         if pending[who] is None:
             ok, d, g = nt._claim(t, period, lp.ctl, lp.st, lp.cnt, w[0], w[1], w[2])
             if ok:
-                q = nt._compute(t * 1e-9, lp.cfg, w[0], lp.times, lp.points, lp.buttons,
-                                lp.hand, lp.cmd, lp.model, lp.ctl, w[1], w[3])[1:]
+                q = nt._compute(t * 1e-9, lp.cfg, w[0], w[1], lp.hand_script, lp.buffers,
+                                w[3])[1:]
                 pending[who] = (g, d, t, q)
             else:
                 assert d > t or lp.cnt[C.claim_ns] == lp.cnt[C.deadline_ns]
@@ -718,7 +717,7 @@ def test_any_order_of_claims_and_commits_keeps_one_tick_per_generation(events):
             g, d, t0, q = pending[who]
             pending[who] = None
             if nt._commit(g, d, period, lp.st, lp.cnt, w[0], w[1], w[2]):
-                nt._publish(t0 * 1e-9, lp.st, lp.out, lp.cnt, lp.ring, w[3], 0, *q)
+                nt._publish(t0 * 1e-9, lp.st, lp.cnt, lp.buffers, w[3], 0, *q)
                 committed.append(t0)
         t += step_us * 1000
     n = len(committed)

@@ -44,9 +44,11 @@ It sleeps to absolute 1 ms deadlines with ``clock_nanosleep`` and reads the cloc
    clamp to ``max_force``.
 6. Write the device, the tick's trace row, the published state (a seqlock), the counters.
 
-Exchange with Python (:mod:`.servo_native`) is through numpy arrays only: seqlock buffers for the
-command, the model and the published state (the writer makes the sequence number odd, writes,
-makes it even; the reader retries when it changed), a ring for the trace, int64 counters. A libc
+Exchange with Python (:mod:`.servo_native`) is through numpy arrays only, passed as a few named
+groups (the configuration, the loop's state and counters, the :class:`Script` and the
+:class:`Buffers`): seqlock buffers for the command, the model and the published state (the
+writer makes the sequence number odd, writes, makes it even; the reader retries when it
+changed), a ring for the trace, int64 counters. A libc
 ``memcpy`` through ctypes is an opaque call the compiler can neither reorder stores across nor
 elide: it orders each seqlock. Times are seconds on CLOCK_MONOTONIC (Python's ``time.monotonic``),
 lengths metres, forces newtons.
@@ -58,6 +60,7 @@ import ctypes.util
 import enum
 import hashlib
 import inspect
+from typing import NamedTuple
 
 import numba as nb
 from llvmlite import binding as llvm
@@ -85,8 +88,8 @@ def inlined_source_hash() -> str:
         h.update(inspect.getsource(f).encode())
     return h.hexdigest()[:16]
 
-__all__ = ['CFG', 'CNT', 'OUT', 'CMD_LEN', 'MODEL_LEN', 'STATE_LEN', 'CTL', 'TRACE_COLS',
-           'CFG_LEN', 'CTL_LEN', 'HAND_LEN', 'OUT_LEN', 'CNT_LEN', 'SCRATCH_LEN', 'LOCK_LEN',
+__all__ = ['CFG', 'CNT', 'OUT', 'CMD_LEN', 'MODEL_LEN', 'MODEL_SLOT', 'STATE_LEN', 'CTL',
+           'TRACE_COLS', 'Script', 'Buffers', 'CFG_LEN', 'CTL_LEN', 'HAND_LEN', 'OUT_LEN', 'CNT_LEN', 'SCRATCH_LEN', 'LOCK_LEN',
            'tick', 'run', 'clock_now', 'new_state']
 
 _libc = ctypes.CDLL(ctypes.util.find_library('c') or 'libc.so.6', use_errno=True)
@@ -144,6 +147,30 @@ def _flat_names(layout: np.dtype) -> list[str]:
         sub = layout[name]
         out += [name] if not sub.shape else [f'{name}{i}' for i in range(sub.shape[0])]
     return out
+
+
+class Script(NamedTuple):
+    """The simulated hand's script, sampled (read only): ``times`` (n,) [s], ``points`` (n, 3)
+    tissue frame [m], ``buttons`` (n - 1, 2) int64 per segment, or (0, 2) for none
+    (:func:`~.servo_native.script_arrays`)."""
+
+    times: np.ndarray
+    points: np.ndarray
+    buttons: np.ndarray
+
+
+class Buffers(NamedTuple):
+    """The buffers the loop shares with Python (numba reads a named tuple's fields by name):
+    ``hand`` (:data:`HAND_LEN`), ``cmd`` (:data:`CMD_LEN`) and ``model`` (:data:`MODEL_SLOT`)
+    seqlocks Python writes, ``ctl`` (:data:`CTL`, int64), ``out`` (:data:`OUT`, a seqlock the
+    loop writes) and the ``trace`` ring ((rows, :data:`TRACE_COLS`); 0 rows: no trace)."""
+
+    hand: np.ndarray
+    cmd: np.ndarray
+    model: np.ndarray
+    ctl: np.ndarray
+    out: np.ndarray
+    trace: np.ndarray
 
 
 #: configuration (float64), written once before the loop starts
@@ -219,9 +246,10 @@ def clock_now(ts) -> float:
 
 
 @nb.njit(nogil=True, cache=True)
-def _script_point(cfg, st, times, points, t):
+def _script_point(cfg, st, script, t):
     """The hand target (device frame, clipped to the workspace) and the segment index at device
     time ``t`` [s] (script held at its start until released: ``script_off`` NaN)."""
+    times, points = script.times, script.points
     off = st[S.script_off]
     tl = 0.0 if off != off else max(t - off, 0.0)
     n = times.shape[0]
@@ -252,9 +280,10 @@ def _script_point(cfg, st, times, points, t):
 
 
 @nb.njit(nogil=True, cache=True)
-def _device_read(cfg, st, times, points, buttons, now, ctl, hand):
-    """Advance the simulated handle to ``now`` (or take a real device's reading from ``hand``);
-    returns (b0, b1) buttons."""
+def _device_read(cfg, st, script, buf, now):
+    """Advance the simulated handle to ``now`` (or take a real device's reading from
+    ``buf.hand``); returns (b0, b1) buttons."""
+    ctl, hand, buttons = buf.ctl, buf.hand, script.buttons
     if cfg[CFG.device] > 0.5:  # a real device: its servo process read it just before this tick
         if st[S.t_dev] != st[S.t_dev]:
             st[S.t_open] = now
@@ -278,7 +307,7 @@ def _device_read(cfg, st, times, points, buttons, now, ctl, hand):
             target[k] = min(max(hand[2 + k] + hand[5 + k] * dt, -h), h)
         hb0, hb1 = int(hand[8]), int(hand[9])
     else:
-        target, seg = _script_point(cfg, st, times, points, now - st[S.t_open])
+        target, seg = _script_point(cfg, st, script, now - st[S.t_open])
     if span > 0.0:
         n = max(1, int(np.ceil(span / cfg[CFG.dt_max] - 1e-9)))
         dt = span / n
@@ -630,22 +659,21 @@ def _passivity_period(cfg, st, gap):
 
 
 @nb.njit(nogil=True, cache=True)
-def tick(now, cfg, st, times, points, buttons, hand, cmd, model, ctl, out, cnt, trace, scratch,
-         stamp_ns):
+def tick(now, cfg, st, cnt, script, buf, scratch, stamp_ns):
     """One servo tick at monotonic time ``now`` [s] (see the module docstring); ``stamp_ns``: the
     wall-clock stamp the published pose carries. Returns the applied force's magnitude [N]."""
-    n, qx, qy, qz, b0, b1 = _compute(now, cfg, st, times, points, buttons, hand, cmd, model, ctl,
-                                     cnt, scratch)
-    _publish(now, st, out, cnt, trace, scratch, stamp_ns, qx, qy, qz, b0, b1)
+    n, qx, qy, qz, b0, b1 = _compute(now, cfg, st, cnt, script, buf, scratch)
+    _publish(now, st, cnt, buf, scratch, stamp_ns, qx, qy, qz, b0, b1)
     return n
 
 
 @nb.njit(nogil=True, cache=True)
-def _compute(now, cfg, st, times, points, buttons, hand, cmd, model, ctl, cnt, scratch):
+def _compute(now, cfg, st, cnt, script, buf, scratch):
     """Steps 1-5 of a tick and its timing counters, on ``st`` and ``cnt`` only (the shared
-    buffers ``out`` and ``trace`` are :func:`_publish`'s): a worker may run it on copies and
-    throw the result away (:func:`run`). Returns the applied force's magnitude [N], the tissue
-    position (with the clutch) and the buttons."""
+    buffers ``buf.out`` and ``buf.trace`` are :func:`_publish`'s): a worker may run it on copies
+    and throw the result away (:func:`run`). Returns the applied force's magnitude [N], the
+    tissue position (with the clutch) and the buttons."""
+    cmd, model, ctl = buf.cmd, buf.model, buf.ctl
     # inputs first: enable / disable, faults, the newest command and model
     if ctl[CTL.enable_gen] != st[S.enable_seen]:
         st[S.enable_seen] = ctl[CTL.enable_gen]
@@ -674,7 +702,7 @@ def _compute(now, cfg, st, times, points, buttons, hand, cmd, model, ctl, cnt, s
     gap = now - st[S.t_prev] if st[S.t_prev] == st[S.t_prev] else cfg[CFG.period]
     period = _passivity_period(cfg, st, gap)
     # 1. device
-    b0, b1 = _device_read(cfg, st, times, points, buttons, now, ctl, hand)
+    b0, b1 = _device_read(cfg, st, script, buf, now)
     sc, fs = cfg[CFG.scale], cfg[CFG.force_scale]
     mx = cfg[CFG.ox] + sc * st[S.x0]
     my = cfg[CFG.oy] + sc * st[S.x1]
@@ -741,8 +769,9 @@ def _compute(now, cfg, st, times, points, buttons, hand, cmd, model, ctl, cnt, s
 
 
 @nb.njit(nogil=True, cache=True)
-def _publish(now, st, out, cnt, trace, scratch, stamp_ns, qx, qy, qz, b0, b1):
+def _publish(now, st, cnt, buf, scratch, stamp_ns, qx, qy, qz, b0, b1):
     """Step 6 of a tick: its trace row and the published state (a seqlock) from ``st``."""
+    out, trace = buf.out, buf.trace
     fx, fy, fz = st[S.f0], st[S.f1], st[S.f2]
     w = cnt[CNT.trace_w]
     if trace.shape[0] > 0:
@@ -828,8 +857,7 @@ def _commit(gen, deadline, period_ns, st, cnt, st_w, cnt_w, base):
 
 
 @nb.njit(nogil=True, cache=True)
-def run(cfg, st, times, points, buttons, hand, cmd, model, ctl, out, cnt, trace, scratch, ts,
-        lock):
+def run(cfg, st, cnt, script, buf, scratch, ts, lock):
     """The servo loop of one worker: a tick every ``period`` to absolute deadlines until
     ``ctl[stop]``. Several workers (threads of one process, each calling this with its own
     ``ts`` and the same arrays and ``lock``) serve ONE schedule: each sleeps to the next deadline;
@@ -846,6 +874,7 @@ def run(cfg, st, times, points, buttons, hand, cmd, model, ctl, out, cnt, trace,
     Each worker leaves the device at zero force on its way out (under the lock, so after any
     commit in progress); the last one also clears the schedule. Returns the number of ticks."""
     period_ns = int(cfg[CFG.period] * 1e9 + 0.5)
+    ctl = buf.ctl
     m = lock.ctypes.data
     _mutex_lock(m)
     cnt[CNT.running] += 1
@@ -867,11 +896,10 @@ def run(cfg, st, times, points, buttons, hand, cmd, model, ctl, out, cnt, trace,
         if claimed:
             _clock_gettime(CLOCK_REALTIME, ts.ctypes.data)
             stamp = ts[0] * 1000000000 + ts[1]
-            _, qx, qy, qz, b0, b1 = _compute(now_ns * 1e-9, cfg, st_w, times, points, buttons,
-                                             hand, cmd, model, ctl, cnt_w, scr)
+            _, qx, qy, qz, b0, b1 = _compute(now_ns * 1e-9, cfg, st_w, cnt_w, script, buf, scr)
             _mutex_lock(m)
             if _commit(gen, deadline, period_ns, st, cnt, st_w, cnt_w, base):
-                _publish(now_ns * 1e-9, st, out, cnt, trace, scr, stamp, qx, qy, qz, b0, b1)
+                _publish(now_ns * 1e-9, st, cnt, buf, scr, stamp, qx, qy, qz, b0, b1)
             mine = cnt[CNT.deadline_ns]
             _mutex_unlock(m)
         ts[0] = mine // 1000000000

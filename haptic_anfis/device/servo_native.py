@@ -505,6 +505,9 @@ class NativeServoLoop:
         self.out = zeros(nt.OUT_LEN)
         self.cnt = zeros(nt.CNT_LEN, dtype=np.int64)
         self.ring = zeros((int(ring) if trace is not None else 0, nt.TRACE_COLS))
+        #: the arrays the compiled loop takes, by name (the same arrays as the attributes)
+        self.hand_script = nt.Script(self.times, self.points, self.buttons)
+        self.buffers = nt.Buffers(self.hand, self.cmd, self.model, self.ctl, self.out, self.ring)
         self._scratch = np.zeros(nt.SCRATCH_LEN)
         self.workers = int(workers)
         self._lock = np.zeros(nt.LOCK_LEN, dtype=np.int64)  # the workers' mutex (one process)
@@ -572,23 +575,22 @@ class NativeServoLoop:
         to stop before its first tick."""
         ctl = self.ctl.copy()
         ctl[nt.CTL.stop] = 1  # run returns at once
-        nt.run(self.cfg, self.st.copy(), self.times, self.points, self.buttons, self.hand.copy(),
-               self.cmd.copy(),
-               self.model.copy(), ctl, self.out.copy(), self.cnt.copy(), self.ring[:0].copy(),
+        b = self.buffers
+        copies = nt.Buffers(b.hand.copy(), b.cmd.copy(), b.model.copy(), ctl, b.out.copy(),
+                            b.trace[:0].copy())
+        nt.run(self.cfg, self.st.copy(), self.cnt.copy(), self.hand_script, copies,
                self._scratch.copy(), np.zeros(2, dtype=np.int64), self._lock.copy())
         if self.device_factory is not None:  # the device loop calls these from Python
             st, cnt = self.st.copy(), self.cnt.copy()
-            nt.tick(0.0, self.cfg, st, self.times, self.points, self.buttons, self.hand.copy(),
-                    self.cmd.copy(), self.model.copy(), ctl, self.out.copy(), cnt,
-                    self.ring.copy(), self._scratch.copy(), 0)
+            nt.tick(0.0, self.cfg, st, cnt, self.hand_script,
+                    copies._replace(trace=b.trace.copy()), self._scratch.copy(), 0)
             nt._fault(st, cnt)
 
     def tick(self, now: float, stamp_ns: int = 0) -> tuple[float, float, float]:
         """One compiled tick at monotonic ``now`` [s] on this loop's state, without the thread
         (tests); returns the force written to the device (device frame) [N]."""
-        nt.tick(float(now), self.cfg, self.st, self.times, self.points, self.buttons, self.hand,
-                self.cmd, self.model, self.ctl, self.out, self.cnt, self.ring, self._scratch,
-                int(stamp_ns))
+        nt.tick(float(now), self.cfg, self.st, self.cnt, self.hand_script, self.buffers,
+                self._scratch, int(stamp_ns))
         S = nt.S
         return float(self.st[S.f0]), float(self.st[S.f1]), float(self.st[S.f2])
 
@@ -631,9 +633,8 @@ class NativeServoLoop:
                     # the device loop: its USB I/O
                     dp.write_message(self.schedmsg, schedule_servo_thread(self.priority))
                     code = dp.run_device_loop(
-                        self.device_factory, self.cfg, self.st, self.times, self.points,
-                        self.buttons, self.hand, self.cmd, self.model, self.ctl, self.out,
-                        self.cnt, self.ring, self._scratch, self.devst, self.devmsg)
+                        self.device_factory, self.cfg, self.st, self.cnt, self.hand_script,
+                        self.buffers, self._scratch, self.devst, self.devmsg)
                 else:
                     for th in self._start_workers(first=1):  # worker 0 is this thread
                         th.join()
@@ -740,8 +741,7 @@ class NativeServoLoop:
             self.scheduling = f'compiled nogil tick; {scheduling}; {self._workers_text()}'
             self._scheduled.set()
         try:
-            nt.run(self.cfg, self.st, self.times, self.points, self.buttons, self.hand, self.cmd,
-                   self.model, self.ctl, self.out, self.cnt, self.ring, self._scratch,
+            nt.run(self.cfg, self.st, self.cnt, self.hand_script, self.buffers, self._scratch,
                    np.zeros(2, dtype=np.int64), self._lock)
         except Exception as exc:  # cannot happen short of a bug; say so, the device is at 0 N
             self.errors += 1
