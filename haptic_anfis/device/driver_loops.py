@@ -19,17 +19,23 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import math
+import time
 from typing import Callable
+
+import numpy as np
 
 from . import falcon_usb
 from .buttons import ClutchMark
 from .falcon import HandParams, SimulatedFalcon, WorkspaceMapping
 from .falcon_kinematics import GEOMETRY
 from .force_input import ForceInput
+from .local_model import STATUS_NAMES
+from .loop_health import LoopHealth
 from .safety import SafetyLayer
 from .servo import ServoLoop
 from .servo_native import NativeServoLoop
-from .trace import TickTrace
+from .trace import TickTrace, save_trace
 
 
 @dataclasses.dataclass
@@ -50,6 +56,41 @@ class DriverLoop:
     #: the compiled loop when it is one (its bridge, trace and hold state), else None
     native: NativeServoLoop | None
 
+    def summary(self, health: LoopHealth) -> dict:
+        """The loop's statistics (:meth:`~.stats.LoopStats.summary`), the safety layer's and
+        the force input's counts, and ``health``'s check windows."""
+        s = self.servo.stats.summary()
+        ss = self.safety.stats
+        s.update(commands=ss.commands, rejected_nonfinite=ss.rejected_nonfinite,
+                 rejected_frame=ss.rejected_frame, watchdog_trips=ss.watchdog_trips,
+                 watchdog_trips_in_contact=ss.watchdog_trips_in_contact,
+                 clamped=ss.clamped, servo_errors=self.servo.errors,
+                 servo_scheduling=self.servo.scheduling, loop_windows=health.windows,
+                 loop_windows_behind=health.behind, **self.input.summary())
+        if self.native is not None:
+            s.update(trace_rows_lost=self.native.trace_lost,
+                     bridge_rate_hz=self.native.bridge_gaps.summary()['rate_hz'])
+        return s
+
+    def save_trace(self, path: str, mapping: WorkspaceMapping, p: dict, frame_id: str,
+                   stats: dict) -> np.ndarray:
+        """Write the servo ticks in the tissue frame (position [m], applied force [N]) with
+        ``stats`` to ``path`` (:func:`~.trace.save_trace`); returns the rows written."""
+        trace = self.servo.trace
+        rows = trace.arrays()
+        rows[:, 1:4] = np.asarray(mapping.offset) + mapping.scale * rows[:, 1:4]
+        rows[:, 4:7] /= mapping.force_scale
+        save_trace(path, rows, stats=stats, status_names=list(STATUS_NAMES),
+                   max_force=p['max_force'] / mapping.force_scale, frame_id=frame_id,
+                   ticks_dropped=trace.dropped,  # the oldest, beyond the ring's bound
+                   period=1.0 / p['rate'],
+                   # the ticks' monotonic times onto the wall clock a bag's receive times use
+                   realtime_minus_monotonic_s=time.time() - time.monotonic(),
+                   model_hold_time=p['model_hold_time'], model_hold_radius=p['model_hold_radius'],
+                   model_blend_time=p['model_blend_time'],
+                   passivity_window=p['passivity_window'])
+        return rows
+
 
 @dataclasses.dataclass
 class Hooks:
@@ -61,6 +102,11 @@ class Hooks:
     log: Callable[[str], None] = print
     on_disconnect: Callable[[str], None] | None = None
     on_reconnect: Callable[[str], None] | None = None
+
+
+def jsonable(d: dict) -> dict:
+    """``d`` with its non-finite floats as None (JSON has no NaN / Inf)."""
+    return {k: (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in d.items()}
 
 
 def tick_trace(p: dict) -> TickTrace | None:

@@ -39,29 +39,27 @@ import sys
 import time
 from typing import Callable
 
-import numpy as np
 from geometry_msgs.msg import PointStamped, PoseStamped, TwistStamped, WrenchStamped
 from sensor_msgs.msg import JointState, Joy
 
 from .. import interfaces as ifc
 from ..device import PalpationScript, WorkspaceMapping
-from ..device.driver_loops import LOOPS, Hooks
+from ..device.driver_loops import LOOPS, Hooks, jsonable
 from ..device.falcon import RATED_FORCE
 from ..device.force_input import MODES
-from ..device.local_model import APPROACH_RADIUS, FALCON_MAX_STIFFNESS, HOLD_RADIUS, \
-    MODEL_BLEND_TIME, PASSIVITY_WINDOW, STATUS_NAMES
+from ..device.local_model import (APPROACH_RADIUS, FALCON_MAX_STIFFNESS, HOLD_RADIUS,
+                                  MODEL_BLEND_TIME, PASSIVITY_WINDOW)
 from ..device.loop_health import LoopHealth, behind_because
 from ..device.safety import OK
 from ..device.start_gate import HeldScript
 from ..device.stamps import STALE
-from ..device.trace import save_trace
 from ..realtime import processes
 from ..resources import config_file
 from . import cdr
 from .base import HapticNode
-from .polled import PolledSubscription
 from .parameters import (Param, ParameterError, declare_parameters, finite_vector, non_negative,
                          one_of, positive)
+from .polled import PolledSubscription
 from .runtime import LOOP_QOS, run_node, set_stamp
 
 BACKENDS = ('sim', 'falcon')
@@ -262,6 +260,7 @@ class FalconDriver(HapticNode):
             p, self.mapping, self.frame_id, script,
             Hooks(self._publish_state, self.get_logger().info, self._device_lost,
                   self._device_back))
+        self.loop = loop
         self.servo, self.device, self.safety = loop.servo, loop.device, loop.safety
         self.clutch, self.input, self.native = loop.clutch, loop.input, loop.native
         self.pub_pose = self.create_publisher(PoseStamped, ifc.TOPIC_POSE, LOOP_QOS)
@@ -503,18 +502,7 @@ class FalconDriver(HapticNode):
                                                 is not None else 'no force command yet')
 
     def summary(self) -> dict:
-        s = self.servo.stats.summary()
-        ss = self.safety.stats
-        s.update(commands=ss.commands, rejected_nonfinite=ss.rejected_nonfinite,
-                 rejected_frame=ss.rejected_frame, watchdog_trips=ss.watchdog_trips,
-                 watchdog_trips_in_contact=ss.watchdog_trips_in_contact,
-                 clamped=ss.clamped, servo_errors=self.servo.errors,
-                 servo_scheduling=self.servo.scheduling, loop_windows=self.health.windows,
-                 loop_windows_behind=self.health.behind,
-                 **self.input.summary())
-        if self.native is not None:
-            s.update(trace_rows_lost=self.native.trace_lost,
-                     bridge_rate_hz=self.native.bridge_gaps.summary()['rate_hz'])
+        s = self.loop.summary(self.health)
         if self.first_command is not None:  # CPU of this process (all its threads) / wall time
             wall = time.monotonic() - self.first_command
             s['process_cpu_pct'] = (round(100.0 * (time.process_time() - self._cpu0) / wall, 1)
@@ -530,34 +518,16 @@ class FalconDriver(HapticNode):
         if self.trace_path and self.servo.trace is not None:
             self._save_trace()
         if self.run_duration > 0:
-            print(json.dumps({'falcon_driver_stats': _jsonable(self.summary())}), flush=True)
-
+            print(json.dumps({'falcon_driver_stats': jsonable(self.summary())}), flush=True)
 
     def _save_trace(self) -> None:
         """The servo ticks in the tissue frame (position, applied force) with the statistics."""
-        rows = self.servo.trace.arrays()
-        m = self.mapping
-        rows[:, 1:4] = np.asarray(m.offset) + m.scale * rows[:, 1:4]
-        rows[:, 4:7] /= m.force_scale
-        save_trace(self.trace_path, rows, stats=_jsonable(self.summary()),
-                   status_names=list(STATUS_NAMES), max_force=self.params['max_force'] /
-                   m.force_scale, frame_id=self.frame_id,
-                   ticks_dropped=self.servo.trace.dropped,  # the oldest, beyond the ring's bound
-                   period=1.0 / self.params['rate'],
-                   # the ticks' monotonic times onto the wall clock a bag's receive times use
-                   realtime_minus_monotonic_s=time.time() - time.monotonic(),
-                   model_hold_time=self.params['model_hold_time'],
-                   model_hold_radius=self.params['model_hold_radius'],
-                   model_blend_time=self.params['model_blend_time'],
-                   passivity_window=self.params['passivity_window'])
+        rows = self.loop.save_trace(self.trace_path, self.mapping, self.params, self.frame_id,
+                                    jsonable(self.summary()))
         self.get_logger().info(f'servo tick trace: {len(rows)} ticks -> {self.trace_path}'
                                + (f' (the oldest {self.servo.trace.dropped} dropped: bounded)'
                                   if self.servo.trace.dropped else ''))
         self.servo.trace = None
-
-
-def _jsonable(d: dict) -> dict:
-    return {k: (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in d.items()}
 
 
 def main(args=None) -> None:
