@@ -787,7 +787,8 @@ def test_an_external_script_is_played_through_the_hand_buffer():
 
 
 def test_auto_servo_loop_is_the_servo_process_for_both_backends():
-    from haptic_anfis.nodes.falcon_driver import ParameterError, resolve_servo_loop
+    from haptic_anfis.nodes.falcon_params import resolve_servo_loop
+    from haptic_anfis.nodes.parameters import ParameterError
     assert resolve_servo_loop('auto') == 'native_process'
     assert resolve_servo_loop('auto', 'falcon') == 'native_process'
     for choice in ('native', 'native_process', 'python'):
