@@ -96,6 +96,31 @@ def test_unplugged_falcon_in_the_servo_process_stops_the_node_with_exit_1(ctx, m
         d.destroy_node()
 
 
+def test_replugged_falcon_in_the_servo_process_is_reconnected_and_force_resumes(ctx,
+                                                                                 monkeypatch):
+    """The cable pulled and put back (a loose cable: firmware and homing kept): the servo
+    process reopens the device, the node's safety layer restarts, and force (gravity
+    compensation) reaches the motors again."""
+    shm = shared()
+    fake = centred_fake(shm)
+    monkeypatch.setattr(falcon_usb, 'import_ftdi', lambda: ftdi_class(fake))
+    d = driver(ctx, backend='falcon', disconnect_after=20, reconnect_period=0.1,
+               gravity_compensation=True, homing=False)
+    try:
+        assert _wait(lambda: d.device.replies >= 50)
+        shm[PLUGGED] = 0.0
+        assert _wait(lambda: d.device.disconnected and not d.safety.enabled)
+        shm[PLUGGED] = 1.0
+        assert _wait(lambda: d.device.reconnects == 1 and d.device.connected
+                     and d.safety.enabled)
+        assert not d.finished
+        n = shm[N]
+        assert _wait(lambda: shm[N] > n + 50 and tuple(shm[M0:M0 + 3]) != (0.0, 0.0, 0.0))
+    finally:
+        d.close()
+        d.destroy_node()
+
+
 NODE = textwrap.dedent('''
     import mmap, sys, time
     import numpy as np
