@@ -143,7 +143,7 @@ def test_refused_fifo_asks_rtkit_for_the_haptic_path_threads(monkeypatch):
     haptic path ask rtkit for SCHED_RR, with the soft run-time limit below rtkit's; threads rtkit
     refused are said; rtkit refusing them all, or absent, is the refusal's line with both
     reasons. Fakes only: no policy changes."""
-    from haptic_anfis.device import rtkit
+    from haptic_anfis.realtime import rtkit
     from haptic_anfis.realtime.rtkit import RealtimeKitError
 
     def refuse(*a):

@@ -791,7 +791,7 @@ def test_auto_servo_loop_is_the_servo_process_for_both_backends():
     from haptic_anfis.nodes.parameters import ParameterError
     assert resolve_servo_loop('auto') == 'native_process'
     assert resolve_servo_loop('auto', 'falcon') == 'native_process'
-    for choice in ('native', 'native_process', 'python'):
+    for choice in ('native', 'native_process'):
         assert resolve_servo_loop(choice) == choice
     with pytest.raises(ParameterError, match="servo_loop: got 'native' with backend 'falcon'"):
         resolve_servo_loop('native', 'falcon')

@@ -3,17 +3,19 @@
 :data:`LOOPS` maps (backend, servo loop) to a builder; each builder returns a :class:`DriverLoop`:
 the loop with the parts the driver wires to its topics (its safety layer, clutch and force
 input), built for that loop from the start, so the driver never swaps one part for another.
+Every loop is the compiled tick (:class:`~.servo_native.NativeServoLoop`), whose safety layer,
+renderer and clutch are the tick's own:
 
-- ``native`` / ``native_process`` with the simulated Falcon: the compiled tick
-  (:class:`~.servo_native.NativeServoLoop`) on threads of the driver, or in a servo process of
-  its own; its safety layer, renderer and clutch are the compiled tick's.
+- ``native`` / ``native_process`` with the simulated Falcon: on threads of the driver, or in a
+  servo process of its own;
 - ``native_process`` with the real Falcon: the same, the USB I/O in the servo process
   (:mod:`.device_process`).
-- ``python``: the Python tick (:class:`~.servo.ServoLoop`) with the Python rules
-  (:class:`~.safety.SafetyLayer`, :class:`~.buttons.ClutchMark`,
-  :class:`~.local_model.LocalModelRenderer`), on a thread of the driver.
 
-``p`` is the driver's parameters (``haptic_anfis.nodes.falcon_driver.PARAMS`` resolved).
+The Python rules (:class:`~.servo.ServoLoop`, :class:`~.safety.SafetyLayer`,
+:class:`~.buttons.ClutchMark`, :class:`~.local_model.LocalModelRenderer`) run in no driver: they
+are the tests' reference for the compiled tick.
+
+``p`` is the driver's parameters (``haptic_anfis.nodes.falcon_params.PARAMS`` resolved).
 """
 from __future__ import annotations
 
@@ -26,15 +28,12 @@ from typing import Callable
 import numpy as np
 
 from . import falcon_usb
-from .buttons import ClutchMark
-from .falcon import HandParams, SimulatedFalcon, WorkspaceMapping
+from .falcon import HandParams, WorkspaceMapping
 from .falcon_kinematics import GEOMETRY
 from .force_input import ForceInput
 from .local_model import STATUS_NAMES
 from .loop_health import LoopHealth
-from .safety import SafetyLayer
-from .servo import ServoLoop
-from .servo_native import NativeServoLoop
+from .servo_native import NativeClutch, NativeRenderer, NativeSafety, NativeServoLoop
 from .trace import TickTrace, save_trace
 
 
@@ -43,18 +42,15 @@ class DriverLoop:
     """A servo loop and the parts a driver wires to it (device frame inside, tissue frame at
     the topics through :class:`~.force_input.ForceInput`)."""
 
-    #: start / stop / stats / trace / scheduling / running / errors
-    servo: ServoLoop | NativeServoLoop
-    #: the device as the driver sees it: the simulated one (its ``script``), the compiled loop
-    #: (its ``script``) or the servo process's device counters; None for the Python Falcon's
-    #: own thread before it opens
+    #: start / stop / stats / trace / scheduling / running / errors, its bridge and hold state
+    servo: NativeServoLoop
+    #: the device as the driver sees it: the compiled loop (its ``script``) with the simulated
+    #: Falcon, the servo process's device counters with the real one
     device: object
-    safety: SafetyLayer
+    safety: NativeSafety
     #: ``update(buttons, mapped, now) -> (tissue position, events)``, ``held``
-    clutch: object
+    clutch: NativeClutch
     input: ForceInput
-    #: the compiled loop when it is one (its bridge, trace and hold state), else None
-    native: NativeServoLoop | None
 
     def summary(self, health: LoopHealth) -> dict:
         """The loop's statistics (:meth:`~.stats.LoopStats.summary`), the safety layer's and
@@ -67,9 +63,8 @@ class DriverLoop:
                  clamped=ss.clamped, servo_errors=self.servo.errors,
                  servo_scheduling=self.servo.scheduling, loop_windows=health.windows,
                  loop_windows_behind=health.behind, **self.input.summary())
-        if self.native is not None:
-            s.update(trace_rows_lost=self.native.trace_lost,
-                     bridge_rate_hz=self.native.bridge_gaps.summary()['rate_hz'])
+        s.update(trace_rows_lost=self.servo.trace_lost,
+                 bridge_rate_hz=self.servo.bridge_gaps.summary()['rate_hz'])
         return s
 
     def save_trace(self, path: str, mapping: WorkspaceMapping, p: dict, frame_id: str,
@@ -95,11 +90,9 @@ class DriverLoop:
 @dataclasses.dataclass
 class Hooks:
     """What the loop calls in the driver: ``on_state(state, force, now)`` for each tick read,
-    ``log(message)``, and the real device's ``on_disconnect(message)`` /
-    ``on_reconnect(message)``."""
+    and the real device's ``on_disconnect(message)`` / ``on_reconnect(message)``."""
 
     on_state: Callable
-    log: Callable[[str], None] = print
     on_disconnect: Callable[[str], None] | None = None
     on_reconnect: Callable[[str], None] | None = None
 
@@ -137,12 +130,11 @@ def _hand(p: dict) -> HandParams:
     return HandParams(p['hand_mass'], p['hand_stiffness'], p['hand_damping'])
 
 
-def _input(p: dict, mapping: WorkspaceMapping, safety: SafetyLayer, renderer=None,
-           clutch: ClutchMark | None = None) -> ForceInput:
+def _input(p: dict, mapping: WorkspaceMapping, safety: NativeSafety,
+           renderer: NativeRenderer) -> ForceInput:
     return ForceInput(safety, mapping, p['force_mode'], p['max_stiffness'],
                       p['model_validity_time'], p['model_validity_radius'], 1.0 / p['rate'],
-                      clutch=clutch, approach_radius=p['model_approach_radius'],
-                      renderer=renderer)
+                      approach_radius=p['model_approach_radius'], renderer=renderer)
 
 
 def _native(p: dict, mapping: WorkspaceMapping, frame_id: str, script, hooks: Hooks,
@@ -161,19 +153,7 @@ def _native(p: dict, mapping: WorkspaceMapping, frame_id: str, script, hooks: Ho
         blend_time=p['model_blend_time'], passivity_window=p['passivity_window'], **kw)
     # the clutch / mark rules and the renderer run in the compiled tick
     return DriverLoop(loop, loop.device if script is None else loop, loop.safety, loop.clutch,
-                      _input(p, mapping, loop.safety, renderer=loop.renderer), loop)
-
-
-def _python(p: dict, mapping: WorkspaceMapping, frame_id: str, device, hooks: Hooks
-            ) -> DriverLoop:
-    """The Python tick on a thread of the driver, with the Python rules."""
-    safety = SafetyLayer(p['max_force'], p['max_force_rate'], p['watchdog_timeout'],
-                         frame_id=frame_id)
-    clutch = ClutchMark()  # button 0 clutch (zero force, mapping follows the hand), 1 mark
-    inp = _input(p, mapping, safety, clutch=clutch)
-    servo = ServoLoop(device, safety, p['rate'], on_state=hooks.on_state, render=inp.render,
-                      trace=tick_trace(p), priority=p['servo_priority'])
-    return DriverLoop(servo, device, safety, clutch, inp, None)
+                      _input(p, mapping, loop.safety, renderer=loop.renderer))
 
 
 def sim_native(p: dict, mapping: WorkspaceMapping, frame_id: str, script, hooks: Hooks
@@ -181,29 +161,14 @@ def sim_native(p: dict, mapping: WorkspaceMapping, frame_id: str, script, hooks:
     return _native(p, mapping, frame_id, script, hooks)
 
 
-def sim_python(p: dict, mapping: WorkspaceMapping, frame_id: str, script, hooks: Hooks
-               ) -> DriverLoop:
-    device = SimulatedFalcon(script, mapping, _hand(p), max_force=p['max_force'])
-    return _python(p, mapping, frame_id, device, hooks)
-
-
 def falcon_native(p: dict, mapping: WorkspaceMapping, frame_id: str, script, hooks: Hooks
                   ) -> DriverLoop:
     built = _native(p, mapping, frame_id, None, hooks, device_factory=falcon_factory(p),
                     open_error=falcon_usb.FalconError,
                     open_timeout=p['homing_timeout'] + 60.0)  # firmware upload + homing
-    built.native.on_disconnect, built.native.on_reconnect = hooks.on_disconnect, \
+    built.servo.on_disconnect, built.servo.on_reconnect = hooks.on_disconnect, \
         hooks.on_reconnect
     return built
-
-
-def falcon_python(p: dict, mapping: WorkspaceMapping, frame_id: str, script, hooks: Hooks
-                  ) -> DriverLoop:
-    """The USB backend on a thread of the driver. Connecting, firmware upload and homing happen
-    when the servo loop opens it; a FalconError (an OSError) stops the driver at start."""
-    device = falcon_factory(p)(log=hooks.log, on_disconnect=hooks.on_disconnect,
-                               on_reconnect=hooks.on_reconnect)
-    return _python(p, mapping, frame_id, device, hooks)
 
 
 #: (backend, servo_loop) -> builder(p, mapping, frame_id, script, hooks) -> DriverLoop; the
@@ -211,7 +176,5 @@ def falcon_python(p: dict, mapping: WorkspaceMapping, frame_id: str, script, hoo
 LOOPS: dict[tuple[str, str], Callable[..., DriverLoop]] = {
     ('sim', 'native'): sim_native,
     ('sim', 'native_process'): sim_native,
-    ('sim', 'python'): sim_python,
     ('falcon', 'native_process'): falcon_native,
-    ('falcon', 'python'): falcon_python,
 }

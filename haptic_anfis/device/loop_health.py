@@ -79,13 +79,10 @@ def behind_text(windows: int, behind: int, cause: str) -> str:
             f'starves the 1 kHz loop: what the hand feels is not the tissue alone); {cause}')
 
 
-def behind_because(servo_loop: str, backend: str, realtime: bool | None, scheduling: str) -> str:
-    """The likely cause of a servo loop falling behind, and what to do, in words: from the loop
-    that runs (``servo_loop``), the device ``backend``, whether its servo threads run
-    real-time now (None: no servo thread found) and its start's ``scheduling`` line."""
-    if servo_loop == 'python':
-        return ('the servo tick runs in Python (servo_loop: python) and waits for the '
-                'interpreter lock; servo_loop: auto runs it compiled, in a process of its own')
+def behind_because(backend: str, realtime: bool | None, scheduling: str) -> str:
+    """The likely cause of a servo loop falling behind, and what to do, in words: from the
+    device ``backend``, whether its servo threads run real-time now (None: no servo thread
+    found) and its start's ``scheduling`` line."""
     if realtime:
         return ('the servo is real-time: the machine itself stalled'
                 + (", or the device's USB replies came late" if backend == 'falcon' else '')

@@ -1,4 +1,9 @@
-"""The servo loop: its own thread, fixed period, absolute deadlines (no ROS).
+"""The Python servo loop: its own thread, fixed period, absolute deadlines (no ROS).
+
+No driver runs it: the compiled tick (:mod:`.native_tick`, :mod:`.servo_native`) is the servo
+tick of every backend. It stays as the reference the tests hold the compiled tick to (with
+:class:`~.safety.SafetyLayer`, :class:`~.buttons.ClutchMark` and
+:class:`~.local_model.LocalModelRenderer`) and as a loop for the device tests and benchmarks.
 
 Each tick: read the device, hand the reading to ``on_state`` (the driver publishes it), let
 ``render`` offer the safety layer this tick's force (the local force model, evaluated at this

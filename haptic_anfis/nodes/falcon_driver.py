@@ -21,9 +21,9 @@ latency (pose stamp to command arrival) and deadline misses are collected in
 :attr:`FalconDriver.servo` ``.stats``; ``trace_path`` writes every servo tick for the applied-force
 error (:mod:`haptic_anfis.device.force_error`).
 
-With the simulated Falcon the tick itself is compiled and never takes the interpreter lock
-(``servo_loop: native``, :mod:`haptic_anfis.device.servo_native`; ``native_process``: in a servo
-process of its own): device, local model, clutch, safety and the passivity bound run there, and
+The servo tick is compiled and never takes the interpreter lock (``servo_loop: native``,
+:mod:`haptic_anfis.device.servo_native`; ``native_process``: in a servo process of its own):
+device, local model, clutch, safety and the passivity bound run there, and
 the Python side above (publishing, taking commands and models) is a bridge thread that may fall
 behind without costing a tick (docs/servo_loop.md). The real Falcon's USB I/O runs with that
 compiled tick in the servo process (:mod:`haptic_anfis.device.device_process`): a frozen node
@@ -86,11 +86,11 @@ class FalconDriver(HapticNode):
             what = f'script {script_path} ({script.duration:.1f} s)'
         loop = LOOPS[p['backend'], p['servo_loop']](
             p, self.mapping, self.frame_id, script,
-            Hooks(self._publish_state, self.get_logger().info, self._device_lost,
-                  self._device_back))
+            Hooks(self._publish_state, self._device_lost, self._device_back))
         self.loop = loop
         self.servo, self.device, self.safety = loop.servo, loop.device, loop.safety
-        self.clutch, self.input, self.native = loop.clutch, loop.input, loop.native
+        self.clutch, self.input = loop.clutch, loop.input
+        self.native = loop.servo  # the compiled loop: its bridge, trace and hold state
         self.pub_pose = self.create_publisher(PoseStamped, ifc.TOPIC_POSE, LOOP_QOS)
         self.pub_twist = self.create_publisher(TwistStamped, ifc.TOPIC_TWIST, LOOP_QOS)
         self.pub_applied = self.create_publisher(WrenchStamped, ifc.TOPIC_APPLIED, LOOP_QOS)
@@ -173,8 +173,7 @@ class FalconDriver(HapticNode):
         """The likely cause of a servo loop falling behind, and what to do, from how it runs
         (the servo threads' policy as the kernel has it now: rtkit may have demoted them since
         the start's scheduling line)."""
-        realtime = None if self.servo_loop == 'python' else processes.servo_realtime(os.getpid())
-        return behind_because(self.servo_loop, self.params['backend'], realtime,
+        return behind_because(self.params['backend'], processes.servo_realtime(os.getpid()),
                               self.servo.scheduling)
 
     def start_loop(self) -> None:
@@ -305,12 +304,11 @@ class FalconDriver(HapticNode):
         refused as stale (so the figures are not cut at the age limit); the measurement window
         opens at the first one taken."""
         script = getattr(self.device, 'script', None)
-        held = script.held if self.native is None else self.native.held
-        if isinstance(script, HeldScript) and held and (why == OK or why.endswith(STALE)) \
+        if isinstance(script, HeldScript) and self.native.held \
+                and (why == OK or why.endswith(STALE)) \
                 and (self.release_gate is None or self.release_gate()):
             script.release()  # a force source answers our poses (late or not): start the palpation
-            if self.native is not None:
-                self.native.release()
+            self.native.release()
         if why == OK and self.first_command is None:
             now = time.monotonic()
             self.first_command = now

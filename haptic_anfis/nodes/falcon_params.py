@@ -100,14 +100,13 @@ PARAMS = [
     Param('servo_loop', 'auto', "sim: 'native' runs the servo tick (device, local model, "
           'clutch, safety, passivity bound) compiled on threads of the driver without the '
           "interpreter lock (haptic_anfis.device.servo_native); 'native_process' the same "
-          'compiled loop in a servo process of its own session on shared memory; '
-          "'python' the Python tick; 'auto': 'native_process', which kept the period better "
+          "compiled loop in a servo process of its own session on shared memory; 'auto': "
+          "'native_process', which kept the period better "
           'than the threads under the normal scheduler and as well at real-time priority '
           "(docs/servo_loop.md). falcon: 'auto' and 'native_process' run the USB I/O "
           "and the compiled tick in the servo process (a frozen node cannot leave force on the "
-          "motors); 'python' the Python tick on a thread of the node; 'native' is refused (its "
-          "USB library needs the interpreter)",
-          one_of('auto', 'native', 'native_process', 'python')),
+          "motors); 'native' is refused (its USB library needs the interpreter)",
+          one_of('auto', 'native', 'native_process')),
     Param('passivity_damping', 1.5, 'native: device damping b [N s/m] of the passivity bound on '
           'the rendered stiffness, K <= 2 b / T with T the measured tick periods of the last '
           'passivity_window, energy-weighted (sum T^2 / sum T; Colgate & Schenkel 1997; '
@@ -172,7 +171,6 @@ def resolve_servo_loop(choice: str, backend: str = 'sim') -> str:
     if backend == 'falcon' and choice == 'native':
         raise ParameterError("falcon_driver: servo_loop: got 'native' with backend 'falcon'; "
                              "expected 'auto' or 'native_process' (the USB I/O and the "
-                             "compiled tick in a servo process) or 'python': the Falcon's "
-                             "USB library needs the interpreter, which a compiled thread "
-                             "does not hold")
+                             "compiled tick in a servo process): the Falcon's USB library "
+                             "needs the interpreter, which a compiled thread does not hold")
     return 'native_process' if choice == 'auto' else choice
