@@ -276,7 +276,7 @@ def main() -> int:
     ap.add_argument('--configs', default='sim:50,sim:0,launch:50,launch:0')
     ap.add_argument('--loops', default='auto',
                     help="the driver's servo_loop values to run, comma-separated (auto, native, "
-                         "native_process, python; default auto, the driver's default)")
+                         "native_process; default auto, the driver's default)")
     ap.add_argument('--view', action='store_true',
                     help='the browser view too: the web_view node and a headless chromium on its '
                          'page (issue 32 measures with the recorder and the view running)')
