@@ -140,10 +140,11 @@ def run_device_loop(factory: Callable[[], object], cfg: np.ndarray, st: np.ndarr
                 deadline = now
             try:
                 s = dev.read(now)
-                hand[1] = now
-                hand[2:5] = s.position
-                hand[5:8] = s.velocity
-                hand[8], hand[9] = s.buttons[0], s.buttons[1]
+                H = nt.HAND
+                hand[H.t] = now
+                hand[H.x0:H.x0 + 3] = s.position
+                hand[H.v0:H.v0 + 3] = s.velocity
+                hand[H.b0], hand[H.b1] = s.buttons[0], s.buttons[1]
             except Exception as exc:  # a reading we cannot use: zero force, no tick from it
                 status[DEV.loop_errors] += 1
                 _say(f'device read failed: {exc}')

@@ -88,8 +88,9 @@ def inlined_source_hash() -> str:
         h.update(inspect.getsource(f).encode())
     return h.hexdigest()[:16]
 
-__all__ = ['CFG', 'CNT', 'OUT', 'CMD_LEN', 'MODEL_LEN', 'MODEL_SLOT', 'STATE_LEN', 'CTL',
-           'TRACE_COLS', 'Script', 'Buffers', 'CFG_LEN', 'CTL_LEN', 'HAND_LEN', 'OUT_LEN', 'CNT_LEN', 'SCRATCH_LEN', 'LOCK_LEN',
+__all__ = ['CFG', 'CNT', 'OUT', 'CMD', 'HAND', 'CMD_LEN', 'MODEL_LEN', 'MODEL_SLOT', 'STATE_LEN',
+           'CTL', 'TRACE_COLS', 'Script', 'Buffers', 'CFG_LEN', 'CTL_LEN', 'HAND_LEN', 'OUT_LEN',
+           'CNT_LEN', 'SCRATCH_LEN', 'LOCK_LEN',
            'tick', 'run', 'clock_now', 'new_state']
 
 _libc = ctypes.CDLL(ctypes.util.find_library('c') or 'libc.so.6', use_errno=True)
@@ -188,7 +189,8 @@ STATE_LEN = len(S)
 #: the state's copy of the model buffer's first field after ``seq``
 _M0 = S['m_' + _flat_names(MODEL_SLOT)[1]]
 #: command buffer (float64 seqlock): seq, force (3,) device frame [N], its pose's time [s]
-CMD_LEN = 5
+CMD = _index('CMD', 'seq f0 f1 f2 t')
+CMD_LEN = len(CMD)
 #: control (int64): stop, release (the held script), fault generation (zero at once),
 #: enable generation and enabled (SafetyLayer.start / stop)
 CTL = _index('CTL', 'stop release fault enable_gen enabled external')
@@ -196,7 +198,8 @@ CTL = _index('CTL', 'stop release fault enable_gen enabled external')
 #: device frame [m], its velocity (3,) [m/s], buttons 0 and 1 (a script only Python can play).
 #: With ``cfg[device]`` = 1 (a real device read by the servo process before each tick, see
 #: :mod:`.device_process`) the same layout holds the device's MEASURED position and velocity.
-HAND_LEN = 10
+HAND = _index('HAND', 'seq t x0 x1 x2 v0 v1 v2 b0 b1')
+HAND_LEN = len(HAND)
 #: the hand target is extrapolated from the newest one for at most this long [s], then held
 HAND_EXTRAPOLATE = 0.02
 #: published state (float64 seqlock): seq, t, device position, velocity, tissue position (with
@@ -289,9 +292,9 @@ def _device_read(cfg, st, script, buf, now):
             st[S.t_open] = now
         st[S.t_dev] = now
         for k in range(3):
-            st[S.x0 + k] = hand[2 + k]
-            st[S.v0 + k] = hand[5 + k]
-        return int(hand[8]), int(hand[9])
+            st[S.x0 + k] = hand[HAND.x0 + k]
+            st[S.v0 + k] = hand[HAND.v0 + k]
+        return int(hand[HAND.b0]), int(hand[HAND.b1])
     if st[S.t_dev] != st[S.t_dev]:
         st[S.t_dev] = now
         st[S.t_open] = now
@@ -301,11 +304,11 @@ def _device_read(cfg, st, script, buf, now):
     st[S.t_dev] = now
     if ctl[CTL.external] != 0:
         target = np.empty(3)
-        dt = min(max(now - hand[1], 0.0), HAND_EXTRAPOLATE)
+        dt = min(max(now - hand[HAND.t], 0.0), HAND_EXTRAPOLATE)
         h = cfg[CFG.half]
         for k in range(3):
-            target[k] = min(max(hand[2 + k] + hand[5 + k] * dt, -h), h)
-        hb0, hb1 = int(hand[8]), int(hand[9])
+            target[k] = min(max(hand[HAND.x0 + k] + hand[HAND.v0 + k] * dt, -h), h)
+        hb0, hb1 = int(hand[HAND.b0]), int(hand[HAND.b1])
     else:
         target, seg = _script_point(cfg, st, script, now - st[S.t_open])
     if span > 0.0:
@@ -725,10 +728,10 @@ def _compute(now, cfg, st, cnt, script, buf, scratch):
         st[S.status] = -1.0
         if _take(cmd, scratch, st[S.cmd_seen]):
             st[S.cmd_seen] = scratch[0]
-            if np.isfinite(scratch[1] + scratch[2] + scratch[3] + scratch[4]):
-                g = _gain(cfg, st, scratch[1] != 0.0 or scratch[2] != 0.0 or scratch[3] != 0.0,
-                          now)
-                _command(st, g * scratch[1], g * scratch[2], g * scratch[3], scratch[4])
+            fx, fy, fz, t = scratch[CMD.f0], scratch[CMD.f1], scratch[CMD.f2], scratch[CMD.t]
+            if np.isfinite(fx + fy + fz + t):
+                g = _gain(cfg, st, fx != 0.0 or fy != 0.0 or fz != 0.0, now)
+                _command(st, g * fx, g * fy, g * fz, t)
             elif st[S.enabled] > 0.5:
                 _fault(st, cnt)
     # 4. passivity observer / controller (optional): energy out of the rendered port

@@ -220,6 +220,7 @@ class NativeSafety(SafetyLayer):
     def __init__(self, loop: 'NativeServoLoop', max_force: float, max_force_rate: float,
                  watchdog_timeout: float, frame_id: str = 'tissue', max_dt: float = 0.005):
         self._loop = loop
+        self._cmd = [0.0] * nt.CMD_LEN  # the next command, laid out as the command buffer
         super().__init__(max_force, max_force_rate, watchdog_timeout, frame_id, max_dt)
 
     @property
@@ -275,7 +276,9 @@ class NativeSafety(SafetyLayer):
                 self._loop.ctl[nt.CTL.fault] += 1
                 self._py.last_reject = f'{REJECTED_FRAME} {frame_id!r} (expected {self.frame_id!r})'
                 return REJECTED_FRAME
-            _seq_write(self._loop.cmd, (fx, fy, fz, float(now)))
+            v, C = self._cmd, nt.CMD
+            v[C.f0], v[C.f1], v[C.f2], v[C.t] = fx, fy, fz, float(now)
+            _seq_write(self._loop.cmd, v[1:])
             return OK
 
     def reject(self, why: str) -> None:
@@ -563,8 +566,11 @@ class NativeServoLoop:
         p = m.to_device(s.target(t))
         p1 = m.to_device(s.target(t + dt))
         b = s.buttons(t) if hasattr(s, 'buttons') else (0, 0)
-        _seq_write(self.hand, (now, *p, *((p1[k] - p[k]) / dt for k in range(3)),
-                               float(b[0]), float(b[1])))
+        v, H = [0.0] * nt.HAND_LEN, nt.HAND
+        v[H.t], v[H.b0], v[H.b1] = now, float(b[0]), float(b[1])
+        for k in range(3):
+            v[H.x0 + k], v[H.v0 + k] = p[k], (p1[k] - p[k]) / dt
+        _seq_write(self.hand, v[1:])
 
     @property
     def held(self) -> bool:
