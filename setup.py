@@ -58,7 +58,7 @@ setup(
         'rosbags>=0.11,<0.12',
         'mcap>=1.2',  # bag recover: stream-reads the MCAP a killed recording left (no summary)
         # the servo threads ask RealtimeKit for real-time priority over D-Bus when SCHED_FIFO is
-        # refused (device/rtkit.py): pure Python, no C library
+        # refused (realtime/rtkit.py): pure Python, no C library
         'jeepney>=0.8',
     ],
     extras_require={

@@ -108,8 +108,8 @@ def respawn(kills: int, domain: int) -> list[dict]:
     from geometry_msgs.msg import WrenchStamped
     from rclpy.context import Context
 
-    from haptic_anfis.nodes import interfaces as ifc
-    from haptic_anfis.nodes._common import LOOP_QOS
+    from haptic_anfis import interfaces as ifc
+    from haptic_anfis.nodes.runtime import LOOP_QOS
     from haptic_anfis.nodes.graph import make_executor_for
     work = Path(tempfile.mkdtemp(prefix='haptic-anfis-respawn-'))
     out = work / 'launch.out'

@@ -76,7 +76,7 @@ def one_process(seconds: float, mode: str, trace: Path) -> None:
 
 
 def multi_process(seconds: float, mode: str, trace: Path, busy: int = 0) -> None:
-    from haptic_anfis.nodes.processes import node_env, start_node, stop_node
+    from haptic_anfis.realtime.processes import node_env, start_node, stop_node
     env = node_env(150 + os.getpid() % 50, localhost=True)
     with spinning(busy):
         cargs = [a for k, v in CONTACT_PARAMS.items() for a in ('-p', f'{k}:={v}')]

@@ -30,7 +30,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 from _page import run_with_page  # noqa: E402
 
-from haptic_anfis.nodes.processes import node_env  # noqa: E402
+from haptic_anfis.realtime.processes import node_env  # noqa: E402
 
 LATE_S = 0.002      # a wake-up later than this is a stall
 TOGETHER_S = 0.003  # two cores' stalls this close are one stall of both

@@ -12,7 +12,7 @@ sleeping to absolute deadlines:
   shared memory would run).
 
 Each at SCHED_FIFO 50, under the normal scheduler, and under the normal scheduler with a 0.1 ms
-time slice requested (:func:`haptic_anfis.device.servo.request_short_slice`), with ``--busy``
+time slice requested (:func:`haptic_anfis.realtime.scheduling.request_short_slice`), with ``--busy``
 processes spinning beside it. Prints rate, periods lost and the longest gap, with the load, and
 writes docs/measurements/servo_candidates.md.
 
@@ -85,7 +85,7 @@ def _py_loop(gaps, n):
 
 
 def _schedule(how: str) -> None:
-    from haptic_anfis.device.servo import request_short_slice, set_realtime
+    from haptic_anfis.realtime.scheduling import request_short_slice, set_realtime
     if how == 'fifo 50':
         set_realtime(50)
     elif how == 'normal + slice':

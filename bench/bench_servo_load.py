@@ -249,7 +249,7 @@ def account() -> str:
     soft, _ = resource.getrlimit(resource.RLIMIT_RTPRIO)
     may = uid == 0 or soft != 0
     try:
-        from haptic_anfis.device.rtkit import RealtimeKitError, max_realtime_priority
+        from haptic_anfis.realtime.rtkit import RealtimeKitError, max_realtime_priority
         kit = f'rtkit answers (max priority {max_realtime_priority()})'
     except RealtimeKitError as exc:
         kit = str(exc)
@@ -276,7 +276,7 @@ def main() -> int:
     ap.add_argument('--configs', default='sim:50,sim:0,launch:50,launch:0')
     ap.add_argument('--loops', default='auto',
                     help="the driver's servo_loop values to run, comma-separated (auto, native, "
-                         "native_process, python; default auto, the driver's default)")
+                         "native_process; default auto, the driver's default)")
     ap.add_argument('--view', action='store_true',
                     help='the browser view too: the web_view node and a headless chromium on its '
                          'page (issue 32 measures with the recorder and the view running)')

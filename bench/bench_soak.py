@@ -113,7 +113,7 @@ def one_process(minutes: float, interval: float, workdir: Path, freeze: bool = T
     from haptic_anfis.bag.topics import ALL_LOOP_TOPICS
     from haptic_anfis.session import open_graph
     from haptic_anfis.nodes.recorder import Recorder
-    from haptic_anfis.nodes.processes import recorder_arguments
+    from haptic_anfis.realtime.processes import recorder_arguments
     from haptic_anfis.nodes.side_nodes import SideNodes, hold_until_recorded
     bag = workdir / 'one_process_bag'
     from rclpy.parameter import Parameter
@@ -182,9 +182,9 @@ def multi_process(minutes: float, interval: float, workdir: Path,
     from geometry_msgs.msg import PoseStamped, WrenchStamped
     from rclpy.context import Context
 
-    from haptic_anfis.nodes.processes import node_env
-    from haptic_anfis.nodes import interfaces as ifc
-    from haptic_anfis.nodes._common import LOOP_QOS, stamp_ns
+    from haptic_anfis.realtime.processes import node_env
+    from haptic_anfis import interfaces as ifc
+    from haptic_anfis.nodes.runtime import LOOP_QOS, stamp_ns
     from haptic_anfis.nodes.executor import make_executor
     domain = 170 + os.getpid() % 40
     bag, out = workdir / 'multi_process_bag', workdir / 'launch.out'

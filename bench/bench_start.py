@@ -29,7 +29,7 @@ NODES = ('force_server', 'contact_detector', 'falcon_driver', 'visualizer', 'rec
 
 def start_time(node: str, cache: Path, work: Path, domain: int, timeout: float = 600.0) -> float:
     """Seconds from process start to the node's 'started' log line."""
-    from haptic_anfis.nodes.processes import node_env, start_node, stop_node
+    from haptic_anfis.realtime.processes import node_env, start_node, stop_node
     env = node_env(domain, localhost=True)
     env.update(NUMBA_CACHE_DIR=str(cache), PYTHONPATH=str(ROOT))
     args = {'falcon_driver': ['-p', 'hold_until_force:=false'],

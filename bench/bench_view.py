@@ -156,7 +156,7 @@ def loop_runs(seconds: float, configs: list[str]) -> list[dict]:
     """bench_loop's graphs without and with the view open."""
     import bench_loop
     from haptic_anfis.commands.loop import trace_report
-    from haptic_anfis.nodes.processes import node_env, start_node, stop_node
+    from haptic_anfis.realtime.processes import node_env, start_node, stop_node
     from haptic_anfis.nodes.side_nodes import SIDE_NICE
     out = []
     with tempfile.TemporaryDirectory(prefix='bench_view_') as tmp:

@@ -1,4 +1,4 @@
-"""Names and message layouts of the topics (pure Python, no ROS): shared by the nodes, the bag
+"""Names and message layouts of the topics (no ROS): shared by the nodes, the bag
 layer and the commands (core <- bag / nodes).
 
 Topics (relative names: a node namespace or ``-r`` remapping moves them):
@@ -69,6 +69,8 @@ renders zero on the outer side of that plane and K (p - p0) once the probe is pa
 from __future__ import annotations
 
 import math
+
+import numpy as np
 
 CONTACT_FIELDS = ('contact_x', 'contact_y', 'contact_z', 'depth', 'direction_x', 'direction_y',
                   'direction_z', 'in_contact', 'saturated', 'normal_x', 'normal_y', 'normal_z')
@@ -152,14 +154,39 @@ class ContactLayouts:
         return '; '.join(parts) or None
 
 
-LOCAL_MODEL_FIELDS = ('f0_x', 'f0_y', 'f0_z', 'p0_x', 'p0_y', 'p0_z',
-                      'k_xx', 'k_xy', 'k_xz', 'k_yx', 'k_yy', 'k_yz', 'k_zx', 'k_zy', 'k_zz',
-                      'contact_x', 'contact_y', 'contact_z', 'normal_x', 'normal_y', 'normal_z',
-                      'direction_x', 'direction_y', 'direction_z', 'depth', 'zero_at_surface')
-#: slices of LOCAL_MODEL_FIELDS
-LM_F0, LM_P0, LM_K, LM_C, LM_N, LM_D = (slice(0, 3), slice(3, 6), slice(6, 15), slice(15, 18),
-                                        slice(18, 21), slice(21, 24))
-LM_DEPTH, LM_ZERO = 24, 25
+#: The local force model message's layout, its one definition: a record of float64 fields in
+#: the order of the message's ``position`` values (see the module doc). The names
+#: (:data:`LOCAL_MODEL_FIELDS`) and the flat positions (``LM_*``) derive from it, and a flat
+#: values array views as one record (``np.asarray(v).view(LOCAL_MODEL)[0]['k']``).
+LOCAL_MODEL = np.dtype([('f0', 'f8', 3), ('p0', 'f8', 3), ('k', 'f8', 9), ('contact', 'f8', 3),
+                        ('normal', 'f8', 3), ('direction', 'f8', 3), ('depth', 'f8'),
+                        ('zero_at_surface', 'f8')])
+#: the component suffixes of a vector field's flat names: (x, y, z); K row-major (xx, xy, ...)
+_AXES = {3: ('x', 'y', 'z'), 9: tuple(r + c for r in 'xyz' for c in 'xyz')}
+
+
+def field_names(layout: np.dtype) -> tuple[str, ...]:
+    """The flat names of a float64 record layout: a scalar field's own name, a vector's
+    ``name_x``, ... (K's ``k_xx``, ...)."""
+    names: list[str] = []
+    for name in layout.names:
+        n = layout[name].shape[0] if layout[name].shape else 1
+        names += [name] if n == 1 else [f'{name}_{a}' for a in _AXES[n]]
+    return tuple(names)
+
+
+def field_index(layout: np.dtype, name: str) -> int | slice:
+    """Where field ``name`` of a float64 record layout sits in its flat values: an index
+    (scalar) or a slice (vector)."""
+    sub, offset = layout.fields[name][:2]
+    i = offset // 8
+    return slice(i, i + sub.shape[0]) if sub.shape else i
+
+
+LOCAL_MODEL_FIELDS = field_names(LOCAL_MODEL)
+#: the flat positions of LOCAL_MODEL's fields
+LM_F0, LM_P0, LM_K, LM_C, LM_N, LM_D, LM_DEPTH, LM_ZERO = (field_index(LOCAL_MODEL, n)
+                                                           for n in LOCAL_MODEL.names)
 #: |F| [N] at depth 0 below which a model counts as zero at the surface
 ZERO_FORCE_TOL = 0.05
 

@@ -157,7 +157,7 @@ def test_recorder_node_says_so_once_and_stays_up_without_recording(tmp_path):
 
 def test_restart_names_do_not_nest(monkeypatch, tmp_path):
     """The recorder's restarts write BAG.restart1, BAG.restart2 (not BAG.restart1.restart2)."""
-    from haptic_anfis.nodes import processes
+    from haptic_anfis.realtime import processes
 
     started = []
 

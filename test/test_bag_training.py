@@ -12,7 +12,7 @@ from haptic_anfis.bag import BagError, BagWriter  # noqa: E402
 from haptic_anfis.bag.topics import typestore  # noqa: E402
 from haptic_anfis.bag.training_data import dataset_from_bag, load_training_data  # noqa: E402
 from haptic_anfis.cli import main as cli  # noqa: E402
-from haptic_anfis.nodes import interfaces as ifc  # noqa: E402
+from haptic_anfis import interfaces as ifc  # noqa: E402
 
 
 def _session_bag(path, ds, extra_free: int = 20):

@@ -18,8 +18,8 @@ from haptic_anfis.cases import CaseError, CaseLibrary  # noqa: E402
 library_module = importlib.import_module('haptic_anfis.cases.library')  # (the package's
 # `library` attribute is the function of that name)
 from haptic_anfis.tissue.dataset import DATA_DIR  # noqa: E402
-from haptic_anfis.nodes import interfaces as ifc  # noqa: E402
-from haptic_anfis.nodes._common import LOOP_QOS  # noqa: E402
+from haptic_anfis import interfaces as ifc  # noqa: E402
+from haptic_anfis.nodes.runtime import LOOP_QOS  # noqa: E402
 from haptic_anfis.nodes.graph import build_graph  # noqa: E402
 from haptic_anfis.tissue.scene import SCENE_DIR  # noqa: E402
 
@@ -111,7 +111,7 @@ def test_case_switch_keeps_force_finite_and_clamped(small_case_library, tmp_path
 
 
 def test_random_case_and_bad_case_parameters(small_case_library, tmp_path):
-    from haptic_anfis.nodes._common import ParameterError  # noqa: F401
+    from haptic_anfis.nodes.parameters import ParameterError  # noqa: F401
 
     with pytest.raises(CaseError, match="unknown case 'nope'"):
         _graph(tmp_path, case='nope')

@@ -14,7 +14,7 @@ from rclpy.serialization import deserialize_message, serialize_message  # noqa: 
 from sensor_msgs.msg import JointState  # noqa: E402
 
 from haptic_anfis.nodes import cdr  # noqa: E402
-from haptic_anfis.nodes import interfaces as ifc  # noqa: E402
+from haptic_anfis import interfaces as ifc  # noqa: E402
 
 FRAMES = ['', 't', 'ti', 'tis', 'tiss', 'tissue', 'tissue_', 'tissue_fr', 'é-frame']
 

@@ -126,7 +126,7 @@ def test_report_of_a_session_that_never_touched_with_a_mark_in_the_air(tmp_path,
     say so, exit 0."""
     from haptic_anfis.bag import typestore
     from haptic_anfis.bag.writer import BagWriter
-    from haptic_anfis.nodes import interfaces as ifc
+    from haptic_anfis import interfaces as ifc
     ts = typestore()
     T, H = ts.types['builtin_interfaces/msg/Time'], ts.types['std_msgs/msg/Header']
     JS = ts.types['sensor_msgs/msg/JointState']
@@ -210,7 +210,7 @@ def test_an_exam_with_the_view_serves_the_debrief_after_it(tmp_path, capfd, in_p
     import subprocess
     import sys
 
-    from haptic_anfis.nodes.processes import OWN_SESSION
+    from haptic_anfis.realtime.processes import OWN_SESSION
     from haptic_anfis.view.browser import free_port
     pytest.importorskip('viser', reason='the view extra (pip install .[view]) is not installed')
     port = free_port()

@@ -14,7 +14,7 @@ from haptic_anfis.device import falcon_kinematics as k
 from haptic_anfis.device.falcon_check import (calibrate, calibrated_counts_per_nm, run_check,
                                               write_counts_per_nm)
 from haptic_anfis.device.falcon_usb import FalconUSB, PyFtdiTransport
-from haptic_anfis.nodes._common import config_file
+from haptic_anfis.resources import config_file
 
 
 class MovedGrip(FakeFalcon):

@@ -1,25 +1,22 @@
-"""falcon_driver with backend 'falcon' (ROS node, in process): parameters, the missing USB library,
-and a whole run against the fake FTDI device. No hardware."""
+"""falcon_driver (ROS node, in process): parameters, the missing USB library, the servo loop's
+start and its health warnings. Runs against the fake FTDI device are in
+test_falcon_servo_process.py. No hardware."""
 from __future__ import annotations
 
 import os
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import pytest
-from falcon_fake import FakeFalcon, ftdi_class
 
 rclpy = pytest.importorskip('rclpy')
 from rclpy.parameter import Parameter  # noqa: E402
 
-from haptic_anfis.device import falcon_kinematics as k  # noqa: E402
 from haptic_anfis.device import falcon_usb  # noqa: E402
-from haptic_anfis.nodes._common import ParameterError  # noqa: E402
+from haptic_anfis.nodes.parameters import ParameterError  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
-
 
 
 def driver(ctx, **params):
@@ -52,25 +49,6 @@ def test_falcon_backend_without_usb_library_says_how_to_install(ctx, monkeypatch
         driver(ctx, backend='falcon')
 
 
-def test_falcon_backend_runs_the_servo_loop_and_stops_at_zero(ctx, monkeypatch):
-    fake = FakeFalcon(firmware_running=True,
-                      encoders=k.angles_to_ticks(k.inverse_kinematics(k.WORKSPACE_CENTER)))
-    monkeypatch.setattr(falcon_usb, 'import_ftdi', lambda: ftdi_class(fake))
-    d = driver(ctx, backend='falcon', homing=False, gravity_compensation=True, servo_loop='python')
-    try:
-        assert isinstance(d.device, falcon_usb.FalconUSB) and d.device.gravity_compensation
-        deadline = time.monotonic() + 5.0
-        while d.device.replies < 50 and time.monotonic() < deadline:
-            time.sleep(0.01)
-        assert d.device.replies >= 50 and d.servo.errors == 0
-        # gravity compensation alone: a small non-zero command while running
-        assert fake.commands[-1].motors != (0, 0, 0)
-    finally:
-        d.close()
-        d.destroy_node()
-    assert fake.commands[-1].motors == (0, 0, 0) and fake.closed
-
-
 def test_node_process_exits_1_with_one_line_error_without_the_usb_library(tmp_path):
     """The console script's path: run_node prints the FalconError and exits 1 (no traceback)."""
     code = ("import sys; sys.modules['pyftdi'] = None; sys.modules['pyftdi.ftdi'] = None\n"
@@ -81,52 +59,6 @@ def test_node_process_exits_1_with_one_line_error_without_the_usb_library(tmp_pa
     assert r.returncode == 1, r.stderr
     assert "error: backend 'falcon' needs the optional USB library pyftdi" in r.stderr
     assert "pip install 'haptic_anfis[falcon]'" in r.stderr and 'Traceback' not in r.stderr
-
-
-def _wait(cond, seconds=10.0):
-    deadline = time.monotonic() + seconds
-    while not cond() and time.monotonic() < deadline:
-        time.sleep(0.01)
-    return cond()
-
-
-def test_unplugged_falcon_stops_the_node_with_exit_1_without_reconnect(ctx, monkeypatch):
-    fake = FakeFalcon(firmware_running=True,
-                      encoders=k.angles_to_ticks(k.inverse_kinematics(k.WORKSPACE_CENTER)))
-    monkeypatch.setattr(falcon_usb, 'import_ftdi', lambda: ftdi_class(fake))
-    d = driver(ctx, backend='falcon', reconnect=False, disconnect_after=20, servo_loop='python')
-    try:
-        assert _wait(lambda: d.device.replies >= 50)
-        fake.unplug()
-        assert _wait(lambda: d.finished)  # run_node leaves its spin loop on this
-        assert d.exit_code == 1 and d.device.disconnected and not d.safety.enabled
-        assert d.device.read(time.monotonic()).velocity == (0.0, 0.0, 0.0)
-        assert d.servo.running and d.servo.errors == 0  # the servo thread did not crash
-    finally:
-        d.close()
-        d.destroy_node()
-
-
-def test_replugged_falcon_is_reconnected_and_force_resumes(ctx, monkeypatch):
-    fake = FakeFalcon(firmware_running=True,
-                      encoders=k.angles_to_ticks(k.inverse_kinematics(k.WORKSPACE_CENTER)))
-    monkeypatch.setattr(falcon_usb, 'import_ftdi', lambda: ftdi_class(fake))
-    d = driver(ctx, backend='falcon', disconnect_after=20, reconnect_period=0.1, servo_loop='python',
-               gravity_compensation=True)
-    try:
-        assert _wait(lambda: d.device.replies >= 50)
-        fake.unplug()
-        # the flag is set on the servo thread just before the hook stops the safety layer
-        assert _wait(lambda: d.device.disconnected and not d.safety.enabled)
-        fake.replug(power_cycled=False)  # a loose cable: firmware and homing kept
-        assert _wait(lambda: d.device.reconnects == 1 and d.device.connected
-                     and d.safety.enabled)  # the hook restarts it just after the flag
-        assert not d.finished
-        n = len(fake.commands)
-        assert _wait(lambda: len(fake.commands) > n + 50 and fake.commands[-1].motors != (0, 0, 0))
-    finally:
-        d.close()
-        d.destroy_node()
 
 
 def test_the_servo_starts_once_the_node_is_told_not_when_it_is_built(ctx):
@@ -243,6 +175,14 @@ def test_loop_check_period_sets_the_checks_timer(ctx, monkeypatch, period, timer
         d.destroy_node()
 
 
+@pytest.mark.parametrize('backend', ['sim', 'falcon'])
+def test_the_python_tick_is_no_servo_loop_choice(ctx, backend):
+    """Every backend runs the compiled tick: 'python' is refused in one line naming the
+    choices."""
+    with pytest.raises(ParameterError, match=r"servo_loop.*'auto', 'native', 'native_process'"):
+        driver(ctx, backend=backend, servo_loop='python')
+
+
 def test_a_loop_check_period_under_a_second_is_refused(ctx):
     with pytest.raises(ParameterError, match='loop_check_period'):
         driver(ctx, loop_check_period=0.5)
@@ -261,13 +201,12 @@ def test_a_loop_check_period_under_a_second_is_refused(ctx):
     # demoted since the start (rtkit's run-time limit): the threads' policy now, not the line
     ('native_process', 'sim', False, 'SCHED_RR priority 20 from rtkit, in place of SCHED_FIFO '
      '50', 'runs under the normal scheduler'),
-    ('python', 'sim', True, 'SCHED_FIFO priority 50', 'waits for the interpreter lock'),
     ('native_process', 'sim', None, '', "the servo thread's scheduling: not reported")])
 def test_the_warning_names_the_likely_cause(ctx, monkeypatch, loop, backend, realtime,
                                             scheduling, cause):
     """The cause follows the servo threads' policy as the kernel reports it
     (``processes.servo_realtime``; None: no servo thread found)."""
-    from haptic_anfis.nodes import processes
+    from haptic_anfis.realtime import processes
     d = driver(ctx)
     try:
         monkeypatch.setattr(processes, 'servo_realtime',

@@ -40,7 +40,7 @@ def _wait(cond, seconds=10.0):
 pytest.importorskip('rclpy')
 from test_falcon_driver import driver  # noqa: E402  (the same node)
 
-from haptic_anfis.nodes._common import ParameterError  # noqa: E402
+from haptic_anfis.nodes.parameters import ParameterError  # noqa: E402
 
 
 def test_falcon_runs_in_a_servo_process_by_default_and_stops_at_zero(ctx, monkeypatch):
@@ -91,6 +91,31 @@ def test_unplugged_falcon_in_the_servo_process_stops_the_node_with_exit_1(ctx, m
         assert _wait(lambda: d.finished)
         assert d.exit_code == 1 and d.device.disconnected and not d.safety.enabled
         assert d.servo.running and d.servo.errors == 0
+    finally:
+        d.close()
+        d.destroy_node()
+
+
+def test_replugged_falcon_in_the_servo_process_is_reconnected_and_force_resumes(ctx,
+                                                                                 monkeypatch):
+    """The cable pulled and put back (a loose cable: firmware and homing kept): the servo
+    process reopens the device, the node's safety layer restarts, and force (gravity
+    compensation) reaches the motors again."""
+    shm = shared()
+    fake = centred_fake(shm)
+    monkeypatch.setattr(falcon_usb, 'import_ftdi', lambda: ftdi_class(fake))
+    d = driver(ctx, backend='falcon', disconnect_after=20, reconnect_period=0.1,
+               gravity_compensation=True, homing=False)
+    try:
+        assert _wait(lambda: d.device.replies >= 50)
+        shm[PLUGGED] = 0.0
+        assert _wait(lambda: d.device.disconnected and not d.safety.enabled)
+        shm[PLUGGED] = 1.0
+        assert _wait(lambda: d.device.reconnects == 1 and d.device.connected
+                     and d.safety.enabled)
+        assert not d.finished
+        n = shm[N]
+        assert _wait(lambda: shm[N] > n + 50 and tuple(shm[M0:M0 + 3]) != (0.0, 0.0, 0.0))
     finally:
         d.close()
         d.destroy_node()
@@ -186,9 +211,8 @@ def test_the_servo_process_never_collects_the_parents_garbage(ctx, monkeypatch):
             ftdi_class(fake)))
 
     monkeypatch.setattr(falcon_usb, 'import_ftdi', lambda: ftdi_class(fake))
-    from haptic_anfis.nodes.falcon_driver import FalconDriver
-    monkeypatch.setattr(FalconDriver, '_falcon_factory', staticmethod(
-        lambda p: lambda **kw: factory_collecting()))
+    from haptic_anfis.device import driver_loops
+    monkeypatch.setattr(driver_loops, 'falcon_factory', lambda p: lambda **kw: factory_collecting())
     gc.disable()
     try:
         _Finalised(shm)  # unreachable at once: garbage

@@ -10,7 +10,7 @@ import sys
 
 import pytest
 
-from haptic_anfis.nodes import processes
+from haptic_anfis.realtime import processes
 from haptic_anfis.session.spec import SessionSpec, add_session_arguments, spec_from_args
 
 CPUS = sorted(os.sched_getaffinity(0))

@@ -13,7 +13,7 @@ import textwrap
 
 import pytest
 
-from haptic_anfis.nodes import processes
+from haptic_anfis.realtime import processes
 from haptic_anfis.session.spec import SessionError, SessionSpec, spec_from_args
 
 PRIO = 3  # below anything a real session uses, so a run beside one changes nothing there
@@ -66,8 +66,8 @@ def test_every_thread_raised_but_one_already_above_then_cleared():
     the raised ones to the normal scheduler and leaves the servo thread alone."""
     out = _run(f'''
         import os, threading
-        from haptic_anfis.device.servo import name_thread
-        from haptic_anfis.nodes.processes import set_graph_priority, leave_realtime
+        from haptic_anfis.realtime.scheduling import name_thread
+        from haptic_anfis.realtime.processes import set_graph_priority, leave_realtime
         ev, seen = threading.Event(), {{}}
         started = {{k: threading.Event() for k in ('servo', 'worker', 'late')}}
         def servo():
@@ -108,7 +108,7 @@ def test_a_node_started_by_a_realtime_process_starts_normal():
     own process) must not inherit that."""
     out = _run(f'''
         import functools, os, subprocess, sys
-        from haptic_anfis.nodes import processes
+        from haptic_anfis.realtime import processes
         processes.set_graph_priority({PRIO})
         child = [sys.executable, '-c', 'import os; print(os.sched_getscheduler(0))']
         print(subprocess.run(child, capture_output=True, text=True,
@@ -143,8 +143,8 @@ def test_refused_fifo_asks_rtkit_for_the_haptic_path_threads(monkeypatch):
     haptic path ask rtkit for SCHED_RR, with the soft run-time limit below rtkit's; threads rtkit
     refused are said; rtkit refusing them all, or absent, is the refusal's line with both
     reasons. Fakes only: no policy changes."""
-    from haptic_anfis.device import rtkit
-    from haptic_anfis.device.rtkit import RealtimeKitError
+    from haptic_anfis.realtime import rtkit
+    from haptic_anfis.realtime.rtkit import RealtimeKitError
 
     def refuse(*a):
         raise PermissionError(1, 'Operation not permitted')
@@ -182,7 +182,7 @@ def test_haptic_path_threads_are_the_main_one_and_those_named_for_it():
     thread asleep for good under another name."""
     import threading
 
-    from haptic_anfis.device.servo import name_thread
+    from haptic_anfis.realtime.scheduling import name_thread
     named, go = {}, threading.Event()
 
     def run(name):
@@ -215,7 +215,7 @@ def test_a_thread_over_the_soft_run_time_limit_goes_normal_and_the_process_lives
     r = subprocess.run([sys.executable, '-X', f'pycache_prefix={tmp_path}', '-c',
                         textwrap.dedent(f'''
         import os, resource, time
-        from haptic_anfis.nodes.processes import guard_realtime_time
+        from haptic_anfis.realtime.processes import guard_realtime_time
         guard_realtime_time()
         resource.setrlimit(resource.RLIMIT_RTTIME, (100_000, 200_000))
         os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param({PRIO}))
@@ -238,8 +238,8 @@ def test_leaving_real_time_keeps_the_servo_threads_and_lets_a_long_close_run():
     RLIMIT_RTTIME (the driver writing an hour's trace) is not SIGKILLed for it."""
     r = subprocess.run([sys.executable, '-c', textwrap.dedent(f'''
         import os, resource, threading, time
-        from haptic_anfis.device.servo import name_thread, realtime_priority
-        from haptic_anfis.nodes.processes import leave_realtime
+        from haptic_anfis.realtime.scheduling import name_thread, realtime_priority
+        from haptic_anfis.realtime.processes import leave_realtime
         resource.setrlimit(resource.RLIMIT_RTTIME, (100_000, 200_000))
         os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param({PRIO}))
         tid, go = [], threading.Event()
@@ -270,7 +270,7 @@ def test_sim_runs_its_graph_in_a_session_of_its_own_and_stops_on_ctrl_c(tmp_path
     import signal
     import time
 
-    from haptic_anfis.nodes.processes import OWN_SESSION
+    from haptic_anfis.realtime.processes import OWN_SESSION
     env = {k: v for k, v in os.environ.items() if k != OWN_SESSION}
     env['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
     p = subprocess.Popen([sys.executable, '-m', 'haptic_anfis.cli', 'sim', '--duration', '120',

@@ -9,7 +9,10 @@ from __future__ import annotations
 import json
 import os
 import signal
+import subprocess
+import sys
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -23,9 +26,11 @@ from haptic_anfis.device.trace import DISABLED, load_trace  # noqa: E402
 
 from geometry_msgs.msg import WrenchStamped  # noqa: E402
 
-from haptic_anfis.nodes import interfaces as ifc  # noqa: E402
+from haptic_anfis import interfaces as ifc  # noqa: E402
 from haptic_anfis.nodes.falcon_driver import PARAMS as DRIVER_PARAMS  # noqa: E402
 from haptic_anfis.nodes.parameters import default_of  # noqa: E402
+from haptic_anfis.realtime.processes import node_env  # noqa: E402
+from delay_relay import FORCE_SERVER_REMAP  # noqa: E402
 from test_nodes_process import Observer, _domains, launch, stop  # noqa: E402
 
 #: [s] the driver's default model_hold_time
@@ -56,8 +61,13 @@ def test_force_follows_a_press_through_a_delayed_force_server(tmp_path, mode):
     commands = []
     obs.node.create_subscription(WrenchStamped, ifc.TOPIC_COMMAND, commands.append, 100)
     try:
-        procs['force_server'] = launch('force_server', ['-p', 'delay:=0.02'], domain,
+        # the force server's outputs reach the driver through a relay 20 ms late
+        procs['force_server'] = launch('force_server', ['-r', *FORCE_SERVER_REMAP], domain,
                                        tmp_path / 'force_server.log')
+        procs['delay_relay'] = subprocess.Popen(
+            [sys.executable, str(Path(__file__).with_name('delay_relay.py')), '0.02'],
+            env=node_env(domain), stdout=(tmp_path / 'delay_relay.log').open('w'),
+            stderr=subprocess.STDOUT)
         procs['contact_detector'] = launch('contact_detector', [], domain,
                                            tmp_path / 'contact_detector.log')
         procs['falcon_driver'] = launch('falcon_driver', [

@@ -91,13 +91,10 @@ def test_a_trace_that_kept_only_its_newest_ticks_says_so_and_refuses_a_window(tm
 def test_the_drivers_trace_keeps_trace_seconds_of_ticks(seconds, rows):
     """``trace_seconds`` bounds the driver's trace to that many seconds at its rate; 0 keeps
     every tick; no ``trace_path``, no trace."""
-    pytest.importorskip('rclpy')
-    from haptic_anfis.nodes.falcon_driver import FalconDriver
-    t = FalconDriver._tick_trace({'trace_path': 'x.npz', 'rate': 1000.0,
-                                  'trace_seconds': seconds})
+    from haptic_anfis.device.driver_loops import tick_trace
+    t = tick_trace({'trace_path': 'x.npz', 'rate': 1000.0, 'trace_seconds': seconds})
     assert t.max_rows == rows
-    assert FalconDriver._tick_trace({'trace_path': '', 'rate': 1000.0,
-                                     'trace_seconds': seconds}) is None
+    assert tick_trace({'trace_path': '', 'rate': 1000.0, 'trace_seconds': seconds}) is None
 
 
 def test_the_ideal_force_is_the_sessions_own_case(tmp_path):

@@ -14,7 +14,7 @@ rclpy = pytest.importorskip('rclpy')
 from rclpy.parameter import Parameter  # noqa: E402
 
 from haptic_anfis.nodes.base import HapticNode  # noqa: E402
-from haptic_anfis.nodes.processes import node_names  # noqa: E402
+from haptic_anfis.realtime.processes import node_names  # noqa: E402
 
 
 def node_class(name: str) -> type:

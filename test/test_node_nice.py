@@ -1,7 +1,7 @@
 """Nodes off the haptic loop start at a lower CPU priority in every layout (issue 32)."""
 from __future__ import annotations
 
-from haptic_anfis.nodes import processes
+from haptic_anfis.realtime import processes
 
 
 def test_supervisor_starts_the_view_nodes_niced_and_the_loop_nodes_not(monkeypatch):

@@ -19,8 +19,10 @@ from std_srvs.srv import Trigger  # noqa: E402
 from visualization_msgs.msg import MarkerArray  # noqa: E402
 
 from haptic_anfis.tissue.dataset import DATA_DIR  # noqa: E402
-from haptic_anfis.nodes import interfaces as ifc  # noqa: E402
-from haptic_anfis.nodes._common import LOOP_QOS, ParameterError, config_file  # noqa: E402
+from haptic_anfis import interfaces as ifc  # noqa: E402
+from haptic_anfis.resources import config_file  # noqa: E402
+from haptic_anfis.nodes.parameters import ParameterError  # noqa: E402
+from haptic_anfis.nodes.runtime import LOOP_QOS  # noqa: E402
 from haptic_anfis.nodes.graph import build_graph  # noqa: E402
 
 pytestmark = pytest.mark.ros

@@ -19,9 +19,9 @@ import yaml
 rclpy = pytest.importorskip('rclpy')
 from geometry_msgs.msg import PoseStamped, WrenchStamped  # noqa: E402
 
-from haptic_anfis.nodes import processes as launcher  # noqa: E402
-from haptic_anfis.nodes import interfaces as ifc  # noqa: E402
-from haptic_anfis.nodes._common import LOOP_QOS  # noqa: E402
+from haptic_anfis.realtime import processes as launcher  # noqa: E402
+from haptic_anfis import interfaces as ifc  # noqa: E402
+from haptic_anfis.nodes.runtime import LOOP_QOS  # noqa: E402
 
 pytestmark = pytest.mark.ros
 ROOT = Path(__file__).resolve().parents[1]

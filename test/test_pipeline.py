@@ -103,11 +103,37 @@ def _imports(path: Path) -> set[str]:
     return {m for m in out if m.startswith('haptic_anfis')}
 
 
+def test_the_local_model_record_is_the_one_layout_of_names_slices_and_values():
+    """interfaces.LOCAL_MODEL is the message's layout: the names are its fields' components in
+    order, each LM_* position is its field's, and an encoded message views as one record whose
+    fields are the parts given to the encoder."""
+    L = ifc.LOCAL_MODEL
+    assert L.itemsize == 8 * len(ifc.LOCAL_MODEL_FIELDS)
+    assert ifc.LOCAL_MODEL_FIELDS[:4] == ('f0_x', 'f0_y', 'f0_z', 'p0_x')
+    assert ifc.LOCAL_MODEL_FIELDS[6:9] == ('k_xx', 'k_xy', 'k_xz')
+    assert ifc.LOCAL_MODEL_FIELDS[-2:] == ('depth', 'zero_at_surface')
+    for name in L.names:
+        at = ifc.field_index(L, name)
+        names = ifc.LOCAL_MODEL_FIELDS[at] if isinstance(at, slice) else (
+            ifc.LOCAL_MODEL_FIELDS[at],)
+        assert all(n == name or n.startswith(f'{name}_') for n in names), (name, names)
+    rng = np.random.default_rng(3)
+    f0, p0, k, c = rng.normal(size=3), rng.normal(size=3), rng.normal(size=9), rng.normal(size=3)
+    v = model_values(tuple(f0), tuple(p0), list(k), tuple(c), (0.0, 0.6, 0.8), (-1.0, 0.0, 0.0),
+                     0.004, True)
+    r = np.asarray(v).view(L)[0]
+    np.testing.assert_array_equal(r['f0'], f0)
+    np.testing.assert_array_equal(r['k'], k)
+    np.testing.assert_array_equal(r['contact'], c)
+    assert tuple(r['normal']) == (0.0, 0.6, 0.8) and tuple(r['direction']) == (-1.0, 0.0, 0.0)
+    assert r['depth'] == 0.004 == v[ifc.LM_DEPTH] and r['zero_at_surface'] == 1.0
+
+
 def test_core_imports_no_node_module_and_interfaces_imports_nothing():
     """interfaces is a leaf (no interfaces <-> device.local_model cycle); the pipeline and the
     core rooms import no node module, at any level (function-level imports count)."""
     assert _imports(ROOT / 'haptic_anfis' / 'interfaces.py') == set()
-    core = ['device', 'contact', 'anfis', 'tissue', 'exam', 'cases', 'bag']
+    core = ['device', 'contact', 'anfis', 'tissue', 'exam', 'cases', 'bag', 'realtime']
     files = [f for room in ['pipeline'] + core
              for f in sorted((ROOT / 'haptic_anfis' / room).glob('*.py'))]
     bad = {str(f.relative_to(ROOT)): sorted(m for m in _imports(f)

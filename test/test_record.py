@@ -590,7 +590,7 @@ def pressing_bag(path: Path, t0_ns: int = 100_000_000_000) -> Path:
     builds its hover bag), its first message received at ``t0_ns``."""
     from haptic_anfis.bag import typestore
     from haptic_anfis.bag.writer import BagWriter
-    from haptic_anfis.nodes import interfaces as ifc
+    from haptic_anfis import interfaces as ifc
     ts = typestore()
     T, H = ts.types['builtin_interfaces/msg/Time'], ts.types['std_msgs/msg/Header']
     JS = ts.types['sensor_msgs/msg/JointState']

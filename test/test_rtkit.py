@@ -1,5 +1,5 @@
-"""Real-time priority from RealtimeKit (haptic_anfis.device.rtkit) against a fake system bus, and
-the servo threads' choice of scheduling (device/servo.py): FIFO, else rtkit, else a short slice."""
+"""Real-time priority from RealtimeKit (haptic_anfis.realtime.rtkit) against a fake system bus, and
+the servo threads' choice of scheduling (realtime/scheduling.py): FIFO, else rtkit, else a short slice."""
 from __future__ import annotations
 
 import os
@@ -11,8 +11,8 @@ import pytest
 
 jeepney = pytest.importorskip('jeepney')
 
-from haptic_anfis.device import rtkit, servo  # noqa: E402
-from haptic_anfis.device.rtkit import RealtimeKitError, make_thread_realtime  # noqa: E402
+from haptic_anfis.realtime import rtkit, scheduling  # noqa: E402
+from haptic_anfis.realtime.rtkit import RealtimeKitError, make_thread_realtime  # noqa: E402
 
 
 class FakeBus:
@@ -117,22 +117,22 @@ def test_servo_thread_falls_back_to_rtkit_then_to_a_short_slice(monkeypatch):
         raise PermissionError(1, 'Operation not permitted')
     monkeypatch.setattr(os, 'sched_setscheduler', refuse)
     sliced = []
-    monkeypatch.setattr(servo, 'request_short_slice', lambda: sliced.append(1) or ', slice')
+    monkeypatch.setattr(scheduling, 'request_short_slice', lambda: sliced.append(1) or ', slice')
     monkeypatch.setattr(rtkit, 'make_thread_realtime', lambda priority: min(priority, 20))
-    monkeypatch.setattr(servo, 'is_realtime', lambda: True)
-    said = servo.schedule_servo_thread(50)
+    monkeypatch.setattr(scheduling, 'is_realtime', lambda: True)
+    said = scheduling.schedule_servo_thread(50)
     assert said == 'SCHED_RR priority 20 from rtkit, in place of SCHED_FIFO 50' and not sliced
-    assert 'refused' in servo.set_realtime(50)  # rtkit only when asked for
+    assert 'refused' in scheduling.set_realtime(50)  # rtkit only when asked for
 
     def kit_refuses(priority):
         raise RealtimeKitError('rtkit: no rtkit-daemon on this machine')
     monkeypatch.setattr(rtkit, 'make_thread_realtime', kit_refuses)
-    monkeypatch.setattr(servo, 'is_realtime', lambda: False)
-    said = servo.schedule_servo_thread(50)
+    monkeypatch.setattr(scheduling, 'is_realtime', lambda: False)
+    said = scheduling.schedule_servo_thread(50)
     assert said.startswith('normal scheduler: SCHED_FIFO 50 refused (Operation not permitted; '
                            'rtkit: no rtkit-daemon on this machine)') and said.endswith(', slice')
     assert sliced == [1]
-    assert servo.schedule_servo_thread(0) == 'normal scheduler (priority 0), slice'
+    assert scheduling.schedule_servo_thread(0) == 'normal scheduler (priority 0), slice'
 
 
 def test_threads_of_another_process_over_one_connection_each_refusal_said(limits):
@@ -165,10 +165,10 @@ def test_the_soft_limit_of_another_process_is_lowered_with_prlimit(monkeypatch):
 
 
 def test_is_realtime_reads_the_policy_without_the_reset_on_fork_flag(monkeypatch):
-    monkeypatch.setattr(os, 'sched_getscheduler', lambda pid: os.SCHED_RR | servo.RESET_ON_FORK)
-    assert servo.is_realtime()
+    monkeypatch.setattr(os, 'sched_getscheduler', lambda pid: os.SCHED_RR | scheduling.RESET_ON_FORK)
+    assert scheduling.is_realtime()
     monkeypatch.setattr(os, 'sched_getscheduler', lambda pid: os.SCHED_OTHER)
-    assert not servo.is_realtime()
+    assert not scheduling.is_realtime()
 
 
 def test_off_realtime_steps_off_and_back_through_rtkit_when_fifo_is_refused(monkeypatch):
@@ -176,25 +176,25 @@ def test_off_realtime_steps_off_and_back_through_rtkit_when_fifo_is_refused(monk
     rtkit set is kept: only a privileged thread may clear it), then gets its priority back:
     SCHED_FIFO where allowed, else from rtkit; a thread that is not real-time is left alone.
     Fakes only: this test process's own policy never changes."""
-    state = {'policy': os.SCHED_RR | servo.RESET_ON_FORK, 'prio': 10}
+    state = {'policy': os.SCHED_RR | scheduling.RESET_ON_FORK, 'prio': 10}
     calls, kit = [], []
 
     def setscheduler(tid, policy, param):
         calls.append((policy, param.sched_priority))
-        if policy & ~servo.RESET_ON_FORK != os.SCHED_OTHER:
+        if policy & ~scheduling.RESET_ON_FORK != os.SCHED_OTHER:
             raise PermissionError(1, 'Operation not permitted')
         state.update(policy=policy, prio=0)
     monkeypatch.setattr(os, 'sched_getscheduler', lambda tid: state['policy'])
     monkeypatch.setattr(os, 'sched_getparam', lambda tid: os.sched_param(state['prio']))
     monkeypatch.setattr(os, 'sched_setscheduler', setscheduler)
     monkeypatch.setattr(rtkit, 'make_thread_realtime', lambda priority: kit.append(priority))
-    with servo.off_realtime():
-        assert not servo.is_realtime()
-    assert calls == [(os.SCHED_OTHER | servo.RESET_ON_FORK, 0),
-                     (os.SCHED_RR | servo.RESET_ON_FORK, 10)]
+    with scheduling.off_realtime():
+        assert not scheduling.is_realtime()
+    assert calls == [(os.SCHED_OTHER | scheduling.RESET_ON_FORK, 0),
+                     (os.SCHED_RR | scheduling.RESET_ON_FORK, 10)]
     assert kit == [10]
     calls.clear()
-    with servo.off_realtime():  # normal already: nothing to do
+    with scheduling.off_realtime():  # normal already: nothing to do
         pass
     assert calls == [] and kit == [10]
 
@@ -210,7 +210,7 @@ def test_off_realtime_gives_a_privileged_thread_its_own_policy_back(monkeypatch)
     monkeypatch.setattr(os, 'sched_getparam', lambda tid: os.sched_param(state['prio']))
     monkeypatch.setattr(os, 'sched_setscheduler', setscheduler)
     monkeypatch.setattr(rtkit, 'make_thread_realtime', lambda priority: pytest.fail('rtkit'))
-    with servo.off_realtime():
+    with scheduling.off_realtime():
         assert state == {'policy': os.SCHED_OTHER, 'prio': 0}
     assert state == {'policy': os.SCHED_RR, 'prio': 30}
-    assert servo.set_realtime(30, policy=os.SCHED_RR) == 'SCHED_RR priority 30'
+    assert scheduling.set_realtime(30, policy=os.SCHED_RR) == 'SCHED_RR priority 30'

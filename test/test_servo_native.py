@@ -21,6 +21,7 @@ from haptic_anfis.device.palpation import PalpationScript
 from haptic_anfis.device.servo_native import NativeServoLoop
 from haptic_anfis.device.start_gate import HeldScript
 from haptic_anfis.device.stats import LoopStats
+from haptic_anfis.interfaces import LM_P0, LOCAL_MODEL
 
 MAP = WorkspaceMapping(1.5, (0.03, 0.0, 0.0), 1.0)
 
@@ -143,7 +144,7 @@ def test_local_model_renders_as_the_python_renderer(seed, spread, approach):
     lp.safety.start()
     lp.renderer.offer_values(v, 0.0)
     ref.offer_values(v, 0.0)
-    p0 = np.array(v[3:6])
+    p0 = np.array(v[LM_P0])
     t = 0.0
     away = 0   # probes past an approach plane, further along it than the radius
     for _ in range(20):
@@ -183,7 +184,7 @@ def test_the_tick_frees_an_approach_plane_past_its_own_radius(approach_radius, a
     lp.safety.start()
     lp.renderer.offer_values(v, 0.0)
     ref.offer_values(v, 0.0)
-    q = np.array(v[3:6]) + np.array([-0.001, across, 0.0])   # n = +x: 1 mm in, across along y
+    q = np.array(v[LM_P0]) + np.array([-0.001, across, 0.0])   # n = +x: 1 mm in, across along y
     pin(lp, MAP.to_device(tuple(q)), 0.0)
     lp.tick(0.0)
     want, status = ref.render(tuple(q), 0.0)
@@ -201,17 +202,41 @@ def test_the_tick_kernels_are_rebuilt_when_a_function_they_inline_changes():
         f'a function compiled into the tick changed: set native_tick.INLINED_SOURCE_HASH = {got!r}')
 
 
+def test_a_model_offered_is_written_to_the_model_buffer_by_field_name():
+    """The renderer fills the compiled tick's model buffer by the fields of
+    native_tick.MODEL_SLOT, and the tick takes it into the state's m_* members in that order."""
+    lp = loop('local_model', max_force_rate=1e6)
+    lp.safety.start()
+    v = model_values(np.random.default_rng(1))
+    lm = np.asarray(v).view(LOCAL_MODEL)[0]
+    lp.renderer.offer_values(v, 0.25)
+    m = lp.model.view(nt.MODEL_SLOT)[0]
+    assert m['seq'] == 2.0 and m['valid'] == 1.0 and m['t0'] == 0.25
+    np.testing.assert_array_equal(m['f'], lm['f0'])
+    np.testing.assert_array_equal(m['p'], lm['p0'])
+    np.testing.assert_array_equal(m['d'], lm['direction'])
+    assert m['depth0'] == lm['depth'] and m['contact'] == 1.0 and m['knorm'] > 0.0
+    K = lm['k'].reshape(3, 3)
+    np.testing.assert_allclose(m['k'].reshape(3, 3), (K + K.T) / 2, atol=1e-9)  # 800 N/m: no clamp
+    lp.tick(0.0)
+    for i, name in enumerate(nt.MODEL_SLOT.names[1:]):
+        at = nt.S[f'm_{name}' if not m[name].shape else f'm_{name}0']
+        want = np.atleast_1d(m[name])
+        np.testing.assert_array_equal(lp.st[at:at + len(want)], want, err_msg=name)
+
+
 def test_non_finite_model_is_never_rendered():
     lp = loop('local_model', max_force_rate=1e6)
     lp.safety.start()
-    v = list(model_values(np.random.default_rng(0)))
-    nt_values = [*v[:6], *v[6:15], 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, v[24], 1.0, 1.0, 0.0, 1.0, 1.0,
-                 0.0, 0.0, 0.0, 1.0]
-    assert len(nt_values) == nt.MODEL_LEN - 1
-    nt_values[0] = math.nan
+    lm = np.asarray(model_values(np.random.default_rng(0))).view(LOCAL_MODEL)[0]
+    slot = np.zeros(1, nt.MODEL_SLOT)
+    m = slot[0]
+    m['f'], m['p'], m['k'], m['depth0'] = lm['f0'], lm['p0'], lm['k'], lm['depth']
+    m['zero'] = m['contact'] = m['valid'] = m['knorm'] = m['hold_skew'] = 1.0
+    m['f'][0] = math.nan
     from haptic_anfis.device.servo_native import _seq_write
-    _seq_write(lp.model, nt_values)
-    pin(lp, MAP.to_device(tuple(v[3:6])), 0.0)
+    _seq_write(lp.model, slot.view(np.float64)[1:])
+    pin(lp, MAP.to_device(tuple(lm['p0'])), 0.0)
     assert lp.tick(0.0) == (0.0, 0.0, 0.0)
     assert int(lp.st[nt.S.status]) == 0  # no model
     assert lp.safety.stats.rejected_nonfinite == 1
@@ -356,8 +381,8 @@ def test_stop_leaves_zero_force_and_trace_rows():
     lp.tick(0.0)
     assert lp.tick(0.001)[0] == pytest.approx(2.0)
     lp.ctl[nt.CTL.stop] = 1
-    nt.run(lp.cfg, lp.st, lp.times, lp.points, lp.buttons, lp.hand, lp.cmd, lp.model, lp.ctl,
-           lp.out, lp.cnt, lp.ring, lp._scratch, np.zeros(2, dtype=np.int64), lp._lock)
+    nt.run(lp.cfg, lp.st, lp.cnt, lp.hand_script, lp.buffers, lp._scratch,
+           np.zeros(2, dtype=np.int64), lp._lock)
     assert tuple(lp.st[nt.S.f0:nt.S.f0 + 3]) == (0.0, 0.0, 0.0)
     lp._drain()
     rows = lp.trace.arrays()
@@ -546,8 +571,8 @@ def test_a_refused_priority_is_said_with_rtkits_reason_on_thread_and_process(mon
     know rtkit's answer). The refusals are faked before the fork, so the child inherits them."""
     import os
 
-    from haptic_anfis.device import rtkit
-    from haptic_anfis.device.rtkit import RealtimeKitError
+    from haptic_anfis.realtime import rtkit
+    from haptic_anfis.realtime.rtkit import RealtimeKitError
 
     def refuse(*_a):
         raise PermissionError(1, 'Operation not permitted')
@@ -577,7 +602,7 @@ def test_two_workers_serve_one_schedule_each_on_its_core(process):
     import os
     import time
 
-    from haptic_anfis.device.servo_native import worker_cpus
+    from haptic_anfis.realtime.scheduling import worker_cpus
     from haptic_anfis.device.trace import TickTrace
     lp = loop(process=process, trace=TickTrace(), workers=2)
     cpus = worker_cpus(2)
@@ -633,8 +658,7 @@ def test_a_worker_stalled_in_its_tick_is_taken_over_and_its_result_dropped():
     a, b = worker_arrays(lp), worker_arrays(lp)
 
     def compute(w, now):
-        return nt._compute(now * 1e-9, lp.cfg, w[0], lp.times, lp.points, lp.buttons, lp.hand,
-                           lp.cmd, lp.model, lp.ctl, w[1], w[3])
+        return nt._compute(now * 1e-9, lp.cfg, w[0], w[1], lp.hand_script, lp.buffers, w[3])
 
     ok, da, ga = nt._claim(t0, period, lp.ctl, lp.st, lp.cnt, a[0], a[1], a[2])
     assert ok and da == t0
@@ -648,7 +672,7 @@ def test_a_worker_stalled_in_its_tick_is_taken_over_and_its_result_dropped():
     assert lp.cnt[C.taken_over] == 1 and lp.cnt[C.deadline_misses] == 1
     _, *q = compute(b, late)
     assert nt._commit(gb, db, period, lp.st, lp.cnt, b[0], b[1], b[2])
-    nt._publish(late * 1e-9, lp.st, lp.out, lp.cnt, lp.ring, b[3], 0, *q)
+    nt._publish(late * 1e-9, lp.st, lp.cnt, lp.buffers, b[3], 0, *q)
     assert not nt._commit(ga, da, period, lp.st, lp.cnt, a[0], a[1], a[2])  # dropped
     assert lp.st[S.t_prev] == pytest.approx(late * 1e-9)
     assert lp.cnt[C.ticks] == 1 and lp.cnt[C.trace_w] == 1 and lp.cnt[C.gen] == 1
@@ -684,8 +708,8 @@ def test_any_order_of_claims_and_commits_keeps_one_tick_per_generation(events):
         if pending[who] is None:
             ok, d, g = nt._claim(t, period, lp.ctl, lp.st, lp.cnt, w[0], w[1], w[2])
             if ok:
-                q = nt._compute(t * 1e-9, lp.cfg, w[0], lp.times, lp.points, lp.buttons,
-                                lp.hand, lp.cmd, lp.model, lp.ctl, w[1], w[3])[1:]
+                q = nt._compute(t * 1e-9, lp.cfg, w[0], w[1], lp.hand_script, lp.buffers,
+                                w[3])[1:]
                 pending[who] = (g, d, t, q)
             else:
                 assert d > t or lp.cnt[C.claim_ns] == lp.cnt[C.deadline_ns]
@@ -693,7 +717,7 @@ def test_any_order_of_claims_and_commits_keeps_one_tick_per_generation(events):
             g, d, t0, q = pending[who]
             pending[who] = None
             if nt._commit(g, d, period, lp.st, lp.cnt, w[0], w[1], w[2]):
-                nt._publish(t0 * 1e-9, lp.st, lp.out, lp.cnt, lp.ring, w[3], 0, *q)
+                nt._publish(t0 * 1e-9, lp.st, lp.cnt, lp.buffers, w[3], 0, *q)
                 committed.append(t0)
         t += step_us * 1000
     n = len(committed)
@@ -723,7 +747,7 @@ def test_the_first_tick_is_claimed_once():
 def test_worker_cores_are_distinct_and_never_more_than_allowed(monkeypatch):
     import os
 
-    from haptic_anfis.device.servo_native import worker_cpus
+    from haptic_anfis.realtime.scheduling import worker_cpus
     monkeypatch.setattr(os, 'sched_getaffinity', lambda pid: {0, 1, 2, 3})
     assert worker_cpus(2) == [0, 3]
     assert worker_cpus(4) == [0, 3, 1, 2]
@@ -763,10 +787,11 @@ def test_an_external_script_is_played_through_the_hand_buffer():
 
 
 def test_auto_servo_loop_is_the_servo_process_for_both_backends():
-    from haptic_anfis.nodes.falcon_driver import ParameterError, resolve_servo_loop
+    from haptic_anfis.nodes.falcon_params import resolve_servo_loop
+    from haptic_anfis.nodes.parameters import ParameterError
     assert resolve_servo_loop('auto') == 'native_process'
     assert resolve_servo_loop('auto', 'falcon') == 'native_process'
-    for choice in ('native', 'native_process', 'python'):
+    for choice in ('native', 'native_process'):
         assert resolve_servo_loop(choice) == choice
     with pytest.raises(ParameterError, match="servo_loop: got 'native' with backend 'falcon'"):
         resolve_servo_loop('native', 'falcon')

@@ -19,7 +19,7 @@ import pytest
 
 from haptic_anfis.device import PalpationScript
 from haptic_anfis.device.start_gate import HeldScript
-from haptic_anfis.nodes.processes import Supervisor, renamed_output
+from haptic_anfis.realtime.processes import Supervisor, renamed_output
 
 ROOT = Path(__file__).resolve().parents[1]
 SCRIPT = ROOT / 'config' / 'palpation.yaml'
@@ -182,7 +182,7 @@ def test_node_interrupted_while_starting_exits_cleanly(tmp_path):
     compiling): exit code 0 and no traceback, whichever moment the signal lands."""
     from rclpy.context import Context
 
-    from haptic_anfis.nodes.processes import node_env, start_node
+    from haptic_anfis.realtime.processes import node_env, start_node
     domain = _domain + 3
     ctx = Context()
     rclpy.init(context=ctx, domain_id=domain)

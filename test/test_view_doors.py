@@ -236,7 +236,7 @@ def test_a_launch_gives_its_web_view_one_token_for_every_restart(monkeypatch):
     import os
 
     from haptic_anfis.session import SessionSpec
-    from haptic_anfis.session.processes import ProcessSession
+    from haptic_anfis.session.launch_runner import ProcessSession
     from haptic_anfis.view.doors import TOKEN_ENV
     monkeypatch.delenv(TOKEN_ENV, raising=False)
     spec = SessionSpec(command='launch', nodes=('falcon_driver', 'web_view'))

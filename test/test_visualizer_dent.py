@@ -12,7 +12,7 @@ from rclpy.qos import DurabilityPolicy, QoSProfile  # noqa: E402
 from visualization_msgs.msg import MarkerArray  # noqa: E402
 
 from deformation_fixture import A, synthetic  # noqa: E402
-from haptic_anfis.nodes import interfaces as ifc  # noqa: E402
+from haptic_anfis import interfaces as ifc  # noqa: E402
 from haptic_anfis.nodes.graph import build_graph  # noqa: E402
 from haptic_anfis.tissue.displacement import save_displacements  # noqa: E402
 

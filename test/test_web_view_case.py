@@ -355,7 +355,7 @@ def test_the_page_says_when_the_drivers_loop_fell_behind():
     node's status and numbers that are not ours change nothing."""
     from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 
-    from haptic_anfis.nodes import interfaces as ifc
+    from haptic_anfis import interfaces as ifc
     from haptic_anfis.nodes.web_view import web_view_in_thread
 
     def report(windows, behind, name=ifc.LOOP_DIAGNOSTIC):

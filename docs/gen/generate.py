@@ -292,8 +292,8 @@ def node_reference() -> str:
 PACKAGE = ROOT / 'haptic_anfis'
 
 #: the order rooms are listed in: the ROS-free core first, then the ROS and command layers
-_LAYERS = ['contact', 'tissue', 'anfis', 'interfaces', 'device', 'exam', 'cases', 'bag', 'report',
-           'numba_cache', 'nodes', 'commands', 'cli', '(package)']
+_LAYERS = ['contact', 'tissue', 'anfis', 'interfaces', 'realtime', 'device', 'exam', 'cases', 'bag',
+           'report', 'numba_cache', 'nodes', 'commands', 'cli', '(package)']
 
 
 def _room(module: str) -> str:

@@ -86,7 +86,7 @@ def _recover(args) -> int:
 
 def _resim(args) -> int:
     from ..nodes.resim import resimulate
-    from ..nodes._common import ParameterError
+    from ..nodes.parameters import ParameterError
     try:
         r = resimulate(args.path, params_files=args.params_file,
                        force_overrides={'model_path': args.model} if args.model else None)
@@ -101,7 +101,7 @@ def _resim(args) -> int:
 
 
 def _ros_node(cls, overrides: list, setup=None) -> int:
-    from ..nodes._common import run_node
+    from ..nodes.runtime import run_node
 
     def factory():
         node = cls(parameter_overrides=overrides)

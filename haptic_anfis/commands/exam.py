@@ -85,7 +85,7 @@ def run(args: argparse.Namespace) -> int:
         # the loop's process in a session of its own, as sim's (a fair CPU share where the
         # kernel groups by session: beside 8 busy processes of the terminal's session and the
         # browser, the exam's start took minutes)
-        from ..nodes.processes import rerun_command_in_own_session
+        from ..realtime.processes import rerun_command_in_own_session
         code = rerun_command_in_own_session(args)
         if code is not None:
             return code

@@ -39,7 +39,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from ..device.falcon_check import calibrate, geometry_with, run_check, write_counts_per_nm
     from ..device.falcon_usb import FalconUSB
-    from ..nodes._common import config_file
+    from ..resources import config_file
     params_file = args.params_file or str(config_file('falcon_driver.yaml'))
     counts = args.counts_per_nm if args.counts_per_nm is not None else _counts_in(params_file)
     for name, v in (('--move-seconds', args.move_seconds), ('--spring-seconds',

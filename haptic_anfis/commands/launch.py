@@ -26,7 +26,7 @@ def run(args: argparse.Namespace) -> int:
     from ..cases.library import use_case_dir
     use_case_dir(args.case_dir)   # before anything reads the library; the nodes inherit it
     if args.node_sessions == 'one':
-        from ..nodes.processes import rerun_command_in_own_session
+        from ..realtime.processes import rerun_command_in_own_session
         code = rerun_command_in_own_session(args)  # the nodes' one session
         if code is not None:
             return code

@@ -35,7 +35,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from ..cases.library import use_case_dir
     use_case_dir(args.case_dir)   # before anything reads the library; the nodes inherit it
-    from ..nodes.processes import rerun_command_in_own_session
+    from ..realtime.processes import rerun_command_in_own_session
     code = rerun_command_in_own_session(args)  # the graph in a session of its own (fair CPU)
     if code is not None:
         return code

@@ -146,7 +146,7 @@ def _list(s: _Session, args) -> int:
 
 
 def _echo(s: _Session, args) -> int:
-    from ..nodes._common import message_class
+    from ..nodes.runtime import message_class
     topic = _absolute(args.topic)
     cls = message_class(s.topic_type(topic, args.type, args.timeout))
     want = 1 if args.once else args.count
@@ -175,7 +175,7 @@ def _echo(s: _Session, args) -> int:
 def _hz(s: _Session, args) -> int:
     from collections import deque
 
-    from ..nodes._common import message_class
+    from ..nodes.runtime import message_class
     topic = _absolute(args.topic)
     cls = message_class(s.topic_type(topic, args.type, args.timeout))
     times: deque = deque(maxlen=max(args.window, 2))

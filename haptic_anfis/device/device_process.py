@@ -106,14 +106,12 @@ class ProcessDevice:
 
 
 def run_device_loop(factory: Callable[[], object], cfg: np.ndarray, st: np.ndarray,
-                    times: np.ndarray, points: np.ndarray, buttons: np.ndarray,
-                    hand: np.ndarray, cmd: np.ndarray, model: np.ndarray, ctl: np.ndarray,
-                    out: np.ndarray, cnt: np.ndarray, ring: np.ndarray, scratch: np.ndarray,
+                    cnt: np.ndarray, script: nt.Script, buf: nt.Buffers, scratch: np.ndarray,
                     status: np.ndarray, message: np.ndarray,
                     clock: Callable[[], float] = time.monotonic,
                     sleep: Callable[[float], None] = time.sleep) -> int:
-    """The servo process's loop (see the module docstring) until ``ctl[stop]``; returns the exit
-    status (0, or 1 when the device could not be opened: ``message`` says why).
+    """The servo process's loop (see the module docstring) until ``buf.ctl[stop]``; returns the
+    exit status (0, or 1 when the device could not be opened: ``message`` says why).
 
     ``factory()`` builds the device IN this process (a USB handle must not cross a fork); its
     ``log``, ``on_disconnect`` and ``on_reconnect`` hooks, when it has them, are pointed at this
@@ -130,6 +128,7 @@ def run_device_loop(factory: Callable[[], object], cfg: np.ndarray, st: np.ndarr
         status[DEV.state] = FAILED
         return 1
     period = float(cfg[nt.CFG.period])
+    ctl, hand = buf.ctl, buf.hand
     status[DEV.state] = RUNNING
     cnt[nt.CNT.running] = 1
     deadline = clock()
@@ -141,18 +140,18 @@ def run_device_loop(factory: Callable[[], object], cfg: np.ndarray, st: np.ndarr
                 deadline = now
             try:
                 s = dev.read(now)
-                hand[1] = now
-                hand[2:5] = s.position
-                hand[5:8] = s.velocity
-                hand[8], hand[9] = s.buttons[0], s.buttons[1]
+                H = nt.HAND
+                hand[H.t] = now
+                hand[H.x0:H.x0 + 3] = s.position
+                hand[H.v0:H.v0 + 3] = s.velocity
+                hand[H.b0], hand[H.b1] = s.buttons[0], s.buttons[1]
             except Exception as exc:  # a reading we cannot use: zero force, no tick from it
                 status[DEV.loop_errors] += 1
                 _say(f'device read failed: {exc}')
                 nt._fault(st, cnt)
                 force = (0.0, 0.0, 0.0)
             else:
-                nt.tick(now, cfg, st, times, points, buttons, hand, cmd, model, ctl, out, cnt,
-                        ring, scratch, time.time_ns())
+                nt.tick(now, cfg, st, cnt, script, buf, scratch, time.time_ns())
                 force = (float(st[nt.S.f0]), float(st[nt.S.f1]), float(st[nt.S.f2]))
             try:
                 dev.write(force)

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import math
 
+from ..interfaces import LM_DEPTH
 from .buttons import ClutchMark
 from .falcon import DeviceState, WorkspaceMapping
 from .local_model import (APPROACH_RADIUS, FALCON_MAX_STIFFNESS, LocalModel, LocalModelRenderer,
@@ -40,19 +41,23 @@ class ForceInput:
             clutch is held, no jump after it).
         approach_radius: how far [m] along an approach plane from its point it renders
             (:class:`~.local_model.LocalModelRenderer`).
+        renderer: the renderer models go to (the compiled tick's,
+            :class:`~.servo_native.NativeRenderer`), or None: a
+            :class:`~.local_model.LocalModelRenderer` built from the arguments above.
     """
 
     def __init__(self, safety: SafetyLayer, mapping: WorkspaceMapping, mode: str = 'local_model',
                  max_stiffness: float = FALCON_MAX_STIFFNESS, validity_time: float = 0.05,
                  validity_radius: float = 0.005, period: float = 0.001,
                  stamps: StampBook | None = None, clutch: ClutchMark | None = None,
-                 approach_radius: float = APPROACH_RADIUS) -> None:
+                 approach_radius: float = APPROACH_RADIUS,
+                 renderer: LocalModelRenderer | None = None) -> None:
         if mode not in MODES:
             raise ValueError(f'mode: expected one of {MODES}, got {mode!r}')
         self.safety, self.mapping, self.mode = safety, mapping, mode
         self.clutch = clutch
         self.stamps = stamps if stamps is not None else StampBook()
-        self.renderer = LocalModelRenderer(
+        self.renderer = renderer if renderer is not None else LocalModelRenderer(
             tissue_stiffness_limit(max_stiffness, mapping.force_scale, mapping.scale),
             validity_time, validity_radius, fresh_age=1.5 * period,
             approach_radius=approach_radius)
@@ -166,7 +171,7 @@ class ForceInput:
         if cur is not None and t_pose < cur:
             return 'ignored: older than the current model'
         self.renderer.offer_values(v, t_pose, checked=True)
-        self.last_in_contact = v[24] > 0.0  # depth0
+        self.last_in_contact = v[LM_DEPTH] > 0.0
         return OK
 
     # -- statistics ---------------------------------------------------------------------------

@@ -555,13 +555,13 @@ def check_values(v) -> None:
             if not all(math.isfinite(c) for c in v[a:b]):
                 what = 'a finite (3, 3) matrix' if b - a == 9 else '3 finite numbers'
                 raise ValueError(f'local model {name}: expected {what}, got {list(v[a:b])!r}')
-    depth0 = v[24]  # LM_DEPTH; 18-20: LM_N, 21-23: LM_D
+    depth0 = v[LM_DEPTH]
     if not (math.isfinite(depth0) and depth0 >= 0.0):
         raise ValueError(f'local model depth0: expected a finite value >= 0, got {depth0!r}')
-    nx, ny, nz = v[18], v[19], v[20]
+    nx, ny, nz = v[LM_N]
     nn = nx * nx + ny * ny + nz * nz
     if depth0 > 0.0 or nn > 0.0:
-        dx, dy, dz = v[21], v[22], v[23]
+        dx, dy, dz = v[LM_D]
         for name, sq, vec in (('normal', nn, (nx, ny, nz)),
                               ('direction', dx * dx + dy * dy + dz * dz, (dx, dy, dz))):
             if abs(math.sqrt(sq) - 1.0) > 1e-3:
@@ -589,18 +589,19 @@ def accept_values(v, max_stiffness: float, stats, checked: bool = False):
         except ValueError:
             stats.rejected += 1
             raise
-    (f0x, f0y, f0z, p0x, p0y, p0z, *_, nx, ny, nz, dx, dy, dz, depth0, zero) = v
-    k, changed = condition_stiffness_values(v[6:15], max_stiffness)
+    f0, p0, depth0, zero = tuple(v[LM_F0]), tuple(v[LM_P0]), v[LM_DEPTH], v[LM_ZERO]
+    nx, ny, nz = v[LM_N]
+    k, changed = condition_stiffness_values(v[LM_K], max_stiffness)
     if changed:
         stats.stiffness_clamped += 1
     # in contact, or an approach model (free, with the plane ahead): renders past its plane
     contact = depth0 > 0.0 or nx * nx + ny * ny + nz * nz > 0.0
     if contact:
+        dx, dy, dz = v[LM_D]
         g, d = depth_gradient_values(nx, ny, nz, dx, dy, dz), (dx, dy, dz)
     else:
         g = d = (0.0, 0.0, 0.0)
-    return ((f0x, f0y, f0z), (p0x, p0y, p0z), k, g, d, float(depth0), zero > 0.5 and contact,
-            contact)
+    return f0, p0, k, g, d, float(depth0), zero > 0.5 and contact, contact
 
 
 # split_offset, hold_offset and across_beyond are compiled into native_tick's kernels (it

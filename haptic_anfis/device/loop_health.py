@@ -77,3 +77,17 @@ def behind_text(windows: int, behind: int, cause: str) -> str:
         return ''
     return (f'the force came late in {behind} of {windows} check windows so far (the machine '
             f'starves the 1 kHz loop: what the hand feels is not the tissue alone); {cause}')
+
+
+def behind_because(backend: str, realtime: bool | None, scheduling: str) -> str:
+    """The likely cause of a servo loop falling behind, and what to do, in words: from the
+    device ``backend``, whether its servo threads run real-time now (None: no servo thread
+    found) and its start's ``scheduling`` line."""
+    if realtime:
+        return ('the servo is real-time: the machine itself stalled'
+                + (", or the device's USB replies came late" if backend == 'falcon' else '')
+                + ' (docs/servo_loop.md, "Stalls of the machine itself")')
+    if realtime is False:
+        return ('the servo runs under the normal scheduler; real-time priority keeps the '
+                'period (docs/nodes.md, "The servo thread\'s priority")')
+    return f'the servo thread\'s scheduling: {scheduling or "not reported"}'

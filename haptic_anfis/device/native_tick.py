@@ -44,9 +44,11 @@ It sleeps to absolute 1 ms deadlines with ``clock_nanosleep`` and reads the cloc
    clamp to ``max_force``.
 6. Write the device, the tick's trace row, the published state (a seqlock), the counters.
 
-Exchange with Python (:mod:`.servo_native`) is through numpy arrays only: seqlock buffers for the
-command, the model and the published state (the writer makes the sequence number odd, writes,
-makes it even; the reader retries when it changed), a ring for the trace, int64 counters. A libc
+Exchange with Python (:mod:`.servo_native`) is through numpy arrays only, passed as a few named
+groups (the configuration, the loop's state and counters, the :class:`Script` and the
+:class:`Buffers`): seqlock buffers for the command, the model and the published state (the
+writer makes the sequence number odd, writes, makes it even; the reader retries when it
+changed), a ring for the trace, int64 counters. A libc
 ``memcpy`` through ctypes is an opaque call the compiler can neither reorder stores across nor
 elide: it orders each seqlock. Times are seconds on CLOCK_MONOTONIC (Python's ``time.monotonic``),
 lengths metres, forces newtons.
@@ -58,6 +60,7 @@ import ctypes.util
 import enum
 import hashlib
 import inspect
+from typing import NamedTuple
 
 import numba as nb
 from llvmlite import binding as llvm
@@ -85,8 +88,9 @@ def inlined_source_hash() -> str:
         h.update(inspect.getsource(f).encode())
     return h.hexdigest()[:16]
 
-__all__ = ['CFG', 'CNT', 'OUT', 'CMD_LEN', 'MODEL_LEN', 'STATE_LEN', 'CTL', 'TRACE_COLS',
-           'CFG_LEN', 'CTL_LEN', 'HAND_LEN', 'OUT_LEN', 'CNT_LEN', 'SCRATCH_LEN', 'LOCK_LEN',
+__all__ = ['CFG', 'CNT', 'OUT', 'CMD', 'HAND', 'CMD_LEN', 'MODEL_LEN', 'MODEL_SLOT', 'STATE_LEN',
+           'CTL', 'TRACE_COLS', 'Script', 'Buffers', 'CFG_LEN', 'CTL_LEN', 'HAND_LEN', 'OUT_LEN',
+           'CNT_LEN', 'SCRATCH_LEN', 'LOCK_LEN',
            'tick', 'run', 'clock_now', 'new_state']
 
 _libc = ctypes.CDLL(ctypes.util.find_library('c') or 'libc.so.6', use_errno=True)
@@ -121,6 +125,55 @@ def _index(name: str, names: str) -> type:
     return enum.IntEnum(name, names, start=0)
 
 
+#: The model buffer (float64 seqlock), its one layout: seq; the model as the tick renders it, in
+#: the tissue frame: f [N] and p [m] (F0 and p0), k (9: the conditioned stiffness's symmetric
+#: part, row-major [N/m]), g (the depth's gradient), d (the indentation direction), depth0 [m],
+#: zero (1: zero at the surface), contact (1: renders past its plane), t0 (its pose's time [s]),
+#: valid (0 = cleared), knorm (the symmetric part's spectral norm [N/m]), w (3: its skew part,
+#: A e = w x e [N/m]; local_model module doc), hold_skew (1: a held model keeps the skew part, K
+#: having no rotating mode). Python writes it by field name
+#: (:class:`~.servo_native.NativeRenderer`); the loop state holds a copy of all but ``seq`` as
+#: :data:`S`'s ``m_<field><i>`` members, whose names and order derive from it.
+MODEL_SLOT = np.dtype([('seq', 'f8'), ('f', 'f8', 3), ('p', 'f8', 3), ('k', 'f8', 9),
+                       ('g', 'f8', 3), ('d', 'f8', 3), ('depth0', 'f8'), ('zero', 'f8'),
+                       ('contact', 'f8'), ('t0', 'f8'), ('valid', 'f8'), ('knorm', 'f8'),
+                       ('w', 'f8', 3), ('hold_skew', 'f8')])
+MODEL_LEN = MODEL_SLOT.itemsize // 8
+
+
+def _flat_names(layout: np.dtype) -> list[str]:
+    """A float64 record layout's flat names: a scalar field's name, a vector's ``name0``, ..."""
+    out: list[str] = []
+    for name in layout.names:
+        sub = layout[name]
+        out += [name] if not sub.shape else [f'{name}{i}' for i in range(sub.shape[0])]
+    return out
+
+
+class Script(NamedTuple):
+    """The simulated hand's script, sampled (read only): ``times`` (n,) [s], ``points`` (n, 3)
+    tissue frame [m], ``buttons`` (n - 1, 2) int64 per segment, or (0, 2) for none
+    (:func:`~.servo_native.script_arrays`)."""
+
+    times: np.ndarray
+    points: np.ndarray
+    buttons: np.ndarray
+
+
+class Buffers(NamedTuple):
+    """The buffers the loop shares with Python (numba reads a named tuple's fields by name):
+    ``hand`` (:data:`HAND_LEN`), ``cmd`` (:data:`CMD_LEN`) and ``model`` (:data:`MODEL_SLOT`)
+    seqlocks Python writes, ``ctl`` (:data:`CTL`, int64), ``out`` (:data:`OUT`, a seqlock the
+    loop writes) and the ``trace`` ring ((rows, :data:`TRACE_COLS`); 0 rows: no trace)."""
+
+    hand: np.ndarray
+    cmd: np.ndarray
+    model: np.ndarray
+    ctl: np.ndarray
+    out: np.ndarray
+    trace: np.ndarray
+
+
 #: configuration (float64), written once before the loop starts
 CFG = _index('CFG', 'period max_force max_force_rate watchdog max_dt validity_time validity_radius '
              'fresh_age max_stiffness scale ox oy oz force_scale hand_m hand_k hand_c half '
@@ -131,17 +184,13 @@ S = _index('S', 'x0 x1 x2 v0 v1 v2 f0 f1 f2 t_dev t_open script_off '
            'enabled target0 target1 target2 out0 out1 out2 last_cmd last_out tripped '
            'held frozen0 frozen1 frozen2 off0 off1 off2 wait_zero ramp_start mark_prev '
            'energy t_prev pt1 pt2 cmd_seen model_seen fault_seen enable_seen status '
-           'm_f0 m_f1 m_f2 m_p0 m_p1 m_p2 m_k0 m_k1 m_k2 m_k3 m_k4 m_k5 m_k6 m_k7 m_k8 '
-           'm_g0 m_g1 m_g2 m_d0 m_d1 m_d2 m_depth0 m_zero m_contact m_t0 m_valid m_knorm '
-           'm_w0 m_w1 m_w2 m_hold_skew bl0 bl1 bl2 bl_tau')
+           + ' '.join(f'm_{n}' for n in _flat_names(MODEL_SLOT)[1:]) + ' bl0 bl1 bl2 bl_tau')
 STATE_LEN = len(S)
+#: the state's copy of the model buffer's first field after ``seq``
+_M0 = S['m_' + _flat_names(MODEL_SLOT)[1]]
 #: command buffer (float64 seqlock): seq, force (3,) device frame [N], its pose's time [s]
-CMD_LEN = 5
-#: model buffer (float64 seqlock): seq, f0 p0 K(9: the conditioned stiffness's symmetric part) g d
-#: (tissue), depth0, zero, contact, t0, valid (0 = cleared), |K| (the symmetric part's spectral
-#: norm, tissue frame [N/m]), w (3: its skew part, A e = w x e [N/m]; local_model module doc),
-#: hold_skew (1: a held model keeps the skew part, K having no rotating mode)
-MODEL_LEN = 1 + 3 + 3 + 9 + 3 + 3 + 6 + 3 + 1
+CMD = _index('CMD', 'seq f0 f1 f2 t')
+CMD_LEN = len(CMD)
 #: control (int64): stop, release (the held script), fault generation (zero at once),
 #: enable generation and enabled (SafetyLayer.start / stop)
 CTL = _index('CTL', 'stop release fault enable_gen enabled external')
@@ -149,7 +198,8 @@ CTL = _index('CTL', 'stop release fault enable_gen enabled external')
 #: device frame [m], its velocity (3,) [m/s], buttons 0 and 1 (a script only Python can play).
 #: With ``cfg[device]`` = 1 (a real device read by the servo process before each tick, see
 #: :mod:`.device_process`) the same layout holds the device's MEASURED position and velocity.
-HAND_LEN = 10
+HAND = _index('HAND', 'seq t x0 x1 x2 v0 v1 v2 b0 b1')
+HAND_LEN = len(HAND)
 #: the hand target is extrapolated from the newest one for at most this long [s], then held
 HAND_EXTRAPOLATE = 0.02
 #: published state (float64 seqlock): seq, t, device position, velocity, tissue position (with
@@ -199,9 +249,10 @@ def clock_now(ts) -> float:
 
 
 @nb.njit(nogil=True, cache=True)
-def _script_point(cfg, st, times, points, t):
+def _script_point(cfg, st, script, t):
     """The hand target (device frame, clipped to the workspace) and the segment index at device
     time ``t`` [s] (script held at its start until released: ``script_off`` NaN)."""
+    times, points = script.times, script.points
     off = st[S.script_off]
     tl = 0.0 if off != off else max(t - off, 0.0)
     n = times.shape[0]
@@ -232,17 +283,18 @@ def _script_point(cfg, st, times, points, t):
 
 
 @nb.njit(nogil=True, cache=True)
-def _device_read(cfg, st, times, points, buttons, now, ctl, hand):
-    """Advance the simulated handle to ``now`` (or take a real device's reading from ``hand``);
-    returns (b0, b1) buttons."""
+def _device_read(cfg, st, script, buf, now):
+    """Advance the simulated handle to ``now`` (or take a real device's reading from
+    ``buf.hand``); returns (b0, b1) buttons."""
+    ctl, hand, buttons = buf.ctl, buf.hand, script.buttons
     if cfg[CFG.device] > 0.5:  # a real device: its servo process read it just before this tick
         if st[S.t_dev] != st[S.t_dev]:
             st[S.t_open] = now
         st[S.t_dev] = now
         for k in range(3):
-            st[S.x0 + k] = hand[2 + k]
-            st[S.v0 + k] = hand[5 + k]
-        return int(hand[8]), int(hand[9])
+            st[S.x0 + k] = hand[HAND.x0 + k]
+            st[S.v0 + k] = hand[HAND.v0 + k]
+        return int(hand[HAND.b0]), int(hand[HAND.b1])
     if st[S.t_dev] != st[S.t_dev]:
         st[S.t_dev] = now
         st[S.t_open] = now
@@ -252,13 +304,13 @@ def _device_read(cfg, st, times, points, buttons, now, ctl, hand):
     st[S.t_dev] = now
     if ctl[CTL.external] != 0:
         target = np.empty(3)
-        dt = min(max(now - hand[1], 0.0), HAND_EXTRAPOLATE)
+        dt = min(max(now - hand[HAND.t], 0.0), HAND_EXTRAPOLATE)
         h = cfg[CFG.half]
         for k in range(3):
-            target[k] = min(max(hand[2 + k] + hand[5 + k] * dt, -h), h)
-        hb0, hb1 = int(hand[8]), int(hand[9])
+            target[k] = min(max(hand[HAND.x0 + k] + hand[HAND.v0 + k] * dt, -h), h)
+        hb0, hb1 = int(hand[HAND.b0]), int(hand[HAND.b1])
     else:
-        target, seg = _script_point(cfg, st, times, points, now - st[S.t_open])
+        target, seg = _script_point(cfg, st, script, now - st[S.t_open])
     if span > 0.0:
         n = max(1, int(np.ceil(span / cfg[CFG.dt_max] - 1e-9)))
         dt = span / n
@@ -508,9 +560,10 @@ def _render(cfg, st, cnt, qx, qy, qz, now, period):
 
 @nb.njit(nogil=True, cache=True)
 def _take_model(st, scratch):
-    """The model in ``scratch`` (a seqlock copy, all finite) becomes the current one."""
+    """The model in ``scratch`` (a seqlock copy, all finite) becomes the current one (the
+    state's ``m_*`` members are the model buffer's fields in its order: :data:`S`)."""
     for i in range(MODEL_LEN - 1):
-        st[S.m_f0 + i] = scratch[1 + i]
+        st[_M0 + i] = scratch[1 + i]
 
 
 @nb.njit(nogil=True, cache=True)
@@ -609,22 +662,21 @@ def _passivity_period(cfg, st, gap):
 
 
 @nb.njit(nogil=True, cache=True)
-def tick(now, cfg, st, times, points, buttons, hand, cmd, model, ctl, out, cnt, trace, scratch,
-         stamp_ns):
+def tick(now, cfg, st, cnt, script, buf, scratch, stamp_ns):
     """One servo tick at monotonic time ``now`` [s] (see the module docstring); ``stamp_ns``: the
     wall-clock stamp the published pose carries. Returns the applied force's magnitude [N]."""
-    n, qx, qy, qz, b0, b1 = _compute(now, cfg, st, times, points, buttons, hand, cmd, model, ctl,
-                                     cnt, scratch)
-    _publish(now, st, out, cnt, trace, scratch, stamp_ns, qx, qy, qz, b0, b1)
+    n, qx, qy, qz, b0, b1 = _compute(now, cfg, st, cnt, script, buf, scratch)
+    _publish(now, st, cnt, buf, scratch, stamp_ns, qx, qy, qz, b0, b1)
     return n
 
 
 @nb.njit(nogil=True, cache=True)
-def _compute(now, cfg, st, times, points, buttons, hand, cmd, model, ctl, cnt, scratch):
+def _compute(now, cfg, st, cnt, script, buf, scratch):
     """Steps 1-5 of a tick and its timing counters, on ``st`` and ``cnt`` only (the shared
-    buffers ``out`` and ``trace`` are :func:`_publish`'s): a worker may run it on copies and
-    throw the result away (:func:`run`). Returns the applied force's magnitude [N], the tissue
-    position (with the clutch) and the buttons."""
+    buffers ``buf.out`` and ``buf.trace`` are :func:`_publish`'s): a worker may run it on copies
+    and throw the result away (:func:`run`). Returns the applied force's magnitude [N], the
+    tissue position (with the clutch) and the buttons."""
+    cmd, model, ctl = buf.cmd, buf.model, buf.ctl
     # inputs first: enable / disable, faults, the newest command and model
     if ctl[CTL.enable_gen] != st[S.enable_seen]:
         st[S.enable_seen] = ctl[CTL.enable_gen]
@@ -653,7 +705,7 @@ def _compute(now, cfg, st, times, points, buttons, hand, cmd, model, ctl, cnt, s
     gap = now - st[S.t_prev] if st[S.t_prev] == st[S.t_prev] else cfg[CFG.period]
     period = _passivity_period(cfg, st, gap)
     # 1. device
-    b0, b1 = _device_read(cfg, st, times, points, buttons, now, ctl, hand)
+    b0, b1 = _device_read(cfg, st, script, buf, now)
     sc, fs = cfg[CFG.scale], cfg[CFG.force_scale]
     mx = cfg[CFG.ox] + sc * st[S.x0]
     my = cfg[CFG.oy] + sc * st[S.x1]
@@ -676,10 +728,10 @@ def _compute(now, cfg, st, times, points, buttons, hand, cmd, model, ctl, cnt, s
         st[S.status] = -1.0
         if _take(cmd, scratch, st[S.cmd_seen]):
             st[S.cmd_seen] = scratch[0]
-            if np.isfinite(scratch[1] + scratch[2] + scratch[3] + scratch[4]):
-                g = _gain(cfg, st, scratch[1] != 0.0 or scratch[2] != 0.0 or scratch[3] != 0.0,
-                          now)
-                _command(st, g * scratch[1], g * scratch[2], g * scratch[3], scratch[4])
+            fx, fy, fz, t = scratch[CMD.f0], scratch[CMD.f1], scratch[CMD.f2], scratch[CMD.t]
+            if np.isfinite(fx + fy + fz + t):
+                g = _gain(cfg, st, fx != 0.0 or fy != 0.0 or fz != 0.0, now)
+                _command(st, g * fx, g * fy, g * fz, t)
             elif st[S.enabled] > 0.5:
                 _fault(st, cnt)
     # 4. passivity observer / controller (optional): energy out of the rendered port
@@ -720,8 +772,9 @@ def _compute(now, cfg, st, times, points, buttons, hand, cmd, model, ctl, cnt, s
 
 
 @nb.njit(nogil=True, cache=True)
-def _publish(now, st, out, cnt, trace, scratch, stamp_ns, qx, qy, qz, b0, b1):
+def _publish(now, st, cnt, buf, scratch, stamp_ns, qx, qy, qz, b0, b1):
     """Step 6 of a tick: its trace row and the published state (a seqlock) from ``st``."""
+    out, trace = buf.out, buf.trace
     fx, fy, fz = st[S.f0], st[S.f1], st[S.f2]
     w = cnt[CNT.trace_w]
     if trace.shape[0] > 0:
@@ -807,8 +860,7 @@ def _commit(gen, deadline, period_ns, st, cnt, st_w, cnt_w, base):
 
 
 @nb.njit(nogil=True, cache=True)
-def run(cfg, st, times, points, buttons, hand, cmd, model, ctl, out, cnt, trace, scratch, ts,
-        lock):
+def run(cfg, st, cnt, script, buf, scratch, ts, lock):
     """The servo loop of one worker: a tick every ``period`` to absolute deadlines until
     ``ctl[stop]``. Several workers (threads of one process, each calling this with its own
     ``ts`` and the same arrays and ``lock``) serve ONE schedule: each sleeps to the next deadline;
@@ -825,6 +877,7 @@ def run(cfg, st, times, points, buttons, hand, cmd, model, ctl, out, cnt, trace,
     Each worker leaves the device at zero force on its way out (under the lock, so after any
     commit in progress); the last one also clears the schedule. Returns the number of ticks."""
     period_ns = int(cfg[CFG.period] * 1e9 + 0.5)
+    ctl = buf.ctl
     m = lock.ctypes.data
     _mutex_lock(m)
     cnt[CNT.running] += 1
@@ -846,11 +899,10 @@ def run(cfg, st, times, points, buttons, hand, cmd, model, ctl, out, cnt, trace,
         if claimed:
             _clock_gettime(CLOCK_REALTIME, ts.ctypes.data)
             stamp = ts[0] * 1000000000 + ts[1]
-            _, qx, qy, qz, b0, b1 = _compute(now_ns * 1e-9, cfg, st_w, times, points, buttons,
-                                             hand, cmd, model, ctl, cnt_w, scr)
+            _, qx, qy, qz, b0, b1 = _compute(now_ns * 1e-9, cfg, st_w, cnt_w, script, buf, scr)
             _mutex_lock(m)
             if _commit(gen, deadline, period_ns, st, cnt, st_w, cnt_w, base):
-                _publish(now_ns * 1e-9, st, out, cnt, trace, scr, stamp, qx, qy, qz, b0, b1)
+                _publish(now_ns * 1e-9, st, cnt, buf, scr, stamp, qx, qy, qz, b0, b1)
             mine = cnt[CNT.deadline_ns]
             _mutex_unlock(m)
         ts[0] = mine // 1000000000

@@ -31,6 +31,7 @@ from typing import Callable
 
 import numpy as np
 
+from ..interfaces import field_index
 from . import native_tick as nt
 from . import device_process as dp
 from .buttons import ButtonEvents
@@ -40,9 +41,9 @@ from .local_model import APPROACH_RADIUS, FALCON_MAX_STIFFNESS, HOLD_RADIUS, MOD
     symmetric_part, tissue_stiffness_limit
 from .safety import IGNORED_DISABLED, OK, REJECTED_FRAME, REJECTED_NONFINITE, SafetyLayer, \
     SafetyStats
-from .servo import name_thread, schedule_servo_thread
 from .stats import LoopStats
 from .trace import TickTrace
+from ..realtime.scheduling import name_thread, schedule_servo_thread, worker_cpus
 
 __all__ = ['NativeServoLoop', 'NativeSafety', 'NativeRenderer', 'NativeState', 'NativeClutch',
            'NativeLoopStats', 'script_arrays', 'spectral_norm_sym', 'FALCON_DAMPING']
@@ -51,6 +52,9 @@ __all__ = ['NativeServoLoop', 'NativeSafety', 'NativeRenderer', 'NativeState', '
 #: (3000 N/m) at T = 1 ms, b > K T / 2 asks 1.5 N s/m; the bound then only bites when a tick is
 #: late (K <= 2 b / T).
 FALCON_DAMPING = 1.5
+
+#: where each field of the model buffer (:data:`~.native_tick.MODEL_SLOT`) sits in its values
+_MODEL_AT = {name: field_index(nt.MODEL_SLOT, name) for name in nt.MODEL_SLOT.names}
 
 
 class NativeState(DeviceState):
@@ -216,6 +220,7 @@ class NativeSafety(SafetyLayer):
     def __init__(self, loop: 'NativeServoLoop', max_force: float, max_force_rate: float,
                  watchdog_timeout: float, frame_id: str = 'tissue', max_dt: float = 0.005):
         self._loop = loop
+        self._cmd = [0.0] * nt.CMD_LEN  # the next command, laid out as the command buffer
         super().__init__(max_force, max_force_rate, watchdog_timeout, frame_id, max_dt)
 
     @property
@@ -271,7 +276,9 @@ class NativeSafety(SafetyLayer):
                 self._loop.ctl[nt.CTL.fault] += 1
                 self._py.last_reject = f'{REJECTED_FRAME} {frame_id!r} (expected {self.frame_id!r})'
                 return REJECTED_FRAME
-            _seq_write(self._loop.cmd, (fx, fy, fz, float(now)))
+            v, C = self._cmd, nt.CMD
+            v[C.f0], v[C.f1], v[C.f2], v[C.t] = fx, fy, fz, float(now)
+            _seq_write(self._loop.cmd, v[1:])
             return OK
 
     def reject(self, why: str) -> None:
@@ -298,6 +305,7 @@ class NativeRenderer(LocalModelRenderer):
                  fresh_age: float = 0.0015, approach_radius: float = APPROACH_RADIUS) -> None:
         self._loop = loop
         self._base = loop.cnt.copy()
+        self._slot = [0.0] * nt.MODEL_LEN  # the next model, laid out as the model buffer
         super().__init__(max_stiffness, validity_time, validity_radius, fresh_age,
                          approach_radius)
 
@@ -340,27 +348,15 @@ class NativeRenderer(LocalModelRenderer):
                                                                checked)
         ks = symmetric_part(k)  # the tick adds the skew part w x e (held: without rotating mode)
         t = float(time)
-        _seq_write(self._loop.model, (*f0, *p0, *ks, *g, *d, depth0, 1.0 if zero else 0.0,
-                                      1.0 if contact else 0.0, t, 1.0, spectral_norm_sym(ks),
-                                      *skew_vector(k), 0.0 if rotating_mode(k) else 1.0))
+        m, at = self._slot, _MODEL_AT  # a list by the buffer's fields: ~1 us, a record's ~15
+        m[at['f']], m[at['p']], m[at['k']], m[at['g']], m[at['d']] = f0, p0, ks, g, d
+        m[at['depth0']], m[at['zero']] = depth0, 1.0 if zero else 0.0
+        m[at['contact']], m[at['t0']], m[at['valid']] = 1.0 if contact else 0.0, t, 1.0
+        m[at['knorm']], m[at['w']] = spectral_norm_sym(ks), skew_vector(k)
+        m[at['hold_skew']] = 0.0 if rotating_mode(k) else 1.0
+        _seq_write(self._loop.model, m[1:])
         self.time = t
         self._py.models += 1
-
-
-def worker_cpus(n: int) -> list[int | None]:
-    """The cores for ``n`` tick workers: distinct cores this process may run on, the first and
-    the last of them first (on most machines different physical cores, whose interrupts and
-    busy neighbours differ); fewer when fewer are allowed. ``[None]`` (one worker, unpinned)
-    where affinity is not available."""
-    import os
-    try:
-        allowed = sorted(os.sched_getaffinity(0))
-    except (AttributeError, OSError):
-        return [None]
-    if n <= 1 or len(allowed) <= 1:
-        return [None]
-    order = [allowed[0], allowed[-1], *allowed[1:-1]]
-    return order[:min(n, len(allowed))]
 
 
 def _check_number(name: str, value, unit: str, zero: bool = False) -> None:
@@ -512,6 +508,9 @@ class NativeServoLoop:
         self.out = zeros(nt.OUT_LEN)
         self.cnt = zeros(nt.CNT_LEN, dtype=np.int64)
         self.ring = zeros((int(ring) if trace is not None else 0, nt.TRACE_COLS))
+        #: the arrays the compiled loop takes, by name (the same arrays as the attributes)
+        self.hand_script = nt.Script(self.times, self.points, self.buttons)
+        self.buffers = nt.Buffers(self.hand, self.cmd, self.model, self.ctl, self.out, self.ring)
         self._scratch = np.zeros(nt.SCRATCH_LEN)
         self.workers = int(workers)
         self._lock = np.zeros(nt.LOCK_LEN, dtype=np.int64)  # the workers' mutex (one process)
@@ -567,8 +566,11 @@ class NativeServoLoop:
         p = m.to_device(s.target(t))
         p1 = m.to_device(s.target(t + dt))
         b = s.buttons(t) if hasattr(s, 'buttons') else (0, 0)
-        _seq_write(self.hand, (now, *p, *((p1[k] - p[k]) / dt for k in range(3)),
-                               float(b[0]), float(b[1])))
+        v, H = [0.0] * nt.HAND_LEN, nt.HAND
+        v[H.t], v[H.b0], v[H.b1] = now, float(b[0]), float(b[1])
+        for k in range(3):
+            v[H.x0 + k], v[H.v0 + k] = p[k], (p1[k] - p[k]) / dt
+        _seq_write(self.hand, v[1:])
 
     @property
     def held(self) -> bool:
@@ -579,23 +581,22 @@ class NativeServoLoop:
         to stop before its first tick."""
         ctl = self.ctl.copy()
         ctl[nt.CTL.stop] = 1  # run returns at once
-        nt.run(self.cfg, self.st.copy(), self.times, self.points, self.buttons, self.hand.copy(),
-               self.cmd.copy(),
-               self.model.copy(), ctl, self.out.copy(), self.cnt.copy(), self.ring[:0].copy(),
+        b = self.buffers
+        copies = nt.Buffers(b.hand.copy(), b.cmd.copy(), b.model.copy(), ctl, b.out.copy(),
+                            b.trace[:0].copy())
+        nt.run(self.cfg, self.st.copy(), self.cnt.copy(), self.hand_script, copies,
                self._scratch.copy(), np.zeros(2, dtype=np.int64), self._lock.copy())
         if self.device_factory is not None:  # the device loop calls these from Python
             st, cnt = self.st.copy(), self.cnt.copy()
-            nt.tick(0.0, self.cfg, st, self.times, self.points, self.buttons, self.hand.copy(),
-                    self.cmd.copy(), self.model.copy(), ctl, self.out.copy(), cnt,
-                    self.ring.copy(), self._scratch.copy(), 0)
+            nt.tick(0.0, self.cfg, st, cnt, self.hand_script,
+                    copies._replace(trace=b.trace.copy()), self._scratch.copy(), 0)
             nt._fault(st, cnt)
 
     def tick(self, now: float, stamp_ns: int = 0) -> tuple[float, float, float]:
         """One compiled tick at monotonic ``now`` [s] on this loop's state, without the thread
         (tests); returns the force written to the device (device frame) [N]."""
-        nt.tick(float(now), self.cfg, self.st, self.times, self.points, self.buttons, self.hand,
-                self.cmd, self.model, self.ctl, self.out, self.cnt, self.ring, self._scratch,
-                int(stamp_ns))
+        nt.tick(float(now), self.cfg, self.st, self.cnt, self.hand_script, self.buffers,
+                self._scratch, int(stamp_ns))
         S = nt.S
         return float(self.st[S.f0]), float(self.st[S.f1]), float(self.st[S.f2])
 
@@ -638,9 +639,8 @@ class NativeServoLoop:
                     # the device loop: its USB I/O
                     dp.write_message(self.schedmsg, schedule_servo_thread(self.priority))
                     code = dp.run_device_loop(
-                        self.device_factory, self.cfg, self.st, self.times, self.points,
-                        self.buttons, self.hand, self.cmd, self.model, self.ctl, self.out,
-                        self.cnt, self.ring, self._scratch, self.devst, self.devmsg)
+                        self.device_factory, self.cfg, self.st, self.cnt, self.hand_script,
+                        self.buffers, self._scratch, self.devst, self.devmsg)
                 else:
                     for th in self._start_workers(first=1):  # worker 0 is this thread
                         th.join()
@@ -747,8 +747,7 @@ class NativeServoLoop:
             self.scheduling = f'compiled nogil tick; {scheduling}; {self._workers_text()}'
             self._scheduled.set()
         try:
-            nt.run(self.cfg, self.st, self.times, self.points, self.buttons, self.hand, self.cmd,
-                   self.model, self.ctl, self.out, self.cnt, self.ring, self._scratch,
+            nt.run(self.cfg, self.st, self.cnt, self.hand_script, self.buffers, self._scratch,
                    np.zeros(2, dtype=np.int64), self._lock)
         except Exception as exc:  # cannot happen short of a bug; say so, the device is at 0 N
             self.errors += 1

@@ -18,8 +18,8 @@ from typing import Callable
 from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 
 from ..cases import Case, CaseError, resolve_case
-from ..device.servo import off_realtime
-from .case_watch import CASE_KEYS, effective_case
+from ..realtime.scheduling import off_realtime
+from ..session.case_watch import CASE_KEYS, effective_case
 from .parameters import CASE_PARAMS  # declared writable: setting one switches the case
 
 __all__ = ['CASE_PARAMS', 'declare_case', 'declare_case_parameters', 'describe', 'apply_case',

@@ -3,7 +3,7 @@
 Subscribes to ``falcon/measured_cp`` (``geometry_msgs/PoseStamped``, tissue frame); for each pose
 advances a :class:`~haptic_anfis.contact.ContactTracker` on the tissue surface (loaded once at
 start) and publishes ``contact`` (``sensor_msgs/JointState``, layout in
-:mod:`haptic_anfis.nodes.interfaces`) stamped with the pose's stamp. A NaN/Inf pose or one in
+:mod:`haptic_anfis.interfaces`) stamped with the pose's stamp. A NaN/Inf pose or one in
 another frame is logged (throttled) and answered with "no contact"; the tracker is reset so the
 next good pose cannot start a contact from inside the tissue.
 
@@ -19,10 +19,10 @@ from geometry_msgs.msg import PoseStamped
 from sensor_msgs.msg import JointState
 
 from ..pipeline.contact import DEFAULT_SURFACE, approach_values, contact_values, make_tracker
-from . import interfaces as ifc
+from .. import interfaces as ifc
 from ._case import CASE_PARAMS, apply_case, declare_case  # noqa: F401 (CASE_PARAMS: in config)
-from ._common import (LOOP_QOS, Param, declare_parameters, finite_vector, non_negative, one_of,
-                      positive, run_node)
+from .parameters import Param, declare_parameters, finite_vector, non_negative, one_of, positive
+from .runtime import LOOP_QOS, run_node
 from .base import HapticNode
 
 MESH_PARAMS = [

@@ -19,7 +19,7 @@ from typing import Sequence
 
 from visualization_msgs.msg import MarkerArray
 
-from . import interfaces as ifc
+from .. import interfaces as ifc
 from .base import HapticNode
 
 __all__ = ['EXAMINER_TOPICS', 'CoverageWatch', 'examiner_arguments', 'hold_until_examiner']

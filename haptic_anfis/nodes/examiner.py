@@ -29,9 +29,10 @@ from ..exam.files import write_text_atomic
 from ..exam.lesions import ExamSubject
 from ..pipeline.contact import load_surface
 from . import cdr
-from . import interfaces as ifc
+from .. import interfaces as ifc
 from ._case import CASE_PARAMS, apply_case, declare_case  # noqa: F401 (CASE_PARAMS: in config)
-from ._common import Param, declare_parameters, positive, run_node, stamp_ns
+from .parameters import Param, declare_parameters, positive
+from .runtime import run_node, stamp_ns
 from .base import HapticNode
 from .contact_detector import MESH_PARAMS
 

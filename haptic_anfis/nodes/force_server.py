@@ -1,11 +1,11 @@
 """``force_server``: contact in, force command out (:class:`haptic_anfis.anfis.ForceModel`).
 
-Subscribes to ``contact`` (``sensor_msgs/JointState``, see :mod:`haptic_anfis.nodes.interfaces`),
+Subscribes to ``contact`` (``sensor_msgs/JointState``, see :mod:`haptic_anfis.interfaces`),
 evaluates the Fx, Fy, Fz ANFIS models on the compiled path (compiled and warmed when the model is
 loaded, before the first message) and publishes ``falcon/servo_cf`` (``geometry_msgs/
 WrenchStamped``, tissue frame) with the contact's stamp: zero when not in contact (or on a malformed
 contact / NaN input), and with it ``falcon/servo_cf_local`` (``sensor_msgs/JointState``, layout
-in :mod:`haptic_anfis.nodes.interfaces`): the local force model at the contact — F0, p0 and the
+in :mod:`haptic_anfis.interfaces`): the local force model at the contact — F0, p0 and the
 stiffness K = dF/dp through the contact geometry — that the falcon driver renders at every servo
 tick. The service ``~/reload`` (``std_srvs/Trigger``) re-reads ``model_path``: the new model
 replaces the old in one reference swap between two messages (a load takes ~1-2 ms); a bad file
@@ -17,8 +17,6 @@ ramp after a switch and the reload service.
 """
 from __future__ import annotations
 
-import queue
-import threading
 import time
 
 from geometry_msgs.msg import WrenchStamped
@@ -26,13 +24,13 @@ from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
 
 from ..device.local_model import no_model
-from ..device.servo import off_realtime
+from ..realtime.scheduling import off_realtime
 from ..pipeline.force import force_from_contact, load_model, local_model_from_contact
 from . import cdr
-from . import interfaces as ifc
+from .. import interfaces as ifc
 from ._case import CASE_PARAMS, apply_case, declare_case  # noqa: F401 (CASE_PARAMS: in config)
-from ._common import (LOOP_QOS, Param, declare_parameters, non_negative, positive, run_node,
-                      set_stamp, stamp_ns)
+from .parameters import Param, declare_parameters, positive
+from .runtime import LOOP_QOS, run_node, set_stamp, stamp_ns
 from .base import HapticNode
 
 PARAMS = [
@@ -41,8 +39,6 @@ PARAMS = [
     Param('frame_id', 'tissue', 'frame of the published force (the tissue frame)'),
     Param('publish_local_model', True, 'also publish the local force model (F0, p0, K) on '
           'falcon/servo_cf_local with every force (the driver renders it at every servo tick)'),
-    Param('delay', 0.0, 'TESTS ONLY: hold every output this long [s] before publishing it (a slow '
-          'or loaded force server); 0 = publish at once', non_negative),
     Param('case_ramp', 0.5, 'after a case switch the force ramps from 0 to the model force over '
           'this long [s] (the new surface may put the probe deeper at once)', positive),
 ]
@@ -69,11 +65,6 @@ class ForceServer(HapticNode):
             # published as serialized bytes (the same JointState on the wire, ~10x cheaper)
             self._lm = cdr.JointStateWriter(p['frame_id'], ifc.LOCAL_MODEL_FIELDS,
                                             len(ifc.LOCAL_MODEL_FIELDS))
-        self.delay = p['delay']
-        self._delayed: queue.Queue | None = None
-        if self.delay > 0:
-            self._delayed = queue.Queue()
-            threading.Thread(target=self._delay_line, name='delay', daemon=True).start()
         self.n_contacts = self.n_forces = self.n_bad = self.reloads = 0
         self.max_force = 0.0
         self.get_logger().info(f'model {self.model_path} ({self._describe()})')
@@ -93,9 +84,7 @@ class ForceServer(HapticNode):
                 return
         else:
             stamp, position, effort = stamp_ns(msg.header.stamp), msg.position, msg.effort
-        delayed = self._delayed is not None
-        out = WrenchStamped() if delayed else self._msg
-        out.header.frame_id = self.frame_id
+        out = self._msg
         set_stamp(out.header.stamp, stamp)
         f = out.wrench.force
         model = self.model
@@ -124,9 +113,6 @@ class ForceServer(HapticNode):
             if n > self.max_force:
                 self.max_force = n
         f.x, f.y, f.z = fx, fy, fz
-        if delayed:
-            self._delayed.put((time.monotonic() + self.delay, out, lm))
-            return
         self.pub.publish(out)
         if lm is not None:
             self.pub_lm.publish(lm)
@@ -149,34 +135,6 @@ class ForceServer(HapticNode):
             self._ramp_t0 = None
             return None
         return k
-
-    def _delay_line(self) -> None:
-        """TESTS ONLY (``delay`` > 0): publish each output ``delay`` seconds after it was made.
-        Outputs already due together go out as the newest one only (the loop topics keep the
-        last sample anyway), so a late wake-up on a loaded machine cannot build a backlog."""
-        pending = None
-        while True:
-            item = pending if pending is not None else self._delayed.get()
-            pending = None
-            wait = item[0] - time.monotonic()
-            if wait > 0:
-                time.sleep(wait)
-            while True:  # skip to the newest output that is due
-                try:
-                    nxt = self._delayed.get_nowait()
-                except queue.Empty:
-                    break
-                if nxt[0] > time.monotonic():
-                    pending = nxt
-                    break
-                item = nxt
-            _, out, lm = item
-            try:
-                self.pub.publish(out)
-                if lm is not None:
-                    self.pub_lm.publish(lm)
-            except Exception:  # the node is shutting down
-                return
 
     def _bad(self, why: str) -> None:
         self.n_bad += 1

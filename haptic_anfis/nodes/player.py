@@ -29,8 +29,9 @@ from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from ..bag import BagError, bag_info
 from ..bag.playback import Recorded, check_timing, schedule
 from ..bag.topics import WRENCH_TYPE, absolute, playback_topic
-from . import interfaces as ifc
-from ._common import Param, declare_parameters, message_class, non_negative, positive, run_node
+from .. import interfaces as ifc
+from .parameters import Param, declare_parameters, non_negative, positive
+from .runtime import message_class, run_node
 from .base import HapticNode
 
 PARAMS = [

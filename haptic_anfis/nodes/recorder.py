@@ -34,7 +34,8 @@ from ..bag.topics import DEFAULT_TOPICS, KNOWN_TYPES
 from ..cases import CaseError, library
 from ..cases.force_mapping import case_force_mapping
 from ._case import CASE_PARAMS, declare_case_parameters, requested_case  # noqa: F401 (config)
-from ._common import Param, declare_parameters, message_class, positive, run_node
+from .parameters import Param, declare_parameters, positive
+from .runtime import message_class, run_node
 from .base import HapticNode
 from .polled import PolledSubscription
 

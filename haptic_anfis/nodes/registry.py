@@ -12,7 +12,7 @@ import functools
 import importlib
 
 from .parameters import CASE_PARAMS, ROS_BUILTIN, Param
-from .processes import node_names
+from ..realtime.processes import node_names
 
 __all__ = ['declared_parameters', 'node_parameters']
 

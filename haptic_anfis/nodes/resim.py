@@ -74,8 +74,7 @@ def build_pipeline(params_files=(), contact_overrides=None, force_overrides=None
     from . import contact_detector as cd
     from . import force_server as fs
     from ._case import apply_case
-    from ._common import resolve_parameters
-    from .parameters import CASE_PARAMS
+    from .parameters import CASE_PARAMS, resolve_parameters
     pc = resolve_parameters(cd.PARAMS + CASE_PARAMS, 'contact_detector', params_files,
                             contact_overrides)
     pf = resolve_parameters(fs.PARAMS + CASE_PARAMS, 'force_server', params_files,

@@ -16,7 +16,7 @@ from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from .executor import make_executor, settle_and_start
 from .middleware import use_loop_transport
 from .parameters import ParameterError
-from .processes import (HOLD_FOR_RECORDER, RECORDED_TOPICS, SESSION_CHECKED, guard_realtime_time,
+from ..realtime.processes import (HOLD_FOR_RECORDER, RECORDED_TOPICS, SESSION_CHECKED, guard_realtime_time,
                         leave_realtime)
 from .sigint import SigintStop
 

@@ -10,7 +10,7 @@ process by default: *Long runs*).
 :class:`SideNodes` starts them (output to standard error, so ``--json``'s last line stays the
 JSON), waits until each has said ``started`` on ``session/status``, and stops them in order
 (SIGINT, as Ctrl-C: the recorder writes its summary). A side node also gets SIGINT if the process
-that started it dies (``nodes/processes.py``), so none is left running.
+that started it dies (``realtime/processes.py``), so none is left running.
 """
 from __future__ import annotations
 
@@ -18,7 +18,7 @@ import sys
 import time
 from typing import Mapping, Sequence
 
-from .processes import SESSION_CHECKED, SIDE_NICE, Supervisor, node_env
+from ..realtime.processes import SESSION_CHECKED, SIDE_NICE, Supervisor, node_env
 from ..errors import HapticAnfisError
 
 

@@ -12,8 +12,8 @@ import math
 from geometry_msgs.msg import WrenchStamped
 from sensor_msgs.msg import JointState
 
-from . import interfaces as ifc
-from ._common import stamp_ns
+from .. import interfaces as ifc
+from .runtime import stamp_ns
 from .base import HapticNode
 from .examiner import SAMPLE_QOS
 

@@ -20,8 +20,9 @@ from ..anfis import train_on_dataset
 from ..anfis.defaults import SHIPPED
 from ..bag.training_data import load_training_data
 from ..tissue.dataset import DEFAULT_DATASET
-from . import interfaces as ifc
-from ._common import Param, declare_parameters, positive, run_node
+from .. import interfaces as ifc
+from .parameters import Param, declare_parameters, positive
+from .runtime import run_node
 from .base import HapticNode
 
 

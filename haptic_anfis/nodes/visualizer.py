@@ -25,9 +25,10 @@ from visualization_msgs.msg import Marker, MarkerArray
 
 from ..pipeline.contact import load_surface
 from . import cdr
-from . import interfaces as ifc
+from .. import interfaces as ifc
 from ._case import CASE_PARAMS, apply_case, declare_case  # noqa: F401 (CASE_PARAMS: in config)
-from ._common import Param, declare_parameters, non_negative, positive, run_node
+from .parameters import Param, declare_parameters, non_negative, positive
+from .runtime import run_node
 from .base import HapticNode
 from .contact_detector import MESH_PARAMS
 from .polled import PolledSubscription

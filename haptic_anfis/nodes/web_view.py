@@ -38,12 +38,13 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 
 from . import cdr
-from . import interfaces as ifc
+from .. import interfaces as ifc
 from ._case import CASE_PARAMS, declare_case  # noqa: F401 (CASE_PARAMS: in config)
-from ._common import Param, declare_parameters, positive, run_node
+from .parameters import Param, declare_parameters, positive
+from .runtime import run_node
 from .base import HapticNode
-from .case_switch import CaseSwitch
-from .case_watch import CASE_KEYS, CaseWatch
+from ..session.case_switch import CaseSwitch
+from ..session.case_watch import CASE_KEYS, CaseWatch
 from .polled import PolledSubscription
 
 #: newest sample, best effort

@@ -123,7 +123,7 @@ class OneProcessSession:
         common = [*s.params_arguments(), *s.user_ros_args()]
         nodes: dict[str, list[str]] = {}
         if s.record and s.recorder_process:
-            from ..nodes.processes import recorder_arguments
+            from ..realtime.processes import recorder_arguments
             nodes['recorder'] = [*common, *s.recorder_case_arguments(),
                                  *recorder_arguments(s.record, RECORDED_TOPICS())]
         if s.visualizer and not s.in_process:
@@ -176,7 +176,7 @@ class OneProcessSession:
             print(f'not ready after {s.ready_timeout:g} s: no force command reached the driver',
                   flush=True)
             return False
-        from ..nodes.processes import guard_realtime_time, set_graph_priority
+        from ..realtime.processes import guard_realtime_time, set_graph_priority
         guard_realtime_time()  # rtkit's run-time limit ends no graph
         # now, not before: a cold numba compile at real-time priority would hold a core
         self.graph_scheduling = set_graph_priority(s.graph_priority)
@@ -200,7 +200,7 @@ class OneProcessSession:
         longest it may take [s]} for nodes whose output the caller needs (the examiner writes
         its report when stopped): each is asked to stop first and waited for that long (a line
         every :data:`FINISH_SAY_S` s), instead of the other nodes' short grace before a kill."""
-        from ..nodes.processes import leave_realtime
+        from ..realtime.processes import leave_realtime
         try:
             # the shutdown computes (an hour's tick trace written): at rtkit's real-time
             # priority its run-time limit would SIGKILL the session for it

@@ -23,7 +23,7 @@ from typing import Any, Mapping, Sequence
 
 from ..cases.library import CASE_DIR_HELP
 from ..errors import HapticAnfisError
-from ..nodes.processes import GRAPH_PRIORITY
+from ..realtime.processes import GRAPH_PRIORITY
 
 __all__ = ['SessionSpec', 'SessionError', 'Option', 'OPTIONS', 'COMMANDS', 'ONE_PROCESS_NODES',
            'CASE_NODES', 'add_session_arguments', 'spec_from_args', 'recorder_settings']
@@ -364,7 +364,7 @@ class SessionSpec:
             ParameterError: the parameter files / overrides (one line per problem:
                 file:line, node, parameter, what was given and what is expected).
         """
-        from ..nodes.processes import node_names
+        from ..realtime.processes import node_names
         unknown = [n for n in self.nodes if n not in node_names()]
         if unknown or not self.nodes:
             raise SessionError(f'--nodes: unknown node(s) {unknown or list(self.nodes)!r}; '

@@ -1,21 +1,28 @@
 """Start the package's nodes as separate processes (what ``ros2 launch`` would do; not available
-here). Pure process management, no ROS imports: used by ``haptic-anfis launch``, the multi-process
-loop benchmark and the cross-process tests.
+here), with their scheduling: real-time priority and CPU pinning of a node graph, a session of
+its own. Pure process management, no ROS imports: used by ``haptic-anfis launch``, the
+multi-process loop benchmark and the cross-process tests.
 """
 from __future__ import annotations
 
+import ctypes
 import functools
 import os
+import resource
 import signal
 import subprocess
 import sys
+import time
 from pathlib import Path
 from typing import IO, Mapping, Sequence
+
+from . import rtkit
+from .scheduling import is_realtime, realtime_priority, realtime_refused, to_normal_scheduler
 
 #: The nodes' console scripts sit next to the interpreter in a virtualenv (bin/); on a colcon
 #: install they are in lib/haptic_anfis/ instead, and nodes are started as modules.
 BIN = Path(sys.executable).parent
-NODES_DIR = Path(__file__).resolve().parent  # this module lives beside the nodes
+NODES_DIR = Path(__file__).resolve().parent.parent / 'nodes'  # haptic_anfis/nodes
 #: Set by a session runner in its node processes' environment: the session checked the parameters
 #: against every one of its nodes (a global key only another node declares is then no error in
 #: the node's own check, ``haptic_anfis.nodes.runtime.check_node_arguments``).
@@ -31,9 +38,8 @@ RECORDED_TOPICS = 'HAPTIC_ANFIS_RECORDED_TOPICS'
 @functools.lru_cache(maxsize=1)
 def node_names() -> tuple[str, ...]:
     """The package's nodes: modules of haptic_anfis.nodes that run as ``python -m``."""
-    here = Path(__file__).name  # this module names the marker below: not a node itself
     return tuple(sorted(f.stem for f in NODES_DIR.glob('*.py')
-                        if f.name != here and "__name__ == '__main__'" in f.read_text()))
+                        if "__name__ == '__main__'" in f.read_text()))
 
 
 def node_env(domain_id: int | None = None, localhost: bool = True,
@@ -57,7 +63,6 @@ def _stop_with_parent() -> None:
     never left running (a recorder recording forever) after a launcher was killed with
     ``kill -9``; SIGINT, as Ctrl-C, lets it zero the force / close its bag."""
     try:
-        import ctypes
         ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGINT)  # PR_SET_PDEATHSIG
     except (OSError, AttributeError):  # not Linux: nodes outlive a killed launcher
         pass
@@ -118,7 +123,6 @@ def set_graph_priority(priority: int, pid: int | None = None) -> str:
     scheduler and the words say how to allow it."""
     if priority <= 0:
         return 'normal scheduler (graph priority 0)'
-    from ..device.servo import realtime_priority
     done = []
     for tid in _threads(pid):
         try:
@@ -162,17 +166,17 @@ def _graph_from_rtkit(priority: int, pid: int | None, refused: BaseException) ->
     """SCHED_FIFO ``priority`` was ``refused`` for process ``pid``: ask rtkit for SCHED_RR for
     its haptic-path threads, with the soft run-time limit below rtkit's; the words for the
     log."""
-    from ..device.rtkit import RealtimeKitError, make_threads_realtime
-    from ..device.servo import realtime_refused
     tids = haptic_path_threads(pid)
     if not tids:  # the process has ended
         return realtime_refused(priority, refused)
     try:
-        granted, failed = make_threads_realtime(priority, tids, pid, soft_share=RTTIME_SOFT_SHARE)
-    except RealtimeKitError as kit:
+        granted, failed = rtkit.make_threads_realtime(priority, tids, pid,
+                                                      soft_share=RTTIME_SOFT_SHARE)
+    except rtkit.RealtimeKitError as kit:
         return realtime_refused(priority, refused, kit)
     if len(failed) == len(tids):
-        return realtime_refused(priority, refused, RealtimeKitError(next(iter(failed.values()))))
+        return realtime_refused(priority, refused,
+                                rtkit.RealtimeKitError(next(iter(failed.values()))))
     words = (f'SCHED_RR priority {granted} from rtkit for {len(tids) - len(failed)} of its '
              f'threads (executor, DDS receive, servo bridge), in place of SCHED_FIFO {priority}')
     if failed:
@@ -215,7 +219,7 @@ def keep_on_cpu(pid: int, cpu: int) -> str:
     return f'threads kept on CPU {cpu}' if done else 'no thread to keep on a CPU'
 
 
-#: Names of the servo loop's threads (``device.servo.name_thread``): the tick workers and the
+#: Names of the servo loop's threads (``realtime.scheduling.name_thread``): the tick workers and the
 #: real Falcon's device loop, on threads of the driver or in its servo process.
 SERVO_THREADS = ('servo-tick', 'servo-device')
 
@@ -225,7 +229,6 @@ def servo_realtime(pid: int) -> bool | None:
     or SCHED_RR from rtkit): any thread named as a servo thread (:data:`SERVO_THREADS`) in the
     process or in a process it started (the servo process); None where none is found (the loop
     not started yet, or not Linux)."""
-    from ..device.servo import realtime_priority
     found = False
     for p in (pid, *_children(pid)):
         for tid, name in _thread_names(p).items():
@@ -248,7 +251,6 @@ def _children(pid: int) -> list[int]:
 
 
 def _normal(tid: int) -> None:
-    from ..device.servo import to_normal_scheduler
     to_normal_scheduler(tid)
 
 
@@ -258,7 +260,6 @@ def leave_realtime() -> int:
     thread raised through rtkit would meet its run-time limit: a node's shutdown (the driver
     writes its tick trace), ``sim``'s stop (what :func:`set_graph_priority` raised) and
     :func:`guard_realtime_time`'s handler."""
-    from ..device.servo import realtime_priority
     n = 0
     for tid, name in _thread_names().items():
         if not name.startswith(SERVO_THREADS) and realtime_priority(tid) > 0:
@@ -275,14 +276,8 @@ def guard_realtime_time() -> None:
     limit's SIGKILL would come next. A node that never asked rtkit never gets the signal.
 
     Why: a graph node raised through rtkit (:func:`_graph_from_rtkit`) must never compute for
-    long at real-time priority; a case switch steps off it (``device.servo.off_realtime``), and
+    long at real-time priority; a case switch steps off it (``realtime.scheduling.off_realtime``), and
     anything not foreseen is caught here instead of killing the node mid-session."""
-    import resource
-
-    # imported now, not in the handler: importing it (numpy with it) costs ~0.2 s of CPU, more
-    # than the 100 ms the handler has between rtkit's soft and hard limits
-    from ..device import servo  # noqa: F401
-
     def demote(signum, frame) -> None:
         n = leave_realtime()
         ran = 'SIGXCPU'
@@ -358,7 +353,6 @@ def stop_node(p: subprocess.Popen, timeout: float = 10.0, sig: int = signal.SIGI
 
 
 def _realtime() -> bool:
-    from ..device.servo import is_realtime
     return is_realtime()
 
 
@@ -403,7 +397,6 @@ class Supervisor:
 
     def start(self, name: str, args: Sequence[str] = (), env: Mapping[str, str] | None = None
               ) -> subprocess.Popen:
-        import time
         log = self.stream
         if self.log_dir is not None:
             log = self.logs.get(name) or (self.log_dir / f'{name}.log').open('w')
@@ -429,7 +422,6 @@ class Supervisor:
         with the servo under the normal scheduler too, the pinned nodes took that share from the
         servo's tick workers on their CPU, and the loop lost more periods and had longer gaps
         than with the nodes free (interleaved runs, docs/sessions.md)."""
-        from ..device.servo import realtime_priority
         servo_rt: list[bool | None] = []  # read once, and only when a node is to be pinned
 
         def pin(pid: int, cpu: int) -> str:

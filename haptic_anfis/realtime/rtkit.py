@@ -13,7 +13,7 @@ every thread it raised if its own canary thread starves.
 
 The servo's threads ask for themselves (the compiled tick workers, the real Falcon's device loop,
 the Python servo thread): each blocks every period. The graph's nodes on the haptic path are
-raised by whoever raises them (``nodes.processes.set_graph_priority``), a few threads each, with
+raised by whoever raises them (``realtime.processes.set_graph_priority``), a few threads each, with
 a soft limit below rtkit's (:func:`make_threads_realtime`'s ``soft_share``): a node that computes
 longer than that without blocking (a case switch, which steps off real-time priority for it)
 gets SIGXCPU first and goes back to the normal scheduler, instead of being killed.

@@ -8,7 +8,7 @@ at its start) and says what the page must do: nothing (every node that reported 
 case), follow (every running case node was set, from outside, to one other case: the page takes
 it too), or stop collecting and say which node is on which case (split).
 
-No ROS here: :mod:`.web_view` feeds it the events' values and the names of the running nodes.
+No ROS here: :mod:`haptic_anfis.nodes.web_view` feeds it the events' values and the names of the running nodes.
 """
 from __future__ import annotations
 

@@ -73,7 +73,7 @@ class ProcessSession:
         self.notes: list[str] = []
         self.recorded: list[str] = []  # the topics the session's recorder records
         if spec.record:
-            from ..nodes.processes import recorder_arguments
+            from ..realtime.processes import recorder_arguments
             topics, self.notes = recorder_settings(spec, recorded_topics())
             self.recorded = topics
             self.extra['recorder'] = [*spec.recorder_case_arguments(),
@@ -105,7 +105,7 @@ class ProcessSession:
         Raises:
             SessionError / CaseError / ParameterError: bad input (nothing started).
         """
-        from ..nodes.processes import (SESSION_CHECKED, VIEW_NODES, Supervisor, graph_cores,
+        from ..realtime.processes import (SESSION_CHECKED, VIEW_NODES, Supervisor, graph_cores,
                                        node_env, on_stop_signals, restore_signals)
         from ..nodes.session import SessionMonitor
         s = self.spec
@@ -220,7 +220,7 @@ class ProcessSession:
 
     def _handle_deaths(self) -> bool:
         """Restart what died and may be restarted; False when the session must stop."""
-        from ..nodes.processes import HOLD_FOR_RECORDER, RECORDED_TOPICS, renamed_output
+        from ..realtime.processes import HOLD_FOR_RECORDER, RECORDED_TOPICS, renamed_output
         s, sup = self.spec, self.sup
         for name, code in sup.dead():
             self.say('died', node=name, code=code)
