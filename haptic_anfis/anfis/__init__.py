@@ -13,5 +13,6 @@ from .structure import search_structure
 from .sugeno import SugenoModel
 from .training import solve_consequents, train
 
-__all__ = ['ANFIS', 'ANFISInputError', 'ForceModel', 'SugenoModel', 'ModelFileError', 'FORMAT_VERSION', 'rmse',
-           'search_structure', 'solve_consequents', 'train', 'train_on_dataset']
+__all__ = ['ANFIS', 'ANFISInputError', 'ForceModel', 'SugenoModel', 'ModelFileError',
+           'FORMAT_VERSION', 'rmse', 'search_structure', 'solve_consequents', 'train',
+           'train_on_dataset']
