@@ -24,6 +24,8 @@ import numpy as np
 
 from . import families as fam
 
+#: Factor on κ after a rejected step.
+REJECT_SHRINK = 0.5
 LETTERS = 'abcdefghijklmnopqrstuvwxy'
 
 
@@ -134,7 +136,7 @@ def hybrid_fit(family: str, premise: list[np.ndarray], Um: np.ndarray, Ue: np.nd
             grads = None
         else:
             fit.rejected += 1
-            step *= 0.5
+            step *= REJECT_SHRINK
         fit.train_rmse.append(float(np.sqrt(2.0 * E / n)))
         if len(tried) >= 5:
             s = np.sign(np.diff(tried[-5:]))
