@@ -144,7 +144,7 @@ class ANFIS:
         bad = ~np.isfinite(X)
         if bad.any():
             row, col = np.argwhere(bad)[0]
-            raise ANFISInputError(f'{what}: non-finite value {X[row, col]!r} at sample {row}, '
+            raise ANFISInputError(f'{what}: non-finite value {float(X[row, col])!r} at sample {row}, '
                                   f'feature {col}; expected finite numbers')
         return X
 
@@ -164,7 +164,7 @@ class ANFIS:
             raise ANFISInputError(f'y: expected shape ({n},) to match X, got {y.shape}')
         if not np.all(np.isfinite(y)):
             k = int(np.flatnonzero(~np.isfinite(y))[0])
-            raise ANFISInputError(f'y: non-finite value {y[k]!r} at sample {k}; expected finite '
+            raise ANFISInputError(f'y: non-finite value {float(y[k])!r} at sample {k}; expected finite '
                                   'numbers')
         t0 = time.perf_counter()
         self.n_features_in_ = d
