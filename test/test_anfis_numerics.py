@@ -83,7 +83,7 @@ def test_scaled_paths_agree_on_knots_corners_and_outside(scaled, synthetic, rng)
     np.testing.assert_allclose(scaled.predict_compiled(X), F_np, rtol=0, atol=1e-12)
     np.testing.assert_allclose(np.array([scaled.predict_one(*x) for x in X]), F_np, rtol=0,
                                atol=1e-12)
-    F_j, _ = scaled.predict_with_jacobian(X)
+    F_j, _ = scaled.predict_compiled(X, jacobian=True)
     np.testing.assert_allclose(F_j, F_np, rtol=0, atol=1e-12)
     assert np.all(np.isfinite(F_np))
     np.testing.assert_array_equal(F_np[X[:, 3] <= 0], 0.0)

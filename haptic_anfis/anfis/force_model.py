@@ -84,7 +84,8 @@ class ForceModel:
             ``extrapolation`` one per column of (x, y, z, depth).
     """
 
-    def __init__(self, structure: Structure | Sequence[Structure] | str | None = SHIPPED['structure'],
+    def __init__(self, *,
+                 structure: Structure | Sequence[Structure] | str | None = SHIPPED['structure'],
                  epochs: int = SHIPPED['epochs'], search_epochs: int = SHIPPED['search_epochs'],
                  search_start: Structure | None = None, max_mfs: Structure | None = SHIPPED['max_mfs'],
                  candidates: list[Structure] | None = None, tol: float = SHIPPED['tol'],
@@ -343,24 +344,6 @@ class ForceModel:
             F *= np.maximum(X[:, self.scale_col_], 0.0)[:, None]
         return F
 
-    def predict_with_jacobian(self, X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Compiled batch forces and their exact derivatives w.r.t. the inputs.
-
-        Args:
-            X: (n, 4) queries (x, y, z, depth) [m] (any float dtype).
-        Returns:
-            (F (n, 3) [N], J (n, 3, 4) [N/m]) with ``J[i, a, b] = dF_a / dX_b`` at ``X[i]``.
-            Where an input is clamped by the out-of-range policy its column is 0; at an MF kink
-            the derivative is one-sided.
-        Raises:
-            ValueError: on NaN/Inf input.
-        """
-        self._check_fitted()
-        X = np.ascontiguousarray(check_finite_inputs(X, INPUT_NAMES))
-        if X.shape[1] != 4:
-            raise ValueError(f'predict_with_jacobian needs X of shape (n, 4); got {X.shape}')
-        return compiled.eval_jac_batch(X, self._fp, self._ip)
-
     def jacobian_one(self, x: float, y: float, z: float, depth: float
                      ) -> tuple[np.ndarray, np.ndarray]:
         """Compiled real-time forces and Jacobian for one contact: metres in.
@@ -377,12 +360,23 @@ class ForceModel:
                              f'depth={depth!r}')
         return F, J
 
-    def predict_compiled(self, X: np.ndarray) -> np.ndarray:
-        """Compiled batch path: X (n, 4) [m] -> (n, 3) [N]. Raises ValueError on NaN/Inf input."""
+    def predict_compiled(self, X: np.ndarray, jacobian: bool = False
+                         ) -> np.ndarray | tuple[np.ndarray, np.ndarray]:
+        """Compiled batch path: X (n, 4) [m] (any float dtype) -> F (n, 3) [N].
+
+        With ``jacobian``: (F, J (n, 3, 4) [N/m]) with ``J[i, a, b] = dF_a / dX_b`` at ``X[i]``,
+        the exact derivatives of the compiled model. Where an input is clamped by the out-of-range
+        policy its column is 0; at an MF kink the derivative is one-sided.
+
+        Raises:
+            ValueError: on NaN/Inf input.
+        """
         self._check_fitted()
         X = np.ascontiguousarray(check_finite_inputs(X, INPUT_NAMES))
         if X.shape[1] != 4:
             raise ValueError(f'predict_compiled needs X of shape (n, 4); got {X.shape}')
+        if jacobian:
+            return compiled.eval_jac_batch(X, self._fp, self._ip)
         return compiled.eval_batch(X, self._fp, self._ip)
 
     def predict_one(self, x: float, y: float, z: float, depth: float) -> tuple[float, float, float]:
