@@ -167,3 +167,15 @@ def test_no_hold_out_trains_every_output_on_all_the_data(synthetic, tmp_path):
     with pytest.raises(ValueError, match='val_fraction 0'):
         ForceModel(structure=None, val_fraction=0, search_folds=1, epochs=2).fit(synthetic.X, synthetic.Y,
                                                                   groups=synthetic.point)
+
+
+def test_the_step_guard_keeps_the_training_error_from_rising(synthetic):
+    """With the guard (the default) no epoch ends above the previous one; without it a large
+    initial step overshoots and the error goes up at least once."""
+    X = synthetic.X[:, 1:]
+    t = synthetic.Y[:, 2]
+    kw = dict(step=0.5, ridge=1e-6, scale=synthetic.X[:, 3])
+    guarded = train(X, t, (3, 3, 2), 25, **kw)
+    assert np.all(np.diff(guarded.train_rmse) <= 0.0)
+    free = train(X, t, (3, 3, 2), 25, guard=False, **kw)
+    assert np.any(np.diff(free.train_rmse) > 0.0)

@@ -82,6 +82,8 @@ class ForceModel:
             are recorded in ``metadata_['training']['input_check']``.
             ``structure``, ``search_start``, ``max_mfs`` have one entry per ANFIS input;
             ``extrapolation`` one per column of (x, y, z, depth).
+        step_guard: reject an MF gradient step that raises the training error (restore, halve the
+            step; :func:`~.training.fit_normalized`'s ``guard``).
     """
 
     def __init__(self, *,
@@ -94,7 +96,7 @@ class ForceModel:
                  search_folds: int = SHIPPED['search_folds'],
                  extrapolation: Sequence[float] | None = None, seed: int = SHIPPED['seed'],
                  form: str = SHIPPED['form'], inputs: Sequence[str] | str = SHIPPED['inputs'],
-                 ridge_candidates: Sequence[float] | None = None) -> None:
+                 ridge_candidates: Sequence[float] | None = None, step_guard: bool = True) -> None:
         self.form = form
         self.inputs = inputs
         self.structure = structure
@@ -112,6 +114,7 @@ class ForceModel:
         self.search_folds = search_folds
         self.extrapolation = extrapolation
         self.seed = seed
+        self.step_guard = step_guard
         self.metadata_: dict[str, Any] = {}
 
     # ---- training ---------------------------------------------------------------------------
@@ -244,7 +247,7 @@ class ForceModel:
         self.ridges_: list[float] = []
         for o, fixed in enumerate(structures):
             t0 = time.perf_counter()
-            kw = dict(ridge=ridges[o], step=self.step)
+            kw = dict(ridge=ridges[o], step=self.step, guard=bool(self.step_guard))
             Xf, tf, Xv, tv = X[fit_idx], Y[fit_idx, o], X[val_idx], Y[val_idx, o]
             if fixed is None:
                 held = (dict(folds=folds, scale=S) if folds else
@@ -294,7 +297,8 @@ class ForceModel:
             'search_folds': self.search_folds, 'input_check': self.input_check_,
             'structure': 'given' if not isinstance(self.structure, str) and self.structure is not None
             else ('search' if all(s is None for s in structures) else 'shipped'),
-            'seed': self.seed, 'seconds': round(self.fit_seconds_, 3),
+            'seed': self.seed, 'step_guard': bool(self.step_guard),
+            'seconds': round(self.fit_seconds_, 3),
             'n_samples': int(len(X)),
             'candidates': [[_candidate_dict(c) for c in sr.candidates] if sr else []
                            for sr in self.search_],

@@ -121,7 +121,7 @@ def fit_normalized(U: np.ndarray, t: np.ndarray, structure: tuple[int, ...], epo
                    U_check: np.ndarray | None = None, t_check: np.ndarray | None = None,
                    step: float = 0.01, ridge: float = DEFAULT_RIDGE, patience: int = 20,
                    initial_mfs: list[np.ndarray] | None = None, scale: np.ndarray | None = None,
-                   scale_check: np.ndarray | None = None) -> TrainResult:
+                   scale_check: np.ndarray | None = None, guard: bool = True) -> TrainResult:
     """Hybrid training on normalised inputs U in [0, 1]^d.
 
     Args:
@@ -137,6 +137,8 @@ def fit_normalized(U: np.ndarray, t: np.ndarray, structure: tuple[int, ...], epo
             s · y(U) (the force model's F = depth · g), so the consequents solve the least squares
             on the rows of Φ times s and the MF gradient weighs by s² (both still the hybrid rule
             on the error of s · y). Targets ``t`` and the reported RMSEs are of s · y.
+        guard: reject a step whose epoch ends with a higher training error than the last accepted
+            one (its MFs are restored and the step halved), so the training error never rises.
     """
     d = U.shape[1]
     if len(structure) != d:
@@ -163,12 +165,18 @@ def fit_normalized(U: np.ndarray, t: np.ndarray, structure: tuple[int, ...], epo
     else:
         t_fit, w_fit = t, None
     s_check = 1.0 if scale_check is None else np.asarray(scale_check, dtype=np.float64)
+    accepted = None   # (mfs, coef, E, grads) of the last accepted epoch, for the guard
     for epoch in range(1, epochs + 1):
         Phi = model.design_matrix(U)
         if scale is not None:
             Phi *= scale[:, None]
         model.coef = solve_consequents(Phi, t, ridge, n_inputs=d).reshape(R, d + 1)
         grads, E = model.mf_gradient(U, t_fit, w_fit)
+        if guard and accepted is not None and E > accepted[2]:
+            # The last step raised the training error: undo it and retry with half the step.
+            model.mfs, model.coef, E, grads = accepted
+            step *= 0.5
+        accepted = (model.mfs, model.coef, E, grads)
         train_err = float(np.sqrt(2.0 * E / len(t)))
         result.train_rmse.append(train_err)
         score = train_err
