@@ -17,6 +17,8 @@ import math
 import numba
 import numpy as np
 
+from .compiled import rule_output
+
 #: family name -> code in ``ip[0]``
 CODES = {'triangular': 0, 'trapezoidal': 1, 'gbell': 2, 'gaussian': 3}
 
@@ -93,8 +95,7 @@ def _eval(q, fp, ip, ws):
     for r in range(R):
         idx = r
         w = 1.0
-        mo = mo                       # walk inputs from the last (fastest) to the first
-        base = mo
+        base = mo                     # walk inputs from the last (fastest) to the first
         for i in range(d - 1, -1, -1):
             m = ip[3 + i]
             base -= m
@@ -102,11 +103,7 @@ def _eval(q, fp, ip, ws):
             idx //= m
         if w == 0.0:
             continue
-        c = off + r * (d + 1)
-        f = fp[c + d]
-        for i in range(d):
-            f += fp[c + i] * ue[i]
-        acc += w * f
+        acc += w * rule_output(fp, off + r * (d + 1), d, ue)
     return acc
 
 
