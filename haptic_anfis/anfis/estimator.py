@@ -90,7 +90,8 @@ class ANFIS:
         names = self._param_names()
         for k, v in params.items():
             if k not in names:
-                raise ANFISInputError(f'set_params: unknown parameter {k!r}; expected one of {names}')
+                raise ANFISInputError(f'set_params: unknown parameter {k!r}; expected one of '
+                                      f'{names}')
             setattr(self, k, v)
         return self
 
@@ -113,8 +114,8 @@ class ANFIS:
             raise ANFISInputError(f'n_mfs {counts} make {int(np.prod(counts))} rules; expected at '
                                   'most 10000 (a grid partition grows as the product)')
         for name, ok, want in (
-                ('epochs', isinstance(self.epochs, (int, np.integer)) and not isinstance(self.epochs, bool)
-                 and self.epochs >= 1, 'an integer >= 1'),
+                ('epochs', isinstance(self.epochs, (int, np.integer))
+                 and not isinstance(self.epochs, bool) and self.epochs >= 1, 'an integer >= 1'),
                 ('step', _num(self.step) and self.step > 0, 'a number > 0'),
                 ('ridge', self.ridge is None or (_num(self.ridge) and self.ridge >= 0),
                  'None or a number >= 0'),
@@ -137,15 +138,15 @@ class ANFIS:
         except (TypeError, ValueError):
             raise ANFISInputError(f'{what}: expected a 2-D array of numbers') from None
         if X.ndim != 2 or X.shape[0] < 1 or X.shape[1] < 1:
-            raise ANFISInputError(f'{what}: expected a 2-D array (n_samples, n_features), got shape '
-                                  f'{X.shape}')
+            raise ANFISInputError(f'{what}: expected a 2-D array (n_samples, n_features), got '
+                                  f'shape {X.shape}')
         if d is not None and X.shape[1] != d:
             raise ANFISInputError(f'{what}: expected {d} features (columns), got {X.shape[1]}')
         bad = ~np.isfinite(X)
         if bad.any():
             row, col = np.argwhere(bad)[0]
-            raise ANFISInputError(f'{what}: non-finite value {float(X[row, col])!r} at sample {row}, '
-                                  f'feature {col}; expected finite numbers')
+            raise ANFISInputError(f'{what}: non-finite value {float(X[row, col])!r} at sample '
+                                  f'{row}, feature {col}; expected finite numbers')
         return X
 
     # ---- fit ------------------------------------------------------------------------------
@@ -164,8 +165,8 @@ class ANFIS:
             raise ANFISInputError(f'y: expected shape ({n},) to match X, got {y.shape}')
         if not np.all(np.isfinite(y)):
             k = int(np.flatnonzero(~np.isfinite(y))[0])
-            raise ANFISInputError(f'y: non-finite value {float(y[k])!r} at sample {k}; expected finite '
-                                  'numbers')
+            raise ANFISInputError(f'y: non-finite value {float(y[k])!r} at sample {k}; expected '
+                                  'finite numbers')
         t0 = time.perf_counter()
         self.n_features_in_ = d
         self.input_min_, self.input_max_ = X.min(axis=0), X.max(axis=0)

@@ -53,7 +53,7 @@ def check_family(family: object) -> str:
 
 
 def n_free(family: str, m: int) -> int:
-    """Free (trained) premise parameters of one input with ``m`` MFs: every parameter of every MF."""
+    """Free (trained) premise parameters of one input with ``m`` MFs: all of every MF's."""
     return FAMILIES[family] * m
 
 

@@ -14,7 +14,8 @@ each input's training range onto it). Each epoch:
 The step size κ follows Jang's (1993) heuristics on the sequence of epoch errors: ×1.1 after four
 decreases in a row, ×0.9 after two up-down alternations. On top, a guard: a step whose re-solved
 training error is above the current one is rejected and κ halved, so the training error never rises
-from one accepted epoch to the next (with a ridge > 0 the least squares alone does not promise that).
+from one accepted epoch to the next (with a ridge > 0 the least squares alone does not promise
+that).
 """
 from __future__ import annotations
 

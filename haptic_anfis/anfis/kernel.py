@@ -70,7 +70,9 @@ def _eval(q, fp, ip, ws):
                     z = abs((um - fp[p + 2]) / fp[p])
                     if z > 0.0:
                         L = 2.0 * fp[p + 1] * math.log(z)
-                        lm = -(L + math.log1p(math.exp(-L))) if L > 0.0 else -math.log1p(math.exp(L))
+                        # -log(1 + e^L) without overflow
+                        lm = -(L + math.log1p(math.exp(-L))) if L > 0.0 \
+                            else -math.log1p(math.exp(L))
                     else:
                         lm = 0.0
                 else:                 # gaussian (sigma, c)
