@@ -158,7 +158,7 @@ def test_no_hold_out_trains_every_output_on_all_the_data(synthetic, tmp_path):
     X = synthetic.X[:, 1:]
     lo, hi = X.min(0), X.max(0)
     ref = train(X, synthetic.Y[:, 1], (2, 3, 2), 4, lo=lo, hi=hi, scale=synthetic.X[:, 3],
-                ridge=m.ridges_[1])  # the force model's own ridge, not train's default
+                ridge=m.ridges_[1], guard=m.step_guard)  # the force model's settings
     np.testing.assert_array_equal(m.models_[1].coef, ref.model.coef)
     model, _ = train_on_dataset(synthetic, **kw)
     model.save(tmp_path / 'm.json')

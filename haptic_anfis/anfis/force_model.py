@@ -83,7 +83,9 @@ class ForceModel:
             ``structure``, ``search_start``, ``max_mfs`` have one entry per ANFIS input;
             ``extrapolation`` one per column of (x, y, z, depth).
         step_guard: reject an MF gradient step that raises the training error (restore, halve the
-            step; :func:`~.training.fit_normalized`'s ``guard``).
+            step; :func:`~.training.fit_normalized`'s ``guard``). Off by default: on the shipped
+            data it cost accuracy in grouped CV (docs/measurements/cv.md): in a fixed budget of
+            40 epochs an accepted uphill step often leads lower later.
     """
 
     def __init__(self, *,
@@ -96,7 +98,7 @@ class ForceModel:
                  search_folds: int = SHIPPED['search_folds'],
                  extrapolation: Sequence[float] | None = None, seed: int = SHIPPED['seed'],
                  form: str = SHIPPED['form'], inputs: Sequence[str] | str = SHIPPED['inputs'],
-                 ridge_candidates: Sequence[float] | None = None, step_guard: bool = True) -> None:
+                 ridge_candidates: Sequence[float] | None = None, step_guard: bool = False) -> None:
         self.form = form
         self.inputs = inputs
         self.structure = structure
