@@ -52,7 +52,7 @@ def ours(params: dict, outputs: str = 'xyz'):
     base.pop('seed', None)
     base.update(params)
     for key in ('extrapolation', 'inputs', 'max_mfs', 'search_start'):
-        if key in base and base[key] is not None:
+        if isinstance(base.get(key), list):   # YAML lists; 'auto' stays a string
             base[key] = tuple(base[key])
     if isinstance(base.get('structure'), list):
         st = base['structure']

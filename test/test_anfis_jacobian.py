@@ -83,7 +83,7 @@ def _queries(fm, rng, n=1500):
 def test_batch_jacobian_matches_central_differences(model, rng):
     X = _away_from_kinks(model, _queries(model, rng))
     assert len(X) > 1000
-    F, J = model.predict_with_jacobian(X)
+    F, J = model.predict_compiled(X, jacobian=True)
     np.testing.assert_allclose(F, model.predict(X), rtol=0, atol=1e-12)
     Jfd = _finite_differences(model, X)
     scale = np.abs(Jfd).max()
@@ -93,7 +93,7 @@ def test_batch_jacobian_matches_central_differences(model, rng):
 
 def test_single_query_jacobian_equals_batch(model, rng):
     X = _queries(model, rng, 300)
-    F, J = model.predict_with_jacobian(X)
+    F, J = model.predict_compiled(X, jacobian=True)
     for k in range(len(X)):
         f1, j1 = model.jacobian_one(*X[k])
         assert f1.shape == (3,) and j1.shape == (3, 4)
@@ -122,11 +122,11 @@ def test_depth_scaled_model_ignores_x_and_gives_no_force_without_contact(depth_s
 
 def test_float32_and_non_finite_inputs(small_model):
     X = np.array([[0.03, 0.01, 0.0, 0.008]], dtype=np.float32)
-    F, J = small_model.predict_with_jacobian(X)
-    F64, J64 = small_model.predict_with_jacobian(X.astype(np.float64))
+    F, J = small_model.predict_compiled(X, jacobian=True)
+    F64, J64 = small_model.predict_compiled(X.astype(np.float64), jacobian=True)
     np.testing.assert_array_equal(F, F64)
     np.testing.assert_array_equal(J, J64)
     with pytest.raises(ValueError, match='non-finite input'):
         small_model.jacobian_one(0.03, np.nan, 0.0, 0.005)
     with pytest.raises(ValueError, match='non-finite input depth'):
-        small_model.predict_with_jacobian(np.array([[0.03, 0.0, 0.0, np.inf]]))
+        small_model.predict_compiled(np.array([[0.03, 0.0, 0.0, np.inf]]), jacobian=True)

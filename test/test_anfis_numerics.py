@@ -83,7 +83,7 @@ def test_scaled_paths_agree_on_knots_corners_and_outside(scaled, synthetic, rng)
     np.testing.assert_allclose(scaled.predict_compiled(X), F_np, rtol=0, atol=1e-12)
     np.testing.assert_allclose(np.array([scaled.predict_one(*x) for x in X]), F_np, rtol=0,
                                atol=1e-12)
-    F_j, _ = scaled.predict_with_jacobian(X)
+    F_j, _ = scaled.predict_compiled(X, jacobian=True)
     np.testing.assert_allclose(F_j, F_np, rtol=0, atol=1e-12)
     assert np.all(np.isfinite(F_np))
     np.testing.assert_array_equal(F_np[X[:, 3] <= 0], 0.0)
@@ -157,7 +157,8 @@ def test_no_hold_out_trains_every_output_on_all_the_data(synthetic, tmp_path):
     assert m.val_rmse_ == [None] * 3 and all(1 <= e <= 4 for e in m.best_epoch_)
     X = synthetic.X[:, 1:]
     lo, hi = X.min(0), X.max(0)
-    ref = train(X, synthetic.Y[:, 1], (2, 3, 2), 4, lo=lo, hi=hi, scale=synthetic.X[:, 3])
+    ref = train(X, synthetic.Y[:, 1], (2, 3, 2), 4, lo=lo, hi=hi, scale=synthetic.X[:, 3],
+                ridge=m.ridges_[1], guard=m.step_guard)  # the force model's settings
     np.testing.assert_array_equal(m.models_[1].coef, ref.model.coef)
     model, _ = train_on_dataset(synthetic, **kw)
     model.save(tmp_path / 'm.json')
@@ -166,3 +167,15 @@ def test_no_hold_out_trains_every_output_on_all_the_data(synthetic, tmp_path):
     with pytest.raises(ValueError, match='val_fraction 0'):
         ForceModel(structure=None, val_fraction=0, search_folds=1, epochs=2).fit(synthetic.X, synthetic.Y,
                                                                   groups=synthetic.point)
+
+
+def test_the_step_guard_keeps_the_training_error_from_rising(synthetic):
+    """With the guard (the default) no epoch ends above the previous one; without it a large
+    initial step overshoots and the error goes up at least once."""
+    X = synthetic.X[:, 1:]
+    t = synthetic.Y[:, 2]
+    kw = dict(step=0.5, ridge=1e-6, scale=synthetic.X[:, 3])
+    guarded = train(X, t, (3, 3, 2), 25, **kw)
+    assert np.all(np.diff(guarded.train_rmse) <= 0.0)
+    free = train(X, t, (3, 3, 2), 25, guard=False, **kw)
+    assert np.any(np.diff(free.train_rmse) > 0.0)

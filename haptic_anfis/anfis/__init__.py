@@ -1,15 +1,18 @@
-"""ANFIS force models: first-order Takagi–Sugeno, triangular MFs on a grid partition, hybrid learning.
+"""ANFIS: first-order Takagi–Sugeno models on a grid partition, hybrid learning; the force models.
 
 Pure Python (numpy, numba); nothing here imports ROS.
 
+- :class:`ANFIS` — the general estimator: n inputs, one output, four MF families, hybrid learning.
 - :class:`ForceModel` — the three-output (Fx, Fy, Fz) model the force server uses.
 - :class:`SugenoModel` — one output; :func:`train` its hybrid learning; :func:`search_structure`.
 """
+from .estimator import ANFIS, ANFISInputError
 from .force_model import ForceModel, rmse, train_on_dataset
 from .model_file import FORMAT_VERSION, ModelFileError
 from .structure import search_structure
 from .sugeno import SugenoModel
 from .training import solve_consequents, train
 
-__all__ = ['ForceModel', 'SugenoModel', 'ModelFileError', 'FORMAT_VERSION', 'rmse',
-           'search_structure', 'solve_consequents', 'train', 'train_on_dataset']
+__all__ = ['ANFIS', 'ANFISInputError', 'ForceModel', 'SugenoModel', 'ModelFileError',
+           'FORMAT_VERSION', 'rmse', 'search_structure', 'solve_consequents', 'train',
+           'train_on_dataset']

@@ -98,6 +98,15 @@ def _dtri(x, a, b, c):
     return 0.0
 
 
+@numba.njit(cache=True, nogil=True, inline='always')
+def rule_output(fp, c, d, x):
+    """First-order consequent of the rule whose (p_1 .. p_d, q) start at ``fp[c]``: q + Σ p_i x_i."""
+    f = fp[c + d]
+    for i in range(d):
+        f += fp[c + i] * x[i]
+    return f
+
+
 @numba.njit(cache=True, nogil=True)
 def _eval_point(q, fp, ip, out, J, want_jac, ws):
     """Evaluate every packed model at one query ``q`` (nq,) into ``out`` (n_out,), and with
@@ -181,9 +190,7 @@ def _eval_point(q, fp, ip, out, J, want_jac, ws):
             if not exists or (w == 0.0 and not want_jac):
                 continue
             c = coef_off + rule * (d + 1)
-            f = fp[c + d]
-            for i in range(d):
-                f += fp[c + i] * xe[i]
+            f = rule_output(fp, c, d, xe)
             acc += w * f
             if want_jac:
                 for i in range(d):

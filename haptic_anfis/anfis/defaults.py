@@ -13,10 +13,9 @@ from typing import Any
 import numpy as np
 
 from .sugeno import DEFAULT_EXTRAPOLATION_SCALED
-from .training import DEFAULT_RIDGE
 
-__all__ = ['SHIPPED', 'SHIPPED_INPUTS', 'SHIPPED_STRUCTURE', 'X_CHECK_TOL', 'X_MFS',
-           'AUTO', 'x_explained_by_yz']
+__all__ = ['FORCE_MODEL_RIDGE', 'SHIPPED', 'SHIPPED_INPUTS', 'SHIPPED_STRUCTURE', 'X_CHECK_TOL',
+           'X_MFS', 'AUTO', 'x_explained_by_yz']
 
 #: ``inputs`` / ``structure`` value meaning "decided from the data" (the default)
 AUTO = 'auto'
@@ -24,6 +23,9 @@ AUTO = 'auto'
 SHIPPED_INPUTS = ('y', 'z', 'depth')
 #: per-output (Fx, Fy, Fz) MF counts over :data:`SHIPPED_INPUTS` (6-6-2, 6-6-2, 5-5-2)
 SHIPPED_STRUCTURE = ((6, 6, 2), (6, 6, 2), (5, 5, 2))
+#: the force model's relative ridge of the consequent least squares (part of the shipped
+#: configuration, chosen with it by grouped CV on the FE data)
+FORCE_MODEL_RIDGE = 1e-6
 #: upper bound of the structure search's MF count on x when x is kept
 X_MFS = 3
 #: x is "a function of (y, z)" when the leave-one-out RMS error of a smooth (polynomial)
@@ -46,7 +48,7 @@ SHIPPED: MappingProxyType = MappingProxyType({
     'search_epochs': 10,
     'max_mfs': None,          # per input: x 3 (X_MFS), y 5, z 5, depth 3
     'tol': 0.0,
-    'ridge': DEFAULT_RIDGE,   # 1e-6
+    'ridge': FORCE_MODEL_RIDGE,   # 1e-6
     'search_folds': 5,
     'val_fraction': 0.0,
     'test_fraction': 0.2,

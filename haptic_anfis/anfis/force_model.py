@@ -82,9 +82,14 @@ class ForceModel:
             are recorded in ``metadata_['training']['input_check']``.
             ``structure``, ``search_start``, ``max_mfs`` have one entry per ANFIS input;
             ``extrapolation`` one per column of (x, y, z, depth).
+        step_guard: reject an MF gradient step that raises the training error (restore, halve the
+            step; :func:`~.training.fit_normalized`'s ``guard``). Off by default: on the shipped
+            data it cost accuracy in grouped CV (docs/measurements/cv.md): in a fixed budget of
+            40 epochs an accepted uphill step often leads lower later.
     """
 
-    def __init__(self, structure: Structure | Sequence[Structure] | str | None = SHIPPED['structure'],
+    def __init__(self, *,
+                 structure: Structure | Sequence[Structure] | str | None = SHIPPED['structure'],
                  epochs: int = SHIPPED['epochs'], search_epochs: int = SHIPPED['search_epochs'],
                  search_start: Structure | None = None, max_mfs: Structure | None = SHIPPED['max_mfs'],
                  candidates: list[Structure] | None = None, tol: float = SHIPPED['tol'],
@@ -93,7 +98,7 @@ class ForceModel:
                  search_folds: int = SHIPPED['search_folds'],
                  extrapolation: Sequence[float] | None = None, seed: int = SHIPPED['seed'],
                  form: str = SHIPPED['form'], inputs: Sequence[str] | str = SHIPPED['inputs'],
-                 ridge_candidates: Sequence[float] | None = None) -> None:
+                 ridge_candidates: Sequence[float] | None = None, step_guard: bool = False) -> None:
         self.form = form
         self.inputs = inputs
         self.structure = structure
@@ -111,6 +116,7 @@ class ForceModel:
         self.search_folds = search_folds
         self.extrapolation = extrapolation
         self.seed = seed
+        self.step_guard = step_guard
         self.metadata_: dict[str, Any] = {}
 
     # ---- training ---------------------------------------------------------------------------
@@ -243,7 +249,7 @@ class ForceModel:
         self.ridges_: list[float] = []
         for o, fixed in enumerate(structures):
             t0 = time.perf_counter()
-            kw = dict(ridge=ridges[o], step=self.step)
+            kw = dict(ridge=ridges[o], step=self.step, guard=bool(self.step_guard))
             Xf, tf, Xv, tv = X[fit_idx], Y[fit_idx, o], X[val_idx], Y[val_idx, o]
             if fixed is None:
                 held = (dict(folds=folds, scale=S) if folds else
@@ -293,7 +299,8 @@ class ForceModel:
             'search_folds': self.search_folds, 'input_check': self.input_check_,
             'structure': 'given' if not isinstance(self.structure, str) and self.structure is not None
             else ('search' if all(s is None for s in structures) else 'shipped'),
-            'seed': self.seed, 'seconds': round(self.fit_seconds_, 3),
+            'seed': self.seed, 'step_guard': bool(self.step_guard),
+            'seconds': round(self.fit_seconds_, 3),
             'n_samples': int(len(X)),
             'candidates': [[_candidate_dict(c) for c in sr.candidates] if sr else []
                            for sr in self.search_],
@@ -343,24 +350,6 @@ class ForceModel:
             F *= np.maximum(X[:, self.scale_col_], 0.0)[:, None]
         return F
 
-    def predict_with_jacobian(self, X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Compiled batch forces and their exact derivatives w.r.t. the inputs.
-
-        Args:
-            X: (n, 4) queries (x, y, z, depth) [m] (any float dtype).
-        Returns:
-            (F (n, 3) [N], J (n, 3, 4) [N/m]) with ``J[i, a, b] = dF_a / dX_b`` at ``X[i]``.
-            Where an input is clamped by the out-of-range policy its column is 0; at an MF kink
-            the derivative is one-sided.
-        Raises:
-            ValueError: on NaN/Inf input.
-        """
-        self._check_fitted()
-        X = np.ascontiguousarray(check_finite_inputs(X, INPUT_NAMES))
-        if X.shape[1] != 4:
-            raise ValueError(f'predict_with_jacobian needs X of shape (n, 4); got {X.shape}')
-        return compiled.eval_jac_batch(X, self._fp, self._ip)
-
     def jacobian_one(self, x: float, y: float, z: float, depth: float
                      ) -> tuple[np.ndarray, np.ndarray]:
         """Compiled real-time forces and Jacobian for one contact: metres in.
@@ -377,12 +366,23 @@ class ForceModel:
                              f'depth={depth!r}')
         return F, J
 
-    def predict_compiled(self, X: np.ndarray) -> np.ndarray:
-        """Compiled batch path: X (n, 4) [m] -> (n, 3) [N]. Raises ValueError on NaN/Inf input."""
+    def predict_compiled(self, X: np.ndarray, jacobian: bool = False
+                         ) -> np.ndarray | tuple[np.ndarray, np.ndarray]:
+        """Compiled batch path: X (n, 4) [m] (any float dtype) -> F (n, 3) [N].
+
+        With ``jacobian``: (F, J (n, 3, 4) [N/m]) with ``J[i, a, b] = dF_a / dX_b`` at ``X[i]``,
+        the exact derivatives of the compiled model. Where an input is clamped by the out-of-range
+        policy its column is 0; at an MF kink the derivative is one-sided.
+
+        Raises:
+            ValueError: on NaN/Inf input.
+        """
         self._check_fitted()
         X = np.ascontiguousarray(check_finite_inputs(X, INPUT_NAMES))
         if X.shape[1] != 4:
             raise ValueError(f'predict_compiled needs X of shape (n, 4); got {X.shape}')
+        if jacobian:
+            return compiled.eval_jac_batch(X, self._fp, self._ip)
         return compiled.eval_batch(X, self._fp, self._ip)
 
     def predict_one(self, x: float, y: float, z: float, depth: float) -> tuple[float, float, float]:

@@ -92,8 +92,11 @@ class SugenoModel:
 
     @property
     def n_params(self) -> int:
-        """Trainable parameters: consequents plus free MF parameters."""
-        return self.coef.size + sum(3 * max(m - 1, 0) for m in self.structure)
+        """Trainable parameters: consequents plus free MF parameters.
+
+        Per input with m >= 2 triangles, 3m - 4 MF parameters are free: the outer peaks are pinned
+        to the domain edges and the outer feet lie outside it, unused; a single MF has none."""
+        return self.coef.size + sum(3 * m - 4 for m in self.structure if m >= 2)
 
     # ---- forward pass ---------------------------------------------------------------------
     def clamp(self, X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

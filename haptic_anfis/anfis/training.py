@@ -19,8 +19,10 @@ import scipy.linalg
 from . import membership as mfun
 from .sugeno import SugenoModel
 
-#: Ridge weight relative to the largest squared singular value of the (column-scaled) design matrix.
-DEFAULT_RIDGE = 1e-6
+#: Ridge weight relative to the largest squared singular value of the (column-scaled) design matrix:
+#: none by default, since any ridge biases clean data (the force model sets its own,
+#: :data:`.defaults.FORCE_MODEL_RIDGE`, chosen by grouped CV on FE data).
+DEFAULT_RIDGE = 0.0
 #: In the fallback solve, eigenvalues below this fraction of the largest are cut off outright.
 SVD_CUTOFF = 1e-12
 
@@ -42,8 +44,8 @@ def _largest_eigenvalue(G: np.ndarray, iterations: int = 50) -> float:
     return float(v @ G @ v)
 
 
-def solve_consequents(Phi: np.ndarray, t: np.ndarray, ridge: float = DEFAULT_RIDGE,
-                      n_inputs: int | None = None) -> np.ndarray:
+def solve_consequents(Phi: np.ndarray, t: np.ndarray, ridge: float = DEFAULT_RIDGE, *,
+                      n_inputs: int) -> np.ndarray:
     """Regularised least squares for the consequents, stable when Φ is rank deficient.
 
     A triangular grid partition makes the first-order consequent columns linearly dependent (the
@@ -63,12 +65,14 @@ def solve_consequents(Phi: np.ndarray, t: np.ndarray, ridge: float = DEFAULT_RID
     Args:
         Phi: (n, R (d + 1)) design matrix of :meth:`SugenoModel.design_matrix`.
         t: (n,) targets.
-        n_inputs: d (default 4, the force model's).
+        n_inputs: d, the number of model inputs (Φ has R (d + 1) columns).
     Returns:
         (R (d + 1),) coefficients.
     """
     n, P = Phi.shape
-    d1 = (n_inputs if n_inputs is not None else 4) + 1
+    if isinstance(n_inputs, bool) or not isinstance(n_inputs, (int, np.integer)) or n_inputs < 1:
+        raise ValueError(f'solve_consequents: n_inputs must be an integer >= 1, got {n_inputs!r}')
+    d1 = int(n_inputs) + 1
     if P % d1:
         raise ValueError(f'design matrix has {P} columns, not a multiple of d + 1 = {d1}')
     R = P // d1
@@ -117,7 +121,7 @@ def fit_normalized(U: np.ndarray, t: np.ndarray, structure: tuple[int, ...], epo
                    U_check: np.ndarray | None = None, t_check: np.ndarray | None = None,
                    step: float = 0.01, ridge: float = DEFAULT_RIDGE, patience: int = 20,
                    initial_mfs: list[np.ndarray] | None = None, scale: np.ndarray | None = None,
-                   scale_check: np.ndarray | None = None) -> TrainResult:
+                   scale_check: np.ndarray | None = None, guard: bool = True) -> TrainResult:
     """Hybrid training on normalised inputs U in [0, 1]^d.
 
     Args:
@@ -133,6 +137,8 @@ def fit_normalized(U: np.ndarray, t: np.ndarray, structure: tuple[int, ...], epo
             s · y(U) (the force model's F = depth · g), so the consequents solve the least squares
             on the rows of Φ times s and the MF gradient weighs by s² (both still the hybrid rule
             on the error of s · y). Targets ``t`` and the reported RMSEs are of s · y.
+        guard: reject a step whose epoch ends with a higher training error than the last accepted
+            one (its MFs are restored and the step halved), so the training error never rises.
     """
     d = U.shape[1]
     if len(structure) != d:
@@ -159,12 +165,18 @@ def fit_normalized(U: np.ndarray, t: np.ndarray, structure: tuple[int, ...], epo
     else:
         t_fit, w_fit = t, None
     s_check = 1.0 if scale_check is None else np.asarray(scale_check, dtype=np.float64)
+    accepted = None   # (mfs, coef, E, grads) of the last accepted epoch, for the guard
     for epoch in range(1, epochs + 1):
         Phi = model.design_matrix(U)
         if scale is not None:
             Phi *= scale[:, None]
-        model.coef = solve_consequents(Phi, t, ridge, d).reshape(R, d + 1)
+        model.coef = solve_consequents(Phi, t, ridge, n_inputs=d).reshape(R, d + 1)
         grads, E = model.mf_gradient(U, t_fit, w_fit)
+        if guard and accepted is not None and E > accepted[2]:
+            # The last step raised the training error: undo it and retry with half the step.
+            model.mfs, model.coef, E, grads = accepted
+            step *= 0.5
+        accepted = (model.mfs, model.coef, E, grads)
         train_err = float(np.sqrt(2.0 * E / len(t)))
         result.train_rmse.append(train_err)
         score = train_err
