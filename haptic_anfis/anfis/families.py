@@ -16,8 +16,12 @@ family          k     row                                        membership
 Every parameter is free (Jang 1993): an MF may widen, narrow and move. :func:`project` keeps them in
 the constraint set after each gradient step:
 
-- centres (the peak, the middle of the plateau, c) inside [0, 1] and ordered with a minimum gap of
-  :data:`MIN_GAP` of the uniform spacing — the MFs keep their linguistic order;
+- centres (the peak, the middle of the plateau, c) ordered with a minimum gap of :data:`MIN_GAP` of
+  the uniform spacing — the MFs keep their linguistic order — and inside [0, 1] for the
+  piecewise-linear families (a peak outside the domain could leave an MF firing nowhere), within
+  :data:`CENTRE_MARGIN` of it for the smooth ones: a bell or Gaussian centred past the edge of the
+  range is monotone over it, the shape a 2-MF partition needs for a curved trend (Jang's premise
+  parameters are unconstrained; the margin only keeps the centre near the data);
 - widths at least :data:`MIN_WIDTH` (no zero-width MF, whose derivative would be infinite);
   gbell slopes within [:data:`MIN_SLOPE`, :data:`MAX_SLOPE`] (below 1/2 the bell has a cusp at
   its centre; above, |u|^(2b) overflows);
@@ -41,6 +45,8 @@ FAMILIES = {'triangular': 3, 'trapezoidal': 4, 'gbell': 3, 'gaussian': 2}
 MIN_WIDTH = 1e-3
 #: Smallest gap between neighbouring centres, as a fraction of the uniform spacing.
 MIN_GAP = 0.1
+#: How far (in units of the input's range) a smooth MF's centre may lie outside [0, 1].
+CENTRE_MARGIN = 1.0
 #: Slope range of the generalized bell.
 MIN_SLOPE, MAX_SLOPE = 0.5, 50.0
 
@@ -87,17 +93,18 @@ def centres(family: str, P: np.ndarray) -> np.ndarray:
     return P[:, centre_column(family)]
 
 
-def _ordered(c: np.ndarray) -> np.ndarray:
-    """Centres clipped to [0, 1] and spaced at least the minimum gap (forward then backward pass:
-    each pass only moves a centre toward feasibility, and the backward one leaves every gap)."""
+def _ordered(c: np.ndarray, margin: float = 0.0) -> np.ndarray:
+    """Centres clipped to [-margin, 1 + margin] and spaced at least the minimum gap (forward then
+    backward pass: each pass only moves a centre toward feasibility, and the backward one leaves
+    every gap)."""
     m = len(c)
-    c = np.clip(c, 0.0, 1.0)
+    c = np.clip(c, -margin, 1.0 + margin)
     if m < 2:
         return c
     gap = MIN_GAP / (m - 1)
     for j in range(1, m):
         c[j] = max(c[j], c[j - 1] + gap)
-    c[-1] = min(c[-1], 1.0)
+    c[-1] = min(c[-1], 1.0 + margin)
     for j in range(m - 2, -1, -1):
         c[j] = min(c[j], c[j + 1] - gap)
     return c
@@ -119,11 +126,11 @@ def project(family: str, P: np.ndarray) -> np.ndarray:
     if family == 'gbell':
         P[:, 0] = np.maximum(np.abs(P[:, 0]), eps)
         P[:, 1] = np.clip(P[:, 1], MIN_SLOPE, MAX_SLOPE)
-        P[:, 2] = _ordered(P[:, 2])
+        P[:, 2] = _ordered(P[:, 2], CENTRE_MARGIN)
         return P
     if family == 'gaussian':
         P[:, 0] = np.maximum(np.abs(P[:, 0]), eps)
-        P[:, 1] = _ordered(P[:, 1])
+        P[:, 1] = _ordered(P[:, 1], CENTRE_MARGIN)
         return P
     if family == 'triangular':
         b = _ordered(P[:, 1])
