@@ -27,7 +27,7 @@ pytestmark = pytest.mark.ros
 #: press 14 mm at the apex, hold, lift, repeat: the switches land mid-press
 PRESS = {'loop': True, 'start_delay': 0.1, 'approach_height': 0.004, 'pattern': [
     {'press': {'points': [[0.0, 0.0]], 'depth': 0.014, 'hold': 0.6}}, {'pause': {'duration': 0.2}}]}
-MAX_FORCE = 10.0
+MAX_FORCE = 8.9   # the Falcon's rated force, the bound haptic_anfis.device.limits sets
 
 
 @pytest.fixture

@@ -18,8 +18,8 @@ SLOW_WRITER = textwrap.dedent('''
     import signal, sys, time
     from haptic_anfis.exam.files import write_text_atomic
     out, delay = sys.argv[1], float(sys.argv[2])
-    print('up', flush=True)
     try:
+        print('up', flush=True)   # inside the try: a SIGINT right after it is handled too
         time.sleep(120)
     except KeyboardInterrupt:
         time.sleep(delay)   # a loaded machine: the figure and the samples take their time
