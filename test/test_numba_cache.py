@@ -61,3 +61,41 @@ def test_package_import_sets_it_before_numba_loads(tmp_path):
         pkg.chmod(0o755)
     if os.geteuid() != 0:
         assert out.splitlines()[-1] == str(tmp_path / 'xdg' / 'haptic_anfis' / 'numba')
+
+
+def test_warm_rejects_an_unknown_part():
+    with pytest.raises(ValueError, match=r"unknown part\(s\) \['servo'\]; expected some of"):
+        numba_cache.warm(('servo',))
+
+
+def _cache_files(d: Path) -> dict[str, int]:
+    return {str(p.relative_to(d)): p.stat().st_mtime_ns for p in d.rglob('*') if p.is_file()}
+
+
+@pytest.mark.slow
+def test_the_warm_up_compiles_the_servo_tick_the_driver_then_loads(tmp_path):
+    """`haptic-anfis warmup` compiles the servo tick into an empty cache; the loop the simulated
+    Falcon's driver then builds (its own process, a tick trace, a held script) finds every kernel
+    there and compiles nothing (no cache file added or rewritten)."""
+    cache = tmp_path / 'numba'
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(cache), PYTHONPATH=str(ROOT))
+    warm = ('from haptic_anfis.numba_cache import warm; '
+            "print(sorted(warm(('servo_tick',))))")
+    out = subprocess.run([sys.executable, '-c', warm], env=env, capture_output=True, text=True,
+                         timeout=600)
+    assert out.returncode == 0 and "['servo_tick']" in out.stdout, out.stderr
+    files = _cache_files(cache)
+    for kernel in ('run', 'tick', '_fault'):
+        assert any(f'native_tick.{kernel}-' in f and f.endswith('.nbc') for f in files), kernel
+    driver = (
+        'from haptic_anfis.device.palpation import PalpationScript\n'
+        'from haptic_anfis.device.servo_native import NativeServoLoop\n'
+        'from haptic_anfis.device.start_gate import HeldScript\n'
+        'from haptic_anfis.device.trace import TickTrace\n'
+        'from haptic_anfis.resources import config_file\n'
+        "s = HeldScript(PalpationScript.from_yaml(config_file('palpation.yaml')), held=True)\n"
+        'NativeServoLoop(s, process=True, trace=TickTrace(max_rows=100), workers=2).compile()\n')
+    out = subprocess.run([sys.executable, '-c', driver], env=env, capture_output=True, text=True,
+                         timeout=600)
+    assert out.returncode == 0, out.stderr
+    assert _cache_files(cache) == files
