@@ -283,3 +283,46 @@ def test_lesion_case_reuses_the_lesion_free_solves_away_from_its_lesions(tmp_pat
     # than the base there times the modulus ratio
     over = int(np.argmin(np.hypot(pts[:, 1] - t.centre[1], pts[:, 2] - t.centre[2])))
     assert np.all(ds.Y[ds.point == over, 0] > scale * bds.Y[bds.point == over, 0])
+
+
+def test_a_case_with_a_failed_fe_point_is_not_ready_and_says_generate_cannot_help(tmp_path,
+                                                                                    monkeypatch):
+    """A graded case whose store holds a point that failed in every attempt: `sim --case` must
+    not send the user to `cases generate` (the builder refuses a case with a hole); the line
+    names the point, the attempts, the depth reached, and points to the ready cases. The
+    builder's refusal carries the same one-line summary."""
+    import importlib
+    from haptic_anfis.cases.sweeps import case_stores, stored_records
+    from haptic_anfis.tissue.store import PointStore, failure_summary, store_manifest
+
+    name = 'benign_fibrous'
+    sd = tmp_path / 'scenes'
+    sd.mkdir()
+    (sd / f'{name}.yaml').write_text((SCENE_DIR / f'{name}.yaml').read_text())
+    lib = CaseLibrary(sd, tmp_path / 'data', work_root=tmp_path / 'work')
+    case = lib.get(name)
+    root = tmp_path / 'store'
+    monkeypatch.setattr(importlib.import_module('haptic_anfis.cases.library'),
+                        'default_store_root', lambda: root)
+    with pytest.raises(CaseError, match='make it with `haptic-anfis cases generate'):
+        case.require()  # nothing solved, nothing failed: generating it is the way
+    error = ('attempt 1 (step 4 mm): stopped at 12 mm: no convergence from depth 12.121 mm '
+             'towards 12.121 mm after 6 cut-backs: Maximum number of iterations reached.\n; '
+             'attempt 2 (step 2 mm): stopped at 10 mm: no convergence from depth 10.5 mm '
+             'towards 10.5 mm after 8 cut-backs: Maximum number of iterations reached.\n')
+    store = PointStore(root / name, store_manifest(case.scene, case.scene.mesh.probe_cells))
+    store.save_failure('y-018000_z-018000', {'status': 'failed', 'error': error, 'attempts': 2})
+    assert failure_summary(error) == ('2 attempt(s) failed, the last (load step 2 mm) stopped at '
+                                      '10 mm: no convergence from depth 10.5 mm towards 10.5 mm '
+                                      'after 8 cut-backs')
+    with pytest.raises(CaseError) as e:
+        case.require()
+    msg = str(e.value)
+    assert '\n' not in msg and f"case '{name}' is not ready" in msg
+    assert 'y-018000_z-018000 did not solve (2 attempt(s) failed' in msg
+    assert f'`haptic-anfis cases generate {name}` refuses it too' in msg
+    assert 'cases list' in msg
+    with pytest.raises(CaseError, match=r'y-018000_z-018000 did not solve \(2 attempt\(s\) '
+                                        r'failed.*refusing to ship a case with a hole') as e:
+        stored_records(case_stores(case, root))
+    assert '\n' not in str(e.value)

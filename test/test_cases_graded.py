@@ -184,7 +184,8 @@ def test_a_hole_refuses_the_case_naming_the_point(swept):
                                   executor=pool, progress=False, solve=_never)
         assert list(res.failed) == [victim] and res.solved == []
         assert store_status(stores).failed == {victim: 'injected'}
-        with pytest.raises(CaseError, match=re.escape(f'FE point {victim} failed')):
+        with pytest.raises(CaseError,
+                           match=re.escape(f'FE point {victim} did not solve (injected)')):
             stored_records(stores)
         again = run_point_sweep(case.scene, stores.main, loading_points(case.scene), 2,
                                 workers=1, progress=False, solve=_never)
