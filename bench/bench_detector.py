@@ -39,7 +39,7 @@ sys.path.insert(0, str(ROOT))
 
 import numpy as np  # noqa: E402
 
-from _page import write_page  # noqa: E402
+from harness import write_page  # noqa: E402
 
 DATA = ROOT / 'test' / 'data' / 'detector_sessions.npz'
 LIVE = ROOT / 'test' / 'data' / 'felt_live_zoh.npz'

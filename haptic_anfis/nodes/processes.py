@@ -76,8 +76,7 @@ VIEW_NODES = ('visualizer', 'web_view')
 #: machine starves them even where the servo thread itself is real-time: beside 8 busy
 #: processes and the browser view on 2 cores, ``sim`` with the servo at SCHED_FIFO 50 had its
 #: models expire (dropouts to 0 N mid-press); with the graph at SCHED_FIFO 10 as well, none
-#: (issue 32: ``bench/bench_servo_load.py --busy 8 --view --configs sim:50,sim:50:10``, and
-#: docs/measurements/servo_load_view.md).
+#: (``bench/bench_servo_load.py --busy 8 --view --configs sim:50,sim:50:10``).
 #: Event-driven nodes: they sleep between messages, and Linux keeps 5 % of each second for the
 #: normal scheduler whatever real-time threads do (``/proc/sys/kernel/sched_rt_runtime_us``).
 GRAPH_PRIORITY = 10
@@ -508,8 +507,7 @@ def rerun_in_own_session(argv: Sequence[str]) -> int | None:
     CPU is shared between sessions first, and the one-process graph shared its terminal's
     session with whatever else runs there: beside 8 busy processes of that session and the
     browser view, without real-time priority, ``sim`` lost periods, the force error grew and
-    the force rippled; in a session of its own far less (docs/servo_loop.md,
-    docs/measurements/servo_load_view.md). This process stays in the terminal's session and
+    the force rippled; in a session of its own far less (docs/servo_loop.md). This process stays in the terminal's session and
     waits: Ctrl-C, SIGTERM and SIGHUP reach it and are passed on as SIGINT (the re-run stops
     the device at zero force first and closes its bag); killed, the re-run gets SIGINT all the
     same (PR_SET_PDEATHSIG)."""
