@@ -143,7 +143,7 @@ def sweep_case(case: Case, *, coarse: bool = False, workers: int = 2, executor: 
     from ..tissue.displacement import (displacement_path, displacements_from_records,
                                        record_is_current, save_displacements)
 
-    if all(record_is_current(r) for r in records):  # the skin's dent of the same solves (issue 16)
+    if all(record_is_current(r) for r in records):  # the skin's dent of the same solves
         disp = displacements_from_records(records, scene.depths, {
             'dataset_sha256': dataset.sha256(), 'scene_sha256': scene.sha256(),
             'scene': scene.name, 'probe_radius_m': scene.probe_radius, 'coarse': coarse,

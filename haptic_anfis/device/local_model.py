@@ -58,7 +58,7 @@ with these rules (:class:`LocalModelRenderer`):
   followed exactly and the offset across the indentation direction held at the radius
   (:func:`hold_offset`): the force stays the tissue's at the probe's depth, a little behind along
   the surface, where expiring it dropped the force to 0 N mid-press and brought it back with a
-  jolt when the next model came (issue 32). Counted (``ticks_beyond``).
+  jolt when the next model came. Counted (``ticks_beyond``).
 
 The message (``falcon/servo_cf_local``, layout :data:`haptic_anfis.interfaces.LOCAL_MODEL_FIELDS`)
 is encoded and decoded here, beside :class:`LocalModel`: :func:`model_values` /

@@ -1,6 +1,6 @@
 """The middleware settings of a haptic process: Fast DDS over UDP only, no shared memory.
 
-Why (issue 32, docs/servo_loop.md): Fast DDS checks a shared-memory port's health whenever a
+Why (docs/sessions.md): Fast DDS checks a shared-memory port's health whenever a
 process opens another process's port, which it does on the first message to a newly discovered
 participant. When the port's listener has been idle and was checked a moment before, the opening
 thread sleeps a full listener period — a third of ``healthy_check_timeout_ms`` (default 1000), so

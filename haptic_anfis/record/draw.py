@@ -1,6 +1,6 @@
 """``exam run --trainee-id ID --next``: a blind case of the level after the trainee's mastered one.
 
-Among the library's ready cases of that level — the graded ones (issue 29: full-density FE, models
+Among the library's ready cases of that level — the graded ones (full-density FE, models
 within the gates) when the level has any — the one the trainee has done least often (ties:
 drawn with the number of sessions stored as the seed, so the draw is reproducible from the record
 and differs from one session to the next). Pure Python, no ROS.
