@@ -1,7 +1,18 @@
-"""Shared fixtures. Tests are seeded and isolated: ROS tests use their own domain, localhost only."""
+"""Shared fixtures, and the test rooms. Tests are seeded and isolated: ROS tests use their own
+domain, localhost only.
+
+A test file's folder under ``test/`` is its room and its marker (docs/tests.md): ``unit/`` (the
+ROS-free core, seconds), ``ros/`` (a ROS graph: rclpy, node processes), ``browser/`` (a headless
+chromium on the view's page; slow too), ``slow/`` (a file whose tests together take more than
+~10 s). Moving a file between folders is all it takes to change its room. Helpers and fixture
+files live in ``support/`` (on ``sys.path``: ``from falcon_fake import FakeFalcon``), data in
+``support/data/``.
+"""
 from __future__ import annotations
 
 import os
+import sys
+from pathlib import Path
 
 import haptic_anfis  # noqa: F401  (first: it pins BLAS to one thread before numpy loads)
 import numpy as np
@@ -20,6 +31,27 @@ os.environ.pop('ROS_STATIC_PEERS', None)  # no discovery of peers outside this m
 
 settings.register_profile('ci', derandomize=True, deadline=None, max_examples=60)
 settings.load_profile('ci')
+
+TEST_DIR = Path(__file__).resolve().parent
+#: the rooms: a folder of test/ and the marker its tests get (registered in setup.cfg)
+ROOMS = ('unit', 'ros', 'browser', 'slow')
+# the helpers the tests import by name, and the rooms: a test file may reuse another's helpers
+# (``from test_nodes_process import launch``) whichever room either is in
+for _d in ('support', *ROOMS):
+    sys.path.insert(0, str(TEST_DIR / _d))
+
+
+def pytest_collection_modifyitems(config, items):
+    """Mark every test with its file's room (the folder under test/ it is in)."""
+    for item in items:
+        try:
+            room = Path(str(item.path)).resolve().relative_to(TEST_DIR).parts[0]
+        except ValueError:  # a test outside test/ (a path given on the command line)
+            continue
+        if room in ROOMS:
+            item.add_marker(getattr(pytest.mark, room))
+        if room == 'browser':  # a chromium starts and loads the page: a slow test too
+            item.add_marker(pytest.mark.slow)
 
 
 @pytest.fixture(scope='session')
