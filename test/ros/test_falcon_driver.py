@@ -18,7 +18,7 @@ from haptic_anfis.device import falcon_kinematics as k  # noqa: E402
 from haptic_anfis.device import falcon_usb  # noqa: E402
 from haptic_anfis.nodes._common import ParameterError  # noqa: E402
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 

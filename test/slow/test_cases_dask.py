@@ -54,7 +54,7 @@ def test_generate_on_a_dask_cluster_survives_a_killed_worker(tmp_path, capsys):
     journal = tmp_path / 'journal.txt'
     env = {**os.environ, JOURNAL_ENV: str(journal), 'OMP_NUM_THREADS': '1',
            'OPENBLAS_NUM_THREADS': '1', 'MKL_NUM_THREADS': '1',
-           'PYTHONPATH': os.pathsep.join([str(Path(__file__).resolve().parents[1]),
+           'PYTHONPATH': os.pathsep.join([str(Path(__file__).resolve().parents[2]),
                                           os.environ.get('PYTHONPATH', '')])}
     sched_file = tmp_path / 'scheduler.json'
     procs = [_dask('scheduler', '--scheduler-file', str(sched_file), '--port', '0',

@@ -8,7 +8,7 @@ from pathlib import Path
 
 from haptic_anfis.cli import main
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 pytestmark = pytest.mark.ros
 

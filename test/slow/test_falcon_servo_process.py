@@ -20,8 +20,8 @@ from falcon_fake import ftdi_class
 from haptic_anfis.device import falcon_kinematics as k
 from haptic_anfis.device import falcon_usb
 
-ROOT = Path(__file__).resolve().parents[1]
-TEST_DIR = Path(__file__).resolve().parent
+ROOT = Path(__file__).resolve().parents[2]
+TEST_DIR = Path(__file__).resolve().parents[1] / 'support'  # falcon_fake
 from falcon_fake import CLOSED, M0, N, PLUGGED, SharedFake, shared  # noqa: E402
 
 

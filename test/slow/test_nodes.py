@@ -24,7 +24,7 @@ from haptic_anfis.nodes._common import LOOP_QOS, ParameterError, config_file  # 
 from haptic_anfis.nodes.graph import build_graph  # noqa: E402
 
 pytestmark = pytest.mark.ros
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 PRESS = {'loop': True, 'start_delay': 0.2, 'approach_height': 0.006, 'pattern': [
     {'press': {'points': [[0.0, 0.0]], 'depth': 0.012, 'hold': 0.8}}, {'pause': {'duration': 0.5}}]}
 

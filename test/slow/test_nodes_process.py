@@ -24,7 +24,7 @@ from haptic_anfis.nodes import interfaces as ifc  # noqa: E402
 from haptic_anfis.nodes._common import LOOP_QOS  # noqa: E402
 
 pytestmark = pytest.mark.ros
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 BIN = launcher.BIN
 _domains = itertools.count(120 + os.getpid() % 40 * 2)
 

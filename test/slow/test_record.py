@@ -27,7 +27,7 @@ from haptic_anfis.record import db as rdb
 from haptic_anfis.record.draw import next_case
 from haptic_anfis.record.mastery import MasteryConfig, MasteryLevel
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def fake_report(rng, deep=None, found=True, false_marks=0, case='default', lesions=('idc',),

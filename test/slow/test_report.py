@@ -197,7 +197,7 @@ def test_report_measures_the_shipped_model_as_configured():
     from haptic_anfis.commands.train import load_config
     from haptic_anfis.report.run import cv_models, shipped_params
     from haptic_anfis.anfis.defaults import AUTO, SHIPPED_INPUTS, SHIPPED_STRUCTURE
-    cfg = load_config(str(Path(__file__).resolve().parents[1] / 'config' / 'force_model.yaml'))
+    cfg = load_config(str(Path(__file__).resolve().parents[2] / 'config' / 'force_model.yaml'))
     sp = shipped_params()
     # 'auto' inputs and structure resolve, on the shipped data (x follows from (y, z)), to these
     assert cfg['inputs'] == cfg['structure'] == AUTO

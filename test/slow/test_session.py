@@ -21,7 +21,7 @@ from haptic_anfis.device import PalpationScript
 from haptic_anfis.device.start_gate import HeldScript
 from haptic_anfis.nodes.processes import Supervisor, renamed_output
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 SCRIPT = ROOT / 'config' / 'palpation.yaml'
 
 

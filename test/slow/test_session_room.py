@@ -69,7 +69,7 @@ def test_a_node_stopped_with_sigint_closes_without_a_warning(tmp_path):
     from pathlib import Path
 
     from haptic_anfis.nodes.processes import node_env, start_node
-    root = Path(__file__).resolve().parents[1]
+    root = Path(__file__).resolve().parents[2]
     log = tmp_path / 'recorder.log'
     env = {**node_env(int(os.environ['ROS_DOMAIN_ID']) + 1, localhost=True),
            'PYTHONPATH': str(root)}

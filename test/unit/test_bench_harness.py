@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-BENCH = Path(__file__).resolve().parents[1] / 'bench'
+BENCH = Path(__file__).resolve().parents[2] / 'bench'
 sys.path.insert(0, str(BENCH))
 import harness  # noqa: E402
 from harness import LoadSampler, steal_pct  # noqa: E402

@@ -6,7 +6,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-BENCH = Path(__file__).resolve().parents[1] / 'bench'
+BENCH = Path(__file__).resolve().parents[2] / 'bench'
 sys.path.insert(0, str(BENCH))
 from bench_servo_load import driver_settings, graph_words, params_file, sched_words, \
     settled  # noqa: E402

@@ -90,7 +90,7 @@ def test_shipped_config_is_valid():
     from pathlib import Path
 
     from haptic_anfis.commands.train import load_config
-    params = load_config(str(Path(__file__).resolve().parents[1] / 'config' / 'force_model.yaml'))
+    params = load_config(str(Path(__file__).resolve().parents[2] / 'config' / 'force_model.yaml'))
     # the default the force server loads: depth-scaled over (y, z, depth), y/z band 15 %
     assert params['form'] == 'depth_scaled' and params['inputs'] == 'auto'   # x checked
     assert params['extrapolation'] == (0.0, 0.15, 0.15, 0.0)

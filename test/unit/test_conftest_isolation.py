@@ -12,7 +12,7 @@ def test_an_exported_domain_is_not_inherited_by_the_tests(tmp_path):
     probe.write_text('import os\n\ndef test_env():\n'
                      '    print("DOMAIN", os.environ["ROS_DOMAIN_ID"],\n'
                      '          os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"])\n')
-    conftest = Path(__file__).with_name('conftest.py')
+    conftest = Path(__file__).resolve().parents[1] / 'conftest.py'
     (tmp_path / 'conftest.py').write_text(conftest.read_text())
     env = {**os.environ, 'ROS_DOMAIN_ID': '7', 'ROS_AUTOMATIC_DISCOVERY_RANGE': 'SUBNET'}
     out = subprocess.run([sys.executable, '-m', 'pytest', '-q', '-s', '-p', 'no:cacheprovider',

@@ -1,5 +1,5 @@
 """The lump detector's thresholds are chosen on TUNING sessions and checked here on TEST sessions
-that tuning never saw (other cases, other trainee paths): test/data/detector_sessions.npz, written
+that tuning never saw (other cases, other trainee paths): test/support/data/detector_sessions.npz, written
 by bench/bench_detector.py (felt samples of the systematic trainee generated offline: the
 simulated hand, the case's contact tracker and force model; see docs/exam_detector.md)."""
 import inspect
@@ -12,7 +12,7 @@ import pytest
 from haptic_anfis.cases import library
 from haptic_anfis.exam.detector import detect_lumps
 
-DATA = Path(__file__).parent / 'data' / 'detector_sessions.npz'
+DATA = Path(__file__).resolve().parents[1] / 'support' / 'data' / 'detector_sessions.npz'
 TUNING_CASES = ('default', 'small_breast_carcinoma', 'three_lesions_large', 'normal',
                 'normal_fatty_small')   # as bench/bench_detector.py
 TUNING_SEEDS = (0, 1, 2)

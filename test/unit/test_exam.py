@@ -418,7 +418,7 @@ def test_detector_on_live_sessions_of_the_case_library():
     lesion found; the large breast's lesion (+10 %) found without its rim artefact (+8 %); nothing
     on the small fatty breast (two false marks before the robust baseline); of two lesions the
     one standing +10 % once the other left the baseline."""
-    data = np.load(Path(__file__).parent / 'data' / 'felt_live_zoh.npz')
+    data = np.load(Path(__file__).resolve().parents[1] / 'support' / 'data' / 'felt_live_zoh.npz')
     lesions = {'default': [(0.015, -0.010)], 'large_breast_carcinoma': [(-0.018, 0.022)],
                'normal_fatty_small': [], 'two_lesions': [(-0.020, -0.010)]}
     for case, where in lesions.items():

@@ -14,7 +14,7 @@ from haptic_anfis.anfis.defaults import (AUTO, SHIPPED, SHIPPED_INPUTS, SHIPPED_
 from haptic_anfis.tissue.dataset import INPUT_NAMES
 from haptic_anfis.tissue.synthetic import make_synthetic_dataset
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def _norm(v):

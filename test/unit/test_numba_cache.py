@@ -10,7 +10,7 @@ import pytest
 
 from haptic_anfis import numba_cache
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def test_writable_package_keeps_the_in_tree_cache(tmp_path):

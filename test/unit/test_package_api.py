@@ -8,7 +8,7 @@ from pathlib import Path
 
 from haptic_anfis.errors import HapticAnfisError
 
-PKG = Path(__file__).resolve().parents[1] / 'haptic_anfis'
+PKG = Path(__file__).resolve().parents[2] / 'haptic_anfis'
 
 
 def test_py_typed_ships_and_every_package_declares_all():

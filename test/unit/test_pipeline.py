@@ -16,9 +16,9 @@ from haptic_anfis.bag.reader import read_messages
 from haptic_anfis.bag.topics import absolute
 from haptic_anfis.device.local_model import LocalModel, check_values, model_values, no_model
 
-ROOT = Path(__file__).resolve().parents[1]
-#: written by main at b517df5 (before the pipeline left the node modules): test/data/make_*.py
-BAG = Path(__file__).parent / 'data' / 'servo_cf_local_b517df5'
+ROOT = Path(__file__).resolve().parents[2]
+#: written by main at b517df5 (before the pipeline left the node modules): test/support/data/make_*.py
+BAG = Path(__file__).resolve().parents[1] / 'support' / 'data' / 'servo_cf_local_b517df5'
 
 
 @pytest.fixture(scope='module')

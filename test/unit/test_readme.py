@@ -14,7 +14,7 @@ import pytest
 
 from haptic_anfis.cli import build_parser
 
-README = Path(__file__).resolve().parents[1] / 'README.md'
+README = Path(__file__).resolve().parents[2] / 'README.md'
 MAX_LINES = 250
 
 #: one command line: ``haptic-anfis`` and what follows up to the end of the code span / cell / line

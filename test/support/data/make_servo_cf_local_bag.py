@@ -6,7 +6,7 @@ the node modules (issue 28), with this same script importing the old names; test
 that today's code decodes it and answers its contacts with the same local models. Re-running it
 rewrites the fixture with the current code (only when the format changes on purpose)::
 
-    .venv/bin/python test/data/make_servo_cf_local_bag.py test/data/servo_cf_local_b517df5
+    .venv/bin/python test/support/data/make_servo_cf_local_bag.py test/support/data/servo_cf_local_b517df5
 """
 import sys
 from pathlib import Path
