@@ -48,7 +48,7 @@ docs: venv
 	NO_MKDOCS_2_WARNING=1 $(PY) -m mkdocs build --strict --site-dir site
 
 # Every bench/bench_*.py script prints its own table (ratios and percentiles, never asserted) and
-# writes it to docs/measurements/<name>.md with the date, machine and load (bench/_page.py).
+# writes it to docs/measurements/<name>.md with the date, machine and load (bench/harness.py).
 bench: venv
 	@set -e; for f in bench/bench_*.py; do echo "== $$f"; $(PY) $$f; done
 

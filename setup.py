@@ -53,7 +53,7 @@ setup(
         'pyyaml>=6',
         'trimesh>=4',
         # trimesh decodes text formats (ASCII STL with a non-UTF-8 name, or random bytes) with it;
-        # without it those fail with "No module named 'charset_normalizer'" (issue 22)
+        # without it those fail with "No module named 'charset_normalizer'"
         'charset-normalizer>=3',
         'rosbags>=0.11,<0.12',
         'mcap>=1.2',  # bag recover: stream-reads the MCAP a killed recording left (no summary)
@@ -72,7 +72,7 @@ setup(
         # Finite-element data generation (haptic_anfis.tissue). Optional for running the simulator.
         # Optional: Intel MKL PARDISO factorises the FE systems when importable (~700 MB,
         # x86-64 only). With the kept-factorisation solver (haptic_anfis.tissue.linsolve) it
-        # saved ~20 % of a point's wall time in one manual comparison under load (issue 29), so
+        # saved ~20 % of a point's wall time in one manual comparison under load, so
         # SciPy's SuperLU stays the default (bench/bench_fe_point.py times whichever is
         # importable). Needs PYPARDISO_MKL_RT when mkl is installed outside the venv prefix.
         'fe-fast': [

@@ -26,7 +26,7 @@ from haptic_anfis.cases import resolve_case  # noqa: E402
 from haptic_anfis.commands.train import load_config  # noqa: E402
 from haptic_anfis.tissue.dataset import load_dataset  # noqa: E402
 from haptic_anfis.tissue.scene import SCENE_DIR  # noqa: E402
-from _page import run_with_page  # noqa: E402  (bench/ is sys.path[0])
+from harness import run_with_page  # noqa: E402  (bench/ is sys.path[0])
 
 
 def main() -> None:

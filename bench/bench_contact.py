@@ -23,7 +23,7 @@ import trimesh
 from haptic_anfis.contact import ContactDetector, ContactTracker, bvh, ellipsoid_dome
 from haptic_anfis.contact import detector as detector_module, proxy as proxy_module
 from haptic_anfis.tissue.synthetic import surface_x
-from _page import run_with_page  # noqa: E402  (bench/ is sys.path[0])
+from harness import run_with_page  # noqa: E402  (bench/ is sys.path[0])
 
 try:  # trimesh's proximity queries need rtree, which haptic_anfis itself does not
     import rtree  # noqa: F401  (only its presence matters)

@@ -28,7 +28,7 @@ from haptic_anfis.anfis.defaults import AUTO, SHIPPED_STRUCTURE
 from haptic_anfis.commands.train import load_config
 from haptic_anfis.report.cv import group_cv
 from haptic_anfis.tissue.dataset import DEFAULT_DATASET, load_dataset
-from _page import run_with_page  # noqa: E402  (bench/ is sys.path[0])
+from harness import run_with_page  # noqa: E402  (bench/ is sys.path[0])
 
 CONFIG = Path(__file__).resolve().parents[1] / 'config' / 'force_model.yaml'
 

@@ -32,7 +32,7 @@ sys.path.insert(0, str(ROOT))
 from haptic_anfis.tissue.deformation import DeformationModel, holdout_errors  # noqa: E402
 from haptic_anfis.tissue.displacement import (displacement_path,  # noqa: E402
                                               displacements_from_records, load_displacements)
-from _page import run_with_page  # noqa: E402  (bench/ is sys.path[0])
+from harness import run_with_page  # noqa: E402  (bench/ is sys.path[0])
 
 
 def load_data(args):

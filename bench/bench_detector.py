@@ -4,8 +4,8 @@ paths), with sensitivity and false marks per case over the whole library and the
 margin. Printed and written to docs/measurements/detector.md; the felt samples (every 8th
 in-contact tick at 4-16 mm, float16: the detector sees 125 Hz of what the trainee felt at 1 kHz;
 its candidates moved by <= 0.5 % of excess against 1 kHz on the sessions checked)
-and the chosen thresholds go to test/data/detector_sessions.npz (read by
-test/test_detector_protocol.py).
+and the chosen thresholds go to test/support/data/detector_sessions.npz (read by
+test/unit/test_detector_protocol.py).
 
 Felt samples are generated OFFLINE, without ROS: the systematic trainee's script (the path
 varied per seed, below) drives the simulated Falcon's hand (mass-spring-damper, 1 kHz, the
@@ -13,7 +13,7 @@ driver's 8.9 N clamp), each handle pose goes through the case's contact tracker 
 contact_detector's own, ``make_tracker``) and the case's force model (``force_from_contact``),
 and the force is applied back to the handle one tick later (the zero-order-hold loop without its
 transport and scheduling delays). What the trainee feels is (contact point, depth, |F|) of
-every in-contact tick, as in ``exam run``. Live sessions of ``exam run --out`` (test/data/
+every in-contact tick, as in ``exam run``. Live sessions of ``exam run --out`` (test/support/data/
 felt_live_zoh.npz) are scored beside them as a check of the offline stand-in.
 
 Path variants (seeded): lane spacing 6-10 mm, lanes shifted by up to half a spacing, hand depths
@@ -39,10 +39,10 @@ sys.path.insert(0, str(ROOT))
 
 import numpy as np  # noqa: E402
 
-from _page import write_page  # noqa: E402
+from harness import write_page  # noqa: E402
 
-DATA = ROOT / 'test' / 'data' / 'detector_sessions.npz'
-LIVE = ROOT / 'test' / 'data' / 'felt_live_zoh.npz'
+DATA = ROOT / 'test' / 'support' / 'data' / 'detector_sessions.npz'
+LIVE = ROOT / 'test' / 'support' / 'data' / 'felt_live_zoh.npz'
 #: both sets hold small, medium and large breasts, one lesion and several, lesion-free cases
 TUNING_CASES = ('default', 'small_breast_carcinoma', 'three_lesions_large', 'normal',
                 'normal_fatty_small')

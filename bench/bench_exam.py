@@ -23,7 +23,7 @@ import time
 from pathlib import Path
 
 import numpy as np
-from _page import run_with_page  # noqa: E402  (bench/ is sys.path[0])
+from harness import run_with_page  # noqa: E402  (bench/ is sys.path[0])
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -42,10 +42,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from _beside import TestSuite, browser_when_up  # noqa: E402
-from _busy import busy  # noqa: E402
-from _launch import stop_launch  # noqa: E402
-from _page import write_page  # noqa: E402
+from harness import TestSuite, browser_when_up, busy, stop_launch, write_page  # noqa: E402
 
 MODES = (('zoh', True), ('local_model', True), ('zoh', False), ('local_model', False))
 

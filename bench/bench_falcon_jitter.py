@@ -5,7 +5,7 @@ a timeout shorter than the servo thread's normal scheduling jitter gives spuriou
 (each followed by a 50 ms ramp back). This measures the write-to-write gaps of the 1 kHz servo
 thread in two settings:
 
-  1. ``usb``: the FalconUSB backend against the fake Falcon of test/falcon_fake.py (no hardware),
+  1. ``usb``: the FalconUSB backend against the fake Falcon of test/support/falcon_fake.py (no hardware),
      ServoLoop + SafetyLayer, nothing else in the process;
   2. ``graph``: the whole one-process node graph (driver, contact detector, force server, ROS
      executor) with the simulated device, each device write time-stamped.
@@ -25,11 +25,11 @@ import time
 from pathlib import Path
 
 import numpy as np
-from _page import run_with_page  # noqa: E402  (bench/ is sys.path[0])
+from harness import run_with_page  # noqa: E402  (bench/ is sys.path[0])
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
-sys.path.insert(0, str(ROOT / 'test'))  # the protocol-derived fake device
+sys.path.insert(0, str(ROOT / 'test' / 'support'))  # the protocol-derived fake device
 
 THRESHOLDS_MS = (5.0, 10.0, 25.0, 50.0, 100.0)
 

@@ -15,7 +15,7 @@ import numpy as np  # noqa: E402
 from haptic_anfis.tissue.fe import default_linear_solver, scene_mesh, solve_scene_point  # noqa: E402
 from haptic_anfis.tissue.geometry import loading_points  # noqa: E402
 from haptic_anfis.tissue.scene import load_scene  # noqa: E402
-from _page import run_with_page  # noqa: E402  (bench/ is sys.path[0])
+from harness import run_with_page  # noqa: E402  (bench/ is sys.path[0])
 
 
 def main() -> None:

@@ -27,7 +27,7 @@ for _v in ('OMP_NUM_THREADS', 'MKL_NUM_THREADS', 'OPENBLAS_NUM_THREADS'):
 
 import numpy as np  # noqa: E402
 
-from _page import write_page, write_readme_block  # noqa: E402
+from harness import write_page, write_readme_block  # noqa: E402
 from haptic_anfis.cases import library  # noqa: E402
 from haptic_anfis.tissue.fe import solve_scene_point  # noqa: E402
 from haptic_anfis.tissue.geometry import loading_points  # noqa: E402

@@ -28,76 +28,16 @@ import argparse
 import contextlib
 import json
 import os
-import subprocess
 import sys
 import tempfile
-import time
 from pathlib import Path
-from _busy import busy as spinning  # noqa: E402  (bench/ is sys.path[0])
-from _page import run_with_page  # noqa: E402
+
+from harness import loop_in_one_process, loop_in_processes, run_with_page  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 MODES = ('zoh', 'local_model')
-
-
-#: extra contact_detector parameters (name -> value), from the command line
-CONTACT_PARAMS: dict = {}
-#: extra falcon_driver parameters (name -> value), from the command line
-DRIVER_PARAMS: dict = {}
-#: one process: CPU seconds of the process over the measurement window, by trace path
-CPU: dict = {}
-
-
-def one_process(seconds: float, mode: str, trace: Path) -> None:
-    from rclpy.parameter import Parameter
-
-    from haptic_anfis.session import open_graph
-    # a domain of its own: another session's graph on the default domain would feed this driver
-    # its commands (refused as unknown / future stamps, but taking this process's time)
-    os.environ['ROS_DOMAIN_ID'] = str(100 + os.getpid() % 50)
-    os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
-    g = open_graph(program='bench', overrides={'falcon_driver': [
-        Parameter('force_mode', value=mode), Parameter('trace_path', value=str(trace)),
-        *(Parameter(k, value=v) for k, v in DRIVER_PARAMS.items())],
-        'contact_detector': [Parameter(k, value=v) for k, v in CONTACT_PARAMS.items()]})
-    try:
-        if not g.spin_for(60.0, lambda: g.driver.first_command is not None):
-            raise RuntimeError('no force command within 60 s')
-        # the window opens at the first command, as run_duration does across processes (the
-        # servo thread's misses while the other nodes were still loading do not count)
-        g.driver.servo.stats.reset()
-        cpu0 = time.process_time()
-        g.spin_for(seconds)
-        CPU[trace] = time.process_time() - cpu0  # the whole graph's CPU over the window
-    finally:
-        g.shutdown()  # the driver writes its trace
-
-
-def multi_process(seconds: float, mode: str, trace: Path, busy: int = 0) -> None:
-    from haptic_anfis.realtime.processes import node_env, start_node, stop_node
-    env = node_env(150 + os.getpid() % 50, localhost=True)
-    with spinning(busy):
-        cargs = [a for k, v in CONTACT_PARAMS.items() for a in ('-p', f'{k}:={v}')]
-        helpers = [start_node(n, cargs if n == 'contact_detector' else (), env=env,
-                              log=subprocess.DEVNULL) for n in ('force_server', 'contact_detector')]
-        try:
-            time.sleep(3.0)
-            driver = start_node('falcon_driver', ['-p', f'run_duration:={float(seconds)}',
-                                                  '-p', f'force_mode:={mode}',
-                                                  '-p', f'trace_path:={trace}',
-                                                  *(a for k, v in DRIVER_PARAMS.items()
-                                                    for a in ('-p', f'{k}:={str(v).lower()}'))],
-                                env=env, log=subprocess.PIPE)
-            helpers.append(driver)  # stopped below if it outlives the timeout
-            out = driver.communicate(timeout=seconds + 180)[0].decode(errors='replace')
-            if not trace.is_file():
-                raise RuntimeError(f'falcon_driver wrote no trace (rc {driver.returncode}):\n'
-                                   f'{out[-2000:]}')
-        finally:
-            for h in helpers:
-                stop_node(h)
 
 
 def row(name: str, r: dict) -> str:
@@ -128,13 +68,19 @@ def main() -> int:
                     help="the driver takes its loop inputs in executor callbacks "
                          "(take_in_servo_thread false), as before the servo thread took them")
     a = ap.parse_args()
-    if a.executor_input:
-        DRIVER_PARAMS['take_in_servo_thread'] = False
-    if a.approach_distance is not None:
-        CONTACT_PARAMS['approach_distance'] = float(a.approach_distance)
-    configs = {'one': ('one process', lambda s, m, t: one_process(s, m, t)),
-               'multi': ('separate processes', lambda s, m, t: multi_process(s, m, t)),
-               'busy': ('separate + 2 busy processes', lambda s, m, t: multi_process(s, m, t, 2))}
+    driver = {'take_in_servo_thread': False} if a.executor_input else {}
+    contact = ({} if a.approach_distance is None
+               else {'approach_distance': float(a.approach_distance)})
+    cpu: dict[Path, float] = {}   # one process: the graph's CPU seconds over the window
+
+    def one(s, m, t):
+        cpu[t] = loop_in_one_process(s, m, t, driver, contact)
+
+    configs = {'one': ('one process', one),
+               'multi': ('separate processes',
+                         lambda s, m, t: loop_in_processes(s, m, t, 0, driver, contact)),
+               'busy': ('separate + 2 busy processes',
+                        lambda s, m, t: loop_in_processes(s, m, t, 2, driver, contact))}
     print(f'haptic loop at 1 kHz, {a.seconds:g} s per run, {os.cpu_count()} CPUs, '
           f'load average {os.getloadavg()[0]:.2f} (1 min) at start')
     print(f'{"configuration":<30} {"mode":<11} {"rate Hz":>7} {"p50 ms":>6} {"p99 ms":>6} '
@@ -154,8 +100,8 @@ def main() -> int:
                     load0 = os.getloadavg()[0]
                     fn(a.seconds, mode, trace)
                     r = trace_report(trace)
-                    if trace in CPU and r.get('ticks'):
-                        r['cpu_us_per_tick'] = 1e6 * CPU[trace] / r['ticks']
+                    if trace in cpu and r.get('ticks'):
+                        r['cpu_us_per_tick'] = 1e6 * cpu[trace] / r['ticks']
                     r['load_1min'] = round((load0 + os.getloadavg()[0]) / 2, 2)
                     res[mode] = r
                     print(row(name, r), f' load {r["load_1min"]:.1f}', flush=True)

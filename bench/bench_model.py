@@ -11,7 +11,7 @@ from haptic_anfis.anfis import ANFIS
 from haptic_anfis.anfis.timing import percentiles_us, throughput, time_calls
 from haptic_anfis.cli import main
 from haptic_anfis.tissue.dataset import load_dataset
-from _page import run_with_page  # noqa: E402  (bench/ is sys.path[0])
+from harness import run_with_page  # noqa: E402  (bench/ is sys.path[0])
 
 #: Single-query timings per family.
 REPEATS = 20000

@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _page import write_page  # noqa: E402
+from harness import write_page  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 

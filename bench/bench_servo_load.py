@@ -38,9 +38,8 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _beside import TestSuite, browser_when_up  # noqa: E402
-from _busy import LoadSampler, busy, paused  # noqa: E402
-from _page import write_page  # noqa: E402
+from harness import (LoadSampler, TestSuite, account, browser_when_up, busy, paused,  # noqa: E402
+                     write_page)
 
 CLI = [sys.executable, '-m', 'haptic_anfis.cli']
 COLS = ('config', 'busy', 'load', 'steal_pct', 'rt_others', 'rate_hz', 'periods_lost',
@@ -238,23 +237,6 @@ def graph_words(scheduling: str | dict | None) -> str | None:
     texts = scheduling.values() if isinstance(scheduling, dict) else [scheduling]
     words = {sched_words(t) + (' pinned' if 'kept on CPU' in t else '') for t in texts}
     return '/'.join(sorted(words))
-
-
-def account() -> str:
-    """Who runs the benchmark, for the page: the user, whether it may set SCHED_FIFO itself
-    (root, CAP_SYS_NICE or an rtprio limit) and whether a RealtimeKit answers on the system bus."""
-    import pwd
-    import resource
-    uid = os.geteuid()
-    soft, _ = resource.getrlimit(resource.RLIMIT_RTPRIO)
-    may = uid == 0 or soft != 0
-    try:
-        from haptic_anfis.realtime.rtkit import RealtimeKitError, max_realtime_priority
-        kit = f'rtkit answers (max priority {max_realtime_priority()})'
-    except RealtimeKitError as exc:
-        kit = str(exc)
-    return (f'run as {pwd.getpwuid(uid).pw_name} (uid {uid}); SCHED_FIFO '
-            + ('allowed' if may else 'not allowed (no rtprio limit, not root)') + f'; {kit}')
 
 
 def fmt(v) -> str:

@@ -29,8 +29,7 @@ import time
 from pathlib import Path
 
 import numpy as np
-from _launch import stop_launch  # noqa: E402
-from _page import run_with_page  # noqa: E402  (bench/ is sys.path[0])
+from harness import account, busy, run_with_page, stop_launch  # noqa: E402  (bench/ is sys.path[0])
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
@@ -308,9 +307,7 @@ def main() -> int:
     work.mkdir(parents=True, exist_ok=True)
     print(f'soak: {os.cpu_count()} CPUs, load average {os.getloadavg()}'
           + (f'; {a.busy} busy processes spinning beside it' if a.busy else ''))
-    from bench_servo_load import account
     print(account())
-    from _busy import busy
     try:
         with busy(a.busy):   # ended with the runs, also on an error
             if a.one_minutes > 0:

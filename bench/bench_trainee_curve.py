@@ -20,7 +20,7 @@ import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _page import PAGES_DIR, write_page  # noqa: E402
+from harness import PAGES_DIR, write_page  # noqa: E402
 
 DEFAULT = 'careless,careless,systematic,systematic,systematic,systematic,careless,systematic'
 

@@ -35,30 +35,10 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from _page import write_page  # noqa: E402
+from harness import (close_browser, loop_in_one_process, loop_in_processes,  # noqa: E402
+                     open_browser, write_page)
 
 from haptic_anfis.view.browser import free_port  # noqa: E402
-
-
-def open_browser(url: str) -> subprocess.Popen:
-    """A headless chromium keeping ``url`` open (killed by the caller): it stands for a trainee's
-    browser, another program in a session of its own, which draws on a GPU; this one draws in
-    software on the loop's cores (a whole core of two at the view's 30 Hz). ``nice`` counts only
-    inside its session where the kernel groups by session (autogroups), and run as root chromium
-    sets some of its processes' priorities itself; putting it in the benchmark's session made it
-    starve the `sim` graph there instead, and lowering its session's weight
-    (``/proc/<pid>/autogroup``) made a 1 kHz loop in another session lose periods (issue 32)."""
-    from haptic_anfis.view.browser import chromium, open_chromium
-    if chromium() is None:   # a row "with the browser" measured without one would be a false figure
-        raise SystemExit('no chromium on this machine: the browser view cannot be measured '
-                         '(Debian: apt-get install chromium, as .ci/run does)')
-    return open_chromium(url, nice=10)
-
-
-def close_browser(browser: subprocess.Popen) -> None:
-    """Kill the chromium of :func:`open_browser` with every process it started."""
-    from haptic_anfis.view.browser import close_chromium
-    close_chromium(browser)
 
 
 def _blue_centre(img: np.ndarray):
@@ -153,8 +133,7 @@ def dent_frames(frames: int = 60) -> dict:
 
 
 def loop_runs(seconds: float, configs: list[str]) -> list[dict]:
-    """bench_loop's graphs without and with the view open."""
-    import bench_loop
+    """The haptic loop's graphs (bench_loop's) without and with the view open."""
     from haptic_anfis.commands.loop import trace_report
     from haptic_anfis.realtime.processes import node_env, start_node, stop_node
     from haptic_anfis.nodes.side_nodes import SIDE_NICE
@@ -184,9 +163,9 @@ def loop_runs(seconds: float, configs: list[str]) -> list[dict]:
                             time.sleep(0.5)
                         procs.append(open_browser(f'http://127.0.0.1:{port}/'))
                     if key == 'one':
-                        bench_loop.one_process(seconds, 'local_model', trace)
+                        loop_in_one_process(seconds, 'local_model', trace)
                     else:
-                        bench_loop.multi_process(seconds, 'local_model', trace)
+                        loop_in_processes(seconds, 'local_model', trace)
                     r = trace_report(trace)
                     r.update(config=key, view=view,
                              load=round((load0 + os.getloadavg()[0]) / 2, 1))

@@ -1,7 +1,19 @@
-"""Shared fixtures. Tests are seeded and isolated: ROS tests use their own domain, localhost only."""
+"""Shared fixtures, and the test rooms. Tests are seeded and isolated: ROS tests use their own
+domain, localhost only.
+
+A test file's folder under ``test/`` is its room and its marker (docs/tests.md): ``unit/`` (the
+ROS-free core, seconds), ``ros/`` (a ROS graph: rclpy, node processes), ``browser/`` (a headless
+chromium on the view's page; slow too), ``slow/`` (a file whose tests together take more than
+~10 s). Moving a file between folders is all it takes to change its room. Helpers and fixture
+files live in ``support/`` (on ``sys.path``: ``from falcon_fake import FakeFalcon``), data in
+``support/data/``.
+"""
 from __future__ import annotations
 
 import os
+import sys
+import tempfile
+from pathlib import Path
 
 import haptic_anfis  # noqa: F401  (first: it pins BLAS to one thread before numpy loads)
 import numpy as np
@@ -18,8 +30,43 @@ os.environ['ROS_DOMAIN_ID'] = str(TEST_DOMAIN_ID)
 os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
 os.environ.pop('ROS_STATIC_PEERS', None)  # no discovery of peers outside this machine
 
+# Nor a user's own data: their case folder, trainee record and XDG data home (a case of
+# theirs would join the library every test lists) are replaced by an empty folder of the run's.
+for _name in ('HAPTIC_ANFIS_CASE_DIR', 'HAPTIC_ANFIS_DB'):
+    os.environ.pop(_name, None)
+os.environ['XDG_DATA_HOME'] = tempfile.mkdtemp(prefix='haptic_anfis_test_data_')
+
 settings.register_profile('ci', derandomize=True, deadline=None, max_examples=60)
 settings.load_profile('ci')
+
+TEST_DIR = Path(__file__).resolve().parent
+#: the rooms: a folder of test/ and the marker its tests get (registered in setup.cfg)
+ROOMS = ('unit', 'ros', 'browser', 'slow')
+# the helpers the tests import by name, and the rooms: a test file may reuse another's helpers
+# (``from test_nodes_process import launch``) whichever room either is in
+for _d in ('support', *ROOMS):
+    sys.path.insert(0, str(TEST_DIR / _d))
+
+
+def pytest_collection_modifyitems(config, items):
+    """Mark every test with its file's room (the folder under test/ it is in)."""
+    for item in items:
+        try:
+            room = Path(str(item.path)).resolve().relative_to(TEST_DIR).parts[0]
+        except ValueError:  # a test outside test/ (a path given on the command line)
+            continue
+        if room in ROOMS:
+            item.add_marker(getattr(pytest.mark, room))
+        if room == 'browser':  # a chromium starts and loads the page: a slow test too
+            item.add_marker(pytest.mark.slow)
+
+
+@pytest.fixture(autouse=True)
+def _no_case_dir_left_behind():
+    """``--case-dir`` run in the test process sets ``HAPTIC_ANFIS_CASE_DIR`` for the nodes it
+    starts; the next test must not inherit it."""
+    yield
+    os.environ.pop('HAPTIC_ANFIS_CASE_DIR', None)
 
 
 @pytest.fixture(scope='session')

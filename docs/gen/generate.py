@@ -13,7 +13,7 @@ mkdocs collects the pages), or alone: ``python docs/gen/generate.py`` writes the
 - ``docs/reference/dependencies.md``: which room of the package imports which (module-level and
   function-level imports, read from the source), and the cycles among rooms.
 - ``docs/measurements/index.md``: the measurement pages the benchmark scripts wrote
-  (``bench/_page.py``); a benchmark not run has no page and no link.
+  (``bench/harness.py``); a benchmark not run has no page and no link.
 
 A page is rewritten only when its text changes (so ``mkdocs serve`` does not rebuild forever).
 """
@@ -434,7 +434,7 @@ def measurements_index() -> str:
     missing = [s for s in scripts if not (MEASUREMENTS / f'{s}.md').exists()]
     text = ('# Measurements\n\n' + NOTE.format(src='the pages in `docs/measurements/`')
             + 'Every figure here was written by the benchmark script that measured it '
-            '(`bench/_page.py`), with the date, the machine and its load; re-running a script '
+            '(`bench/harness.py`), with the date, the machine and its load; re-running a script '
             'rewrites its page. Timings on a shared machine follow its load: read them with it.\n\n')
     text += ('| page | command | written |\n|---|---|---|\n' + '\n'.join(rows) + '\n'
              if rows else 'No benchmark has written its page yet.\n')

@@ -35,7 +35,7 @@ class GenerateResult:
 #: the lesion-free case of the same breast (see :func:`reuse_plan`). Measured on the default
 #: scene's fine FE data (r = 7.5 mm, 15 mm deep): the lesion changes the force by 1.1 % at
 #: r + 14 mm, 0.4 % at r + 18 mm, 21 % over its centre. For a 25 mm lesion it is more than 1 % of
-#: the local force well beyond r + 14 mm (docs/measurements/far_field.md), so the graded library
+#: the local force well beyond r + 14 mm (docs/case_library.md), so the graded library
 #: (:mod:`.build`) reuses nothing; this older path keeps it for the older cases only.
 REUSE_MARGIN = 0.014  # [m]
 
@@ -143,7 +143,7 @@ def sweep_case(case: Case, *, coarse: bool = False, workers: int = 2, executor: 
     from ..tissue.displacement import (displacement_path, displacements_from_records,
                                        record_is_current, save_displacements)
 
-    if all(record_is_current(r) for r in records):  # the skin's dent of the same solves (issue 16)
+    if all(record_is_current(r) for r in records):  # the skin's dent of the same solves
         disp = displacements_from_records(records, scene.depths, {
             'dataset_sha256': dataset.sha256(), 'scene_sha256': scene.sha256(),
             'scene': scene.name, 'probe_radius_m': scene.probe_radius, 'coarse': coarse,

@@ -21,6 +21,7 @@ from pathlib import Path
 
 from ..tissue.dataset import DATA_DIR
 from ..tissue.scene import SCENE_DIR, Scene, SceneError, load_scene
+from ..tissue.store import default_store_root, failed_records, failure_summary
 from ..errors import HapticAnfisError
 from .grading import regrade
 
@@ -71,6 +72,15 @@ class Case:
         _ = self.scene
         gone = self.missing(fields)
         if gone:
+            failed = self.fe_failures()
+            if failed:  # the builder refuses a case with a hole: generating it cannot succeed
+                key, rec = next(iter(failed.items()))
+                raise CaseError(
+                    f'case {self.name!r} is not ready: its FE point {key} did not solve '
+                    f'({failure_summary(str(rec.get("error", "failed")))}; {len(failed)} such '
+                    f'point(s)), and a case with a hole in its FE is never built, so `haptic-anfis '
+                    f'cases generate {self.name}` refuses it too; choose a ready case '
+                    '(`haptic-anfis cases list`)')
             what = ', '.join(f'{f} {str(getattr(self, f))!r}' for f in gone)
             raise CaseError(f'case {self.name!r}: missing {what}; make it with '
                             f'`haptic-anfis cases generate {self.name}`')
@@ -78,6 +88,19 @@ class Case:
         if changed:
             raise CaseError(changed)
         return self
+
+    def fe_failures(self) -> dict[str, dict]:
+        """{point key: failure record} of this graded case's FE points whose every attempt
+        failed in the committed store (its own points, then its lesion-free twin's as
+        ``twin/<key>``); {} for a case not built from the store (no lesion rings in its
+        loading)."""
+        scene = self.scene
+        if not scene.ring_diameters:
+            return {}
+        root = default_store_root()
+        out = failed_records(root / (scene.fe_store or self.name))
+        out.update({f'twin/{k}': r for k, r in failed_records(root / self.name / 'twin').items()})
+        return out
 
     def scene_changed(self) -> str | None:
         """One line saying the case's model or FE grading was made from another version of its

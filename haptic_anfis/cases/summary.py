@@ -1,7 +1,7 @@
 """What ``haptic-anfis cases list`` shows for a case: lesions, size, data, model, errors, speed,
 and each lesion's contrast (FE against model).
 
-Lesion contrast (issue 14): the normal force Fx at 8 mm depth with the probe over the lesion
+Lesion contrast: the normal force Fx at 8 mm depth with the probe over the lesion
 centre, relative to the mirror point (-y, -z) of the symmetric dome: ``F_over / F_mirror - 1``.
 The loading points include both points (:func:`haptic_anfis.tissue.geometry.loading_points`), so
 the FE contrast is read from the dataset; the model's from the model at the same two inputs. The

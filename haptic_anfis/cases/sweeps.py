@@ -17,7 +17,8 @@ from typing import Any
 import numpy as np
 
 from ..tissue.scene import Scene, surface_height
-from ..tissue.store import PointStore, default_store_root, point_key, store_manifest
+from ..tissue.store import (PointStore, default_store_root, failure_summary, point_key,
+                            store_manifest)
 from .library import Case, CaseError
 
 __all__ = ['CaseStores', 'StoreStatus', 'case_stores', 'sweep_case_store', 'store_status',
@@ -138,9 +139,10 @@ def stored_records(stores: CaseStores) -> tuple[list[dict[str, Any]], dict[str, 
     if not st.complete:
         bad = next(iter(st.failed.items()), None)
         if bad is not None:
-            raise CaseError(f'case {stores.case.name!r}: FE point {bad[0]} failed ({bad[1]}); '
-                            f'{len(st.failed)} failed, {len(st.missing)} missing of {st.total}: '
-                            'refusing to ship a case with a hole')
+            raise CaseError(f'case {stores.case.name!r}: FE point {bad[0]} did not solve '
+                            f'({failure_summary(bad[1])}); {len(st.failed)} failed, '
+                            f'{len(st.missing)} missing of {st.total}: refusing to ship a case '
+                            'with a hole')
         raise CaseError(f'case {stores.case.name!r}: FE point {st.missing[0]} is not solved yet '
                         f'({st.solved} of {st.total} solved); run `haptic-anfis cases sweep '
                         f'{stores.case.name}` first')

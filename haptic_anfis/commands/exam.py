@@ -172,7 +172,7 @@ def _run_sim(args):
                                    Parameter('force_mode', value=args.force_mode)]}
     if case_name is not None:
         ex_params.append(Parameter(case_name, value=case_value))
-    # --- the examiner: in the loop's process (--in-process) or a process of its own (issue 26.4)
+    # --- the examiner: in the loop's process (--in-process) or a process of its own
     report_dir, side_nodes = None, None
     if args.in_process:
         extra = [lambda ctx: Examiner(context=ctx, parameter_overrides=ex_params)]

@@ -40,7 +40,7 @@ import numpy as np
 NAME = 'loop'
 HELP = 'applied-force error and loop statistics of a falcon_driver servo tick trace (trace_path)'
 
-#: the keys printed first, in this order (issue 17)
+#: the keys printed first, in this order
 KEYS = ('force_mode', 'rates_hz', 'latency_p50_ms', 'latency_p99_ms', 'latency_max_ms',
         'ticks_fresh', 'ticks_extrapolated', 'ticks_expired', 'watchdog_trips',
         'watchdog_trips_in_contact', 'force_error_rms_pct', 'force_error_rms_n',

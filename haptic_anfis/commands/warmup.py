@@ -1,6 +1,7 @@
 """``haptic-anfis warmup``: compile the nodes' numba kernels into the cache (run at install).
 
-A cold cache made the contact detector take 23 s to start on a busy 2-core machine; ``make venv``
+The force model, the contact detector and the servo tick are compiled on first use: on a cold
+cache the first session waits for them (tens of seconds on a busy 2-core machine). ``make venv``
 runs this once so the first session starts warm. The cache is beside the sources, or
 ``NUMBA_CACHE_DIR`` (set by the package to the user cache directory when the package directory is
 not writable, see :mod:`haptic_anfis.numba_cache`).
@@ -11,7 +12,8 @@ import argparse
 import os
 
 NAME = 'warmup'
-HELP = "compile the nodes' numba kernels into the cache (run once after install)"
+HELP = ("compile the nodes' numba kernels (force model, contact detector, servo tick) into the "
+        'cache (run once after install)')
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:

@@ -18,7 +18,7 @@ Tables (built by :func:`build_tables`, triangles stored in tree-leaf order):
 - ``box`` (N, 11) float64: node bounds (min xyz 0:3, max xyz 3:6) and a slab along the node's
   mean normal: unit n (6:9), min and max of n . x over its triangles (9, 10). The slab is what
   prunes on a curved shell: an AABB of a tilted patch is as thick as the patch is wide, the slab
-  only as thick as the patch is curved, so a probe deep under the surface no longer sees the
+  only as thick as the patch is curved, so a probe deep under the surface does not see the
   boxes of every patch around its closest point as "maybe as close".
 - ``node`` (N, 2) int64: internal node -> (left, right); leaf -> (first, -count) into ``tri``.
 

@@ -128,7 +128,7 @@ class ContactDetector:
         (:mod:`.proxy`), called as they are called there, at the first triangle (answers
         unused). With a cold cache the ray casts and the follow compiled at the trainee's first
         touch: the contact stream stopped for ~1.5 s and the servo loop rendered 0 N for 0.65 s
-        as its model expired (issue 32)."""
+        as its model expired."""
         q = self._tri[0, 0:3].copy()
         p = q + self._tri[0, 9:12] * (1e-3 * self.scale)  # off the surface, outside
         self.query(q)

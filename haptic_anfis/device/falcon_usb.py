@@ -56,7 +56,7 @@ INSTALL_HINT = "pip install 'haptic_anfis[falcon]'"
 #: Default stall-guard timeout [s], chosen from the servo thread's measured write-to-write gaps
 #: (bench/bench_falcon_jitter.py; figures in the README): on a 2-core machine at load 7-17 the
 #: FalconUSB servo thread's p99.9 gap was 14 ms, gaps > 25 ms came about 4-6 times a minute and
-#: > 50 ms about twice a minute at load 17 (none at load 7), where the old 5 ms tripped ~2000
+#: > 50 ms about twice a minute at load 17 (none at load 7), where a 5 ms timeout tripped ~2000
 #: times a minute. A real stall keeps the last force (<= max_force) on for at most this long.
 DEFAULT_STALL_TIMEOUT = 0.05
 #: Where the firmware file comes from (for error messages).

@@ -149,7 +149,7 @@ def ripple_and_dropouts(times: np.ndarray, applied: np.ndarray, ideal: np.ndarra
                         in_contact: np.ndarray, max_force: float = math.inf,
                         mean_window: float = 0.05, window: float = 0.2, ripple: float = 0.1,
                         dropout_ideal: float = DROPOUT_IDEAL) -> dict:
-    """The buzz and the dropouts a hand feels (issue 32), over the ticks in contact.
+    """The buzz and the dropouts a hand feels, over the ticks in contact.
 
     - ``ripple_windows_pct``: share of the ``window`` [s] (200 ms) windows of contact ticks in
       which the applied force leaves its own centred ``mean_window`` (50 ms) moving mean by more

@@ -71,7 +71,7 @@ class ForceInput:
         renderer (the one in use: the compiled tick's holds a model) still renders one, since
         refusing it would only leave an older one. With the compiled tick's hold, refusing at
         the validity time left the held model to expire while younger ones, late beside a busy
-        machine, came in (923 refused in an hour of sim without real-time priority; issue 32)."""
+        machine, came in (923 refused in an hour of sim without real-time priority)."""
         return self.safety.watchdog_timeout if self.mode == 'zoh' else self.renderer.max_age
 
     # -- servo thread -----------------------------------------------------------------------

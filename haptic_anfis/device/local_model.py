@@ -30,8 +30,8 @@ with these rules (:class:`LocalModelRenderer`):
   tissue field's own: the ANFIS force turns as the probe moves (its lateral components grow with
   the depth), which the force server's F0 carries at every model anyway; dropping it made the
   force between two models drift away from the tissue's by ~0.04 % of the force per ms of model
-  age and jump back at the next model (issue 32; with it ~0.01 %/ms:
-  ``bench/bench_model_age.py``). It does not enter the sampling bound below: a zero-order
+  age and jump back at the next model (with it ~0.01 %/ms; docs/servo_loop.md, *Parameters
+  chosen by measurement*). It does not enter the sampling bound below: a zero-order
   hold's energy leak per period is ``-T^2 v . K v / 2``, and ``v . A v = 0``.
   The Falcon figure: 3000 N/m, the maximum linear stiffness CHAI3D's Falcon driver advertises
   (``cHapticDeviceInfo::m_maxLinearStiffness``, with 8 N and 20 N s/m damping). By Colgate & Brown
@@ -58,7 +58,7 @@ with these rules (:class:`LocalModelRenderer`):
   followed exactly and the offset across the indentation direction held at the radius
   (:func:`hold_offset`): the force stays the tissue's at the probe's depth, a little behind along
   the surface, where expiring it dropped the force to 0 N mid-press and brought it back with a
-  jolt when the next model came (issue 32). Counted (``ticks_beyond``).
+  jolt when the next model came. Counted (``ticks_beyond``).
 
 The message (``falcon/servo_cf_local``, layout :data:`haptic_anfis.interfaces.LOCAL_MODEL_FIELDS`)
 is encoded and decoded here, beside :class:`LocalModel`: :func:`model_values` /
@@ -83,16 +83,16 @@ FALCON_MAX_STIFFNESS = 3000.0
 #: [s] time constant of the tick periods the servo loop's passivity bound weighs (the measured
 #: period T = sum(T_k^2) / sum(T_k), exponentially weighted; docs/servo_loop.md *Passivity*). A
 #: late tick lowers the rendered stiffness for about this long; at 20 ms a gap of 7.5 ms at the
-#: stiffness bound scaled the extrapolated force to a third and made ripple windows. Chosen with
-#: bench/bench_passivity_window.py on one run's trace (the shortest window that added no
-#: ripple window to the ideal force's own), checked on another's.
+#: stiffness bound scaled the extrapolated force to a third and made ripple windows. Chosen by
+#: replaying one run's trace (the shortest window that added no ripple window to the ideal
+#: force's own), checked on another's (docs/servo_loop.md, *Parameters chosen by measurement*).
 PASSIVITY_WINDOW = 0.05
 
 #: How far [m] along an approach plane from its point it is rendered (module doc): the plane lies
 #: r^2 / 2R above a convex surface of radius R there (2.5 mm at 15 mm on the default breast,
-#: R >= 45 mm); past it the probe is free. Chosen with bench/bench_approach_late.py: the largest
-#: radius measured that adds no tick pressing on a free probe with the graph 500 ms late
-#: (docs/servo_loop.md).
+#: R >= 45 mm); past it the probe is free. Chosen by measurement: the largest radius
+#: measured that adds no tick pressing on a free probe with the graph 500 ms late
+#: (docs/servo_loop.md, *Parameters chosen by measurement*).
 APPROACH_RADIUS = 0.015
 
 #: [m] how far from its p0 the compiled tick renders a HELD model (older than its validity time,
@@ -100,11 +100,11 @@ APPROACH_RADIUS = 0.015
 #: the probe is expired for those ticks (the watchdog ramps the force to zero; back inside the
 #: radius it is rendered again: the tissue has not moved). A trainee who moved that far has left
 #: the place the model describes: a held plane followed down a convex surface's flank pressed on
-#: a free probe with up to 12 N (before the clamp) in 1 s stalls. Chosen with
-#: bench/bench_stall_hold.py on one session's trace: the smallest radius measured that adds no
+#: a free probe with up to 12 N (before the clamp) in 1 s stalls. Chosen by
+#: replaying one session's trace: the smallest radius measured that adds no
 #: dropout tick in stalls up to 0.6 s (the loaded sessions' longest pose -> model latency:
 #: 0.40-0.57 s; 30 mm added some at 0.6 s, and cost a 0.54 s stall of a session 4 dropout
-#: ticks); checked on another (docs/servo_loop.md).
+#: ticks); checked on another (docs/servo_loop.md, *Parameters chosen by measurement*).
 HOLD_RADIUS = 0.04
 
 #: [s] the longest the compiled tick takes to ramp out the step between two successive models:
@@ -113,8 +113,8 @@ HOLD_RADIUS = 0.04
 #: apart disagree by a hair; one that comes after the graph was late disagrees with the old
 #: model's extrapolation by tenths of a newton, and a step of 0.2 N already leaves the 50 ms
 #: mean by the issue's 0.1 N (a ripple window); ramped over 20 ms, steps up to ~0.3 N make none.
-#: Chosen with bench/bench_model_blend.py: the quiet error stays within its 0.2 % target
-#: (docs/servo_loop.md).
+#: Chosen by replaying recorded traces: the quiet error stays within its 0.2 % target
+#: (docs/servo_loop.md, *Parameters chosen by measurement*).
 MODEL_BLEND_TIME = 0.02
 
 #: Tick status codes (also the trace's status column).

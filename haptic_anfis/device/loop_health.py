@@ -1,10 +1,10 @@
 """Whether the servo loop is keeping its period, window by window while a session runs.
 
-A loop the machine starves (no real-time priority on a busy machine, issue 32) still runs: the
+A loop the machine starves (no real-time priority on a busy machine) still runs: the
 force the hand feels is late or held, and nothing else says so. :class:`LoopHealth` compares two
 readings of the loop's counters (:meth:`~.stats.LoopStats.summary`, cumulative within a
 statistics window) and names what fell short in between: the share of the periods lost above
-``max_lost_pct`` (0.5 %: issue 32's 995 Hz at 1 kHz) and gaps between ticks longer than the
+``max_lost_pct`` (0.5 %: 995 Hz at 1 kHz, the rate the haptic loop is held to) and gaps between ticks longer than the
 watchdog (the hand feels the force stop). The falcon_driver node logs it as a warning
 (``loop_check_period``; at most one a minute, with how many windows fell behind so far), with
 the likely cause and what to do. No ROS.
@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 
 __all__ = ['LoopHealth', 'MAX_LOST_PCT', 'behind_text']
 
-#: issue 32's rate target (995 Hz at 1 kHz) as the largest share of the periods lost [%]
+#: the loop's rate target (995 Hz at 1 kHz) as the largest share of the periods lost [%]
 MAX_LOST_PCT = 0.5
 
 

@@ -13,7 +13,7 @@ tick. Rules, in order:
    the timeout since the previous output (a paused process), the output is zero at once: the
    ramp's time has passed already. The next valid command re-arms it. A
    command's time is the time the caller gives :meth:`SafetyLayer.command`: the driver gives the
-   time of its own pose the command answers (its stamp's age, issue 22), not its arrival; a
+   time of its own pose the command answers (its stamp's age), not its arrival; a
    command older than the current one is ignored (out of order).
 4. Rate limit: the output vector moves towards the target by at most ``max_force_rate * dt``
    (``dt`` = time since the last output, capped at ``max_dt``).

@@ -10,7 +10,7 @@ its own monotonic time; a command is then judged by the pose it answers, not by 
 
 A rejected command is not a fault: it is simply not taken, so the watchdog ramps the force down as
 for a missing command. This is what stops a driver paused (SIGSTOP) with old commands queued from
-rendering a force from a node that died long ago (issue 22).
+rendering a force from a node that died long ago.
 
 ``record`` runs on the servo thread and ``check`` on the executor thread: a dict holds
 stamp -> time and a ring of stamps evicts the oldest; single dict operations are atomic under

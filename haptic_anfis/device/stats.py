@@ -1,7 +1,7 @@
 """Servo-loop timing statistics (no ROS): tick rate, deadline misses, latency percentiles.
 
 Everything here runs in constant memory, whatever the session length: the latencies go into a
-fixed log-scale histogram (:class:`LatencyHistogram`), not a growing list (issue 21: a list of
+fixed log-scale histogram (:class:`LatencyHistogram`), not a growing list (a list of
 every command's latency grew the falcon driver by ~145 MB per hour).
 """
 from __future__ import annotations
@@ -130,7 +130,7 @@ class LoopStats:
     ticks: int = 0
     deadline_misses: int = 0
     #: periods lost: a gap of k periods between two ticks lost k - 1 (a deadline miss can lose
-    #: many; issue 32: the miss count undercounted lost ticks ~5x)
+    #: many: the miss count undercounted lost ticks ~5x)
     periods_lost: int = 0
     max_gap: float = 0.0  # the longest time between two ticks [s]
     #: the safety layer's watchdog time [s] (inf: no gap counted in ``long_gaps``)

@@ -19,7 +19,7 @@ Thresholds (``min_rel`` 9.5 %, ``k_sigma`` 1.0) chosen on a TUNING set of sessio
 the library, three trainee paths each) and tested on a disjoint TEST set (the other five cases,
 three other paths): ``bench/bench_detector.py``, docs/exam_detector.md and
 docs/measurements/detector.md (the tuning grid, the margin, sensitivity and false marks per case);
-``test/test_detector_protocol.py`` checks them against test/data/detector_sessions.npz.
+``test/unit/test_detector_protocol.py`` checks them against test/support/data/detector_sessions.npz.
 """
 from __future__ import annotations
 

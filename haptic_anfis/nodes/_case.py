@@ -1,4 +1,4 @@
-"""The ``case`` / ``random_case_seed`` parameters the case-aware nodes share (issue 14).
+"""The ``case`` / ``random_case_seed`` parameters the case-aware nodes share.
 
 ``case`` ('' = the node's own path parameters, i.e. the default scene) names a case of the
 library (``haptic-anfis cases list``); ``random_case_seed`` (>= 0) draws one instead, for a

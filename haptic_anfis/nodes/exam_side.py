@@ -4,7 +4,7 @@ server) and the simulated trainee in the exam's process.
 
 Why: in the loop's process the examiner's heat map (folding samples, serialising ~6k coloured
 vertices) holds the interpreter lock the driver's servo thread needs; with the driver's default
-``local_model`` force mode the one-process exam graph fell to ~280 poses/s under load (issue 26).
+``local_model`` force mode the one-process exam graph fell to ~280 poses/s under load.
 
 :class:`CoverageWatch` (a node in the exam's process) reads the examiner's heat maps raw (no
 deserialisation: it counts them, times them and reads the ``marks N`` of the summary text), so

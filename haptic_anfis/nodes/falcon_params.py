@@ -121,8 +121,8 @@ PARAMS = [
           'stiffness for about this long, a loop that keeps ticking late gets the bound of its '
           'period (docs/servo_loop.md)', positive),
     Param('model_hold_time', 1.0, 'native, local_model: a model older than model_validity_time '
-          'but not than this [s] is still rendered (the tissue does not move: an upstream stall '
-          'no longer drops the force to 0 N), and one arriving that old is still taken; then it '
+          'but not than this [s] is still rendered (the tissue does not move, so an upstream stall '
+          'does not drop the force to 0 N), and one arriving that old is still taken; then it '
           'expires and the watchdog ramps the force to zero (also how long a paused driver or a '
           'dead force server leaves the last model on the hand; docs/servo_loop.md). '
           '<= model_validity_time: off', positive),
@@ -134,7 +134,7 @@ PARAMS = [
           'workspace): off', positive),
     Param('model_blend_time', MODEL_BLEND_TIME, 'native, local_model: the step between two '
           'successive local models is ramped out over the old model\'s age, at most this [s], '
-          'where both press on the probe (a model that comes late no longer jolts the hand: a '
+          'where both press on the probe (a model that comes late does not jolt the hand: a '
           'step of 0.2 N is a ripple window; a release is never faded; docs/servo_loop.md). '
           '0: off',
           non_negative),
@@ -142,7 +142,7 @@ PARAMS = [
           '(Hannaford & Ryu 2002) on the rendered port'),
     Param('servo_workers', 2, "native, native_process with the simulated Falcon: threads "
           'that serve the one 1 kHz tick schedule, each pinned to its own core; the first to '
-          'wake runs the tick, so one core held busy no longer costs ticks, and a tick whose '
+          'wake runs the tick, so one core held busy costs no tick, and a tick whose '
           'worker was preempted mid-tick is taken over a period later (measured: '
           'docs/servo_loop.md). At most the cores the process may use; 1: one servo thread. '
           "The real Falcon's servo process has one (its USB I/O)",

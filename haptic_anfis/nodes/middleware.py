@@ -1,13 +1,13 @@
 """The middleware settings of a haptic process: Fast DDS over UDP only, no shared memory.
 
-Why (issue 32, docs/servo_loop.md): Fast DDS checks a shared-memory port's health whenever a
+Why (docs/sessions.md): Fast DDS checks a shared-memory port's health whenever a
 process opens another process's port, which it does on the first message to a newly discovered
 participant. When the port's listener has been idle and was checked a moment before, the opening
 thread sleeps a full listener period — a third of ``healthy_check_timeout_ms`` (default 1000), so
 ~333 ms — and it is the thread that publishes (rmw_fastrtps publishes synchronously) or the
 discovery thread holding the writer's lock. Measured with ``launch``: one pose -> command latency
 of 333-342 ms in about one start in four, the local model expiring mid-press; over UDP only, none
-(``bench/bench_dds_stall.py``, docs/measurements/dds_stall.md). For
+(docs/sessions.md, *The middleware*). For
 ``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`` rmw_fastrtps adds its shared-memory transport itself,
 so the same discovery (this machine only) is given as a Fast DDS profile instead
 (``data/dds/localhost_udp.xml``) with ``ROS_AUTOMATIC_DISCOVERY_RANGE=SYSTEM_DEFAULT``; other

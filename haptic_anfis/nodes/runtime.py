@@ -114,7 +114,7 @@ def run_node(factory: Callable[[], Any], args=None) -> int:
     except KeyboardInterrupt:  # a second Ctrl-C while shutting down
         pass
     finally:
-        stop.spinning = False  # a second Ctrl-C while closing: KeyboardInterrupt, as before
+        stop.spinning = False  # a second Ctrl-C while closing raises KeyboardInterrupt
         try:
             # closing computes (the driver writes an hour's tick trace: seconds of CPU); at
             # rtkit's real-time priority its run-time limit would SIGKILL the node for it

@@ -70,7 +70,7 @@ class Readiness:
         self.state = ''
         self.ready_after: float | None = None
         self._msg = String()
-        # the process id: to find the node in ps, top or a scheduler trace (bench/sched_episodes)
+        # the process id: to find the node in ps, top or a scheduler trace
         self.announce('started', f'constructed (kernels compiled, files loaded), process '
                                  f'{os.getpid()}')
         self._check()

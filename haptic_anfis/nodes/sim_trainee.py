@@ -19,7 +19,8 @@ from .examiner import SAMPLE_QOS
 
 
 #: contacts waiting for their force (stamp -> sample); the oldest go first past this many (5 s of
-#: 1 kHz contacts): a burst of late forces on a loaded machine used to clear them all
+#: 1 kHz contacts): a bound, not a clear-all, so a burst of late forces on a loaded machine
+#: leaves the newest contacts waiting
 MAX_PENDING = 5000
 
 

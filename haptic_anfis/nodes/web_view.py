@@ -329,7 +329,7 @@ class WebView(HapticNode):
             self._tell(f'{what} failed: {exc}')
 
     def _store(self, trainee: str, report: dict) -> str:
-        """Store the stopped exam in the trainee record (issue 31) under ``trainee``, with the
+        """Store the stopped exam in the trainee record under ``trainee``, with the
         case's real name (a blind case is named in the record, not on the page); returns what
         to say on the page. A record that cannot be written is said, never raised."""
         from ..record import level_of_case_name, store_session, utc_iso

@@ -81,8 +81,7 @@ VIEW_NODES = ('visualizer', 'web_view')
 #: machine starves them even where the servo thread itself is real-time: beside 8 busy
 #: processes and the browser view on 2 cores, ``sim`` with the servo at SCHED_FIFO 50 had its
 #: models expire (dropouts to 0 N mid-press); with the graph at SCHED_FIFO 10 as well, none
-#: (issue 32: ``bench/bench_servo_load.py --busy 8 --view --configs sim:50,sim:50:10``, and
-#: docs/measurements/servo_load_view.md).
+#: (``bench/bench_servo_load.py --busy 8 --view --configs sim:50,sim:50:10``).
 #: Event-driven nodes: they sleep between messages, and Linux keeps 5 % of each second for the
 #: normal scheduler whatever real-time threads do (``/proc/sys/kernel/sched_rt_runtime_us``).
 GRAPH_PRIORITY = 10
@@ -187,7 +186,7 @@ def _graph_from_rtkit(priority: int, pid: int | None, refused: BaseException) ->
 def graph_cores(names: Sequence[str], cpus: Sequence[int] | None = None) -> dict[str, int]:
     """{node: the one CPU its threads are kept on}, round robin over ``cpus`` (None: the CPUs
     this process may use) in the order of ``names``; {} with fewer than two CPUs (nothing to
-    choose). Why one CPU per node (issue 32, docs/sessions.md): with autogroups a node in a
+    choose). Why one CPU per node (docs/sessions.md): with autogroups a node in a
     session of its own gets its session's share on a CPU in proportion to the load it has there,
     so a thread of it woken on the CPU where it has little load (a DDS receive thread, while
     the executor thread runs on the other) got almost no share beside busy processes and waited
@@ -320,7 +319,7 @@ def start_node(name: str, ros_args: Sequence[str] = (), env: Mapping[str, str] |
     groups processes by session (autogroups, ``/proc/sys/kernel/sched_autogroup_enabled``) a nice
     value counts only between the processes of one session, so a node in a session of its own
     keeps its session's share; lowering the session's weight instead (``/proc/<pid>/autogroup``)
-    was tried and made a 1 kHz loop in another session lose periods (issue 32): not done.
+    was tried and made a 1 kHz loop in another session lose periods: not done.
     The node starts under the normal scheduler also when this process is real-time (sim's graph
     after :func:`set_graph_priority`); :meth:`Supervisor.raise_priority` raises it once ready."""
     if name not in node_names():
@@ -496,12 +495,11 @@ def rerun_in_own_session(argv: Sequence[str]) -> int | None:
     """Run ``haptic-anfis ARGV`` again in a session of its own and return its exit code; None
     (nothing done) in that re-run itself, or when this process leads a session already.
 
-    Why (``sim``, issue 32): where the kernel groups processes by session (autogroups), the
+    Why (``sim``): where the kernel groups processes by session (autogroups), the
     CPU is shared between sessions first, and the one-process graph shared its terminal's
     session with whatever else runs there: beside 8 busy processes of that session and the
     browser view, without real-time priority, ``sim`` lost periods, the force error grew and
-    the force rippled; in a session of its own far less (docs/servo_loop.md,
-    docs/measurements/servo_load_view.md). This process stays in the terminal's session and
+    the force rippled; in a session of its own far less (docs/servo_loop.md). This process stays in the terminal's session and
     waits: Ctrl-C, SIGTERM and SIGHUP reach it and are passed on as SIGINT (the re-run stops
     the device at zero force first and closes its bag); killed, the re-run gets SIGINT all the
     same (PR_SET_PDEATHSIG)."""

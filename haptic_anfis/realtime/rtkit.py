@@ -1,6 +1,6 @@
 """Real-time priority without privilege: ask RealtimeKit (rtkit) over the system D-Bus (no ROS).
 
-Why (issue 32): SCHED_FIFO needs CAP_SYS_NICE or an rtprio limit, which a trainee's account on a
+Why: SCHED_FIFO needs CAP_SYS_NICE or an rtprio limit, which a trainee's account on a
 lab PC has only if an administrator added one; without it the servo shares the cores with the
 browser and everything else under the fair scheduler, and loses periods. Desktop Linux
 distributions run ``rtkit-daemon`` (PipeWire and PulseAudio ask it for their audio threads). It

@@ -91,7 +91,7 @@ CREATE TABLE sessions (
 );
 CREATE INDEX sessions_by_trainee ON sessions(trainee_id, id);
 """
-# v2: lesions the FE grades not palpable (the graded library, issue 29): a miss of one is not held
+# v2: lesions the FE grades not palpable (the graded library): a miss of one is not held
 # against the trainee; and the misses that count.
 _V2 = """
 ALTER TABLE sessions ADD COLUMN not_palpable TEXT NOT NULL DEFAULT '[]';

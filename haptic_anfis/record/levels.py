@@ -1,6 +1,6 @@
 """Case difficulty levels (1 = easiest) for mastery and ``exam run --next``.
 
-:func:`case_level` prefers a ``level`` the case library states (the graded library of issue 29,
+:func:`case_level` prefers a ``level`` the case library states (the graded library,
 graded from the FE: lesion contrast, palpability). Until a case has one, the level is derived from
 its lesions' count and size alone — a placeholder, documented in docs/trainee_record.md:
 

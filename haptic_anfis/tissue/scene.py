@@ -313,7 +313,7 @@ def _fe_store(v: Any, where: str) -> str:
     return v
 
 
-#: Lesion limits of the scene format: at most 3 lesions of diameter 5-25 mm (issue 29: 5 mm is what
+#: Lesion limits of the scene format: at most 3 lesions of diameter 5-25 mm (5 mm is what
 #: clinical breast-exam training aims to find). A 5 mm lesion spans only a few FE cells (~2 mm
 #: under the probe, coarser away from it; its stiffness enters per cell by volume fraction) and a
 #: 16 mm probe may not feel it at all: the library decides palpability from the FE.

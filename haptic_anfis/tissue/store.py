@@ -26,6 +26,7 @@ from __future__ import annotations
 import io
 import json
 import os
+import re
 import tempfile
 from pathlib import Path
 from typing import Any, Iterable
@@ -34,8 +35,8 @@ import numpy as np
 
 from ..errors import HapticAnfisError
 
-__all__ = ['FORMAT_VERSION', 'PointStore', 'StoreError', 'default_store_root', 'point_key',
-           'store_manifest']
+__all__ = ['FORMAT_VERSION', 'PointStore', 'StoreError', 'default_store_root', 'failed_records',
+           'failure_summary', 'point_key', 'store_manifest']
 
 FORMAT_VERSION = 1
 
@@ -51,6 +52,31 @@ def default_store_root() -> Path:
     if (src / 'setup.py').is_file():
         return src / 'fe_store'
     return Path('fe_store').resolve()
+
+
+def failed_records(directory: str | os.PathLike) -> dict[str, dict[str, Any]]:
+    """{key: failure record} of the points in the store ``directory`` whose every attempt failed
+    ({} when there is no such directory). Reads no manifest: a caller that only reports why a case
+    is not ready need not know the scene's mesh density."""
+    d = Path(directory)
+    if not d.is_dir():
+        return {}
+    return {p.name[:-len('.failed.json')]: json.loads(p.read_text())
+            for p in sorted(d.glob('*.failed.json'))}
+
+
+def failure_summary(error: str) -> str:
+    """One line of a failure record's ``error`` (every attempt's message, joined by '; '): how
+    many attempts failed and the last one's load step, depth reached and cause, without the
+    solver's trailing detail."""
+    parts = [p.strip() for p in re.split(r';\s*(?=attempt \d)', error.strip()) if p.strip()]
+    if not parts:
+        return 'failed'
+    m = re.match(r'attempt \d+ \(step ([^)]*)\): (.*)', parts[-1], re.S)
+    if m is None:
+        return parts[-1].splitlines()[0]
+    cause = ': '.join(m.group(2).split(': ')[:2]).rstrip('.')
+    return f'{len(parts)} attempt(s) failed, the last (load step {m.group(1)}) {cause}'
 
 
 def point_key(y: float, z: float) -> str:
@@ -133,10 +159,7 @@ class PointStore:
 
     def failed(self) -> dict[str, dict[str, Any]]:
         """{key: failure record} of the points whose every attempt failed."""
-        if not self.dir.is_dir():
-            return {}
-        return {p.name[:-len('.failed.json')]: json.loads(p.read_text())
-                for p in self.dir.glob('*.failed.json')}
+        return failed_records(self.dir)
 
     def has(self, key: str) -> bool:
         return self.path(key).is_file()
