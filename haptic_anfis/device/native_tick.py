@@ -2,7 +2,7 @@
 
 One function, :func:`run`, is the whole servo loop: a Python thread calls it once and it returns
 only when told to stop, so the thread holds no interpreter lock (GIL) for the loop's whole life
-(issue 32: the executors, the recorder and the garbage collector held it for 14-169 ms).
+(the executors, the recorder and the garbage collector can hold it for 14-169 ms).
 It sleeps to absolute 1 ms deadlines with ``clock_nanosleep`` and reads the clock with
 ``clock_gettime`` (libc through ctypes: numba compiles those calls to plain C calls). Each tick
 (:func:`tick`, also called alone by the tests with a chosen time):
@@ -15,20 +15,20 @@ It sleeps to absolute 1 ms deadlines with ``clock_nanosleep`` and reads the cloc
    newest force command (zero-order hold), in the device frame. A model older than its validity
    time but younger than ``hold_time`` is still rendered (counted as ``held``): the tissue does
    not move, so its local linearisation stays right near p0, and an upstream stall (force
-   server, contact detector, the bridge) no longer drops the force to 0 N. Only within
+   server, contact detector, the bridge) does not drop the force to 0 N. Only within
    ``hold_radius`` of p0, though: with the probe further, a held model that would press on it
    is expired for that tick (:data:`.local_model.HOLD_RADIUS`; back inside, it is rendered
    again: the tissue has not moved). Beyond the validity
    radius the depth is followed exactly and the offset across the indentation direction held at
    the radius (:func:`.local_model.hold_offset`, counted as ``beyond``): a late model under a
-   fast stroke no longer drops the force to 0 N either; an approach model (the plane ahead of a
+   fast stroke does not drop the force to 0 N either; an approach model (the plane ahead of a
    free probe) past ``approach_radius`` along its plane renders zero instead
    (:func:`.local_model.across_beyond`). The stiffness's skew part (the tissue force turning with
    the probe) is rendered while the model is valid; a held model keeps it
    only where K has no rotating mode (:func:`.local_model.rotating_mode`): a free handle could
    spiral out along one. A new model that disagrees with the old one at the probe by more than
    :data:`BLEND_DEADBAND` is not taken as a step: the excess is ramped out over the old
-   model's age (at most ``blend_time``), so a model that comes late no longer jolts the hand
+   model's age (at most ``blend_time``), so a model that comes late does not jolt the hand
    (:func:`_render_blended`; a release is never faded).
 4. Passivity: the model's stiffness is limited by the MEASURED tick period ``T``:
    ``K <= 2 (b - |B|) / T`` with ``b`` the device's damping and ``B`` the rendered damping
@@ -869,8 +869,7 @@ def run(cfg, st, cnt, script, buf, scratch, ts, lock):
     and publishes it (:func:`_commit`, :func:`_publish`, under the lock); the others find it
     not due or claimed and sleep to the next one. Under the normal scheduler one thread is
     sometimes not run for milliseconds after it wakes (a busy core, a long kernel path); two
-    workers pinned to different cores are rarely both held (issue 32:
-    ``bench/bench_servo_wake.py``). A worker preempted in the middle of its tick holds no lock:
+    workers pinned to different cores are rarely both held. A worker preempted in the middle of its tick holds no lock:
     a period later the other takes the tick over from the last committed state, and the late
     one's result is dropped (``taken_over``). A tick more than one period late is a deadline
     miss and the schedule re-synchronises (the periods lost are counted by :func:`_compute`).

@@ -13,7 +13,7 @@ trace. Commands and models go the other way through :class:`NativeSafety` and
 :class:`~.local_model.LocalModelRenderer`'s interfaces (so :class:`~.force_input.ForceInput`
 and the driver use them unchanged) and write the loop's input buffers.
 
-A stalled bridge (or a frozen process, short of SIGSTOP) no longer stops the ticks: the last model
+A stalled bridge (or a frozen process, short of SIGSTOP) does not stop the ticks: the last model
 is rendered until it expires (``model_validity_time`` from its pose) and the watchdog then ramps
 the force to zero inside the compiled loop.
 
@@ -404,8 +404,8 @@ class NativeServoLoop:
             its CPU time), on shared memory; else on threads of this process.
         workers: threads that serve the one tick schedule (:func:`~.native_tick.run`), each
             pinned to its own core (:func:`worker_cpus`): the first to wake runs the tick, so a
-            core held busy for milliseconds no longer costs ticks (issue 32). At most the
-            cores this process may use; 1 is the single servo thread of before.
+            core held busy for milliseconds costs no tick. At most the cores this process
+            may use; 1 is a single servo thread.
         device_factory: a real device instead of the simulated handle (``script`` is then
             None): called IN the servo process (implies ``process``) to build the
             :class:`~.falcon.Device` (e.g. a :class:`~.falcon_usb.FalconUSB`) that
