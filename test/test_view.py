@@ -37,7 +37,10 @@ def test_gauge_bands_follow_the_exam_levels_and_cue_light_and_overforce():
     assert gauge(th[2], 1.0, th, False).level == 'none'   # not in contact: no pressure
     assert gauge(th[1], 3.0, th, True, light_for=0.5).cue == ''
     assert 'press harder' in gauge(th[1], 3.0, th, True, light_for=1.5).cue
-    assert gauge(th[2], 3.0, th, True, light_for=5.0).cue == ''   # deep: no cue
+    good = gauge(th[2], 3.0, th, True, light_for=5.0)   # deep: said to be right
+    assert good.cue.startswith("that's right: deep") and good.kind == 'good'
+    assert gauge(th[1], 3.0, th, True, light_for=1.5).kind == 'fix'
+    assert gauge(th[2], 3.0, th, False).cue == ''   # lifted: nothing to say
     assert "device's force" in gauge(th[2], 10.0, th, True, max_force=10.0).cue
     assert 0 <= gauge(0.1, 1.0, th, True).percent <= 100
 
@@ -215,3 +218,50 @@ def test_a_hung_chromium_is_killed_and_another_capture_tried(tmp_path, monkeypat
     monkeypatch.setattr(browser, '_capture_when_ready', lambda *a: False)
     with pytest.raises(RuntimeError, match='did not connect, or was not ready, in 3 .*0 of'):
         browser.screenshot('http://x/', tmp_path / 'c.png', tries=3, timeout=90)
+
+
+def test_skin_paint_sets_the_region_apart_and_maps_pressure_continuously():
+    from haptic_anfis.palette import LEVEL, NOT_PRESSED, rgb255
+    from haptic_anfis.view.scene import OUTSIDE_RGB, SkinPaint, pressure_rgb, region_outline
+    # two triangles sharing an edge, the first is the region; a third vertex-disjoint outside
+    v = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0], [5, 5, 0], [6, 5, 0], [5, 6, 0]],
+                 float) * 0.01
+    f = np.array([[0, 1, 2], [1, 3, 2], [4, 5, 6]])
+    th = (0.002, 0.005, 0.008)
+    p = SkinPaint(v, f, np.array([0, 1]), th)
+    c = p.colours(p.vertex_levels(np.array([0, 3])))
+    assert tuple(c[0, :3]) == rgb255(NOT_PRESSED)   # in the region, not palpated: the neutral
+    assert tuple(c[3, :3]) == rgb255(LEVEL['deep'])  # a corner only of the deep face
+    assert tuple(c[4, :3]) == OUTSIDE_RGB and tuple(c[6, :3]) == OUTSIDE_RGB
+    assert c[4, :3].sum() < c[0, :3].sum()   # outside is dimmer than what is left to palpate
+    # the border: the four outer edges of the two region triangles, not the shared one
+    assert sorted(map(tuple, region_outline(f, np.array([0, 1])))) == [(0, 1), (0, 2), (1, 3),
+                                                                      (2, 3)]
+    # continuous: the level colours at the thresholds, between them in between, deep beyond
+    r = pressure_rgb(np.array([0.0, 0.002, 0.0035, 0.005, 0.008, 0.02]), th)
+    np.testing.assert_allclose(r[[0, 1, 3, 4]], [rgb255(NOT_PRESSED), rgb255(LEVEL['light']),
+                                                 rgb255(LEVEL['medium']), rgb255(LEVEL['deep'])])
+    np.testing.assert_allclose(r[2], 0.5 * (r[1] + r[3]))
+    np.testing.assert_allclose(r[5], r[4])
+    # a dent paints the pressed vertex in the continuous colour of its displacement
+    u = np.zeros_like(v)
+    u[0] = (0.0, 0.0, -0.005)
+    assert tuple(p.colours(None, u)[0, :3]) == rgb255(LEVEL['medium'])
+
+
+def test_gauge_html_ticks_each_band_and_the_banner_says_the_cue():
+    from haptic_anfis.palette import OUTCOME
+    from haptic_anfis.view.legend import banner_html, gauge_html, legend_html
+    th = ExamConfig().thresholds
+    h = gauge_html(th, None)
+    for k, t in zip(('light', 'medium', 'deep'), th):   # a tick at each threshold, labelled
+        assert f'left:{100 * t / (1.5 * th[-1]):.1f}%' in h and f'{k} {t * 1e3:.0f}' in h
+    assert 'background:#000;' not in h   # no marker off the skin
+    assert 'left:50.0%;top:-4px' in gauge_html(th, 0.75 * th[-1])   # the marker at the depth
+    good = gauge(th[2], 3.0, th, True)
+    assert OUTCOME['pass'] in banner_html(good.cue, good.kind) and "that's right" in \
+        banner_html(good.cue, good.kind)
+    assert OUTCOME['retry'] in banner_html('press harder', 'fix')
+    assert banner_html('', '') == ''
+    assert all(w in legend_html() for w in ('not yet palpated', 'deep', 'outside the region',
+                                            'your marks'))

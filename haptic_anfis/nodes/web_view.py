@@ -134,6 +134,7 @@ class WebView(HapticNode):
         self._pose = self._force = None   # newest (stamp [s], (x, y, z) [m] / [N])
         self._contact = None               # newest contact message's values
         self.malformed = 0                 # loop messages that could not be read
+        self.loop_text = ''                # the haptic loop's health ('' while it keeps up)
         self.t_start = time.monotonic()
         self.running = True   # the session collects from the start; "start" begins afresh
         self._param_clients: dict = {}
@@ -206,9 +207,10 @@ class WebView(HapticNode):
                 self._requests.append(('reported', (name, values, declared, stamp)))
 
     def _on_diagnostics(self, m) -> None:
-        """The falcon driver's report on its servo loop (ROS's diagnostics topic): the page says
-        when the loop fell behind, so the trainee and the instructor know the force came late
-        (:func:`~haptic_anfis.device.loop_health.behind_text`); other statuses are not ours."""
+        """The falcon driver's report on its servo loop (ROS's diagnostics topic): the
+        instructor's console and the log say when the loop fell behind (the force came late:
+        :func:`~haptic_anfis.device.loop_health.behind_text`); the trainee's page does not (a
+        machine's health is not the trainee's to act on). Other statuses are not ours."""
         from ..device.loop_health import behind_text
         for st in m.status:
             if st.name == ifc.LOOP_DIAGNOSTIC:
@@ -218,12 +220,17 @@ class WebView(HapticNode):
                                        v.get('cause', ''))
                 except ValueError:   # not our driver's numbers: say nothing rather than wrong
                     continue
-                self.app.show_loop_health(text)
+                if text and text != self.loop_text:
+                    self.get_logger().warning(f'haptic loop behind: {text}')
+                self.loop_text = text
+                if self.console is not None:
+                    self.console.show_loop_health(text)
 
     def _on_mark(self, m: PointStamped) -> None:
         if self._collecting():
             q = m.point
             self.cv.session.add_mark(_stamp(m), (q.x, q.y, q.z))
+            self.app.show_mark((q.x, q.y, q.z))   # on the page at once: the trainee sees it
 
     def _take(self) -> None:
         """The newest pose and force command, and every contact sample since the last frame,

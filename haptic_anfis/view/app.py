@@ -25,10 +25,13 @@ import numpy as np
 
 from ..errors import HapticAnfisError
 from ..exam.config import LEVELS
+from ..palette import REGION, rgb255
 from .doors import guarded_server
 from .escape import md
 from .gauge import DEVICE_MAX_FORCE, gauge
-from .scene import LESION_RGB, MARK_RGB, SkinPaint, frame_camera, probe_quaternion
+from .legend import banner_html, gauge_html, legend_html
+from .scene import (LESION_RGB, MARK_RGB, SkinPaint, frame_camera, probe_quaternion,
+                    region_outline)
 
 __all__ = ['BLIND', 'PROBE_LENGTH', 'md', 'ViewApp', 'ViewError', 'check_port', 'coverage_fractions',
            'trainee_history']
@@ -137,6 +140,7 @@ class ViewApp:
         self.probe = s.scene.add_mesh_simple('/probe', probe.vertices, probe.faces,
                                              color=(60, 110, 240), visible=False)
         self.arrow = None
+        self._live_marks: list = []   # the trainee's marks as they are placed
         self._lesion_nodes: list = []
         self._mark_nodes: list = []
         self._path = None
@@ -150,14 +154,16 @@ class ViewApp:
     def _gui(self) -> None:
         g = self.server.gui
         self.g_status = g.add_markdown('**live** — waiting for the probe')
-        #: the haptic loop's health as the falcon driver reports it ('' while it keeps up)
-        self.g_loop = g.add_markdown('')
-        with g.add_folder('Exam'):
+        #: the cue, a banner above everything else (the text in ``cue``)
+        self.g_banner = g.add_html('')
+        self.cue = ''
+        with g.add_folder('Exam') as self.g_exam:
             self.g_clock = g.add_markdown('clock 0:00')
-            self.g_bar = g.add_progress_bar(0.0, color='gray')
+            self.g_bar = g.add_html(gauge_html(self.thresholds, None))
             self.g_gauge = g.add_markdown(self._gauge_text(None))
-            self.g_cue = g.add_markdown('')
             self.g_cov = g.add_markdown(self._coverage_text({k: 0.0 for k in LEVELS}))
+        with g.add_folder('Colours'):
+            self.g_legend = g.add_html(legend_html())
         with g.add_folder('Debrief', visible=False) as f:
             self.g_debrief = f
             self.g_numbers = g.add_markdown('')
@@ -174,19 +180,13 @@ class ViewApp:
         """A line in the page's status (escaped: shown as the characters given)."""
         self.g_status.content = md(text)
 
-    def show_loop_health(self, text: str) -> None:
-        """A line under the status that the haptic loop fell behind (``text``:
-        :func:`~haptic_anfis.device.loop_health.behind_text`), or none (``''``)."""
-        content = f'**haptic loop behind**: {md(text)}' if text else ''
-        if content != self.g_loop.content:   # every update redraws the page for a while
-            self.g_loop.content = content
-
     def set_exam_running(self, running: bool, blind: bool = False, case_name: str = '') -> None:
-        """The live state of an exam: lesions hidden, status line."""
+        """The live state of an exam: lesions hidden, no marks yet, status line."""
         with self._lock:
             if running:
                 self.mode = 'live'
                 self._clear_debrief()
+                self._clear_live_marks()
                 shown = 'blind case' if blind else (case_name or 'default case')
                 self.g_status.content = f'**exam running** — {md(shown)}; lesions hidden'
 
@@ -208,7 +208,8 @@ class ViewApp:
         with self._lock:
             self.vertices = np.asarray(vertices, float)
             self.faces = np.asarray(faces, np.int64)
-            self.paint = SkinPaint(self.vertices, self.faces, region_faces)
+            self.paint = SkinPaint(self.vertices, self.faces, region_faces, self.thresholds)
+            self._outline(region_faces)
             self.vertex_levels = np.zeros(len(self.vertices), np.int64)
             self.displacement = None
             self._moved = np.zeros(len(self.vertices), bool)   # drawn displaced
@@ -253,6 +254,31 @@ class ViewApp:
             if changed.any():
                 self._send_skin(changed)
 
+    def _outline(self, region_faces) -> None:
+        """Draw the border of the region to examine, lifted off the skin."""
+        e = region_outline(self.faces, region_faces)
+        seg = _segments_lifted(self.vertices[e], lift=0.0008)
+        self.server.scene.add_line_segments('/region', seg, rgb255(REGION), thickness=3.0,
+                                            thickness_units='screen')
+
+    def show_mark(self, point) -> None:
+        """A mark the trainee placed at ``point`` (3,) [m] (the probe tip): drawn at once on the
+        nearest point of the skin, in the colour of the legend's "your marks" (whether it hit
+        a lesion is said only in the debrief)."""
+        p = np.asarray(point, float)
+        if p.shape != (3,) or not np.isfinite(p).all():
+            return
+        with self._lock:
+            v = self.vertices[int(np.argmin(np.sum((self.vertices - p) ** 2, axis=1)))]
+            self._live_marks.append(self.server.scene.add_icosphere(
+                f'/live_marks/{len(self._live_marks)}', radius=0.003, color=MARK_RGB['live'],
+                position=tuple(map(float, _segments_lifted(v[None, None], 0.002)[0, 0]))))
+
+    def _clear_live_marks(self) -> None:
+        for n in self._live_marks:
+            n.remove()
+        self._live_marks = []
+
     # -- live -------------------------------------------------------------------------------
 
     def show_live(self, pose, contact=None, force=None, clock_s: float | None = None) -> None:
@@ -291,11 +317,13 @@ class ViewApp:
             gg = gauge(depth, fn, self.thresholds, in_contact,
                        0.0 if self._light_since is None else now - self._light_since,
                        self.max_force)
-            self.g_bar.value = gg.percent
-            self.g_bar.color = {'none': 'gray', 'light': 'yellow', 'medium': 'orange',
-                                'deep': 'red'}[gg.level]
+            bar = gauge_html(self.thresholds, depth if in_contact else None)
+            if bar != self.g_bar.content:
+                self.g_bar.content = bar
             self.g_gauge.content = self._gauge_text(gg)
-            self.g_cue.content = f'**{gg.cue}**' if gg.cue else ''
+            if gg.cue != self.cue:
+                self.cue = gg.cue
+                self.g_banner.content = banner_html(gg.cue, gg.kind)
             if clock_s is not None:
                 self.g_clock.content = f'clock {int(clock_s) // 60}:{int(clock_s) % 60:02d}'
             self._dent(contact if in_contact else None)
@@ -340,6 +368,7 @@ class ViewApp:
         history (from the trainee record ``db``, None = its default file) beside it."""
         with self._lock:
             self._clear_debrief()
+            self._clear_live_marks()   # the debrief draws them scored
             self.mode, self.debrief = 'debrief', debrief
             self.displacement, self._dent_key = None, None
             self.probe.visible = False
@@ -417,8 +446,8 @@ class ViewApp:
                 'numbers': self.debrief.numbers() if self.debrief is not None else None,
                 'numbers_text': self.g_numbers.content,
                 'coverage_text': self.g_cov.content, 'gauge_text': self.g_gauge.content,
-                'cue': self.g_cue.content, 'status': self.g_status.content,
-                'loop_text': self.g_loop.content,
+                'cue': self.cue, 'banner': self.g_banner.content,
+                'live_marks': len(self._live_marks), 'status': self.g_status.content,
                 'lesions': [(le.name, le.status) for le in self.debrief.lesions]
                 if self.debrief is not None else [],
                 'lesions_visible': bool(self._lesion_nodes),
@@ -487,13 +516,18 @@ def coverage_fractions(grid, face_levels) -> dict:
     return {k: float(a[face_levels > i].sum()) for i, k in enumerate(LEVELS)}
 
 
+def _segments_lifted(points: np.ndarray, lift: float) -> np.ndarray:
+    """``points`` (..., 3) [m] each moved ``lift`` [m] outward (away from the chest-wall
+    centre) so what is drawn there shows above the skin."""
+    n = np.linalg.norm(points, axis=-1, keepdims=True)
+    return points + lift * points / np.where(n > 0, n, 1.0)
+
+
 def _segments(path: np.ndarray, lift: float) -> np.ndarray:
-    """(n, 2, 3) segments of a NaN-split polyline, each point moved ``lift`` [m] outward (away
-    from the chest-wall centre) so the line is drawn above the skin."""
+    """(n, 2, 3) segments of a NaN-split polyline, lifted ``lift`` [m] above the skin."""
     if len(path) < 2:
         return np.zeros((0, 2, 3))
-    n = np.linalg.norm(path, axis=1, keepdims=True)
-    p = path + lift * path / np.where(n > 0, n, 1.0)
+    p = _segments_lifted(path, lift)
     a, b = p[:-1], p[1:]
     ok = np.isfinite(a).all(axis=1) & np.isfinite(b).all(axis=1)
     return np.stack([a[ok], b[ok]], axis=1)
