@@ -138,6 +138,18 @@ def test_live_page_hides_lesions_and_draws_the_dent():
         assert np.abs(app.displacement).max() == pytest.approx(0.006)   # the probe's depth
         app.show_live(np.array([x + 0.01, y, z]), None, None, 13.0)   # lifted: dent gone
         assert app.displacement is None
+        # the exam ends: said at once, and a late live frame does not bring "running" back
+        app.show_over()
+        s = app.state()
+        assert s['mode'] == 'over' and 'exam over — debrief loading' in s['status']
+        assert s['cue'] == 'exam over — debrief loading' and 'running' not in s['status']
+        assert not app.probe.visible
+        app.show_live(np.array([x - 0.006, y, z]),
+                      (np.array([x, y, z]), np.array([-1.0, 0, 0]), 0.009), None, 14.0)
+        assert app.state()['cue'] == 'exam over — debrief loading'
+        assert app.g_clock.content == 'exam over'
+        app.set_exam_running(True)   # the next exam: live again, no banner left over
+        assert app.state()['mode'] == 'live' and app.state()['banner'] == ''
     finally:
         app.close()
 

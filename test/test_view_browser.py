@@ -185,6 +185,14 @@ def test_live_page_shows_the_whole_region_what_is_left_to_palpate_the_cue_and_th
         app.show_live(centre - 0.003 * n, (centre, -n, 0.003), 1.0 * n, 14.0)
         assert app.state()['cue'].startswith('press harder')
         assert not any('haptic loop' in str(v) for v in app.state().values())
+        # the exam ends: the banner says so at once (grey), no "running" with a stopped clock
+        app.show_over()
+        from PIL import Image
+        png = screenshot(app.url, tmp_path / 'over.png', app=app, ready=drawn)
+        panel = np.asarray(Image.open(png).convert('RGB')).astype(int)[60:260, 940:1270]
+        grey = (np.abs(panel - 153) <= 6).all(axis=2)   # OUTCOME['void'], the banner's
+        assert grey.sum() > 3000, grey.sum()
+        assert 'running' not in app.state()['status']
     finally:
         app.close()
 

@@ -56,6 +56,9 @@ CONTACT_QUEUE = QoSProfile(depth=200, history=HistoryPolicy.KEEP_LAST,
 #: recorder (its case is the bag's label) only once every node of the loop has switched
 CASE_PHASES = (('contact_detector', 'force_server', 'visualizer', 'examiner'), ('recorder',))
 CASE_NODE_NAMES = frozenset(n for ph in CASE_PHASES for n in ph)
+#: [s] how long a closing page's last words get to reach the browsers (viser sends them from a
+#: thread of its own; a server stopped at once drops them)
+CLOSE_FLUSH = 0.3
 #: what the console says while the loop nodes load a case
 SWITCHING = 'switching to {} ...'
 #: what the trainee's page says meanwhile (no case name: a blind draw stays blind)
@@ -306,6 +309,7 @@ class WebView(HapticNode):
                 self._tell('exam started')
             elif what == 'stop':
                 self.running = False
+                self.app.show_over()   # before the scoring: the page says so at once
                 self._running_shown(False)
                 from ..view.debrief import Debrief
                 report = self.cv.session.report()
@@ -571,6 +575,9 @@ class WebView(HapticNode):
                                f'drawing), {st.probe_updates} probe updates')
         for s in self._inputs.values():
             s.destroy()
+        if self.app.mode == 'live':   # the session ends (exam run --view): its debrief follows
+            self.app.show_over()
+            time.sleep(CLOSE_FLUSH)
         self.app.close()
         if self.console is not None:
             self.console.close()

@@ -40,6 +40,8 @@ __all__ = ['BLIND', 'PROBE_LENGTH', 'md', 'ViewApp', 'ViewError', 'check_port', 
 BLIND = 'blind random case'
 PROBE_LENGTH = 0.03  # [m] drawn length of the probe cylinder
 FORCE_SCALE = 0.004  # [m/N] force arrow length
+#: what the page says between the end of an exam and its debrief
+OVER = 'exam over — debrief loading'
 
 
 class ViewError(HapticAnfisError, ValueError):
@@ -187,8 +189,33 @@ class ViewApp:
                 self.mode = 'live'
                 self._clear_debrief()
                 self._clear_live_marks()
+                self._say_cue('', '')
                 shown = 'blind case' if blind else (case_name or 'default case')
                 self.g_status.content = f'**exam running** — {md(shown)}; lesions hidden'
+
+    def _say_cue(self, cue: str, kind: str) -> None:
+        if cue != self.cue:   # every update redraws the panel
+            self.cue = cue
+            self.g_banner.content = banner_html(cue, kind)
+
+    def show_over(self) -> None:
+        """The exam has ended and its debrief is being computed: said at once, in the banner
+        and the status, the clock and the probe taken off (a page still saying "exam running"
+        with a stopped clock reads as a hung exam); live frames are ignored until the debrief
+        or the next exam."""
+        with self._lock:
+            if self.mode != 'live':
+                return
+            self.mode = 'over'
+            self.probe.visible = False
+            if self.arrow is not None:
+                self.arrow.visible = False
+            self.g_status.content = f'**{OVER}**'
+            self.g_clock.content = 'exam over'
+            self.g_bar.content = gauge_html(self.thresholds, None)
+            self.g_gauge.content = self._gauge_text(None)
+            self._say_cue(OVER, 'over')
+            self._dent(None)
 
     def _gauge_text(self, gg) -> str:
         lv = ' | '.join(f'{k} >= {t * 1e3:.0f} mm' for k, t in zip(LEVELS, self.thresholds))
@@ -284,8 +311,10 @@ class ViewApp:
     def show_live(self, pose, contact=None, force=None, clock_s: float | None = None) -> None:
         """One live frame: probe tip ``pose`` (3,) [m] or None; ``contact`` None or (point (3,),
         direction (3,), depth [m]) while in contact; ``force`` (3,) [N] or None; the exam clock
-        [s]. Re-sends the skin only when the dent changed."""
+        [s]. Re-sends the skin only when the dent changed; nothing once the exam is over."""
         with self._lock:
+            if self.mode != 'live':
+                return
             now = time.monotonic()
             fvec = np.zeros(3) if force is None else np.asarray(force, float)
             fn = float(np.linalg.norm(fvec)) if np.isfinite(fvec).all() else 0.0
@@ -321,9 +350,7 @@ class ViewApp:
             if bar != self.g_bar.content:
                 self.g_bar.content = bar
             self.g_gauge.content = self._gauge_text(gg)
-            if gg.cue != self.cue:
-                self.cue = gg.cue
-                self.g_banner.content = banner_html(gg.cue, gg.kind)
+            self._say_cue(gg.cue, gg.kind)
             if clock_s is not None:
                 self.g_clock.content = f'clock {int(clock_s) // 60}:{int(clock_s) % 60:02d}'
             self._dent(contact if in_contact else None)
@@ -369,6 +396,7 @@ class ViewApp:
         with self._lock:
             self._clear_debrief()
             self._clear_live_marks()   # the debrief draws them scored
+            self._say_cue('', '')
             self.mode, self.debrief = 'debrief', debrief
             self.displacement, self._dent_key = None, None
             self.probe.visible = False

@@ -14,8 +14,11 @@ from .scene import MARK_RGB, OUTSIDE_RGB
 
 __all__ = ['banner_html', 'gauge_html', 'legend_html']
 
-#: the banner's background per cue kind: right (bluish green) or to fix (orange), Okabe-Ito
-BANNER_BG = {'good': OUTCOME['pass'], 'fix': OUTCOME['retry']}
+#: the banner's background per cue kind: right (bluish green), to fix (orange), the exam over
+#: (grey), Okabe-Ito
+BANNER_BG = {'good': OUTCOME['pass'], 'fix': OUTCOME['retry'], 'over': OUTCOME['void']}
+#: the banner's sign per cue kind
+SIGN = {'good': '\u2714 ', 'fix': '\u26a0 ', 'over': ''}
 
 
 def _hex(rgb) -> str:
@@ -74,6 +77,6 @@ def banner_html(cue: str, kind: str) -> str:
     bg = BANNER_BG.get(kind, OUTCOME['retry'])
     r, g, b = rgb255(bg)
     fg = '#000' if 0.299 * r + 0.587 * g + 0.114 * b > 140 else '#fff'
-    sign = '\u2714 ' if kind == 'good' else '\u26a0 '
+    sign = SIGN.get(kind, SIGN['fix'])
     return (f'<div style="font-size:1.5em;font-weight:bold;padding:10px 12px;margin:4px 8px;'
             f'border-radius:6px;background:{bg};color:{fg}">{sign}{cue}</div>')
