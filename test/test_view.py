@@ -110,8 +110,11 @@ def test_page_state_is_the_report_and_lesions_are_revealed(bag):
     try:
         s = app.state()
         assert s['mode'] == 'debrief' and s['lesions_visible']
-        assert f"score: **{s['numbers']['score']}**" in s['numbers_text']
-        assert f"hits: **{s['numbers']['hits']}**" in s['numbers_text']
+        n = s['numbers']
+        assert f"score **{n['score']:.0f}**" in s['numbers_text']
+        assert f"lumps found: **{n['hits']} of {n['hits'] + n['misses']}**" in s['numbers_text']
+        assert 'replay' not in s['gauge_text'] and not app.g_bar.visible   # live only
+        assert not app.g_gauge.visible and 'lump missed' in app.g_legend.content
         app.scrub(0.0)   # the start of the replay: nothing covered yet
         assert 'light 0.0 %' in app.state()['coverage_text']
     finally:
@@ -277,3 +280,45 @@ def test_gauge_html_ticks_each_band_and_the_banner_says_the_cue():
     assert banner_html('', '') == ''
     assert all(w in legend_html() for w in ('not yet palpated', 'deep', 'outside the region',
                                             'your marks'))
+
+
+def test_debrief_numbers_are_rounded_as_a_person_reads_them():
+    from haptic_anfis.view.panel import duration_text, history_markdown, numbers_markdown
+    assert duration_text(183.719) == '3 min 4 s' and duration_text(42.4) == '42 s'
+    assert duration_text(3725) == '1 h 2 min'
+    n = {'score': 41.04, 'verdict': 'retry', 'hits': 0, 'misses': 1, 'false_marks': 2,
+         'coverage_light_pct': 62.01, 'coverage_medium_pct': 61.5, 'coverage_deep_pct': 40.49,
+         'pattern': 'vertical_strip', 'duration_s': 183.719,
+         'time_at_level_s': {'light': 8.413, 'deep': 16.065}, 'area_time_s': None,
+         'force_palpating_n': 0.292, 'force_searching_n': 9.232,
+         'palpating_vs_searching_pct': -96.8}
+    t = numbers_markdown(n)
+    assert 'score **41**' in t and 'lumps found: **0 of 1**' in t and 'false marks: **2**' in t
+    assert 'deep **40 %**' in t and 'duration **3 min 4 s**' in t and 'vertical strip' in t
+    assert 'light 8 s · deep 16 s' in t and '0.3 / 9.2 N (-97 %)' in t
+    assert '183.7' not in t and '62.01' not in t
+    rows = [{'session': k, 'started_utc': '2026-12-01T10:00:00Z', 'case_level': 1,
+             'coverage_pct': {'deep': 70.2}, 'hits': 1, 'misses': 0, 'false_marks': 0,
+             'score': 88.4, 'verdict': 'pass', 'case': 'lib_m_dense_idc10_d10'} for k in range(12)]
+    h = history_markdown('ann', rows)
+    assert h.count('\n| ') == 1 + 5 and '| 11 | 12-01 | 1 | 70 % | 1/1 | 0 | 88 | pass |' in h
+    assert 'lib_m_dense' not in h   # no case name: narrow, and no blind case named
+
+
+def test_a_revealed_lesion_says_how_much_it_stood_out_and_its_difficulty():
+    """From the case's FE grading: the contrast at deep pressure (8 mm) and the difficulty,
+    carried by the exam's lesion entries into the debrief's words."""
+    from haptic_anfis.cases import library
+    from haptic_anfis.exam.lesions import subject_from_scene
+    from haptic_anfis.view.debrief import lesion_why
+    case = library().get('lib_l_dense_three')
+    grade = {g['lesion']: g for g in case.grading()['lesions']}['idc1']
+    want = next(r['contrast_pct'] for r in grade['contrasts'] if abs(r['depth_m'] - 0.008) < 1e-9)
+    les = {le.name: le for le in subject_from_scene(case.scene_path).lesions}['idc1']
+    assert les.contrast_pct == pytest.approx(want) and les.contrast_depth == pytest.approx(0.008)
+    assert les.difficulty == grade['difficulty']
+    why = lesion_why({'found': False, 'missed': 'never palpated deep', 'level': les.level,
+                      'level_depth_mm': les.level_depth * 1e3, 'contrast_pct': les.contrast_pct,
+                      'contrast_depth_mm': 8.0, 'difficulty': les.difficulty})
+    assert why.endswith(f'stood out {want:.0f} % at deep pressure; difficulty '
+                        f"{grade['difficulty']} of 5"), why

@@ -3,6 +3,7 @@ check on the debrief of a recorded session and on a live page fed by ROS topics.
 
 Skipped, saying why, where chromium or viser is absent (.ci/run installs chromium)."""
 import json
+import re
 import time
 
 import numpy as np
@@ -55,11 +56,12 @@ def test_debrief_page_shows_the_report_heat_map_and_lesions(tmp_path, capfd):
         assert px['green'] > 200, px   # the lesion found, revealed
         # the panel's numbers as the server holds them for every page: exam report --json's
         n = app.state()['numbers_text']
-        for key, value in (('score', want['score']), ('hits', want['hits']),
-                           ('misses', want['misses']), ('false marks', want['false_marks']),
-                           ('coverage deep %', want['coverage_pct']['deep']),
-                           ('coverage light %', want['coverage_pct']['light'])):
-            assert f'{key}: **{value}**' in n, (key, value)
+        for text in (f"score **{want['score']:.0f}**",
+                     f"lumps found: **{want['hits']} of {want['hits'] + want['misses']}**",
+                     f"false marks: **{want['false_marks']}**",
+                     f"deep **{want['coverage_pct']['deep']:.0f} %**",
+                     f"light **{want['coverage_pct']['light']:.0f} %**"):
+            assert text in n, text
         app.scrub(0.0)   # the instructor drags the replay to the start; a page (re)connecting
         px0 = pixels(screenshot(app.url, tmp_path / 'start.png', app=app, ready=drawn))   # now gets that state
         assert px0['red'] < 0.05 * px['red'] and px0['drawn'] > 0.15 * px0['total'], px0
@@ -216,3 +218,41 @@ def looks(png) -> dict:
             'neutral': int(((spread < 14) & (r > 150) & (r < 250)).sum()),
             'outside': int(((r > g + 12) & (g > b) & (r < 200) & (r > 60)).sum()),
             'mark': int(((b > r + 80) & (g > r + 75) & (b > g + 20)).sum())}
+
+
+def test_debrief_with_history_fits_a_1280_by_800_window(tmp_path):
+    """The instructor's review of a recording with the trainee's history, in a 1280 x 800
+    chromium: no table wider than the panel or running out of the window (the history was cut
+    off on the right), the numbers rounded, the gauge (live only) gone."""
+    from haptic_anfis.record.store import store_session
+    from haptic_anfis.view.browser import Page, close_chromium, open_chromium
+    from haptic_anfis.view.build import bag_debrief, open_bag_view
+    bag, db = tmp_path / 'session', tmp_path / 'r.sqlite'
+    write_session_bag(bag)
+    rep = {k: v for k, v in bag_debrief(bag).report.items() if k != 'bag'}
+    for k in range(7):
+        store_session(db, 'ann', dict(rep, case='lib_m_dense_idc10_d10'), case_level=1,
+                      bag=f'/bags/s{k}', started_utc='2026-12-01T10:00:00Z')
+    app = open_bag_view(bag, None, free_port(), '127.0.0.1', None, 'ann', db)
+    proc = open_chromium(app.url, (1280, 800))
+    try:
+        page = Page(proc, (1280, 800), 90.0)
+        js = ('JSON.stringify(Array.from(document.querySelectorAll("table")).map(t => '
+              '[t.getBoundingClientRect().right, t.scrollWidth, t.parentElement.clientWidth, '
+              't.innerText]))')
+        end, tables = time.monotonic() + 120.0, []
+        while time.monotonic() < end and not tables:
+            time.sleep(0.5)
+            r = page.call('Runtime.evaluate', expression=js, returnByValue=True)
+            tables = json.loads(r['result']['value'])
+        assert tables, 'the history table never arrived'
+        right, scroll, room, text = tables[0]
+        assert '12-01' in text and 'retry' in text and 'lib_m_dense' not in text
+        assert right <= 1280 and scroll <= room, tables[0]   # not cut off, no scrolling
+        page.close()
+    finally:
+        close_chromium(proc)
+        app.close()
+    n = app.state()['numbers_text']
+    assert 'duration **4 s**' in n and not re.search(r'\d\.\d\d', n), n   # rounded
+    assert not app.g_bar.visible and not app.g_gauge.visible

@@ -30,6 +30,7 @@ from .doors import guarded_server
 from .escape import md
 from .gauge import DEVICE_MAX_FORCE, gauge
 from .legend import banner_html, gauge_html, legend_html
+from .panel import history_markdown, numbers_markdown
 from .scene import (LESION_RGB, MARK_RGB, SkinPaint, frame_camera, probe_quaternion,
                     region_outline)
 
@@ -40,6 +41,8 @@ __all__ = ['BLIND', 'PROBE_LENGTH', 'md', 'ViewApp', 'ViewError', 'check_port', 
 BLIND = 'blind random case'
 PROBE_LENGTH = 0.03  # [m] drawn length of the probe cylinder
 FORCE_SCALE = 0.004  # [m/N] force arrow length
+#: the legend's place in the panel: after every folder, the trainee history's too
+LAST = 1e6
 #: what the page says between the end of an exam and its debrief
 OVER = 'exam over — debrief loading'
 
@@ -155,6 +158,9 @@ class ViewApp:
 
     def _gui(self) -> None:
         g = self.server.gui
+        # the wide panel: the debrief's lines and the history table unwrapped (at 1280 x 800
+        # the breast still has the window's middle)
+        g.configure_theme(control_width='large')
         self.g_status = g.add_markdown('**live** — waiting for the probe')
         #: the cue, a banner above everything else (the text in ``cue``)
         self.g_banner = g.add_html('')
@@ -164,8 +170,6 @@ class ViewApp:
             self.g_bar = g.add_html(gauge_html(self.thresholds, None))
             self.g_gauge = g.add_markdown(self._gauge_text(None))
             self.g_cov = g.add_markdown(self._coverage_text({k: 0.0 for k in LEVELS}))
-        with g.add_folder('Colours'):
-            self.g_legend = g.add_html(legend_html())
         with g.add_folder('Debrief', visible=False) as f:
             self.g_debrief = f
             self.g_numbers = g.add_markdown('')
@@ -173,6 +177,8 @@ class ViewApp:
                                        initial_value=1.0)
             self.g_lesions = g.add_markdown('')
             self.g_feedback = g.add_markdown('')
+        with g.add_folder('Colours', order=LAST):   # under everything: the numbers first
+            self.g_legend = g.add_html(legend_html())
         self.g_time.on_update(lambda _: self.scrub(self.g_time.value))
         # made only by a debrief shown with a trainee (haptic-anfis view BAG --trainee-id, the
         # instructor's review of a recording): the live trainee's page never has it
@@ -190,8 +196,15 @@ class ViewApp:
                 self._clear_debrief()
                 self._clear_live_marks()
                 self._say_cue('', '')
+                self._live_panel(True)
                 shown = 'blind case' if blind else (case_name or 'default case')
                 self.g_status.content = f'**exam running** — {md(shown)}; lesions hidden'
+
+    def _live_panel(self, live: bool) -> None:
+        """The panel's live-only parts (the gauge) shown or not, the legend for the exam or
+        for its debrief (lesions and marks scored)."""
+        self.g_bar.visible = self.g_gauge.visible = live
+        self.g_legend.content = legend_html(debrief=not live)
 
     def _say_cue(self, cue: str, kind: str) -> None:
         if cue != self.cue:   # every update redraws the panel
@@ -404,6 +417,7 @@ class ViewApp:
                 self.arrow.visible = False
             n = debrief.numbers()
             r = debrief.report
+            self._live_panel(False)
             self.g_numbers.content = numbers_markdown(n)
             sc = self.server.scene
             for k, les in enumerate(debrief.lesions):
@@ -431,8 +445,8 @@ class ViewApp:
                         self.g_history_md = g.add_markdown('')
                 self.g_history_md.content = history_markdown(trainee, hist)
                 self.g_history.visible = True
-            self.g_status.content = (f"**debrief** — score {r['score']:.1f} ({md(r['verdict'])}); "
-                                     'drag the replay time to replay the session')
+            self.g_status.content = (f"**debrief** — score {r['score']:.0f} ({md(r['verdict'])});"
+                                     ' drag *replay time* to replay it')
             self.scrub(debrief.duration)
 
     def scrub(self, t: float) -> None:
@@ -485,56 +499,6 @@ class ViewApp:
         from .doors import close_door
         self.server.stop()
         close_door(self.door)
-
-
-def numbers_markdown(n: dict) -> str:
-    """The debrief's headline numbers as the panel shows them (one ``key: value`` per line, the
-    values printed as the report has them)."""
-    rows = [('score', n['score']), ('verdict', n['verdict']), ('hits', n['hits']),
-            ('misses', n['misses']), ('false marks', n['false_marks']),
-            ('coverage light %', n['coverage_light_pct']),
-            ('coverage medium %', n['coverage_medium_pct']),
-            ('coverage deep %', n['coverage_deep_pct']), ('pattern', n['pattern']),
-            ('duration s', n['duration_s'])]
-    rows += effort_rows(n)
-    return '\n'.join(f'- {k}: **{md(v) if isinstance(v, str) else v}**' for k, v in rows)
-
-
-def effort_rows(n: dict) -> list[tuple[str, object]]:
-    """What predicts finding lumps (haptic_anfis.exam.effort) as (label, value) rows: time at
-    each pressure level and per area [s], the force palpating vs searching [N]; none for a
-    report without them."""
-    rows: list[tuple[str, object]] = []
-    for key, label in (('time_at_level_s', 'time at {} s'), ('area_time_s', 'time over {} s')):
-        rows += [(label.format(k.replace('_', ' ')), v) for k, v in (n.get(key) or {}).items()]
-    if n.get('force_palpating_n') is not None or n.get('force_searching_n') is not None:
-        rows.append(('force palpating / searching N',
-                     f"{n.get('force_palpating_n')} / {n.get('force_searching_n')}"
-                     + (f" ({n['palpating_vs_searching_pct']:+.0f} %)"
-                        if n.get('palpating_vs_searching_pct') is not None else '')))
-    return rows
-
-
-#: the history table's columns: (heading, the row's value)
-_HISTORY_COLUMNS = (
-    ('session', lambda r: r['session']), ('date (UTC)', lambda r: (r['started_utc'] or '')[:16]),
-    ('case', lambda r: r['case']), ('level', lambda r: r['case_level'] or ''),
-    ('deep %', lambda r: f"{r['coverage_pct']['deep']:.0f}"),
-    ('found', lambda r: f"{r['hits']}/{r['hits'] + r['misses']}"),
-    ('false marks', lambda r: r['false_marks']), ('score', lambda r: f"{r['score']:.0f}"),
-    ('verdict', lambda r: r['verdict']))
-
-
-def history_markdown(trainee: str, rows: list[dict]) -> str:
-    """The trainee's last ten sessions as a Markdown table (:func:`trainee_history` rows)."""
-    if rows and 'error' in rows[0]:
-        return f"trainee record: {md(rows[0]['error'])}"
-    if not rows:
-        return f'no earlier session of **{md(trainee)}**'
-    head = '| ' + ' | '.join(h for h, _ in _HISTORY_COLUMNS) + ' |\n|' + '---|' * len(
-        _HISTORY_COLUMNS)
-    return f'**{md(trainee)}**: {len(rows)} sessions\n\n' + head + ''.join(
-        '\n| ' + ' | '.join(md(f(r)) for _, f in _HISTORY_COLUMNS) + ' |' for r in rows[-10:])
 
 
 def coverage_fractions(grid, face_levels) -> dict:

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from ..exam.config import LEVELS
 from ..palette import LEVEL, NOT_PRESSED, OUTCOME, REGION, rgb255
-from .scene import MARK_RGB, OUTSIDE_RGB
+from .scene import LESION_RGB, MARK_RGB, OUTSIDE_RGB
 
 __all__ = ['banner_html', 'gauge_html', 'legend_html']
 
@@ -56,15 +56,23 @@ def gauge_html(thresholds, depth_m: float | None) -> str:
             f'the probe [mm]</div></div>')
 
 
-def legend_html() -> str:
+def legend_html(debrief: bool = False) -> str:
     """What the skin's colours mean: not yet palpated inside the outline, the deepest level
-    reached, outside the region, the outline, the trainee's marks."""
-    rows = [(NOT_PRESSED, 'not yet palpated (inside the outline)'),
+    reached, outside the region, the outline; live the trainee's marks, in the ``debrief`` the
+    lesions revealed and the marks scored."""
+    rows = [(NOT_PRESSED, 'not palpated' if debrief else 'not yet palpated'),
             (LEVEL['light'], 'palpated light'), (LEVEL['medium'], 'palpated medium'),
             (LEVEL['deep'], 'palpated deep'), (_hex(OUTSIDE_RGB), 'outside the region'),
-            (REGION, 'the region to examine (outline)'),
-            (_hex(MARK_RGB['live']), 'your marks')]
-    return '<div style="font-size:0.85em;margin:2px 10px">' + ''.join(
+            (REGION, 'region to examine')]
+    if debrief:
+        rows += [(_hex(LESION_RGB['hit']), 'lump found / mark on it'),
+                 (_hex(LESION_RGB['missed']), 'lump missed'),
+                 (_hex(LESION_RGB['below device']), 'lump not renderable'),
+                 (_hex(MARK_RGB['false']), 'mark on no lump')]
+    else:
+        rows.append((_hex(MARK_RGB['live']), 'your marks'))
+    return ('<div style="font-size:0.85em;margin:2px 10px;display:grid;'
+            'grid-template-columns:1fr 1fr;column-gap:8px">') + ''.join(
         f'<div><span style="display:inline-block;width:14px;height:14px;background:{c};'
         f'border:1px solid #666;vertical-align:middle;margin-right:6px"></span>{t}</div>'
         for c, t in rows) + '</div>'
