@@ -322,3 +322,31 @@ def test_a_revealed_lesion_says_how_much_it_stood_out_and_its_difficulty():
                       'contrast_depth_mm': 8.0, 'difficulty': les.difficulty})
     assert why.endswith(f'stood out {want:.0f} % at deep pressure; difficulty '
                         f"{grade['difficulty']} of 5"), why
+
+
+def test_feel_it_again_presses_the_lesion_at_each_band_then_beside_it(bag, tmp_path):
+    import yaml
+
+    from haptic_anfis.device.palpation import PalpationScript, dome_height
+    from haptic_anfis.view.build import bag_debrief
+    from haptic_anfis.view.feel_again import OVERSHOOT
+    d = bag_debrief(bag)
+    cmds = d.feel_again(tmp_path)
+    les = d.report['lesions'][0]
+    cmd = cmds[les['name']]
+    assert cmd.startswith('haptic-anfis sim --case default --view --duration 120 --params-file ')
+    params = yaml.safe_load(open(cmd.split('--params-file ')[1]))
+    script = PalpationScript.from_yaml(params['falcon_driver']['ros__parameters'][
+        'palpation_script'])
+    y, z = les['surface_mm'][1] * 1e-3, les['surface_mm'][2] * 1e-3
+    t = np.linspace(0.0, script.duration, 4000)
+    held = np.array([script.target(x) for x in t if script.is_pressing(x)])
+    over = np.hypot(held[:, 1] - y, held[:, 2] - z) < 1e-6
+    assert over.any() and (~over).any()   # over the lesion, and beside it
+    depth = dome_height(y, z, (0.045, 0.07, 0.07)) - held[over, 0]
+    th = d.session.config.thresholds
+    assert depth.max() == pytest.approx(OVERSHOOT * th[-1], abs=1e-4)   # the deep band's press
+    assert np.hypot(held[~over, 1] - y, held[~over, 2] - z).min() > les['radius_mm'] * 1e-3
+    # a blind exam's debrief names no case, so it has no such step
+    d.report['case'] = 'blind case'
+    assert d.feel_again(tmp_path) == {}

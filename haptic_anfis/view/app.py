@@ -177,6 +177,9 @@ class ViewApp:
                                        initial_value=1.0)
             self.g_lesions = g.add_markdown('')
             self.g_feedback = g.add_markdown('')
+        with g.add_folder('Feel it again', expand_by_default=False, visible=False) as f:
+            self.g_feel = f
+            self.g_feel_md = g.add_markdown('')
         with g.add_folder('Colours', order=LAST):   # under everything: the numbers first
             self.g_legend = g.add_html(legend_html())
         self.g_time.on_update(lambda _: self.scrub(self.g_time.value))
@@ -398,6 +401,7 @@ class ViewApp:
             self._path.remove()
             self._path = None
         self.g_debrief.visible = False
+        self.g_feel.visible = False
         if self.g_history is not None:
             self.g_history.visible = False
         self.debrief = None
@@ -434,6 +438,10 @@ class ViewApp:
                 for les in debrief.lesions) or '- the case has no lesion'
             self.g_feedback.content = '\n'.join(f'- {md(line)}' for line in r['feedback']) \
                 or '- pass: every lesion found, deep coverage met'
+            feel = debrief.feel_again()
+            self.g_feel_md.content = '\n'.join(
+                f'- **{md(name)}**: {md(cmd)}' for name, cmd in feel.items())
+            self.g_feel.visible = bool(feel)
             self.g_time.max = max(round(debrief.duration, 1), 0.1)
             self.g_time.value = self.g_time.max
             self.g_debrief.visible = True
@@ -493,6 +501,7 @@ class ViewApp:
                 'lesions': [(le.name, le.status) for le in self.debrief.lesions]
                 if self.debrief is not None else [],
                 'lesions_visible': bool(self._lesion_nodes),
+                'feel_again': self.g_feel_md.content if self.g_feel.visible else '',
                 'skin_frames': self.stats.skin_frames, 'clients': len(self.server.get_clients())}
 
     def close(self) -> None:
