@@ -80,5 +80,6 @@ def history_markdown(trainee: str, rows: list[dict]) -> str:
     head = '| ' + ' | '.join(h for h, _ in _HISTORY_COLUMNS) + ' |\n|' + '---|' * len(
         _HISTORY_COLUMNS)
     shown = min(len(rows), HISTORY_ROWS)
-    return f'**{md(trainee)}**: {len(rows)} sessions, the last {shown}\n\n' + head + ''.join(
-        '\n| ' + ' | '.join(md(f(r)) for _, f in _HISTORY_COLUMNS) + ' |' for r in rows[-HISTORY_ROWS:])
+    body = ''.join('\n| ' + ' | '.join(md(f(r)) for _, f in _HISTORY_COLUMNS) + ' |'
+                   for r in rows[-HISTORY_ROWS:])
+    return f'**{md(trainee)}**: {len(rows)} sessions, the last {shown}\n\n' + head + body
