@@ -1,6 +1,7 @@
 """The end of an exam on the trainee's page: "exam over — debrief loading" at once (before the
-session is scored, which takes seconds), then the debrief; a mark placed during the exam shows
-on the page as it is placed."""
+session is scored, which takes seconds), then the debrief with its "feel it again" commands
+(also on the instructor's console); a mark placed during the exam shows on the page as it is
+placed."""
 from __future__ import annotations
 
 import time
@@ -43,3 +44,10 @@ def test_stop_says_exam_over_before_scoring_then_shows_the_debrief(monkeypatch):
         assert OVER in seen['status'] and seen['cue'] == OVER and 'running' not in seen['status']
         s = node.app.state()
         assert s['banner'] == '' and s['live_marks'] == 0   # the debrief draws the marks scored
+        # "feel it again": the command on the instructor's console and in the debrief
+        end = time.monotonic() + 30.0   # said after the debrief is shown
+        while time.monotonic() < end and 'exam stopped' not in node.console.last_message:
+            time.sleep(0.05)
+        msg = node.console.last_message
+        assert 'feel lesion idc again: haptic-anfis sim --case default --view' in msg, msg
+        assert 'haptic-anfis sim --case default' in s['feel_again']

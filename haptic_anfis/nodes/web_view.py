@@ -317,7 +317,8 @@ class WebView(HapticNode):
                 trainee = self.console.trainee if self.console is not None else ''
                 stored = self._store(trainee, report) if trainee else ''
                 self.app.show_debrief(Debrief(report, self.cv.session))   # no record here
-                self._tell("exam stopped: the debrief is on the trainee's page" + stored)
+                self._tell("exam stopped: the debrief is on the trainee's page" + stored
+                           + self._feel_again(report))
                 if self.console is not None:
                     self.console.refresh(select=trainee or None)
             elif what == 'case':
@@ -337,6 +338,14 @@ class WebView(HapticNode):
         except Exception as exc:   # keep serving: say it on the page
             self.get_logger().error(f'{what}: {exc}')
             self._tell(f'{what} failed: {exc}')
+
+    def _feel_again(self, report: dict) -> str:
+        """The instructor's "feel it again" commands of the stopped exam's lesions (a blind
+        case's too: the console may name it), as a sentence ('' for none)."""
+        from ..view.feel_again import feel_commands
+        cmds = feel_commands(self.cv.name or 'default', report['lesions'],
+                             self.cv.config.thresholds)
+        return ''.join(f'; feel lesion {k} again: {v}' for k, v in cmds.items())
 
     def _store(self, trainee: str, report: dict) -> str:
         """Store the stopped exam in the trainee record (issue 31) under ``trainee``, with the

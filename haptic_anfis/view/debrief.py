@@ -8,9 +8,7 @@ steps once, keeping the first time each face reached each level.
 from __future__ import annotations
 
 import os
-import tempfile
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
@@ -163,19 +161,9 @@ class Debrief:
         (:mod:`.feel_again`) for each palpable lesion of a library case, its files written
         into ``directory`` (None: a folder of the temporary directory); none for a blind case
         (its name stays with the instructor) or a case not in the library."""
-        from ..cases import CaseError
-        from .feel_again import write_feel_again
+        from .feel_again import feel_commands
         case = self.report.get('case')
         if not case or case == 'blind case' or self.report.get('blind'):
             return {}
-        d = Path(directory) if directory is not None else \
-            Path(tempfile.gettempdir()) / 'haptic_anfis_feel_again' / str(case)
-        out = {}
-        for e in self.report['lesions']:
-            if e.get('palpable') is False:
-                continue
-            try:
-                out[e['name']] = write_feel_again(case, e, self.session.config.thresholds, d)
-            except (CaseError, OSError):   # not a library case, or nowhere to write: no step
-                return {}
-        return out
+        return feel_commands(case, self.report['lesions'], self.session.config.thresholds,
+                             directory)

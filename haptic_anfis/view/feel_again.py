@@ -12,11 +12,12 @@ trainee presses there by hand: the page draws the probe over the skin, and the d
 from __future__ import annotations
 
 import os
+import tempfile
 from pathlib import Path
 
 import yaml
 
-__all__ = ['FEEL_DURATION', 'feel_script', 'write_feel_again']
+__all__ = ['FEEL_DURATION', 'feel_commands', 'feel_script', 'write_feel_again']
 
 #: [s] how long the command's session runs
 FEEL_DURATION = 120.0
@@ -68,3 +69,22 @@ def write_feel_again(case: str, lesion: dict, thresholds, directory: str | os.Pa
         'palpation_script': str(script.resolve())}}}))
     return (f'haptic-anfis sim --case {case} --view --duration {FEEL_DURATION:g} '
             f'--params-file {params.resolve()}')
+
+
+def feel_commands(case: str, lesions: list[dict], thresholds,
+                  directory: str | os.PathLike | None = None) -> dict[str, str]:
+    """{lesion name: :func:`write_feel_again`'s command} for each palpable lesion of the report
+    entries ``lesions`` of library case ``case``, the files in ``directory`` (None: a folder of
+    the temporary directory); {} for a case not in the library or nowhere to write."""
+    from ..cases import CaseError
+    d = Path(directory) if directory is not None else \
+        Path(tempfile.gettempdir()) / 'haptic_anfis_feel_again' / str(case)
+    out = {}
+    for e in lesions:
+        if e.get('palpable') is False:
+            continue
+        try:
+            out[e['name']] = write_feel_again(case, e, thresholds, d)
+        except (CaseError, OSError):   # not a library case, or nowhere to write: no step
+            return {}
+    return out
