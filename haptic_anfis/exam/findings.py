@@ -74,7 +74,12 @@ def match(lesions, lesion_points: np.ndarray, mark_points: np.ndarray, invalid: 
              'palpable': bool(getattr(les, 'palpable', True)),
              'level': getattr(les, 'level', None),
              'level_depth_mm': (None if getattr(les, 'level_depth', None) is None
-                                else round(les.level_depth * 1e3, 2))}
+                                else round(les.level_depth * 1e3, 2)),
+             'contrast_pct': (None if getattr(les, 'contrast_pct', None) is None
+                              else round(les.contrast_pct, 1)),
+             'contrast_depth_mm': (None if getattr(les, 'contrast_depth', None) is None
+                                   else round(les.contrast_depth * 1e3, 2)),
+             'difficulty': getattr(les, 'difficulty', None)}
         if not e['palpable']:
             e['missed'] = BELOW_DEVICE
             e['reason'] = getattr(les, 'reason', None)

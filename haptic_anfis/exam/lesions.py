@@ -14,7 +14,9 @@ class Lesion:
     False when the case's FE grading says the device does not render it to a stylus (scored
     neither hit nor miss, reported as below what this device renders, with ``reason``);
     ``level``: the pressure level ('light', 'medium', 'deep') and ``level_depth`` [m] the tissue
-    depth at which it is first palpable (None: ungraded)."""
+    depth at which it is first palpable (None: ungraded); ``contrast_pct`` how much it stands
+    out [%] (its force against the breast without it) at ``contrast_depth`` [m], the deep
+    pressure's depth when graded there; ``difficulty`` 1-5 (None: not palpable or ungraded)."""
     name: str
     centre: tuple[float, float, float]
     radius: float
@@ -22,6 +24,9 @@ class Lesion:
     level: str | None = None
     level_depth: float | None = None
     reason: str | None = None
+    contrast_pct: float | None = None
+    contrast_depth: float | None = None
+    difficulty: int | None = None
 
 
 @dataclass(frozen=True)
@@ -64,8 +69,22 @@ def _fe_grades(scene_path: Path) -> dict[str, dict]:
     if case.scene_path.resolve() != scene_path.resolve():
         return {}
     return {g['lesion']: {'palpable': bool(g['palpable']), 'level': g.get('found_level'),
-                          'level_depth': g.get('found_depth_m'), 'reason': g.get('reason')}
+                          'level_depth': g.get('found_depth_m'), 'reason': g.get('reason'),
+                          'difficulty': g.get('difficulty'), **_deep_contrast(g)}
             for g in ((case.grading() or {}).get('lesions') or [])}
+
+
+def _deep_contrast(grade: dict) -> dict:
+    """``contrast_pct`` / ``contrast_depth`` [m] of a lesion's grading: at the deep pressure's
+    depth (what a trainee pressing as taught would feel), else its strongest; {} without
+    per-depth contrasts."""
+    from ..cases.grading import DEEP_DEPTH
+    rows = grade.get('contrasts') or []
+    if not rows:
+        return {}
+    row = next((r for r in rows if abs(r['depth_m'] - DEEP_DEPTH) < 1e-6),
+               max(rows, key=lambda r: r['contrast_pct']))
+    return {'contrast_pct': float(row['contrast_pct']), 'contrast_depth': float(row['depth_m'])}
 
 
 def lesion_surface_points(detector, lesions) -> np.ndarray:

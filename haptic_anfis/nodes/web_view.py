@@ -57,6 +57,9 @@ CONTACT_QUEUE = QoSProfile(depth=200, history=HistoryPolicy.KEEP_LAST,
 #: recorder (its case is the bag's label) only once every node of the loop has switched
 CASE_PHASES = (('contact_detector', 'force_server', 'visualizer', 'examiner'), ('recorder',))
 CASE_NODE_NAMES = frozenset(n for ph in CASE_PHASES for n in ph)
+#: [s] how long a closing page's last words get to reach the browsers (viser sends them from a
+#: thread of its own; a server stopped at once drops them)
+CLOSE_FLUSH = 0.3
 #: what the console says while the loop nodes load a case
 SWITCHING = 'switching to {} ...'
 #: what the trainee's page says meanwhile (no case name: a blind draw stays blind)
@@ -135,6 +138,7 @@ class WebView(HapticNode):
         self._pose = self._force = None   # newest (stamp [s], (x, y, z) [m] / [N])
         self._contact = None               # newest contact message's values
         self.malformed = 0                 # loop messages that could not be read
+        self.loop_text = ''                # the haptic loop's health ('' while it keeps up)
         self.t_start = time.monotonic()
         self.running = True   # the session collects from the start; "start" begins afresh
         self._param_clients: dict = {}
@@ -207,9 +211,10 @@ class WebView(HapticNode):
                 self._requests.append(('reported', (name, values, declared, stamp)))
 
     def _on_diagnostics(self, m) -> None:
-        """The falcon driver's report on its servo loop (ROS's diagnostics topic): the page says
-        when the loop fell behind, so the trainee and the instructor know the force came late
-        (:func:`~haptic_anfis.device.loop_health.behind_text`); other statuses are not ours."""
+        """The falcon driver's report on its servo loop (ROS's diagnostics topic): the
+        instructor's console and the log say when the loop fell behind (the force came late:
+        :func:`~haptic_anfis.device.loop_health.behind_text`); the trainee's page does not (a
+        machine's health is not the trainee's to act on). Other statuses are not ours."""
         from ..device.loop_health import behind_text
         for st in m.status:
             if st.name == ifc.LOOP_DIAGNOSTIC:
@@ -219,12 +224,17 @@ class WebView(HapticNode):
                                        v.get('cause', ''))
                 except ValueError:   # not our driver's numbers: say nothing rather than wrong
                     continue
-                self.app.show_loop_health(text)
+                if text and text != self.loop_text:
+                    self.get_logger().warning(f'haptic loop behind: {text}')
+                self.loop_text = text
+                if self.console is not None:
+                    self.console.show_loop_health(text)
 
     def _on_mark(self, m: PointStamped) -> None:
         if self._collecting():
             q = m.point
             self.cv.session.add_mark(_stamp(m), (q.x, q.y, q.z))
+            self.app.show_mark((q.x, q.y, q.z))   # on the page at once: the trainee sees it
 
     def _take(self) -> None:
         """The newest pose and force command, and every contact sample since the last frame,
@@ -300,6 +310,7 @@ class WebView(HapticNode):
                 self._tell('exam started')
             elif what == 'stop':
                 self.running = False
+                self.app.show_over()   # before the scoring: the page says so at once
                 self._running_shown(False)
                 from ..view.debrief import Debrief
                 report = self.cv.session.report()
@@ -307,7 +318,8 @@ class WebView(HapticNode):
                 trainee = self.console.trainee if self.console is not None else ''
                 stored = self._store(trainee, report) if trainee else ''
                 self.app.show_debrief(Debrief(report, self.cv.session))   # no record here
-                self._tell("exam stopped: the debrief is on the trainee's page" + stored)
+                self._tell("exam stopped: the debrief is on the trainee's page" + stored
+                           + self._feel_again(report))
                 if self.console is not None:
                     self.console.refresh(select=trainee or None)
             elif what == 'case':
@@ -327,6 +339,14 @@ class WebView(HapticNode):
         except Exception as exc:   # keep serving: say it on the page
             self.get_logger().error(f'{what}: {exc}')
             self._tell(f'{what} failed: {exc}')
+
+    def _feel_again(self, report: dict) -> str:
+        """The instructor's "feel it again" commands of the stopped exam's lesions (a blind
+        case's too: the console may name it), as a sentence ('' for none)."""
+        from ..view.feel_again import feel_commands
+        cmds = feel_commands(self.cv.name or 'default', report['lesions'],
+                             self.cv.config.thresholds)
+        return ''.join(f'; feel lesion {k} again: {v}' for k, v in cmds.items())
 
     def _store(self, trainee: str, report: dict) -> str:
         """Store the stopped exam in the trainee record under ``trainee``, with the
@@ -565,6 +585,9 @@ class WebView(HapticNode):
                                f'drawing), {st.probe_updates} probe updates')
         for s in self._inputs.values():
             s.destroy()
+        if self.app.mode == 'live':   # the session ends (exam run --view): its debrief follows
+            self.app.show_over()
+            time.sleep(CLOSE_FLUSH)
         self.app.close()
         if self.console is not None:
             self.console.close()

@@ -25,10 +25,14 @@ import numpy as np
 
 from ..errors import HapticAnfisError
 from ..exam.config import LEVELS
+from ..palette import REGION, rgb255
 from .doors import guarded_server
 from .escape import md
 from .gauge import DEVICE_MAX_FORCE, gauge
-from .scene import LESION_RGB, MARK_RGB, SkinPaint, frame_camera, probe_quaternion
+from .legend import banner_html, gauge_html, legend_html
+from .panel import history_markdown, numbers_markdown
+from .scene import (LESION_RGB, MARK_RGB, SkinPaint, frame_camera, probe_quaternion,
+                    region_outline)
 
 __all__ = ['BLIND', 'PROBE_LENGTH', 'md', 'ViewApp', 'ViewError', 'check_port', 'coverage_fractions',
            'trainee_history']
@@ -37,6 +41,10 @@ __all__ = ['BLIND', 'PROBE_LENGTH', 'md', 'ViewApp', 'ViewError', 'check_port', 
 BLIND = 'blind random case'
 PROBE_LENGTH = 0.03  # [m] drawn length of the probe cylinder
 FORCE_SCALE = 0.004  # [m/N] force arrow length
+#: the legend's place in the panel: after every folder, the trainee history's too
+LAST = 1e6
+#: what the page says between the end of an exam and its debrief
+OVER = 'exam over — debrief loading'
 
 
 class ViewError(HapticAnfisError, ValueError):
@@ -137,6 +145,7 @@ class ViewApp:
         self.probe = s.scene.add_mesh_simple('/probe', probe.vertices, probe.faces,
                                              color=(60, 110, 240), visible=False)
         self.arrow = None
+        self._live_marks: list = []   # the trainee's marks as they are placed
         self._lesion_nodes: list = []
         self._mark_nodes: list = []
         self._path = None
@@ -149,14 +158,17 @@ class ViewApp:
 
     def _gui(self) -> None:
         g = self.server.gui
+        # the wide panel: the debrief's lines and the history table unwrapped (at 1280 x 800
+        # the breast still has the window's middle)
+        g.configure_theme(control_width='large')
         self.g_status = g.add_markdown('**live** — waiting for the probe')
-        #: the haptic loop's health as the falcon driver reports it ('' while it keeps up)
-        self.g_loop = g.add_markdown('')
-        with g.add_folder('Exam'):
+        #: the cue, a banner above everything else (the text in ``cue``)
+        self.g_banner = g.add_html('')
+        self.cue = ''
+        with g.add_folder('Exam') as self.g_exam:
             self.g_clock = g.add_markdown('clock 0:00')
-            self.g_bar = g.add_progress_bar(0.0, color='gray')
+            self.g_bar = g.add_html(gauge_html(self.thresholds, None))
             self.g_gauge = g.add_markdown(self._gauge_text(None))
-            self.g_cue = g.add_markdown('')
             self.g_cov = g.add_markdown(self._coverage_text({k: 0.0 for k in LEVELS}))
         with g.add_folder('Debrief', visible=False) as f:
             self.g_debrief = f
@@ -165,6 +177,11 @@ class ViewApp:
                                        initial_value=1.0)
             self.g_lesions = g.add_markdown('')
             self.g_feedback = g.add_markdown('')
+        with g.add_folder('Feel it again', expand_by_default=False, visible=False) as f:
+            self.g_feel = f
+            self.g_feel_md = g.add_markdown('')
+        with g.add_folder('Colours', order=LAST):   # under everything: the numbers first
+            self.g_legend = g.add_html(legend_html())
         self.g_time.on_update(lambda _: self.scrub(self.g_time.value))
         # made only by a debrief shown with a trainee (haptic-anfis view BAG --trainee-id, the
         # instructor's review of a recording): the live trainee's page never has it
@@ -174,21 +191,47 @@ class ViewApp:
         """A line in the page's status (escaped: shown as the characters given)."""
         self.g_status.content = md(text)
 
-    def show_loop_health(self, text: str) -> None:
-        """A line under the status that the haptic loop fell behind (``text``:
-        :func:`~haptic_anfis.device.loop_health.behind_text`), or none (``''``)."""
-        content = f'**haptic loop behind**: {md(text)}' if text else ''
-        if content != self.g_loop.content:   # every update redraws the page for a while
-            self.g_loop.content = content
-
     def set_exam_running(self, running: bool, blind: bool = False, case_name: str = '') -> None:
-        """The live state of an exam: lesions hidden, status line."""
+        """The live state of an exam: lesions hidden, no marks yet, status line."""
         with self._lock:
             if running:
                 self.mode = 'live'
                 self._clear_debrief()
+                self._clear_live_marks()
+                self._say_cue('', '')
+                self._live_panel(True)
                 shown = 'blind case' if blind else (case_name or 'default case')
                 self.g_status.content = f'**exam running** — {md(shown)}; lesions hidden'
+
+    def _live_panel(self, live: bool) -> None:
+        """The panel's live-only parts (the gauge) shown or not, the legend for the exam or
+        for its debrief (lesions and marks scored)."""
+        self.g_bar.visible = self.g_gauge.visible = live
+        self.g_legend.content = legend_html(debrief=not live)
+
+    def _say_cue(self, cue: str, kind: str) -> None:
+        if cue != self.cue:   # every update redraws the panel
+            self.cue = cue
+            self.g_banner.content = banner_html(cue, kind)
+
+    def show_over(self) -> None:
+        """The exam has ended and its debrief is being computed: said at once, in the banner
+        and the status, the clock and the probe taken off (a page still saying "exam running"
+        with a stopped clock reads as a hung exam); live frames are ignored until the debrief
+        or the next exam."""
+        with self._lock:
+            if self.mode != 'live':
+                return
+            self.mode = 'over'
+            self.probe.visible = False
+            if self.arrow is not None:
+                self.arrow.visible = False
+            self.g_status.content = f'**{OVER}**'
+            self.g_clock.content = 'exam over'
+            self.g_bar.content = gauge_html(self.thresholds, None)
+            self.g_gauge.content = self._gauge_text(None)
+            self._say_cue(OVER, 'over')
+            self._dent(None)
 
     def _gauge_text(self, gg) -> str:
         lv = ' | '.join(f'{k} >= {t * 1e3:.0f} mm' for k, t in zip(LEVELS, self.thresholds))
@@ -208,7 +251,8 @@ class ViewApp:
         with self._lock:
             self.vertices = np.asarray(vertices, float)
             self.faces = np.asarray(faces, np.int64)
-            self.paint = SkinPaint(self.vertices, self.faces, region_faces)
+            self.paint = SkinPaint(self.vertices, self.faces, region_faces, self.thresholds)
+            self._outline(region_faces)
             self.vertex_levels = np.zeros(len(self.vertices), np.int64)
             self.displacement = None
             self._moved = np.zeros(len(self.vertices), bool)   # drawn displaced
@@ -253,13 +297,40 @@ class ViewApp:
             if changed.any():
                 self._send_skin(changed)
 
+    def _outline(self, region_faces) -> None:
+        """Draw the border of the region to examine, lifted off the skin."""
+        e = region_outline(self.faces, region_faces)
+        seg = _segments_lifted(self.vertices[e], lift=0.0008)
+        self.server.scene.add_line_segments('/region', seg, rgb255(REGION), thickness=3.0,
+                                            thickness_units='screen')
+
+    def show_mark(self, point) -> None:
+        """A mark the trainee placed at ``point`` (3,) [m] (the probe tip): drawn at once on the
+        nearest point of the skin, in the colour of the legend's "your marks" (whether it hit
+        a lesion is said only in the debrief)."""
+        p = np.asarray(point, float)
+        if p.shape != (3,) or not np.isfinite(p).all():
+            return
+        with self._lock:
+            v = self.vertices[int(np.argmin(np.sum((self.vertices - p) ** 2, axis=1)))]
+            self._live_marks.append(self.server.scene.add_icosphere(
+                f'/live_marks/{len(self._live_marks)}', radius=0.003, color=MARK_RGB['live'],
+                position=tuple(map(float, _segments_lifted(v[None, None], 0.002)[0, 0]))))
+
+    def _clear_live_marks(self) -> None:
+        for n in self._live_marks:
+            n.remove()
+        self._live_marks = []
+
     # -- live -------------------------------------------------------------------------------
 
     def show_live(self, pose, contact=None, force=None, clock_s: float | None = None) -> None:
         """One live frame: probe tip ``pose`` (3,) [m] or None; ``contact`` None or (point (3,),
         direction (3,), depth [m]) while in contact; ``force`` (3,) [N] or None; the exam clock
-        [s]. Re-sends the skin only when the dent changed."""
+        [s]. Re-sends the skin only when the dent changed; nothing once the exam is over."""
         with self._lock:
+            if self.mode != 'live':
+                return
             now = time.monotonic()
             fvec = np.zeros(3) if force is None else np.asarray(force, float)
             fn = float(np.linalg.norm(fvec)) if np.isfinite(fvec).all() else 0.0
@@ -291,11 +362,11 @@ class ViewApp:
             gg = gauge(depth, fn, self.thresholds, in_contact,
                        0.0 if self._light_since is None else now - self._light_since,
                        self.max_force)
-            self.g_bar.value = gg.percent
-            self.g_bar.color = {'none': 'gray', 'light': 'yellow', 'medium': 'orange',
-                                'deep': 'red'}[gg.level]
+            bar = gauge_html(self.thresholds, depth if in_contact else None)
+            if bar != self.g_bar.content:
+                self.g_bar.content = bar
             self.g_gauge.content = self._gauge_text(gg)
-            self.g_cue.content = f'**{gg.cue}**' if gg.cue else ''
+            self._say_cue(gg.cue, gg.kind)
             if clock_s is not None:
                 self.g_clock.content = f'clock {int(clock_s) // 60}:{int(clock_s) % 60:02d}'
             self._dent(contact if in_contact else None)
@@ -330,6 +401,7 @@ class ViewApp:
             self._path.remove()
             self._path = None
         self.g_debrief.visible = False
+        self.g_feel.visible = False
         if self.g_history is not None:
             self.g_history.visible = False
         self.debrief = None
@@ -340,6 +412,8 @@ class ViewApp:
         history (from the trainee record ``db``, None = its default file) beside it."""
         with self._lock:
             self._clear_debrief()
+            self._clear_live_marks()   # the debrief draws them scored
+            self._say_cue('', '')
             self.mode, self.debrief = 'debrief', debrief
             self.displacement, self._dent_key = None, None
             self.probe.visible = False
@@ -347,6 +421,7 @@ class ViewApp:
                 self.arrow.visible = False
             n = debrief.numbers()
             r = debrief.report
+            self._live_panel(False)
             self.g_numbers.content = numbers_markdown(n)
             sc = self.server.scene
             for k, les in enumerate(debrief.lesions):
@@ -363,6 +438,10 @@ class ViewApp:
                 for les in debrief.lesions) or '- the case has no lesion'
             self.g_feedback.content = '\n'.join(f'- {md(line)}' for line in r['feedback']) \
                 or '- pass: every lesion found, deep coverage met'
+            feel = debrief.feel_again()
+            self.g_feel_md.content = '\n'.join(
+                f'- **{md(name)}**: {md(cmd)}' for name, cmd in feel.items())
+            self.g_feel.visible = bool(feel)
             self.g_time.max = max(round(debrief.duration, 1), 0.1)
             self.g_time.value = self.g_time.max
             self.g_debrief.visible = True
@@ -374,8 +453,8 @@ class ViewApp:
                         self.g_history_md = g.add_markdown('')
                 self.g_history_md.content = history_markdown(trainee, hist)
                 self.g_history.visible = True
-            self.g_status.content = (f"**debrief** — score {r['score']:.1f} ({md(r['verdict'])}); "
-                                     'drag the replay time to replay the session')
+            self.g_status.content = (f"**debrief** — score {r['score']:.0f} ({md(r['verdict'])});"
+                                     ' drag *replay time* to replay it')
             self.scrub(debrief.duration)
 
     def scrub(self, t: float) -> None:
@@ -417,67 +496,18 @@ class ViewApp:
                 'numbers': self.debrief.numbers() if self.debrief is not None else None,
                 'numbers_text': self.g_numbers.content,
                 'coverage_text': self.g_cov.content, 'gauge_text': self.g_gauge.content,
-                'cue': self.g_cue.content, 'status': self.g_status.content,
-                'loop_text': self.g_loop.content,
+                'cue': self.cue, 'banner': self.g_banner.content,
+                'live_marks': len(self._live_marks), 'status': self.g_status.content,
                 'lesions': [(le.name, le.status) for le in self.debrief.lesions]
                 if self.debrief is not None else [],
                 'lesions_visible': bool(self._lesion_nodes),
+                'feel_again': self.g_feel_md.content if self.g_feel.visible else '',
                 'skin_frames': self.stats.skin_frames, 'clients': len(self.server.get_clients())}
 
     def close(self) -> None:
         from .doors import close_door
         self.server.stop()
         close_door(self.door)
-
-
-def numbers_markdown(n: dict) -> str:
-    """The debrief's headline numbers as the panel shows them (one ``key: value`` per line, the
-    values printed as the report has them)."""
-    rows = [('score', n['score']), ('verdict', n['verdict']), ('hits', n['hits']),
-            ('misses', n['misses']), ('false marks', n['false_marks']),
-            ('coverage light %', n['coverage_light_pct']),
-            ('coverage medium %', n['coverage_medium_pct']),
-            ('coverage deep %', n['coverage_deep_pct']), ('pattern', n['pattern']),
-            ('duration s', n['duration_s'])]
-    rows += effort_rows(n)
-    return '\n'.join(f'- {k}: **{md(v) if isinstance(v, str) else v}**' for k, v in rows)
-
-
-def effort_rows(n: dict) -> list[tuple[str, object]]:
-    """What predicts finding lumps (haptic_anfis.exam.effort) as (label, value) rows: time at
-    each pressure level and per area [s], the force palpating vs searching [N]; none for a
-    report without them."""
-    rows: list[tuple[str, object]] = []
-    for key, label in (('time_at_level_s', 'time at {} s'), ('area_time_s', 'time over {} s')):
-        rows += [(label.format(k.replace('_', ' ')), v) for k, v in (n.get(key) or {}).items()]
-    if n.get('force_palpating_n') is not None or n.get('force_searching_n') is not None:
-        rows.append(('force palpating / searching N',
-                     f"{n.get('force_palpating_n')} / {n.get('force_searching_n')}"
-                     + (f" ({n['palpating_vs_searching_pct']:+.0f} %)"
-                        if n.get('palpating_vs_searching_pct') is not None else '')))
-    return rows
-
-
-#: the history table's columns: (heading, the row's value)
-_HISTORY_COLUMNS = (
-    ('session', lambda r: r['session']), ('date (UTC)', lambda r: (r['started_utc'] or '')[:16]),
-    ('case', lambda r: r['case']), ('level', lambda r: r['case_level'] or ''),
-    ('deep %', lambda r: f"{r['coverage_pct']['deep']:.0f}"),
-    ('found', lambda r: f"{r['hits']}/{r['hits'] + r['misses']}"),
-    ('false marks', lambda r: r['false_marks']), ('score', lambda r: f"{r['score']:.0f}"),
-    ('verdict', lambda r: r['verdict']))
-
-
-def history_markdown(trainee: str, rows: list[dict]) -> str:
-    """The trainee's last ten sessions as a Markdown table (:func:`trainee_history` rows)."""
-    if rows and 'error' in rows[0]:
-        return f"trainee record: {md(rows[0]['error'])}"
-    if not rows:
-        return f'no earlier session of **{md(trainee)}**'
-    head = '| ' + ' | '.join(h for h, _ in _HISTORY_COLUMNS) + ' |\n|' + '---|' * len(
-        _HISTORY_COLUMNS)
-    return f'**{md(trainee)}**: {len(rows)} sessions\n\n' + head + ''.join(
-        '\n| ' + ' | '.join(md(f(r)) for _, f in _HISTORY_COLUMNS) + ' |' for r in rows[-10:])
 
 
 def coverage_fractions(grid, face_levels) -> dict:
@@ -487,13 +517,18 @@ def coverage_fractions(grid, face_levels) -> dict:
     return {k: float(a[face_levels > i].sum()) for i, k in enumerate(LEVELS)}
 
 
+def _segments_lifted(points: np.ndarray, lift: float) -> np.ndarray:
+    """``points`` (..., 3) [m] each moved ``lift`` [m] outward (away from the chest-wall
+    centre) so what is drawn there shows above the skin."""
+    n = np.linalg.norm(points, axis=-1, keepdims=True)
+    return points + lift * points / np.where(n > 0, n, 1.0)
+
+
 def _segments(path: np.ndarray, lift: float) -> np.ndarray:
-    """(n, 2, 3) segments of a NaN-split polyline, each point moved ``lift`` [m] outward (away
-    from the chest-wall centre) so the line is drawn above the skin."""
+    """(n, 2, 3) segments of a NaN-split polyline, lifted ``lift`` [m] above the skin."""
     if len(path) < 2:
         return np.zeros((0, 2, 3))
-    n = np.linalg.norm(path, axis=1, keepdims=True)
-    p = path + lift * path / np.where(n > 0, n, 1.0)
+    p = _segments_lifted(path, lift)
     a, b = p[:-1], p[1:]
     ok = np.isfinite(a).all(axis=1) & np.isfinite(b).all(axis=1)
     return np.stack([a[ok], b[ok]], axis=1)

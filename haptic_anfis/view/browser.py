@@ -163,8 +163,10 @@ def _capture_when_ready(url, out: Path, size, timeout: float, settle: float, app
             time.sleep(0.25)
             if time.monotonic() - t_load < settle:
                 continue
-            connected = app is None or app.n_connects > before
-            ok = connected and (ready is None or ready(page.capture(out)))
+            if app is not None and app.n_connects <= before:   # not connected yet
+                continue
+            png = page.capture(out)   # without a ``ready`` too: the file is the result
+            ok = ready is None or ready(png)
             if ok and seen:
                 return True
             if ok:

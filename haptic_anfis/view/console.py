@@ -58,6 +58,10 @@ class ConsoleApp:
             self.g_start = g.add_button('start exam', color='green')
             self.g_stop = g.add_button('stop exam', color='red', disabled=True)
             self.g_msg = g.add_markdown('')
+            #: the haptic loop's health as the falcon driver reports it ('' while it keeps up):
+            #: the instructor's to judge (a session whose loop fell behind is void), not the
+            #: trainee's to read while palpating
+            self.g_loop = g.add_markdown('')
         with g.add_folder('Class'):
             self.g_refresh = g.add_button('refresh')
             self.g_csv = g.add_button('export CSV')
@@ -99,6 +103,13 @@ class ConsoleApp:
         """A line under the exam's controls (escaped; ``last_message`` keeps it as given)."""
         self.last_message = text
         self.g_msg.content = md(text)
+
+    def show_loop_health(self, text: str) -> None:
+        """A line under the exam's messages that the haptic loop fell behind (``text``:
+        :func:`~haptic_anfis.device.loop_health.behind_text`), or none (``''``)."""
+        content = f'**haptic loop behind**: {md(text)}' if text else ''
+        if content != self.g_loop.content:   # every update redraws the page for a while
+            self.g_loop.content = content
 
     def show_case_choice(self, name: str) -> None:
         """Show ``name`` (a case or :data:`BLIND`) in the dropdown without choosing it; a name

@@ -7,10 +7,12 @@ steps once, keeping the first time each face reached each level.
 """
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
 
 import numpy as np
 
+from ..cases.grading import DEEP_DEPTH
 from ..exam.config import LEVELS
 from ..exam.coverage import CoverageGrid
 
@@ -40,14 +42,22 @@ def lesion_status(entry: dict) -> str:
 
 
 def lesion_why(entry: dict) -> str:
-    """What the debrief says of a lesion: why it was missed (or why it is not scored) and the
-    pressure level from which it can be felt, e.g. 'never palpated deep; palpable from medium
-    pressure (5 mm)'."""
+    """What the debrief says of a lesion: why it was missed (or why it is not scored), the
+    pressure level from which it can be felt, how much it stood out and its difficulty (from
+    the case's FE grading, when graded), e.g. 'never palpated deep; palpable from medium
+    pressure (5 mm); stood out 23 % at deep pressure; difficulty 3 of 5'."""
     if entry.get('palpable') is False:
         return '; '.join(v for v in (entry.get('missed'), entry.get('reason')) if v)
     parts = [entry.get('missed') or ('found' if entry.get('found') else '')]
     if entry.get('level'):
         parts.append(f"palpable from {entry['level']} pressure ({entry['level_depth_mm']:g} mm)")
+    if entry.get('contrast_pct') is not None:   # how much there was to feel, in the FE
+        at = entry.get('contrast_depth_mm')
+        where = ('at deep pressure' if at is not None and abs(at - DEEP_DEPTH * 1e3) < 1e-3
+                 else f'at {at:g} mm' if at is not None else '')
+        parts.append(f"stood out {entry['contrast_pct']:.0f} % {where}".rstrip())
+    if entry.get('difficulty') is not None:
+        parts.append(f"difficulty {entry['difficulty']} of 5")
     return '; '.join(p for p in parts if p)
 
 
@@ -145,3 +155,15 @@ class Debrief:
 
     def numbers(self) -> dict:
         return panel_numbers(self.report)
+
+    def feel_again(self, directory: str | os.PathLike | None = None) -> dict[str, str]:
+        """{lesion name: the command that presses it again with the simulated Falcon}
+        (:mod:`.feel_again`) for each palpable lesion of a library case, its files written
+        into ``directory`` (None: a folder of the temporary directory); none for a blind case
+        (its name stays with the instructor) or a case not in the library."""
+        from .feel_again import feel_commands
+        case = self.report.get('case')
+        if not case or case == 'blind case' or self.report.get('blind'):
+            return {}
+        return feel_commands(case, self.report['lesions'], self.session.config.thresholds,
+                             directory)

@@ -24,12 +24,13 @@ LIGHT_PRESS_S = 1.0
 class Gauge:
     """``level``: 'none', 'light', 'medium' or 'deep'; ``percent``: the depth as a share of the
     deep threshold x 1.5 (the bar's full scale), 0..100; ``force_n`` [N]; ``cue``: '' or the
-    prompt."""
+    prompt; ``kind``: 'good' (the press is right), 'fix' (do something else) or ''."""
     level: str
     percent: float
     depth_mm: float
     force_n: float
     cue: str
+    kind: str = ''
 
 
 def gauge(depth: float, force_n: float, thresholds, in_contact: bool, light_for: float = 0.0,
@@ -37,16 +38,20 @@ def gauge(depth: float, force_n: float, thresholds, in_contact: bool, light_for:
     """The gauge for a probe ``depth`` [m] and force magnitude ``force_n`` [N]; ``thresholds``
     (light, medium, deep) [m]; ``light_for`` [s]: how long the press has stayed in contact short
     of deep. Cues: at or beyond ``max_force`` the device clamps ("beyond the device's force"); a
-    press held ``LIGHT_PRESS_S`` short of deep is too light for deep coverage."""
+    press held ``LIGHT_PRESS_S`` short of deep is too light for deep coverage ("press harder");
+    a press at deep is said to be right (the trainee learns the feel of it, not only its
+    absence)."""
     d = max(float(depth), 0.0) if in_contact else 0.0
     k = sum(d >= t for t in thresholds)
     level = 'none' if k == 0 else LEVELS[k - 1]
     full = 1.5 * thresholds[-1]
-    cue = ''
+    cue, kind = '', ''
     if force_n >= max_force:
-        cue = f"beyond the device's force ({max_force:g} N): ease off"
+        cue, kind = f"beyond the device's force ({max_force:g} N): ease off", 'fix'
     elif in_contact and d < thresholds[-1] and light_for >= LIGHT_PRESS_S:
-        cue = (f'press harder: {d * 1e3:.1f} mm is too light for deep coverage '
-               f'(>= {thresholds[-1] * 1e3:.0f} mm)')
+        cue, kind = (f'press harder: {d * 1e3:.1f} mm is too light for deep coverage '
+                     f'(>= {thresholds[-1] * 1e3:.0f} mm)'), 'fix'
+    elif level == 'deep':
+        cue, kind = f"that's right: deep ({d * 1e3:.1f} mm)", 'good'
     return Gauge(level, round(min(100.0, 100.0 * d / full), 1), round(d * 1e3, 2),
-                 round(float(force_n), 2), cue)
+                 round(float(force_n), 2), cue, kind)

@@ -1,5 +1,7 @@
 """What the browser view draws, as plain arrays (no ROS, no viser): the skin coloured per pressure
-level and darkened by the dent, the probe's pose, the lesion and mark colours, the camera framing.
+level (:mod:`haptic_anfis.palette`, the meanings of report.png), the region to examine outlined
+and apart from the skin outside it, the dent under the probe in the continuous pressure colours;
+the probe's pose, the lesion and mark colours, the camera framing.
 
 Tissue frame, metres: chest wall at x = 0, +x out of the body along the nipple axis.
 """
@@ -9,20 +11,41 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ['DEEP_DARK', 'LESION_RGB', 'LEVEL_RGB', 'MARK_RGB', 'SKIN_RGB', 'Framing', 'SkinPaint',
-           'frame_camera', 'probe_quaternion']
+from ..palette import FINDING, LEVEL, MARK, NOT_PRESSED, SKIN, rgb255
 
-#: untouched skin (RGB 0..255)
-SKIN_RGB = (236, 196, 178)
-#: coverage colour per highest level reached: none (skin), light, medium, deep — a heat scale
-#: yellow -> orange -> red, far from the skin tone and the white page
-LEVEL_RGB = np.array([SKIN_RGB, (250, 222, 70), (245, 140, 30), (200, 25, 35)], np.uint8)
-#: the dent darkens a corner towards this colour at ``colour_depth`` of displacement
-DEEP_DARK = np.array([110, 40, 40], float)
-#: lesion markers revealed in the debrief
-LESION_RGB = {'hit': (20, 170, 60), 'missed': (150, 0, 200), 'below device': (120, 120, 120)}
-#: marks: a hit, another mark on a found lesion, a false mark
-MARK_RGB = {'hit': (20, 170, 60), 'repeat': (0, 170, 200), 'false': (20, 20, 20)}
+__all__ = ['FRONTAL', 'LESION_RGB', 'LEVEL_RGB', 'MARK_RGB', 'OUTSIDE_RGB', 'Framing', 'SkinPaint',
+           'frame_camera', 'pressure_rgb', 'probe_quaternion', 'region_outline']
+
+#: coverage colour per highest level reached (the palette's, as report.png): none (the region
+#: not yet palpated: a neutral, lighter than light), light, medium, deep
+LEVEL_RGB = np.array([rgb255(NOT_PRESSED)] + [rgb255(LEVEL[k]) for k in LEVEL], np.uint8)
+#: skin outside the region to examine: the skin tone dimmed, so what is left to palpate (the
+#: neutral inside the outline) stands apart from what need not be
+OUTSIDE_RGB = tuple(int(round(0.62 * c)) for c in rgb255(SKIN))
+#: lesion markers revealed in the debrief (the palette's findings)
+LESION_RGB = {'hit': rgb255(FINDING['found']), 'missed': rgb255(FINDING['missed']),
+              'below device': rgb255(FINDING['not palpable'])}
+#: marks: a hit, another mark on a found lesion, a false mark; live (not yet scored): 'live'
+MARK_RGB = {'hit': rgb255(MARK['hit']), 'repeat': rgb255(MARK['repeat']),
+            'false': rgb255(MARK['false']), 'not_palpable': rgb255(MARK['not_palpable']),
+            'live': rgb255(MARK['repeat'])}
+
+
+def pressure_rgb(depth: np.ndarray, thresholds) -> np.ndarray:
+    """(n, 3) float 0..255: the continuous pressure map for depths ``depth`` (n,) [m]: the
+    not-pressed neutral at 0, then linear through the palette's light, medium and deep colours
+    at the ``thresholds`` (light, medium, deep) [m], deep beyond (the legend's scale)."""
+    xs = np.concatenate([[0.0], np.asarray(thresholds, float)])
+    d = np.clip(np.asarray(depth, float), 0.0, xs[-1])
+    return np.stack([np.interp(d, xs, LEVEL_RGB[:, k].astype(float)) for k in range(3)], axis=1)
+
+
+def region_outline(faces: np.ndarray, region_faces: np.ndarray) -> np.ndarray:
+    """(e, 2) int: the vertex pairs of the region's border (edges of exactly one region face)."""
+    f = np.asarray(faces, np.int64)[np.asarray(region_faces, np.int64)]
+    e = np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), axis=1)
+    uniq, count = np.unique(e, axis=0, return_counts=True)
+    return uniq[count == 1]
 
 
 class SkinPaint:
@@ -32,17 +55,19 @@ class SkinPaint:
         vertices: (v, 3) [m]; faces: (f, 3) int.
         region_faces: (m,) indices into ``faces`` of the coverage grid's faces
             (:attr:`~haptic_anfis.exam.CoverageGrid.faces_index`), in the grid's order.
-        colour_depth: displacement [m] drawn darkest.
+        thresholds: (light, medium, deep) [m]: the dent's continuous pressure scale.
     """
 
     def __init__(self, vertices: np.ndarray, faces: np.ndarray, region_faces: np.ndarray,
-                 colour_depth: float = 0.016) -> None:
+                 thresholds=(0.002, 0.005, 0.008)) -> None:
         self.vertices = np.asarray(vertices, float)
         self.faces = np.asarray(faces, np.int64)
         self.region_faces = np.asarray(region_faces, np.int64)
-        self.colour_depth = float(colour_depth)
+        self.thresholds = tuple(float(t) for t in thresholds)
         # the corners of each region face, for the per-vertex maximum of the face levels
         self._corner_v = self.faces[self.region_faces].reshape(-1)
+        self.in_region = np.zeros(len(self.vertices), bool)
+        self.in_region[self._corner_v] = True
 
     def vertex_levels(self, face_levels: np.ndarray) -> np.ndarray:
         """(v,) int: per vertex, the highest level (0..3) of the region faces around it."""
@@ -52,17 +77,26 @@ class SkinPaint:
 
     def colours(self, vertex_levels: np.ndarray | None = None,
                 displacement: np.ndarray | None = None) -> np.ndarray:
-        """(v, 4) uint8 RGBA: the level colour (skin where none), darkened by the displacement
-        [m] (v, 3) under the probe."""
+        """(v, 4) uint8 RGBA: the level colour (the not-pressed neutral in the region, the
+        dimmed skin outside), and under the probe the continuous pressure colour of the
+        displacement [m] (v, 3), faded in over the first light threshold of it."""
         lv = np.zeros(len(self.vertices), np.int64) if vertex_levels is None else vertex_levels
         rgb = LEVEL_RGB[np.clip(lv, 0, 3)].astype(float)
+        rgb[~self.in_region] = OUTSIDE_RGB
         if displacement is not None:
-            t = np.clip(np.linalg.norm(displacement, axis=1) / self.colour_depth, 0.0, 1.0)
-            rgb = (1 - t)[:, None] * rgb + t[:, None] * DEEP_DARK
+            d = np.linalg.norm(displacement, axis=1)
+            w = np.clip(d / self.thresholds[0], 0.0, 1.0)[:, None]
+            rgb = (1 - w) * rgb + w * pressure_rgb(d, self.thresholds)
         out = np.empty((len(rgb), 4), np.uint8)
         out[:, :3] = np.round(rgb)
         out[:, 3] = 255
         return out
+
+
+#: the camera's direction from the breast: in front of the chest, a little above so the dome
+#: reads as one (tilted 10 degrees). Frontal, so the whole region to examine is in view: from
+#: the side (as before) its far edge hid behind the dome's silhouette
+FRONTAL = (1.0, 0.0, 0.18)
 
 
 @dataclass(frozen=True)
@@ -78,11 +112,11 @@ class Framing:
 
 
 def frame_camera(vertices: np.ndarray, fov: float = np.radians(40.0),
-                 direction=(1.0, -0.55, 0.45), margin: float = 1.15) -> Framing:
-    """Camera looking at the middle of the mesh from ``direction`` (tissue frame: in front of the
-    chest, a little to the side and above), far enough that the bounding sphere of ``vertices``
-    [m] fills the view with ``margin``. viser's default camera sits 5 m away from a scene of
-    14 cm, where the breast is a few pixels."""
+                 direction=FRONTAL, margin: float = 1.15) -> Framing:
+    """Camera looking at the middle of the mesh from ``direction`` (tissue frame; the default
+    :data:`FRONTAL`), far enough that the bounding sphere of ``vertices`` [m] fills the view
+    with ``margin``. viser's default camera sits 5 m away from a scene of 14 cm, where the
+    breast is a few pixels."""
     v = np.asarray(vertices, float)
     lo, hi = v.min(axis=0), v.max(axis=0)
     centre = 0.5 * (lo + hi)

@@ -45,7 +45,7 @@ def test_no_samples_give_zeros_and_none():
 
 def test_the_report_the_debrief_and_the_record_carry_them(tmp_path):
     from haptic_anfis.record.store import history, session_row, store_session
-    from haptic_anfis.view.app import numbers_markdown
+    from haptic_anfis.view.panel import numbers_markdown
     from haptic_anfis.view.debrief import panel_numbers
     c, f = _samples()
     e = effort(c, f, LEVELS, 0.008)
@@ -57,7 +57,7 @@ def test_the_report_the_debrief_and_the_record_carry_them(tmp_path):
     n = panel_numbers(report)
     assert n['time_at_level_s'] == e['time_at_level_s']
     text = numbers_markdown(n)
-    assert 'time at deep s: **4.0**' in text and 'force palpating / searching N' in text
+    assert 'deep 4 s' in text and 'force palpating / searching' in text
     row = session_row(report, source='run')
     assert row['force_palpating_n'] == e['force_palpating_n']
     db = tmp_path / 'r.sqlite'

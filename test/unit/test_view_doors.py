@@ -69,7 +69,7 @@ def test_another_origin_is_refused_and_the_pages_own_gets_the_exam_alone(page):
     with Client(port, f'http://127.0.0.1:{port}') as c:
         msgs = c.read(3.0)
     kinds = types(msgs)
-    assert 'GuiMarkdownMessage' in kinds and 'GuiProgressBarMessage' in kinds
+    assert 'GuiMarkdownMessage' in kinds and 'GuiHtmlMessage' in kinds   # the gauge, the legend
     # no control of the session: no case choice, no start / stop, no trainee id
     assert not kinds & {'GuiButtonMessage', 'GuiDropdownMessage', 'GuiTextMessage'}
     assert 'trainee' not in texts(msgs).lower()
