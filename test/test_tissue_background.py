@@ -133,6 +133,6 @@ def test_the_fe_gives_nodules_and_ribs_their_moduli_cell_by_cell():
     assert core.sum() >= 5 and np.median(mu[core]) > 0.5 * rib
     d_nod = np.min([np.linalg.norm(mid - n.centre, axis=1) - n.radius
                     for n in (*s.background.nodules, *s.tumours)], axis=0)
-    free = (d_rib > 2.0) & (d_nod > 0.01)
-    assert free.sum() > 50 and np.all(mu[free] == pytest.approx(fat))
+    free = (d_rib > 2.0) & (d_nod > 0.01) & (np.hypot(mid[:, 1], mid[:, 2]) < 0.03)
+    assert free.sum() > 20 and np.all(mu[free] == pytest.approx(fat))
     np.testing.assert_allclose(bulk / mu, s.material.bulk_ratio())

@@ -16,6 +16,7 @@ import numpy as np
 from ..tissue.dataset import ForceDataset, load_dataset
 from ..anfis.timing import percentiles_us, time_calls
 from .library import Case
+from .background import summary_fields
 
 CONTRAST_DEPTH = 0.008  # [m]
 CONTRAST_TOLERANCE = 0.25  # relative
@@ -112,9 +113,11 @@ def case_summary(case: Case, timing: bool = True, contrast: bool = True) -> dict
         'parameters': None, 'rmse_n': None, 'rmse_pct_range': None, 'eval_p50_us': None,
         'contrast': None, 'level': case.level, 'cv_rmse_n': None, 'cv_pct_range': None,
         'fe_points': _store_progress(case)}
+    row.update(summary_fields(scene, None))
     ds = None
     if case.dataset_path.is_file():
         ds = load_dataset(case.dataset_path)
+        row.update(summary_fields(scene, (ds.provenance.get('grading') or {}).get('background')))
         row['dataset_rows'] = len(ds)
         row['dataset_points'] = int(len(np.unique(ds.point)))
         row['fe_probe_cells'] = ds.provenance.get('mesh', {}).get('probe_cells')
@@ -166,7 +169,8 @@ def format_table(rows: list[dict[str, Any]]) -> str:
     """The human-readable listing."""
     head = (f'{"case":<24} {"lvl":>3} {"lesions":<30} {"breast mm":<10} {"E kPa":>5} {"rows":>5} '
             f'{"structure Fx/Fy/Fz":<24} {"rules":>5} {"params":>6} '
-            f'{"test RMSE N (% range) Fx, Fy, Fz":<42} {"CV % range":<16} {"p50 µs":>6}')
+            f'{"test RMSE N (% range) Fx, Fy, Fz":<42} {"CV % range":<16} {"p50 µs":>6} '
+            f'{"background":<28} {"ribs":>4}')
     lines = [head, '-' * len(head)]
     for r in rows:
         les = ', '.join(_lesion_text(l) for l in r['lesions']) or 'none'
@@ -182,13 +186,16 @@ def format_table(rows: list[dict[str, Any]]) -> str:
         lines.append(f'{r["name"]:<24} {lvl:>3} {les:<30} {size:<10} {r["glandular_kpa"]:>5g} '
                      f'{r["dataset_rows"] or "-":>5} {st:<24} {r["rules"] or "-":>5} '
                      f'{r["parameters"] or "-":>6} {err:<42} {cv:<16} '
-                     f'{"-" if r["eval_p50_us"] is None else format(r["eval_p50_us"], ".2f"):>6}')
+                     f'{"-" if r["eval_p50_us"] is None else format(r["eval_p50_us"], ".2f"):>6} '
+                     f'{r.get("background", "smooth"):<28} {r.get("ribs", 0):>4}')
     lines.append('lesions: kind (m = malignant, b = benign, u = unstated), diameter @ centre depth '
                  'under the skin [mm]; graded cases add the FE contrast at the deep level vs the '
                  'lesion-free twin (% / N) and the difficulty dN (np = not palpable); lvl: case '
                  'level 1-5; CV % range: grouped-CV RMSE Fx/Fy/Fz (or FE points solved so far); '
                  '(scene changed): the scene file was edited since the case was generated '
-                 '(not ready until `cases generate NAME`)')
+                 '(not ready until `cases generate NAME`); background: smooth, or nodular with '
+                 'its nodule count and (once graded) their bump range over the force trend at the '
+                 'deep level; ribs: ribs under the breast')
     return '\n'.join(lines)
 
 

@@ -18,7 +18,8 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from .mesh import Domain, HexMesh, build_mesh, tumour_fractions
+from .background import rib_fraction
+from .mesh import Domain, HexMesh, build_mesh, cell_samples, tumour_fractions
 from .scene import Scene, surface_height
 from ..errors import HapticAnfisError
 
@@ -57,13 +58,18 @@ class LoadPathResult:
     mesh: HexMesh | None = None
 
 
-def default_linear_solver() -> tuple[str, Callable]:
+#: Newton's residual tolerance [N] (felupe: norm of the free degrees of freedom's residual)
+NEWTON_TOL = 1e-6
+
+
+def default_linear_solver(newton_tol: float = NEWTON_TOL) -> tuple[str, Callable]:
     """A fresh :class:`~.linsolve.ReusedFactorSolver` (one per load path: it keeps the last
-    factorisation and preconditions the next Newton systems with it) and its name
+    factorisation and preconditions the next Newton systems with it; its Krylov solves are as
+    accurate as a Newton loop of ``newton_tol`` [N] needs) and its name
     ('reused-factor/pypardiso' with the optional pypardiso, else 'reused-factor/scipy-superlu-sym')."""
     from .linsolve import ReusedFactorSolver
 
-    solver = ReusedFactorSolver()
+    solver = ReusedFactorSolver(newton_tol=newton_tol)
     return f'reused-factor/{solver.backend}', solver
 
 
@@ -79,7 +85,7 @@ def load_steps(depths: Sequence[float], max_step: float) -> list[float]:
 
 def solve_load_path(mesh: HexMesh, shear: np.ndarray | float, bulk: np.ndarray | float,
                     direction: Sequence[float], depths: Sequence[float], max_step: float = 2e-3,
-                    max_cutbacks: int = 6, tol: float = 1e-6, maxiter: int = 16,
+                    max_cutbacks: int = 6, tol: float = NEWTON_TOL, maxiter: int = 16,
                     solver: Callable | None = None, bonded: bool = True) -> LoadPathResult:
     """Indent ``mesh``'s footprint along the unit vector ``direction`` to each of ``depths`` [m].
 
@@ -98,7 +104,7 @@ def solve_load_path(mesh: HexMesh, shear: np.ndarray | float, bulk: np.ndarray |
 
     t0 = time.perf_counter()
     if solver is None:
-        solver = default_linear_solver()[1]  # a new one per path: its factor belongs to this mesh
+        solver = default_linear_solver(tol)[1]  # a new one per path: its factor belongs to this mesh
     direction = np.asarray(direction, dtype=float)
     direction = direction / np.linalg.norm(direction)
     fmesh = fem.Mesh(mesh.points, mesh.cells, 'hexahedron')
@@ -213,14 +219,22 @@ def scene_domain(scene: Scene) -> Domain:
 
 
 def scene_moduli(scene: Scene, mesh: HexMesh) -> tuple[np.ndarray, np.ndarray]:
-    """Per-cell shear and bulk moduli (M,) [Pa]: tissue, stiffened by each tumour's volume
-    fraction in the cell (Voigt mixing; the same Poisson's ratio everywhere)."""
+    """Per-cell shear and bulk moduli (M,) [Pa]: tissue, changed by each region's volume fraction
+    in the cell (lesions, background nodules and ribs; Voigt mixing, the same Poisson's ratio
+    everywhere; regions never overlap, so the fractions add up to at most 1)."""
     mat = scene.material
     mu = np.full(len(mesh.cells), mat.shear)
-    if scene.tumours:
-        frac = tumour_fractions(mesh, [(t.centre, t.radius) for t in scene.tumours])
-        for k, t in enumerate(scene.tumours):
-            mu += frac[:, k] * (t.youngs / (2.0 * (1.0 + mat.poisson)) - mat.shear)
+    bg = scene.background
+    spheres = list(scene.tumours) + (list(bg.nodules) if bg is not None else [])
+    if not spheres and (bg is None or not bg.ribs):
+        return mu, mu * mat.bulk_ratio()
+    samples = cell_samples(mesh.points, mesh.cells)
+    frac = tumour_fractions(mesh, [(t.centre, t.radius) for t in spheres], samples)
+    parts = [(frac[:, k], t.youngs) for k, t in enumerate(spheres)]
+    if bg is not None:
+        parts += [(rib_fraction(samples, rib, scene.radii), rib.youngs) for rib in bg.ribs]
+    for f, youngs in parts:
+        mu += f * (youngs / (2.0 * (1.0 + mat.poisson)) - mat.shear)
     return mu, mu * mat.bulk_ratio()
 
 
