@@ -89,6 +89,24 @@ class Background:
         """'nodular' with nodules, else 'smooth'."""
         return 'nodular' if self.nodules else 'smooth'
 
+    def region_at(self, y: float, z: float, margin: float = 0.0) -> tuple[str, str] | None:
+        """(name, what it is) of the normal region under the skin point over (y, z) [m]: the
+        nearest nodule whose (y, z) lies within its radius + ``margin`` [m] ('a normal glandular
+        lobule' / 'a fat lobule'), else a rib whose line lies within its half width + ``margin``
+        ('a rib'); None when the point is over neither. (What a false mark there was on.)"""
+        best, bd = None, np.inf
+        for n in self.nodules:
+            d = float(np.hypot(y - n.centre[1], z - n.centre[2]))
+            if d <= n.radius + margin and d < bd:
+                best, bd = n, d
+        if best is not None:
+            what = 'a normal glandular lobule' if best.kind == 'glandular' else 'a fat lobule'
+            return best.name, what
+        for rib in self.ribs:
+            if abs(z - rib.z) <= rib.radius + margin:
+                return rib.name, 'a rib'
+        return None
+
 
 def _keys(d: Any, section: str, where: str) -> dict[str, Any]:
     if not isinstance(d, dict):

@@ -109,6 +109,12 @@ class Scene:
     #: chest wall
     background: Background | None = None
 
+    @property
+    def graded(self) -> bool:
+        """A graded-library scene (solved point by point into the FE store, built with gates):
+        one with lesion rings, or with a normal background."""
+        return bool(self.ring_diameters) or self.background is not None
+
     def to_dict(self) -> dict[str, Any]:
         """Plain-dict form in SI units (for provenance sidecars)."""
         return asdict(self)
