@@ -1,11 +1,10 @@
-"""FE point solve at the validated density: three solvers on the same points.
+"""FE point solve at the validated density, before / after the solver work of issue 29.
 
 "before" is felupe's Newton loop with SciPy's default ``spsolve`` (SuperLU, COLAMD: a fresh
-factorisation every iteration, the solver the library used to ship with); "reused factor" is
-:class:`haptic_anfis.tissue.linsolve.ReusedFactorSolver` with a fixed Krylov tolerance (the
-default until the nodular cases); "now" is the default: the same kept factor with inexact-Newton
-Krylov tolerances (``newton_tol``). Same mesh,
-same Newton tolerance; the largest force difference against the first solver run is printed. Also the per-point
+factorisation every iteration, the solver the library used to ship with); "after" is the
+default now, :class:`haptic_anfis.tissue.linsolve.ReusedFactorSolver` (symmetric-mode SuperLU
+kept and used to precondition GMRES for the next Newton systems; pypardiso factorises when
+importable). Same points, same forces (the largest difference is printed). Also the per-point
 CPU time of every point already in the committed store (``fe_store/``), i.e. measured inside the
 real sweeps, and the projected wall time of one case on 2 cores.
 
@@ -30,7 +29,7 @@ import numpy as np  # noqa: E402
 
 from _page import write_page, write_readme_block  # noqa: E402
 from haptic_anfis.cases import library  # noqa: E402
-from haptic_anfis.tissue.fe import default_linear_solver, solve_scene_point  # noqa: E402
+from haptic_anfis.tissue.fe import solve_scene_point  # noqa: E402
 from haptic_anfis.tissue.geometry import loading_points  # noqa: E402
 from haptic_anfis.tissue.linsolve import ReusedFactorSolver, backend_name  # noqa: E402
 
@@ -88,9 +87,8 @@ def main() -> None:
                     help='loading points to time (default 2; 0: only the committed store\'s '
                          'figures, written into the README, the page left as it is)')
     ap.add_argument('--no-before', action='store_true', help='skip the slow "before" solver')
-    ap.add_argument('--case', default=CASE, help=f'the case whose points are timed (default {CASE})')
     args = ap.parse_args()
-    case = library().get(args.case)
+    case = library().get(CASE)
     scene = case.scene
     pts = loading_points(scene)
     t = scene.tumours[0]
@@ -102,22 +100,21 @@ def main() -> None:
     print(f'case {CASE}, {scene.mesh.probe_cells} cells across the probe, linear backend '
           f'{backend_name()}, load {load0:.1f}')
     head = (f'| point (y, z) mm | solver | CPU s | wall s | Newton it. | factorisations | '
-            f'Fx @16 mm N | max |dF| vs first row N |')
+            f'Fx @16 mm N | max |dF| vs before N |')
     print(head)
     for i in chosen:
         p = pts[i]
-        first = None
+        before = None
         variants = ([] if args.no_before else [('before: spsolve (COLAMD) each iteration',
                                                 _scipy_default)])
-        variants += [(f'reused factor ({backend_name()}), fixed Krylov tol 1e-6',
-                      ReusedFactorSolver()),
-                     (f'now: reused factor ({backend_name()}), inexact-Newton Krylov tol',
-                      default_linear_solver()[1])]
-        for name, s in variants:
+        variants.append((f'after: reused factor ({backend_name()})', None))
+        for name, solver in variants:
+            s = ReusedFactorSolver() if solver is None else solver
             res, cpu, wall = _run(scene, p, s)
-            if first is None:
-                first = res.forces
-            diff = '-' if res.forces is first else f'{np.abs(res.forces - first).max():.2e}'
+            if before is None and solver is not None:
+                before = res.forces
+            diff = ('-' if before is None or solver is not None
+                    else f'{np.abs(res.forces - before).max():.2e}')
             row = (f'| ({p[1] * 1e3:.0f}, {p[2] * 1e3:.0f}) | {name} | {cpu:.1f} | {wall:.1f} | '
                    f'{res.newton_iterations} | {res.info.get("factorisations", res.newton_iterations)} | '
                    f'{res.forces[-1, 0]:.3f} | {diff} |')
@@ -151,7 +148,7 @@ def main() -> None:
             return
     table = (f'Load average at the start: {load0:.1f} (2 cores, shared with 7 other developers).\n\n'
              + '\n'.join([head, '|---|---|---|---|---|---|---|---|', *rows]) + sweep)
-    write_page('fe_point', 'FE point solve: three solvers on the same points', table,
+    write_page('fe_point', 'FE point solve: before / after (issue 29)', table,
                command='.venv/bin/python bench/bench_fe_point.py')
 
 

@@ -58,18 +58,13 @@ class LoadPathResult:
     mesh: HexMesh | None = None
 
 
-#: Newton's residual tolerance [N] (felupe: norm of the free degrees of freedom's residual)
-NEWTON_TOL = 1e-6
-
-
-def default_linear_solver(newton_tol: float = NEWTON_TOL) -> tuple[str, Callable]:
+def default_linear_solver() -> tuple[str, Callable]:
     """A fresh :class:`~.linsolve.ReusedFactorSolver` (one per load path: it keeps the last
-    factorisation and preconditions the next Newton systems with it; its Krylov solves are as
-    accurate as a Newton loop of ``newton_tol`` [N] needs) and its name
+    factorisation and preconditions the next Newton systems with it) and its name
     ('reused-factor/pypardiso' with the optional pypardiso, else 'reused-factor/scipy-superlu-sym')."""
     from .linsolve import ReusedFactorSolver
 
-    solver = ReusedFactorSolver(newton_tol=newton_tol)
+    solver = ReusedFactorSolver()
     return f'reused-factor/{solver.backend}', solver
 
 
@@ -85,7 +80,7 @@ def load_steps(depths: Sequence[float], max_step: float) -> list[float]:
 
 def solve_load_path(mesh: HexMesh, shear: np.ndarray | float, bulk: np.ndarray | float,
                     direction: Sequence[float], depths: Sequence[float], max_step: float = 2e-3,
-                    max_cutbacks: int = 6, tol: float = NEWTON_TOL, maxiter: int = 16,
+                    max_cutbacks: int = 6, tol: float = 1e-6, maxiter: int = 16,
                     solver: Callable | None = None, bonded: bool = True) -> LoadPathResult:
     """Indent ``mesh``'s footprint along the unit vector ``direction`` to each of ``depths`` [m].
 
@@ -104,7 +99,7 @@ def solve_load_path(mesh: HexMesh, shear: np.ndarray | float, bulk: np.ndarray |
 
     t0 = time.perf_counter()
     if solver is None:
-        solver = default_linear_solver(tol)[1]  # a new one per path: its factor belongs to this mesh
+        solver = default_linear_solver()[1]  # a new one per path: its factor belongs to this mesh
     direction = np.asarray(direction, dtype=float)
     direction = direction / np.linalg.norm(direction)
     fmesh = fem.Mesh(mesh.points, mesh.cells, 'hexahedron')

@@ -74,28 +74,13 @@ class ReusedFactorSolver:
             relative error of x) GMRES must reach with the kept factor M.
         maxiter: Krylov iterations allowed before refactorising.
         backend: 'pypardiso' or 'scipy-superlu-sym' (default: :func:`backend_name`).
-        newton_tol: the Newton loop's residual tolerance [N]; when given, each Krylov solve is
-            only as accurate as the Newton iteration needs (an inexact Newton method,
-            Eisenstat & Walker 1996, SIAM J. Sci. Comput. 17:16, their choice 2 with
-            gamma = 0.9, alpha = 2): the tolerance follows the square of the last residual
-            reduction, capped at :attr:`eta_max` (also for a new load step, whose right-hand
-            side is larger than the last one), and is never tighter than needed to bring the
-            error's share of the next residual below half of ``newton_tol``, nor than ``rtol``.
-            Early iterations then take a few Krylov iterations instead of many; the converged
-            answer still meets Newton's own test, so accuracy is unchanged.
 
     Counters ``factorisations`` and ``krylov_solves`` say what happened (for benchmarks).
     """
 
-    #: loosest Krylov tolerance of the inexact Newton mode (relative error of the increment)
-    eta_max = 1e-2
-
-    def __init__(self, rtol: float = 1e-6, maxiter: int = 25, backend: str | None = None,
-                 newton_tol: float | None = None) -> None:
+    def __init__(self, rtol: float = 1e-6, maxiter: int = 25, backend: str | None = None
+                 ) -> None:
         self.rtol, self.maxiter = float(rtol), int(maxiter)
-        self.newton_tol = newton_tol
-        self._last_norm: float | None = None
-        self._last_eta = self.eta_max
         self.backend = backend or backend_name()
         self.factor: Any = None
         self.shape: tuple[int, int] | None = None
@@ -107,28 +92,10 @@ class ReusedFactorSolver:
         """Forget the kept factorisation (e.g. after a cut-back restored an older state)."""
         self.factor, self.shape = None, None
 
-    def _tolerance(self, bnorm: float) -> float:
-        """The Krylov tolerance for a right-hand side of norm ``bnorm`` (see ``newton_tol``)."""
-        if self.newton_tol is None:
-            return self.rtol
-        last, self._last_norm = self._last_norm, bnorm
-        if last is None or not last > 0 or bnorm >= last:
-            eta = self.eta_max  # a new load step (or a residual that grew)
-        else:
-            eta = 0.9 * (bnorm / last) ** 2
-            if 0.9 * self._last_eta ** 2 > 0.1:  # the safeguard against over-solving too soon
-                eta = max(eta, 0.9 * self._last_eta ** 2)
-            eta = min(eta, self.eta_max)
-        if bnorm > 0:
-            eta = max(eta, 0.5 * self.newton_tol / bnorm)
-        self._last_eta = eta = max(min(eta, self.eta_max), self.rtol)
-        return eta
-
     def __call__(self, A, b) -> np.ndarray:
         from scipy.sparse.linalg import LinearOperator, gmres
 
         b = np.asarray(b, dtype=float).ravel()
-        rtol = self._tolerance(float(np.linalg.norm(b)))
         if self.factor is not None and self.shape == A.shape:
             count = [0]
 
@@ -142,7 +109,7 @@ class ReusedFactorSolver:
             solve = self.factor.solve
             MA = LinearOperator(A.shape, matvec=lambda v: solve(A @ v), dtype=float)
             with np.errstate(all='ignore'):
-                x, info = gmres(MA, solve(b), rtol=rtol, atol=0.0, restart=self.maxiter,
+                x, info = gmres(MA, solve(b), rtol=self.rtol, atol=0.0, restart=self.maxiter,
                                 maxiter=1, callback=cb, callback_type='pr_norm')
             if info == 0 and np.all(np.isfinite(x)):
                 self.krylov_solves += 1
