@@ -136,3 +136,10 @@ def test_the_fe_gives_nodules_and_ribs_their_moduli_cell_by_cell():
     free = (d_rib > 2.0) & (d_nod > 0.01) & (np.hypot(mid[:, 1], mid[:, 2]) < 0.03)
     assert free.sum() > 20 and np.all(mu[free] == pytest.approx(fat))
     np.testing.assert_allclose(bulk / mu, s.material.bulk_ratio())
+
+
+def test_a_lesion_free_nodular_scene_is_graded_and_swept_per_point():
+    free = load_scene(SCENE_DIR / 'nod_s_fatty_free.yaml')
+    assert not free.ring_diameters and free.background is not None and free.graded
+    assert load_scene(SCENE_DIR / 'lib_free_s_fatty.yaml').graded  # rings, no background
+    assert not load_scene(SCENE_DIR / 'normal.yaml').background
