@@ -1,4 +1,4 @@
-"""A scene's normal background: seeded nodules, ribs, their validation and their moduli in the FE."""
+"""A scene's normal background: seeded nodules, ribs, their validation, their moduli in the FE."""
 import copy
 
 import numpy as np
@@ -54,7 +54,8 @@ def test_drawn_nodules_keep_apart_from_each_other_the_lesion_and_the_ribs(raw):
     t = s.tumours[0]
     assert (np.linalg.norm(c - t.centre, axis=1) - r - t.radius).min() >= 1e-3 - 1e-12
     for rib in s.background.ribs:
-        assert (np.hypot(c[:, 0] - rib.axis_x, c[:, 2] - rib.z) - r - rib.radius).min() >= 1e-3 - 1e-12
+        gap = np.hypot(c[:, 0] - rib.axis_x, c[:, 2] - rib.z) - r - rib.radius
+        assert gap.min() >= 1e-3 - 1e-12
 
 
 def test_a_scene_without_background_keeps_its_hash():
@@ -128,7 +129,8 @@ def test_the_fe_gives_nodules_and_ribs_their_moduli_cell_by_cell():
     # cells whose centre lies deep in a rib's section are about bone-stiff; cells far from every
     # region keep the fat's modulus
     ribs = s.background.ribs
-    d_rib = np.min([np.hypot(mid[:, 0] - r.axis_x, mid[:, 2] - r.z) / r.radius for r in ribs], axis=0)
+    d_rib = np.min([np.hypot(mid[:, 0] - r.axis_x, mid[:, 2] - r.z) / r.radius for r in ribs],
+                   axis=0)
     core = (d_rib < 0.6) & (mid[:, 0] < ribs[0].top - 2e-3)
     assert core.sum() >= 5 and np.median(mu[core]) > 0.5 * rib
     d_nod = np.min([np.linalg.norm(mid - n.centre, axis=1) - n.radius

@@ -27,7 +27,8 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from .scenebase import KPA, MM, SceneError, check_number, check_vec, sphere_inside, surface_height
+from .scenebase import (KPA, MM, SceneError, check_number, check_vec, region_centre,
+                        sphere_inside, surface_height)
 
 __all__ = ['Background', 'Nodule', 'Rib', 'parse_background', 'rib_fraction', 'NODULE_RADIUS_MM']
 
@@ -120,7 +121,8 @@ def _keys(d: Any, section: str, where: str) -> dict[str, Any]:
 def _range(d: dict[str, Any], key: str, where: str) -> tuple[float, float]:
     lo, hi = check_vec(d, key, where, 2)
     if not 0 < lo <= hi:
-        raise SceneError(f'{where}.{key}: expected [low, high] with 0 < low <= high, got {d[key]!r}')
+        raise SceneError(f'{where}.{key}: expected [low, high] with 0 < low <= high, '
+                         f'got {d[key]!r}')
     return lo * MM, hi * MM
 
 
@@ -176,15 +178,18 @@ def _parse_ribs(d: Any, radii: tuple[float, float, float], loaded_radius: float
     rd = _keys(d, 'ribs', 'background.ribs')
     zs = rd.get('z_mm')
     if (not isinstance(zs, list) or not zs or not all(
-            isinstance(v, (int, float)) and not isinstance(v, bool) and np.isfinite(v) for v in zs)):
-        raise SceneError(f'background.ribs.z_mm: expected a list of rib positions (z, mm), got {zs!r}')
+            isinstance(v, (int, float)) and not isinstance(v, bool) and np.isfinite(v)
+            for v in zs)):
+        raise SceneError(f'background.ribs.z_mm: expected a list of rib positions (z, mm), '
+                         f'got {zs!r}')
     r = 0.5 * check_number(rd, 'width_mm', 'background.ribs') * MM
     top = check_number(rd, 'height_mm', 'background.ribs') * MM
     cover = check_number(rd, 'cover_mm', 'background.ribs') * MM
     e = check_number(rd, 'youngs_kPa', 'background.ribs') * KPA
     if top > 2 * r:
-        raise SceneError(f'background.ribs.height_mm: {top / MM:g} mm is more than the rib\'s width '
-                         f'{2 * r / MM:g} mm (a bar of circular section rises at most its diameter)')
+        raise SceneError(f'background.ribs.height_mm: {top / MM:g} mm is more than the rib\'s '
+                         f'width {2 * r / MM:g} mm (a bar of circular section rises at most its '
+                         'diameter)')
     out: list[Rib] = []
     for i, z in enumerate(sorted(float(v) * MM for v in zs)):
         rib = Rib(name=f'rib{i}', z=z, radius=r, top=top, youngs=e, cover=cover)
@@ -223,15 +228,7 @@ def _explicit(nd: dict[str, Any], radii, e: float, youngs: float) -> tuple[Nodul
     for i, t in enumerate(items):
         where = f'background.nodules[{i}]'
         t = _keys(t, 'item', where)
-        if ('centre_mm' in t) == ('position_mm' in t or 'depth_mm' in t):
-            raise SceneError(f'{where}: give either centre_mm [x, y, z] or position_mm [y, z] '
-                             'with depth_mm (centre depth under the skin)')
-        if 'centre_mm' in t:
-            c = tuple(v * MM for v in check_vec(t, 'centre_mm', where, 3))
-        else:
-            y, z = (v * MM for v in check_vec(t, 'position_mm', where, 2))
-            c = (float(surface_height(np.array(y), np.array(z), radii))
-                 - check_number(t, 'depth_mm', where) * MM, y, z)
+        c, _ = region_centre(t, where, radii)
         r = check_number(t, 'radius_mm', where) * MM
         out.append(Nodule(name=str(t.get('name', f'nodule{i}')), centre=c, radius=r, youngs=e,
                           kind=_kind(e, youngs)))
@@ -263,8 +260,8 @@ def _drawn(nd: dict[str, Any], radii, e: float, youngs: float, seed: int, lesion
         r = rng.uniform(rlo, rhi)
         rho, th = extent * np.sqrt(rng.uniform()), rng.uniform(0.0, 2.0 * np.pi)
         y, z = rho * np.cos(th), rho * np.sin(th)
-        c = np.array([float(surface_height(np.array(y), np.array(z), radii)) - rng.uniform(dlo, dhi),
-                      y, z])
+        top = float(surface_height(np.array(y), np.array(z), radii))
+        c = np.array([top - rng.uniform(dlo, dhi), y, z])
         if not sphere_inside(tuple(c), r + gap, radii):
             continue
         if any(np.linalg.norm(c - oc) < r + orad + gap for oc, orad in regions):
@@ -275,8 +272,8 @@ def _drawn(nd: dict[str, Any], radii, e: float, youngs: float, seed: int, lesion
         out.append(Nodule(name=f'nodule{len(out)}', centre=tuple(float(v) for v in c), radius=r,
                           youngs=e, kind=_kind(e, youngs)))
     if len(out) < count:
-        raise SceneError(f'{where}: placed only {len(out)} of count {count} nodules apart from each '
-                         f'other, the lesions and the ribs; lower count or widen extent_mm / '
+        raise SceneError(f'{where}: placed only {len(out)} of count {count} nodules apart from '
+                         f'each other, the lesions and the ribs; lower count or widen extent_mm / '
                          f'depth_mm')
     return tuple(out)
 

@@ -22,7 +22,7 @@ import yaml
 from ..resources import config_dir
 from .background import Background, parse_background
 from .scenebase import (KPA, MM, SceneError, check_number as _num, check_vec as _vec,
-                        sphere_inside, surface_height)
+                        region_centre, sphere_inside, surface_height)
 
 SCENE_DIR = config_dir('scenes')  # source tree or installed share dir (resources)
 DEFAULT_SCENE = SCENE_DIR / 'default.yaml'
@@ -315,17 +315,7 @@ def _parse_lesions(items: Any, radii: tuple[float, float, float], scene: str) ->
     for i, t in enumerate(items):
         where = f'{scene}: tumours[{i}]'
         t = _check_keys(t, 'tumour', where)
-        if ('centre_mm' in t) == ('position_mm' in t or 'depth_mm' in t):
-            raise SceneError(f'{where}: give either centre_mm [x, y, z] or position_mm [y, z] with '
-                             'depth_mm (centre depth under the skin)')
-        if 'centre_mm' in t:
-            c = tuple(v * MM for v in _vec(t, 'centre_mm', where, 3))
-            given = f'centre {t["centre_mm"]} mm'
-        else:
-            y, z = (v * MM for v in _vec(t, 'position_mm', where, 2))
-            depth = _num(t, 'depth_mm', where) * MM
-            c = (float(surface_height(np.array(y), np.array(z), radii)) - depth, y, z)
-            given = f'position {t["position_mm"]} mm, depth {t["depth_mm"]} mm'
+        c, given = region_centre(t, where, radii)
         r = _num(t, 'radius_mm', where) * MM
         lo, hi = LESION_RADIUS_MM
         if not lo <= r / MM <= hi:

@@ -43,6 +43,23 @@ def check_vec(d: dict[str, Any], key: str, where: str, n: int) -> tuple[float, .
     return tuple(float(c) for c in v)
 
 
+def region_centre(t: dict[str, Any], where: str, radii: tuple[float, float, float]
+                  ) -> tuple[tuple[float, float, float], str]:
+    """A region's centre [m] from ``centre_mm`` (x, y, z), or from ``position_mm`` (y, z) over the
+    chest wall plus ``depth_mm`` of the centre under the skin (along -x); and the given values as
+    text for messages."""
+    if ('centre_mm' in t) == ('position_mm' in t or 'depth_mm' in t):
+        raise SceneError(f'{where}: give either centre_mm [x, y, z] or position_mm [y, z] with '
+                         'depth_mm (centre depth under the skin)')
+    if 'centre_mm' in t:
+        c = tuple(v * MM for v in check_vec(t, 'centre_mm', where, 3))
+        return (c[0], c[1], c[2]), f'centre {t["centre_mm"]} mm'
+    y, z = (v * MM for v in check_vec(t, 'position_mm', where, 2))
+    depth = check_number(t, 'depth_mm', where) * MM
+    c = (float(surface_height(np.array(y), np.array(z), radii)) - depth, y, z)
+    return c, f'position {t["position_mm"]} mm, depth {t["depth_mm"]} mm'
+
+
 def surface_height(y: np.ndarray, z: np.ndarray, radii: tuple[float, float, float]) -> np.ndarray:
     """Height x [m] of the semi-ellipsoid above the chest wall at (y, z) [m]; 0 outside."""
     rx, ry, rz = radii
