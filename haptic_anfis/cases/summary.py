@@ -144,7 +144,7 @@ def case_summary(case: Case, timing: bool = True, contrast: bool = True) -> dict
 
 def _store_progress(case: Case) -> dict[str, int] | None:
     """{'solved', 'total', 'failed'} FE points of a graded-library case in the committed store
-    (None for a case whose scene has no lesion rings, i.e. not swept per point)."""
+    (None for a case whose scene is not graded, i.e. not swept per point: ``Scene.graded``)."""
     if not case.scene.graded:
         return None
     from .sweeps import case_stores, store_status
