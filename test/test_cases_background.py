@@ -80,3 +80,53 @@ def test_cases_list_fields_name_the_background_and_the_ribs(scene):
     assert f['background'] == 'nodular 30 (+0.5..+4.2 %)' and f['ribs'] == 4
     smooth = load_scene(SCENE_DIR / 'lib_s_fatty_two.yaml')
     assert summary_fields(smooth, None)['background'] == 'smooth'
+
+
+#: a tiny nodular case: coarse mesh, 3 depths, 9 base points, one lesion with a ring of 4, two
+#: explicit glandular nodules and one rib under the breast (+ 1 twin point)
+TINY_NODULAR = {
+    'name': 'tinynodular', 'description': 'test case: one lesion among two nodules over a rib',
+    'breast': {'radii_mm': [45, 70, 70]},
+    'material': {'youngs_kPa': 19, 'poisson': 0.499},
+    'tumours': [{'name': 'idc', 'kind': 'malignant', 'position_mm': [12, 6], 'depth_mm': 9,
+                 'radius_mm': 6, 'youngs_kPa': 93}],
+    'background': {
+        'nodules': {'youngs_kPa': 33, 'source': 'test',
+                    'items': [{'position_mm': [-20, 0], 'depth_mm': 8, 'radius_mm': 4},
+                              {'position_mm': [0, -20], 'depth_mm': 8, 'radius_mm': 4}]},
+        'ribs': {'z_mm': [20], 'width_mm': 12, 'height_mm': 9, 'cover_mm': 5,
+                 'youngs_kPa': 2000, 'source': 'test'}},
+    'probe': {'diameter_mm': 16},
+    'loading': {'spacing_mm': 20, 'palpable_radius_mm': 30, 'ring_diameters': [1.0],
+                'ring_points': 4, 'depths_mm': [2, 5, 8], 'max_step_mm': 4},
+    'mesh': {'probe_cells': 4, 'coarse_probe_cells': 2, 'edge_offset': 0.2, 'edge_refine': 0},
+}
+
+
+def test_a_nodular_case_is_swept_graded_against_its_background_and_listed(tmp_path, monkeypatch):
+    from test_cases import _library  # the same throw-away library of scene files
+
+    from haptic_anfis.cases import build as build_mod
+    from haptic_anfis.cases.build import build_case
+    from haptic_anfis.cases.summary import case_summary
+    from haptic_anfis.cases.sweeps import sweep_case_store
+
+    lib = _library(tmp_path, {'tinynodular': TINY_NODULAR})
+    case = lib.get('tinynodular')
+    st = sweep_case_store(case, root=tmp_path / 'store', coarse=True, workers=1, progress=False)
+    assert st.complete
+    monkeypatch.setattr(build_mod, 'RANGE_GATE_PCT', 1e9)   # the tiny model is not the point here
+    monkeypatch.setattr(build_mod, 'CONTRAST_GATE', 1e9)
+    monkeypatch.setattr('haptic_anfis.cases.background.FEATURE_GATE', 1e9)
+    res = build_case(case, store_root=tmp_path / 'store', coarse=True,
+                     train_params={'structure': (2, 2, 2), 'epochs': 8, 'search_folds': 1,
+                                   'seed': 0}, folds=3, seeds=(0,))
+    bg = case.grading()['background']
+    assert bg['background'] == 'nodular' and len(bg['nodules']) == 2 and len(bg['ribs']) == 1
+    (les,) = bg['lesions']
+    assert les['lesion'] == 'idc' and res.level == bg['level'] == les['difficulty']
+    assert les['stands_out'] == (les['margin_pct'] >= bg['threshold_pct'])
+    row = case_summary(case, timing=False, contrast=False)
+    lo, hi = bg['nodule_bump_pct']
+    assert row['background'] == f'nodular 2 ({lo:+.1f}..{hi:+.1f} %)' and row['ribs'] == 1
+    assert row['fe_points']['total'] == 16  # the full-density store: swept per point too

@@ -6,7 +6,8 @@ pressing level. From the case's FE points (no extra solves):
 
 - **Force map** at the grading depth (:data:`~.grading.DEEP_DEPTH`): |F| at every loading point.
 - **Trend**: the smooth part of that map, a least-squares polynomial of degree
-  :data:`TREND_DEGREE` in (y, z) over the loading points, refitted once without the points whose
+  :data:`TREND_DEGREE` in (y, z) over the loading points (lower for a map of few points:
+  :func:`trend_degree`), refitted once without the points whose
   residual exceeds :data:`TREND_CLIP` robust standard deviations (the dome's thickness changes
   slowly across the breast; the bumps are what is left).
 - **Bump** of a point: its force over the trend, in % (and in N). The bump of a region (a
@@ -32,7 +33,8 @@ import numpy as np
 from ..tissue.scenebase import surface_height
 from .grading import DEEP_DEPTH, PALPABLE_PCT, difficulty
 
-__all__ = ['TREND_DEGREE', 'TREND_CLIP', 'force_map', 'trend_fit', 'background_grades',
+__all__ = ['TREND_DEGREE', 'TREND_CLIP', 'force_map', 'trend_degree', 'trend_fit',
+           'background_grades',
            'background_gate_failures', 'summary_fields']
 
 #: grouped-CV RMSE (vector norm) as a fraction of each graded feature's bump (as for lesions)
@@ -63,9 +65,20 @@ def _basis(yz: np.ndarray, scale: float, degree: int) -> np.ndarray:
                             for j in range(degree + 1 - i)])
 
 
+def trend_degree(points: int, degree: int = TREND_DEGREE) -> int:
+    """The trend's polynomial degree for a map of ``points`` loading points: at most ``degree``,
+    with at least four points per coefficient (a trend with as many terms as points would
+    follow the bumps it is meant to separate)."""
+    while degree > 0 and (degree + 1) * (degree + 2) // 2 * 4 > points:
+        degree -= 1
+    return degree
+
+
 def trend_fit(yz: np.ndarray, f: np.ndarray, degree: int = TREND_DEGREE,
               clip: float = TREND_CLIP) -> np.ndarray:
-    """(P,) smooth trend [N] of the force map at its points (see the module docstring)."""
+    """(P,) smooth trend [N] of the force map at its points (see the module docstring;
+    the degree is :func:`trend_degree` of the number of points)."""
+    degree = trend_degree(len(f), degree)
     scale = float(np.abs(yz).max()) or 1.0
     A = _basis(yz, scale, degree)
     keep = np.ones(len(f), dtype=bool)
@@ -105,7 +118,7 @@ def background_grades(scene, records: Sequence[dict[str, Any]], depth: float = D
     bg = scene.background
     out: dict[str, Any] = {'depth_m': depth, 'threshold_pct': threshold_pct,
                            'background': bg.kind if bg is not None else 'smooth',
-                           'trend': {'degree': TREND_DEGREE, 'clip_sigma': TREND_CLIP},
+                           'trend': {'degree': trend_degree(len(f)), 'clip_sigma': TREND_CLIP},
                            'nodules': [], 'ribs': []}
     for n in (bg.nodules if bg is not None else ()):
         k = _region_bump(yz, bump, n.centre[1:], n.radius)
