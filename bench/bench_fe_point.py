@@ -49,6 +49,38 @@ def _scipy_default(A, b):
     return spsolve(A, b)
 
 
+def _store_times(pattern: str) -> tuple[list[float], list[float]]:
+    """(CPU s, wall s) of every point in the committed store directories matching ``pattern``."""
+    cpu, wall = [], []
+    for f in glob.glob(str(ROOT / 'fe_store' / pattern / '*.npz')):
+        with np.load(f) as z:
+            m = json.loads(str(z['meta']))
+        cpu.append(m.get('cpu_time_s', np.nan))
+        wall.append(m.get('wall_time_s', np.nan))
+    return cpu, wall
+
+
+def _nodular_line() -> str:
+    """The nodular series (``nod_*``): points per case and the time per case projected from the
+    CPU per point measured in its sweeps so far, with 1 and 2 workers."""
+    cpu, wall = _store_times('nod_*')
+    cases = [c for c in library().cases() if c.name.startswith('nod_')]
+    if not cpu or not cases:
+        return ''
+    from haptic_anfis.cases.sweeps import twin_points
+
+    n = [len(loading_points(c.scene)) + len(twin_points(c.scene)) for c in cases]
+    med = float(np.nanmedian(cpu))
+    return (f'\n\nNodular series (`fe_store/nod_*`, {len(cases)} cases, {min(n)}-{max(n)} points '
+            f'each with the lesion-free twin points, {sum(n)} in all): {len(cpu)} points solved so '
+            f'far by one niced worker, CPU per point median {med:.1f} s (p90 '
+            f'{np.nanpercentile(cpu, 90):.1f} s), wall median {np.nanmedian(wall):.0f} s under the '
+            f'shared load. Projected per case ({int(np.median(n))} points) on idle cores: 1 worker '
+            f'{np.median(n) * med / 60:.0f} min, 2 workers {np.median(n) * med / 120:.0f} min; the '
+            f'series: {sum(n) * med / 3600:.1f} CPU-hours. These points were solved with the '
+            f'solver of their sweep\'s start (the records name it).')
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split('\n')[0])
     ap.add_argument('--points', type=int, default=2,
@@ -89,14 +121,9 @@ def main() -> None:
             print(row, flush=True)
             rows.append(row)
     # the real sweeps: every point in the committed store
-    cpu, wall, n_pts = [], [], 0
-    for f in glob.glob(str(ROOT / 'fe_store' / '*' / '*.npz')):
-        with np.load(f) as z:
-            m = json.loads(str(z['meta']))
-        cpu.append(m.get('cpu_time_s', np.nan))
-        wall.append(m.get('wall_time_s', np.nan))
-        n_pts += 1
-    sweep = ''
+    cpu, wall = _store_times('lib_*')
+    n_pts = len(cpu)
+    sweep = _nodular_line()
     if n_pts:
         graded = [c for c in library().cases() if c.name.startswith('lib_')]
         n_graded = sum(len(loading_points(c.scene)) for c in graded)
@@ -110,7 +137,7 @@ def main() -> None:
                  f'{2 * per_case:.1f} min, 2 single-threaded workers on 2 cores {per_case:.1f} min '
                  f'(two such workers doubled throughput: tissue/sweep.py, limit_threads); '
                  f'the whole graded library ({len(graded)} cases, {n_graded} points): '
-                 f'{n_graded * med / 3600:.1f} CPU-hours.')
+                 f'{n_graded * med / 3600:.1f} CPU-hours.') + sweep
         print(sweep.strip())
         write_readme_block('fe-case-time', (
             f'One graded case at full density ({len(pts)} loading points of {CASE}, five '

@@ -120,6 +120,7 @@ def build_case(case: Case, *, store_root: str | os.PathLike | None = None, coars
                                        save_displacements)
     from ..tissue.sweep import records_to_dataset
     from .generate import _package_relative, write_case_mesh
+    from .background import background_gate_failures, background_grades
     from .grading import case_level, grading_record, lesion_grades
     from .sweeps import case_stores, stored_records
 
@@ -132,11 +133,15 @@ def build_case(case: Case, *, store_root: str | os.PathLike | None = None, coars
     ds.Y = np.vectorize(lambda v: float(str(np.float32(v))))(ds.Y)
     res.grades = lesion_grades(scene, recs, twins)
     res.level = case_level(res.grades)
+    bg = background_grades(scene, recs) if scene.background is not None else None
+    if bg is not None:  # in a nodular breast the level is how hard a lesion is told apart
+        res.level = bg['level']
     ds.provenance.update(
         case=case.name, generator='haptic_anfis.cases.build.build_case',
         store={'dir': stores.main.dir.name, 'probe_cells': stores.probe_cells,
                'twin_points': len(twins)},
-        grading=grading_record(res.grades),
+        grading={**grading_record(res.grades), 'level': res.level,
+                 **({'background': bg} if bg is not None else {})},
         cpu_time_s=float(sum(r.get('cpu_time_s', 0.0) for r in recs)))
     p = dict(train_params or {})
     test_fraction, seed = p.pop('test_fraction', 0.2), p.pop('seed', 0)
@@ -151,6 +156,8 @@ def build_case(case: Case, *, store_root: str | os.PathLike | None = None, coars
     res.cv_rmse_n = [float(v) for v in cv]
     res.cv_pct_range = [float(100.0 * v / s) for v, s in zip(cv, span)]
     res.failures = gate_failures(cv, span, res.grades)
+    if bg is not None:
+        res.failures += background_gate_failures(cv, bg)
     cv_meta = {'folds': folds, 'seeds': list(seeds), 'rmse_n': res.cv_rmse_n,
                'pct_range': res.cv_pct_range, 'gates': {'range_pct': RANGE_GATE_PCT,
                                                         'contrast_fraction': CONTRAST_GATE}}

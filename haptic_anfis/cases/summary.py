@@ -17,6 +17,7 @@ from ..tissue.dataset import ForceDataset, load_dataset
 from ..anfis.timing import percentiles_us, time_calls
 from .force_mapping import case_force_mapping
 from .library import Case
+from .background import summary_fields
 
 CONTRAST_DEPTH = 0.008  # [m]
 CONTRAST_TOLERANCE = 0.25  # relative
@@ -120,11 +121,13 @@ def case_summary(case: Case, timing: bool = True, contrast: bool = True,
         'parameters': None, 'rmse_n': None, 'rmse_pct_range': None, 'eval_p50_us': None,
         'contrast': None, 'level': case.level_at(threshold_pct), 'cv_rmse_n': None, 'cv_pct_range': None,
         'fe_points': _store_progress(case)}
+    row.update(summary_fields(scene, None))
     ds = None
     row['force_mapping'] = None
     if case.dataset_path.is_file():
         ds = load_dataset(case.dataset_path)
         row['force_mapping'] = case_force_mapping(case).as_dict()
+        row.update(summary_fields(scene, (ds.provenance.get('grading') or {}).get('background')))
         row['dataset_rows'] = len(ds)
         row['dataset_points'] = int(len(np.unique(ds.point)))
         row['fe_probe_cells'] = ds.provenance.get('mesh', {}).get('probe_cells')
@@ -151,8 +154,8 @@ def case_summary(case: Case, timing: bool = True, contrast: bool = True,
 
 def _store_progress(case: Case) -> dict[str, int] | None:
     """{'solved', 'total', 'failed'} FE points of a graded-library case in the committed store
-    (None for a case whose scene has no lesion rings, i.e. not swept per point)."""
-    if not case.scene.ring_diameters:
+    (None for a case whose scene is not graded, i.e. not swept per point: ``Scene.graded``)."""
+    if not case.scene.graded:
         return None
     from .sweeps import case_stores, store_status
 
@@ -184,7 +187,7 @@ def format_table(rows: list[dict[str, Any]]) -> str:
     head = (f'{"case":<24} {"lvl":>3} {"lesions":<30} {"breast mm":<10} {"E kPa":>5} {"rows":>5} '
             f'{"structure Fx/Fy/Fz":<24} {"rules":>5} {"params":>6} '
             f'{"test RMSE N (% range) Fx, Fy, Fz":<42} {"CV % range":<16} {"p50 µs":>6} '
-            f'{"force":>6}')
+            f'{"force":>6} {"background":<28} {"ribs":>4}')
     lines = [head, '-' * len(head)]
     for r in rows:
         les = ', '.join(_lesion_text(l) for l in r['lesions']) or 'none'
@@ -201,7 +204,8 @@ def format_table(rows: list[dict[str, Any]]) -> str:
                      f'{r["dataset_rows"] or "-":>5} {st:<24} {r["rules"] or "-":>5} '
                      f'{r["parameters"] or "-":>6} {err:<42} {cv:<16} '
                      f'{"-" if r["eval_p50_us"] is None else format(r["eval_p50_us"], ".2f"):>6} '
-                     f'{_scale_text(r.get("force_mapping")):>6}')
+                     f'{_scale_text(r.get("force_mapping")):>6} '
+                     f'{r.get("background", "smooth"):<28} {r.get("ribs", 0):>4}')
     lines.append('lesions: kind (m = malignant, b = benign, u = unstated), diameter @ centre depth '
                  'under the skin [mm]; graded cases add the FE contrast vs the lesion-free twin '
                  '(% / N) at the shallowest depth a stylus can feel it, the difficulty dN and '
@@ -211,7 +215,9 @@ def format_table(rows: list[dict[str, Any]]) -> str:
                  '(scene changed): the scene file was edited since the case was generated '
                  '(not ready until `cases generate NAME`); force: the tissue -> device force '
                  'scale a session of the case renders (its largest FE force at the deepest '
-                 'trained depth at 85 % of the clamp; --json: force_mapping)')
+                 'trained depth at 85 % of the clamp; --json: force_mapping); background: smooth, '
+                 'or nodular with its nodule count and (once graded) their bump range over the '
+                 'force trend at the deep level; ribs: ribs under the breast')
     return '\n'.join(lines)
 
 

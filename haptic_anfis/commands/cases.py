@@ -243,7 +243,7 @@ def _sweep(args: argparse.Namespace) -> int:
     if args.workers < 1:
         raise ValueError(f'--workers must be >= 1, got {args.workers}')
     lib = _open_library(args)
-    names = args.names or [n for n in lib.names() if lib.get(n).scene.ring_diameters]
+    names = args.names or [n for n in lib.names() if lib.get(n).scene.graded]
     cases = [lib.get(n) for n in names]
     for c in cases:
         _ = c.scene
@@ -283,7 +283,7 @@ def _generate(args: argparse.Namespace) -> int:
     cases = [lib.get(n) for n in names]  # unknown names fail before any work
     for c in cases:
         _ = c.scene  # and invalid scenes
-        if args.train_only and not c.scene.ring_diameters and not c.dataset_path.is_file():
+        if args.train_only and not c.scene.graded and not c.dataset_path.is_file():
             from ..cases import CaseError   # --train-only promises no FE: no hours-long sweep
             raise CaseError(f'case {c.name!r}: no dataset {str(c.dataset_path)!r} to train on '
                             '(--train-only runs no FE; run without it to sweep the FE first)')
@@ -298,7 +298,7 @@ def _generate(args: argparse.Namespace) -> int:
         refused = 0
         for k, case in enumerate(cases, 1):
             print(f'[case {k}/{len(cases)}] {case.name}: {case.description}', flush=True)
-            if case.scene.ring_diameters:  # a graded-library case: per-point store, gates
+            if case.scene.graded:  # a graded-library case: per-point store, gates
                 refused += not _generate_graded(case, args, executor, params)
                 continue
             res = generate_case(case, coarse=args.coarse, workers=args.workers, executor=executor,

@@ -31,7 +31,7 @@ BELOW_DEVICE = 'below what this device renders'
 
 
 def match(lesions, lesion_points: np.ndarray, mark_points: np.ndarray, invalid: list,
-          margin: float, palpated_deep: list[bool]) -> dict:
+          margin: float, palpated_deep: list[bool], background=None) -> dict:
     """Findings: each valid mark within lesion radius + ``margin`` of a lesion's surface point is
     a hit (on the nearest such lesion; more marks on a found lesion are 'repeat' marks, not false);
     other marks are false; each lesion not hit is a miss, 'missed although palpated deep' when
@@ -39,7 +39,9 @@ def match(lesions, lesion_points: np.ndarray, mark_points: np.ndarray, invalid: 
     does not render to a stylus (``palpable`` False) is neither hit nor miss: it is reported
     'below what this device renders' with the grading's reason, and a mark on it is neither a
     hit nor a false mark. Each lesion says at which pressure level it is first palpable
-    (``level``, ``level_depth_mm``; None when ungraded)."""
+    (``level``, ``level_depth_mm``; None when ungraded). With the case's ``background`` (its
+    nodules and ribs), a false mark over a normal region says which ('no lesion here: a rib
+    (rib2)') and names it in ``normal``; ``false_marks_normal`` counts them."""
     found = [None] * len(lesions)
     marks = []
     for i, (p, bad) in enumerate(zip(mark_points, invalid)):
@@ -54,7 +56,12 @@ def match(lesions, lesion_points: np.ndarray, mark_points: np.ndarray, invalid: 
             d = float(np.linalg.norm(p - lesion_points[k]))
             if d <= les.radius + margin and d < bd:
                 best, bd = k, d
-        if best is None:
+        region = (background.region_at(float(p[1]), float(p[2]), margin)
+                  if best is None and background is not None else None)
+        if region is not None:
+            entry.update(result='false', reason=f'no lesion here: {region[1]} ({region[0]})',
+                         normal=region[0])
+        elif best is None:
             entry.update(result='false', reason='no lesion within radius + margin')
         elif not getattr(lesions[best], 'palpable', True):
             entry.update(result='not_palpable', lesion=lesions[best].name,
@@ -91,4 +98,5 @@ def match(lesions, lesion_points: np.ndarray, mark_points: np.ndarray, invalid: 
     n_palpable = sum(bool(getattr(les, 'palpable', True)) for les in lesions)
     return {'hits': hits, 'misses': n_palpable - hits, 'palpable_lesions': n_palpable,
             'false_marks': sum(m['result'] == 'false' for m in marks),
+            'false_marks_normal': sum('normal' in m for m in marks),
             'marks': marks, 'lesions': les_out}

@@ -4,6 +4,7 @@ from __future__ import annotations
 import os
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -32,11 +33,14 @@ class Lesion:
 @dataclass(frozen=True)
 class ExamSubject:
     """What the examiner needs to know of the case: its lesions, the palpable radius [m] and the
-    probe radius [m] from the scene, and the scene file (provenance)."""
+    probe radius [m] from the scene, and the scene file (provenance); ``background``: the
+    scene's normal background (:class:`haptic_anfis.tissue.background.Background`: a false mark
+    on a nodule or a rib says which), None for a smooth breast."""
     lesions: tuple[Lesion, ...]
     palpable_radius: float
     probe_radius: float
     source: str
+    background: Any = None
 
 
 def subject_from_scene(path: str | os.PathLike | None = None) -> ExamSubject:
@@ -52,7 +56,8 @@ def subject_from_scene(path: str | os.PathLike | None = None) -> ExamSubject:
     les = tuple(Lesion(t.name, tuple(float(c) for c in t.centre), float(t.radius),
                        **graded.get(t.name, {}))
                 for t in sc.tumours)
-    return ExamSubject(les, float(sc.palpable_radius), float(sc.probe_radius), str(p))
+    return ExamSubject(les, float(sc.palpable_radius), float(sc.probe_radius), str(p),
+                       sc.background)
 
 
 def _fe_grades(scene_path: Path) -> dict[str, dict]:

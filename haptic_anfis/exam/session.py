@@ -159,7 +159,8 @@ class ExamSession:
                 for les, lp in zip(lesions, lpts)]
         mk = np.array([m[1:] for m in self.marks], float).reshape(-1, 3)
         mpts, invalid = project_marks(self.surface.detector, mk, cfg.mark_tolerance)
-        fin = match(lesions, lpts, mpts, invalid, cfg.hit_margin, deep)
+        fin = match(lesions, lpts, mpts, invalid, cfg.hit_margin, deep,
+                    getattr(self.subject, 'background', None))
         if not lesions:
             notes.append('the case has no lesion: every mark is a false mark')
         for m in fin['marks']:
@@ -181,6 +182,7 @@ class ExamSession:
             'max_depth_mm': round(depth_max * 1e3, 2),
             'max_force_n': round(float(fn.max()), 3) if len(fn) else 0.0,
             'hits': fin['hits'], 'misses': fin['misses'], 'false_marks': fin['false_marks'],
+            'false_marks_normal': fin['false_marks_normal'],
             'score': round(score, 2), 'score_parts': parts, 'verdict': verdict,
             'feedback': reasons, 'pattern': pat['pattern'], 'pattern_detail': pat,
             'marks': fin['marks'], 'lesions': fin['lesions'],

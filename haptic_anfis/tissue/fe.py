@@ -18,7 +18,8 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from .mesh import Domain, HexMesh, build_mesh, tumour_fractions
+from .background import rib_fraction
+from .mesh import Domain, HexMesh, build_mesh, cell_samples, tumour_fractions
 from .scene import Scene, surface_height
 from ..errors import HapticAnfisError
 
@@ -213,14 +214,22 @@ def scene_domain(scene: Scene) -> Domain:
 
 
 def scene_moduli(scene: Scene, mesh: HexMesh) -> tuple[np.ndarray, np.ndarray]:
-    """Per-cell shear and bulk moduli (M,) [Pa]: tissue, stiffened by each tumour's volume
-    fraction in the cell (Voigt mixing; the same Poisson's ratio everywhere)."""
+    """Per-cell shear and bulk moduli (M,) [Pa]: tissue, changed by each region's volume fraction
+    in the cell (lesions, background nodules and ribs; Voigt mixing, the same Poisson's ratio
+    everywhere; regions never overlap, so the fractions add up to at most 1)."""
     mat = scene.material
     mu = np.full(len(mesh.cells), mat.shear)
-    if scene.tumours:
-        frac = tumour_fractions(mesh, [(t.centre, t.radius) for t in scene.tumours])
-        for k, t in enumerate(scene.tumours):
-            mu += frac[:, k] * (t.youngs / (2.0 * (1.0 + mat.poisson)) - mat.shear)
+    bg = scene.background
+    spheres = list(scene.tumours) + (list(bg.nodules) if bg is not None else [])
+    if not spheres and (bg is None or not bg.ribs):
+        return mu, mu * mat.bulk_ratio()
+    samples = cell_samples(mesh.points, mesh.cells)
+    frac = tumour_fractions(mesh, [(t.centre, t.radius) for t in spheres], samples)
+    parts = [(frac[:, k], t.youngs) for k, t in enumerate(spheres)]
+    if bg is not None:
+        parts += [(rib_fraction(samples, rib, scene.radii), rib.youngs) for rib in bg.ribs]
+    for f, youngs in parts:
+        mu += f * (youngs / (2.0 * (1.0 + mat.poisson)) - mat.shear)
     return mu, mu * mat.bulk_ratio()
 
 

@@ -184,24 +184,34 @@ def layer_fractions(thickness: float, first: float, growth: float, refine: int =
     return f / f[-1]
 
 
-def _tumour_fraction(points: np.ndarray, cells: np.ndarray,
-                     spheres: Sequence[tuple[np.ndarray, float]]) -> np.ndarray:
-    """(M, len(spheres)) volume fraction of each hexahedron inside each sphere (27-point rule)."""
-    out = np.zeros((len(cells), len(spheres)))
-    if not spheres:
-        return out
+def cell_samples(points: np.ndarray, cells: np.ndarray) -> np.ndarray:
+    """(M, 27, 3) sample points [m] of each hexahedron (a 3 x 3 x 3 rule at +-2/3 and 0 of the
+    reference cube): what the volume fractions of inclusions are counted on."""
     xi = np.array([-2.0, 0.0, 2.0]) / 3.0
     r, s, t = (a.ravel() for a in np.meshgrid(xi, xi, xi, indexing='ij'))
     sign = np.array([[-1, -1, -1], [1, -1, -1], [1, 1, -1], [-1, 1, -1],
                      [-1, -1, 1], [1, -1, 1], [1, 1, 1], [-1, 1, 1]], dtype=float)
     N = 0.125 * ((1 + np.outer(r, sign[:, 0])) * (1 + np.outer(s, sign[:, 1]))
                  * (1 + np.outer(t, sign[:, 2])))  # (27, 8) trilinear shape functions
+    return np.einsum('qn,mnd->mqd', N, points[cells])
+
+
+def _tumour_fraction(points: np.ndarray, cells: np.ndarray,
+                     spheres: Sequence[tuple[np.ndarray, float]],
+                     samples: np.ndarray | None = None) -> np.ndarray:
+    """(M, len(spheres)) volume fraction of each hexahedron inside each sphere (27-point rule;
+    ``samples`` from :func:`cell_samples` when the caller has them already)."""
+    out = np.zeros((len(cells), len(spheres)))
+    if not spheres:
+        return out
     X = points[cells]  # (M, 8, 3)
+    if samples is None:
+        samples = cell_samples(points, cells)
+    mid, size = X.mean(1), np.ptp(X, axis=1).max(1)
     for k, (c, rad) in enumerate(spheres):
-        near = np.linalg.norm(X.mean(1) - c, axis=1) < rad + np.ptp(X, axis=1).max(1)
+        near = np.linalg.norm(mid - c, axis=1) < rad + size
         if near.any():
-            samples = np.einsum('qn,mnd->mqd', N, X[near])
-            out[near, k] = (np.linalg.norm(samples - c, axis=2) <= rad).mean(1)
+            out[near, k] = (np.linalg.norm(samples[near] - c, axis=2) <= rad).mean(1)
     return out
 
 
@@ -276,7 +286,8 @@ def _round_footprint(y: np.ndarray, z: np.ndarray, centre: tuple[float, float], 
     return centre[0] + dy * scale, centre[1] + dz * scale
 
 
-def tumour_fractions(mesh: HexMesh, spheres: Sequence[tuple[Sequence[float], float]]) -> np.ndarray:
+def tumour_fractions(mesh: HexMesh, spheres: Sequence[tuple[Sequence[float], float]],
+                     samples: np.ndarray | None = None) -> np.ndarray:
     """(M, T) volume fraction of each cell inside each sphere (centre (3,) [m], radius [m])."""
     return _tumour_fraction(mesh.points, mesh.cells,
-                            [(np.asarray(c, dtype=float), float(r)) for c, r in spheres])
+                            [(np.asarray(c, dtype=float), float(r)) for c, r in spheres], samples)

@@ -19,18 +19,13 @@ from typing import Any
 import numpy as np
 import yaml
 
-from ..errors import HapticAnfisError
 from ..resources import config_dir
-
-MM = 1e-3
-KPA = 1e3
+from .background import Background, parse_background
+from .scenebase import (KPA, MM, SceneError, check_number as _num, check_vec as _vec,
+                        region_centre, sphere_inside, surface_height)
 
 SCENE_DIR = config_dir('scenes')  # source tree or installed share dir (resources)
 DEFAULT_SCENE = SCENE_DIR / 'default.yaml'
-
-
-class SceneError(HapticAnfisError, ValueError):
-    """A scene file is missing, malformed or physically inconsistent."""
 
 
 @dataclass(frozen=True)
@@ -110,6 +105,15 @@ class Scene:
     #: the case whose per-point FE store this scene reads (its FE problem is the same: see
     #: :meth:`fe_sha256`); '' = its own (haptic_anfis.cases.sweeps.case_stores)
     fe_store: str = ''
+    #: the normal background (nodules, ribs: :mod:`.background`); None = a smooth dome on a flat
+    #: chest wall
+    background: Background | None = None
+
+    @property
+    def graded(self) -> bool:
+        """A graded-library scene (solved point by point into the FE store, built with gates):
+        one with lesion rings, or with a normal background."""
+        return bool(self.ring_diameters) or self.background is not None
 
     def to_dict(self) -> dict[str, Any]:
         """Plain-dict form in SI units (for provenance sidecars)."""
@@ -127,7 +131,8 @@ class Scene:
             d.pop(key)
         for t in d['tumours']:
             t.pop('kind')
-        for key in ('refine_spacing', 'refine_margin', 'ring_diameters', 'ring_points'):
+        for key in ('refine_spacing', 'refine_margin', 'ring_diameters', 'ring_points',
+                    'background'):
             if not d[key]:
                 d.pop(key)
         return hashlib.sha256(json.dumps(d, sort_keys=True).encode()).hexdigest()
@@ -142,12 +147,17 @@ class Scene:
         for t in d['tumours']:
             for key in ('kind', 'source', 'name'):
                 t.pop(key)
+        if d['background'] is None:
+            d.pop('background')
+        else:
+            for key in ('nodule_source', 'rib_source'):
+                d['background'].pop(key)
         return hashlib.sha256(json.dumps(d, sort_keys=True).encode()).hexdigest()
 
 
 _KEYS: dict[str, set[str]] = {
     '': {'name', 'description', 'breast', 'material', 'tumours', 'probe', 'loading', 'mesh',
-         'fe_store'},
+         'fe_store', 'background'},
     'breast': {'radii_mm'},
     'material': {'model', 'youngs_kPa', 'poisson', 'source'},
     'tumour': {'name', 'kind', 'centre_mm', 'position_mm', 'depth_mm', 'radius_mm', 'youngs_kPa',
@@ -166,36 +176,6 @@ def _check_keys(d: Any, section: str, where: str) -> dict[str, Any]:
     if unknown:
         raise SceneError(f'{where}: unknown key(s) {unknown}; allowed: {sorted(_KEYS[section])}')
     return d
-
-
-def _num(d: dict[str, Any], key: str, where: str, *, positive: bool = True,
-         default: float | None = None) -> float:
-    if key not in d:
-        if default is None:
-            raise SceneError(f'{where}: missing required key {key!r}')
-        return default
-    v = d[key]
-    if isinstance(v, bool) or not isinstance(v, (int, float)) or not np.isfinite(v):
-        raise SceneError(f'{where}.{key}: expected a finite number, got {v!r}')
-    if positive and v <= 0:
-        raise SceneError(f'{where}.{key}: must be > 0, got {v!r}')
-    return float(v)
-
-
-def _vec(d: dict[str, Any], key: str, where: str, n: int) -> tuple[float, ...]:
-    v = d.get(key)
-    if (not isinstance(v, (list, tuple)) or len(v) != n
-            or not all(isinstance(c, (int, float)) and not isinstance(c, bool) and np.isfinite(c)
-                       for c in v)):
-        raise SceneError(f'{where}.{key}: expected a list of {n} finite numbers, got {v!r}')
-    return tuple(float(c) for c in v)
-
-
-def surface_height(y: np.ndarray, z: np.ndarray, radii: tuple[float, float, float]) -> np.ndarray:
-    """Height x [m] of the semi-ellipsoid above the chest wall at (y, z) [m]; 0 outside."""
-    rx, ry, rz = radii
-    return rx * np.sqrt(np.clip(1.0 - (np.asarray(y) / ry) ** 2 - (np.asarray(z) / rz) ** 2,
-                                0.0, None))
 
 
 def parse_scene(data: Any, name: str = 'scene', source_sha256: str = '') -> Scene:
@@ -303,7 +283,9 @@ def parse_scene(data: Any, name: str = 'scene', source_sha256: str = '') -> Scen
                  source_sha256=source_sha256, description=description.strip(),
                  refine_spacing=refine_spacing, refine_margin=refine_margin,
                  ring_diameters=tuple(float(v) for v in rings_raw), ring_points=int(ring_points),
-                 fe_store=_fe_store(top.get('fe_store', ''), name))
+                 fe_store=_fe_store(top.get('fe_store', ''), name),
+                 background=parse_background(top.get('background'), radii, material.youngs,
+                                             tumours, palp + a))
 
 
 def _fe_store(v: Any, where: str) -> str:
@@ -333,17 +315,7 @@ def _parse_lesions(items: Any, radii: tuple[float, float, float], scene: str) ->
     for i, t in enumerate(items):
         where = f'{scene}: tumours[{i}]'
         t = _check_keys(t, 'tumour', where)
-        if ('centre_mm' in t) == ('position_mm' in t or 'depth_mm' in t):
-            raise SceneError(f'{where}: give either centre_mm [x, y, z] or position_mm [y, z] with '
-                             'depth_mm (centre depth under the skin)')
-        if 'centre_mm' in t:
-            c = tuple(v * MM for v in _vec(t, 'centre_mm', where, 3))
-            given = f'centre {t["centre_mm"]} mm'
-        else:
-            y, z = (v * MM for v in _vec(t, 'position_mm', where, 2))
-            depth = _num(t, 'depth_mm', where) * MM
-            c = (float(surface_height(np.array(y), np.array(z), radii)) - depth, y, z)
-            given = f'position {t["position_mm"]} mm, depth {t["depth_mm"]} mm'
+        c, given = region_centre(t, where, radii)
         r = _num(t, 'radius_mm', where) * MM
         lo, hi = LESION_RADIUS_MM
         if not lo <= r / MM <= hi:
@@ -352,11 +324,7 @@ def _parse_lesions(items: Any, radii: tuple[float, float, float], scene: str) ->
         kind = t.get('kind', '')
         if kind not in ('', *LESION_KINDS):
             raise SceneError(f'{where}.kind: expected one of {LESION_KINDS}, got {kind!r}')
-        # Sufficient test: the centre lies in the ellipsoid shrunk by r (which the inner
-        # parallel body contains) and the sphere stays above the chest wall.
-        shrunk = np.array(radii) - r
-        inside = (np.all(shrunk > 0) and c[0] - r >= 0
-                  and sum((ci / si) ** 2 for ci, si in zip(c, shrunk)) <= 1.0)
+        inside = sphere_inside(c, r, radii)
         if not inside:
             raise SceneError(f'{where}: tumour ({given}, radius {t["radius_mm"]} mm) is not inside '
                              'the tissue (it must clear the skin surface and the chest wall x = 0)')

@@ -311,8 +311,8 @@ def test_exam_reports_a_non_palpable_lesion_neither_hit_nor_miss():
 def test_every_shipped_case_is_at_the_validated_fidelity():
     """Issue 29, item 1: every case but the package's default is a graded case as shipped — the
     validated mesh (6 cells across the probe, not the coarse one), >= 149 loading points, lesion
-    rings, no failed point, its dataset and scene tied by hash, and its grouped-CV figures within
-    the gates that let it ship."""
+    rings (or a normal background), no failed point, its dataset and scene tied by hash, and its
+    grouped-CV figures within the gates that let it ship."""
     from haptic_anfis.tissue.dataset import load_dataset
 
     lib = library()
@@ -320,7 +320,7 @@ def test_every_shipped_case_is_at_the_validated_fidelity():
         if case.name == 'default':
             continue
         scene = case.scene
-        assert scene.ring_diameters and scene.mesh.probe_cells == 6, case.name
+        assert scene.graded and scene.mesh.probe_cells == 6, case.name
         if case.missing():  # not shipped (refused or not solved yet): nothing a trainee can run
             assert case.name not in {c.name for c in lib.ready()}, case.name
             continue
