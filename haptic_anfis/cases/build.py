@@ -219,6 +219,7 @@ def regrade_case(case: Case, *, store_root: str | os.PathLike | None = None,
         CaseError: the case is not shipped, or its store lacks a point (naming it).
     """
     from ..tissue.dataset import sidecar_path
+    from .background import background_grades
     from .grading import PALPABLE_PCT, grading_record, lesion_grades
     from .sweeps import case_stores, stored_records
 
@@ -234,6 +235,9 @@ def regrade_case(case: Case, *, store_root: str | os.PathLike | None = None,
     thr = PALPABLE_PCT if threshold_pct is None else float(threshold_pct)
     recs, twins = stored_records(case_stores(case, store_root))
     doc['grading'] = grading_record(lesion_grades(case.scene, recs, twins, thr), thr)
+    if case.scene.background is not None:   # a nodular breast: told apart from its background
+        bg = background_grades(case.scene, recs, threshold_pct=thr)
+        doc['grading'].update(level=bg['level'], background=bg)
     tmp = side.with_name(f'.{side.name}.tmp')
     tmp.write_text(json.dumps(doc, indent=2) + '\n')
     os.replace(tmp, side)

@@ -49,6 +49,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                     help="palpability threshold [%%] (default: config/exam.yaml's palpable_pct)")
     rg.add_argument('--store', type=Path, default=None,
                     help='per-point store root (default fe_store/ in the source tree)')
+    add_case_dir_argument(rg)
     sw = sub.add_parser('sweep', help='solve the missing FE points of cases into the committed '
                         'per-point store (fe_store/; resumable, parallel, local or dask)')
     sw.add_argument('names', nargs='*', help='cases (default: every graded case, i.e. every '
@@ -193,7 +194,7 @@ def _regrade(args: argparse.Namespace) -> int:
     lib = library()
     thr = args.threshold if args.threshold is not None else load_exam_config().palpable_pct
     cases = ([lib.get(n) for n in args.names] if args.names else
-             [c for c in lib.cases() if c.scene.ring_diameters and c.grading() is not None])
+             [c for c in lib.cases() if c.scene.graded and c.grading() is not None])
     failed = 0
     for c in cases:
         try:
