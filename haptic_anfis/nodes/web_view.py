@@ -39,6 +39,10 @@ from std_msgs.msg import String
 
 from . import cdr
 from .. import interfaces as ifc
+from ..cases import CaseError, library
+from ..cases.force_mapping import case_force_mapping
+from ..cases.library import DEFAULT_CASE
+from ..device.falcon import RATED_FORCE
 from ._case import CASE_PARAMS, declare_case  # noqa: F401 (CASE_PARAMS: in config)
 from .parameters import Param, declare_parameters, positive
 from .runtime import run_node
@@ -99,6 +103,19 @@ PARAMS = [
 ]
 
 
+def tissue_clamp(case) -> float:
+    """The tissue force [N] at which the device clamps in a session of ``case`` (None: the
+    default case): the driver's rated ``max_force`` over the case's force scale
+    (:mod:`haptic_anfis.cases.force_mapping`, what sessions give the driver). The gauge shows
+    tissue force, so its "beyond the device's force" cue compares against this; the device's own
+    limit where the case has no dataset to scale from."""
+    try:
+        c = case if case is not None else library().get(DEFAULT_CASE)
+        return RATED_FORCE / case_force_mapping(c).force_scale
+    except (CaseError, ValueError, OSError):
+        return RATED_FORCE
+
+
 class WebView(HapticNode):
     def __init__(self, name: str = 'web_view', **kw):
         super().__init__(name, **kw)
@@ -112,7 +129,8 @@ class WebView(HapticNode):
         from ..view.app import ViewApp
         self.app = ViewApp(self.cv.vertices, self.cv.faces, self.cv.region_faces,
                            self.cv.config.thresholds, port=p['port'], host=p['host'],
-                           title='haptic_anfis', deformation=self.cv.deformation)
+                           title='haptic_anfis', deformation=self.cv.deformation,
+                           max_force=tissue_clamp(case))
         self.console = None
         if p['controls']:
             self.console = self._open_console(p, [c.name for c in library().ready()], case)
@@ -570,6 +588,7 @@ class WebView(HapticNode):
         self.cv = case_view(case.name if case else None, self.params['exam_config'] or None,
                             self.params['dent'])
         self.app.deformation = self.cv.deformation
+        self.app.max_force = tissue_clamp(case)
         self.app.set_surface(self.cv.vertices, self.cv.faces, self.cv.region_faces)
         self._restart()
         self._running_shown(True)

@@ -238,7 +238,7 @@ class ViewApp:
         if gg is None:
             return f'pressure: — (bands: {lv})'
         return (f'pressure: **{gg.level}** ({gg.depth_mm:.1f} mm) · force **{gg.force_n:.1f} N**'
-                f' of {self.max_force:g} N  \nbands: {lv}')
+                f' (the device clamps at {self.max_force:.1f} N)  \nbands: {lv}')
 
     @staticmethod
     def _coverage_text(cov: dict) -> str:

@@ -52,3 +52,19 @@ def test_stop_says_exam_over_before_scoring_then_shows_the_debrief(monkeypatch):
         assert 'feel lesion idc again: haptic-anfis sim --case default --view' in msg, msg
         # the debrief's panels are filled after the mode turns: read them once it is all said
         assert 'haptic-anfis sim --case default' in node.app.state()['feel_again']
+
+
+def test_the_gauge_says_the_clamp_in_tissue_force_at_the_cases_scale():
+    """The gauge shows tissue force; the device clamps at its rated force over the case's force
+    scale, so "beyond the device's force" is said there (a case with no dataset: the rated
+    force itself)."""
+    from haptic_anfis.cases import library
+    from haptic_anfis.cases.force_mapping import case_force_mapping
+    from haptic_anfis.device.falcon import RATED_FORCE
+    from haptic_anfis.nodes.web_view import tissue_clamp
+    lib = library()
+    dense = lib.get('lib_m_dense_idc25_d15')
+    assert tissue_clamp(dense) == pytest.approx(RATED_FORCE / case_force_mapping(dense).force_scale)
+    assert tissue_clamp(dense) > RATED_FORCE
+    assert tissue_clamp(None) == pytest.approx(tissue_clamp(lib.get('default')))
+    assert tissue_clamp(lib.get('benign_fibrous')) == RATED_FORCE   # not ready: no dataset
