@@ -33,9 +33,10 @@ import numpy as np
 
 from ..device.falcon import RATED_FORCE
 from ..tissue.dataset import load_dataset
-from .library import Case, CaseError
+from .library import DEFAULT_CASE, Case, CaseError, library
 
-__all__ = ['HEADROOM', 'ForceMapping', 'fe_peak_force', 'mapping_for', 'case_force_mapping']
+__all__ = ['HEADROOM', 'ForceMapping', 'fe_peak_force', 'mapping_for', 'case_force_mapping',
+           'tissue_clamp']
 
 #: the fraction of the clamp the case's largest trained FE force is mapped to: the rest is room
 #: for the force model's error, the local model's linear step between two updates and the hand's
@@ -127,3 +128,15 @@ def case_force_mapping(case: Case, max_force: float = RATED_FORCE,
                         f'scale from; make it with `haptic-anfis cases generate {case.name}`')
     peak, depth = _peak(str(path), path.stat().st_mtime_ns, float(case.scene.palpable_radius))
     return mapping_for(case.name, peak, depth, max_force, headroom)
+
+
+def tissue_clamp(case: Case | None, max_force: float = RATED_FORCE) -> float:
+    """The tissue force [N] at which the device clamps in a session of ``case`` (None: the
+    default case): ``max_force`` over the case's force scale (what sessions give the driver).
+    A gauge that shows tissue force says "beyond the device's force" there; ``max_force`` itself
+    where the case has no dataset to scale from."""
+    try:
+        c = case if case is not None else library().get(DEFAULT_CASE)
+        return max_force / case_force_mapping(c, max_force).force_scale
+    except (CaseError, ValueError, OSError):
+        return max_force

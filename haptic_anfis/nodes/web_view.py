@@ -39,10 +39,8 @@ from std_msgs.msg import String
 
 from . import cdr
 from .. import interfaces as ifc
-from ..cases import CaseError, library
-from ..cases.force_mapping import case_force_mapping
-from ..cases.library import DEFAULT_CASE
-from ..device.falcon import RATED_FORCE
+from ..cases import library
+from ..cases.force_mapping import tissue_clamp
 from ._case import CASE_PARAMS, declare_case  # noqa: F401 (CASE_PARAMS: in config)
 from .parameters import Param, declare_parameters, positive
 from .runtime import run_node
@@ -103,19 +101,6 @@ PARAMS = [
 ]
 
 
-def tissue_clamp(case) -> float:
-    """The tissue force [N] at which the device clamps in a session of ``case`` (None: the
-    default case): the driver's rated ``max_force`` over the case's force scale
-    (:mod:`haptic_anfis.cases.force_mapping`, what sessions give the driver). The gauge shows
-    tissue force, so its "beyond the device's force" cue compares against this; the device's own
-    limit where the case has no dataset to scale from."""
-    try:
-        c = case if case is not None else library().get(DEFAULT_CASE)
-        return RATED_FORCE / case_force_mapping(c).force_scale
-    except (CaseError, ValueError, OSError):
-        return RATED_FORCE
-
-
 class WebView(HapticNode):
     def __init__(self, name: str = 'web_view', **kw):
         super().__init__(name, **kw)
@@ -123,7 +108,6 @@ class WebView(HapticNode):
         self._requests: collections.deque = collections.deque()
         case = declare_case(self, lambda c: self._requests.append(('switched', c)))
         self.blind = self.get_parameter('random_case_seed').value >= 0
-        from ..cases import library
         from ..view.build import case_view
         self.cv = case_view(case.name if case else None, p['exam_config'] or None, p['dent'])
         from ..view.app import ViewApp

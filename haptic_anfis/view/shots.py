@@ -61,6 +61,7 @@ def main(argv: list[str] | None = None) -> int:
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)
     from .app import ViewApp
+    from ..cases.force_mapping import tissue_clamp
     from .build import bag_debrief, case_view, open_bag_view
     with tempfile.TemporaryDirectory(prefix='haptic-anfis-shots-') as tmp:
         bag = Path(tmp) / 'exam'
@@ -73,7 +74,7 @@ def main(argv: list[str] | None = None) -> int:
         d = bag_debrief(bag)
         cv = case_view(None)
         app = ViewApp(cv.vertices, cv.faces, cv.region_faces, cv.config.thresholds,
-                      port=free_port(), deformation=cv.deformation)
+                      port=free_port(), deformation=cv.deformation, max_force=tissue_clamp(None))
         try:
             app.set_exam_running(True)
             # the first moment past the middle with the probe pressing (the dent shows)

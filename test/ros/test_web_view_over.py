@@ -61,7 +61,7 @@ def test_the_gauge_says_the_clamp_in_tissue_force_at_the_cases_scale():
     from haptic_anfis.cases import library
     from haptic_anfis.cases.force_mapping import case_force_mapping
     from haptic_anfis.device.falcon import RATED_FORCE
-    from haptic_anfis.nodes.web_view import tissue_clamp
+    from haptic_anfis.cases.force_mapping import tissue_clamp
     lib = library()
     dense = lib.get('lib_m_dense_idc25_d15')
     assert tissue_clamp(dense) == pytest.approx(RATED_FORCE / case_force_mapping(dense).force_scale)
