@@ -27,8 +27,8 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from .scenebase import (KPA, MM, SceneError, check_number, check_vec, region_centre,
-                        sphere_inside, surface_height)
+from .scenebase import (KPA, MM, SceneError, check_keys, check_number, check_vec,
+                        region_centre, sphere_inside, surface_height)
 
 __all__ = ['Background', 'Nodule', 'Rib', 'parse_background', 'rib_fraction', 'NODULE_RADIUS_MM']
 
@@ -110,12 +110,7 @@ class Background:
 
 
 def _keys(d: Any, section: str, where: str) -> dict[str, Any]:
-    if not isinstance(d, dict):
-        raise SceneError(f'{where}: expected a mapping, got {type(d).__name__}')
-    unknown = sorted(set(d) - _KEYS[section])
-    if unknown:
-        raise SceneError(f'{where}: unknown key(s) {unknown}; allowed: {sorted(_KEYS[section])}')
-    return d
+    return check_keys(d, _KEYS[section], where)
 
 
 def _range(d: dict[str, Any], key: str, where: str) -> tuple[float, float]:

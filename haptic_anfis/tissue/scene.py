@@ -21,8 +21,8 @@ import yaml
 
 from ..resources import config_dir
 from .background import Background, parse_background
-from .scenebase import (KPA, MM, SceneError, check_number as _num, check_vec as _vec,
-                        region_centre, sphere_inside, surface_height)
+from .scenebase import (KPA, MM, SceneError, check_keys, check_number as _num,
+                        check_vec as _vec, region_centre, sphere_inside, surface_height)
 
 SCENE_DIR = config_dir('scenes')  # source tree or installed share dir (resources)
 DEFAULT_SCENE = SCENE_DIR / 'default.yaml'
@@ -170,12 +170,7 @@ _KEYS: dict[str, set[str]] = {
 
 
 def _check_keys(d: Any, section: str, where: str) -> dict[str, Any]:
-    if not isinstance(d, dict):
-        raise SceneError(f'{where}: expected a mapping, got {type(d).__name__}')
-    unknown = sorted(set(d) - _KEYS[section])
-    if unknown:
-        raise SceneError(f'{where}: unknown key(s) {unknown}; allowed: {sorted(_KEYS[section])}')
-    return d
+    return check_keys(d, _KEYS[section], where)
 
 
 def parse_scene(data: Any, name: str = 'scene', source_sha256: str = '') -> Scene:

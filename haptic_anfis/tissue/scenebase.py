@@ -17,6 +17,17 @@ class SceneError(HapticAnfisError, ValueError):
     """A scene file is missing, malformed or physically inconsistent."""
 
 
+def check_keys(d: Any, allowed: set[str], where: str) -> dict[str, Any]:
+    """``d`` itself when it is a mapping whose keys are all in ``allowed``; else SceneError naming
+    ``where`` and the unknown keys."""
+    if not isinstance(d, dict):
+        raise SceneError(f'{where}: expected a mapping, got {type(d).__name__}')
+    unknown = sorted(set(d) - allowed)
+    if unknown:
+        raise SceneError(f'{where}: unknown key(s) {unknown}; allowed: {sorted(allowed)}')
+    return d
+
+
 def check_number(d: dict[str, Any], key: str, where: str, *, positive: bool = True,
                  default: float | None = None) -> float:
     """``d[key]`` as a finite float (> 0 when ``positive``); ``default`` when absent (None:
