@@ -1,9 +1,9 @@
 """The Python servo loop: its own thread, fixed period, absolute deadlines (no ROS).
 
 No driver runs it: the compiled tick (:mod:`.native_tick`, :mod:`.servo_native`) is the servo
-tick of every backend. It stays as the reference the tests hold the compiled tick to (with
-:class:`~.safety.SafetyLayer`, :class:`~.buttons.ClutchMark` and
-:class:`~.local_model.LocalModelRenderer`) and as a loop for the device tests and benchmarks.
+tick of every backend. It renders the threshold test's spring (:mod:`.stiffness_press`: a plane
+of known stiffness, no local model) on a device through :class:`~.safety.SafetyLayer`, and runs
+the device tests and the USB jitter benchmark.
 
 Each tick: read the device, hand the reading to ``on_state`` (the driver publishes it), let
 ``render`` offer the safety layer this tick's force (the local force model, evaluated at this

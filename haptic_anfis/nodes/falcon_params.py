@@ -1,5 +1,5 @@
 """The ``falcon_driver`` node's parameters (:data:`PARAMS`: name, default, help, check) and
-``servo_loop``'s resolution; the node is :mod:`.falcon_driver`."""
+their resolution (:func:`resolve`); the node is :mod:`.falcon_driver`."""
 from __future__ import annotations
 
 import math
@@ -179,3 +179,19 @@ def resolve_servo_loop(choice: str, backend: str = 'sim') -> str:
                              "compiled tick in a servo process): the Falcon's USB library "
                              "needs the interpreter, which a compiled thread does not hold")
     return 'native_process' if choice == 'auto' else choice
+
+
+def resolve(p: dict, node: str = 'falcon_driver') -> dict:
+    """The declared parameters ``p`` made concrete in place (``servo_loop``,
+    :func:`resolve_servo_loop`) and checked across each other (``max_force`` against the
+    backend's bound, which the declaration could not know); returns ``p``.
+
+    Raises:
+        ParameterError: one line naming the parameter and what was expected.
+    """
+    p['servo_loop'] = resolve_servo_loop(p['servo_loop'], p['backend'])
+    why = check_max_force(p['max_force'], p['backend'])
+    if why:
+        raise ParameterError(f"{node}: bad parameters: parameter 'max_force' = "
+                             f"{p['max_force']!r}: {why}")
+    return p

@@ -49,8 +49,8 @@ def test_falcon_runs_in_a_servo_process_by_default_and_stops_at_zero(ctx, monkey
     monkeypatch.setattr(falcon_usb, 'import_ftdi', lambda: ftdi_class(fake))
     d = driver(ctx, backend='falcon', homing=False, gravity_compensation=True)
     try:
-        assert d.servo_loop == 'native_process' and d.native is not None
-        assert d.native._pid and d.native._pid != os.getpid()
+        assert d.servo_loop == 'native_process' and d.servo is not None
+        assert d.servo._pid and d.servo._pid != os.getpid()
         assert 'servo process' in d.servo.scheduling
         assert _wait(lambda: d.device.replies >= 50 and shm[N] >= 50)
         assert d.device.connected and not d.device.disconnected
@@ -59,7 +59,7 @@ def test_falcon_runs_in_a_servo_process_by_default_and_stops_at_zero(ctx, monkey
         assert d.servo.errors == 0 and d.device.loop_errors == 0
         # the node publishes the servo process's ticks
         n = d.servo.stats.summary()['ticks'] if 'ticks' in d.servo.stats.summary() else None
-        assert d.native.last_state is not None, n
+        assert d.servo.last_state is not None, n
     finally:
         d.close()
         d.destroy_node()
