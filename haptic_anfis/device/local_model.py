@@ -57,7 +57,7 @@ with these rules (the compiled servo tick renders them, :mod:`.native_tick`):
   approach plane: only within ``approach_radius``, above) is still rendered, with the depth
   followed exactly and the offset across the indentation direction held at the radius
   (:func:`hold_offset`): the force stays the tissue's at the probe's depth, a little behind along
-  the surface, where expiring it dropped the force to 0 N mid-press and brought it back with a
+  the surface; expiring it would drop the force to 0 N mid-press and bring it back with a
   jolt when the next model came. Counted (``ticks_beyond``).
 
 The message (``falcon/servo_cf_local``, layout :data:`haptic_anfis.interfaces.LOCAL_MODEL_FIELDS`)
@@ -112,7 +112,7 @@ HOLD_RADIUS = 0.04
 #: the switch, at most this, not at once (native_tick._render_blended). Models a millisecond
 #: apart disagree by a hair; one that comes after the graph was late disagrees with the old
 #: model's extrapolation by tenths of a newton, and a step of 0.2 N already leaves the 50 ms
-#: mean by the issue's 0.1 N (a ripple window); ramped over 20 ms, steps up to ~0.3 N make none.
+#: mean by 0.1 N (a ripple window); ramped over 20 ms, steps up to ~0.3 N make none.
 #: Chosen by replaying recorded traces: the quiet error stays within its 0.2 % target
 #: (docs/servo_loop.md, *Parameters chosen by measurement*).
 MODEL_BLEND_TIME = 0.02

@@ -34,9 +34,9 @@ It sleeps to absolute 1 ms deadlines with ``clock_nanosleep`` and reads the cloc
    ``K <= 2 (b - |B|) / T`` with ``b`` the device's damping and ``B`` the rendered damping
    (here 0) — Colgate & Schenkel 1997 (J. Robotic Systems 14(1):37-47), the discrete-time
    passivity condition of a virtual wall, ``b > K T / 2 + |B|`` — with ``T`` the energy-weighted
-   mean of the last ``passivity_window`` (50 ms) of periods (:func:`_passivity_period`; it was
-   the last gap alone, which turned one late tick into a one-tick force step; now one late
-   tick lowers the stiffness less, at once, and it comes back over about the window). Optional
+   mean of the last ``passivity_window`` (50 ms) of periods (:func:`_passivity_period`: one
+   late tick lowers the stiffness a little, at once, and it comes back over about the window,
+   where the last gap alone would turn one late tick into a one-tick force step). Optional
    passivity observer / controller (Hannaford & Ryu 2002, IEEE T-RO 18(1):1-10): the energy the
    rendered port put out so far; when it turns negative a damping force takes it back.
 5. Safety (:class:`haptic_anfis.device.safety.SafetyLayer`'s rules): non-finite -> zero at once,

@@ -291,8 +291,8 @@ class NativeRenderer:
         loop: the owning loop.
         max_stiffness: tissue-frame stiffness bound [N/m]
             (:func:`~.local_model.tissue_stiffness_limit`).
-        validity_time: a model older than this [s] (from its pose) is no longer fresh or
-            extrapolated (then held up to :attr:`max_age`, or expired).
+        validity_time: a model older than this [s] (from its pose) is past its validity:
+            held up to :attr:`max_age`, then expired.
         validity_radius: beyond this [m] from p0 the offset across the depth gradient is held.
         fresh_age: a model no older than this [s] counts as fresh.
         approach_radius: an approach plane renders zero further than this [m] from its point.

@@ -4,6 +4,11 @@
 - :class:`LocalModelRenderer`: the local force model's render (``haptic_anfis.device.local_model``'s
   module doc states the rules);
 - :class:`ClutchMark`: the clutch / mark buttons (``haptic_anfis.device.buttons``' module doc);
+- :class:`SafetyLayer`: clamp, rate limit, watchdog, command validation
+  (``haptic_anfis.device.safety``'s module doc);
+- :class:`ServoLoop`: a device ticked on a thread at a fixed period, or by the caller with
+  chosen times, through a :class:`SafetyLayer` (each tick: read, ``on_state``, ``render``,
+  the safety layer's output, write; the trace and statistics);
 - :func:`render`: what the driver's servo tick offers the safety layer from a
   :class:`~haptic_anfis.device.force_input.ForceInput` in local-model mode (the render of the
   model at the tick's position), for a :class:`~haptic_anfis.device.servo.ServoLoop`'s
@@ -14,14 +19,23 @@ Times are seconds; lengths metres; forces newtons; tissue frame.
 from __future__ import annotations
 
 import math
+import threading
+import time
+from typing import Callable
 
 from haptic_anfis.device.buttons import CLUTCH, MARK, ButtonEvents
 from haptic_anfis.device.local_model import (APPROACH_RADIUS, EXPIRED, EXTRAPOLATED,
                                              FALCON_MAX_STIFFNESS, FREE, FRESH, NONE, LocalModel,
                                              RenderStats, accept_values, across_beyond,
                                              hold_offset)
+from haptic_anfis.device.falcon import RATED_FORCE, Device, DeviceState
+from haptic_anfis.device.safety import (IGNORED_DISABLED, IGNORED_OLDER, OK, REJECTED_FRAME,
+                                        REJECTED_NONFINITE, SafetyStats)
+from haptic_anfis.device.stats import LoopStats
+from haptic_anfis.device.trace import DISABLED, TickTrace
+from haptic_anfis.realtime.scheduling import name_thread, schedule_servo_thread
 
-__all__ = ['ClutchMark', 'LocalModelRenderer', 'render']
+__all__ = ['ClutchMark', 'LocalModelRenderer', 'SafetyLayer', 'ServoLoop', 'render']
 
 
 def render(fi, state, now: float) -> int:
@@ -264,3 +278,261 @@ class ClutchMark:
             self._ramp_start = None
             return 1.0
         return max(a, 0.0)
+
+
+class SafetyLayer:
+    """Clamp, rate limit, watchdog and command validation (see the module docstring).
+
+    Args:
+        max_force: device force limit [N], > 0 (the falcon driver passes its ``max_force``, default
+            8.9 N, the Falcon's rated force).
+        max_force_rate: largest change of the output per second [N/s], > 0.
+        watchdog_timeout: command age [s] after which the force ramps to zero, > 0.
+        frame_id: the frame commands must be expressed in ('' accepts any frame).
+        max_dt: cap on the time step used by the rate limit [s] (a stalled caller must not earn
+            a large jump).
+    """
+
+    def __init__(self, max_force: float = RATED_FORCE, max_force_rate: float = 1000.0,
+                 watchdog_timeout: float = 0.010, frame_id: str = 'tissue',
+                 max_dt: float = 0.005) -> None:
+        for name, v in (('max_force', max_force), ('max_force_rate', max_force_rate),
+                        ('watchdog_timeout', watchdog_timeout), ('max_dt', max_dt)):
+            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
+                raise ValueError(f'{name}: expected a finite number > 0, got {v!r}')
+        self.max_force = float(max_force)
+        self.max_force_rate = float(max_force_rate)
+        self.watchdog_timeout = float(watchdog_timeout)
+        self.frame_id = frame_id
+        self.max_dt = float(max_dt)
+        self.stats = SafetyStats()
+        self._lock = threading.Lock()
+        self._enabled = False
+        self._target = (0.0, 0.0, 0.0)
+        self._out = (0.0, 0.0, 0.0)
+        self._last_cmd: float | None = None
+        self._last_out: float | None = None
+        self._tripped = False
+
+    # -- state ----------------------------------------------------------------------------------
+    @property
+    def enabled(self) -> bool:
+        return self._enabled
+
+    @property
+    def watchdog_tripped(self) -> bool:
+        return self._tripped
+
+    def start(self, now: float) -> None:
+        """Enable; the output starts at zero and the watchdog counts from ``now``."""
+        with self._lock:
+            self._enabled = True
+            self._target = self._out = (0.0, 0.0, 0.0)
+            self._last_cmd = None
+            self._last_out = now
+            self._tripped = False
+
+    def stop(self) -> None:
+        """Disable: the output is zero from now on (until :meth:`start`)."""
+        with self._lock:
+            self._enabled = False
+            self._target = self._out = (0.0, 0.0, 0.0)
+
+    # -- input ----------------------------------------------------------------------------------
+    def command(self, force, now: float, frame_id: str | None = None, count: bool = True) -> str:
+        """Offer a force command (3,) [N] whose time is ``now`` (the time of the pose it answers,
+        or its arrival); returns OK or why it was refused. ``count=False``: not counted in
+        ``stats.commands`` (the local model feeds its force every servo tick)."""
+        try:
+            fx, fy, fz = (float(v) for v in force)
+        except (TypeError, ValueError):
+            fx = fy = fz = math.nan
+        with self._lock:
+            if not self._enabled:
+                return IGNORED_DISABLED
+            if count:
+                self.stats.commands += 1
+            if not math.isfinite(fx + fy + fz) or not all(map(math.isfinite, (fx, fy, fz))):
+                self.stats.rejected_nonfinite += 1
+                self._fault(REJECTED_NONFINITE)
+                return REJECTED_NONFINITE
+            if self.frame_id and frame_id is not None and frame_id != self.frame_id:
+                self.stats.rejected_frame += 1
+                self._fault(f'{REJECTED_FRAME} {frame_id!r} (expected {self.frame_id!r})')
+                return REJECTED_FRAME
+            if self._last_cmd is not None and now < self._last_cmd:
+                return IGNORED_OLDER
+            self._target = (fx, fy, fz)
+            self._last_cmd = now
+            self._tripped = False
+            return OK
+
+    def reject(self, why: str) -> None:
+        """A non-finite input from elsewhere (e.g. a local force model): counted as a non-finite
+        command, and the output drops to zero at once as for one."""
+        with self._lock:
+            if not self._enabled:
+                return
+            self.stats.rejected_nonfinite += 1
+            self._fault(why)
+
+    def _fault(self, why: str) -> None:
+        self._target = self._out = (0.0, 0.0, 0.0)
+        self._last_cmd = None  # no valid command: the watchdog stays tripped until one comes
+        self.stats.last_reject = why
+
+    # -- output ---------------------------------------------------------------------------------
+    def output(self, now: float) -> tuple[float, float, float]:
+        """The force to apply now [N]: finite, magnitude <= max_force, rate-limited."""
+        with self._lock:
+            if not self._enabled:
+                return (0.0, 0.0, 0.0)
+            last = self._last_out if self._last_out is not None else now
+            gap = now - last
+            dt = min(max(gap, 0.0), self.max_dt)
+            self._last_out = now
+            age = math.inf if self._last_cmd is None else now - self._last_cmd
+            if age > self.watchdog_timeout:
+                if not self._tripped and self._last_cmd is not None:
+                    self.stats.watchdog_trips += 1
+                    if self._target != (0.0, 0.0, 0.0):
+                        self.stats.watchdog_trips_in_contact += 1
+                self._tripped = True
+                self._target = (0.0, 0.0, 0.0)
+                if gap > self.watchdog_timeout:
+                    # The caller itself stalled longer than the watchdog (a paused process): the
+                    # ramp's time has passed already; zero now, not a ramp from a stale force.
+                    self._out = (0.0, 0.0, 0.0)
+            tx, ty, tz = self._target
+            tn = math.sqrt(tx * tx + ty * ty + tz * tz)
+            if tn > self.max_force:
+                self.stats.clamped += 1
+                s = self.max_force / tn
+                tx, ty, tz = tx * s, ty * s, tz * s
+            ox, oy, oz = self._out
+            dx, dy, dz = tx - ox, ty - oy, tz - oz
+            dn = math.sqrt(dx * dx + dy * dy + dz * dz)
+            step = self.max_force_rate * dt
+            if dn > step:
+                s = step / dn
+                dx, dy, dz = dx * s, dy * s, dz * s
+            ox, oy, oz = ox + dx, oy + dy, oz + dz
+            on = math.sqrt(ox * ox + oy * oy + oz * oz)
+            if on > self.max_force:  # rounding guard: never above the limit
+                s = self.max_force / on
+                ox, oy, oz = ox * s, oy * s, oz * s
+                on = self.max_force
+            self._out = (ox, oy, oz)
+            if on > self.stats.max_output:
+                self.stats.max_output = on
+            return self._out
+
+
+class ServoLoop:
+    """Run ``device`` at ``rate`` Hz on a daemon thread through ``safety``.
+
+    ``on_state(state, force, now)`` runs on the servo thread after each read; ``force`` is the
+    force applied in the previous tick (device frame). Exceptions in it are counted and the loop
+    keeps running (``errors``; the last one in ``last_error``). ``render(state, now) -> int``
+    runs next (same error handling) and returns the tick's status code, kept in ``status`` and
+    written to ``trace`` (a :class:`~.trace.TickTrace`, or None) with the applied force.
+    """
+
+    def __init__(self, device: Device, safety: SafetyLayer, rate: float = 1000.0,
+                 on_state: Callable[[DeviceState, tuple, float], None] | None = None,
+                 clock: Callable[[], float] = time.monotonic,
+                 render: Callable[[DeviceState, float], int] | None = None,
+                 trace: TickTrace | None = None, priority: int = 0):
+        if not rate > 0:
+            raise ValueError(f'rate: expected > 0 Hz, got {rate!r}')
+        if not 0 <= priority <= 99:
+            raise ValueError(f'priority: expected 0 (normal scheduling) to 99, got {priority!r}')
+        self.priority = int(priority)
+        #: how the servo thread is scheduled (set by the thread as it starts; see set_realtime)
+        self.scheduling = ''
+        self._scheduled = threading.Event()
+        self.device, self.safety, self.on_state, self.clock = device, safety, on_state, clock
+        self.render, self.trace, self.status = render, trace, -1
+        self.period = 1.0 / rate
+        self.stats = LoopStats(period=self.period,
+                               watchdog=getattr(safety, 'watchdog_timeout', math.inf))
+        self.errors = 0
+        self.last_error: BaseException | None = None
+        self.force = (0.0, 0.0, 0.0)
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+
+    def start(self) -> None:
+        now = self.clock()
+        self.device.open(now)
+        self.safety.start(now)
+        self._thread = threading.Thread(target=self._run, name='servo', daemon=True)
+        self._thread.start()
+        self._scheduled.wait(1.0)  # so that the caller can log how the thread runs
+
+    def stop(self, timeout: float = 2.0) -> None:
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout)
+        self.safety.stop()
+        self.device.write((0.0, 0.0, 0.0))
+        self.device.close()
+
+    @property
+    def running(self) -> bool:
+        return self._thread is not None and self._thread.is_alive()
+
+    def tick(self, now: float) -> None:
+        """One servo cycle at time ``now`` (also usable without the thread, e.g. in tests)."""
+        state = self.device.read(now)
+        if self.on_state is not None:
+            try:
+                self.on_state(state, self.force, now)
+            except Exception as exc:  # a publishing hiccup must not stop the servo
+                self.errors += 1
+                self.last_error = exc
+        if self.render is not None:
+            try:
+                self.status = self.render(state, now)
+            except Exception as exc:  # as above: the safety layer's watchdog covers a failure
+                self.errors += 1
+                self.last_error = exc
+        f = self.safety.output(now)
+        self.device.write(f)
+        self.force = f
+        if self.trace is not None:
+            self.trace.add(now, state.position, f,
+                           self.status if self.safety.enabled else DISABLED)
+        n = (f[0] * f[0] + f[1] * f[1] + f[2] * f[2]) ** 0.5
+        if n > self.stats.max_force:
+            self.stats.max_force = n
+        self.stats.tick(now)
+
+    def _run(self) -> None:
+        name_thread('servo-tick')
+        self.scheduling = schedule_servo_thread(self.priority)
+        self._scheduled.set()
+        period, clock, stop = self.period, self.clock, self._stop
+        deadline = clock()
+        while not stop.is_set():
+            now = clock()
+            if now - deadline > period:
+                self.stats.deadline_misses += 1
+                deadline = now  # re-synchronise
+            try:
+                self.tick(now)
+            except Exception as exc:  # a device read/write failure: zero force, keep the period
+                self.errors += 1
+                self.last_error = exc
+                self.safety.stop()
+                self.safety.start(now)  # starts at zero; the watchdog needs a new command
+                try:
+                    self.device.write((0.0, 0.0, 0.0))
+                except Exception:
+                    pass
+            deadline += period
+            delay = deadline - clock()
+            if delay > 0:
+                time.sleep(delay)
+        self.safety.stop()
+        self.device.write((0.0, 0.0, 0.0))

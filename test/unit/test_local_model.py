@@ -9,7 +9,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as hst
 
-from haptic_anfis.device import DeviceState, SafetyLayer, ServoLoop, WorkspaceMapping
+from haptic_anfis.device import DeviceState, WorkspaceMapping
 from haptic_anfis.device.force_input import ForceInput
 from haptic_anfis.device.local_model import (EXPIRED, EXTRAPOLATED, FREE, FRESH, NONE,
                                              across_beyond, hold_offset,
@@ -19,7 +19,7 @@ from haptic_anfis.device.local_model import (EXPIRED, EXTRAPOLATED, FREE, FRESH,
                                              depth_gradient)
 from haptic_anfis.device.stamps import FUTURE, OK, STALE, UNKNOWN, StampBook
 from haptic_anfis.device.trace import TickTrace, load_trace, save_trace
-from tick_oracle import LocalModelRenderer, render
+from tick_oracle import LocalModelRenderer, SafetyLayer, ServoLoop, render
 
 
 def unit(v):
