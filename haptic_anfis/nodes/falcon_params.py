@@ -13,6 +13,9 @@ from .parameters import (Param, ParameterError, finite_vector, non_negative, one
                          positive)
 
 BACKENDS = ('sim', 'falcon')
+#: the driver's servo loops (:data:`haptic_anfis.device.driver_loops.LOOPS`): all the compiled
+#: tick, on threads of the driver ('native') or in a servo process of its own
+SERVO_LOOPS = ('auto', 'native', 'native_process')
 
 PARAMS = [
     Param('backend', 'sim', "device backend: 'sim' (simulated Falcon with a scripted virtual hand) "
@@ -111,7 +114,8 @@ PARAMS = [
           "(docs/servo_loop.md). falcon: 'auto' and 'native_process' run the USB I/O "
           "and the compiled tick in the servo process (a frozen node cannot leave force on the "
           "motors); 'native' is refused (its USB library needs the interpreter)",
-          one_of('auto', 'native', 'native_process')),
+          lambda v: None if v in SERVO_LOOPS else
+          f"expected one of {', '.join(map(repr, SERVO_LOOPS))} (each runs the compiled tick)"),
     Param('passivity_damping', 1.5, 'native: device damping b [N s/m] of the passivity bound on '
           'the rendered stiffness, K <= 2 b / T with T the measured tick periods of the last '
           'passivity_window, energy-weighted (sum T^2 / sum T; Colgate & Schenkel 1997; '
