@@ -14,6 +14,7 @@ from hypothesis import strategies as st
 from haptic_anfis.device import HandParams, WorkspaceMapping
 from haptic_anfis.device import native_tick as nt
 from haptic_anfis.device.force_error import ripple_and_dropouts
+from haptic_anfis.device.force_input import ForceInput
 from haptic_anfis.device.local_model import (EXPIRED, EXTRAPOLATED, FREE, FRESH, LocalModel,
                                              tissue_stiffness_limit)
 from haptic_anfis.device.palpation import PalpationScript
@@ -992,3 +993,20 @@ def test_the_ticks_clutch_and_mark_follow_the_python_rules(seed):
         gains.add(round(g, 3))
     assert (cnt[nt.CNT.clutches], cnt[nt.CNT.marks]) == (cm.clutches, cm.marks)
     assert cm.clutches > 5 and cm.marks > 5 and {0.0, 1.0} < gains  # every branch was taken
+
+
+def test_a_malformed_model_through_the_drivers_input_is_counted_and_zeroes_the_force():
+    """The driver's force input over the compiled loop: a model the tick would press with, then
+    one with a value missing: refused in one line, counted as a rejected model and a non-finite
+    input, and the next tick applies no force."""
+    lp, x = wall_loop()
+    fi = ForceInput(lp.safety, MAP, lp.renderer)
+    for t in (0.0, 0.001, 0.002):  # the first tick takes the enable: zero, then the wall's
+        pin(lp, x, t)
+        f = lp.tick(t)
+    assert f[0] > 1.0
+    why = fi.model_values([0.0] * 25, 1, 'tissue', 0.0025)
+    assert why == 'rejected: local model: expected 26 values, got 25'
+    assert fi.summary()['models_rejected'] == 1 and lp.safety.stats.rejected_nonfinite == 1
+    pin(lp, x, 0.003)
+    assert lp.tick(0.003) == (0.0, 0.0, 0.0)
