@@ -23,7 +23,7 @@ from haptic_anfis.device.start_gate import HeldScript
 from haptic_anfis.device.stats import LoopStats
 from haptic_anfis.device.tick_views import seq_write, spectral_norm_sym
 from haptic_anfis.interfaces import LM_P0, LOCAL_MODEL
-from tick_oracle import ClutchMark, LocalModelRenderer
+from tick_oracle import ClutchMark, LocalModelRenderer, SafetyLayer
 
 MAP = WorkspaceMapping(1.5, (0.03, 0.0, 0.0), 1.0)
 
@@ -1010,3 +1010,38 @@ def test_a_malformed_model_through_the_drivers_input_is_counted_and_zeroes_the_f
     assert fi.summary()['models_rejected'] == 1 and lp.safety.stats.rejected_nonfinite == 1
     pin(lp, x, 0.003)
     assert lp.tick(0.003) == (0.0, 0.0, 0.0)
+
+
+@pytest.mark.parametrize('seed', [0, 1, 2])
+def test_the_ticks_safety_rules_follow_the_python_rules(seed):
+    """Commands at random times (over the clamp, non-finite, in a wrong frame, out of order)
+    and ticks with jitter and stalls past the watchdog, through the compiled tick (zoh) and the
+    Python rules (tick_oracle.SafetyLayer): the same force at every tick."""
+    rng = np.random.default_rng(seed)
+    lp = loop('zoh', max_force=5.0, max_force_rate=1000.0, watchdog_timeout=0.01)
+    ref = SafetyLayer(5.0, 1000.0, 0.01, frame_id='tissue')
+    t = 1.0
+    lp.safety.start()
+    lp.tick(t)  # takes the enable: zero force, the watchdog counts from here
+    ref.start(t)
+    seen = set()
+    for i in range(3000):
+        gap = 0.001 * (1.0 + 0.2 * rng.random()) if rng.random() > 0.005 else 0.02
+        if rng.random() < 0.5:  # one command between two ticks
+            tc = t + rng.random() * gap
+            f, frame, kind = tuple(rng.normal(scale=3.0, size=3)), 'tissue', 'ok'
+            u = rng.random()
+            if u < 0.01:
+                f, kind = (math.nan, 0.0, 1.0), 'nan'
+            elif u < 0.02:
+                frame, kind = 'world', 'frame'
+            elif u < 0.04:
+                tc, kind = tc - 0.05, 'older'
+            seen.add(kind)
+            assert lp.safety.command(f, tc, frame) == ref.command(f, tc, frame) or kind == 'older'
+        t += gap
+        got, want = lp.tick(t), ref.output(t)
+        assert got == pytest.approx(want, abs=1e-9), i
+        seen.add('clamped' if math.hypot(*want) > 4.999 else 'zero' if want == (0, 0, 0) else '')
+    assert seen >= {'ok', 'nan', 'frame', 'older', 'clamped', 'zero'}
+    assert lp.safety.stats.watchdog_trips == ref.stats.watchdog_trips > 0
