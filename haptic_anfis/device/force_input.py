@@ -4,8 +4,9 @@ safety layer's target until the next one) or the local force model (``mode='loca
 compiled tick evaluates the model at every servo tick's position, :mod:`.local_model`).
 
 Threads: :meth:`ForceInput.on_pose` runs where the driver publishes its pose;
-:meth:`ForceInput.command` and :meth:`ForceInput.model` on the thread that receives messages. Forces and positions arrive in the tissue frame; :class:`WorkspaceMapping`
-takes them to the device frame for the safety layer.
+:meth:`ForceInput.command` and :meth:`ForceInput.model` on the thread that receives messages.
+Forces and positions arrive in the tissue frame; :class:`WorkspaceMapping` takes them to the
+device frame for the safety layer.
 """
 from __future__ import annotations
 

@@ -87,7 +87,7 @@ class NativeServoLoop:
         max_force, max_force_rate, watchdog_timeout, frame_id: the safety layer's.
         mode: ``'local_model'`` or ``'zoh'``.
         max_stiffness: device-frame stiffness bound [N/m]; validity_time [s], validity_radius [m],
-            approach_radius [m]: the local model's (:class:`~.local_model.LocalModelRenderer`).
+            approach_radius [m]: the local model's (:mod:`.local_model`'s rules).
         damping: device damping b [N s/m] of the passivity bound K <= 2 b / T.
         observer: run the passivity observer / controller (Hannaford & Ryu 2002).
         hold_time: a model older than ``validity_time`` but not than this [s] is still rendered
