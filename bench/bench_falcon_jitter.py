@@ -1,20 +1,18 @@
 """Servo-thread jitter: the gaps between consecutive packets the Falcon would receive.
 
 The Falcon backend's stall guard sends zero force when no packet went out for ``stall_timeout``;
-a timeout shorter than the servo thread's normal scheduling jitter gives spurious zero-force drops
-(each followed by a 50 ms ramp back). This measures the write-to-write gaps of the 1 kHz servo
-thread in two settings:
-
-  1. ``usb``: the FalconUSB backend against the fake Falcon of test/support/falcon_fake.py (no hardware),
-     ServoLoop + SafetyLayer, nothing else in the process;
-  2. ``graph``: the whole one-process node graph (driver, contact detector, force server, ROS
-     executor) with the simulated device, each device write time-stamped.
+a timeout shorter than the servo loop's normal scheduling jitter gives spurious zero-force drops
+(each followed by a 50 ms ramp back). This measures the tick-to-tick gaps of the driver's real
+Falcon loop, each tick one packet: the compiled tick with the FalconUSB backend's I/O in a servo
+process of its own (as ``falcon_driver`` runs it), against the fake Falcon of
+test/support/falcon_fake.py (no hardware), the node sending a force command every millisecond.
+The whole node graph's loop under load is ``bench/bench_servo_load.py``'s.
 
 It prints p50 / p99 / p99.9 / max of the gaps [ms], how many exceed 5 / 10 / 25 / 50 / 100 ms, how
 often the default stall_timeout would trip, and the load average. Printed, never asserted (shared
 machine).
 
-    .venv/bin/python bench/bench_falcon_jitter.py [--seconds 20] [--only usb|graph]
+    .venv/bin/python bench/bench_falcon_jitter.py [--seconds 20]
 """
 from __future__ import annotations
 
@@ -37,43 +35,29 @@ THRESHOLDS_MS = (5.0, 10.0, 25.0, 50.0, 100.0)
 def usb_gaps(seconds: float) -> np.ndarray:
     from falcon_fake import FakeFalcon, ftdi_class
 
-    from haptic_anfis.device import SafetyLayer, ServoLoop
     from haptic_anfis.device import falcon_kinematics as k
-    from haptic_anfis.device.falcon_usb import FalconUSB, PyFtdiTransport
-    fake = FakeFalcon(firmware_running=True,
-                      encoders=k.angles_to_ticks(k.inverse_kinematics(k.WORKSPACE_CENTER)))
-    dev = FalconUSB(transport=PyFtdiTransport(ftdi_class(fake)), log=lambda m: None,
-                    stall_timeout=10.0)  # the guard must not interfere with the measurement
-    safety = SafetyLayer(frame_id='tissue')
-    loop = ServoLoop(dev, safety, rate=1000.0)
+    from haptic_anfis.device.falcon import WorkspaceMapping
+    from haptic_anfis.device.falcon_usb import FalconError, FalconUSB, PyFtdiTransport
+    from haptic_anfis.device.servo_native import NativeServoLoop
+    from haptic_anfis.device.trace import TickTrace
+
+    def device():  # built in the servo process, as the driver's factory is
+        fake = FakeFalcon(firmware_running=True,
+                          encoders=k.angles_to_ticks(k.inverse_kinematics(k.WORKSPACE_CENTER)))
+        return FalconUSB(transport=PyFtdiTransport(ftdi_class(fake)), log=lambda m: None,
+                         homing=False,
+                         stall_timeout=10.0)  # the guard must not interfere with the measurement
+    loop = NativeServoLoop(None, WorkspaceMapping(), mode='zoh', device_factory=device,
+                           open_error=FalconError,
+                           trace=TickTrace(max_rows=int(1000 * (seconds + 5))))
     loop.start()
     t_end = time.monotonic() + seconds
     while time.monotonic() < t_end:  # a force command stream, as the force server sends
-        safety.command((1.0, 0.0, 0.0), time.monotonic(), 'tissue')
+        loop.safety.command((1.0, 0.0, 0.0), time.monotonic(), 'tissue')
         time.sleep(0.001)
     loop.stop()
-    t = np.array(fake.write_times)
+    t = loop.trace.arrays()[:, 0]  # each tick's time: one packet per tick
     return np.diff(t[len(t) // 20:])  # drop the start-up
-
-
-def graph_gaps(seconds: float) -> np.ndarray:
-    from haptic_anfis.session import open_graph
-    g = open_graph(program='bench_jitter')
-    stamps: list[float] = []
-    dev = g.driver.device
-    write = dev.write
-
-    def stamped(force):
-        stamps.append(time.monotonic())
-        write(force)
-    dev.write = stamped
-    try:
-        g.spin_for(30.0, lambda: g.driver.first_command is not None)
-        stamps.clear()
-        g.spin_for(seconds)
-    finally:
-        g.shutdown()
-    return np.diff(np.array(stamps))
 
 
 def report(name: str, gaps: np.ndarray, timeout_ms: float) -> None:
@@ -89,16 +73,12 @@ def report(name: str, gaps: np.ndarray, timeout_ms: float) -> None:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument('--seconds', type=float, default=20.0)
-    ap.add_argument('--only', choices=('usb', 'graph'))
     a = ap.parse_args(argv)
     print(f'load average {os.getloadavg()[0]:.2f} {os.getloadavg()[1]:.2f} on '
           f'{os.cpu_count()} cores; {a.seconds:g} s per setting')
     from haptic_anfis.device.falcon_usb import DEFAULT_STALL_TIMEOUT
     timeout_ms = DEFAULT_STALL_TIMEOUT * 1e3
-    if a.only in (None, 'usb'):
-        report('usb', usb_gaps(a.seconds), timeout_ms)
-    if a.only in (None, 'graph'):
-        report('graph', graph_gaps(a.seconds), timeout_ms)
+    report('usb', usb_gaps(a.seconds), timeout_ms)
     print(f'load average after: {os.getloadavg()[0]:.2f}')
     return 0
 

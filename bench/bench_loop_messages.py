@@ -73,11 +73,13 @@ def main() -> int:
     from rclpy.serialization import deserialize_message, serialize_message
     from sensor_msgs.msg import JointState
 
-    from haptic_anfis.device import SafetyLayer, WorkspaceMapping
+    from haptic_anfis.device import PalpationScript, WorkspaceMapping
     from haptic_anfis.device.force_input import ForceInput
     from haptic_anfis import interfaces as ifc
     from haptic_anfis.pipeline import contact as pc, force as pf
-    from haptic_anfis.device.local_model import LocalModel, LocalModelRenderer
+    from haptic_anfis.device.local_model import LocalModel
+    from haptic_anfis.device.servo_native import NativeServoLoop
+    from haptic_anfis.resources import config_file
     from haptic_anfis.nodes.resim import build_pipeline
 
     _, tracker, _, model = build_pipeline()  # as the nodes build them, default parameters
@@ -126,35 +128,34 @@ def main() -> int:
     except ImportError:
         pass
     now = [0.0]
-    inp = ForceInput(SafetyLayer(8.9, 1000.0, 0.01), WorkspaceMapping(1.5, (0.03, 0.0, 0.0)),
-                     'local_model')
-    inp.safety.start(0.0)
+    mapping = WorkspaceMapping(1.5, (0.03, 0.0, 0.0))
+
+    def driver_input(mode: str) -> ForceInput:
+        """The driver's force input over a compiled loop's buffers (the loop is not started:
+        only the Python side of a message is timed)."""
+        loop = NativeServoLoop(PalpationScript.from_yaml(config_file('palpation.yaml')),
+                               mapping, mode=mode)
+        loop.safety.start(0.0)
+        return ForceInput(loop.safety, mapping, loop.renderer, mode)
+    inp = driver_input('local_model')
     # every message answers a recorded pose 1 ms old
     msgs = [deserialize_message(r, JointState) for r in raw_lm]
-
-    fast = hasattr(inp, 'model_values')  # the driver's path since the flat-values handler
 
     def on_lm(msg, i=[0]):  # what FalconDriver._on_local_model does with a message
         i[0] += 1
         now[0] = i[0] * 1e-3
         inp.on_pose(i[0], now[0] - 1e-3)
-        if fast:
-            inp.model_values(msg.position, i[0], 'tissue', now[0])
-        else:
-            inp.model(LocalModel.from_values(msg.position), i[0], 'tissue', now[0])
+        inp.model_values(msg.position, i[0], 'tissue', now[0])
     rows.append(('driver: servo_cf_local handler body', timed(on_lm, msgs)))
     rows.append(('driver: servo_cf handler body (local mode)', timed(
         lambda _: inp.command((0.1, 0.2, 0.3), 1, 'tissue', now[0]), lms)))
     models = [LocalModel.from_values(v) for v in lms]
-    r = LocalModelRenderer()
-    rows.append(('driver: LocalModelRenderer.offer', timed(lambda m: r.offer(m), models)))
-    if hasattr(r, 'offer_values'):
-        rows.append(('driver: LocalModelRenderer.offer_values', timed(
-            lambda v: r.offer_values(v, 0.0, checked=True), msgs and [m.position for m in msgs])))
+    r = inp.renderer
+    rows.append(('driver: NativeRenderer.offer_values', timed(
+        lambda v: r.offer_values(v, 0.0, checked=True), [m.position for m in msgs])))
     rows.append(('driver: LocalModel.check', timed(lambda m: m.check(), models)))
     rows.append(('driver: LocalModel.from_values', timed(LocalModel.from_values, lms)))
-    zi = ForceInput(SafetyLayer(8.9, 1000.0, 0.01), WorkspaceMapping(1.5, (0.03, 0.0, 0.0)), 'zoh')
-    zi.safety.start(0.0)
+    zi = driver_input('zoh')
 
     def on_cmd(_, i=[0]):
         i[0] += 1

@@ -1,4 +1,4 @@
-"""Servo loop under load (issue 32): busy processes beside the haptic graph, every tick traced.
+"""Servo loop under load: busy processes beside the haptic graph, every tick traced.
 
 For each configuration — ``sim`` (one process: driver, contact detector, force server, recorder;
 the visualizer in its own process) and ``launch`` (every node a process, with the recorder), the
@@ -18,7 +18,7 @@ thread). Prints the table and writes
 docs/measurements/servo_load.md (``--page``).
 
 Usage: ``python bench/bench_servo_load.py [--duration 20] [--busy 8] [--quiet]
-[--configs sim:50,sim:0,launch:50,launch:0,sim:50:10] [--loops native,python]``
+[--configs sim:50,sim:0,launch:50,launch:0,sim:50:10] [--loops auto,native]``
 (``KIND:SERVO_PRIORITY[:GRAPH_PRIORITY]``: a graph priority runs the whole graph under
 ``chrt -f``)
 """
@@ -261,7 +261,7 @@ def main() -> int:
                          "native_process; default auto, the driver's default)")
     ap.add_argument('--view', action='store_true',
                     help='the browser view too: the web_view node and a headless chromium on its '
-                         'page (issue 32 measures with the recorder and the view running)')
+                         'page (the loop measured with the recorder and the view running)')
     ap.add_argument('--force-mode', default='', choices=('', 'local_model', 'zoh'),
                     help="the driver's force_mode (default: its default, local_model; zoh: the "
                          "zero-order hold of the force server's commands)")

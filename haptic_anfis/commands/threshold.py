@@ -15,6 +15,7 @@ it.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import math
 import sys
@@ -69,7 +70,9 @@ def run(args: argparse.Namespace) -> int:
         if verbose:
             print(f'trial {n:3d}: {100 * delta:6.1f} % stiffer: '
                   f'{"correct" if correct else "wrong"}', flush=True)
-    res = run_threshold(press, choose, seed=args.seed, on_trial=said)
+    # the real device's servo process holds it for the whole series (zero force on exit)
+    with press if hasattr(press, '__enter__') else contextlib.nullcontext():
+        res = run_threshold(press, choose, seed=args.seed, on_trial=said)
     res.update(device=device, trainee_id=args.trainee_id)
     if args.backend == 'sim':
         res['observer_threshold_pct'] = args.observer
@@ -97,18 +100,16 @@ def _simulated(args):
 def _falcon(args):
     """Presses on a Novint Falcon; the trainee answers 1 or 2 on the terminal."""
     from ..device.falcon import WorkspaceMapping
+    from ..device.stiffness_press import DevicePresses
     from ..device.falcon_usb import FalconUSB, import_ftdi
-    from ..device.stiffness_press import device_press
     if not (math.isfinite(args.press_time) and args.press_time > 0):
         raise ValueError(f'--press-time: expected > 0 s, got {args.press_time}')
     import_ftdi()
-    dev = FalconUSB()
     mapping = WorkspaceMapping()
-    surface = mapping.offset[0]   # the plane through the workspace's centre
-
-    def press(k: float):
-        input('press ENTER, then press the grip down into the spring and let it back up... ')
-        return device_press(dev, k, surface, args.press_time, mapping)
+    # the plane through the workspace's centre
+    presses = DevicePresses(FalconUSB, mapping.offset[0], args.press_time, mapping,
+                            before=lambda: input('press ENTER, then press the grip down into '
+                                                 'the spring and let it back up... '))
 
     def choose(a, b) -> int:
         while True:
@@ -116,4 +117,4 @@ def _falcon(args):
             if got in ('1', '2'):
                 return int(got) - 1
             print(f'expected 1 or 2, got {got!r}', file=sys.stderr)
-    return press, choose, 'falcon'
+    return presses, choose, 'falcon'

@@ -1,7 +1,9 @@
-"""The haptic device side, pure Python (no ROS): safety layer, device interface, simulated Falcon
+"""The haptic device side (no ROS): the compiled servo tick, device interface, simulated Falcon
 with a scripted virtual hand, servo-loop timing statistics.
 
-- :class:`SafetyLayer`: clamp, force-rate limit, watchdog, command validation.
+- :mod:`.native_tick` / :mod:`.servo_native`: the servo tick of every backend (device, clutch,
+  local model, passivity, the safety rules of :mod:`.safety`), compiled, on its own workers or
+  in a servo process; :mod:`.driver_loops`: the loop a driver runs, from a table.
 - :class:`SimulatedFalcon`: 10 cm workspace, force clamped to ``max_force`` (default
   :data:`RATED_FORCE`, 8.9 N), handle pulled by a mass-spring-damper hand.
 - :class:`PalpationScript`: the hand's scripted pattern (press, strips, circles) from YAML.
@@ -18,9 +20,8 @@ force-scale calibration behind ``haptic-anfis falcon check``).
 """
 from .falcon import RATED_FORCE, Device, DeviceState, HandParams, SimulatedFalcon, WorkspaceMapping
 from .palpation import PalpationScript, dome_height
-from .safety import SafetyLayer, SafetyStats
-from .servo import ServoLoop
+from .safety import SafetyStats
 from .stats import LoopStats
 
-__all__ = ['RATED_FORCE', 'Device', 'DeviceState', 'HandParams', 'LoopStats', 'PalpationScript', 'SafetyLayer',
-           'SafetyStats', 'ServoLoop', 'SimulatedFalcon', 'WorkspaceMapping', 'dome_height']
+__all__ = ['RATED_FORCE', 'Device', 'DeviceState', 'HandParams', 'LoopStats', 'PalpationScript',
+           'SafetyStats', 'SimulatedFalcon', 'WorkspaceMapping', 'dome_height']

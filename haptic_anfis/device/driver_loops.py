@@ -11,10 +11,6 @@ renderer and clutch are the tick's own:
 - ``native_process`` with the real Falcon: the same, the USB I/O in the servo process
   (:mod:`.device_process`).
 
-The Python rules (:class:`~.servo.ServoLoop`, :class:`~.safety.SafetyLayer`,
-:class:`~.buttons.ClutchMark`, :class:`~.local_model.LocalModelRenderer`) run in no driver: they
-are the tests' reference for the compiled tick.
-
 ``p`` is the driver's parameters (``haptic_anfis.nodes.falcon_params.PARAMS`` resolved).
 """
 from __future__ import annotations
@@ -33,7 +29,12 @@ from .falcon_kinematics import GEOMETRY
 from .force_input import ForceInput
 from .local_model import STATUS_NAMES
 from .loop_health import LoopHealth
-from .servo_native import NativeClutch, NativeRenderer, NativeSafety, NativeServoLoop
+from .palpation import PalpationScript
+from .safety import OK
+from .servo_native import NativeServoLoop
+from .stamps import STALE
+from .start_gate import HeldScript
+from .tick_views import NativeClutch, NativeSafety
 from .trace import TickTrace, save_trace
 
 
@@ -51,10 +52,40 @@ class DriverLoop:
     #: ``update(buttons, mapped, now) -> (tissue position, events)``, ``held``
     clutch: NativeClutch
     input: ForceInput
+    #: monotonic time [s] the first force command / model was taken (None: none yet); the
+    #: measurement window (trace, model counts, latencies) opens there
+    first_command: float | None = None
+    #: the process's CPU time [s] at :attr:`first_command`
+    cpu0: float = 0.0
+
+    def arrived(self, why: str, stamp_ns: int, reset_stats: bool = False,
+                release_gate: Callable[[], bool] | None = None) -> None:
+        """A command (zoh) / model (local_model) answering the pose ``stamp_ns`` was taken or
+        refused (``why``). Answers taken or refused as stale count in the latencies (so the
+        figures are not cut at the age limit) from the first one taken on, which opens the
+        window (``reset_stats``: the loop statistics too). The first answer (late or not)
+        releases the held simulated hand, when ``release_gate`` (if given) allows it."""
+        answered = why == OK or why.endswith(STALE)
+        script = getattr(self.device, 'script', None)
+        if isinstance(script, HeldScript) and self.servo.held and answered \
+                and (release_gate is None or release_gate()):
+            script.release()
+            self.servo.release()
+        if why == OK and self.first_command is None:
+            self.first_command = time.monotonic()
+            self.cpu0 = time.process_time()
+            self.input.reset_stats()
+            if self.servo.trace is not None:
+                self.servo.trace.clear()
+            if reset_stats:
+                self.servo.stats.reset()
+        if self.first_command is not None and answered:
+            self.servo.stats.latency((time.time_ns() - stamp_ns) * 1e-9)
 
     def summary(self, health: LoopHealth) -> dict:
-        """The loop's statistics (:meth:`~.stats.LoopStats.summary`), the safety layer's and
-        the force input's counts, and ``health``'s check windows."""
+        """The loop's statistics (:meth:`~.tick_views.NativeLoopStats.summary`), the safety
+        layer's and the force input's counts, ``health``'s check windows, and the process's CPU
+        (all its threads) over the wall time since the first command [%]."""
         s = self.servo.stats.summary()
         ss = self.safety.stats
         s.update(commands=ss.commands, rejected_nonfinite=ss.rejected_nonfinite,
@@ -65,6 +96,10 @@ class DriverLoop:
                  loop_windows_behind=health.behind, **self.input.summary())
         s.update(trace_rows_lost=self.servo.trace_lost,
                  bridge_rate_hz=self.servo.bridge_gaps.summary()['rate_hz'])
+        if self.first_command is not None:
+            wall = time.monotonic() - self.first_command
+            s['process_cpu_pct'] = (round(100.0 * (time.process_time() - self.cpu0) / wall, 1)
+                                    if wall > 0 else None)
         return s
 
     def save_trace(self, path: str, mapping: WorkspaceMapping, p: dict, frame_id: str,
@@ -95,6 +130,23 @@ class Hooks:
     on_state: Callable
     on_disconnect: Callable[[str], None] | None = None
     on_reconnect: Callable[[str], None] | None = None
+
+
+def hand_script(p: dict, default_script: str) -> tuple[HeldScript | None, str]:
+    """(the simulated hand's script, held until the first force command when
+    ``hold_until_force``, or None with the real Falcon; what the start's log line says of the
+    device). ``default_script``: the palpation YAML when ``palpation_script`` is ''.
+
+    Raises:
+        ValueError: a script file that cannot be read (naming the file).
+    """
+    if p['backend'] == 'falcon':
+        return None, (f"Falcon {p['device_serial'] or 'index ' + str(p['device_index'])}, "
+                      f"homing {'on' if p['homing'] else 'off'}, gravity compensation "
+                      f"{p['gravity_mass'] if p['gravity_compensation'] else 'off'}")
+    path = p['palpation_script'] or default_script
+    script = HeldScript(PalpationScript.from_yaml(path), held=p['hold_until_force'])
+    return script, f'script {path} ({script.duration:.1f} s)'
 
 
 def jsonable(d: dict) -> dict:
@@ -130,13 +182,6 @@ def _hand(p: dict) -> HandParams:
     return HandParams(p['hand_mass'], p['hand_stiffness'], p['hand_damping'])
 
 
-def _input(p: dict, mapping: WorkspaceMapping, safety: NativeSafety,
-           renderer: NativeRenderer) -> ForceInput:
-    return ForceInput(safety, mapping, p['force_mode'], p['max_stiffness'],
-                      p['model_validity_time'], p['model_validity_radius'], 1.0 / p['rate'],
-                      approach_radius=p['model_approach_radius'], renderer=renderer)
-
-
 def _native(p: dict, mapping: WorkspaceMapping, frame_id: str, script, hooks: Hooks,
             **kw) -> DriverLoop:
     """The compiled, GIL-free servo loop (:mod:`.servo_native`): with the simulated Falcon
@@ -153,7 +198,7 @@ def _native(p: dict, mapping: WorkspaceMapping, frame_id: str, script, hooks: Ho
         blend_time=p['model_blend_time'], passivity_window=p['passivity_window'], **kw)
     # the clutch / mark rules and the renderer run in the compiled tick
     return DriverLoop(loop, loop.device if script is None else loop, loop.safety, loop.clutch,
-                      _input(p, mapping, loop.safety, renderer=loop.renderer))
+                      ForceInput(loop.safety, mapping, loop.renderer, p['force_mode']))
 
 
 def sim_native(p: dict, mapping: WorkspaceMapping, frame_id: str, script, hooks: Hooks

@@ -28,7 +28,7 @@ from pathlib import Path
 from typing import Callable
 
 from .falcon_kinematics import GEOMETRY, G
-from .falcon_usb import FalconError, FalconUSB
+from .falcon_usb import FalconError, FalconUSB, PyFtdiTransport
 from ..errors import HapticAnfisError
 
 Say = Callable[[str], None]
@@ -95,7 +95,6 @@ def run_check(dev: FalconUSB, say: Say = print, move_seconds: float = 5.0,
         step = 1
         say('1. find: looking for a Falcon on USB (0403:cb48) ...')
         if dev.transport is None:
-            from .falcon_usb import PyFtdiTransport
             dev.transport = PyFtdiTransport()
         found = dev.transport.list_devices()
         if not found:

@@ -2,7 +2,8 @@
 
 :class:`FalconUSB` implements the same :class:`~haptic_anfis.device.falcon.Device` interface as
 :class:`~haptic_anfis.device.falcon.SimulatedFalcon` (device frame, metres, newtons), so the
-driver runs it through the same :class:`~haptic_anfis.device.SafetyLayer`. Packets are in
+driver runs it around the same compiled servo tick, in a servo process of its own
+(:mod:`.device_process`). Packets are in
 :mod:`.falcon_protocol`, the delta-robot kinematics in :mod:`.falcon_kinematics`.
 
 The USB library (``pyftdi``, pure Python over ``pyusb``/libusb) is optional: it is imported only

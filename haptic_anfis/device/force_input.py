@@ -1,27 +1,53 @@
 """What the driver does with the force server's messages, ROS-free: stamp-age check, frame and
 finiteness checks, then either the zero-order hold (``mode='zoh'``: the commanded force is the
 safety layer's target until the next one) or the local force model (``mode='local_model'``: the
-model is evaluated at every servo tick's position, :mod:`.local_model`).
+compiled tick evaluates the model at every servo tick's position, :mod:`.local_model`).
 
-Threads: :meth:`ForceInput.on_pose` and :meth:`ForceInput.render` run on the servo thread (in that
-order, once per tick); :meth:`ForceInput.command` and :meth:`ForceInput.model` on the thread that
-receives messages. Forces and positions arrive in the tissue frame; :class:`WorkspaceMapping`
-takes them to the device frame for the safety layer.
+Threads: :meth:`ForceInput.on_pose` runs where the driver publishes its pose;
+:meth:`ForceInput.command` and :meth:`ForceInput.model` on the thread that receives messages.
+Forces and positions arrive in the tissue frame; :class:`WorkspaceMapping` takes them to the
+device frame for the safety layer.
 """
 from __future__ import annotations
 
 import math
+from typing import Protocol
 
 from ..interfaces import LM_DEPTH
-from .buttons import ClutchMark
-from .falcon import DeviceState, WorkspaceMapping
-from .local_model import (APPROACH_RADIUS, FALCON_MAX_STIFFNESS, LocalModel, LocalModelRenderer,
-                          check_values, tissue_stiffness_limit)
-from .safety import OK, REJECTED_FRAME, SafetyLayer
+from .falcon import WorkspaceMapping
+from .local_model import LocalModel, check_values
+from .safety import OK, REJECTED_FRAME
 from .stamps import OK as STAMP_OK
 from .stamps import StampBook
 
 MODES = ('zoh', 'local_model')
+
+
+class Safety(Protocol):
+    """What :class:`ForceInput` asks of a safety layer (device frame):
+    :class:`~.tick_views.NativeSafety`'s interface."""
+    frame_id: str
+    watchdog_timeout: float
+
+    def command(self, force, now: float, frame_id: str | None = None,
+                count: bool = True) -> str: ...
+
+    def reject(self, why: str) -> None: ...
+
+
+class Renderer(Protocol):
+    """What :class:`ForceInput` asks of a local-model renderer (tissue frame):
+    :class:`~.tick_views.NativeRenderer`'s interface."""
+    time: float | None
+    max_age: float
+
+    def offer_values(self, v, time: float, checked: bool = False) -> None: ...
+
+    def clear(self) -> None: ...
+
+    def count_rejected(self) -> None: ...
+
+    def reset_stats(self) -> None: ...
 
 
 class ForceInput:
@@ -30,37 +56,18 @@ class ForceInput:
     Args:
         safety: the device's safety layer (device frame).
         mapping: tissue <-> device frame.
+        renderer: the renderer models go to (tissue frame; the compiled tick's,
+            :class:`~.tick_views.NativeRenderer`).
         mode: ``'zoh'`` or ``'local_model'``.
-        max_stiffness: device-frame stiffness bound [N/m] (default: the Falcon's, see
-            :data:`~.local_model.FALCON_MAX_STIFFNESS`).
-        validity_time, validity_radius: local model expiry [s], [m] (tissue frame).
-        period: servo period [s] (a model no older than 1.5 periods is "fresh").
         stamps: the book of the driver's pose stamps (a new one by default).
-        clutch: the grip buttons' state machine (:class:`.buttons.ClutchMark`), or None: its
-            offset moves the rendered position and its gain scales every force (zero while the
-            clutch is held, no jump after it).
-        approach_radius: how far [m] along an approach plane from its point it renders
-            (:class:`~.local_model.LocalModelRenderer`).
-        renderer: the renderer models go to (the compiled tick's,
-            :class:`~.servo_native.NativeRenderer`), or None: a
-            :class:`~.local_model.LocalModelRenderer` built from the arguments above.
     """
 
-    def __init__(self, safety: SafetyLayer, mapping: WorkspaceMapping, mode: str = 'local_model',
-                 max_stiffness: float = FALCON_MAX_STIFFNESS, validity_time: float = 0.05,
-                 validity_radius: float = 0.005, period: float = 0.001,
-                 stamps: StampBook | None = None, clutch: ClutchMark | None = None,
-                 approach_radius: float = APPROACH_RADIUS,
-                 renderer: LocalModelRenderer | None = None) -> None:
+    def __init__(self, safety: Safety, mapping: WorkspaceMapping, renderer: Renderer,
+                 mode: str = 'local_model', stamps: StampBook | None = None) -> None:
         if mode not in MODES:
             raise ValueError(f'mode: expected one of {MODES}, got {mode!r}')
-        self.safety, self.mapping, self.mode = safety, mapping, mode
-        self.clutch = clutch
+        self.safety, self.mapping, self.renderer, self.mode = safety, mapping, renderer, mode
         self.stamps = stamps if stamps is not None else StampBook()
-        self.renderer = renderer if renderer is not None else LocalModelRenderer(
-            tissue_stiffness_limit(max_stiffness, mapping.force_scale, mapping.scale),
-            validity_time, validity_radius, fresh_age=1.5 * period,
-            approach_radius=approach_radius)
         self.last_in_contact = False
         self.commands_received = self.models_received = 0
 
@@ -68,34 +75,14 @@ class ForceInput:
     def max_age(self) -> float:
         """A command or model older than this [s] at arrival is refused: the command rule
         (watchdog timeout) for the zero-order hold; for a local model the age up to which the
-        renderer (the one in use: the compiled tick's holds a model) still renders one, since
-        refusing it would only leave an older one. With the compiled tick's hold, refusing at
-        the validity time left the held model to expire while younger ones, late beside a busy
-        machine, came in (923 refused in an hour of sim without real-time priority)."""
+        renderer still renders one (its hold time), since refusing a younger one than the
+        model it holds would only leave the older one on the hand."""
         return self.safety.watchdog_timeout if self.mode == 'zoh' else self.renderer.max_age
 
     # -- servo thread -----------------------------------------------------------------------
     def on_pose(self, stamp_ns: int, now: float) -> None:
         """The driver published a pose stamped ``stamp_ns`` at monotonic ``now``."""
         self.stamps.record(stamp_ns, now)
-
-    def render(self, state: DeviceState, now: float) -> int:
-        """Local-model mode: offer the safety layer the model's force at this tick's position;
-        returns the status code (-1 in zoh mode). Expired / no model: nothing is offered, so the
-        safety layer holds the last force and its watchdog ramps it to zero."""
-        if self.mode != 'local_model':
-            return -1
-        m, c = self.mapping, self.clutch
-        p = m.to_tissue(state.position)
-        if c is not None:
-            p = c.tissue(p)
-        f, status = self.renderer.render(p, now)
-        if f is not None:
-            if c is not None:
-                g = c.gain(f, now)
-                f = (g * f[0], g * f[1], g * f[2])
-            self.safety.command(m.force_to_device(f), now, count=False)
-        return status
 
     # -- receiving thread ---------------------------------------------------------------------
     def _stamp(self, stamp_ns: int, now: float) -> tuple[str, float]:
@@ -121,9 +108,6 @@ class ForceInput:
         why, t_pose = self._stamp(stamp_ns, now)
         if why != STAMP_OK:
             return f'rejected: stamp {why}'
-        if self.clutch is not None:  # 0 while clutched, then no jump
-            g = self.clutch.gain(force, now)
-            force = tuple(g * float(v) for v in force)
         why = self.safety.command(self.mapping.force_to_device(force), t_pose, frame_id)
         if why == OK:
             self.last_in_contact = any(v != 0.0 for v in force)
@@ -142,7 +126,7 @@ class ForceInput:
     def _refuse(self, exc: ValueError) -> str:
         """A malformed / non-finite model: zero force at once, whatever its stamp."""
         self.renderer.clear()
-        self.renderer.stats.rejected += 1
+        self.renderer.count_rejected()
         self.safety.reject(f'rejected: {exc}')
         return f'rejected: {exc}'
 

@@ -9,7 +9,7 @@ servo loop evaluates it at the current probe position every tick::
 
     F(p) = F0 + K (p - p0)                                   (3,) N, p (3,) m, K (3, 3) N/m
 
-with these rules (:class:`LocalModelRenderer`):
+with these rules (the compiled servo tick renders them, :mod:`.native_tick`):
 
 - Depth and leaving contact. The model carries the contact's surface point ``c0``, outward normal
   ``n`` and indentation direction ``d``; the depth at ``p`` is measured along ``d`` to the tangent
@@ -57,14 +57,14 @@ with these rules (:class:`LocalModelRenderer`):
   approach plane: only within ``approach_radius``, above) is still rendered, with the depth
   followed exactly and the offset across the indentation direction held at the radius
   (:func:`hold_offset`): the force stays the tissue's at the probe's depth, a little behind along
-  the surface, where expiring it dropped the force to 0 N mid-press and brought it back with a
+  the surface; expiring it would drop the force to 0 N mid-press and bring it back with a
   jolt when the next model came. Counted (``ticks_beyond``).
 
 The message (``falcon/servo_cf_local``, layout :data:`haptic_anfis.interfaces.LOCAL_MODEL_FIELDS`)
 is encoded and decoded here, beside :class:`LocalModel`: :func:`model_values` /
 :meth:`LocalModel.values` (encode), :func:`no_model` (the "no contact" model),
 :meth:`LocalModel.from_values` (decode), :func:`check_values` (validate); the driver renders the
-flat values directly (:meth:`LocalModelRenderer.offer_values`).
+flat values directly (:meth:`~.tick_views.NativeRenderer.offer_values`).
 
 Times are seconds on the caller's monotonic clock; lengths metres; forces newtons; tissue frame.
 """
@@ -112,7 +112,7 @@ HOLD_RADIUS = 0.04
 #: the switch, at most this, not at once (native_tick._render_blended). Models a millisecond
 #: apart disagree by a hair; one that comes after the graph was late disagrees with the old
 #: model's extrapolation by tenths of a newton, and a step of 0.2 N already leaves the 50 ms
-#: mean by the issue's 0.1 N (a ripple window); ramped over 20 ms, steps up to ~0.3 N make none.
+#: mean by 0.1 N (a ripple window); ramped over 20 ms, steps up to ~0.3 N make none.
 #: Chosen by replaying recorded traces: the quiet error stays within its 0.2 % target
 #: (docs/servo_loop.md, *Parameters chosen by measurement*).
 MODEL_BLEND_TIME = 0.02
@@ -653,150 +653,6 @@ class RenderStats:
     models: int = 0
     rejected: int = 0
     stiffness_clamped: int = 0
-
-
-class LocalModelRenderer:
-    """Evaluates the newest accepted :class:`LocalModel` at the probe position every servo tick.
-
-    ``offer`` runs on the thread that receives models, ``render`` on the servo thread; the model
-    is swapped in as one reference (atomic under the GIL).
-
-    Args:
-        max_stiffness: tissue-frame stiffness bound [N/m] (:func:`tissue_stiffness_limit`).
-        validity_time: a model older than this [s] (from the time of its pose) is expired.
-        validity_radius: a probe further than this [m] from the model's p0 is rendered with its
-            offset across the depth gradient held at it (:func:`hold_offset`).
-        approach_radius: an approach model (depth 0: the plane ahead of a free probe) renders
-            zero with the probe further than this [m] along the plane from its point
-            (:func:`across_beyond`; the module doc).
-        fresh_age: a model no older than this [s] counts as fresh (default 1.5 servo periods at
-            1 kHz: it answers the previous tick's pose), older and valid as extrapolated.
-    """
-
-    def __init__(self, max_stiffness: float = FALCON_MAX_STIFFNESS / 1.5,
-                 validity_time: float = 0.05, validity_radius: float = 0.005,
-                 fresh_age: float = 0.0015, approach_radius: float = APPROACH_RADIUS) -> None:
-        for name, v in (('max_stiffness', max_stiffness), ('validity_time', validity_time),
-                        ('validity_radius', validity_radius), ('fresh_age', fresh_age),
-                        ('approach_radius', approach_radius)):
-            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
-                raise ValueError(f'{name}: expected a finite number > 0, got {v!r}')
-        self.max_stiffness = float(max_stiffness)
-        self.validity_time = float(validity_time)
-        self.validity_radius = float(validity_radius)
-        self.approach_radius = float(approach_radius)
-        self.fresh_age = float(fresh_age)
-        self.stats = RenderStats()
-        self._m: tuple | None = None  # the prepared model (plain floats for the servo thread)
-        self._values = None  # the current model's flat values
-        self.time: float | None = None  # the current model's time [s] (its pose's)
-
-    @property
-    def max_age(self) -> float:
-        """The oldest [s] a model is still rendered: its validity time (this renderer holds
-        none)."""
-        return self.validity_time
-
-    def reset_stats(self) -> None:
-        self.stats = RenderStats()
-
-    def clear(self) -> None:
-        """Forget the model (the next ticks render nothing: status NONE)."""
-        self._m = None
-        self._values = None
-        self.time = None
-
-    def offer(self, m: LocalModel, checked: bool = False, time: float | None = None) -> None:
-        """Accept ``m`` as the newest model (:meth:`offer_values` of ``m.values()``); ``time``:
-        the model's time [s] if not ``m.time``.
-
-        Raises:
-            ValueError: a non-finite or malformed field (the model is not taken; the caller
-            decides the safe output — zero force).
-        """
-        try:
-            v = m.values()
-        except ValueError:
-            self.stats.rejected += 1
-            raise
-        self.offer_values(v, m.time if time is None else time, checked)
-
-    def offer_values(self, v, time: float, checked: bool = False) -> None:
-        """Accept the flat values ``v`` (26: :meth:`LocalModel.values`, a message's
-        ``position``) as the newest model, whose time is ``time`` [s] (the driver: the time of
-        its pose it answers; kept in :attr:`time`): checked (:func:`check_values`; unless
-        ``checked``: the caller did), K conditioned (counted when the guard changed it by more
-        than 1e-6 N/m). Plain floats throughout: this runs once per received model on the thread
-        that shares the servo thread's GIL.
-
-        Raises:
-            ValueError: a non-finite or malformed field (the model is not taken).
-        """
-        f0, p0, k, g, d, depth0, zero, contact = accept_values(v, self.max_stiffness, self.stats,
-                                                               checked)
-        t = float(time)
-        self._m = (f0, p0, (k[0:3], k[3:6], k[6:9]), g, d, depth0, zero, t, contact)
-        self._values = v
-        self.time = t
-        self.stats.models += 1
-
-    @property
-    def model(self) -> LocalModel | None:
-        """The current model (as received; its ``time`` is :attr:`time`), or None."""
-        if self._m is None:
-            return None
-        return LocalModel.from_values(self._values, self.time)
-
-    def render(self, p, now: float) -> tuple[tuple[float, float, float] | None, int]:
-        """(force (3,) [N] or None, status) for the probe at ``p`` (3,) [m] at time ``now``.
-
-        Status FRESH / EXTRAPOLATED: the model's force at p (beyond the validity radius: at p with
-        its offset across the depth gradient held at the radius); FREE: zero (the model says no
-        contact, p is out of the surface along the local normal, or an approach model's point is
-        more than ``approach_radius`` away across the direction); EXPIRED (too old) and
-        NONE (no model yet): None — the caller holds the last force and its watchdog ramps it.
-        """
-        m = self._m
-        st = self.stats
-        if m is None:
-            st.ticks_none += 1
-            return None, NONE
-        f0, p0, k, g, d, depth0, zero_surface, t0, contact = m
-        age = now - t0
-        px, py, pz = p
-        ex, ey, ez = px - p0[0], py - p0[1], pz - p0[2]
-        if age > self.validity_time:
-            st.ticks_expired += 1
-            return None, EXPIRED
-        depth = depth0 + g[0] * ex + g[1] * ey + g[2] * ez
-        if not contact or depth <= 0.0:  # out along the local normal: zero at once, any distance
-            st.ticks_free += 1
-            return (0.0, 0.0, 0.0), FREE
-        if depth0 == 0.0 and across_beyond(g[0], g[1], g[2], ex, ey, ez, self.approach_radius):
-            st.ticks_free += 1   # an approach plane, away from its point (module doc)
-            return (0.0, 0.0, 0.0), FREE
-        if ex * ex + ey * ey + ez * ez > self.validity_radius ** 2:
-            st.ticks_beyond += 1
-            ex, ey, ez = hold_offset(g[0], g[1], g[2], ex, ey, ez, self.validity_radius)
-        fresh = age <= self.fresh_age
-        if fresh:
-            st.ticks_fresh += 1
-        else:
-            st.ticks_extrapolated += 1
-        if depth0 == 0.0:
-            st.ticks_approach += 1
-        k0, k1, k2 = k
-        fx = f0[0] + k0[0] * ex + k0[1] * ey + k0[2] * ez
-        fy = f0[1] + k1[0] * ex + k1[1] * ey + k1[2] * ez
-        fz = f0[2] + k2[0] * ex + k2[1] * ey + k2[2] * ez
-        if zero_surface and depth < depth0:
-            # L(p_s), p_s = p - depth d on the tangent plane: subtract it with weight (1 - s)^2.
-            sx, sy, sz = ex - depth * d[0], ey - depth * d[1], ez - depth * d[2]
-            w = (1.0 - depth / depth0) ** 2
-            fx -= w * (f0[0] + k0[0] * sx + k0[1] * sy + k0[2] * sz)
-            fy -= w * (f0[1] + k1[0] * sx + k1[1] * sy + k1[2] * sz)
-            fz -= w * (f0[2] + k2[0] * sx + k2[1] * sy + k2[2] * sz)
-        return (fx, fy, fz), (FRESH if fresh else EXTRAPOLATED)
 
 
 def force_and_jacobian(model, x: float, y: float, z: float, depth: float

@@ -9,7 +9,7 @@ It sleeps to absolute 1 ms deadlines with ``clock_nanosleep`` and reads the cloc
 
 1. Read the device: the simulated Falcon's handle (mass-spring-damper hand pulled to the scripted
    target, semi-implicit Euler, at most ``dt_max`` steps; the script sampled into arrays).
-2. The clutch / mark buttons (:class:`haptic_anfis.device.buttons.ClutchMark`'s rules).
+2. The clutch / mark buttons (:mod:`.buttons`' rules; ``ClutchMark`` in the tests' oracle).
 3. Render: the newest local model (:mod:`.local_model`'s rules: depth along the indentation
    direction, onset correction, expiry by age, the offset across held beyond the radius) or the
    newest force command (zero-order hold), in the device frame. A model older than its validity
@@ -34,14 +34,14 @@ It sleeps to absolute 1 ms deadlines with ``clock_nanosleep`` and reads the cloc
    ``K <= 2 (b - |B|) / T`` with ``b`` the device's damping and ``B`` the rendered damping
    (here 0) — Colgate & Schenkel 1997 (J. Robotic Systems 14(1):37-47), the discrete-time
    passivity condition of a virtual wall, ``b > K T / 2 + |B|`` — with ``T`` the energy-weighted
-   mean of the last ``passivity_window`` (50 ms) of periods (:func:`_passivity_period`; it was
-   the last gap alone, which turned one late tick into a one-tick force step; now one late
-   tick lowers the stiffness less, at once, and it comes back over about the window). Optional
+   mean of the last ``passivity_window`` (50 ms) of periods (:func:`_passivity_period`: one
+   late tick lowers the stiffness a little, at once, and it comes back over about the window,
+   where the last gap alone would turn one late tick into a one-tick force step). Optional
    passivity observer / controller (Hannaford & Ryu 2002, IEEE T-RO 18(1):1-10): the energy the
    rendered port put out so far; when it turns negative a damping force takes it back.
-5. Safety (:class:`haptic_anfis.device.safety.SafetyLayer`'s rules): non-finite -> zero at once,
-   watchdog on the command age (zero at once after a stall longer than the watchdog), rate limit,
-   clamp to ``max_force``.
+5. Safety (:mod:`.safety`'s rules; ``SafetyLayer`` in the tests' oracle): non-finite -> zero at
+   once, watchdog on the command age (zero at once after a stall longer than the watchdog), rate
+   limit, clamp to ``max_force``.
 6. Write the device, the tick's trace row, the published state (a seqlock), the counters.
 
 Exchange with Python (:mod:`.servo_native`) is through numpy arrays only, passed as a few named
@@ -192,7 +192,7 @@ _M0 = S['m_' + _flat_names(MODEL_SLOT)[1]]
 CMD = _index('CMD', 'seq f0 f1 f2 t')
 CMD_LEN = len(CMD)
 #: control (int64): stop, release (the held script), fault generation (zero at once),
-#: enable generation and enabled (SafetyLayer.start / stop)
+#: enable generation and enabled (NativeSafety.start / stop)
 CTL = _index('CTL', 'stop release fault enable_gen enabled external')
 #: external hand target (float64 seqlock; ``ctl[external]`` = 1): seq, its time [s], target (3,)
 #: device frame [m], its velocity (3,) [m/s], buttons 0 and 1 (a script only Python can play).
@@ -347,7 +347,7 @@ def _device_write(cfg, st, fx, fy, fz):
 
 @nb.njit(nogil=True, cache=True)
 def _clutch(st, cnt, b0, b1, m0, m1, m2):
-    """ClutchMark.update: the tissue position (3,) for ``m`` = mapped device position; counts
+    """The clutch / mark update: the tissue position (3,) for ``m`` = mapped device position; counts
     clutches and marks (a mark event: ``cnt[marks]`` goes up)."""
     clutch = b0 != 0
     mark = b1 != 0
@@ -374,7 +374,7 @@ def _clutch(st, cnt, b0, b1, m0, m1, m2):
 
 @nb.njit(nogil=True, cache=True)
 def _gain(cfg, st, nonzero, now):
-    """ClutchMark.gain for this tick's force (``nonzero``: it is not exactly zero)."""
+    """The clutch's gain for this tick's force (``nonzero``: it is not exactly zero)."""
     if st[S.held] > 0.5:
         return 0.0
     if st[S.wait_zero] > 0.5:
@@ -407,7 +407,7 @@ def _safety_reset(st, now, enabled):
 
 @nb.njit(nogil=True, cache=True)
 def _command(st, fx, fy, fz, t):
-    """SafetyLayer.command for a finite force (device frame) whose time is ``t``."""
+    """Take a finite force command (device frame) whose time is ``t``."""
     if st[S.enabled] < 0.5:
         return
     lc = st[S.last_cmd]
@@ -433,7 +433,7 @@ def _fault(st, cnt, count=True):
 
 @nb.njit(nogil=True, cache=True)
 def _safety_output(cfg, st, cnt, now):
-    """SafetyLayer.output: the force to apply now (device frame)."""
+    """The safety rules' output: the force to apply now (device frame)."""
     if st[S.enabled] < 0.5:
         return 0.0, 0.0, 0.0
     last = st[S.last_out]

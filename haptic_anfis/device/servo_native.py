@@ -8,10 +8,9 @@ recorder, garbage collector, a view) can delay a tick. A second,
 ordinary Python thread, the *bridge*, does what needs the interpreter, at whatever pace it gets:
 it reads the newest published tick (a seqlock), hands it to ``on_state`` (the driver publishes
 the pose and takes the newest command / local model from its readers), and drains the tick
-trace. Commands and models go the other way through :class:`NativeSafety` and
-:class:`NativeRenderer`, which keep :class:`~.safety.SafetyLayer`'s and
-:class:`~.local_model.LocalModelRenderer`'s interfaces (so :class:`~.force_input.ForceInput`
-and the driver use them unchanged) and write the loop's input buffers.
+trace. Commands and models go the other way through :class:`~.tick_views.NativeSafety` and
+:class:`~.tick_views.NativeRenderer`, which write the loop's input buffers
+(:mod:`.tick_views`).
 
 A stalled bridge (or a frozen process, short of SIGSTOP) does not stop the ticks: the last model
 is rendered until it expires (``model_validity_time`` from its pose) and the watchdog then ramps
@@ -24,92 +23,34 @@ watchdog zeroes the force whatever the node does (see docs/servo_loop.md).
 """
 from __future__ import annotations
 
+import gc
 import math
+import os
+import signal
 import threading
 import time
 from typing import Callable
 
 import numpy as np
 
-from ..interfaces import field_index
-from . import native_tick as nt
 from . import device_process as dp
-from .buttons import ButtonEvents
-from .falcon import DeviceState, HandParams, WorkspaceMapping
-from .local_model import APPROACH_RADIUS, FALCON_MAX_STIFFNESS, HOLD_RADIUS, MODEL_BLEND_TIME, \
-    PASSIVITY_WINDOW, LocalModelRenderer, RenderStats, accept_values, rotating_mode, skew_vector, \
-    symmetric_part, tissue_stiffness_limit
-from .safety import IGNORED_DISABLED, OK, REJECTED_FRAME, REJECTED_NONFINITE, SafetyLayer, \
-    SafetyStats
-from .stats import LoopStats
-from .trace import TickTrace
+from . import native_tick as nt
 from ..realtime.scheduling import name_thread, schedule_servo_thread, worker_cpus
+from ..realtime.shm import SharedArrays, die_with_parent
+from .falcon import HandParams, WorkspaceMapping
+from .local_model import (APPROACH_RADIUS, FALCON_MAX_STIFFNESS, HOLD_RADIUS, MODEL_BLEND_TIME,
+                          PASSIVITY_WINDOW, tissue_stiffness_limit)
+from .stats import LoopStats
+from .tick_views import (NativeClutch, NativeLoopStats, NativeRenderer, NativeSafety,
+                         NativeState, seq_read, seq_write)
+from .trace import TickTrace
 
-__all__ = ['NativeServoLoop', 'NativeSafety', 'NativeRenderer', 'NativeState', 'NativeClutch',
-           'NativeLoopStats', 'script_arrays', 'spectral_norm_sym', 'FALCON_DAMPING']
+__all__ = ['NativeServoLoop', 'script_arrays', 'FALCON_DAMPING']
 
 #: device damping b [N s/m] the passivity bound assumes: with CHAI3D's Falcon stiffness
 #: (3000 N/m) at T = 1 ms, b > K T / 2 asks 1.5 N s/m; the bound then only bites when a tick is
 #: late (K <= 2 b / T).
 FALCON_DAMPING = 1.5
-
-#: where each field of the model buffer (:data:`~.native_tick.MODEL_SLOT`) sits in its values
-_MODEL_AT = {name: field_index(nt.MODEL_SLOT, name) for name in nt.MODEL_SLOT.names}
-
-
-class NativeState(DeviceState):
-    """A published tick: :class:`DeviceState` plus the tick's wall-clock stamp [ns], its tissue
-    position with the clutch [m], and the tick's monotonic time [s]."""
-
-    def __init__(self, position, velocity, buttons, stamp_ns: int, tissue, t: float):
-        object.__setattr__(self, 'position', position)
-        object.__setattr__(self, 'velocity', velocity)
-        object.__setattr__(self, 'buttons', buttons)
-        object.__setattr__(self, 'stamp_ns', stamp_ns)
-        object.__setattr__(self, 'tissue', tissue)
-        object.__setattr__(self, 't', t)
-
-
-class _SharedArrays:
-    """numpy arrays in anonymous shared memory (``mmap``, MAP_SHARED): a forked servo process
-    and this one see the same bytes. Kept alive as long as this object."""
-
-    def __init__(self) -> None:
-        self._maps: list = []
-
-    def zeros(self, shape, dtype=np.float64) -> np.ndarray:
-        import mmap
-        n = int(np.prod(shape)) * np.dtype(dtype).itemsize
-        m = mmap.mmap(-1, max(n, 8))  # anonymous, shared with children; zero-filled
-        self._maps.append(m)
-        return np.frombuffer(m, dtype=dtype, count=int(np.prod(shape))).reshape(shape)
-
-
-def _die_with_parent(sig: int) -> None:
-    """Linux prctl(PR_SET_PDEATHSIG): the calling process gets ``sig`` when its parent dies."""
-    import ctypes
-    try:
-        ctypes.CDLL(None, use_errno=True).prctl(1, sig, 0, 0, 0)
-    except (OSError, AttributeError):
-        pass
-
-
-def _seq_write(buf: np.ndarray, values) -> None:
-    """Seqlock write from Python: odd, the values, even (one writer per buffer)."""
-    s = buf[0]
-    buf[0] = s + 1.0
-    buf[1:] = values
-    buf[0] = s + 2.0
-
-
-def _seq_read(buf: np.ndarray) -> np.ndarray | None:
-    """A consistent copy of a seqlock buffer the compiled loop writes (None after 100 tries)."""
-    for _ in range(100):
-        s1 = buf[0]
-        c = buf.copy()
-        if s1 % 2.0 == 0.0 and buf[0] == s1 and c[0] == s1:
-            return c
-    return None
 
 
 def script_arrays(script) -> tuple[np.ndarray, np.ndarray, np.ndarray, bool, bool]:
@@ -123,240 +64,6 @@ def script_arrays(script) -> tuple[np.ndarray, np.ndarray, np.ndarray, bool, boo
     buttons = (np.zeros((0, 2), dtype=np.int64) if bs is None or not np.any(bs)
                else np.ascontiguousarray(bs, dtype=np.int64).reshape(-1, 2))
     return times, points, buttons, bool(inner.loop), held
-
-
-def spectral_norm_sym(k) -> float:
-    """The largest |eigenvalue| of the symmetric 3 x 3 ``k`` (9 values row-major) [N/m], by the
-    trigonometric closed form (Smith 1961; plain floats, a few µs: once per received model)."""
-    a00, a01, a02, _, a11, a12, _, _, a22 = k
-    p1 = a01 * a01 + a02 * a02 + a12 * a12
-    q = (a00 + a11 + a22) / 3.0
-    b00, b11, b22 = a00 - q, a11 - q, a22 - q
-    p2 = b00 * b00 + b11 * b11 + b22 * b22 + 2.0 * p1
-    if p2 <= 0.0:
-        return abs(q)
-    p = math.sqrt(p2 / 6.0)
-    det = (b00 * (b11 * b22 - a12 * a12) - a01 * (a01 * b22 - a12 * a02)
-           + a02 * (a01 * a12 - b11 * a02))
-    r = max(-1.0, min(1.0, det / (2.0 * p * p * p)))
-    phi = math.acos(r) / 3.0
-    l1 = q + 2.0 * p * math.cos(phi)
-    l3 = q + 2.0 * p * math.cos(phi + 2.0943951023931957)
-    return max(abs(l1), abs(l3))
-
-
-class NativeLoopStats(LoopStats):
-    """:class:`LoopStats` whose tick counters are the compiled loop's (``cnt``); :meth:`reset`
-    starts a new window by remembering the counters (the loop's own are never written here)."""
-
-    def __init__(self, cnt: np.ndarray, period: float):
-        super().__init__(period=period)
-        self._cnt = cnt
-        self._base = cnt.copy()
-
-    def reset(self) -> None:
-        super().reset()
-        # the two maxima restart with the window: the loop only ever raises them (a reset that
-        # races with a tick's update loses that one tick's value)
-        self._cnt[nt.CNT.max_gap_ns] = 0
-        self._cnt[nt.CNT.max_force_un] = 0
-        self._base = self._cnt.copy()
-
-    def summary(self) -> dict:
-        c, b = self._cnt.copy(), self._base
-        s = super().summary()
-        ticks = int(c[nt.CNT.ticks] - b[nt.CNT.ticks])
-        t0 = (b[nt.CNT.t_last_ns] if b[nt.CNT.ticks] else c[nt.CNT.t_first_ns]) * 1e-9
-        span = c[nt.CNT.t_last_ns] * 1e-9 - t0 if ticks > 0 else 0.0
-        s.update(ticks=ticks, seconds=span, rate_hz=ticks / span if span > 0 else 0.0,
-                 deadline_misses=int(c[nt.CNT.deadline_misses] - b[nt.CNT.deadline_misses]),
-                 periods_lost=int(c[nt.CNT.periods_lost] - b[nt.CNT.periods_lost]),
-                 max_gap_ms=c[nt.CNT.max_gap_ns] * 1e-6,
-                 gaps_past_watchdog=int(c[nt.CNT.long_gaps] - b[nt.CNT.long_gaps]),
-                 max_force_N=c[nt.CNT.max_force_un] * 1e-6,
-                 passivity_limited=int(c[nt.CNT.passivity_limited]
-                                       - b[nt.CNT.passivity_limited]),
-                 observer_active=int(c[nt.CNT.observer_active] - b[nt.CNT.observer_active]),
-                 ticks_held=int(c[nt.CNT.held] - b[nt.CNT.held]),
-                 ticks_beyond=int(c[nt.CNT.beyond] - b[nt.CNT.beyond]),
-                 ticks_taken_over=int(c[nt.CNT.taken_over] - b[nt.CNT.taken_over]))
-        return s
-
-
-class NativeClutch:
-    """The driver's clutch view in native mode: the compiled tick runs the clutch / mark rules
-    (:class:`~.buttons.ClutchMark`'s); this reports what the newest published tick decided."""
-
-    def __init__(self, loop: 'NativeServoLoop'):
-        self._loop = loop
-        self._marks = 0
-        self.held = False
-
-    @property
-    def marks(self) -> int:
-        return int(self._loop.cnt[nt.CNT.marks])
-
-    @property
-    def clutches(self) -> int:
-        return int(self._loop.cnt[nt.CNT.clutches])
-
-    def update(self, buttons, mapped, now: float):
-        """(tissue position of the newest tick, events: a mark since the previous call)."""
-        st = self._loop.last_state
-        self.held = bool(self._loop.last_out[nt.OUT.held] > 0.5)
-        ev = ButtonEvents()
-        m = self.marks
-        if m != self._marks:
-            ev.mark = True
-            self._marks = m
-        return (st.tissue if st is not None else mapped), ev
-
-
-class NativeSafety(SafetyLayer):
-    """:class:`~.safety.SafetyLayer`'s interface over the compiled loop's safety state: commands
-    (device frame) go into the command buffer, faults zero the force at once in the next tick.
-    The clamp, rate limit and watchdog run in the compiled tick (same rules)."""
-
-    def __init__(self, loop: 'NativeServoLoop', max_force: float, max_force_rate: float,
-                 watchdog_timeout: float, frame_id: str = 'tissue', max_dt: float = 0.005):
-        self._loop = loop
-        self._cmd = [0.0] * nt.CMD_LEN  # the next command, laid out as the command buffer
-        super().__init__(max_force, max_force_rate, watchdog_timeout, frame_id, max_dt)
-
-    @property
-    def enabled(self) -> bool:
-        return bool(self._loop.ctl[nt.CTL.enabled])
-
-    @property
-    def watchdog_tripped(self) -> bool:
-        return bool(self._loop.st[nt.S.tripped] > 0.5)
-
-    @property
-    def stats(self) -> SafetyStats:
-        """The Python-side counts with the compiled loop's (a new object each time)."""
-        c = self._loop.cnt
-        s = SafetyStats(**{k: getattr(self._py, k) for k in ('commands', 'rejected_frame',
-                                                             'last_reject')})
-        s.rejected_nonfinite = self._py.rejected_nonfinite + int(c[nt.CNT.rejected_nonfinite])
-        s.watchdog_trips = int(c[nt.CNT.watchdog_trips])
-        s.watchdog_trips_in_contact = int(c[nt.CNT.watchdog_trips_in_contact])
-        s.clamped = int(c[nt.CNT.clamped])
-        s.max_output = c[nt.CNT.max_force_un] * 1e-6
-        return s
-
-    @stats.setter
-    def stats(self, value: SafetyStats) -> None:
-        self._py = value
-
-    def start(self, now: float = 0.0) -> None:
-        ctl = self._loop.ctl
-        ctl[nt.CTL.enabled] = 1
-        ctl[nt.CTL.enable_gen] += 1
-
-    def stop(self) -> None:
-        ctl = self._loop.ctl
-        ctl[nt.CTL.enabled] = 0
-        ctl[nt.CTL.enable_gen] += 1
-
-    def command(self, force, now: float, frame_id: str | None = None, count: bool = True) -> str:
-        try:
-            fx, fy, fz = (float(v) for v in force)
-        except (TypeError, ValueError):
-            fx = fy = fz = math.nan
-        with self._lock:
-            if not self.enabled:
-                return IGNORED_DISABLED
-            if count:
-                self._py.commands += 1
-            if not math.isfinite(fx + fy + fz):
-                self._fault(REJECTED_NONFINITE)
-                return REJECTED_NONFINITE
-            if self.frame_id and frame_id is not None and frame_id != self.frame_id:
-                self._py.rejected_frame += 1
-                self._loop.ctl[nt.CTL.fault] += 1
-                self._py.last_reject = f'{REJECTED_FRAME} {frame_id!r} (expected {self.frame_id!r})'
-                return REJECTED_FRAME
-            v, C = self._cmd, nt.CMD
-            v[C.f0], v[C.f1], v[C.f2], v[C.t] = fx, fy, fz, float(now)
-            _seq_write(self._loop.cmd, v[1:])
-            return OK
-
-    def reject(self, why: str) -> None:
-        """A non-finite input from elsewhere: zero at once in the next tick."""
-        with self._lock:
-            if self.enabled:
-                self._fault(why)
-
-    def _fault(self, why: str) -> None:
-        self._py.rejected_nonfinite += 1
-        self._py.last_reject = why
-        self._loop.ctl[nt.CTL.fault] += 1
-
-
-class NativeRenderer(LocalModelRenderer):
-    """:class:`~.local_model.LocalModelRenderer`'s receiving side over the compiled loop: a model
-    is checked and conditioned here (once per model, as before) and written to the model buffer;
-    the compiled tick renders it. ``stats``: the tick counts by status come from the loop. The
-    radii and times are the loop's configuration (``cfg``, written once): changing these
-    attributes afterwards changes nothing the tick does."""
-
-    def __init__(self, loop: 'NativeServoLoop', max_stiffness: float = FALCON_MAX_STIFFNESS / 1.5,
-                 validity_time: float = 0.05, validity_radius: float = 0.005,
-                 fresh_age: float = 0.0015, approach_radius: float = APPROACH_RADIUS) -> None:
-        self._loop = loop
-        self._base = loop.cnt.copy()
-        self._slot = [0.0] * nt.MODEL_LEN  # the next model, laid out as the model buffer
-        super().__init__(max_stiffness, validity_time, validity_radius, fresh_age,
-                         approach_radius)
-
-    @property
-    def stats(self) -> RenderStats:
-        c, b, C = self._loop.cnt, self._base, nt.CNT
-        s = RenderStats(models=self._py.models, rejected=self._py.rejected,
-                        stiffness_clamped=self._py.stiffness_clamped)
-        s.ticks_fresh = int(c[C.fresh] - b[C.fresh])
-        s.ticks_extrapolated = int(c[C.extrapolated] - b[C.extrapolated])
-        s.ticks_expired = int(c[C.expired] - b[C.expired])
-        s.ticks_free = int(c[C.free] - b[C.free])
-        s.ticks_none = int(c[C.none] - b[C.none])
-        s.ticks_approach = int(c[C.approach] - b[C.approach])
-        return s
-
-    @stats.setter
-    def stats(self, value: RenderStats) -> None:
-        self._py = value
-
-    @property
-    def max_age(self) -> float:
-        """The oldest [s] a model is still rendered: the compiled tick's hold time (held while
-        the probe stays near it; the validity time where there is no hold)."""
-        return float(self._loop.cfg[nt.CFG.hold_time])
-
-    def reset_stats(self) -> None:
-        self._py = RenderStats()
-        self._base = self._loop.cnt.copy()
-
-    def clear(self) -> None:
-        """Forget the model (the next ticks render nothing)."""
-        self.time = None
-        v = np.zeros(nt.MODEL_LEN - 1)
-        _seq_write(self._loop.model, v)
-
-    def offer_values(self, v, time: float, checked: bool = False) -> None:
-        """As :meth:`LocalModelRenderer.offer_values` (raises ValueError on a malformed model)."""
-        f0, p0, k, g, d, depth0, zero, contact = accept_values(v, self.max_stiffness, self._py,
-                                                               checked)
-        ks = symmetric_part(k)  # the tick adds the skew part w x e (held: without rotating mode)
-        t = float(time)
-        m, at = self._slot, _MODEL_AT  # a list by the buffer's fields: ~1 us, a record's ~15
-        m[at['f']], m[at['p']], m[at['k']], m[at['g']], m[at['d']] = f0, p0, ks, g, d
-        m[at['depth0']], m[at['zero']] = depth0, 1.0 if zero else 0.0
-        m[at['contact']], m[at['t0']], m[at['valid']] = 1.0 if contact else 0.0, t, 1.0
-        m[at['knorm']], m[at['w']] = spectral_norm_sym(ks), skew_vector(k)
-        m[at['hold_skew']] = 0.0 if rotating_mode(k) else 1.0
-        _seq_write(self._loop.model, m[1:])
-        self.time = t
-        self._py.models += 1
 
 
 def _check_number(name: str, value, unit: str, zero: bool = False) -> None:
@@ -380,7 +87,7 @@ class NativeServoLoop:
         max_force, max_force_rate, watchdog_timeout, frame_id: the safety layer's.
         mode: ``'local_model'`` or ``'zoh'``.
         max_stiffness: device-frame stiffness bound [N/m]; validity_time [s], validity_radius [m],
-            approach_radius [m]: the local model's (:class:`~.local_model.LocalModelRenderer`).
+            approach_radius [m]: the local model's (:mod:`.local_model`'s rules).
         damping: device damping b [N s/m] of the passivity bound K <= 2 b / T.
         observer: run the passivity observer / controller (Hannaford & Ryu 2002).
         hold_time: a model older than ``validity_time`` but not than this [s] is still rendered
@@ -458,7 +165,7 @@ class NativeServoLoop:
         self.points = points
         self._script = script
         self.process = bool(process) or device_factory is not None
-        self._mem = _SharedArrays() if self.process else None
+        self._mem = SharedArrays() if self.process else None
         zeros = self._mem.zeros if self.process else np.zeros
         self.hand = zeros(nt.HAND_LEN)
         C = nt.CFG
@@ -570,7 +277,7 @@ class NativeServoLoop:
         v[H.t], v[H.b0], v[H.b1] = now, float(b[0]), float(b[1])
         for k in range(3):
             v[H.x0 + k], v[H.v0 + k] = p[k], (p1[k] - p[k]) / dt
-        _seq_write(self.hand, v[1:])
+        seq_write(self.hand, v[1:])
 
     @property
     def held(self) -> bool:
@@ -614,9 +321,6 @@ class NativeServoLoop:
     def _start_process(self) -> None:
         """Fork the servo process: it only runs the compiled loop (compiled before the fork) on
         the shared arrays and exits with ``os._exit``; it dies with this process (PDEATHSIG)."""
-        import gc
-        import os
-        import signal
         pid = os.fork()
         if pid == 0:  # the child: no Python threads, no ROS; only the compiled loop
             # Never collect what the parent left: a finalizer of its garbage (an rclpy node, a
@@ -631,9 +335,9 @@ class NativeServoLoop:
                     # a real device must be left at zero force: stop the loop, do not kill it
                     signal.signal(signal.SIGTERM, lambda *_: self.ctl.__setitem__(nt.CTL.stop, 1))
                     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C: the node stops us
-                    _die_with_parent(signal.SIGTERM)
+                    die_with_parent(signal.SIGTERM)
                 else:
-                    _die_with_parent(signal.SIGKILL)
+                    die_with_parent(signal.SIGKILL)
                 if self.device_factory is not None:
                     name_thread('servo-device')
                     # the device loop: its USB I/O
@@ -665,7 +369,6 @@ class NativeServoLoop:
     def _wait_open(self, pid: int) -> None:
         """Wait for the servo process to open the device; raise ``open_error`` with its message
         when it could not (the process has exited then)."""
-        import os
         end = time.monotonic() + self.open_timeout
         while self.devst[dp.DEV.state] == dp.STARTING:
             done = os.waitpid(pid, os.WNOHANG)[0]
@@ -691,7 +394,6 @@ class NativeServoLoop:
             if th is not None and th is not threading.current_thread():
                 th.join(timeout)
         if self._pid:
-            import os
             end = time.monotonic() + timeout
             while time.monotonic() < end:
                 if os.waitpid(self._pid, os.WNOHANG)[0]:
@@ -733,7 +435,6 @@ class NativeServoLoop:
 
     def _run_ticks(self, worker: int = 0, cpu: int | None = None) -> None:
         """One tick worker: its core, its scheduling, then the compiled loop until stop."""
-        import os
         name_thread(f'servo-tick{worker}')
         if cpu is not None:
             try:
@@ -773,7 +474,7 @@ class NativeServoLoop:
                     self._call(self.on_reconnect, f'Falcon: device back (reconnect {back})')
             if self.ctl[nt.CTL.external]:
                 self._call(self._feed_hand)  # the script's own error: counted, the hand holds
-            o = _seq_read(self.out)
+            o = seq_read(self.out)
             if o is not None and o[0] != seen:
                 seen = o[0]
                 self._publish(o)

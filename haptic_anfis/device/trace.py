@@ -12,6 +12,7 @@ concatenates them.
 """
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
@@ -50,7 +51,6 @@ class TickTrace(RowLog):
 def save_trace(path: str | Path, rows: np.ndarray, **meta) -> Path:
     """Write ``rows`` (n, 8) and ``meta`` (JSON-able values, stored as strings) to ``path`` (.npz),
     through a temporary file renamed into place (a crash leaves the old file or the new one)."""
-    import json
     path = Path(path)
     tmp = path.with_name(path.name + '.tmp.npz')
     np.savez(tmp, rows=rows, columns=np.array(COLUMNS),
@@ -65,7 +65,6 @@ def load_trace(path: str | Path) -> tuple[np.ndarray, dict]:
     Raises:
         ValueError: the file is not such a trace.
     """
-    import json
     try:
         with np.load(path, allow_pickle=False) as z:
             rows, cols, meta = z['rows'], tuple(z['columns'].tolist()), json.loads(str(z['meta']))

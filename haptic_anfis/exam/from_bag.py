@@ -156,7 +156,7 @@ def session_from_bag(bag: str | os.PathLike, case: str | None = None,
         elif topic == absolute(ifc.TOPIC_BUTTONS):
             b = list(msg.buttons)
             session.add_buttons(t, b)
-            # the driver's rule (device.buttons.ClutchMark): a rising edge of the mark button
+            # the driver's rule (device.buttons): a rising edge of the mark button
             # while the clutch is not held
             mark, clutch = len(b) > MARK and bool(b[MARK]), len(b) > CLUTCH and bool(b[CLUTCH])
             if not marks_topic and mark and not mark_prev and not clutch \

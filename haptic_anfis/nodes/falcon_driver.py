@@ -1,34 +1,26 @@
-"""``falcon_driver``: owns the haptic device; a 1 kHz servo loop on its own thread.
+"""``falcon_driver``: owns the haptic device; its 1 kHz servo tick is compiled and runs without
+the interpreter lock (:mod:`haptic_anfis.device.servo_native`), in a servo process of its own by
+default, with the real Falcon's USB I/O there too (:mod:`haptic_anfis.device.device_process`).
 
 Publishes the tip pose (``falcon/measured_cp``), velocity (``falcon/measured_cv``), the force it
 applies (``falcon/measured_cf``, every ``measured_cf_every`` ticks) and the buttons
 (``falcon/buttons``, on change and every 100 ticks), all in the tissue frame; button 0 is the
-clutch and button 1 the mark (:class:`haptic_anfis.device.buttons.ClutchMark`; a mark is published
-as ``exam/marks``, ``geometry_msgs/PointStamped`` at the probe tip); subscribes to the
-force command ``falcon/servo_cf`` (``geometry_msgs/WrenchStamped``, tissue frame) and the local
-force model ``falcon/servo_cf_local`` (``sensor_msgs/JointState``, layout in
-:mod:`haptic_anfis.interfaces`). ``force_mode``: ``local_model`` (default) evaluates the
-newest local model at every servo tick's position; ``zoh`` holds the newest command (the
-zero-order hold). Either goes through the safety layer (:class:`haptic_anfis.device.SafetyLayer`:
-clamp, rate limit, watchdog, NaN/wrong-frame rejection). A command or model is judged by the age
-of the driver's own pose it answers (its stamp), not by its arrival; stale, future and unknown
-stamps are refused and counted (:class:`haptic_anfis.device.force_input.ForceInput`). The servo
-thread is not a ROS timer: it keeps its period whatever the executor is doing, and (by default,
-``take_in_servo_thread``) it takes the force command and the local model itself from their
-keep-last-1 readers at the start of each tick, as raw CDR (:mod:`.polled`, :mod:`.cdr`): no
-rclpy message objects and no GIL hand-over per message. Pose -> command
-latency (pose stamp to command arrival) and deadline misses are collected in
-:attr:`FalconDriver.servo` ``.stats``; ``trace_path`` writes every servo tick for the applied-force
-error (:mod:`haptic_anfis.device.force_error`).
+clutch and button 1 the mark (:mod:`haptic_anfis.device.buttons`; a mark is published as
+``exam/marks``, ``geometry_msgs/PointStamped`` at the probe tip). Subscribes to the force
+command ``falcon/servo_cf`` (``geometry_msgs/WrenchStamped``, tissue frame) and the local force
+model ``falcon/servo_cf_local`` (``sensor_msgs/JointState``, layout
+:data:`haptic_anfis.interfaces.LOCAL_MODEL`). ``force_mode``: ``local_model`` renders the
+newest local model at every tick's position, ``zoh`` holds the newest command. A command or
+model is judged by the age of the driver's own pose it answers (its stamp), not by its arrival
+(:class:`haptic_anfis.device.force_input.ForceInput`); the tick's safety rules (clamp, rate
+limit, watchdog, NaN / wrong-frame rejection) zero the force whatever this node does.
 
-The servo tick is compiled and never takes the interpreter lock (``servo_loop: native``,
-:mod:`haptic_anfis.device.servo_native`; ``native_process``: in a servo process of its own):
-device, local model, clutch, safety and the passivity bound run there, and
-the Python side above (publishing, taking commands and models) is a bridge thread that may fall
-behind without costing a tick (docs/servo_loop.md). The real Falcon's USB I/O runs with that
-compiled tick in the servo process (:mod:`haptic_anfis.device.device_process`): a frozen node
-cannot leave force on the motors. The loop, with its safety layer, clutch and force input, comes
-from the table :data:`haptic_anfis.device.driver_loops.LOOPS` by ``backend`` and ``servo_loop``.
+This node is wiring: the loop and its parts come from the table
+:data:`haptic_anfis.device.driver_loops.LOOPS` by ``backend`` and ``servo_loop``; a bridge thread
+calls :meth:`FalconDriver._publish_state` for the newest tick and takes the newest command and
+model from their keep-last-1 readers as raw CDR (:mod:`.polled`, :mod:`.cdr`: no rclpy message
+objects on the loop's path). ``trace_path`` writes every tick for the applied-force error
+(:mod:`haptic_anfis.device.force_error`).
 """
 from __future__ import annotations
 
@@ -38,23 +30,22 @@ import sys
 import time
 from typing import Callable
 
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PointStamped, PoseStamped, TwistStamped, WrenchStamped
 from sensor_msgs.msg import JointState, Joy
 
 from .. import interfaces as ifc
-from ..device import PalpationScript, WorkspaceMapping
-from ..device.driver_loops import LOOPS, Hooks, jsonable
-from ..device.limits import check_max_force
+from ..device import WorkspaceMapping
+from ..device.driver_loops import LOOPS, Hooks, hand_script, jsonable
 from ..device.loop_health import LoopHealth, behind_because
 from ..device.safety import OK
-from ..device.start_gate import HeldScript
 from ..device.stamps import STALE
 from ..realtime import processes
 from ..resources import config_file
 from . import cdr
 from .base import HapticNode
-from .falcon_params import PARAMS, resolve_servo_loop  # PARAMS: the node's (registry, config)
-from .parameters import ParameterError, declare_parameters
+from .falcon_params import PARAMS, resolve  # PARAMS: the node's (registry, config)
+from .parameters import declare_parameters
 from .polled import PolledSubscription
 from .runtime import LOOP_QOS, run_node, set_stamp
 
@@ -65,37 +56,21 @@ WARN_EVERY = 60.0
 class FalconDriver(HapticNode):
     def __init__(self, name: str = 'falcon_driver', **kw):
         super().__init__(name, **kw)
-        p = self.params = declare_parameters(self, PARAMS)
-        p['servo_loop'] = self.servo_loop = resolve_servo_loop(p['servo_loop'], p['backend'])
-        why = check_max_force(p['max_force'], p['backend'])  # the declaration took any backend's
-        if why:
-            raise ParameterError(f"{name}: bad parameters: parameter 'max_force' = "
-                                 f"{p['max_force']!r}: {why}")
-        if p['gil_switch_interval'] > 0:
-            # A busy thread (bag writer, executor callbacks) keeps the GIL up to this long while
-            # the 1 kHz servo thread waits: with a recorder in the same process the worst
-            # pose->wrench latency was 4.0-4.7 ms at Python's 5 ms, 1.6-1.9 ms at 0.2 ms.
+        p = self.params = resolve(declare_parameters(self, PARAMS), name)
+        self.servo_loop = p['servo_loop']
+        if p['gil_switch_interval'] > 0:  # the bridge thread gets the GIL back sooner
             sys.setswitchinterval(p['gil_switch_interval'])
         self.frame_id = p['frame_id']
         self.mapping = WorkspaceMapping(p['workspace_scale'], tuple(p['workspace_offset']),
                                         p['force_scale'])
-        if p['backend'] == 'falcon':
-            script = None
-            what = (f"Falcon {p['device_serial'] or 'index ' + str(p['device_index'])}, homing "
-                    f"{'on' if p['homing'] else 'off'}, gravity compensation "
-                    f"{p['gravity_mass'] if p['gravity_compensation'] else 'off'}")
-        else:
-            script_path = p['palpation_script'] or str(config_file('palpation.yaml'))
-            script = PalpationScript.from_yaml(script_path)  # ValueError naming the file -> exit 1
-            script = HeldScript(script, held=p['hold_until_force'])
-            what = f'script {script_path} ({script.duration:.1f} s)'
+        # a script file that cannot be read: ValueError naming the file -> exit 1
+        script, what = hand_script(p, str(config_file('palpation.yaml')))
         loop = LOOPS[p['backend'], p['servo_loop']](
             p, self.mapping, self.frame_id, script,
             Hooks(self._publish_state, self._device_lost, self._device_back))
         self.loop = loop
         self.servo, self.device, self.safety = loop.servo, loop.device, loop.safety
         self.clutch, self.input = loop.clutch, loop.input
-        self.native = loop.servo  # the compiled loop: its bridge, trace and hold state
         self.pub_pose = self.create_publisher(PoseStamped, ifc.TOPIC_POSE, LOOP_QOS)
         self.pub_twist = self.create_publisher(TwistStamped, ifc.TOPIC_TWIST, LOOP_QOS)
         self.pub_applied = self.create_publisher(WrenchStamped, ifc.TOPIC_APPLIED, LOOP_QOS)
@@ -122,7 +97,6 @@ class FalconDriver(HapticNode):
         self._cf_every = p['measured_cf_every']
         self._tick = 0
         self.run_duration = p['run_duration']
-        self.first_command: float | None = None
         #: sim: a further condition for releasing the held hand (e.g. ``haptic-anfis sim``: the
         #: recorder in its own process has matched every loop topic); set it before the executor
         #: first spins. None = the first force command alone releases it.
@@ -139,7 +113,6 @@ class FalconDriver(HapticNode):
         self.health = LoopHealth(p['watchdog_timeout'])
         self.device_lost = False
         if p['loop_check_period'] > 0:
-            from diagnostic_msgs.msg import DiagnosticArray
             self.pub_diag = self.create_publisher(DiagnosticArray, ifc.TOPIC_DIAGNOSTICS, 10)
             self.create_timer(p['loop_check_period'], self._check_loop)
 
@@ -163,7 +136,6 @@ class FalconDriver(HapticNode):
     def _publish_health(self, short: str | None) -> None:
         """The window just checked on ROS's diagnostics topic: WARN with ``short`` when it fell
         behind, else OK; the counts and the likely cause as values (the page shows them)."""
-        from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
         st = DiagnosticStatus(name=ifc.LOOP_DIAGNOSTIC, hardware_id=self.params['backend'])
         st.level = DiagnosticStatus.WARN if short else DiagnosticStatus.OK
         st.message = short or 'kept its period'
@@ -185,11 +157,8 @@ class FalconDriver(HapticNode):
     def start_loop(self) -> None:
         """Start the servo loop (a real device is opened here: a FalconError / OSError). Called
         once the process has settled (:func:`~.runtime.run_node`, the one-process graph): the
-        loop's bridge thread publishes the poses and takes the commands, and it shares this
-        process's interpreter lock; started in ``__init__`` it waited behind the rest of the
-        process's start (a first log call inspecting every module, the full garbage collection of
-        ``settle_gc``): 40-340 ms after the first command had released the hand (launch, about
-        one start in four). Idempotent."""
+        loop's bridge thread shares this process's interpreter lock, so it should not wait
+        behind the rest of the process's start. Idempotent."""
         if self.started:
             return
         self.servo.start()
@@ -238,18 +207,14 @@ class FalconDriver(HapticNode):
         self.pub_twist.publish(tw)
         self._tick += 1
         if self._tick % self._cf_every == 0:
-            ap = self._applied
-            ap.header.stamp = pose.header.stamp
-            k = 1.0 / m.force_scale
-            f = ap.wrench.force
+            ap, k = self._applied, 1.0 / m.force_scale
+            ap.header.stamp, f = pose.header.stamp, ap.wrench.force
             f.x, f.y, f.z = force[0] * k, force[1] * k, force[2] * k
             self.pub_applied.publish(ap)
         if state.buttons != self._buttons or self._tick % 100 == 0:
             self._buttons = state.buttons
-            joy = Joy()
-            joy.header.stamp = pose.header.stamp
-            joy.header.frame_id = self.frame_id
-            joy.buttons = list(state.buttons)
+            joy = Joy(buttons=list(state.buttons))
+            joy.header.stamp, joy.header.frame_id = pose.header.stamp, self.frame_id
             self.pub_buttons.publish(joy)
         if ev.mark:  # the probe tip; the examiner projects it on the surface
             mk = PointStamped()
@@ -260,10 +225,8 @@ class FalconDriver(HapticNode):
                 and now - self.first_command >= self.run_duration:
             self.finished = True
 
-    # -- executor thread ------------------------------------------------------------------------
-    # Both loop inputs arrive as raw bytes (nodes/cdr.py): rclpy's own deserialisation of a
-    # message cost 25-100 µs of this process's GIL, which the servo thread needs every 1 ms.
-    # They run on the servo thread (take_in_servo_thread, the default) or the executor's.
+    # -- the loop's inputs, as raw CDR (no rclpy message objects: GIL time per message), on the
+    # bridge thread (take_in_servo_thread, the default) or the executor's -------------------
     def _on_command(self, raw: bytes) -> None:
         now = time.monotonic()
         try:
@@ -273,7 +236,7 @@ class FalconDriver(HapticNode):
             return
         why = self.input.command(f, stamp, frame, now)
         if self.input.mode == 'zoh':
-            self._arrived(why, stamp)
+            self.loop.arrived(why, stamp, self.run_duration > 0, self.release_gate)
         if why != OK and not (why.endswith(STALE) and self.first_command is None):
             # (stale answers queued while the graph started are counted, not warned of)
             self.get_logger().warning(f'force command {why}: {f} in frame {frame!r}; '
@@ -288,14 +251,8 @@ class FalconDriver(HapticNode):
             self._malformed(f'local force model {exc}')
             return
         # flat values: no LocalModel object on this path (GIL time per message)
-        if len(v) == len(ifc.LOCAL_MODEL_FIELDS):
-            why = self.input.model_values(v, stamp, frame, now)
-        else:  # wrong length: zero force, as for a non-finite model
-            why = (f'rejected: local force model message with {len(v)} values, expected '
-                   f'{len(ifc.LOCAL_MODEL_FIELDS)}')
-            self.input.renderer.clear()
-            self.safety.reject(why)
-        self._arrived(why, stamp)
+        why = self.input.model_values(v, stamp, frame, now)
+        self.loop.arrived(why, stamp, self.run_duration > 0, self.release_gate)
         if why != OK and not (why.endswith(STALE) and self.first_command is None):
             self.get_logger().warning(f'local force model {why}', throttle_duration_sec=1.0)
 
@@ -305,28 +262,10 @@ class FalconDriver(HapticNode):
         self.safety.reject(f'rejected: {why}')
         self.get_logger().warning(f'{why}: applying zero force', throttle_duration_sec=1.0)
 
-    def _arrived(self, why: str, stamp: int) -> None:
-        """Latency of every command (zoh) / model (local_model) answering a known pose, taken or
-        refused as stale (so the figures are not cut at the age limit); the measurement window
-        opens at the first one taken."""
-        script = getattr(self.device, 'script', None)
-        if isinstance(script, HeldScript) and self.native.held \
-                and (why == OK or why.endswith(STALE)) \
-                and (self.release_gate is None or self.release_gate()):
-            script.release()  # a force source answers our poses (late or not): start the palpation
-            self.native.release()
-        if why == OK and self.first_command is None:
-            now = time.monotonic()
-            self.first_command = now
-            self._cpu0 = time.process_time()  # the process's CPU over the window (summary)
-            # the trace and the model statistics measure the loop from the first command on
-            self.input.reset_stats()
-            if self.servo.trace is not None:
-                self.servo.trace.clear()
-            if self.run_duration > 0:  # so do the loop statistics
-                self.servo.stats.reset()
-        if self.first_command is not None and (why == OK or why.endswith(STALE)):
-            self.servo.stats.latency((time.time_ns() - stamp) * 1e-9)
+    @property
+    def first_command(self) -> float | None:
+        """Monotonic time [s] the first force command / model was taken (None: none yet)."""
+        return self.loop.first_command
 
     def ready_condition(self) -> tuple[bool, str]:
         """Ready (see nodes/session.py) once a valid force command arrived."""
@@ -334,12 +273,7 @@ class FalconDriver(HapticNode):
                                                 is not None else 'no force command yet')
 
     def summary(self) -> dict:
-        s = self.loop.summary(self.health)
-        if self.first_command is not None:  # CPU of this process (all its threads) / wall time
-            wall = time.monotonic() - self.first_command
-            s['process_cpu_pct'] = (round(100.0 * (time.process_time() - self._cpu0) / wall, 1)
-                                    if wall > 0 else None)
-        return s
+        return self.loop.summary(self.health)
 
     def close(self) -> None:
         """Stop the servo thread; the device is left at zero force."""
@@ -347,19 +281,15 @@ class FalconDriver(HapticNode):
             self.servo.stop()
         for sub, _ in self._polled:
             sub.destroy()
-        if self.trace_path and self.servo.trace is not None:
-            self._save_trace()
+        if self.trace_path and self.servo.trace is not None:  # tissue frame, with the stats
+            rows = self.loop.save_trace(self.trace_path, self.mapping, self.params,
+                                        self.frame_id, jsonable(self.summary()))
+            self.get_logger().info(f'servo tick trace: {len(rows)} ticks -> {self.trace_path}'
+                                   + (f' (the oldest {self.servo.trace.dropped} dropped: '
+                                      'bounded)' if self.servo.trace.dropped else ''))
+            self.servo.trace = None
         if self.run_duration > 0:
             print(json.dumps({'falcon_driver_stats': jsonable(self.summary())}), flush=True)
-
-    def _save_trace(self) -> None:
-        """The servo ticks in the tissue frame (position, applied force) with the statistics."""
-        rows = self.loop.save_trace(self.trace_path, self.mapping, self.params, self.frame_id,
-                                    jsonable(self.summary()))
-        self.get_logger().info(f'servo tick trace: {len(rows)} ticks -> {self.trace_path}'
-                               + (f' (the oldest {self.servo.trace.dropped} dropped: bounded)'
-                                  if self.servo.trace.dropped else ''))
-        self.servo.trace = None
 
 
 def main(args=None) -> None:

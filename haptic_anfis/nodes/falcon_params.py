@@ -1,5 +1,5 @@
 """The ``falcon_driver`` node's parameters (:data:`PARAMS`: name, default, help, check) and
-``servo_loop``'s resolution; the node is :mod:`.falcon_driver`."""
+their resolution (:func:`resolve`); the node is :mod:`.falcon_driver`."""
 from __future__ import annotations
 
 import math
@@ -13,6 +13,9 @@ from .parameters import (Param, ParameterError, finite_vector, non_negative, one
                          positive)
 
 BACKENDS = ('sim', 'falcon')
+#: the driver's servo loops (:data:`haptic_anfis.device.driver_loops.LOOPS`): all the compiled
+#: tick, on threads of the driver ('native') or in a servo process of its own
+SERVO_LOOPS = ('auto', 'native', 'native_process')
 
 PARAMS = [
     Param('backend', 'sim', "device backend: 'sim' (simulated Falcon with a scripted virtual hand) "
@@ -111,7 +114,8 @@ PARAMS = [
           "(docs/servo_loop.md). falcon: 'auto' and 'native_process' run the USB I/O "
           "and the compiled tick in the servo process (a frozen node cannot leave force on the "
           "motors); 'native' is refused (its USB library needs the interpreter)",
-          one_of('auto', 'native', 'native_process')),
+          lambda v: None if v in SERVO_LOOPS else
+          f"expected one of {', '.join(map(repr, SERVO_LOOPS))} (each runs the compiled tick)"),
     Param('passivity_damping', 1.5, 'native: device damping b [N s/m] of the passivity bound on '
           'the rendered stiffness, K <= 2 b / T with T the measured tick periods of the last '
           'passivity_window, energy-weighted (sum T^2 / sum T; Colgate & Schenkel 1997; '
@@ -179,3 +183,19 @@ def resolve_servo_loop(choice: str, backend: str = 'sim') -> str:
                              "compiled tick in a servo process): the Falcon's USB library "
                              "needs the interpreter, which a compiled thread does not hold")
     return 'native_process' if choice == 'auto' else choice
+
+
+def resolve(p: dict, node: str = 'falcon_driver') -> dict:
+    """The declared parameters ``p`` made concrete in place (``servo_loop``,
+    :func:`resolve_servo_loop`) and checked across each other (``max_force`` against the
+    backend's bound, which the declaration could not know); returns ``p``.
+
+    Raises:
+        ParameterError: one line naming the parameter and what was expected.
+    """
+    p['servo_loop'] = resolve_servo_loop(p['servo_loop'], p['backend'])
+    why = check_max_force(p['max_force'], p['backend'])
+    if why:
+        raise ParameterError(f"{node}: bad parameters: parameter 'max_force' = "
+                             f"{p['max_force']!r}: {why}")
+    return p

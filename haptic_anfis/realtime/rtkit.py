@@ -28,6 +28,10 @@ import resource
 import threading
 from typing import Any, Callable, Sequence
 
+from jeepney import DBusAddress, new_method_call
+from jeepney.io.blocking import open_dbus_connection
+from jeepney.wrappers import DBusErrorResponse, unwrap_msg
+
 from ..errors import HapticAnfisError
 
 __all__ = ['OBJECT_PATH', 'SERVICE', 'RealtimeKitError', 'limit_rttime', 'make_thread_realtime',
@@ -106,13 +110,6 @@ class _Bus:
     """One blocking connection to rtkit for one request; every failure a RealtimeKitError."""
 
     def __init__(self, connect: Callable[[], Any] | None, timeout: float) -> None:
-        try:
-            from jeepney import DBusAddress, new_method_call
-            from jeepney.io.blocking import open_dbus_connection
-            from jeepney.wrappers import DBusErrorResponse, unwrap_msg
-        except ImportError:
-            raise RealtimeKitError('rtkit: jeepney is not installed (pip install jeepney)') \
-                from None
         self._new, self._unwrap, self._error = new_method_call, unwrap_msg, DBusErrorResponse
         self.timeout = timeout
         self.kit = DBusAddress(OBJECT_PATH, bus_name=SERVICE, interface=SERVICE)

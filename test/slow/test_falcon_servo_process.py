@@ -49,8 +49,8 @@ def test_falcon_runs_in_a_servo_process_by_default_and_stops_at_zero(ctx, monkey
     monkeypatch.setattr(falcon_usb, 'import_ftdi', lambda: ftdi_class(fake))
     d = driver(ctx, backend='falcon', homing=False, gravity_compensation=True)
     try:
-        assert d.servo_loop == 'native_process' and d.native is not None
-        assert d.native._pid and d.native._pid != os.getpid()
+        assert d.servo_loop == 'native_process' and d.servo is not None
+        assert d.servo._pid and d.servo._pid != os.getpid()
         assert 'servo process' in d.servo.scheduling
         assert _wait(lambda: d.device.replies >= 50 and shm[N] >= 50)
         assert d.device.connected and not d.device.disconnected
@@ -59,7 +59,7 @@ def test_falcon_runs_in_a_servo_process_by_default_and_stops_at_zero(ctx, monkey
         assert d.servo.errors == 0 and d.device.loop_errors == 0
         # the node publishes the servo process's ticks
         n = d.servo.stats.summary()['ticks'] if 'ticks' in d.servo.stats.summary() else None
-        assert d.native.last_state is not None, n
+        assert d.servo.last_state is not None, n
     finally:
         d.close()
         d.destroy_node()
@@ -227,3 +227,33 @@ def test_the_servo_process_never_collects_the_parents_garbage(ctx, monkeypatch):
         gc.enable()
     gc.collect()
     assert shm[7] == os.getpid()  # collected here, where it belongs
+
+
+def test_threshold_presses_on_a_falcon_render_the_spring_in_its_servo_process():
+    """The threshold's spring on a (fake) Falcon held 15 mm (tissue) into the plane: one servo
+    process for the series; each press measures the asked stiffness from the ticks it got, and
+    between presses and after the series the motors are at zero."""
+    from haptic_anfis.device.falcon import WorkspaceMapping
+    from haptic_anfis.device.stiffness_press import DevicePresses
+    shm = shared()
+    # device x -0.01 m (15 mm into the plane through the workspace's centre, tissue frame)
+    grip = tuple(c + o for c, o in zip(k.WORKSPACE_CENTER,
+                                       falcon_usb.device_to_falcon((-0.01, 0.0, 0.0))))
+    fake = SharedFake(shm, firmware_running=True,
+                      encoders=k.angles_to_ticks(k.inverse_kinematics(grip)))
+    factory = lambda: falcon_usb.FalconUSB(  # noqa: E731
+        homing=False, transport=falcon_usb.PyFtdiTransport(ftdi_class(fake)))
+    mapping = WorkspaceMapping()
+    between = []
+    with DevicePresses(factory, mapping.offset[0], 0.3, mapping,
+                       before=lambda: between.append(tuple(shm[M0:M0 + 3]))) as presses:
+        pid = presses.loop._pid
+        assert pid and pid != os.getpid()
+        got = [presses(stiffness) for stiffness in (200.0, 300.0)]
+        time.sleep(0.1)
+        between.append(tuple(shm[M0:M0 + 3]))
+    for stiffness, p in zip((200.0, 300.0), got):
+        assert p.peak_depth == pytest.approx(0.015, abs=1e-3)
+        assert p.stiffness == pytest.approx(stiffness, rel=0.05), got
+    assert between[0] == between[-1] == (0.0, 0.0, 0.0), between
+    assert _wait(lambda: shm[CLOSED] == 1.0, 5.0)

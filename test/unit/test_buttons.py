@@ -1,4 +1,5 @@
-"""Clutch / mark state machine and the palpation scripts that press the buttons (no ROS)."""
+"""The clutch / mark rules (their Python oracle, which the compiled tick is held to in
+test_servo_native) and the palpation scripts that press the buttons (no ROS)."""
 import math
 
 import numpy as np
@@ -6,7 +7,7 @@ import pytest
 from hypothesis import given, settings, strategies as st
 
 from haptic_anfis.device import PalpationScript, SimulatedFalcon, WorkspaceMapping
-from haptic_anfis.device.buttons import ClutchMark
+from tick_oracle import ClutchMark
 
 
 def test_clutch_freezes_the_probe_and_keeps_the_offset():

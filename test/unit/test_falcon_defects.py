@@ -9,11 +9,11 @@ import math
 import pytest
 from falcon_fake import Clock, FakeFalcon, ftdi_class
 
-from haptic_anfis.device import SafetyLayer, ServoLoop
 from haptic_anfis.device import falcon_kinematics as k
 from haptic_anfis.device import falcon_protocol as fp
 from haptic_anfis.device import falcon_usb
 from haptic_anfis.device.falcon_usb import FalconError, FalconUSB, PyFtdiTransport
+from tick_oracle import SafetyLayer, ServoLoop
 
 FIRMWARE = bytes(range(256)) * 4 + b'end'  # 1027 bytes: 16 chunks of 62 and a short one
 

@@ -12,12 +12,12 @@ import numpy as np
 import pytest
 from falcon_fake import Clock, FakeFalcon, Received, ftdi_class
 
-from haptic_anfis.device import SafetyLayer, ServoLoop
 from haptic_anfis.device import falcon_kinematics as k
 from haptic_anfis.device import falcon_protocol as fp
 from haptic_anfis.device.falcon_usb import (FalconError, FalconUnavailableError, FalconUSB,
                                             PyFtdiTransport, device_to_falcon, falcon_to_device,
                                             import_ftdi)
+from tick_oracle import SafetyLayer, ServoLoop
 
 FIRMWARE = bytes(range(256)) * 3 + b'tail'  # 772 bytes: 6 full chunks and a short one
 

@@ -9,16 +9,17 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as hst
 
-from haptic_anfis.device import DeviceState, SafetyLayer, ServoLoop, WorkspaceMapping
+from haptic_anfis.device import DeviceState, WorkspaceMapping
 from haptic_anfis.device.force_input import ForceInput
 from haptic_anfis.device.local_model import (EXPIRED, EXTRAPOLATED, FREE, FRESH, NONE,
                                              across_beyond, hold_offset,
-                                             LocalModel, LocalModelRenderer, condition_stiffness,
+                                             LocalModel, condition_stiffness,
                                              condition_stiffness_values, contact_jacobian,
                                              rotating_mode,
                                              depth_gradient)
 from haptic_anfis.device.stamps import FUTURE, OK, STALE, UNKNOWN, StampBook
 from haptic_anfis.device.trace import TickTrace, load_trace, save_trace
+from tick_oracle import LocalModelRenderer, SafetyLayer, ServoLoop, render
 
 
 def unit(v):
@@ -342,7 +343,7 @@ def test_stall_and_kill(mode):
     arrive. No force above 0.05 N after the resume."""
     mapping = WorkspaceMapping(1.0, (0.0, 0.0, 0.0), 1.0)
     safety = SafetyLayer(10.0, 1000.0, 0.010, frame_id='tissue')
-    fi = ForceInput(safety, mapping, mode=mode)
+    fi = ForceInput(safety, mapping, LocalModelRenderer(3000.0, validity_time=0.05), mode=mode)
     p = np.array([-0.004, 0.0, 0.0])
     dev = StillDevice(p)
     clock = [0.0]
@@ -354,7 +355,7 @@ def test_stall_and_kill(mode):
         fi.on_pose(ns, now)
 
     servo = ServoLoop(dev, safety, 1000.0, on_state=on_state, clock=lambda: clock[0],
-                      render=fi.render)
+                      render=lambda st, now: render(fi, st, now))
     servo.start()
     n = np.array([1.0, 0, 0])
     F0 = np.array([9.5, 0.0, 0.0])  # more than one max_dt ramp step (5 N) above zero
@@ -403,7 +404,7 @@ def test_a_late_model_is_taken_while_it_could_still_be_held(hold_time, taken):
     hold it is refused (issue 22)."""
     mapping = WorkspaceMapping(1.0, (0.0, 0.0, 0.0), 1.0)
     safety = SafetyLayer(10.0, 1000.0, 0.010, frame_id='tissue')
-    fi = ForceInput(safety, mapping, mode='local_model', validity_time=0.05)
+    fi = ForceInput(safety, mapping, LocalModelRenderer(3000.0, validity_time=0.05), mode='local_model')
     if hold_time is not None:   # the driver's compiled tick: its renderer takes the models
         from haptic_anfis.device import HandParams
         from haptic_anfis.device.palpation import PalpationScript
@@ -432,7 +433,7 @@ def test_local_model_rides_out_latency_zoh_does_not():
     for mode in ('zoh', 'local_model'):
         mapping = WorkspaceMapping(1.0, (0.0, 0.0, 0.0), 1.0)
         safety = SafetyLayer(10.0, 1000.0, 0.010, frame_id='tissue')
-        fi = ForceInput(safety, mapping, mode=mode)
+        fi = ForceInput(safety, mapping, LocalModelRenderer(3000.0, validity_time=0.05), mode=mode)
         dev = StillDevice((0.0, 0.0, 0.0))
         n = np.array([1.0, 0, 0])
         k = 400.0
@@ -442,7 +443,7 @@ def test_local_model_rides_out_latency_zoh_does_not():
                           on_state=lambda st, f, now: (fi.on_pose(int(now * 1e9) + 1, now),
                                                        pend.append((now + 0.015, st.position,
                                                                     int(now * 1e9) + 1))),
-                          clock=lambda: 0.0, render=fi.render)
+                          clock=lambda: 0.0, render=lambda st, now: render(fi, st, now))
         servo.start()
         errs, forces = [], []
         for i in range(400):

@@ -14,14 +14,16 @@ from hypothesis import strategies as st
 from haptic_anfis.device import HandParams, WorkspaceMapping
 from haptic_anfis.device import native_tick as nt
 from haptic_anfis.device.force_error import ripple_and_dropouts
+from haptic_anfis.device.force_input import ForceInput
 from haptic_anfis.device.local_model import (EXPIRED, EXTRAPOLATED, FREE, FRESH, LocalModel,
-                                             LocalModelRenderer,
                                              tissue_stiffness_limit)
 from haptic_anfis.device.palpation import PalpationScript
 from haptic_anfis.device.servo_native import NativeServoLoop
 from haptic_anfis.device.start_gate import HeldScript
 from haptic_anfis.device.stats import LoopStats
+from haptic_anfis.device.tick_views import seq_write, spectral_norm_sym
 from haptic_anfis.interfaces import LM_P0, LOCAL_MODEL
+from tick_oracle import ClutchMark, LocalModelRenderer, SafetyLayer
 
 MAP = WorkspaceMapping(1.5, (0.03, 0.0, 0.0), 1.0)
 
@@ -234,8 +236,7 @@ def test_non_finite_model_is_never_rendered():
     m['f'], m['p'], m['k'], m['depth0'] = lm['f0'], lm['p0'], lm['k'], lm['depth']
     m['zero'] = m['contact'] = m['valid'] = m['knorm'] = m['hold_skew'] = 1.0
     m['f'][0] = math.nan
-    from haptic_anfis.device.servo_native import _seq_write
-    _seq_write(lp.model, slot.view(np.float64)[1:])
+    seq_write(lp.model, slot.view(np.float64)[1:])
     pin(lp, MAP.to_device(tuple(lm['p0'])), 0.0)
     assert lp.tick(0.0) == (0.0, 0.0, 0.0)
     assert int(lp.st[nt.S.status]) == 0  # no model
@@ -412,7 +413,6 @@ def test_ripple_and_dropouts_on_known_signals():
 
 
 def test_spectral_norm_matches_numpy():
-    from haptic_anfis.device.servo_native import spectral_norm_sym
     rng = np.random.default_rng(3)
     for _ in range(20):
         A = rng.normal(size=(3, 3))
@@ -961,3 +961,87 @@ def test_gaps_past_the_watchdog_are_counted_and_restart_with_the_window():
     lp.stats.reset()
     lp.tick(t + 0.02)
     assert lp.stats.summary()['gaps_past_watchdog'] == 1
+
+
+@pytest.mark.parametrize('seed', [0, 1, 2])
+def test_the_ticks_clutch_and_mark_follow_the_python_rules(seed):
+    """Grip buttons held for random spells, a wandering hand and forces on and off through the
+    compiled tick's clutch and gain and through the Python rules (tick_oracle.ClutchMark): the
+    same tissue position, gain, clutches and marks at every tick."""
+    rng = np.random.default_rng(seed)
+    ramp = 0.005
+    cm = ClutchMark(ramp_s=ramp)
+    cfg = np.zeros(nt.CFG_LEN)
+    cfg[nt.CFG.ramp] = ramp
+    st, cnt = nt.new_state(), np.zeros(nt.CNT_LEN, dtype=np.int64)
+    buttons, pressing, mapped = [0, 0], False, np.zeros(3)
+    gains = set()
+    for i in range(4000):
+        now = i * 0.001
+        for b in range(2):
+            if rng.random() < 0.02:
+                buttons[b] ^= 1
+        if rng.random() < 0.01:
+            pressing = not pressing
+        mapped = mapped + rng.normal(scale=2e-4, size=3)
+        force = (1.5, 0.0, -0.5) if pressing else (0.0, 0.0, 0.0)
+        q = nt._clutch(st, cnt, buttons[0], buttons[1], *mapped)
+        want, _ = cm.update(tuple(buttons), tuple(mapped), now)
+        assert q == pytest.approx(want, abs=1e-15), i
+        g = nt._gain(cfg, st, pressing, now)
+        assert g == cm.gain(force, now), i
+        gains.add(round(g, 3))
+    assert (cnt[nt.CNT.clutches], cnt[nt.CNT.marks]) == (cm.clutches, cm.marks)
+    assert cm.clutches > 5 and cm.marks > 5 and {0.0, 1.0} < gains  # every branch was taken
+
+
+def test_a_malformed_model_through_the_drivers_input_is_counted_and_zeroes_the_force():
+    """The driver's force input over the compiled loop: a model the tick would press with, then
+    one with a value missing: refused in one line, counted as a rejected model and a non-finite
+    input, and the next tick applies no force."""
+    lp, x = wall_loop()
+    fi = ForceInput(lp.safety, MAP, lp.renderer)
+    for t in (0.0, 0.001, 0.002):  # the first tick takes the enable: zero, then the wall's
+        pin(lp, x, t)
+        f = lp.tick(t)
+    assert f[0] > 1.0
+    why = fi.model_values([0.0] * 25, 1, 'tissue', 0.0025)
+    assert why == 'rejected: local model: expected 26 values, got 25'
+    assert fi.summary()['models_rejected'] == 1 and lp.safety.stats.rejected_nonfinite == 1
+    pin(lp, x, 0.003)
+    assert lp.tick(0.003) == (0.0, 0.0, 0.0)
+
+
+@pytest.mark.parametrize('seed', [0, 1, 2])
+def test_the_ticks_safety_rules_follow_the_python_rules(seed):
+    """Commands at random times (over the clamp, non-finite, in a wrong frame, out of order)
+    and ticks with jitter and stalls past the watchdog, through the compiled tick (zoh) and the
+    Python rules (tick_oracle.SafetyLayer): the same force at every tick."""
+    rng = np.random.default_rng(seed)
+    lp = loop('zoh', max_force=5.0, max_force_rate=1000.0, watchdog_timeout=0.01)
+    ref = SafetyLayer(5.0, 1000.0, 0.01, frame_id='tissue')
+    t = 1.0
+    lp.safety.start()
+    lp.tick(t)  # takes the enable: zero force, the watchdog counts from here
+    ref.start(t)
+    seen = set()
+    for i in range(3000):
+        gap = 0.001 * (1.0 + 0.2 * rng.random()) if rng.random() > 0.005 else 0.02
+        if rng.random() < 0.5:  # one command between two ticks
+            tc = t + rng.random() * gap
+            f, frame, kind = tuple(rng.normal(scale=3.0, size=3)), 'tissue', 'ok'
+            u = rng.random()
+            if u < 0.01:
+                f, kind = (math.nan, 0.0, 1.0), 'nan'
+            elif u < 0.02:
+                frame, kind = 'world', 'frame'
+            elif u < 0.04:
+                tc, kind = tc - 0.05, 'older'
+            seen.add(kind)
+            assert lp.safety.command(f, tc, frame) == ref.command(f, tc, frame) or kind == 'older'
+        t += gap
+        got, want = lp.tick(t), ref.output(t)
+        assert got == pytest.approx(want, abs=1e-9), i
+        seen.add('clamped' if math.hypot(*want) > 4.999 else 'zero' if want == (0, 0, 0) else '')
+    assert seen >= {'ok', 'nan', 'frame', 'older', 'clamped', 'zero'}
+    assert lp.safety.stats.watchdog_trips == ref.stats.watchdog_trips > 0
