@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ['RIB_POINTS', 'normal_lines', 'normal_regions', 'specificity', 'specificity_text']
+__all__ = ['RIB_POINTS', 'normal_lines', 'normal_regions', 'skin_point', 'specificity', 'specificity_text']
 
 #: surface points per rib in the report (its line across the region to examine, for drawing)
 RIB_POINTS = 9
@@ -28,7 +28,7 @@ def _mm(p) -> list[float]:
     return [round(float(v) * 1e3, 2) for v in p]
 
 
-def _surface(detector, y: float, z: float) -> np.ndarray | None:
+def skin_point(detector, y: float, z: float) -> np.ndarray | None:
     """The skin point over (y, z) [m] (the probe axis is -x), None where no skin lies over it."""
     r = detector.query(np.array([_UNDER, y, z]))
     return np.asarray(r.contact_point, float) if r.in_contact else None
@@ -64,16 +64,16 @@ def normal_regions(detector, background, grading: dict[str, Any] | None, marks: 
             on.setdefault(m['normal'], []).append(int(m['index']))
     out = []
     for n in background.nodules:
-        s = _surface(detector, n.centre[1], n.centre[2])
+        s = skin_point(detector, n.centre[1], n.centre[2])
         out.append({'name': n.name, 'kind': 'nodule', 'what': n.what,
                     'radius_mm': round(n.radius * 1e3, 2),
                     'surface_mm': None if s is None else _mm(s), 'line_mm': [],
                     'depth_mm': None if s is None else round((s[0] - n.centre[0]) * 1e3, 2)})
     for rib in background.ribs:
         half = float(np.sqrt(max(region_radius ** 2 - rib.z ** 2, 0.0)))
-        line = [p for p in (_surface(detector, y, rib.z)
+        line = [p for p in (skin_point(detector, y, rib.z)
                             for y in np.linspace(-half, half, RIB_POINTS)) if p is not None]
-        s = _surface(detector, 0.0, rib.z)
+        s = skin_point(detector, 0.0, rib.z)
         out.append({'name': rib.name, 'kind': 'rib', 'what': rib.what,
                     'radius_mm': round(rib.radius * 1e3, 2),
                     'surface_mm': None if s is None else _mm(s),
