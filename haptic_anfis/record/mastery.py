@@ -170,7 +170,8 @@ def mastery(sessions: list[dict], config: MasteryConfig = DEFAULT) -> dict:
     'void', 'cases' (counted sessions of either kind), 'false_marks' and 'false_marks_normal'
     (over them; the latter of the sessions that know it), 'window_cases',
     'window_false_marks' (the current window), 'false_marks_per_case' (over the window, None
-    without one)}}, 'specificity': :func:`specificity` of the counted sessions}``; sessions
+    without one)}}, 'specificity': :func:`specificity` of every session not void, whatever
+    its level}``; sessions
     with no case level are not counted, nor a bag's second session (a recording scored again,
     in a record from before :class:`~haptic_anfis.record.AlreadyStored`); two recordings made
     at one path (``bag_start_ns`` differs) count as two.
