@@ -123,14 +123,14 @@ def normal_lines(report: dict[str, Any]) -> list[str]:
     if not normal:
         return []
     nod = [e for e in normal if e['kind'] == 'nodule']
-    ribs = [e for e in normal if e['kind'] == 'rib']
+    ribs = [e for e in normal if e['kind'] == 'rib' and e['line_mm']]   # under the region
     kinds = sorted({e['what'].removeprefix('a ').removeprefix('normal ') for e in nod})
     parts = [f"{len(nod)} {' / '.join(k + 's' for k in kinds) or 'lobules'}"] if nod else []
     bumps = [e['bump_pct'] for e in nod if e.get('bump_pct') is not None]
     if bumps:
         parts[0] += f' (bumps {min(bumps):+.1f}..{max(bumps):+.1f} % at deep pressure)'
     if ribs:
-        parts.append(f'{len(ribs)} rib(s)')
+        parts.append(f"{len(ribs)} rib{'s' if len(ribs) > 1 else ''} under the region")
     lines = ['normal background: ' + ', '.join(parts)]
     thr = (report.get('specificity') or {}).get('threshold_pct')
     conf = [e for e in normal if e['confounder']]
@@ -140,6 +140,7 @@ def normal_lines(report: dict[str, Any]) -> list[str]:
                         or 'none'))
     for e in normal:
         if e['marks']:
-            lines.append(f"false mark(s) {', '.join(str(i) for i in e['marks'])} on "
-                         f"{e['name']}: {e['what']}{_bump(e)}, not a lesion")
+            lines.append(f"false mark{'s' if len(e['marks']) > 1 else ''} "
+                         f"{', '.join(str(i) for i in e['marks'])} on {e['name']}: "
+                         f"{e['what']}{_bump(e)}, not a lesion")
     return lines
