@@ -15,7 +15,8 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ['RIB_POINTS', 'normal_lines', 'normal_regions', 'skin_point', 'specificity', 'specificity_text']
+__all__ = ['RIB_POINTS', 'normal_lines', 'normal_regions', 'skin_point', 'specificity',
+           'specificity_text']
 
 #: surface points per rib in the report (its line across the region to examine, for drawing)
 RIB_POINTS = 9

@@ -162,9 +162,9 @@ class ExamSession:
         mpts, invalid = project_marks(self.surface.detector, mk, cfg.mark_tolerance)
         fin = match(lesions, lpts, mpts, invalid, cfg.hit_margin, deep,
                     getattr(self.subject, 'background', None))
+        bg_grading = getattr(self.subject, 'background_grading', None)
         normal = normal_regions(self.surface.detector, getattr(self.subject, 'background', None),
-                                getattr(self.subject, 'background_grading', None),
-                                fin['marks'], self.region_radius)
+                                bg_grading, fin['marks'], self.region_radius)
         if not lesions:
             notes.append('the case has no lesion: every mark is a false mark')
         for m in fin['marks']:
@@ -188,7 +188,7 @@ class ExamSession:
             'hits': fin['hits'], 'misses': fin['misses'], 'false_marks': fin['false_marks'],
             'false_marks_normal': fin['false_marks_normal'],
             'false_marks_elsewhere': fin['false_marks'] - fin['false_marks_normal'],
-            'specificity': specificity(fin, normal, getattr(self.subject, 'background_grading', None)),
+            'specificity': specificity(fin, normal, bg_grading),
             'normal': normal,
             'score': round(score, 2), 'score_parts': parts, 'verdict': verdict,
             'feedback': reasons, 'pattern': pat['pattern'], 'pattern_detail': pat,

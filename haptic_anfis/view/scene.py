@@ -13,8 +13,9 @@ import numpy as np
 
 from ..palette import FINDING, LEVEL, MARK, NORMAL, NOT_PRESSED, SKIN, rgb255
 
-__all__ = ['FRONTAL', 'LESION_RGB', 'LEVEL_RGB', 'MARK_RGB', 'NORMAL_RGB', 'OUTSIDE_RGB', 'Framing', 'SkinPaint',
-           'frame_camera', 'pressure_rgb', 'probe_quaternion', 'region_outline']
+__all__ = ['FRONTAL', 'LESION_RGB', 'LEVEL_RGB', 'MARK_RGB', 'NORMAL_RGB', 'OUTSIDE_RGB',
+           'Framing', 'SkinPaint', 'frame_camera', 'pressure_rgb', 'probe_quaternion',
+           'region_outline']
 
 #: coverage colour per highest level reached (the palette's, as report.png): none (the region
 #: not yet palpated: a neutral, lighter than light), light, medium, deep

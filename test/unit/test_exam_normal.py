@@ -110,6 +110,28 @@ def test_ribs_are_drawn_as_lines_across_the_region_and_an_ungraded_bump_is_unkno
     assert all(m.label for m in marks if m.kind == 'rib')   # a rib is always named
 
 
+def test_the_report_figure_draws_the_lobules_and_ribs_beside_the_lesions(surface, tmp_path,
+                                                                        monkeypatch):
+    import matplotlib.pyplot as plt
+    from matplotlib.colors import to_hex
+    from haptic_anfis import palette
+    from haptic_anfis.exam.figure import save_figure
+    figs = []
+    monkeypatch.setattr(plt, 'close', figs.append)
+    s = ExamSession(surface, subject_from_scene(RIBS), ExamConfig())
+    r = s.report()
+    save_figure(s, r, tmp_path / 'report.png')
+    ax = figs[0].axes[1]
+    blue = palette.NORMAL['normal']
+    circles = [p for p in ax.patches if p.get_linestyle() == ':' and to_hex(p.get_edgecolor())
+               == blue]
+    lines = [ln for ln in ax.get_lines() if ln.get_linestyle() == ':' and len(ln.get_xdata()) > 1]
+    assert len(circles) == sum(e['kind'] == 'nodule' for e in r['normal'])
+    assert len(lines) == sum(bool(e['line_mm']) for e in r['normal'])
+    assert 'normal lobule / rib' in [t.get_text() for t in ax.get_legend().get_texts()]
+    assert (tmp_path / 'report.png').stat().st_size > 10_000
+
+
 def test_a_smooth_case_has_no_background_to_show(surface):
     r = _report(surface, subject_from_scene(SCENE_DIR / 'lib_s_fatty_two.yaml'), [])
     assert r['normal'] == [] and normal_lines(r) == [] and normal_markers(r) == []
