@@ -129,3 +129,28 @@ def test_trainees_progress_says_the_window_and_the_specificity(tmp_path, capsys)
     assert 'false marks 0.33 per case over the last 3 (at most 0.34)' in out
     assert ('specificity: 2 of 3 session(s) without a false mark (67 %); 0.33 false marks per '
             'session (0.33 on normal tissue, 0.00 elsewhere, of 3 session(s) that tell)') in out
+
+
+def test_the_progress_figure_shows_the_false_marks_on_normal_tissue(tmp_path, monkeypatch):
+    import matplotlib
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt
+    from matplotlib.colors import to_hex
+
+    from haptic_anfis import palette
+    from haptic_anfis.record.figure import save_progress_figure
+    figs = []
+    monkeypatch.setattr(plt, 'close', figs.append)
+
+    def s(fm, on):
+        return {'coverage_pct': {'light': 99.0, 'medium': 95.0, 'deep': 91.0},
+                'sensitivity': 1.0, 'false_marks': fm, 'false_marks_normal': on,
+                'duration_s': 100.0, 'contact_s': 80.0, 'case_level': 3, 'verdict': 'pass',
+                'void': None}
+    save_progress_figure('t', [s(2, 1), s(1, None), s(0, 0)], tmp_path / 'p.png', None, 90.0)
+    ax = figs[0].axes[2]
+    blue = [p.get_height() for p in ax.patches
+            if to_hex(p.get_facecolor()) == palette.NORMAL['normal']]
+    assert blue == [1, 0, 0]
+    assert 'of them on a normal lobule or rib' in [t.get_text()
+                                                   for t in ax.get_legend().get_texts()]
