@@ -81,7 +81,7 @@ def normal_regions(detector, background, grading: dict[str, Any] | None, marks: 
                     'line_mm': [_mm(p) for p in line] if half > 0 else [], 'depth_mm': None})
     for e in out:
         b = bumps.get(e['name'])
-        e.update(bump_pct=None if b is None else round(float(b), 1),
+        e.update(bump_pct=None if b is None else round(float(b), 1) + 0.0,   # no '-0.0'
                  confounder=e['name'] in confound, marks=on.get(e['name'], []))
     return out
 
@@ -132,7 +132,7 @@ def normal_lines(report: dict[str, Any]) -> list[str]:
         parts[0] += f' (bumps {min(bumps):+.1f}..{max(bumps):+.1f} % at deep pressure)'
     if ribs:
         parts.append(f"{len(ribs)} rib{'s' if len(ribs) > 1 else ''} under the region")
-    lines = ['normal background: ' + ', '.join(parts)]
+    lines = ['normal background: ' + (', '.join(parts) or 'none under the region')]
     thr = (report.get('specificity') or {}).get('threshold_pct')
     conf = [e for e in normal if e['confounder']]
     if thr is not None:
