@@ -137,3 +137,25 @@ def test_a_smooth_case_has_no_background_to_show(surface):
     assert r['normal'] == [] and normal_lines(r) == [] and normal_markers(r) == []
     assert r['specificity']['normal_regions'] == 0
     assert normal_markers({'lesions': []}) == []   # a report made before the background
+
+
+def test_a_confounder_is_drawn_apart_and_named_with_its_bump():
+    """No shipped ready case has a normal region that reaches the threshold yet: a report entry
+    says what the debrief does with one."""
+    def entry(name, bump, confounder, marks=()):
+        return {'name': name, 'kind': 'nodule', 'what': 'a normal glandular lobule',
+                'radius_mm': 3.0, 'surface_mm': [30.0, 1.0, 2.0], 'line_mm': [],
+                'depth_mm': 5.0, 'bump_pct': bump, 'confounder': confounder,
+                'marks': list(marks)}
+    r = {'normal': [entry('nodule0', 25.4, True, [0]), entry('nodule1', 3.0, False)],
+         'specificity': {'false_marks': 1, 'on_normal': 1, 'elsewhere': 0,
+                         'normal_regions': 2, 'threshold_pct': 22.0}}
+    conf, plain = normal_markers(r)
+    assert (conf.status, conf.label) == ('confounder', 'nodule0: normal glandular lobule, '
+                                                       '+25 %, false mark')
+    assert (plain.status, plain.label) == ('normal', '')
+    lines = normal_lines(r)
+    assert lines[1] == ('stand out as much as a lesion (bump >= 22 %): nodule0 (a normal '
+                        'glandular lobule, bump +25.4 %)')
+    assert lines[2] == ('false mark 0 on nodule0: a normal glandular lobule, bump +25.4 %, '
+                        'not a lesion')
