@@ -13,14 +13,16 @@ common colour-vision deficiencies:
 - **findings and outcomes** (lesions, marks, pass / retry): the Okabe-Ito palette (Okabe & Ito
   2002, "Color Universal Design"; Wong, Nature Methods 8:441, 2011), distinct under
   protanopia, deuteranopia and tritanopia: bluish green found / hit / pass, reddish purple
-  missed, sky blue a repeated mark, black a false mark, grey not palpable, orange retry.
+  missed, sky blue a repeated mark, black a false mark, grey not palpable, orange retry;
+  after the exam the breast's normal background (its lobules and ribs): blue, and vermillion
+  for normal tissue that stands out as much as a lesion would (a confounder).
 
 Colours are ``#rrggbb`` strings; :func:`rgb255` gives (r, g, b) 0-255 for a page or a mesh.
 """
 from __future__ import annotations
 
-__all__ = ['FINDING', 'LEVEL', 'LEVEL_LABEL', 'MARK', 'NOT_PRESSED', 'OUTCOME', 'PRESSURE_CMAP',
-           'REGION', 'SENSITIVITY', 'SKIN', 'TIME', 'rgb255']
+__all__ = ['FINDING', 'LEVEL', 'LEVEL_LABEL', 'MARK', 'NORMAL', 'NOT_PRESSED', 'OUTCOME',
+           'PRESSURE_CMAP', 'REGION', 'SENSITIVITY', 'SKIN', 'TIME', 'rgb255']
 
 #: never pressed to the light level (figures; lighter than light, so less pressed is always
 #: lighter, in grey too); the page shows the skin instead
@@ -40,6 +42,10 @@ FINDING = {'found': '#009e73', 'missed': '#cc79a7', 'not palpable': '#999999'}
 #: the trainee's marks: on a lesion, again on a lesion already found, on no lesion, on a
 #: lesion the FE says cannot be felt (neither hit nor false)
 MARK = {'hit': '#009e73', 'repeat': '#56b4e9', 'false': '#000000', 'not_palpable': '#999999'}
+#: the normal background revealed after the exam (Okabe-Ito blue and vermillion): a normal
+#: lobule or rib, and one whose bump reaches the palpability threshold (it stands out as much as
+#: a lesion would: a confounder)
+NORMAL = {'normal': '#0072b2', 'confounder': '#d55e00'}
 #: a session's verdict; void: the haptic loop fell behind, it does not count
 OUTCOME = {'pass': '#009e73', 'retry': '#e69f00', 'void': '#999999'}
 #: the share of palpable lesions found (progress figure)

@@ -360,6 +360,7 @@ def haptic_loop(driver) -> tuple[dict, str | None]:
 
 
 def print_report(r: dict) -> None:
+    from ..exam.normal import normal_lines, specificity_text
     c = r['coverage_pct']
     print(f"coverage       light {c['light']:.1f} %, medium {c['medium']:.1f} %, deep "
           f"{c['deep']:.1f} % of {r['region_faces']} cells (radius {r['region_radius_mm']:.0f} mm)")
@@ -381,12 +382,15 @@ def print_report(r: dict) -> None:
               + ('' if r.get('palpating_vs_searching_pct') is None else
                  f", palpating {r['palpating_vs_searching_pct']:+.0f} % (successful examiners "
                  'press ~15 % harder palpating)'))
-    print(f"findings       hits {r['hits']}, misses {r['misses']}, false marks {r['false_marks']}")
+    print(f"findings       hits {r['hits']}, misses {r['misses']}, false marks {r['false_marks']}"
+          + specificity_text(r))
     for les in r['lesions']:
         where = (f", felt from {les['level']} pressure ({les['level_depth_mm']:g} mm)"
                  if les.get('level') else '')
         print(f"  lesion {les['name']}: {'found' if les['found'] else les['missed']}{where}"
               + (f" ({les['reason']})" if les.get('reason') else ''))
+    for line in normal_lines(r):
+        print(f'  {line}')
     print(f"score          {r['score']:.1f} ({r['verdict']})")
     if r.get('void_reason'):
         print(f"void           {r['void_reason']}")

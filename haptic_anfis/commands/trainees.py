@@ -99,14 +99,30 @@ def _table(sessions: list[dict]) -> None:
                                 initial_indent='  ', subsequent_indent='    '))
 
 
-def _mastery_lines(m: dict) -> None:
+def _mastery_lines(m: dict, config=None) -> None:
+    """The mastery (:func:`~haptic_anfis.record.mastery`) per level, with its window's false
+    marks per case against ``config``'s limit (a MasteryConfig; None: not said), and the
+    trainee's specificity over the sessions."""
     print(f"mastered level {m['mastered_level'] or 'none'}; next level {m['next_level']}")
     for L, v in m['levels'].items():
         more = ''.join(f', {n} {what}' for n, what in (
             (v.get('lesion_free', 0), 'without a lump'), (v.get('void', 0), 'void')) if n)
+        limit = None if config is None else config.levels[L].max_false_marks_per_case
+        if v.get('false_marks_per_case') is not None:   # specificity over the window
+            more += (f", false marks {v['false_marks_per_case']:.2f} per case over the last "
+                     f"{v['window_cases']}" + ('' if limit is None else f' (at most {limit:g})'))
         print(f"  level {L}: {v['sessions']} session(s) with a lump, {v['met']} met the "
               f"thresholds, {v['best_streak']}/{v['needed']} in a row"
               f"{' - mastered' if v['mastered'] else ''}{more}")
+    sp = m.get('specificity')
+    if sp and sp['sessions']:
+        split = ('' if sp['normal_per_session'] is None else
+                 f" ({sp['normal_per_session']:.2f} on normal tissue, "
+                 f"{sp['elsewhere_per_session']:.2f} elsewhere, of {sp['split_sessions']} "
+                 'session(s) that tell)')
+        print(f"specificity: {sp['clean']} of {sp['sessions']} session(s) without a false mark "
+              f"({sp['clean_pct']:.0f} %); {sp['false_marks_per_session']:.2f} false marks per "
+              f'session{split}')
 
 
 def _show(args, db) -> int:
@@ -114,7 +130,8 @@ def _show(args, db) -> int:
     sessions = history(db, args.id, instructor=args.instructor)
     print(f'trainee {args.id}: {len(sessions)} session(s) in {db}')
     _table(sessions)
-    _mastery_lines(mastery(sessions, load_mastery_config()))
+    cfg = load_mastery_config()
+    _mastery_lines(mastery(sessions, cfg), cfg)
     for s in sessions:
         if s['bag']:
             print(f"  session {s['session']}: bag {s['bag']}")
@@ -140,7 +157,7 @@ def _progress(args, db) -> int:
         print(json.dumps({'trainee': args.id, 'sessions': sessions, 'mastery': m}))
         return 0
     _table(sessions)
-    _mastery_lines(m)
+    _mastery_lines(m, cfg)
     if args.figure:
         print(f'figure {args.figure}')
     return 0

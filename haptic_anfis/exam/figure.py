@@ -1,5 +1,6 @@
 """The report figure (PNG): where the skin was pressed and how deep, the path, the marks and the
-lesions revealed, with the summary numbers (no ROS; matplotlib Agg). Its colours are the picture
+lesions revealed (and a nodular case's normal lobules and ribs beside them), with the summary
+numbers (no ROS; matplotlib Agg). Its colours are the picture
 language every figure and the page share (:mod:`haptic_anfis.palette`): red is pressed deep,
 bluish green found, reddish purple missed, black a false mark."""
 from __future__ import annotations
@@ -71,6 +72,7 @@ def save_figure(session, report: dict, path: str | os.PathLike) -> None:
                     textcoords='offset points', ha='center', va='bottom', fontsize=8,
                     zorder=5, bbox={'boxstyle': 'round,pad=0.15', 'fc': 'white', 'ec': 'none',
                                     'alpha': 0.8})
+    normal = _draw_normal(ax, report.get('normal') or [])
     for m in report['marks']:
         if m['surface_mm'] is None:
             continue
@@ -86,7 +88,10 @@ def save_figure(session, report: dict, path: str | os.PathLike) -> None:
                  for s in palette.FINDING),
                *(Line2D([], [], color=palette.MARK[k], label=f'mark: {w}', **cross)
                  for k, w in (('hit', 'on a lesion'), ('repeat', 'again on one'),
-                              ('false', 'false')))]
+                              ('false', 'false'))),
+               *(Line2D([], [], color=palette.NORMAL[k], lw=1.5, ls=':', label=w)
+                 for k, w in (('normal', 'normal lobule / rib'),
+                              ('confounder', 'normal, stands out like a lump')) if k in normal)]
     ax.legend(handles=handles, fontsize=8, loc='upper center', bbox_to_anchor=(0.5, -0.12),
               ncol=3)
     fig.suptitle(f"score {report['score']:.0f} ({report['verdict']}): hits {report['hits']}, "
@@ -96,6 +101,30 @@ def save_figure(session, report: dict, path: str | os.PathLike) -> None:
     # 'tight': the legends below the maps are part of the picture, never cut off
     fig.savefig(path, dpi=90, bbox_inches='tight', pad_inches=0.15)
     plt.close(fig)
+
+
+def _draw_normal(ax, normal: list[dict]) -> set[str]:
+    """A nodular case's normal lobules (dotted circles) and ribs under the region (dotted lines)
+    from the report's ``normal`` entries, blue, a confounder vermillion; the kinds drawn."""
+    drawn = set()
+    for e in normal:
+        kind = 'confounder' if e.get('confounder') else 'normal'
+        colour = palette.NORMAL[kind]
+        if e['kind'] == 'rib' and e.get('line_mm'):
+            line = np.asarray(e['line_mm'], float)
+            ax.plot(line[:, 1], line[:, 2], color=colour, lw=1.5, ls=':', zorder=2.5)
+        elif e['kind'] == 'nodule' and e.get('surface_mm') is not None:
+            ax.add_patch(_circle(e['surface_mm'][1:], e['radius_mm'], colour))
+        else:
+            continue
+        drawn.add(kind)
+    return drawn
+
+
+def _circle(centre, radius: float, colour: str):
+    """A dotted circle patch of ``radius`` [mm] at ``centre`` (y, z) [mm]."""
+    from matplotlib.patches import Circle
+    return Circle(tuple(centre), radius, fill=False, lw=1.2, ls=':', zorder=2.5, color=colour)
 
 
 def _frame(ax, R):

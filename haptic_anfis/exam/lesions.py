@@ -35,12 +35,15 @@ class ExamSubject:
     """What the examiner needs to know of the case: its lesions, the palpable radius [m] and the
     probe radius [m] from the scene, and the scene file (provenance); ``background``: the
     scene's normal background (:class:`haptic_anfis.tissue.background.Background`: a false mark
-    on a nodule or a rib says which), None for a smooth breast."""
+    on a nodule or a rib says which), None for a smooth breast; ``background_grading``: the
+    case's FE grading of that background (each nodule's and rib's bump, the confounders:
+    :func:`haptic_anfis.cases.background.background_grades`), None when not graded."""
     lesions: tuple[Lesion, ...]
     palpable_radius: float
     probe_radius: float
     source: str
     background: Any = None
+    background_grading: dict | None = None
 
 
 def subject_from_scene(path: str | os.PathLike | None = None) -> ExamSubject:
@@ -52,18 +55,18 @@ def subject_from_scene(path: str | os.PathLike | None = None) -> ExamSubject:
     from ..tissue.scene import DEFAULT_SCENE, load_scene
     p = Path(path) if path else DEFAULT_SCENE
     sc = load_scene(p)
-    graded = _fe_grades(p)
+    grading = _case_grading(p)
+    graded = _fe_grades(grading)
     les = tuple(Lesion(t.name, tuple(float(c) for c in t.centre), float(t.radius),
                        **graded.get(t.name, {}))
                 for t in sc.tumours)
     return ExamSubject(les, float(sc.palpable_radius), float(sc.probe_radius), str(p),
-                       sc.background)
+                       sc.background, grading.get('background'))
 
 
-def _fe_grades(scene_path: Path) -> dict[str, dict]:
-    """{lesion name: {palpable, level, level_depth, reason}} from the FE grading of the library
-    case whose scene file this is (haptic_anfis.cases.grading); {} (all palpable, no level) for
-    an ungraded scene."""
+def _case_grading(scene_path: Path) -> dict:
+    """The FE grading of the library case whose scene file this is (haptic_anfis.cases.grading);
+    {} for an ungraded scene."""
     from ..cases import CaseError, library
 
     lib = library()
@@ -73,10 +76,16 @@ def _fe_grades(scene_path: Path) -> dict[str, dict]:
         return {}
     if case.scene_path.resolve() != scene_path.resolve():
         return {}
+    return case.grading() or {}
+
+
+def _fe_grades(grading: dict) -> dict[str, dict]:
+    """{lesion name: {palpable, level, level_depth, reason}} from a case's FE ``grading``
+    (:func:`_case_grading`); {} (all palpable, no level) for an ungraded scene."""
     return {g['lesion']: {'palpable': bool(g['palpable']), 'level': g.get('found_level'),
                           'level_depth': g.get('found_depth_m'), 'reason': g.get('reason'),
                           'difficulty': g.get('difficulty'), **_deep_contrast(g)}
-            for g in ((case.grading() or {}).get('lesions') or [])}
+            for g in (grading.get('lesions') or [])}
 
 
 def _deep_contrast(grade: dict) -> dict:

@@ -20,6 +20,7 @@ from .effort import effort
 from .files import write_atomic
 from .findings import match, project_marks
 from .lesions import ExamSubject, lesion_surface_points
+from .normal import normal_regions, specificity
 from .pattern import classify
 
 
@@ -161,6 +162,9 @@ class ExamSession:
         mpts, invalid = project_marks(self.surface.detector, mk, cfg.mark_tolerance)
         fin = match(lesions, lpts, mpts, invalid, cfg.hit_margin, deep,
                     getattr(self.subject, 'background', None))
+        bg_grading = getattr(self.subject, 'background_grading', None)
+        normal = normal_regions(self.surface.detector, getattr(self.subject, 'background', None),
+                                bg_grading, fin['marks'], self.region_radius)
         if not lesions:
             notes.append('the case has no lesion: every mark is a false mark')
         for m in fin['marks']:
@@ -183,6 +187,9 @@ class ExamSession:
             'max_force_n': round(float(fn.max()), 3) if len(fn) else 0.0,
             'hits': fin['hits'], 'misses': fin['misses'], 'false_marks': fin['false_marks'],
             'false_marks_normal': fin['false_marks_normal'],
+            'false_marks_elsewhere': fin['false_marks'] - fin['false_marks_normal'],
+            'specificity': specificity(fin, normal, bg_grading),
+            'normal': normal,
             'score': round(score, 2), 'score_parts': parts, 'verdict': verdict,
             'feedback': reasons, 'pattern': pat['pattern'], 'pattern_detail': pat,
             'marks': fin['marks'], 'lesions': fin['lesions'],
@@ -227,6 +234,18 @@ def score_of(cov: dict, fin: dict, pattern: str, n_lesions: int, cfg: ExamConfig
     return min(max(sum(parts.values()), 0.0), 100.0), parts
 
 
+def false_marks_text(fin: dict) -> str:
+    """'3 false mark(s): 2 on normal tissue, not a lesion: a rib (rib2), a normal glandular
+    lobule (nodule4); 1 elsewhere' (split only when a mark fell on a normal structure)."""
+    n, marks = fin['false_marks'], fin['marks']
+    on = [m for m in marks if m.get('normal')]
+    if not on:
+        return f'{n} false mark(s)'
+    what = ', '.join(m['reason'].removeprefix('no lesion here: ') for m in on)
+    return (f'{n} false mark(s): {len(on)} on normal tissue, not a lesion: {what}'
+            + (f'; {n - len(on)} elsewhere' if n > len(on) else ''))
+
+
 def verdict_of(cov: dict, fin: dict, cfg: ExamConfig) -> tuple[str, list[str]]:
     """'pass' or 'retry', and the feedback lines that explain it."""
     why = []
@@ -242,5 +261,5 @@ def verdict_of(cov: dict, fin: dict, cfg: ExamConfig) -> tuple[str, list[str]]:
                 why.append(f"lesion {les['name']} missed, never palpated deep there: cover that "
                            'area at deep pressure')
     if fin['false_marks']:
-        why.append(f"{fin['false_marks']} false mark(s)")
+        why.append(false_marks_text(fin))
     return ('retry' if why else 'pass'), why

@@ -130,7 +130,15 @@ _V5 = """
 ALTER TABLE sessions ADD COLUMN void_reason TEXT;
 ALTER TABLE sessions ADD COLUMN blind INTEGER NOT NULL DEFAULT 0;
 """
-MIGRATIONS: tuple[str, ...] = (_V1, _V2, _V3, _V4, _V5)
+# v6: specificity: of a session's false marks, those on a normal structure (a normal lobule or a
+# rib of a nodular case) -- the rest fell elsewhere. Taken from the stored report where it says
+# (a report scored since false marks name the nodule or rib); NULL (not known) before that.
+_V6 = """
+ALTER TABLE sessions ADD COLUMN false_marks_normal INTEGER;
+UPDATE sessions SET false_marks_normal = CASE WHEN json_valid(report_json)
+    THEN json_extract(report_json, '$.false_marks_normal') END
+"""
+MIGRATIONS: tuple[str, ...] = (_V1, _V2, _V3, _V4, _V5, _V6)
 SCHEMA_VERSION = len(MIGRATIONS)
 
 

@@ -1,6 +1,6 @@
 """The learning-curve figure of one trainee (PNG, matplotlib Agg, no ROS): per session, coverage
-per pressure level, sensitivity, false marks, time, and the case level with the mastered level.
-Colours: the picture language of every figure and the page (:mod:`haptic_anfis.palette`)."""
+per pressure level, sensitivity, false marks (those on normal tissue apart), time, and the case
+level with the mastered level. Colours: the picture language of every figure and the page (:mod:`haptic_anfis.palette`)."""
 from __future__ import annotations
 
 import os
@@ -62,6 +62,10 @@ def save_progress_figure(trainee_id: str, sessions: list[dict], path: str | os.P
     ax = axes[2]
     fm = [s['false_marks'] for s in sessions]
     ax.bar(x, fm, color=palette.MARK['false'], width=0.6, label='false marks')
+    on = [s.get('false_marks_normal') or 0 for s in sessions]
+    if any(on):   # of them, on a normal lobule or rib (sessions stored since schema v6)
+        ax.bar(x, on, color=palette.NORMAL['normal'], width=0.6,
+               label='of them on a normal lobule or rib')
     ax.set_ylim(0, max(fm + [1]) + 0.5)
     ax.set_ylabel('false marks')
     ax.yaxis.get_major_locator().set_params(integer=True)

@@ -27,7 +27,8 @@ ID_PUNCTUATION = '._@+-'
 #: the columns of ``trainees export --csv`` (one row per session, oldest first)
 CSV_COLUMNS = ('session', 'started_utc', 'source', 'case', 'case_level', 'coverage_light_pct',
                'coverage_medium_pct', 'coverage_deep_pct', 'pattern', 'lesions', 'hits',
-               'misses', 'palpable_missed', 'not_palpable', 'false_marks', 'sensitivity',
+               'misses', 'palpable_missed', 'not_palpable', 'false_marks', 'false_marks_normal',
+               'sensitivity',
                'score', 'verdict', 'duration_s', 'contact_s', 'bag', 'void', 'blind')
 
 
@@ -107,6 +108,8 @@ def session_row(report: dict, *, source: str, case_level: int | None = None,
             'contact_s': float(report.get('contact_s', 0.0)),
             'not_palpable': json.dumps(hidden), 'palpable_missed': palpable_missed,
             'void_reason': report.get('void_reason') or None,
+            # schema v6: of the false marks, those on a normal lobule or rib (None: not known)
+            'false_marks_normal': _int_or_none(report.get('false_marks_normal')),
             'blind': int(bool(report.get('blind'))),
             'report_json': json.dumps(report, allow_nan=False, default=str),
             # what predicts finding lumps (haptic_anfis.exam.effort); None in an older report
@@ -123,6 +126,10 @@ def session_row(report: dict, *, source: str, case_level: int | None = None,
 
 def _json_or_none(v) -> str | None:
     return None if v is None else json.dumps(v)
+
+
+def _int_or_none(v) -> int | None:
+    return None if v is None else int(v)
 
 
 #: first-message times from here on [ns] are wall clock (after 2001); earlier ones are a
@@ -213,7 +220,7 @@ _HISTORY_COLS = ('id', 'started_utc', 'source', 'case_name', 'case_level', 'bag_
                  'hits', 'misses', 'palpable_missed', 'not_palpable', 'false_marks', 'score',
                  'verdict', 'duration_s', 'contact_s', 'bag_start_ns', 'time_at_level_json',
                  'area_time_json', 'force_palpating_n', 'force_searching_n',
-                 'lesion_levels_json', 'void_reason', 'blind')
+                 'lesion_levels_json', 'void_reason', 'blind', 'false_marks_normal')
 
 #: what the trainee's view of the record shows for a blind session's case
 BLIND_CASE = 'blind'
@@ -240,7 +247,9 @@ def history(db: str | os.PathLike | None, trainee_id: str, full: bool = False,
     ``case_level``, ``bag``, ``bag_start_ns`` (its first message [ns], None if not known),
     ``coverage_pct`` {light, medium, deep} [%], ``pattern``,
     ``lesions``, ``hits``, ``misses``, ``palpable_missed``, ``not_palpable`` (names),
-    ``false_marks``, ``sensitivity`` (found / palpable lesions, None without one), ``score``,
+    ``false_marks``, ``false_marks_normal`` / ``false_marks_elsewhere`` (of them, on a normal
+    lobule or rib / elsewhere; None for a session stored before schema v6 from a report without
+    the split), ``sensitivity`` (found / palpable lesions, None without one), ``score``,
     ``verdict``, ``duration_s``, ``contact_s`` [s], ``time_at_level_s`` and ``area_time_s``
     ({name: s}), ``force_palpating_n`` / ``force_searching_n`` [N], ``lesion_levels`` ({lesion:
     the pressure level it is felt from}; these None for a session stored before schema v4),
@@ -278,6 +287,11 @@ def history(db: str | os.PathLike | None, trainee_id: str, full: bool = False,
              'pattern': d['pattern'], 'lesions': d['lesions'], 'hits': d['hits'],
              'misses': d['misses'], 'palpable_missed': missed, 'not_palpable': hidden,
              'false_marks': d['false_marks'],
+             # schema v6 (None before, or from a report without the split): of the false marks,
+             # those on a normal lobule or rib, and those elsewhere
+             'false_marks_normal': d['false_marks_normal'],
+             'false_marks_elsewhere': (None if d['false_marks_normal'] is None
+                                       else d['false_marks'] - d['false_marks_normal']),
              'sensitivity': round((palpable - missed) / palpable, 4) if palpable > 0 else None,
              'score': d['score'], 'verdict': d['verdict'], 'duration_s': d['duration_s'],
              'contact_s': d['contact_s'],
@@ -348,7 +362,9 @@ def export_csv(db: str | os.PathLike | None, trainee_id: str, out: IO[str]) -> i
         w.writerow([h['session'], h['started_utc'], h['source'], h['case'], h['case_level'],
                     c['light'], c['medium'], c['deep'], h['pattern'], h['lesions'], h['hits'],
                     h['misses'], h['palpable_missed'], ';'.join(h['not_palpable']),
-                    h['false_marks'], '' if h['sensitivity'] is None else h['sensitivity'],
+                    h['false_marks'],
+                    '' if h['false_marks_normal'] is None else h['false_marks_normal'],
+                    '' if h['sensitivity'] is None else h['sensitivity'],
                     h['score'], h['verdict'], h['duration_s'], h['contact_s'], h['bag'] or '',
                     h['void'] or '', int(h['blind'])])
     return len(rows)

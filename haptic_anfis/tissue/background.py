@@ -56,6 +56,11 @@ class Nodule:
     youngs: float
     kind: str
 
+    @property
+    def what(self) -> str:
+        """What it is, as the exam says it to the trainee."""
+        return 'a normal glandular lobule' if self.kind == 'glandular' else 'a fat lobule'
+
 
 @dataclass(frozen=True)
 class Rib:
@@ -68,6 +73,9 @@ class Rib:
     top: float
     youngs: float
     cover: float
+
+    #: what it is, as the exam says it to the trainee
+    what = 'a rib'
 
     @property
     def axis_x(self) -> float:
@@ -101,11 +109,10 @@ class Background:
             if d <= n.radius + margin and d < bd:
                 best, bd = n, d
         if best is not None:
-            what = 'a normal glandular lobule' if best.kind == 'glandular' else 'a fat lobule'
-            return best.name, what
+            return best.name, best.what
         for rib in self.ribs:
             if abs(z - rib.z) <= rib.radius + margin:
-                return rib.name, 'a rib'
+                return rib.name, rib.what
         return None
 
 

@@ -25,14 +25,15 @@ import numpy as np
 
 from ..errors import HapticAnfisError
 from ..exam.config import LEVELS
+from ..exam.normal import normal_lines
 from ..palette import REGION, rgb255
 from .doors import guarded_server
 from .escape import md
 from .gauge import DEVICE_MAX_FORCE, gauge
 from .legend import banner_html, gauge_html, legend_html
 from .panel import history_markdown, numbers_markdown
-from .scene import (LESION_RGB, MARK_RGB, SkinPaint, frame_camera, probe_quaternion,
-                    region_outline)
+from .scene import (LESION_RGB, MARK_RGB, NORMAL_RGB, SkinPaint, frame_camera,
+                    probe_quaternion, region_outline)
 
 __all__ = ['BLIND', 'PROBE_LENGTH', 'md', 'ViewApp', 'ViewError', 'check_port', 'coverage_fractions',
            'trainee_history']
@@ -422,6 +423,8 @@ class ViewApp:
             n = debrief.numbers()
             r = debrief.report
             self._live_panel(False)
+            if debrief.normal:
+                self.g_legend.content = legend_html(debrief=True, background=True)
             self.g_numbers.content = numbers_markdown(n)
             sc = self.server.scene
             for k, les in enumerate(debrief.lesions):
@@ -432,10 +435,12 @@ class ViewApp:
                 self._lesion_nodes.append(sc.add_label(
                     f'/lesions/{k}_label', f'{les.name}: {les.status}',
                     position=tuple(np.asarray(les.surface) + (0.012, 0, 0.006))))
+            self._draw_normal(debrief.normal)
             self.g_lesions.content = '\n'.join(
                 f'- lesion **{md(les.name)}**: {md(les.status)}'
                 + (f' ({md(les.why)})' if les.why else '')
                 for les in debrief.lesions) or '- the case has no lesion'
+            self.g_lesions.content += ''.join(f'\n- {md(line)}' for line in normal_lines(r))
             self.g_feedback.content = '\n'.join(f'- {md(line)}' for line in r['feedback']) \
                 or '- pass: every lesion found, deep coverage met'
             feel = debrief.feel_again()
@@ -456,6 +461,26 @@ class ViewApp:
             self.g_status.content = (f"**debrief** — score {r['score']:.0f} ({md(r['verdict'])});"
                                      ' drag *replay time* to replay it')
             self.scrub(debrief.duration)
+
+    def _draw_normal(self, markers) -> None:
+        """The breast's normal lobules (spheres on the skin over them) and ribs (lines on the
+        skin), blue, a confounder vermillion; labelled when it stands out or was marked."""
+        sc = self.server.scene
+        for k, nm in enumerate(markers):
+            rgb = NORMAL_RGB[nm.status]
+            if nm.kind == 'rib' and len(nm.line) > 1:
+                p = _segments_lifted(nm.line, 0.001)
+                self._lesion_nodes.append(sc.add_line_segments(
+                    f'/normal/{k}', np.stack([p[:-1], p[1:]], axis=1), rgb, thickness=4.0,
+                    thickness_units='screen'))
+            else:
+                self._lesion_nodes.append(sc.add_icosphere(
+                    f'/normal/{k}', radius=max(nm.radius, 0.002), color=rgb,
+                    position=nm.surface, opacity=0.9 if nm.status == 'confounder' else 0.6))
+            if nm.label:
+                self._lesion_nodes.append(sc.add_label(
+                    f'/normal/{k}_label', nm.label,
+                    position=tuple(np.asarray(nm.surface) + (0.010, 0, -0.004))))
 
     def scrub(self, t: float) -> None:
         """Show the debrief as it was ``t`` [s] into the session: coverage, path, marks."""
@@ -501,6 +526,8 @@ class ViewApp:
                 'lesions': [(le.name, le.status) for le in self.debrief.lesions]
                 if self.debrief is not None else [],
                 'lesions_visible': bool(self._lesion_nodes),
+                'normal': [(nm.name, nm.status, nm.label) for nm in self.debrief.normal]
+                if self.debrief is not None else [],
                 'feel_again': self.g_feel_md.content if self.g_feel.visible else '',
                 'skin_frames': self.stats.skin_frames, 'clients': len(self.server.get_clients())}
 

@@ -16,7 +16,8 @@ from ..cases.grading import DEEP_DEPTH
 from ..exam.config import LEVELS
 from ..exam.coverage import CoverageGrid
 
-__all__ = ['Debrief', 'LesionMarker', 'lesion_status', 'lesion_why', 'panel_numbers']
+__all__ = ['Debrief', 'LesionMarker', 'NormalMarker', 'lesion_status', 'lesion_why',
+           'normal_markers', 'panel_numbers']
 
 
 @dataclass(frozen=True)
@@ -29,6 +30,51 @@ class LesionMarker:
     surface: tuple
     status: str
     why: str
+
+
+@dataclass(frozen=True)
+class NormalMarker:
+    """A normal structure revealed beside the lesions: ``name``, ``what`` ('a normal glandular
+    lobule', 'a fat lobule', 'a rib'), ``kind`` ('nodule' / 'rib'), ``surface`` (3,) [m] (the
+    skin over it), ``radius`` [m], ``line`` (k, 3) [m] (a rib's line on the skin; empty for a
+    nodule), ``bump_pct`` (how much it stood out at deep pressure [%], None ungraded),
+    ``status``: 'confounder' (it stands out as much as a lesion would) or 'normal', ``marked``
+    (a false mark fell on it), ``label`` (what the page writes beside it; '' for an unmarked
+    lobule that does not stand out: thirty labels would hide the breast)."""
+    name: str
+    what: str
+    kind: str
+    surface: tuple
+    radius: float
+    line: np.ndarray
+    bump_pct: float | None
+    status: str
+    marked: bool
+    label: str
+
+
+def normal_markers(report: dict) -> list[NormalMarker]:
+    """The report's normal background (``report['normal']``, :mod:`haptic_anfis.exam.normal`)
+    as markers; [] for a smooth case or a report made before it; a region without a skin point,
+    and a rib that does not cross the region to examine, are left out."""
+    out = []
+    for e in report.get('normal') or []:
+        if e.get('surface_mm') is None or e['kind'] == 'rib' and len(e.get('line_mm') or ()) < 2:
+            continue
+        status = 'confounder' if e.get('confounder') else 'normal'
+        bump = e.get('bump_pct')
+        words = [e['what'].removeprefix('a ')]
+        if bump is not None:
+            words.append(f'{bump:+.0f} %')
+        if e.get('marks'):
+            words.append('false mark')
+        show = status == 'confounder' or bool(e.get('marks')) or e['kind'] == 'rib'
+        out.append(NormalMarker(
+            e['name'], e['what'], e['kind'], tuple(np.array(e['surface_mm'], float) * 1e-3),
+            e['radius_mm'] * 1e-3, np.array(e.get('line_mm') or [], float).reshape(-1, 3) * 1e-3,
+            bump, status, bool(e.get('marks')),
+            f"{e['name']}: {', '.join(words)}" if show else ''))
+    return out
 
 
 def lesion_status(entry: dict) -> str:
@@ -69,7 +115,10 @@ def panel_numbers(report: dict) -> dict:
             'coverage_medium_pct': report['coverage_pct']['medium'],
             'coverage_deep_pct': report['coverage_pct']['deep'],
             'hits': report['hits'], 'misses': report['misses'],
-            'false_marks': report['false_marks'], 'score': report['score'],
+            'false_marks': report['false_marks'],
+            # of them on a normal lobule or rib (None in a report made before the split)
+            'false_marks_normal': report.get('false_marks_normal'),
+            'score': report['score'],
             'verdict': report['verdict'], 'pattern': report['pattern'],
             'duration_s': report['duration_s'],
             # what predicts finding lumps (haptic_anfis.exam.effort; None in an older report)
@@ -117,6 +166,7 @@ class Debrief:
                                      e['radius_mm'] * 1e-3, tuple(np.array(e['surface_mm']) * 1e-3),
                                      lesion_status(e), lesion_why(e))
                         for e in report['lesions']]
+        self.normal = normal_markers(report)
 
     def face_levels(self, t: float | None = None) -> np.ndarray:
         """(m,) int 0..3: highest level per coverage face reached by ``t`` [s] (None = the end)."""

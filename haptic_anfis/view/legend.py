@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from ..exam.config import LEVELS
 from ..palette import LEVEL, NOT_PRESSED, OUTCOME, REGION, rgb255
-from .scene import LESION_RGB, MARK_RGB, OUTSIDE_RGB
+from .scene import LESION_RGB, MARK_RGB, NORMAL_RGB, OUTSIDE_RGB
 
 __all__ = ['banner_html', 'gauge_html', 'legend_html']
 
@@ -56,10 +56,11 @@ def gauge_html(thresholds, depth_m: float | None) -> str:
             f'the probe [mm]</div></div>')
 
 
-def legend_html(debrief: bool = False) -> str:
+def legend_html(debrief: bool = False, background: bool = False) -> str:
     """What the skin's colours mean: not yet palpated inside the outline, the deepest level
     reached, outside the region, the outline; live the trainee's marks, in the ``debrief`` the
-    lesions revealed and the marks scored."""
+    lesions revealed and the marks scored, and with a nodular ``background`` its normal lobules
+    and ribs (and those that stand out as much as a lesion would)."""
     rows = [(NOT_PRESSED, 'not palpated' if debrief else 'not yet palpated'),
             (LEVEL['light'], 'palpated light'), (LEVEL['medium'], 'palpated medium'),
             (LEVEL['deep'], 'palpated deep'), (_hex(OUTSIDE_RGB), 'outside the region'),
@@ -69,6 +70,9 @@ def legend_html(debrief: bool = False) -> str:
                  (_hex(LESION_RGB['missed']), 'lump missed'),
                  (_hex(LESION_RGB['below device']), 'lump not renderable'),
                  (_hex(MARK_RGB['false']), 'mark on no lump')]
+        if background:
+            rows += [(_hex(NORMAL_RGB['normal']), 'normal lobule / rib (no lump)'),
+                     (_hex(NORMAL_RGB['confounder']), 'normal, but stands out like a lump')]
     else:
         rows.append((_hex(MARK_RGB['live']), 'your marks'))
     return ('<div style="font-size:0.85em;margin:2px 10px;display:grid;'

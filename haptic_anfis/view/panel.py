@@ -28,7 +28,9 @@ def numbers_markdown(n: dict) -> str:
                      for k in ('light', 'medium', 'deep'))
     found = n['hits'] + n['misses']
     lines = [f"score **{n['score']:.0f}** — **{md(n['verdict'])}**",
-             f"lumps found: **{n['hits']} of {found}** · false marks: **{n['false_marks']}**",
+             f"lumps found: **{n['hits']} of {found}** · false marks: **{n['false_marks']}**"
+             + (f" ({n['false_marks_normal']} on normal tissue)"
+                if n.get('false_marks_normal') else ''),
              f'coverage: {cov}',
              f"pattern: {md(str(n['pattern']).replace('_', ' '))} · duration "
              f"**{duration_text(n['duration_s'])}**"]

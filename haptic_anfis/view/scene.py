@@ -11,10 +11,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..palette import FINDING, LEVEL, MARK, NOT_PRESSED, SKIN, rgb255
+from ..palette import FINDING, LEVEL, MARK, NORMAL, NOT_PRESSED, SKIN, rgb255
 
-__all__ = ['FRONTAL', 'LESION_RGB', 'LEVEL_RGB', 'MARK_RGB', 'OUTSIDE_RGB', 'Framing', 'SkinPaint',
-           'frame_camera', 'pressure_rgb', 'probe_quaternion', 'region_outline']
+__all__ = ['FRONTAL', 'LESION_RGB', 'LEVEL_RGB', 'MARK_RGB', 'NORMAL_RGB', 'OUTSIDE_RGB',
+           'Framing', 'SkinPaint', 'frame_camera', 'pressure_rgb', 'probe_quaternion',
+           'region_outline']
 
 #: coverage colour per highest level reached (the palette's, as report.png): none (the region
 #: not yet palpated: a neutral, lighter than light), light, medium, deep
@@ -25,6 +26,9 @@ OUTSIDE_RGB = tuple(int(round(0.62 * c)) for c in rgb255(SKIN))
 #: lesion markers revealed in the debrief (the palette's findings)
 LESION_RGB = {'hit': rgb255(FINDING['found']), 'missed': rgb255(FINDING['missed']),
               'below device': rgb255(FINDING['not palpable'])}
+#: the normal background revealed in the debrief: a lobule or rib, one that stands out as much
+#: as a lesion would (:class:`~haptic_anfis.view.debrief.NormalMarker` ``status``)
+NORMAL_RGB = {k: rgb255(v) for k, v in NORMAL.items()}
 #: marks: a hit, another mark on a found lesion, a false mark; live (not yet scored): 'live'
 MARK_RGB = {'hit': rgb255(MARK['hit']), 'repeat': rgb255(MARK['repeat']),
             'false': rgb255(MARK['false']), 'not_palpable': rgb255(MARK['not_palpable']),

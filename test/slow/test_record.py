@@ -478,7 +478,9 @@ def test_mastery_needs_n_consecutive_sessions_meeting_the_level():
     assert m['mastered_level'] == 1 and m['next_level'] == 2
     assert m['levels'][1] == {'sessions': 6, 'met': 5, 'streak': 3, 'best_streak': 3,
                               'needed': 3, 'mastered': True, 'lesion_free': 0,
-                              'lesion_free_met': 0, 'void': 0}
+                              'lesion_free_met': 0, 'void': 0, 'cases': 6, 'false_marks': 0,
+                              'false_marks_normal': 0, 'window_cases': 3,
+                              'window_false_marks': 0, 'false_marks_per_case': 0.0}
     # a later weak session does not take it away; level 2 with one false mark is not met
     hist = [ok] * 3 + [weak] + [session(2, false_marks=1)] * 3
     assert mastery(hist, cfg)['mastered_level'] == 1

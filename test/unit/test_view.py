@@ -350,3 +350,41 @@ def test_feel_it_again_presses_the_lesion_at_each_band_then_beside_it(bag, tmp_p
     # a blind exam's debrief names no case, so it has no such step
     d.report['case'] = 'blind case'
     assert d.feel_again(tmp_path) == {}
+
+
+def test_the_debrief_shows_the_normal_background_beside_the_lesions():
+    """A nodular case with ribs: after the exam its lobules and ribs are drawn on the page with
+    a legend, the panel says the background and the false mark on a rib."""
+    from haptic_anfis.view.app import ViewApp
+    from haptic_anfis.view.build import case_view
+    from haptic_anfis.view.debrief import Debrief
+    cv = case_view('nod_s_fatty_idc6_d12_ribs', dent=False)   # its skin: the scene's breast
+    s = cv.session
+    from haptic_anfis.exam.normal import skin_point
+    bg, margin = s.subject.background, cv.config.hit_margin
+    ribs = {e['name']: e for e in s.report()['normal'] if e['kind'] == 'rib' and e['line_mm']}
+    name, y = next((b.name, y) for b in bg.ribs if b.name in ribs   # on the rib, off the lobules
+                   for y in np.arange(-0.03, 0.03, 0.001)
+                   if bg.region_at(y, b.z, margin) == (b.name, 'a rib'))
+    rib = ribs[name]
+    s.add_mark(1.0, skin_point(s.surface.detector, y, next(b.z for b in bg.ribs
+                                                            if b.name == name)))
+    r = s.report()
+    assert r['false_marks'] == 1 and r['false_marks_normal'] == 1
+    app = ViewApp(cv.vertices, cv.faces, cv.region_faces, cv.config.thresholds,
+                  port=free_port())
+    try:
+        app.show_debrief(Debrief(r, s))
+        st = app.state()
+        drawn = {name for name, _, _ in st['normal']}
+        assert drawn == {e['name'] for e in r['normal']
+                         if e['kind'] == 'nodule' or e['line_mm']}
+        assert (rib['name'], 'normal', f"{rib['name']}: rib, false mark") in st['normal']
+        assert 'normal lobule / rib (no lump)' in app.g_legend.content
+        assert '(1 on normal tissue)' in st['numbers_text']
+        assert f"false mark 0 on {rib['name']}: a rib, not a lesion" in app.g_lesions.content
+        assert 'normal background:' in app.g_lesions.content
+        app.set_exam_running(True)   # the next exam: the background hidden again
+        assert app.state()['normal'] == [] and 'normal lobule' not in app.g_legend.content
+    finally:
+        app.close()
