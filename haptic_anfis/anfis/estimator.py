@@ -135,8 +135,9 @@ class ANFIS:
                 ('validation_fraction', _num(self.validation_fraction)
                  and 0 < self.validation_fraction < 1, 'a number in (0, 1)'),
                 ('rcond', _num(self.rcond) and 0 <= self.rcond < 1, 'a number in [0, 1)'),
-                ('extrapolation', np.ndim(self.extrapolation) in (0, 1)
-                 and np.size(self.extrapolation) in ((1, d) if np.ndim(self.extrapolation) else (1,))
+                ('extrapolation', (np.ndim(self.extrapolation) == 0
+                                   or (np.ndim(self.extrapolation) == 1
+                                       and np.size(self.extrapolation) in (1, d)))
                  and all(_num(e) and e >= 0 for e in np.ravel(self.extrapolation)),
                  f'a number >= 0 or {d} of them (one per input)')):
             if not ok:

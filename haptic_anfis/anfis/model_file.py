@@ -72,18 +72,9 @@ def estimator_to_dict(est: ANFIS) -> dict[str, Any]:
     }
 
 
-def estimator_from_dict(entry: dict[str, Any], lo: np.ndarray, hi: np.ndarray, name: str,
-                        version: int) -> ANFIS:
-    """One output's estimator from its entry; ``lo``/``hi``: its inputs' range. Versions 1 and 2
-    (triangular, pinned partition) are checked against their own constraints, then migrated."""
-    if version < 3:
-        m = model_from_dict(entry, lo, hi, name)
-        return ANFIS.from_params(mf='triangular', mf_params=m.mfs, consequents=m.coef,
-                                 input_min=lo, input_max=hi, extrapolation=m.extrapolation)
-    family = entry.get('mf')
-    if family not in FAMILIES:
-        raise ModelFileError(f'output {name}: "mf" is {family!r}; expected one of '
-                             f'{sorted(FAMILIES)}')
+def _entry_arrays(entry: dict[str, Any], n_inputs: int, name: str
+                  ) -> tuple[list[np.ndarray], np.ndarray, np.ndarray]:
+    """(MF rows per input, consequents, extrapolation) of an output entry, shapes checked."""
     try:
         mfs = [np.array(P, dtype=np.float64) for P in entry['membership']]
         coef = np.array(entry['consequents'], dtype=np.float64)
@@ -91,42 +82,38 @@ def estimator_from_dict(entry: dict[str, Any], lo: np.ndarray, hi: np.ndarray, n
         structure = tuple(int(m) for m in entry['structure'])
     except (KeyError, TypeError, ValueError) as exc:
         raise ModelFileError(f'output {name}: malformed entry ({exc!r})') from None
-    if extrapolation.shape != (len(lo),) or not np.all(np.isfinite(extrapolation)) \
+    if extrapolation.shape != (n_inputs,) or not np.all(np.isfinite(extrapolation)) \
             or not np.all(extrapolation >= 0):
-        raise ModelFileError(f'output {name}: "extrapolation" needs {len(lo)} numbers '
+        raise ModelFileError(f'output {name}: "extrapolation" needs {n_inputs} numbers '
                              '(finite, >= 0)')
+    if len(mfs) != n_inputs:
+        raise ModelFileError(f'output {name}: {len(mfs)} membership lists for {n_inputs} inputs')
     if structure != tuple(len(P) for P in mfs):
         raise ModelFileError(f'output {name}: structure {structure} does not match its membership '
                              f'functions {tuple(len(P) for P in mfs)}')
+    return mfs, coef, extrapolation
+
+
+def estimator_from_dict(entry: dict[str, Any], lo: np.ndarray, hi: np.ndarray, name: str,
+                        version: int) -> ANFIS:
+    """One output's estimator from its entry; ``lo``/``hi``: its inputs' range. Versions 1 and 2
+    (triangular, pinned partition) are checked against their own constraints, then migrated."""
+    family = 'triangular' if version < 3 else entry.get('mf')
+    if family not in FAMILIES:
+        raise ModelFileError(f'output {name}: "mf" is {family!r}; expected one of '
+                             f'{sorted(FAMILIES)}')
+    mfs, coef, extrapolation = _entry_arrays(entry, len(lo), name)
+    if version < 3:
+        m = SugenoModel(mfs=mfs, coef=coef, lo=lo, hi=hi, extrapolation=extrapolation)
+        try:
+            m.validate(name=f'output {name}')
+        except ValueError as exc:
+            raise ModelFileError(str(exc)) from None
     try:
         return ANFIS.from_params(mf=family, mf_params=mfs, consequents=coef, input_min=lo,
                                  input_max=hi, extrapolation=extrapolation)
     except ANFISInputError as exc:
         raise ModelFileError(f'output {name}: {exc}') from None
-
-
-def model_from_dict(entry: dict[str, Any], lo: np.ndarray, hi: np.ndarray, name: str) -> SugenoModel:
-    """A version 1/2 output entry as the pinned-partition triangular model it was written as."""
-    try:
-        mfs = [np.array(P, dtype=np.float64) for P in entry['membership']]
-        coef = np.array(entry['consequents'], dtype=np.float64)
-        extrapolation = np.array(entry['extrapolation'], dtype=np.float64)
-        structure = tuple(int(m) for m in entry['structure'])
-    except (KeyError, TypeError, ValueError) as exc:
-        raise ModelFileError(f'output {name}: malformed entry ({exc!r})') from None
-    if extrapolation.shape != (len(lo),):
-        raise ModelFileError(f'output {name}: "extrapolation" needs {len(lo)} numbers')
-    if len(mfs) != len(lo):
-        raise ModelFileError(f'output {name}: {len(mfs)} membership lists for {len(lo)} inputs')
-    model = SugenoModel(mfs=mfs, coef=coef, lo=lo, hi=hi, extrapolation=extrapolation)
-    if model.structure != structure:
-        raise ModelFileError(f'output {name}: structure {structure} does not match its membership '
-                             f'functions {model.structure}')
-    try:
-        model.validate(name=f'output {name}')
-    except ValueError as exc:
-        raise ModelFileError(str(exc)) from None
-    return model
 
 
 def write_json_atomic(path: str | os.PathLike, doc: dict[str, Any]) -> Path:

@@ -8,7 +8,7 @@ from hypothesis import given, strategies as st
 from haptic_anfis.anfis import ForceModel, SugenoModel, solve_consequents, train
 from haptic_anfis.anfis import membership as mf
 from haptic_anfis.anfis.force_model import numpy_forces
-from test.support.force_models import assemble
+from force_models import assemble
 
 
 def random_model(structure, rng, lo=None, hi=None, jitter=0.3):

@@ -6,7 +6,7 @@ import pytest
 from haptic_anfis.anfis import SugenoModel
 from haptic_anfis.anfis import membership as mf
 from haptic_anfis.anfis.force_model import numpy_forces
-from test.support.force_models import assemble
+from force_models import assemble
 
 H = 1e-7  # finite-difference step [m]
 

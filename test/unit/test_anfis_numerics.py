@@ -158,7 +158,7 @@ def test_no_hold_out_trains_every_output_on_all_the_data(synthetic, tmp_path):
     assert m.val_rmse_ == [None] * 3 and all(1 <= e <= 4 for e in m.best_epoch_)
     s = synthetic.X[:, 3]
     ref = ANFIS(n_mfs=(2, 3, 2), mf='triangular', epochs=4, ridge=m.ridges_[1],
-                extrapolation=(0.15, 0.15, 0.0)).fit(  # the force model's settings
+                ridge_target='linear', extrapolation=(0.15, 0.15, 0.0)).fit(  # the force model's
         synthetic.X[:, 1:], synthetic.Y[:, 1] / s, sample_weight=s * s)
     np.testing.assert_array_equal(m.estimators_[1].consequents_, ref.consequents_)
     model, _ = train_on_dataset(synthetic, **kw)

@@ -162,7 +162,8 @@ def test_version_2_files_migrate_to_identical_predictions(small_model, tmp_path,
                                atol=1e-12)
     v3 = json.loads(loaded.save(tmp_path / 'v3.json').read_text())
     assert v3['format_version'] == 3
-    np.testing.assert_array_equal(ForceModel.load(tmp_path / 'v3.json').predict(X), loaded.predict(X))
+    np.testing.assert_array_equal(ForceModel.load(tmp_path / 'v3.json').predict(X),
+                                  loaded.predict(X))
 
 
 @pytest.mark.parametrize('path', SHIPPED_MODELS, ids=lambda p: p.parent.name)
