@@ -29,7 +29,8 @@ from .._version import __version__
 from ..tissue.dataset import (INPUT_NAMES, OUTPUT_NAMES, DatasetError, ForceDataset, fold_indices,
                        split_indices)
 from . import compiled
-from .defaults import AUTO, SHIPPED, SHIPPED_INPUTS, SHIPPED_STRUCTURE, X_MFS, x_explained_by_yz
+from .defaults import (AUTO, LEGACY_RIDGE, SHIPPED, SHIPPED_INPUTS, SHIPPED_STRUCTURE, X_MFS,
+                       x_explained_by_yz)
 from .estimator import ANFIS
 from .model_file import (FORMAT, FORMAT_VERSION, ModelFileError, estimator_from_dict,
                          estimator_to_dict, read_model_doc, write_json_atomic)
@@ -536,13 +537,13 @@ def numpy_forces(model: ForceModel, X: np.ndarray) -> np.ndarray:
 
 def _trained_ridges(metadata: dict[str, Any]) -> list[float]:
     """Per-output ridge a model file was trained with (its training metadata: one weight or one
-    per output); the shipped default when the file does not say (older files)."""
-    r = metadata.get('training', {}).get('ridge', SHIPPED['ridge'])
+    per output); :data:`~.defaults.LEGACY_RIDGE` when the file does not say (older files)."""
+    r = metadata.get('training', {}).get('ridge', LEGACY_RIDGE)
     vals = list(r) if np.ndim(r) else [r] * 3
     try:
-        return [float(v) for v in vals] if len(vals) == 3 else [float(SHIPPED['ridge'])] * 3
+        return [float(v) for v in vals] if len(vals) == 3 else [LEGACY_RIDGE] * 3
     except (TypeError, ValueError):
-        return [float(SHIPPED['ridge'])] * 3
+        return [LEGACY_RIDGE] * 3
 
 
 def _read_form(doc: dict[str, Any], path: str | os.PathLike) -> tuple[tuple[int, ...], int]:

@@ -180,3 +180,16 @@ def test_the_step_guard_keeps_the_training_error_from_rising(synthetic):
     assert np.all(np.diff(guarded.train_rmse) <= 0.0)
     free = train(X, t, (3, 3, 2), 25, guard=False, **kw)
     assert np.any(np.diff(free.train_rmse) > 0.0)
+
+
+def test_the_force_model_is_three_triangular_estimators_whose_mfs_can_widen(scaled):
+    """Every MF parameter is free (3 per triangle): trained feet pass the neighbouring peak, which
+    the pinned partition of format version 2 forbade."""
+    assert [type(e).__name__ for e in scaled.estimators_] == ['ANFIS'] * 3
+    widened = False
+    for e, st in zip(scaled.estimators_, scaled.structures_):
+        assert e.mf == 'triangular'
+        assert e.n_params_ == 3 * sum(st) + int(np.prod(st)) * (len(st) + 1)
+        for P in e.mf_params_:
+            widened |= bool(np.any(P[1:, 0] < P[:-1, 1]) or np.any(P[:-1, 2] > P[1:, 1]))
+    assert widened
