@@ -62,8 +62,9 @@ class ForceModel:
         epochs: maximum hybrid-learning epochs when training the final models.
         search_epochs: maximum epochs per candidate during the structure search.
         search_start, max_mfs, candidates, tol: structure search settings.
-        ridge: relative ridge weight of the consequent least squares: one for all outputs, or
-            three (one per output, e.g. a trained model's ``ridges_``).
+        ridge: relative ridge weight of the consequent least squares, which shrinks every rule
+            toward one global linear fit (the estimators' ``ridge_target='linear'``): one for
+            all outputs, or three (one per output, e.g. a trained model's ``ridges_``).
         ridge_candidates: ridge weights the structure search scores every structure with
             (chosen per output with the structure, :func:`~.structure.search_structure`); None:
             ``ridge`` only. The chosen ones are ``ridges_``.
