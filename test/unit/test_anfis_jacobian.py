@@ -3,7 +3,7 @@ differences, away from the kinks of the triangular MFs and of the out-of-range c
 import numpy as np
 import pytest
 
-from haptic_anfis.anfis import SugenoModel
+from haptic_anfis.anfis import ANFIS, SugenoModel
 from haptic_anfis.anfis import membership as mf
 from haptic_anfis.anfis.force_model import numpy_forces
 from force_models import assemble
@@ -65,9 +65,47 @@ def depth_scaled_model():
                      for st in [(3, 3, 2), (4, 2, 3), (2, 3, 1)]], (1, 2, 3), 3)
 
 
-@pytest.fixture(scope='module', params=['plain', 'depth_scaled'])
-def model(request, small_model, depth_scaled_model):
-    return small_model if request.param == 'plain' else depth_scaled_model
+@pytest.fixture(scope='module')
+def wide_model():
+    """Free triangles as the estimator allows them: feet reaching past several peaks and outer
+    peaks off the domain edges, so up to all MFs of an input fire at once (the compiled kernel
+    must visit every firing rule, not only two MFs per input)."""
+    rng = np.random.default_rng(11)
+    lo, hi = np.array([0.0, -0.05, -0.05, 0.002]), np.array([0.06, 0.05, 0.05, 0.016])
+    fm = assemble([_random_sugeno(st, lo, hi, rng, (0.0, 0.1, 0.1, 0.25))
+                   for st in [(2, 3, 4, 2), (3, 3, 3, 2), (1, 4, 2, 3)]])
+    est = []
+    for e in fm.estimators_:
+        P = []
+        for Q, a, b in zip(e.mf_params_, e.input_min_, e.input_max_):
+            w = (b - a) * rng.uniform(0.6, 1.2, len(Q))
+            c = np.sort(a + (b - a) * rng.uniform(0.05, 0.95, len(Q))) if len(Q) > 1 else Q[:, 1]
+            P.append(np.column_stack([c - w, c, c + w * rng.uniform(0.5, 1.5, len(Q))]))
+        est.append(ANFIS.from_params(mf='triangular', mf_params=P, consequents=e.consequents_,
+                                     input_min=e.input_min_, input_max=e.input_max_,
+                                     extrapolation=e.extrapolation))
+    fm.estimators_ = est
+    fm._compile()
+    return fm
+
+
+@pytest.fixture(scope='module', params=['plain', 'depth_scaled', 'wide'])
+def model(request, small_model, depth_scaled_model, wide_model):
+    return {'plain': small_model, 'depth_scaled': depth_scaled_model,
+            'wide': wide_model}[request.param]
+
+
+def test_wide_mfs_fire_more_than_two_per_input_and_paths_agree(wide_model, rng):
+    """The case the old two-MF interval search could not evaluate."""
+    X = _queries(wide_model, rng, 2000)
+    e = wide_model.estimators_[1]
+    u = X[:, 1:2]
+    P = e.mf_params_[1]
+    assert np.any(((u > P[:, 0]) & (u < P[:, 2])).sum(axis=1) >= 3)
+    np.testing.assert_allclose(wide_model.predict(X), numpy_forces(wide_model, X), rtol=0,
+                               atol=1e-12)
+    np.testing.assert_allclose([wide_model.predict_one(*q) for q in X[:300]],
+                               numpy_forces(wide_model, X[:300]), rtol=0, atol=1e-12)
 
 
 def _queries(fm, rng, n=1500):
