@@ -59,7 +59,8 @@ class ForceModel:
             structure search; ``None`` to choose MF counts per output by validation (see
             :func:`~.structure.search_structure`); one tuple (e.g. ``(3, 3, 3, 2)``) for all three
             outputs; or a sequence of three tuples, one per output.
-        epochs: maximum hybrid-learning epochs when training the final models.
+        epochs: hybrid-learning epochs of the final models: one count for all outputs, or three
+            (one per output: Fz, with its stronger shrinkage, keeps improving longer).
         search_epochs: maximum epochs per candidate during the structure search.
         search_start, max_mfs, candidates, tol: structure search settings.
         ridge: relative ridge weight of the consequent least squares, which shrinks every rule
@@ -96,7 +97,8 @@ class ForceModel:
 
     def __init__(self, *,
                  structure: Structure | Sequence[Structure] | str | None = SHIPPED['structure'],
-                 epochs: int = SHIPPED['epochs'], search_epochs: int = SHIPPED['search_epochs'],
+                 epochs: int | Sequence[int] = SHIPPED['epochs'],
+                 search_epochs: int = SHIPPED['search_epochs'],
                  search_start: Structure | None = None, max_mfs: Structure | None = SHIPPED['max_mfs'],
                  candidates: list[Structure] | None = None, tol: float = SHIPPED['tol'],
                  ridge: float | Sequence[float] = SHIPPED['ridge'], step: float = 0.01,
@@ -197,10 +199,14 @@ class ForceModel:
         ``split='point'``) is held out to choose each output's structure and epoch count; the chosen
         structure is then retrained on all of ``X`` for that many epochs.
         """
-        for name in ('epochs', 'search_epochs'):
-            v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
-                raise ValueError(f'{name}: expected an integer >= 1, got {v!r}')
+        def count(v: Any) -> bool:
+            return not isinstance(v, bool) and isinstance(v, (int, np.integer)) and v >= 1
+        if not count(self.search_epochs):
+            raise ValueError(f'search_epochs: expected an integer >= 1, got {self.search_epochs!r}')
+        epochs = [self.epochs] * 3 if np.ndim(self.epochs) == 0 else list(self.epochs)
+        if len(epochs) != 3 or not all(count(e) for e in epochs):
+            raise ValueError(f'epochs: expected an integer >= 1, got {self.epochs!r} (or three, '
+                             'one per output)')
         X = check_finite_inputs(X, INPUT_NAMES)
         Y = np.asarray(Y, dtype=np.float64)
         if X.shape[1] != 4 or Y.shape != (len(X), 3):
@@ -274,12 +280,12 @@ class ForceModel:
             self.ridges_.append(float(kw['ridge']))
             if len(val_idx):
                 # Choose the epoch with the full epoch budget on the held-out part ...
-                chk = _fit_anfis(Xf, tf, structure, self.epochs, X_check=Xv, t_check=tv,
+                chk = _fit_anfis(Xf, tf, structure, epochs[o], X_check=Xv, t_check=tv,
                                  scale=sub(fit_idx), scale_check=sub(val_idx), **kw)
                 # ... then retrain on all the training data for exactly that many epochs.
                 final = _fit_anfis(X, Y[:, o], structure, chk.best_epoch, scale=S, **kw)
             else:
-                final = chk = _fit_anfis(X, Y[:, o], structure, self.epochs, scale=S, **kw)
+                final = chk = _fit_anfis(X, Y[:, o], structure, epochs[o], scale=S, **kw)
             self.estimators_.append(final.model)
             self.search_.append(sr)
             self.best_epoch_.append(chk.best_epoch)
@@ -296,7 +302,8 @@ class ForceModel:
         self._range = (X4.min(axis=0), X4.max(axis=0))
         self.metadata_ = {'training': {
             'form': self.form, 'inputs': [INPUT_NAMES[c] for c in cols], 'max_mfs': list(max_mfs),
-            'epochs': self.epochs, 'search_epochs': self.search_epochs, 'tol': self.tol,
+            'epochs': self.epochs if np.ndim(self.epochs) == 0 else [int(e) for e in epochs],
+            'search_epochs': self.search_epochs, 'tol': self.tol,
             'ridge': self.ridges_[0] if len(set(self.ridges_)) == 1 else list(self.ridges_),
             **({'ridge_candidates': [float(r) for r in self.ridge_candidates]}
                if self.ridge_candidates is not None else {}),

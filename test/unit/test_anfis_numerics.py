@@ -193,3 +193,13 @@ def test_the_force_model_is_three_triangular_estimators_whose_mfs_can_widen(scal
         for P in e.mf_params_:
             widened |= bool(np.any(P[1:, 0] < P[:-1, 1]) or np.any(P[:-1, 2] > P[1:, 1]))
     assert widened
+
+
+def test_epochs_per_output(synthetic):
+    """One epoch count per output (Fx, Fy, Fz), recorded as given; a wrong count is one line."""
+    m = ForceModel(structure=(2, 2, 2), epochs=[2, 3, 4]).fit(synthetic.X, synthetic.Y,
+                                                                groups=synthetic.point)
+    assert m.best_epoch_ == [2, 3, 4] and m.metadata_['training']['epochs'] == [2, 3, 4]
+    for bad in (0, [1, 2], [1, 2, 0], True):
+        with pytest.raises(ValueError, match=r'epochs: expected an integer >= 1, got .*one per'):
+            ForceModel(structure=(2, 2, 2), epochs=bad).fit(synthetic.X, synthetic.Y)
