@@ -9,8 +9,10 @@ from haptic_anfis.anfis import membership as mf
 from haptic_anfis.anfis.force_model import numpy_forces
 from haptic_anfis.tissue.dataset import DATA_DIR
 
-#: Every shipped model file: the default model and each case's (format version 2, migrated).
-SHIPPED_MODELS = sorted([DATA_DIR / 'default_model.json', *DATA_DIR.glob('cases/**/model.json')])
+#: Every shipped model file of an older format version (each case's: version 2, migrated).
+SHIPPED_MODELS = sorted(p for p in [DATA_DIR / 'default_model.json',
+                                    *DATA_DIR.glob('cases/**/model.json')]
+                        if json.loads(p.read_text())['format_version'] < FORMAT_VERSION)
 
 
 def test_save_load_round_trip_is_bit_exact(small_model, synthetic, tmp_path):
@@ -36,7 +38,7 @@ def test_save_load_round_trip_is_bit_exact(small_model, synthetic, tmp_path):
 def test_shipped_default_model_loads_and_records_provenance():
     model = ForceModel.load(DATA_DIR / 'default_model.json')
     doc = json.loads((DATA_DIR / 'default_model.json').read_text())
-    assert doc['format_version'] in (2, FORMAT_VERSION)
+    assert doc['format_version'] == FORMAT_VERSION
     assert len(doc['dataset']['sha256']) == 64
     assert all(0 < o['rmse']['test'] < 1 for o in doc['outputs'])
     assert all(o['best_epoch'] >= 1 for o in doc['outputs'])
@@ -172,8 +174,6 @@ def test_every_shipped_model_file_migrates_exactly(path, rng):
     the migrated estimators, numpy and compiled: identical to 1e-12 N on random inputs."""
     doc = json.loads(path.read_text())
     model = ForceModel.load(path)
-    if doc['format_version'] >= 3:
-        pytest.skip(f'{path.name} is format version {doc["format_version"]}: nothing to migrate')
     lo = np.array([i['min'] for i in doc['inputs']])
     hi = np.array([i['max'] for i in doc['inputs']])
     cols = list(model.input_cols_)
