@@ -66,8 +66,8 @@ def main() -> None:
             train_on_dataset(ds, test_fraction=tf, seed=seed, **p)
             train_s = time.perf_counter() - t0
         model = ForceModel.load(case.model_path)
-        rules = sum(m.n_rules for m in model.models_)
-        n_par = sum(m.n_params for m in model.models_)
+        rules = sum(e.n_rules_ for e in model.estimators_)
+        n_par = sum(e.n_params_ for e in model.estimators_)
         print(f'{case.name:<24} {n_pts:>6} {prov["mesh"]["probe_cells"]:>5} {fe_sum:>9.0f} '
               f'{wall.get("this_run_elapsed", float("nan")):>9.0f} {fe_sum / max(solved, 1):>7.1f} '
               f'{apex_s:>6.1f} {train_s:>7.1f} {rules:>5} {n_par:>6} '

@@ -11,7 +11,9 @@ Run (slow: 15 fits per variant with the defaults; prefix with ``nice``)::
 A variant is ``NAME=KEY=JSON[;KEY=JSON...]``: ForceModel keyword arguments on top of
 config/force_model.yaml's (so ``NAME=`` alone is the shipped configuration). ``--peers rbf mlp
 plain`` adds the report's peers (RBF thin-plate, MLP 32-32 tanh, the paper's plain 3-3-3-2).
-Results are printed and, with ``--jsonl``, appended one JSON object per variant.
+Results are printed and, with ``--jsonl``, appended one JSON object per variant. ``--before
+FILE.jsonl`` first prints the records of an earlier run (this script's ``--jsonl`` at another
+commit) as they were measured, labelled with FILE's name: a before/after page.
 """
 from __future__ import annotations
 
@@ -117,6 +119,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument('--outputs', default='xyz',
                    help='axes to train (x, y, z letters); the others get a one-rule model')
     p.add_argument('--jsonl', default=None, help='append results here')
+    p.add_argument('--before', default=None,
+                   help="an earlier run's --jsonl records, printed first (a before/after page)")
     args = p.parse_args(argv)
     ds = transformed(load_dataset(args.dataset), args.transform, args.radius_factor)
     jobs = [(n, ours(kw, args.outputs), kw) for n, kw in map(parse_variant, args.variant)]
@@ -126,6 +130,12 @@ def main(argv: list[str] | None = None) -> int:
     jobs += [(n, peer(n), {'peer': n}) for n in (args.peers or [])]
     print(f'grouped {args.folds}-fold CV over surface points, seeds {args.seeds}, '
           f'{len(ds)} samples; out-of-fold RMSE [N] mean ± std over seeds')
+    if args.before:
+        for line in Path(args.before).read_text().splitlines():
+            rec = json.loads(line)
+            cells = ' | '.join(f'{m:.4f} ± {s:.4f}' for m, s in zip(rec['mean'], rec['std']))
+            label = f'{rec["name"]} ({Path(args.before).stem})'
+            print(f'{label:<28} | {cells} | fit {rec["fit_s"]:.2f} s | seeds {rec["seeds"]}')
     for name, make, kw in jobs:
         t0 = time.perf_counter()
         r = group_cv(ds, make, folds=args.folds, seeds=args.seeds)

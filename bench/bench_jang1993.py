@@ -21,7 +21,7 @@ for _v in ('OMP_NUM_THREADS', 'MKL_NUM_THREADS', 'OPENBLAS_NUM_THREADS'):
 
 import numpy as np  # noqa: E402
 
-from _page import markdown_table, write_page  # noqa: E402
+from harness import markdown_table, write_page  # noqa: E402  (bench/ is sys.path[0])
 from haptic_anfis.anfis import ANFIS, families  # noqa: E402
 
 #: Published figures (Jang 1993): Example 2 Table I (ANFIS row), Example 3 Section V-D / Table III.

@@ -1,12 +1,14 @@
 """The compiled real-time evaluation path (numba, ``cache=True``): forces and their Jacobian.
 
-For one query, each input has at most two non-zero MFs (a guarantee of the MF constraints, see
-:mod:`.membership`), so only the ≤ 2^d rules that fire are visited — 16 for four inputs, instead of
-the 54 or 128 of the whole grid. Same arithmetic and out-of-range policy as the numpy path
-(:meth:`SugenoModel.predict`); the two agree to rounding (tested to 1e-12 N).
+The force model is three triangular :class:`~.estimator.ANFIS` estimators (Fx, Fy, Fz). For one
+query each input's memberships are computed for all of its MFs and only those that are non-zero
+kept, so only the rules that fire are visited: with MFs on the old pinned partition (feet on the
+neighbouring peaks) at most two per input, 8 of 72 rules for 6-6-2; trained MFs may widen, and
+then a few more. Same arithmetic and out-of-range policy as the estimators' numpy path
+(:meth:`.estimator.ANFIS.predict`); the two agree to rounding (tested to 1e-12 N).
 
-The force model's query is (x, y, z, depth). Its single-output Sugeno models may read a subset of
-the query's columns (``cols``; e.g. (y, z, depth) when x is redundant on the skin), and the output
+The force model's query is (x, y, z, depth). Its single-output models may read a subset of the
+query's columns (``cols``; e.g. (y, z, depth) when x is redundant on the skin), and the output
 may be scaled by one query column (``scale_col``, the depth: F = depth · g(inputs), so that the force
 is exactly zero at contact and grows continuously from it); ``scale_col = -1`` means no scaling.
 The scale factor is max(depth, 0): a negative depth (no contact) gives 0 N, never a pull.
@@ -14,18 +16,20 @@ The scale factor is max(depth, 0): a negative depth (no contact) gives 0 N, neve
 All parameters of several single-output models are packed into one float array and one int array so
 that a call from Python passes few arguments (numba's dispatch cost grows with their number).
 
-Packed layout, for ``n_out`` models over ``d`` model inputs read from an ``nq``-column query:
+Packed layout, for ``n_out`` models over ``d`` model inputs read from an ``nq``-column query, at
+most ``M`` MFs on any input:
 
-ints   ``ip``: [n_out, d, nq, scale_col, cols[0..d), then per output o: nmf[o, 0..d),
+ints   ``ip``: [n_out, d, nq, scale_col, M, cols[0..d), then per output o: nmf[o, 0..d),
                stride[o, 0..d), mf_off[o], coef_off[o]]
 floats ``fp``: per output o at the offsets: lo[d], hi[d], elo[d], ehi[d], then the MF triples
-               (a, b, c) input by input, and at coef_off[o] the (R, d + 1) consequents row-major.
+               (a, b, c) input by input, and at coef_off[o] the (R, d + 1) consequents row-major,
+               all in input units.
 
 Derivatives (:func:`jac_xyzd`, :func:`eval_jac_batch`): exact derivatives of the piecewise-linear
 memberships and linear consequents, w.r.t. the query columns. Where an input is clamped (outside
 [lo, hi] for the memberships, outside the extrapolation box for the consequents) the clamped part
 has zero derivative. At a kink (an MF's foot or peak, a domain edge) the derivative is one-sided:
-that of the piece the point's interval search selects.
+that of the piece the point lies on (the left piece at a peak).
 """
 from __future__ import annotations
 
@@ -34,42 +38,46 @@ from typing import Any
 import numba
 import numpy as np
 
-from .sugeno import SugenoModel
+#: Index of the first per-output header entry after the global header
+#: ``[n_out, d, nq, scale_col, M]``.
+_GLOBAL = 5
 
-#: Index of the first per-output header entry after the global header ``[n_out, d, nq, scale_col]``.
-_GLOBAL = 4
 
-
-def pack(models: list[SugenoModel], cols: tuple[int, ...] | None = None, scale_col: int = -1,
+def pack(estimators: list[Any], cols: tuple[int, ...] | None = None, scale_col: int = -1,
          n_query: int | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """Pack single-output models sharing their inputs into (fp, ip) for the kernels.
+    """Pack fitted triangular :class:`~.estimator.ANFIS` estimators sharing their inputs into
+    (fp, ip) for the kernels.
 
     Args:
-        models: the outputs' models, all with the same number of inputs d.
+        estimators: the outputs' estimators, all with the same number of inputs d.
         cols: (d,) query column each model input reads (default 0..d-1).
         scale_col: query column that multiplies every output (-1: none).
         n_query: number of query columns (default d).
     """
-    d = models[0].n_inputs
-    if any(m.n_inputs != d for m in models):
+    d = estimators[0].n_features_in_
+    if any(e.n_features_in_ != d for e in estimators):
         raise ValueError('all packed models need the same number of inputs')
+    if any(e.mf != 'triangular' for e in estimators):
+        raise ValueError('the force model\'s compiled path takes triangular MFs only, got '
+                         f'{[e.mf for e in estimators]}')
     cols = tuple(range(d)) if cols is None else tuple(int(c) for c in cols)
     nq = d if n_query is None else int(n_query)
     if len(cols) != d or any(not 0 <= c < nq for c in cols) or not -1 <= scale_col < nq:
         raise ValueError(f'bad input columns {cols} / scale column {scale_col} for {nq} query columns')
-    ints: list[int] = [len(models), d, nq, int(scale_col), *cols]
+    M = max(len(P) for e in estimators for P in e.mf_params_)
+    ints: list[int] = [len(estimators), d, nq, int(scale_col), M, *cols]
     floats: list[np.ndarray] = []
     pos = 0
-    for m in models:
-        st = m.structure
+    for e in estimators:
+        st = tuple(len(P) for P in e.mf_params_)
         strides = [int(np.prod(st[i + 1:])) for i in range(d)]
-        span = m.hi - m.lo
-        e = m.extrapolation * span
-        block = [m.lo, m.hi, m.lo - e, m.hi + e]
+        lo, hi = e.input_min_, e.input_max_
+        ext = np.broadcast_to(np.asarray(e.extrapolation, dtype=np.float64), (d,)) * (hi - lo)
+        block = [lo, hi, lo - ext, hi + ext]
         mf_off = pos + 4 * d
-        mfs = np.concatenate([P.ravel() for P in m.mfs])
+        mfs = np.concatenate([P.ravel() for P in e.mf_params_])
         coef_off = mf_off + mfs.size
-        block += [mfs, m.coef.ravel()]
+        block += [mfs, e.consequents_.ravel()]
         flat = np.concatenate([np.asarray(b, dtype=np.float64).ravel() for b in block])
         floats.append(flat)
         ints += [*st, *strides, pos, coef_off]
@@ -107,6 +115,13 @@ def rule_output(fp, c, d, x):
     return f
 
 
+@numba.njit(cache=True, nogil=True, inline='always')
+def scratch_len(ip):
+    """Floats of scratch :func:`_eval_point` needs: per input M (MF index, μ̄, dμ̄/du), the count
+    and the odometer's digit, the clamped consequent input, the in-box flag and the gradient."""
+    return 3 * ip[1] * ip[4] + 5 * ip[1]
+
+
 @numba.njit(cache=True, nogil=True)
 def _eval_point(q, fp, ip, out, J, want_jac, ws):
     """Evaluate every packed model at one query ``q`` (nq,) into ``out`` (n_out,), and with
@@ -118,17 +133,21 @@ def _eval_point(q, fp, ip, out, J, want_jac, ws):
     d = ip[1]
     nq = ip[2]
     scol = ip[3]
+    M = ip[4]
     for i in range(nq):
         if not np.isfinite(q[i]):
             return False
-    # Scratch ``ws`` (at least 6 d floats) comes from the caller: one heap allocation per query
-    # (or per batch) instead of seven; this runs once per servo tick (README "Measured").
-    mu0 = ws[:d]
-    mu1 = ws[d:2 * d]
-    dmu1 = ws[2 * d:3 * d]  # d μ̄1 / d u_i (μ̄0 = 1 - μ̄1, so d μ̄0 = -d μ̄1); 0 where clamped
-    inb = ws[3 * d:4 * d]   # 1 where the consequent input is inside its extrapolation box, else 0
-    xe = ws[4 * d:5 * d]
-    grad = ws[5 * d:6 * d]
+    # Scratch ``ws`` (:func:`scratch_len` floats) comes from the caller: one heap allocation per
+    # query (or per batch); this runs once per servo tick (README "Measured").
+    act = ws[:d * M]              # per input: indices of its non-zero MFs (as floats)
+    mub = ws[d * M:2 * d * M]     # their normalised memberships μ̄
+    dmub = ws[2 * d * M:3 * d * M]  # d μ̄ / d u_i; 0 where the membership input is clamped
+    r0 = 3 * d * M
+    cnt = ws[r0:r0 + d]
+    xe = ws[r0 + d:r0 + 2 * d]
+    inb = ws[r0 + 2 * d:r0 + 3 * d]  # 1 where the consequent input is inside its box, else 0
+    grad = ws[r0 + 3 * d:r0 + 4 * d]
+    digit = ws[r0 + 4 * d:r0 + 5 * d]  # the rule being visited: one active MF per input
     s = 1.0
     ds = 0.0
     if scol >= 0:
@@ -139,7 +158,7 @@ def _eval_point(q, fp, ip, out, J, want_jac, ws):
         base = ip[h + 2 * d]
         coef_off = ip[h + 2 * d + 1]
         mf = base + 4 * d
-        rbase = 0  # the rule of the lower MF of every input's interval
+        total = 1
         for i in range(d):
             u = q[ip[_GLOBAL + i]]
             lo = fp[base + i]
@@ -148,65 +167,64 @@ def _eval_point(q, fp, ip, out, J, want_jac, ws):
             elo = fp[base + 2 * d + i]
             ehi = fp[base + 3 * d + i]
             xe[i] = min(max(u, elo), ehi)
-            if want_jac:
-                inb[i] = 1.0 if elo < u < ehi else 0.0
+            inb[i] = 1.0 if elo < u < ehi else 0.0
+            slope = want_jac and lo < u < hi
             m = ip[h + i]
-            # Interval [b_j, b_j+1] holding xm; only MFs j and j + 1 can be non-zero there.
-            j = 0
-            while j < m - 2 and fp[mf + 3 * (j + 1) + 1] <= xm:
-                j += 1
-            a0, b0, c0 = fp[mf + 3 * j], fp[mf + 3 * j + 1], fp[mf + 3 * j + 2]
-            g0 = _tri(xm, a0, b0, c0)
-            g1 = 0.0
-            d0 = 0.0
-            d1 = 0.0
-            if m > 1:
-                a1, b1, c1 = fp[mf + 3 * j + 3], fp[mf + 3 * j + 4], fp[mf + 3 * j + 5]
-                g1 = _tri(xm, a1, b1, c1)
-                if want_jac and lo < u < hi:
-                    d0 = _dtri(xm, a0, b0, c0)
-                    d1 = _dtri(xm, a1, b1, c1)
-            isg = 1.0 / (g0 + g1)
-            rbase += j * ip[h + d + i]
-            mu0[i] = g0 * isg
-            mu1[i] = g1 * isg
-            if want_jac:
-                dmu1[i] = (d1 * g0 - g1 * d0) * isg * isg
+            k = 0
+            S = 0.0
+            dS = 0.0
+            for j in range(m):
+                a = fp[mf + 3 * j]
+                c = fp[mf + 3 * j + 2]
+                if xm <= a or xm >= c:   # outside the support: μ = 0 (and no rule to visit)
+                    continue
+                b = fp[mf + 3 * j + 1]
+                g = _tri(xm, a, b, c)
+                if g > 0.0:
+                    dg = _dtri(xm, a, b, c) if slope else 0.0
+                    act[i * M + k] = j
+                    mub[i * M + k] = g
+                    dmub[i * M + k] = dg
+                    S += g
+                    dS += dg
+                    k += 1
+            isg = 1.0 / S
+            for t in range(k):
+                g = mub[i * M + t]
+                dmub[i * M + t] = (dmub[i * M + t] * S - g * dS) * isg * isg
+                mub[i * M + t] = g * isg
+            cnt[i] = k
+            total *= k
             mf += 3 * m
         acc = 0.0
         for i in range(d):
             grad[i] = 0.0
-        for combo in range(1 << d):
+            digit[i] = 0.0
+        for _ in range(total):
             w = 1.0
-            rule = rbase
-            exists = True
+            rule = 0
             for i in range(d):
-                if (combo >> i) & 1:
-                    exists = exists and ip[h + i] > 1  # a single-MF input has no second MF
-                    w *= mu1[i]
-                    rule += ip[h + d + i]
-                else:
-                    w *= mu0[i]
-            if not exists or (w == 0.0 and not want_jac):
-                continue
+                t = i * M + int(digit[i])
+                w *= mub[t]
+                rule += int(act[t]) * ip[h + d + i]
             c = coef_off + rule * (d + 1)
             f = rule_output(fp, c, d, xe)
             acc += w * f
             if want_jac:
                 for i in range(d):
                     # ∂w/∂u_i: the product with input i's factor replaced by its derivative.
-                    dw = 1.0
-                    for k in range(d):
-                        if k == i:
-                            dw *= dmu1[k] if (combo >> k) & 1 else -dmu1[k]
-                        elif (combo >> k) & 1:
-                            dw *= mu1[k]
-                        else:
-                            dw *= mu0[k]
+                    dw = dmub[i * M + int(digit[i])]
                     if dw != 0.0:
+                        for k in range(d):
+                            if k != i:
+                                dw *= mub[k * M + int(digit[k])]
                         grad[i] += dw * f
-                    if w != 0.0:
-                        grad[i] += w * fp[c + i] * inb[i]
+                    grad[i] += w * fp[c + i] * inb[i]
+            for i in range(d):      # next rule: the odometer's first digit turns fastest
+                digit[i] += 1.0
+                if digit[i] < cnt[i]:
+                    break
+                digit[i] = 0.0
         out[o] = s * acc
         if want_jac:
             for k in range(nq):
@@ -225,7 +243,7 @@ def eval_xyzd(x, y, z, depth, fp, ip):
     Returns:
         (Fx, Fy, Fz, ok): ok is False (forces 0) if an input is NaN or Inf.
     """
-    buf = np.zeros(7 + 6 * ip[1])  # query (4), forces (3), scratch: one allocation
+    buf = np.empty(7 + scratch_len(ip))  # query (4), forces (3), scratch: one allocation
     q = buf[:4]
     q[0] = x
     q[1] = y
@@ -263,7 +281,7 @@ def jac_xyzd(x, y, z, depth, fp, ip):
     q[3] = depth
     out = np.zeros(3)
     J = np.zeros((3, 4))
-    ok = _eval_point(q, fp, ip, out, J, True, np.empty(6 * ip[1]))
+    ok = _eval_point(q, fp, ip, out, J, True, np.empty(scratch_len(ip)))
     return out, J, ok
 
 
@@ -274,7 +292,7 @@ def eval_batch(X, fp, ip):
     out = np.empty((n, ip[0]))
     row = np.empty(ip[0])
     J = np.empty((0, 0))
-    ws = np.empty(6 * ip[1])
+    ws = np.empty(scratch_len(ip))
     for k in range(n):
         if _eval_point(X[k], fp, ip, row, J, False, ws):
             out[k] = row
@@ -292,7 +310,7 @@ def eval_jac_batch(X, fp, ip):
     Jb = np.empty((n, ip[0], X.shape[1]))
     row = np.empty(ip[0])
     J = np.empty((ip[0], X.shape[1]))
-    ws = np.empty(6 * ip[1])
+    ws = np.empty(scratch_len(ip))
     for k in range(n):
         if _eval_point(X[k], fp, ip, row, J, True, ws):
             F[k] = row

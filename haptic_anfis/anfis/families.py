@@ -157,6 +157,35 @@ def project(family: str, P: np.ndarray) -> np.ndarray:
     return out
 
 
+def check(family: str, P: np.ndarray) -> None:
+    """Raise ``ValueError`` (one line) if normalised parameters ``P`` (m, k) lie outside the
+    constraint set :func:`project` keeps (used when a model file is read): finite, widths > 0,
+    centres strictly increasing, and for the piecewise-linear families every point of [0, 1]
+    under some MF."""
+    P = np.asarray(P, dtype=np.float64)
+    k = FAMILIES[family]
+    if P.ndim != 2 or P.shape[1] != k or len(P) < 1:
+        raise ValueError(f'{family} MF parameters must have shape (m, {k}), got {P.shape}')
+    if not np.all(np.isfinite(P)):
+        raise ValueError('MF parameters hold non-finite numbers')
+    if not np.all(np.diff(centres(family, P)) > 0):
+        raise ValueError('MF centres must be strictly increasing')
+    if family in ('gbell', 'gaussian'):
+        if not np.all(P[:, 0] > 0):
+            raise ValueError('every MF needs a width > 0')
+        if family == 'gbell' and not np.all(P[:, 1] > 0):
+            raise ValueError('every generalized bell needs a slope > 0')
+        return
+    if not np.all(np.diff(P, axis=1) >= 0) or not np.all(P[:, 0] < P[:, 1]) \
+            or not np.all(P[:, -2] < P[:, -1]):
+        raise ValueError(f'every {family} MF needs ordered corners with non-zero slopes')
+    left, right = P[:, 0], P[:, -1]
+    if not (left[0] < 0.0 and right[-1] > 1.0 and np.all(left[1:] < right[:-1])
+            and np.all(P[:-1, 1] <= P[1:, 1])):
+        raise ValueError('the MFs leave part of the input range uncovered (a gap where no rule '
+                         'fires)')
+
+
 def normalized(family: str, u: np.ndarray, P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Normalised memberships of samples ``u`` (n,) and their parameter derivatives.
 

@@ -1,12 +1,19 @@
-"""``ForceModel``: three single-output ANFIS models (Fx, Fy, Fz) over (x, y, z, depth).
+"""``ForceModel``: three triangular :class:`~.estimator.ANFIS` estimators (Fx, Fy, Fz) over
+(x, y, z, depth).
 
-Scikit-learn conventions without the dependency: hyper-parameters in ``__init__``, ``fit`` returns
-``self``, learned attributes end in ``_``. Inputs in metres, forces in newtons.
+Scikit-learn conventions without the dependency: keyword-only hyper-parameters in ``__init__``,
+``fit`` returns ``self``, learned attributes end in ``_`` (``estimators_``: the three ANFIS).
+Inputs in metres, forces in newtons. Three ways to evaluate, all compiled (numba):
 
     model = ForceModel().fit(X, Y, groups=point_ids)  # the shipped configuration (defaults.SHIPPED)
-    F = model.predict(X)                              # (n, 3) numpy batch path
-    fx, fy, fz = model.predict_one(x, y, z, depth)    # compiled real-time path (~1 µs)
+    F = model.predict(X)                              # (n, 3) batch; jacobian=True adds (n, 3, 4)
+    fx, fy, fz = model.predict_one(x, y, z, depth)    # real-time single query (~1 µs)
+    F, J = model.jacobian_one(x, y, z, depth)         # real-time forces and Jacobian
     model.save('model.json'); model = ForceModel.load('model.json')
+
+Each estimator's MFs are free to widen and move within their ordering constraint
+(:mod:`.families`), and learning is its guarded hybrid rule (:mod:`.hybrid`): a step that raises
+the training error is refused.
 """
 from __future__ import annotations
 
@@ -22,13 +29,14 @@ from .._version import __version__
 from ..tissue.dataset import (INPUT_NAMES, OUTPUT_NAMES, DatasetError, ForceDataset, fold_indices,
                        split_indices)
 from . import compiled
-from .defaults import AUTO, SHIPPED, SHIPPED_INPUTS, SHIPPED_STRUCTURE, X_MFS, x_explained_by_yz
-from .model_file import (FORMAT, FORMAT_VERSION, ModelFileError, model_from_dict, model_to_dict,
-                         read_model_doc, write_json_atomic)
+from .defaults import (AUTO, LEGACY_RIDGE, SHIPPED, SHIPPED_INPUTS, SHIPPED_STRUCTURE, X_MFS,
+                       x_explained_by_yz)
+from .estimator import ANFIS
+from .model_file import (FORMAT, FORMAT_VERSION, ModelFileError, estimator_from_dict,
+                         estimator_to_dict, read_model_doc, write_json_atomic)
 from .structure import Candidate, SearchResult, search_structure
-from .sugeno import (DEFAULT_EXTRAPOLATION, DEFAULT_EXTRAPOLATION_SCALED, SugenoModel,
-                     check_finite_inputs)
-from .training import train
+from .sugeno import DEFAULT_EXTRAPOLATION, DEFAULT_EXTRAPOLATION_SCALED, check_finite_inputs
+from .training import TrainResult
 
 INPUT_UNITS = ('m', 'm', 'm', 'm')
 OUTPUT_UNITS = ('N', 'N', 'N')
@@ -51,11 +59,13 @@ class ForceModel:
             structure search; ``None`` to choose MF counts per output by validation (see
             :func:`~.structure.search_structure`); one tuple (e.g. ``(3, 3, 3, 2)``) for all three
             outputs; or a sequence of three tuples, one per output.
-        epochs: maximum hybrid-learning epochs when training the final models.
+        epochs: hybrid-learning epochs of the final models: one count for all outputs, or three
+            (one per output: Fz, with its stronger shrinkage, keeps improving longer).
         search_epochs: maximum epochs per candidate during the structure search.
         search_start, max_mfs, candidates, tol: structure search settings.
-        ridge: relative ridge weight of the consequent least squares: one for all outputs, or
-            three (one per output, e.g. a trained model's ``ridges_``).
+        ridge: relative ridge weight of the consequent least squares, which shrinks every rule
+            toward one global linear fit (the estimators' ``ridge_target='linear'``): one for
+            all outputs, or three (one per output, e.g. a trained model's ``ridges_``).
         ridge_candidates: ridge weights the structure search scores every structure with
             (chosen per output with the structure, :func:`~.structure.search_structure`); None:
             ``ridge`` only. The chosen ones are ``ridges_``.
@@ -73,8 +83,9 @@ class ForceModel:
             :mod:`.sugeno`): by default positions saturate and depth extrapolates by 25 %.
         seed: seeds the validation split.
         form: ``'plain'``: F = ANFIS(inputs) (the paper's form); ``'depth_scaled'``: F = depth ·
-            g(inputs) with g a first-order Sugeno ANFIS per output trained by the same hybrid rule
-            on the error of F: exactly 0 N at zero depth and continuous from contact (|F| ≤ c·depth).
+            g(inputs) with g an :class:`~.estimator.ANFIS` per output trained by the same hybrid
+            rule on the error of F (g fitted to F / depth with sample weights depth²): exactly 0 N
+            at zero depth and continuous from contact (|F| ≤ c·depth).
         inputs: names of the ANFIS inputs among (x, y, z, depth), used exactly as given; or
             ``'auto'`` (default): all four for ``'plain'``; for ``'depth_scaled'`` (y, z, depth)
             when the data show x is a function of (y, z) (on one skin surface it is:
@@ -82,15 +93,12 @@ class ForceModel:
             are recorded in ``metadata_['training']['input_check']``.
             ``structure``, ``search_start``, ``max_mfs`` have one entry per ANFIS input;
             ``extrapolation`` one per column of (x, y, z, depth).
-        step_guard: reject an MF gradient step that raises the training error (restore, halve the
-            step; :func:`~.training.fit_normalized`'s ``guard``). Off by default: on the shipped
-            data it cost accuracy in grouped CV (docs/measurements/cv.md): in a fixed budget of
-            40 epochs an accepted uphill step often leads lower later.
     """
 
     def __init__(self, *,
                  structure: Structure | Sequence[Structure] | str | None = SHIPPED['structure'],
-                 epochs: int = SHIPPED['epochs'], search_epochs: int = SHIPPED['search_epochs'],
+                 epochs: int | Sequence[int] = SHIPPED['epochs'],
+                 search_epochs: int = SHIPPED['search_epochs'],
                  search_start: Structure | None = None, max_mfs: Structure | None = SHIPPED['max_mfs'],
                  candidates: list[Structure] | None = None, tol: float = SHIPPED['tol'],
                  ridge: float | Sequence[float] = SHIPPED['ridge'], step: float = 0.01,
@@ -98,7 +106,7 @@ class ForceModel:
                  search_folds: int = SHIPPED['search_folds'],
                  extrapolation: Sequence[float] | None = None, seed: int = SHIPPED['seed'],
                  form: str = SHIPPED['form'], inputs: Sequence[str] | str = SHIPPED['inputs'],
-                 ridge_candidates: Sequence[float] | None = None, step_guard: bool = False) -> None:
+                 ridge_candidates: Sequence[float] | None = None) -> None:
         self.form = form
         self.inputs = inputs
         self.structure = structure
@@ -116,7 +124,6 @@ class ForceModel:
         self.search_folds = search_folds
         self.extrapolation = extrapolation
         self.seed = seed
-        self.step_guard = step_guard
         self.metadata_: dict[str, Any] = {}
 
     # ---- training ---------------------------------------------------------------------------
@@ -192,10 +199,14 @@ class ForceModel:
         ``split='point'``) is held out to choose each output's structure and epoch count; the chosen
         structure is then retrained on all of ``X`` for that many epochs.
         """
-        for name in ('epochs', 'search_epochs'):
-            v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
-                raise ValueError(f'{name}: expected an integer >= 1, got {v!r}')
+        def count(v: Any) -> bool:
+            return not isinstance(v, bool) and isinstance(v, (int, np.integer)) and v >= 1
+        if not count(self.search_epochs):
+            raise ValueError(f'search_epochs: expected an integer >= 1, got {self.search_epochs!r}')
+        epochs = [self.epochs] * 3 if np.ndim(self.epochs) == 0 else list(self.epochs)
+        if len(epochs) != 3 or not all(count(e) for e in epochs):
+            raise ValueError(f'epochs: expected an integer >= 1, got {self.epochs!r} (or three, '
+                             'one per output)')
         X = check_finite_inputs(X, INPUT_NAMES)
         Y = np.asarray(Y, dtype=np.float64)
         if X.shape[1] != 4 or Y.shape != (len(X), 3):
@@ -240,7 +251,7 @@ class ForceModel:
             raise ValueError('ridge_candidates: the ridge is chosen with the structure search; '
                              'with fixed structures give ridge (one, or one per output)')
         t_start = time.perf_counter()
-        self.models_: list[SugenoModel] = []
+        self.estimators_: list[ANFIS] = []
         self.search_: list[SearchResult | None] = []
         self.best_epoch_: list[int] = []
         self.val_rmse_: list[float] = []
@@ -249,7 +260,7 @@ class ForceModel:
         self.ridges_: list[float] = []
         for o, fixed in enumerate(structures):
             t0 = time.perf_counter()
-            kw = dict(ridge=ridges[o], step=self.step, guard=bool(self.step_guard))
+            kw = dict(ridge=ridges[o], step=self.step, extrapolation=ext[list(cols)])
             Xf, tf, Xv, tv = X[fit_idx], Y[fit_idx, o], X[val_idx], Y[val_idx, o]
             if fixed is None:
                 held = (dict(folds=folds, scale=S) if folds else
@@ -258,7 +269,8 @@ class ForceModel:
                                       start=search_start, max_mfs=max_mfs,
                                       candidates=self.candidates, tol=self.tol,
                                       epochs=self.search_epochs, lo=lo, hi=hi,
-                                      ridges=self.ridge_candidates, **held, **kw)
+                                      ridges=self.ridge_candidates, trainer=_fit_anfis,
+                                      **held, **kw)
                 structure = sr.chosen.structure
                 if sr.chosen.ridge is not None:
                     kw['ridge'] = sr.chosen.ridge
@@ -268,19 +280,18 @@ class ForceModel:
             self.ridges_.append(float(kw['ridge']))
             if len(val_idx):
                 # Choose the epoch with the full epoch budget on the held-out part ...
-                chk = train(Xf, tf, structure, self.epochs, X_check=Xv, t_check=tv, lo=lo, hi=hi,
-                            scale=sub(fit_idx), scale_check=sub(val_idx), **kw)
+                chk = _fit_anfis(Xf, tf, structure, epochs[o], X_check=Xv, t_check=tv,
+                                 scale=sub(fit_idx), scale_check=sub(val_idx), **kw)
                 # ... then retrain on all the training data for exactly that many epochs.
-                final = train(X, Y[:, o], structure, chk.best_epoch, lo=lo, hi=hi, scale=S, **kw)
+                final = _fit_anfis(X, Y[:, o], structure, chk.best_epoch, scale=S, **kw)
             else:
-                final = chk = train(X, Y[:, o], structure, self.epochs, lo=lo, hi=hi, scale=S, **kw)
-            final.model.extrapolation = ext[list(cols)]
-            self.models_.append(final.model)
+                final = chk = _fit_anfis(X, Y[:, o], structure, epochs[o], scale=S, **kw)
+            self.estimators_.append(final.model)
             self.search_.append(sr)
             self.best_epoch_.append(chk.best_epoch)
             self.val_rmse_.append(chk.check_rmse[chk.best_epoch - 1] if chk.check_rmse
                                   else None)  # no hold-out (val_fraction 0)
-            pred = final.model.predict(X) * (1.0 if S is None else S)
+            pred = final.model.predict(X) * (1.0 if S is None else S)  # numpy path
             self.train_rmse_.append(float(np.sqrt(np.mean((pred - Y[:, o]) ** 2))))
             self.train_curves_.append({'train': chk.train_rmse, 'check': chk.check_rmse})
             if verbose:
@@ -291,7 +302,8 @@ class ForceModel:
         self._range = (X4.min(axis=0), X4.max(axis=0))
         self.metadata_ = {'training': {
             'form': self.form, 'inputs': [INPUT_NAMES[c] for c in cols], 'max_mfs': list(max_mfs),
-            'epochs': self.epochs, 'search_epochs': self.search_epochs, 'tol': self.tol,
+            'epochs': self.epochs if np.ndim(self.epochs) == 0 else [int(e) for e in epochs],
+            'search_epochs': self.search_epochs, 'tol': self.tol,
             'ridge': self.ridges_[0] if len(set(self.ridges_)) == 1 else list(self.ridges_),
             **({'ridge_candidates': [float(r) for r in self.ridge_candidates]}
                if self.ridge_candidates is not None else {}),
@@ -299,7 +311,7 @@ class ForceModel:
             'search_folds': self.search_folds, 'input_check': self.input_check_,
             'structure': 'given' if not isinstance(self.structure, str) and self.structure is not None
             else ('search' if all(s is None for s in structures) else 'shipped'),
-            'seed': self.seed, 'step_guard': bool(self.step_guard),
+            'seed': self.seed, 'mf': 'triangular',
             'seconds': round(self.fit_seconds_, 3),
             'n_samples': int(len(X)),
             'candidates': [[_candidate_dict(c) for c in sr.candidates] if sr else []
@@ -310,7 +322,7 @@ class ForceModel:
 
     # ---- prediction -------------------------------------------------------------------------
     def _check_fitted(self) -> None:
-        if not getattr(self, 'models_', None):
+        if not getattr(self, 'estimators_', None):
             raise RuntimeError('ForceModel is not trained: call fit() or ForceModel.load()')
 
     @property
@@ -324,7 +336,7 @@ class ForceModel:
         return getattr(self, '_scale_col', -1)
 
     def _compile(self) -> None:
-        self._fp, self._ip = compiled.pack(self.models_, self.input_cols_, self.scale_col_, 4)
+        self._fp, self._ip = compiled.pack(self.estimators_, self.input_cols_, self.scale_col_, 4)
         compiled.warm_up(self._fp, self._ip)
         self._eval_one, self._jac_one = compiled.entry_points(self._fp, self._ip)
 
@@ -338,17 +350,26 @@ class ForceModel:
             compiled.warm_up(self._fp, self._ip)
             self._eval_one, self._jac_one = compiled.entry_points(self._fp, self._ip)
 
-    def predict(self, X: np.ndarray) -> np.ndarray:
-        """Numpy batch path: X (n, 4) [m] -> (n, 3) [N]. Raises ValueError on NaN/Inf input."""
+    def predict(self, X: np.ndarray, *, jacobian: bool = False
+                ) -> np.ndarray | tuple[np.ndarray, np.ndarray]:
+        """Batch forces (compiled): X (n, 4) [m] (any float dtype) -> F (n, 3) [N].
+
+        With ``jacobian``: (F, J (n, 3, 4) [N/m]) with ``J[i, a, b] = dF_a / dX_b`` at ``X[i]``,
+        the exact derivatives of the model. Where an input is clamped by the out-of-range policy
+        its column is 0; at an MF kink the derivative is one-sided. The same numbers as the
+        estimators' numpy path (``estimators_[o].predict`` on the input columns, times the depth
+        in the depth-scaled form) to rounding.
+
+        Raises:
+            ValueError: on NaN/Inf input or a shape other than (n, 4).
+        """
         self._check_fitted()
-        X = check_finite_inputs(X, INPUT_NAMES)
+        X = np.ascontiguousarray(check_finite_inputs(X, INPUT_NAMES))
         if X.shape[1] != 4:
             raise ValueError(f'predict needs X of shape (n, 4); got {X.shape}')
-        U = X[:, list(self.input_cols_)]
-        F = np.column_stack([m.predict(U) for m in self.models_])
-        if self.scale_col_ >= 0:
-            F *= np.maximum(X[:, self.scale_col_], 0.0)[:, None]
-        return F
+        if jacobian:
+            return compiled.eval_jac_batch(X, self._fp, self._ip)
+        return compiled.eval_batch(X, self._fp, self._ip)
 
     def jacobian_one(self, x: float, y: float, z: float, depth: float
                      ) -> tuple[np.ndarray, np.ndarray]:
@@ -365,25 +386,6 @@ class ForceModel:
             raise ValueError(f'non-finite input to jacobian_one: x={x!r}, y={y!r}, z={z!r}, '
                              f'depth={depth!r}')
         return F, J
-
-    def predict_compiled(self, X: np.ndarray, jacobian: bool = False
-                         ) -> np.ndarray | tuple[np.ndarray, np.ndarray]:
-        """Compiled batch path: X (n, 4) [m] (any float dtype) -> F (n, 3) [N].
-
-        With ``jacobian``: (F, J (n, 3, 4) [N/m]) with ``J[i, a, b] = dF_a / dX_b`` at ``X[i]``,
-        the exact derivatives of the compiled model. Where an input is clamped by the out-of-range
-        policy its column is 0; at an MF kink the derivative is one-sided.
-
-        Raises:
-            ValueError: on NaN/Inf input.
-        """
-        self._check_fitted()
-        X = np.ascontiguousarray(check_finite_inputs(X, INPUT_NAMES))
-        if X.shape[1] != 4:
-            raise ValueError(f'predict_compiled needs X of shape (n, 4); got {X.shape}')
-        if jacobian:
-            return compiled.eval_jac_batch(X, self._fp, self._ip)
-        return compiled.eval_batch(X, self._fp, self._ip)
 
     def predict_one(self, x: float, y: float, z: float, depth: float) -> tuple[float, float, float]:
         """Compiled real-time path for one contact: metres in, (Fx, Fy, Fz) newtons out.
@@ -407,24 +409,23 @@ class ForceModel:
     def input_range_(self) -> tuple[np.ndarray, np.ndarray]:
         """(min, max) (4,) arrays of the trained input domain [m]."""
         self._check_fitted()
-        rng = getattr(self, '_range', None)
-        if rng is None:  # assembled by hand from 4-input models
-            return self.models_[0].lo.copy(), self.models_[0].hi.copy()
-        return rng[0].copy(), rng[1].copy()
+        return self._range[0].copy(), self._range[1].copy()
 
     @property
     def structures_(self) -> list[Structure]:
+        """MF counts per ANFIS input, one tuple per output."""
         self._check_fitted()
-        return [m.structure for m in self.models_]
+        return [tuple(len(P) for P in e.mf_params_) for e in self.estimators_]
 
     # ---- persistence ------------------------------------------------------------------------
     def to_dict(self) -> dict[str, Any]:
+        """The model file's document (:mod:`.model_file`, the current format version)."""
         self._check_fitted()
         lo, hi = self.input_range_
         outputs = []
         rmse = self.metadata_.get('rmse', {})
-        for o, m in enumerate(self.models_):
-            entry = {'name': OUTPUT_NAMES[o], 'unit': OUTPUT_UNITS[o], **model_to_dict(m)}
+        for o, e in enumerate(self.estimators_):
+            entry = {'name': OUTPUT_NAMES[o], 'unit': OUTPUT_UNITS[o], **estimator_to_dict(e)}
             entry['best_epoch'] = self.best_epoch_[o] if hasattr(self, 'best_epoch_') else None
             entry['rmse'] = {k: v[o] for k, v in rmse.items()}
             outputs.append(entry)
@@ -448,7 +449,9 @@ class ForceModel:
 
     @classmethod
     def load(cls, path: str | os.PathLike) -> 'ForceModel':
-        """Read a model file; any format, version, shape or finiteness problem -> ModelFileError."""
+        """Read a model file; any format, version, shape or finiteness problem -> ModelFileError.
+        Files of format versions 1 and 2 (triangular MFs on the pinned partition) are migrated
+        to the estimators exactly (:func:`.model_file.estimator_from_dict`)."""
         doc = read_model_doc(path)
         try:
             return cls._from_doc(doc, path)
@@ -479,8 +482,9 @@ class ForceModel:
         cols, scol = _read_form(doc, path)
         self = cls()
         try:
-            self.models_ = [model_from_dict(o, lo[list(cols)], hi[list(cols)], o['name'])
-                            for o in doc['outputs']]
+            self.estimators_ = [estimator_from_dict(o, lo[list(cols)], hi[list(cols)], o['name'],
+                                                    doc['format_version'])
+                                for o in doc['outputs']]
         except ModelFileError as exc:
             raise ModelFileError(f'model file {str(path)!r}: {exc}') from None
         self._input_cols, self._scale_col = cols, scol
@@ -493,21 +497,61 @@ class ForceModel:
         self.metadata_['rmse'] = {k: [o.get('rmse', {}).get(k) for o in doc['outputs']]
                                   for k in sorted(rmse_keys)}
         self.source_ = {'path': str(path), 'software_version': doc.get('software_version'),
-                        'created_utc': doc.get('created_utc')}
+                        'created_utc': doc.get('created_utc'),
+                        'format_version': doc['format_version']}
         self.ridges_ = _trained_ridges(self.metadata_)
         self._compile()
         return self
 
 
+def _fit_anfis(X: np.ndarray, t: np.ndarray, structure: Structure, epochs: int,
+               X_check: np.ndarray | None = None, t_check: np.ndarray | None = None,
+               lo: np.ndarray | None = None, hi: np.ndarray | None = None,
+               scale: np.ndarray | None = None, scale_check: np.ndarray | None = None, *,
+               ridge: float, step: float, extrapolation: np.ndarray) -> TrainResult:
+    """One output's triangular :class:`~.estimator.ANFIS` on (X, t), with
+    :func:`~.training.train`'s signature for :func:`~.structure.search_structure`.
+
+    The scaled form F = s · g (``scale`` s > 0 per sample) is fitted as g on t / s with sample
+    weights s²: the same squared error of F. ``lo``/``hi`` are not used: an estimator's domain
+    is its training data's range. RMSEs in the result are of F.
+    """
+    est = ANFIS(n_mfs=tuple(int(m) for m in structure), mf='triangular', epochs=int(epochs),
+                step=step, ridge=ridge, ridge_target='linear',
+                extrapolation=tuple(extrapolation))
+    val = None
+    if X_check is not None and t_check is not None and len(X_check):
+        val = ((X_check, t_check, None) if scale_check is None
+               else (X_check, t_check / scale_check, scale_check ** 2))
+    est.fit(X, t if scale is None else t / scale,
+            sample_weight=None if scale is None else scale ** 2, validation_data=val)
+    return TrainResult(model=est, best_epoch=est.best_epoch_, train_rmse=est.train_rmse_,
+                       check_rmse=est.validation_rmse_, n_params=est.n_params_)
+
+
+def numpy_forces(model: ForceModel, X: np.ndarray) -> np.ndarray:
+    """The estimators' numpy path: X (n, 4) [m] -> (n, 3) [N], each output's
+    :meth:`ANFIS.predict <.estimator.ANFIS.predict>` on its input columns (times the depth in the
+    depth-scaled form). The oracle the compiled kernels are tested against, and the numpy
+    timings' path; the force model's own :meth:`ForceModel.predict` is compiled."""
+    model._check_fitted()
+    X = check_finite_inputs(X, INPUT_NAMES)
+    U = X[:, list(model.input_cols_)]
+    F = np.column_stack([e.predict(U) for e in model.estimators_])
+    if model.scale_col_ >= 0:
+        F *= np.maximum(X[:, model.scale_col_], 0.0)[:, None]
+    return F
+
+
 def _trained_ridges(metadata: dict[str, Any]) -> list[float]:
     """Per-output ridge a model file was trained with (its training metadata: one weight or one
-    per output); the shipped default when the file does not say (older files)."""
-    r = metadata.get('training', {}).get('ridge', SHIPPED['ridge'])
+    per output); :data:`~.defaults.LEGACY_RIDGE` when the file does not say (older files)."""
+    r = metadata.get('training', {}).get('ridge', LEGACY_RIDGE)
     vals = list(r) if np.ndim(r) else [r] * 3
     try:
-        return [float(v) for v in vals] if len(vals) == 3 else [float(SHIPPED['ridge'])] * 3
+        return [float(v) for v in vals] if len(vals) == 3 else [LEGACY_RIDGE] * 3
     except (TypeError, ValueError):
-        return [float(SHIPPED['ridge'])] * 3
+        return [LEGACY_RIDGE] * 3
 
 
 def _read_form(doc: dict[str, Any], path: str | os.PathLike) -> tuple[tuple[int, ...], int]:
@@ -524,7 +568,8 @@ def _read_form(doc: dict[str, Any], path: str | os.PathLike) -> tuple[tuple[int,
     except (TypeError, KeyError, ValueError, AttributeError):
         ok = False
     if not ok or not cols or list(cols) != sorted(set(cols)):
-        raise ModelFileError(f'model file {str(path)!r} (format_version 2): "form" must be '
+        raise ModelFileError(f'model file {str(path)!r} (format_version {doc["format_version"]}): '
+                             '"form" must be '
                              '{"name": "plain" | "depth_scaled", "inputs": [names among '
                              f'{list(INPUT_NAMES)} in order], "scale": null | "depth"}}; got {form!r}')
     return cols, scol

@@ -16,7 +16,7 @@ validation decide, instead of the structure ladder alone.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Sequence
+from typing import Callable, Sequence
 
 import numpy as np
 
@@ -50,7 +50,8 @@ def search_structure(X: np.ndarray, t: np.ndarray, X_val: np.ndarray | None = No
                      epochs: int = 40, lo: np.ndarray | None = None, hi: np.ndarray | None = None,
                      folds: list[tuple[np.ndarray, np.ndarray]] | None = None,
                      scale: np.ndarray | None = None, scale_val: np.ndarray | None = None,
-                     ridges: Sequence[float] | None = None, **train_kwargs) -> SearchResult:
+                     ridges: Sequence[float] | None = None,
+                     trainer: Callable[..., TrainResult] = train, **train_kwargs) -> SearchResult:
     """Choose MF counts per input by validation RMSE.
 
     Args:
@@ -70,6 +71,8 @@ def search_structure(X: np.ndarray, t: np.ndarray, X_val: np.ndarray | None = No
             :func:`~.training.fit_normalized`) for ``X`` and ``X_val``.
         ridges: ridge weights to score every structure with (the chosen one is
             ``chosen.ridge``); None: ``train_kwargs``' ridge (or the trainer's default) only.
+        trainer: trains one candidate, with :func:`~.training.train`'s signature and result
+            (the force model passes one that fits an :class:`~.estimator.ANFIS`).
     """
     import time
 
@@ -91,12 +94,13 @@ def search_structure(X: np.ndarray, t: np.ndarray, X_val: np.ndarray | None = No
             kw = train_kwargs if ridge is None else dict(train_kwargs, ridge=ridge)
             scores = []
             for Xf, tf, Xv, tv, sf, sv in parts:
-                res: TrainResult = train(Xf, tf, st, epochs, X_check=Xv, t_check=tv, lo=lo, hi=hi,
+                res: TrainResult = trainer(Xf, tf, st, epochs, X_check=Xv, t_check=tv, lo=lo, hi=hi,
                                          scale=sf, scale_check=sv, **kw)
                 k = res.best_epoch - 1
                 scores.append((res.train_rmse[k], res.check_rmse[k], res.best_epoch))
             tr, va, ep = np.array(scores).T
-            tried[st, ridge] = Candidate(st, res.model.n_rules, res.model.n_params,
+            n_params = res.n_params if res.n_params is not None else res.model.n_params
+            tried[st, ridge] = Candidate(st, int(np.prod(st)), n_params,
                                          float(np.sqrt(np.mean(tr ** 2))),
                                          float(np.sqrt(np.mean(va ** 2))),
                                          int(round(ep.mean())), time.perf_counter() - t0, ridge)

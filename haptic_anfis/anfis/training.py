@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import copy
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 import scipy.linalg
@@ -105,12 +106,14 @@ class TrainResult:
         model: the best model (lowest checking error, or lowest training error without checking data).
         best_epoch: 1-based epoch the model comes from.
         train_rmse, check_rmse: per-epoch RMSE histories (check is empty without checking data).
+        n_params: the model's trained parameters when ``model`` is not a SugenoModel.
     """
 
-    model: SugenoModel
+    model: Any
     best_epoch: int
     train_rmse: list[float] = field(default_factory=list)
     check_rmse: list[float] = field(default_factory=list)
+    n_params: int | None = None
 
 
 def _rmse(y: np.ndarray, t: np.ndarray) -> float:

@@ -136,9 +136,9 @@ def case_summary(case: Case, timing: bool = True, contrast: bool = True,
     if case.model_path.is_file():
         model = ForceModel.load(case.model_path)
         row['structures'] = ['-'.join(map(str, s)) for s in model.structures_]
-        row['rules_per_output'] = [m.n_rules for m in model.models_]
+        row['rules_per_output'] = [e.n_rules_ for e in model.estimators_]
         row['rules'] = int(sum(row['rules_per_output']))
-        row['parameters'] = int(sum(m.n_params for m in model.models_))
+        row['parameters'] = int(sum(e.n_params_ for e in model.estimators_))
         test = model.metadata_.get('rmse', {}).get('test')
         if test and all(v is not None for v in test):
             row['rmse_n'] = [float(v) for v in test]

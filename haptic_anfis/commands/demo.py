@@ -44,7 +44,7 @@ def run(args: argparse.Namespace) -> int:
     single = time_single(model.predict_one, test.X, 20000)
     rng = np.random.default_rng(0)
     lo, hi = model.input_range_
-    rate = throughput(model.predict_compiled, lo + (hi - lo) * rng.random((100_000, 4)))
+    rate = throughput(model.predict, lo + (hi - lo) * rng.random((100_000, 4)))
     print('== evaluation speed (compiled path)')
     print(f'   single query: p50 {np.percentile(single, 50) * 1e6:.2f} µs, '
           f'p99 {np.percentile(single, 99) * 1e6:.2f} µs')

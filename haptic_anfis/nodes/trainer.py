@@ -45,8 +45,9 @@ PARAMS = [
     Param('structure', '', "MF counts for all outputs, one per ANFIS input, e.g. '5-5-2' for the "
           "default (y, z, depth) inputs ('' = the shipped configuration, 'search' = structure search)",
           _structure_check),
-    Param('epochs', SHIPPED['epochs'], 'training epochs',
-          lambda v: None if v >= 1 else 'expected >= 1'),
+    Param('epochs', 0, 'training epochs of every output (0 = the shipped per-output epochs, '
+          'haptic_anfis/anfis/defaults.py SHIPPED)',
+          lambda v: None if v >= 0 else 'expected >= 0'),
     Param('test_fraction', SHIPPED['test_fraction'], 'held-out test part of the surface points',
           lambda v: None if 0 < v < 1 else 'expected 0 < value < 1'),
     Param('seed', SHIPPED['seed'], 'seed of the splits'),
@@ -99,10 +100,11 @@ class Trainer(HapticNode):
             st = (SHIPPED['structure'] if not p['structure'] else None
                   if p['structure'] == 'search' else
                   tuple(int(c) for c in p['structure'].split('-')))
-            self.say(f"training: structure {p['structure'] or 'shipped'}, {p['epochs']} epochs")
+            epochs = p['epochs'] or SHIPPED['epochs']
+            self.say(f"training: structure {p['structure'] or 'shipped'}, {epochs} epochs")
             t0 = time.perf_counter()
             model, _ = train_on_dataset(ds, test_fraction=p['test_fraction'], seed=p['seed'],
-                                        dataset_path=path, structure=st, epochs=p['epochs'])
+                                        dataset_path=path, structure=st, epochs=epochs)
             r = model.metadata_['rmse']['test']
             self.say(f'trained in {time.perf_counter() - t0:.1f} s; test RMSE Fx {r[0]:.4f}, '
                      f'Fy {r[1]:.4f}, Fz {r[2]:.4f} N')

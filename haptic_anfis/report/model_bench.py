@@ -1,7 +1,9 @@
 """Speed against error for the ANFIS force model (``haptic-anfis bench model``, ``make bench``).
 
 For each structure: test RMSE per output, single-query latency percentiles of the compiled path
-(``predict_one``), of its Jacobian (``jacobian_one``) and of the numpy path (``predict`` on one row), and batch throughput of both.
+(``predict_one``), of its Jacobian (``jacobian_one``) and of the
+estimators' numpy path (:func:`~haptic_anfis.anfis.force_model.numpy_forces` on one row), and
+batch throughput of both.
 Timings are printed, never asserted: the machines are shared and noisy.
 """
 from __future__ import annotations
@@ -12,6 +14,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from ..anfis import ForceModel, rmse
+from ..anfis.force_model import numpy_forces
 from ..tissue.dataset import ForceDataset, split_indices
 from ..anfis.timing import percentiles_us, throughput, time_calls
 
@@ -44,7 +47,7 @@ def bench_structures(ds: ForceDataset, structures: Sequence[Any], seed: int = 0,
         model = ForceModel(**{**params, 'structure': st, 'seed': seed}).fit(tr.X, tr.Y,
                                                                           groups=tr.point)
         fit_s = time.perf_counter() - t0
-        numpy_one = lambda x, y, z, d: model.predict(np.array([[x, y, z, d]]))  # noqa: E731
+        numpy_one = lambda x, y, z, d: numpy_forces(model, np.array([[x, y, z, d]]))  # noqa: E731
         c50, c99 = percentiles_us(time_single(model.predict_one, te.X, repeats))
         n50, n99 = percentiles_us(time_single(numpy_one, te.X, max(repeats // 10, 200)))
         j50, j99 = percentiles_us(time_single(model.jacobian_one, te.X, repeats))
@@ -53,14 +56,14 @@ def bench_structures(ds: ForceDataset, structures: Sequence[Any], seed: int = 0,
             'label': 'search' if st is None else ('/'.join(structs) if len(set(structs)) > 1
                                                   else structs[0]),
             'structures': structs,
-            'rules': [m.n_rules for m in model.models_],
+            'rules': [e.n_rules_ for e in model.estimators_],
             'test_rmse': rmse(model.predict(te.X), te.Y),
             'fit_s': fit_s,
             'compiled_p50_us': c50, 'compiled_p99_us': c99,
             'numpy_p50_us': n50, 'numpy_p99_us': n99,
             'jacobian_p50_us': j50, 'jacobian_p99_us': j99,
-            'compiled_batch_per_s': throughput(model.predict_compiled, Xb),
-            'numpy_batch_per_s': throughput(model.predict, Xb[:20000]),
+            'compiled_batch_per_s': throughput(model.predict, Xb),
+            'numpy_batch_per_s': throughput(lambda X: numpy_forces(model, X), Xb[:20000]),
         })
     return rows
 

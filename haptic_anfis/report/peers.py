@@ -112,7 +112,7 @@ class OursPeer(Peer):
         return time_calls(one, [tuple(float(v) for v in q) for q in Q], repeats)
 
     def throughput(self, X, min_seconds=0.3):
-        return throughput(self.model_.predict_compiled, X, min_seconds)
+        return throughput(self.model_.predict, X, min_seconds)
 
     def curves(self):
         return [dict(c) for c in self.model_.train_curves_]

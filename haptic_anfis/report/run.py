@@ -317,7 +317,7 @@ def format_markdown(res: dict[str, Any]) -> str:
          '(no other model is both faster and more accurate). *Single query* is the real-time path each '
          'model offers: ours `ForceModel.predict_one` (numba, packed parameter arrays), every peer its '
          '`predict` on one (1, 4) row; xanfis is timed inside its own process. *Batch*: ours '
-         '`predict_compiled`, peers `predict`, on random surface inputs.',
+         '`predict` (compiled), peers `predict`, on random surface inputs.',
          '',
          f'**Smoothness.** *Max jump*: the largest change of the force vector between neighbouring '
          f'inputs {JUMP_STEP_M * 1e3:.1f} mm apart, over {pr["n_lines"]} lines along y and z across '

@@ -192,7 +192,7 @@ def test_generate_train_load_predict(tiny):
 
     model = ForceModel.load(case.model_path)
     assert model.metadata_['case']['name'] == 'tiny'
-    F = model.predict_compiled(ds.X)
+    F = model.predict(ds.X)
     assert np.all(np.isfinite(F)) and np.corrcoef(F[:, 0], ds.Y[:, 0])[0, 1] > 0.95
     row = case_summary(case, timing=False)
     assert row['dataset_rows'] == len(ds) and row['rules'] == 3 * 8  # 2-2-2 over (y, z, depth)

@@ -7,6 +7,8 @@ from hypothesis import given, strategies as st
 
 from haptic_anfis.anfis import ForceModel, SugenoModel, solve_consequents, train
 from haptic_anfis.anfis import membership as mf
+from haptic_anfis.anfis.force_model import numpy_forces
+from force_models import assemble
 
 
 def random_model(structure, rng, lo=None, hi=None, jitter=0.3):
@@ -192,14 +194,14 @@ def test_all_paths_agree_on_knots_corners_and_outside(small_model, synthetic, rn
     lo, hi = small_model.input_range_
     span = hi - lo
     knots = []
-    for m in small_model.models_:
-        grid = [P[:, 1] for P in m.mfs]
+    for m in small_model.estimators_:
+        grid = [P[:, 1] for P in m.mf_params_]
         knots += [np.array(k) for k in itertools.product(*grid)]
     corners = [np.where(np.array(c), hi, lo) for c in itertools.product((0, 1), repeat=4)]
     X = np.vstack([synthetic.X, np.array(knots), np.array(corners),
                    lo + span * rng.uniform(-0.5, 1.5, (2000, 4))])
-    F_np = small_model.predict(X)
-    F_jit = small_model.predict_compiled(X)
+    F_np = numpy_forces(small_model, X)
+    F_jit = small_model.predict(X)
     F_one = np.array([small_model.predict_one(*x) for x in X])
     np.testing.assert_allclose(F_jit, F_np, rtol=0, atol=1e-12)
     np.testing.assert_allclose(F_one, F_np, rtol=0, atol=1e-12)
@@ -212,7 +214,7 @@ def test_non_finite_input_raises_clear_error(small_model, bad):
     with pytest.raises(ValueError, match=r'non-finite input depth'):
         small_model.predict(np.array([[0.03, 0.0, 0.0, bad]]))
     with pytest.raises(ValueError, match=r'non-finite input x'):
-        small_model.predict_compiled(np.array([[bad, 0.0, 0.0, 0.0]]))
+        small_model.predict(np.array([[bad, 0.0, 0.0, 0.0]]))
 
 
 def test_no_underflow_with_tiny_memberships():
@@ -228,9 +230,7 @@ def test_no_underflow_with_tiny_memberships():
     x = np.full((1, 4), 1e-200)  # MF 1 grade 1e-200 on every input; product 1e-800 -> 0 in float
     y = model.predict(x)[0]
     assert np.isfinite(y) and y == pytest.approx(1.0)  # rule (0,0,0,0) has q = 1
-    fm = ForceModel()
-    fm.models_ = [model] * 3
-    fm._compile()
+    fm = assemble([model] * 3)
     assert fm.predict_one(*x[0]) == pytest.approx((y, y, y))
 
 

@@ -3,8 +3,10 @@ differences, away from the kinks of the triangular MFs and of the out-of-range c
 import numpy as np
 import pytest
 
-from haptic_anfis.anfis import ForceModel, SugenoModel
+from haptic_anfis.anfis import ANFIS, SugenoModel
 from haptic_anfis.anfis import membership as mf
+from haptic_anfis.anfis.force_model import numpy_forces
+from force_models import assemble
 
 H = 1e-7  # finite-difference step [m]
 
@@ -24,11 +26,12 @@ def _random_sugeno(structure, lo, hi, rng, extrapolation):
 def _kinks(fm):
     """Per query column, every coordinate where some output's derivative may jump."""
     out = [[] for _ in range(4)]
-    for m in fm.models_:
-        span = m.hi - m.lo
+    for m in fm.estimators_:
+        lo, hi = m.input_min_, m.input_max_
+        ext = np.broadcast_to(np.asarray(m.extrapolation, dtype=float), lo.shape) * (hi - lo)
         for i, col in enumerate(fm.input_cols_):
-            e = m.extrapolation[i] * span[i]
-            out[col] += [*m.mfs[i].ravel(), m.lo[i], m.hi[i], m.lo[i] - e, m.hi[i] + e]
+            e = ext[i]
+            out[col] += [*m.mf_params_[i].ravel(), lo[i], hi[i], lo[i] - e, hi[i] + e]
     if fm.scale_col_ >= 0:
         out[fm.scale_col_].append(0.0)
     return [np.array(k) for k in out]
@@ -58,17 +61,51 @@ def depth_scaled_model():
     """F = depth · g(y, z, depth): the zero-at-contact form, 3 model inputs, x unused."""
     rng = np.random.default_rng(7)
     lo, hi = np.array([-0.05, -0.05, 0.002]), np.array([0.05, 0.05, 0.016])
-    fm = ForceModel()
-    fm.models_ = [_random_sugeno(st, lo, hi, rng, (0.0, 0.0, 0.1))
-                  for st in [(3, 3, 2), (4, 2, 3), (2, 3, 1)]]
-    fm._input_cols, fm._scale_col = (1, 2, 3), 3
+    return assemble([_random_sugeno(st, lo, hi, rng, (0.0, 0.0, 0.1))
+                     for st in [(3, 3, 2), (4, 2, 3), (2, 3, 1)]], (1, 2, 3), 3)
+
+
+@pytest.fixture(scope='module')
+def wide_model():
+    """Free triangles as the estimator allows them: feet reaching past several peaks and outer
+    peaks off the domain edges, so up to all MFs of an input fire at once (the compiled kernel
+    must visit every firing rule, not only two MFs per input)."""
+    rng = np.random.default_rng(11)
+    lo, hi = np.array([0.0, -0.05, -0.05, 0.002]), np.array([0.06, 0.05, 0.05, 0.016])
+    fm = assemble([_random_sugeno(st, lo, hi, rng, (0.0, 0.1, 0.1, 0.25))
+                   for st in [(2, 3, 4, 2), (3, 3, 3, 2), (1, 4, 2, 3)]])
+    est = []
+    for e in fm.estimators_:
+        P = []
+        for Q, a, b in zip(e.mf_params_, e.input_min_, e.input_max_):
+            w = (b - a) * rng.uniform(0.6, 1.2, len(Q))
+            c = np.sort(a + (b - a) * rng.uniform(0.05, 0.95, len(Q))) if len(Q) > 1 else Q[:, 1]
+            P.append(np.column_stack([c - w, c, c + w * rng.uniform(0.5, 1.5, len(Q))]))
+        est.append(ANFIS.from_params(mf='triangular', mf_params=P, consequents=e.consequents_,
+                                     input_min=e.input_min_, input_max=e.input_max_,
+                                     extrapolation=e.extrapolation))
+    fm.estimators_ = est
     fm._compile()
     return fm
 
 
-@pytest.fixture(scope='module', params=['plain', 'depth_scaled'])
-def model(request, small_model, depth_scaled_model):
-    return small_model if request.param == 'plain' else depth_scaled_model
+@pytest.fixture(scope='module', params=['plain', 'depth_scaled', 'wide'])
+def model(request, small_model, depth_scaled_model, wide_model):
+    return {'plain': small_model, 'depth_scaled': depth_scaled_model,
+            'wide': wide_model}[request.param]
+
+
+def test_wide_mfs_fire_more_than_two_per_input_and_paths_agree(wide_model, rng):
+    """The case the old two-MF interval search could not evaluate."""
+    X = _queries(wide_model, rng, 2000)
+    e = wide_model.estimators_[1]
+    u = X[:, 1:2]
+    P = e.mf_params_[1]
+    assert np.any(((u > P[:, 0]) & (u < P[:, 2])).sum(axis=1) >= 3)
+    np.testing.assert_allclose(wide_model.predict(X), numpy_forces(wide_model, X), rtol=0,
+                               atol=1e-12)
+    np.testing.assert_allclose([wide_model.predict_one(*q) for q in X[:300]],
+                               numpy_forces(wide_model, X[:300]), rtol=0, atol=1e-12)
 
 
 def _queries(fm, rng, n=1500):
@@ -83,8 +120,8 @@ def _queries(fm, rng, n=1500):
 def test_batch_jacobian_matches_central_differences(model, rng):
     X = _away_from_kinks(model, _queries(model, rng))
     assert len(X) > 1000
-    F, J = model.predict_compiled(X, jacobian=True)
-    np.testing.assert_allclose(F, model.predict(X), rtol=0, atol=1e-12)
+    F, J = model.predict(X, jacobian=True)
+    np.testing.assert_allclose(F, numpy_forces(model, X), rtol=0, atol=1e-12)
     Jfd = _finite_differences(model, X)
     scale = np.abs(Jfd).max()
     np.testing.assert_allclose(J, Jfd, rtol=0, atol=1e-6 * scale)
@@ -93,7 +130,7 @@ def test_batch_jacobian_matches_central_differences(model, rng):
 
 def test_single_query_jacobian_equals_batch(model, rng):
     X = _queries(model, rng, 300)
-    F, J = model.predict_compiled(X, jacobian=True)
+    F, J = model.predict(X, jacobian=True)
     for k in range(len(X)):
         f1, j1 = model.jacobian_one(*X[k])
         assert f1.shape == (3,) and j1.shape == (3, 4)
@@ -122,11 +159,11 @@ def test_depth_scaled_model_ignores_x_and_gives_no_force_without_contact(depth_s
 
 def test_float32_and_non_finite_inputs(small_model):
     X = np.array([[0.03, 0.01, 0.0, 0.008]], dtype=np.float32)
-    F, J = small_model.predict_compiled(X, jacobian=True)
-    F64, J64 = small_model.predict_compiled(X.astype(np.float64), jacobian=True)
+    F, J = small_model.predict(X, jacobian=True)
+    F64, J64 = small_model.predict(X.astype(np.float64), jacobian=True)
     np.testing.assert_array_equal(F, F64)
     np.testing.assert_array_equal(J, J64)
     with pytest.raises(ValueError, match='non-finite input'):
         small_model.jacobian_one(0.03, np.nan, 0.0, 0.005)
     with pytest.raises(ValueError, match='non-finite input depth'):
-        small_model.predict_compiled(np.array([[0.03, 0.0, 0.0, np.inf]]), jacobian=True)
+        small_model.predict(np.array([[0.03, 0.0, 0.0, np.inf]]), jacobian=True)

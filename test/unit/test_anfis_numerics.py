@@ -5,7 +5,8 @@ import itertools
 import numpy as np
 import pytest
 
-from haptic_anfis.anfis import ForceModel, solve_consequents, train
+from haptic_anfis.anfis import ANFIS, ForceModel, solve_consequents, train
+from haptic_anfis.anfis.force_model import numpy_forces
 
 
 def test_duplicate_samples_give_the_same_fit_as_weighted_unique_ones(rng):
@@ -72,18 +73,18 @@ def scaled(synthetic):
 def test_scaled_paths_agree_on_knots_corners_and_outside(scaled, synthetic, rng):
     lo, hi = scaled.input_range_
     knots = []
-    for m in scaled.models_:
-        for k in itertools.product(*[P[:, 1] for P in m.mfs]):
+    for m in scaled.estimators_:
+        for k in itertools.product(*[P[:, 1] for P in m.mf_params_]):
             knots.append([0.04, *k])
     corners = [np.where(np.array(c), hi, lo) for c in itertools.product((0, 1), repeat=4)]
     span = hi - lo
     X = np.vstack([synthetic.X, np.array(knots), np.array(corners),
                    lo + span * rng.uniform(-0.5, 1.5, (2000, 4))])
-    F_np = scaled.predict(X)
-    np.testing.assert_allclose(scaled.predict_compiled(X), F_np, rtol=0, atol=1e-12)
+    F_np = numpy_forces(scaled, X)
+    np.testing.assert_allclose(scaled.predict(X), F_np, rtol=0, atol=1e-12)
     np.testing.assert_allclose(np.array([scaled.predict_one(*x) for x in X]), F_np, rtol=0,
                                atol=1e-12)
-    F_j, _ = scaled.predict_compiled(X, jacobian=True)
+    F_j, _ = scaled.predict(X, jacobian=True)
     np.testing.assert_allclose(F_j, F_np, rtol=0, atol=1e-12)
     assert np.all(np.isfinite(F_np))
     np.testing.assert_array_equal(F_np[X[:, 3] <= 0], 0.0)
@@ -103,8 +104,8 @@ def test_float32_inputs_equal_float64_of_the_same_values(request, model_name, sy
     model = request.getfixturevalue(model_name)
     X32 = synthetic.X[:50].astype(np.float32)
     X64 = X32.astype(np.float64)
+    np.testing.assert_array_equal(numpy_forces(model, X32), numpy_forces(model, X64))
     np.testing.assert_array_equal(model.predict(X32), model.predict(X64))
-    np.testing.assert_array_equal(model.predict_compiled(X32), model.predict_compiled(X64))
     for a, b in zip(X32[:5], X64[:5]):
         assert model.predict_one(*a) == model.predict_one(*b)
         assert model.predict_one(*(np.float32(v) for v in a)) == model.predict_one(*b)
@@ -115,9 +116,9 @@ def test_training_is_deterministic_for_a_seed(synthetic):
     a = ForceModel(**kw).fit(synthetic.X, synthetic.Y, groups=synthetic.point)
     b = ForceModel(**kw).fit(synthetic.X, synthetic.Y, groups=synthetic.point)
     assert a.structures_ == b.structures_
-    for ma, mb in zip(a.models_, b.models_):
-        assert np.array_equal(ma.coef, mb.coef)
-        assert all(np.array_equal(P, Q) for P, Q in zip(ma.mfs, mb.mfs))
+    for ma, mb in zip(a.estimators_, b.estimators_):
+        assert np.array_equal(ma.consequents_, mb.consequents_)
+        assert all(np.array_equal(P, Q) for P, Q in zip(ma.mf_params_, mb.mf_params_))
 
 
 def test_single_query_path_takes_ints_and_numpy_scalars_and_rejects_the_rest(scaled):
@@ -143,7 +144,7 @@ def test_pickled_model_predicts_the_same(scaled, synthetic):
     import pickle
     clone = pickle.loads(pickle.dumps(scaled))
     X = synthetic.X[::7]
-    np.testing.assert_array_equal(clone.predict_compiled(X), scaled.predict_compiled(X))
+    np.testing.assert_array_equal(clone.predict(X), scaled.predict(X))
     assert [clone.predict_one(*x) for x in X] == [scaled.predict_one(*x) for x in X]
     np.testing.assert_array_equal(clone.jacobian_one(*X[3])[1], scaled.jacobian_one(*X[3])[1])
 
@@ -155,11 +156,11 @@ def test_no_hold_out_trains_every_output_on_all_the_data(synthetic, tmp_path):
     kw = dict(structure=(2, 3, 2), epochs=4, val_fraction=0)
     m = ForceModel(**kw).fit(synthetic.X, synthetic.Y, groups=synthetic.point)
     assert m.val_rmse_ == [None] * 3 and all(1 <= e <= 4 for e in m.best_epoch_)
-    X = synthetic.X[:, 1:]
-    lo, hi = X.min(0), X.max(0)
-    ref = train(X, synthetic.Y[:, 1], (2, 3, 2), 4, lo=lo, hi=hi, scale=synthetic.X[:, 3],
-                ridge=m.ridges_[1], guard=m.step_guard)  # the force model's settings
-    np.testing.assert_array_equal(m.models_[1].coef, ref.model.coef)
+    s = synthetic.X[:, 3]
+    ref = ANFIS(n_mfs=(2, 3, 2), mf='triangular', epochs=4, ridge=m.ridges_[1],
+                ridge_target='linear', extrapolation=(0.15, 0.15, 0.0)).fit(  # the force model's
+        synthetic.X[:, 1:], synthetic.Y[:, 1] / s, sample_weight=s * s)
+    np.testing.assert_array_equal(m.estimators_[1].consequents_, ref.consequents_)
     model, _ = train_on_dataset(synthetic, **kw)
     model.save(tmp_path / 'm.json')
     loaded = ForceModel.load(tmp_path / 'm.json')
@@ -179,3 +180,26 @@ def test_the_step_guard_keeps_the_training_error_from_rising(synthetic):
     assert np.all(np.diff(guarded.train_rmse) <= 0.0)
     free = train(X, t, (3, 3, 2), 25, guard=False, **kw)
     assert np.any(np.diff(free.train_rmse) > 0.0)
+
+
+def test_the_force_model_is_three_triangular_estimators_whose_mfs_can_widen(scaled):
+    """Every MF parameter is free (3 per triangle): trained feet pass the neighbouring peak, which
+    the pinned partition of format version 2 forbade."""
+    assert [type(e).__name__ for e in scaled.estimators_] == ['ANFIS'] * 3
+    widened = False
+    for e, st in zip(scaled.estimators_, scaled.structures_):
+        assert e.mf == 'triangular'
+        assert e.n_params_ == 3 * sum(st) + int(np.prod(st)) * (len(st) + 1)
+        for P in e.mf_params_:
+            widened |= bool(np.any(P[1:, 0] < P[:-1, 1]) or np.any(P[:-1, 2] > P[1:, 1]))
+    assert widened
+
+
+def test_epochs_per_output(synthetic):
+    """One epoch count per output (Fx, Fy, Fz), recorded as given; a wrong count is one line."""
+    m = ForceModel(structure=(2, 2, 2), epochs=[2, 3, 4]).fit(synthetic.X, synthetic.Y,
+                                                                groups=synthetic.point)
+    assert m.best_epoch_ == [2, 3, 4] and m.metadata_['training']['epochs'] == [2, 3, 4]
+    for bad in (0, [1, 2], [1, 2, 0], True):
+        with pytest.raises(ValueError, match=r'epochs: expected an integer >= 1, got .*one per'):
+            ForceModel(structure=(2, 2, 2), epochs=bad).fit(synthetic.X, synthetic.Y)

@@ -19,6 +19,8 @@ from haptic_anfis.device.local_model import LocalModel, check_values, model_valu
 ROOT = Path(__file__).resolve().parents[2]
 #: written by main at b517df5 (before the pipeline left the node modules): test/support/data/make_*.py
 BAG = Path(__file__).resolve().parents[1] / 'support' / 'data' / 'servo_cf_local_b517df5'
+#: the shipped default model the bag's local models came from (format version 2, read migrated)
+BAG_MODEL = BAG.parent / 'default_model_eeac250.json'
 
 
 @pytest.fixture(scope='module')
@@ -54,10 +56,11 @@ def test_recorded_local_models_decode_and_encode_to_the_same_bytes(recorded):
 
 def test_pipeline_answers_recorded_contacts_with_the_recorded_local_models(recorded):
     """The recorded contacts (both layouts, with and without approach fields) through today's
-    pipeline give the recorded local models (to rounding of the compiled model)."""
+    pipeline give the recorded local models (to rounding of the compiled model), with the model
+    file they were made with."""
     from haptic_anfis.nodes import cdr
     from haptic_anfis.pipeline.force import load_model, local_model_from_contact
-    _, model = load_model({'model_path': ''})
+    _, model = load_model({'model_path': str(BAG_MODEL)})
     layouts = set()
     for _, position, effort, raw in recorded:
         want = cdr.read_joint_state(raw)[2]
