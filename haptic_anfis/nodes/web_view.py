@@ -106,7 +106,7 @@ class WebView(HapticNode):
         self.page = LivePage(case, self.get_parameter('random_case_seed').value >= 0,
                              p['exam_config'], p['dent'], p['port'], p['host'], console,
                              [c.name for c in library().ready()], self._requests,
-                             p['max_force'], p['force_scale'], self._log)
+                             p['max_force'], p['force_scale'], self.log)
         self.app, self.console = self.page.app, self.page.console
         self._param_clients: dict = {}
         self.choices = CaseChoices(self, self.page, p['case_switch_timeout'], self._requests,
