@@ -39,6 +39,7 @@ import time
 from typing import Callable
 
 from geometry_msgs.msg import PointStamped, PoseStamped, TwistStamped, WrenchStamped
+from rcl_interfaces.msg import SetParametersResult
 from sensor_msgs.msg import JointState, Joy
 
 from .. import interfaces as ifc
@@ -54,7 +55,7 @@ from ..resources import config_file
 from . import cdr
 from .base import HapticNode
 from .falcon_params import PARAMS, resolve_servo_loop  # PARAMS: the node's (registry, config)
-from .parameters import ParameterError, declare_parameters
+from .parameters import ParameterError, declare_parameters, positive
 from .polled import PolledSubscription
 from .runtime import LOOP_QOS, run_node, set_stamp
 
@@ -65,7 +66,7 @@ WARN_EVERY = 60.0
 class FalconDriver(HapticNode):
     def __init__(self, name: str = 'falcon_driver', **kw):
         super().__init__(name, **kw)
-        p = self.params = declare_parameters(self, PARAMS)
+        p = self.params = declare_parameters(self, PARAMS, writable=('force_scale',))
         p['servo_loop'] = self.servo_loop = resolve_servo_loop(p['servo_loop'], p['backend'])
         why = check_max_force(p['max_force'], p['backend'])  # the declaration took any backend's
         if why:
@@ -96,6 +97,7 @@ class FalconDriver(HapticNode):
         self.servo, self.device, self.safety = loop.servo, loop.device, loop.safety
         self.clutch, self.input = loop.clutch, loop.input
         self.native = loop.servo  # the compiled loop: its bridge, trace and hold state
+        self.add_on_set_parameters_callback(self._on_set_force_scale)
         self.pub_pose = self.create_publisher(PoseStamped, ifc.TOPIC_POSE, LOOP_QOS)
         self.pub_twist = self.create_publisher(TwistStamped, ifc.TOPIC_TWIST, LOOP_QOS)
         self.pub_applied = self.create_publisher(WrenchStamped, ifc.TOPIC_APPLIED, LOOP_QOS)
@@ -142,6 +144,21 @@ class FalconDriver(HapticNode):
             from diagnostic_msgs.msg import DiagnosticArray
             self.pub_diag = self.create_publisher(DiagnosticArray, ifc.TOPIC_DIAGNOSTICS, 10)
             self.create_timer(p['loop_check_period'], self._check_loop)
+
+    def _on_set_force_scale(self, params) -> SetParametersResult:
+        """``force_scale`` set while the loop runs (a case switched live: each case has its own
+        force mapping): rendered from the next tick; refused unless finite and > 0."""
+        for prm in params:
+            if prm.name != 'force_scale':
+                continue
+            s = prm.value
+            if isinstance(s, bool) or not isinstance(s, (int, float)) or positive(s):
+                return SetParametersResult(successful=False,
+                                           reason=f'force_scale: {s!r}: expected a finite value > 0')
+            self.mapping = self.loop.set_force_scale(float(s), self.params['max_stiffness'])
+            self.params['force_scale'] = float(s)
+            self.get_logger().info(f'force scale {s:g}')
+        return SetParametersResult(successful=True)
 
     def _check_loop(self) -> None:
         """Warn when the servo loop fell behind since the last check

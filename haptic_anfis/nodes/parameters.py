@@ -165,9 +165,10 @@ def check_value(p: Param, v: Any) -> str | None:
     return f'{v!r}: {msg}' if msg else None
 
 
-def declare_parameters(node, params: list[Param]) -> dict[str, Any]:
-    """Declare ``params`` read-only with their descriptions on an rclpy ``node``; return
-    {name: value}.
+def declare_parameters(node, params: list[Param], writable: Sequence[str] = ()
+                       ) -> dict[str, Any]:
+    """Declare ``params`` read-only with their descriptions on an rclpy ``node`` (those named in
+    ``writable`` writable: the node applies a set while it runs); return {name: value}.
 
     Raises:
         ParameterError: naming every parameter with a wrong type or a value its check rejects.
@@ -177,7 +178,7 @@ def declare_parameters(node, params: list[Param]) -> dict[str, Any]:
     values: dict[str, Any] = {}
     errors: list[str] = []
     for p in params:
-        desc = ParameterDescriptor(description=p.description, read_only=True)
+        desc = ParameterDescriptor(description=p.description, read_only=p.name not in writable)
         try:
             node.declare_parameter(p.name, p.default, desc)
         except ParameterException as exc:

@@ -98,7 +98,8 @@ def _force_mapping_data(label: str) -> dict[str, str]:
     """The bag's ``force_mapping`` custom data for the case ``label``: the tissue -> device force
     scale a session of that case renders unless its ``force_scale`` is set
     (:mod:`haptic_anfis.cases.force_mapping`), as JSON; {} for an unknown case or one without a
-    dataset."""
+    dataset. After a case switch it is the mapping of the case switched to (the one in force
+    at the bag's end; ``case`` lists the session's cases in order)."""
     try:
         m = case_force_mapping(library().get(label))
     except CaseError:
@@ -169,6 +170,9 @@ class Recorder(HapticNode):
         if label is not None and label != self.cases[-1]:
             self.cases.append(label)
             self.writer.set_custom_data('case', ', '.join(self.cases))
+            # the mapping in force from now on (the page sets the driver's scale with the case)
+            self.writer.set_custom_data('force_mapping',
+                                        _force_mapping_data(label).get('force_mapping', ''))
         return SetParametersResult(successful=True)
 
     def _discover(self) -> None:

@@ -337,9 +337,17 @@ class SessionSpec:
 
     def view_arguments(self, controls: bool) -> list[str]:
         """The web_view node's own ``-p`` arguments (its port; ``controls``: the instructor's
-        console, on its port, with its token file)."""
+        console, on its port, with its token file; the driver's ``max_force`` and a
+        ``force_scale`` the user set, which a case chosen on the console then leaves alone)."""
         args = ['-p', f'port:={int(self.view_port)}',
                 '-p', f"controls:={'true' if controls else 'false'}"]
+        if 'falcon_driver' in self.nodes:
+            max_force = self.user_parameter('falcon_driver', 'max_force')
+            if max_force is not None:
+                args += ['-p', f'max_force:={float(max_force)!r}']
+            scale = self.user_parameter('falcon_driver', 'force_scale', shipped=False)
+            if scale is not None:
+                args += ['-p', f'force_scale:={float(scale)!r}']
         if controls:
             args += ['-p', f'console_port:={int(self.console_port)}']
             if self.console_token_file:

@@ -138,7 +138,7 @@ def test_every_running_case_node_switches_then_the_page(page_with, loop_nodes):
     for f in fakes.values():
         assert f.loaded == ['normal'] and f.param('case') == 'normal'
         assert f.param('random_case_seed') == -1
-    wait_for(lambda: page.cv.name == 'normal', 30.0)   # the page shows the case it scores
+    wait_for(lambda: page.page.cv.name == 'normal', 30.0)   # the page shows the case it scores
     assert page.get_parameter('case').value == 'normal' and not page.page.blind
     assert page.console.g_case.value == 'normal'
     time.sleep(0.3)
@@ -152,10 +152,10 @@ def test_a_blind_choice_draws_the_same_case_everywhere(page_with, loop_nodes):
     assert msg.startswith('blind random case chosen'), msg
     seed = page.get_parameter('random_case_seed').value
     assert seed >= 0 and page.page.blind and page.console.g_case.value == BLIND
-    wait_for(lambda: page.cv.name == fakes['force_server'].loaded[-1], 30.0)   # the same draw
+    wait_for(lambda: page.page.cv.name == fakes['force_server'].loaded[-1], 30.0)   # the same draw
     for f in fakes.values():   # no old name left readable on any node
         assert f.param('random_case_seed') == seed and f.param('case') == ''
-        assert f.loaded[-1] == page.cv.name
+        assert f.loaded[-1] == page.page.cv.name
 
 
 def test_a_refusal_sends_the_others_back_and_the_page_keeps_its_case(page_with, loop_nodes):
@@ -166,7 +166,7 @@ def test_a_refusal_sends_the_others_back_and_the_page_keeps_its_case(page_with, 
     fakes = loop_nodes(page, (*LOOP, 'recorder'),
                        force_server={'refuse': 'model file unreadable'})
     page.console.g_case.value = 'normal'   # as the instructor's dropdown shows it
-    t0 = page.t_start
+    t0 = page.page.t_start
     msg = choose(page, 'normal')
     assert msg.startswith('case normal NOT chosen'), msg
     assert 'force_server refused: model file unreadable' in msg, msg
@@ -175,8 +175,8 @@ def test_a_refusal_sends_the_others_back_and_the_page_keeps_its_case(page_with, 
     cd = fakes['contact_detector']
     assert cd.param('case') == '' and cd.loaded == ['normal', None]   # answered before that
     assert fakes['recorder'].loaded == [] and not fakes['recorder'].asked.is_set()
-    assert page.get_parameter('case').value == '' and page.cv.name in (None, 'default')
-    assert page.console.g_case.value == 'default' and page.t_start > t0
+    assert page.get_parameter('case').value == '' and page.page.cv.name in (None, 'default')
+    assert page.console.g_case.value == 'default' and page.page.t_start > t0
     time.sleep(0.5)   # the dropdown set by the page is no choice: nothing more happens
     assert page.choices.switch is None and page.console.last_message == msg
 
@@ -314,7 +314,7 @@ def test_a_case_set_on_one_node_outside_the_page_stops_collecting_until_they_agr
     msg = page.console.last_message
     assert 'force_server on case normal' in msg, msg
     assert "contact_detector on the page's case" in msg and not page._collecting()
-    assert page.cv.name != 'normal'   # the page keeps its case
+    assert page.page.cv.name != 'normal'   # the page keeps its case
     assert fs.set_parameters([Parameter('case', value='')])[0].successful
     wait_for(lambda: 'collecting again' in page.console.last_message, 30.0)
     assert page.choices.split == '' and page._collecting()
@@ -330,7 +330,7 @@ def test_a_case_set_on_the_page_alone_from_outside_says_the_loop_did_not_follow(
     wait_for(lambda: 'different cases' in page.console.last_message, 30.0)
     msg = page.console.last_message
     assert 'contact_detector on the default scene; force_server on the default scene' in msg
-    wait_for(lambda: page.cv.name == 'normal', 30.0)   # loaded (the check may come first)
+    wait_for(lambda: page.page.cv.name == 'normal', 30.0)   # loaded (the check may come first)
     assert not page._collecting()
 
 
@@ -339,7 +339,7 @@ def test_every_loop_node_set_outside_to_one_case_is_followed_by_the_page(page_wi
     fakes = loop_nodes(page)
     for f in fakes.values():
         assert f.node.set_parameters([Parameter('case', value='normal')])[0].successful
-    wait_for(lambda: page.cv.name == 'normal', 60.0)
+    wait_for(lambda: page.page.cv.name == 'normal', 60.0)
     assert page.get_parameter('case').value == 'normal' and page.console.g_case.value == 'normal'
     assert 'switched to case normal outside this page' in page.console.last_message
     wait_for(lambda: not page._requests, 10.0)
