@@ -210,6 +210,16 @@ class CaseChoices:
         self.switch = ch
         self.page.tell(SWITCHING.format(ch.label), page=PAGE_SWITCHING)
 
+    def _rescale(self, entry: str, what: str) -> None:
+        """The driver given the force scale of the page's case (set from outside on the case
+        nodes, which the driver is not); no samples until it answered, a refusal stops the
+        exam (the hand would feel the case at another case's scale)."""
+        values = dict(zip(CASE_KEYS, self.graph.own()))
+        self.switch = _Choice(self.graph.switch([[DRIVER]], values, self._driver(values),
+                                                running=True),
+                              f"{DRIVER} on {what}'s force scale", self.page.blind, entry,
+                              values, entry, resync=True)
+
     def follow(self) -> None:
         """The case nodes' answers: all switched, the page switches too; one refused or silent,
         the others are sent back to the case before (no samples collected until they answered),
@@ -311,6 +321,8 @@ class CaseChoices:
                 what = 'a random case' if self.page.blind else f'case {entry}'
                 self._say(f'every loop node was switched to {what} outside this page: the page '
                           'follows, the exam starts afresh')
+                if self.force_scale is not None and DRIVER in self.graph.running_nodes():
+                    self._rescale(entry, what)
                 return
             text = f'the page cannot show it ({why})'
             if text != self.split:

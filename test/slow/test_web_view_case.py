@@ -145,6 +145,44 @@ def test_every_running_case_node_switches_then_the_page(page_with, loop_nodes):
     assert [c.name for c in loads] == ['normal']   # loaded once (both parameters in one set)
 
 
+def test_a_case_chosen_live_brings_its_own_force_scale_to_the_driver(page_with, loop_nodes):
+    """Each case has its own tissue -> device force mapping: the driver (a node with the
+    driver's writable force_scale) is set to the chosen case's with the loop, and the page's
+    gauge marks the tissue force at the clamp under that mapping; a refused choice sends the
+    driver back to the kept case's scale."""
+    from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
+
+    from haptic_anfis.cases import library
+    from haptic_anfis.cases.force_mapping import case_force_mapping, tissue_clamp
+    page = page_with()
+    fakes = loop_nodes(page)
+    drv = rclpy.create_node('falcon_driver', context=page.context)
+    drv.declare_parameter('force_scale', 1.0, ParameterDescriptor(read_only=False))
+    seen: list[float] = []
+    drv.add_on_set_parameters_callback(lambda ps: (seen.extend(q.value for q in ps),
+                                                   SetParametersResult(successful=True))[1])
+    fakes['force_server'].executor.add_node(drv)
+    try:
+        wait_for(lambda: 'falcon_driver' in page.get_node_names(), 30.0)
+        dense = 'lib_m_dense_idc20_d12'
+        msg = choose(page, dense)
+        assert 'falcon_driver' in msg.split('switched: ')[1].split(';')[0], msg
+        want = case_force_mapping(library().get(dense)).force_scale
+        assert drv.get_parameter('force_scale').value == pytest.approx(want) and want < 1.0
+        wait_for(lambda: page.page.cv.name == dense, 30.0)
+        assert page.app.max_force == pytest.approx(tissue_clamp(library().get(dense)))
+        assert page.app.max_force == pytest.approx(8.9 / want)
+        fakes['force_server'].refuse = 'model file unreadable'
+        msg = choose(page, 'normal')
+        assert 'NOT chosen' in msg and 'sent back: ' in msg, msg
+        normal = case_force_mapping(library().get('normal')).force_scale
+        assert seen == pytest.approx([want, normal, want]) and normal != pytest.approx(want)
+        assert drv.get_parameter('force_scale').value == pytest.approx(want)
+    finally:
+        fakes['force_server'].executor.remove_node(drv)
+        drv.destroy_node()
+
+
 def test_a_blind_choice_draws_the_same_case_everywhere(page_with, loop_nodes):
     page = page_with()
     fakes = loop_nodes(page, force_server={'case': 'normal'})   # started with case:=normal
@@ -238,7 +276,7 @@ def test_samples_are_not_collected_while_the_nodes_switch(page_with, loop_nodes)
 def test_a_page_started_blind_shows_the_blind_entry():
     from haptic_anfis.nodes.web_view import web_view_in_thread
     with web_view_in_thread({'port': free_port(), 'random_case_seed': 3}, 'x') as (node, _):
-        assert node.page.page.blind and node.console.g_case.value == BLIND
+        assert node.page.blind and node.console.g_case.value == BLIND
 
 
 def test_a_restarted_case_node_is_given_the_case_chosen(page_with, loop_nodes):
