@@ -40,7 +40,7 @@ from ..session.case_switch import CaseSwitch
 from ..session.case_watch import CASE_KEYS
 from ..view.browser import free_port
 from ..view.live import ConsoleSettings, LivePage
-from ._case import declare_case
+from ._case import CASE_PARAMS, declare_case  # noqa: F401 (CASE_PARAMS: a case node, registry.py)
 from .base import HapticNode
 from .executor import node_in_thread
 from .parameters import Param, declare_parameters, non_negative, positive

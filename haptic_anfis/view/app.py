@@ -31,15 +31,14 @@ from .escape import md
 from .gauge import DEVICE_MAX_FORCE, gauge
 from .legend import banner_html, gauge_html, legend_html
 from .panel import history_markdown, numbers_markdown
-from .scene import (LESION_RGB, MARK_RGB, SkinPaint, frame_camera, probe_quaternion,
-                    region_outline)
+from .scene import (LESION_RGB, MARK_RGB, PROBE_LENGTH, SkinPaint, frame_camera,
+                    probe_quaternion, region_outline)
 
 __all__ = ['BLIND', 'PROBE_LENGTH', 'md', 'ViewApp', 'ViewError', 'check_port', 'coverage_fractions',
            'trainee_history']
 
 #: the dropdown's entry for a blind random case
 BLIND = 'blind random case'
-PROBE_LENGTH = 0.03  # [m] drawn length of the probe cylinder
 FORCE_SCALE = 0.004  # [m/N] force arrow length
 #: the legend's place in the panel: after every folder, the trainee history's too
 LAST = 1e6

@@ -13,8 +13,12 @@ import numpy as np
 
 from ..palette import FINDING, LEVEL, MARK, NOT_PRESSED, SKIN, rgb255
 
-__all__ = ['FRONTAL', 'LESION_RGB', 'LEVEL_RGB', 'MARK_RGB', 'OUTSIDE_RGB', 'Framing', 'SkinPaint',
-           'frame_camera', 'pressure_rgb', 'probe_quaternion', 'region_outline']
+__all__ = ['FRONTAL', 'LESION_RGB', 'LEVEL_RGB', 'MARK_RGB', 'OUTSIDE_RGB', 'PROBE_LENGTH',
+           'Framing', 'SkinPaint', 'frame_camera', 'pressure_rgb', 'probe_quaternion',
+           'region_outline']
+
+#: [m] drawn length of the probe cylinder (its face at the probe tip, its body out of the tissue)
+PROBE_LENGTH = 0.03
 
 #: coverage colour per highest level reached (the palette's, as report.png): none (the region
 #: not yet palpated: a neutral, lighter than light), light, medium, deep
