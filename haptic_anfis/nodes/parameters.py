@@ -12,13 +12,17 @@ from __future__ import annotations
 
 import difflib
 import math
+import re
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Iterable, Mapping, Sequence
 
-from ..errors import HapticAnfisError
+import yaml
 
-__all__ = ['Param', 'ParameterError', 'CASE_PARAMS', 'ROS_BUILTIN', 'positive', 'non_negative',
+from ..errors import HapticAnfisError
+from ..yamlfile import yaml_error
+
+__all__ = ['Param', 'ParameterError', 'CASE_PARAMS', 'CASE_KEYS', 'effective_case', 'ROS_BUILTIN', 'positive', 'non_negative',
            'one_of', 'finite_vector', 'declare_parameters', 'resolve_parameters', 'type_name',
            'value_type_name', 'check_value', 'read_parameter_file', 'parse_overrides',
            'check_parameter_sources', 'ros_args_sources', 'default_of']
@@ -96,6 +100,24 @@ CASE_PARAMS = [
     Param('random_case_seed', -1, 'draw a ready case from the library with this seed (-1 = '
           'off); the case name is not logged; writable like case'),
 ]
+
+#: the parameters that say a node's case
+CASE_KEYS = tuple(p.name for p in CASE_PARAMS)
+
+
+def effective_case(new: dict, current: tuple[str, int]) -> tuple[str, int]:
+    """The ``(case, random_case_seed)`` a node runs after ``new`` ({name: value} of
+    :data:`CASE_KEYS`) is set on it while it ran ``current``: a name set alone ends the random
+    draw, a seed set alone replaces the name (the rule of
+    :func:`haptic_anfis.nodes._case.declare_case`)."""
+    n = new.get('case', current[0])
+    s = new.get('random_case_seed', current[1])
+    if 'case' in new and n and 'random_case_seed' not in new:
+        s = -1
+    if 'random_case_seed' in new and s >= 0 and 'case' not in new:
+        n = ''
+    return n, s
+
 
 #: Parameters rclpy declares on every node itself.
 ROS_BUILTIN = [
@@ -254,10 +276,6 @@ def _nearest(word: str, known: Iterable[str], what: str = '') -> str:
 def _loader():
     """PyYAML's SafeLoader reading numbers as rcl does: ``1e3`` (no decimal point) is a double
     there, a string for YAML 1.1."""
-    import re
-
-    import yaml
-
     class RclLoader(yaml.SafeLoader):
         pass
     RclLoader.add_implicit_resolver('tag:yaml.org,2002:float',
@@ -276,9 +294,6 @@ def read_parameter_file(path: str | Path) -> list[Entry]:
         ParameterError: missing / unreadable file, YAML syntax (with its line), or a layout that is
             not ``node: {ros__parameters: {name: value}}``.
     """
-    import yaml
-
-    from ..yamlfile import yaml_error
     path = Path(path)
     try:
         text = path.read_text()
@@ -320,7 +335,6 @@ def read_parameter_file(path: str | Path) -> list[Entry]:
 
 
 def _flatten(loader, body, prefix: str, section: str, at, out: list[Entry]) -> None:
-    import yaml
     for k, v in body.value:
         name = prefix + str(loader.construct_object(k))
         if isinstance(v, yaml.MappingNode):
@@ -336,7 +350,6 @@ def parse_overrides(args: Sequence[str]) -> list[tuple[str, Any, str]]:
     Raises:
         ParameterError: ``-p`` without ``name:=value``.
     """
-    import yaml
     out = []
     for i, a in enumerate(args):
         if a not in ('-p', '--param'):

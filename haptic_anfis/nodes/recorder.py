@@ -34,10 +34,11 @@ from ..bag.topics import DEFAULT_TOPICS, KNOWN_TYPES
 from ..cases import CaseError, library
 from ..cases.force_mapping import case_force_mapping
 from ._case import CASE_PARAMS, declare_case_parameters, requested_case  # noqa: F401 (config)
-from .parameters import Param, declare_parameters, positive
-from .runtime import message_class, run_node
 from .base import HapticNode
+from .parameters import Param, declare_parameters, positive
 from .polled import PolledSubscription
+from .runtime import message_class, run_node
+from .session import inputs_matched
 
 #: Topics never recorded with ``all_topics`` (ROS infrastructure, as ``ros2 bag record -a``).
 IGNORED = ('/rosout', '/parameter_events')
@@ -83,7 +84,6 @@ def _case_label(name: str, seed: int) -> str:
     Raises:
         CaseError: ``name`` is not a case of the library.
     """
-    from ..cases import library
     if seed >= 0:
         try:
             return library().random(seed).name
@@ -219,7 +219,6 @@ class Recorder(HapticNode):
 
     def ready_condition(self) -> tuple[bool, str]:
         """Ready (nodes/session.py) once every wanted topic has a publisher."""
-        from .session import inputs_matched
         return inputs_matched(self, self.wanted)
 
     def _on_write_error(self, message: str) -> None:

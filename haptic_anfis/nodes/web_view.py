@@ -37,13 +37,12 @@ from ..device.falcon import RATED_FORCE
 from ..device.loop_health import behind_text
 from ..session.case_choice import CASE_NODE_NAMES, CaseChoices
 from ..session.case_switch import CaseSwitch
-from ..session.case_watch import CASE_KEYS
 from ..view.browser import free_port
 from ..view.live import ConsoleSettings, LivePage
 from ._case import CASE_PARAMS, declare_case  # noqa: F401 (CASE_PARAMS: a case node, registry.py)
 from .base import HapticNode
 from .executor import node_in_thread
-from .parameters import Param, declare_parameters, non_negative, positive
+from .parameters import CASE_KEYS, Param, declare_parameters, non_negative, positive
 from .polled import PolledSubscription
 from .runtime import run_node
 from .session import STATUS_QOS, STATUS_TOPIC, inputs_matched, parse_status

@@ -33,7 +33,8 @@ from dataclasses import dataclass, replace
 from typing import Callable, Protocol, Sequence
 
 from ..view.app import BLIND
-from .case_watch import CASE_KEYS, CaseWatch
+from ..nodes.parameters import CASE_KEYS
+from .case_watch import CaseWatch
 
 __all__ = ['CASE_PHASES', 'CASE_NODE_NAMES', 'DRIVER', 'CaseChoices', 'Graph', 'Page',
            'SWITCHING', 'PAGE_SWITCHING', 'PAGE_SPLIT']

@@ -15,6 +15,7 @@ import json
 import os
 import shutil
 import signal
+import socket
 import subprocess
 import tempfile
 import time
@@ -44,7 +45,6 @@ def chromium() -> str | None:
 
 def free_port(host: str = '127.0.0.1') -> int:
     """A TCP port free on ``host`` now (the OS's choice)."""
-    import socket
     with socket.socket() as s:
         s.bind((host, 0))
         return s.getsockname()[1]
