@@ -30,12 +30,10 @@ from std_msgs.msg import String
 
 from . import cdr
 from .. import interfaces as ifc
-from ..cases import library, resolve_case
-from ..cases.force_mapping import case_force_mapping
-from ..cases.library import DEFAULT_CASE
+from ..cases import library
 from ..device.falcon import RATED_FORCE
 from ..device.loop_health import behind_text
-from ..session.case_choice import CASE_NODE_NAMES, CaseChoices
+from ..session.case_choice import CASE_NODE_NAMES, CaseChoices, case_force_scale
 from ..session.case_switch import CaseSwitch
 from ..view.browser import free_port
 from ..view.live import ConsoleSettings, LivePage
@@ -109,7 +107,8 @@ class WebView(HapticNode):
         self.app, self.console = self.page.app, self.page.console
         self._param_clients: dict = {}
         self.choices = CaseChoices(self, self.page, p['case_switch_timeout'], self._requests,
-                                   None if p['force_scale'] > 0 else self._case_force_scale)
+                                   None if p['force_scale'] > 0
+                                   else case_force_scale(p['max_force']))
         self._inputs = {k: PolledSubscription(self, t, topic, q) for k, t, topic, q in (
             ('pose', PoseStamped, ifc.TOPIC_POSE, NEWEST),
             ('force', WrenchStamped, ifc.TOPIC_COMMAND, NEWEST),
@@ -130,12 +129,6 @@ class WebView(HapticNode):
         if self.console is not None:   # stdout only: the token stays out of ROS's log files
             print(f"web_view: instructor's console at {self.console.url} (token from "
                   f'{self.page.token_from}; give it to the instructor only)', flush=True)
-
-    def _case_force_scale(self, name: str, seed: int) -> float:
-        """The driver's force scale for the case ``name`` / drawn with ``seed`` (the default
-        case for neither), against the driver's clamp (``max_force``)."""
-        case = resolve_case(name, seed) or library().get(DEFAULT_CASE)
-        return case_force_mapping(case, self.params['max_force']).force_scale
 
     # -- the graph, for the case choices (session/case_choice.py) ---------------------------
 

@@ -32,12 +32,15 @@ from collections import deque
 from dataclasses import dataclass, replace
 from typing import Callable, Protocol, Sequence
 
+from ..cases import resolve_case
+from ..cases.force_mapping import case_force_mapping
+from ..cases.library import DEFAULT_CASE, library
 from ..view.app import BLIND
 from ..nodes.parameters import CASE_KEYS
 from .case_watch import CaseWatch
 
 __all__ = ['CASE_PHASES', 'CASE_NODE_NAMES', 'DRIVER', 'CaseChoices', 'Graph', 'Page',
-           'SWITCHING', 'PAGE_SWITCHING', 'PAGE_SPLIT']
+           'SWITCHING', 'PAGE_SWITCHING', 'PAGE_SPLIT', 'case_force_scale']
 
 #: nodes whose case the instructor's choice switches (those that are running), in phases: the
 #: recorder (its case is the bag's label) only once every node of the loop has switched
@@ -52,6 +55,16 @@ PAGE_SWITCHING = 'the case is being switched: nothing is collected meanwhile'
 #: what the trainee's page says while the loop nodes' cases differ
 PAGE_SPLIT = 'the loop nodes are not on one case: nothing is collected until the instructor ' \
     'chooses one'
+
+
+def case_force_scale(max_force: float) -> Callable[[str, int], float]:
+    """``scale(case, random_case_seed)``: the driver's force scale for that case (the drawn one
+    for a seed, the default case for neither) against the driver's clamp ``max_force`` [N]
+    (:func:`~haptic_anfis.cases.force_mapping.case_force_mapping`)."""
+    def scale(name: str, seed: int) -> float:
+        case = resolve_case(name, seed) or library().get(DEFAULT_CASE)
+        return case_force_mapping(case, max_force).force_scale
+    return scale
 
 
 class Switch(Protocol):

@@ -227,3 +227,16 @@ def test_a_case_followed_from_outside_gives_the_driver_its_scale():
     answer(s)
     c.tick()
     assert not c.busy and p.lines[-1].startswith(f"{DRIVER} on case normal's force scale")
+
+
+def test_the_scale_given_the_driver_is_the_cases_own_mapping_against_the_drivers_clamp():
+    from haptic_anfis.cases.force_mapping import case_force_mapping
+    from haptic_anfis.cases.library import DEFAULT_CASE, library
+    from haptic_anfis.session.case_choice import case_force_scale
+    lib = library()
+    scale, half = case_force_scale(8.9), case_force_scale(4.45)
+    drawn = lib.random(7)
+    assert scale('', 7) == scale(drawn.name, -1) == case_force_mapping(drawn).force_scale
+    assert scale('', -1) == case_force_mapping(lib.get(DEFAULT_CASE)).force_scale
+    dense = 'lib_m_dense_idc20_d12'
+    assert scale(dense, -1) < 1.0 and half(dense, -1) == pytest.approx(scale(dense, -1) / 2)
