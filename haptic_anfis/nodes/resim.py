@@ -29,7 +29,8 @@ from ..pipeline.contact import make_tracker
 from ..pipeline.force import load_model
 from ..pipeline.replay import pose_to_force
 from ._case import apply_case
-from .parameters import CASE_PARAMS, resolve_parameters
+from .parameter_files import resolve_parameters
+from .parameters import CASE_PARAMS
 
 
 def _ns(stamp) -> int:

@@ -22,7 +22,8 @@ from ..realtime.processes import (HOLD_FOR_RECORDER, RECORDED_TOPICS, SESSION_CH
                                   guard_realtime_time, leave_realtime)
 from .executor import make_executor, settle_and_start
 from .middleware import use_loop_transport
-from .parameters import CASE_PARAMS, ParameterError, check_parameter_sources, ros_args_sources
+from .parameter_files import check_parameter_sources, ros_args_sources
+from .parameters import CASE_PARAMS, ParameterError
 from .session import INFRA_TOPICS, Readiness
 from .sigint import SigintStop
 

@@ -25,8 +25,9 @@ from ..cases.force_mapping import case_force_mapping
 from ..cases.library import CASE_DIR_HELP, DEFAULT_CASE, case_node_arguments, library
 from ..device.falcon import RATED_FORCE
 from ..errors import HapticAnfisError
-from ..nodes.parameters import (ParameterError, check_parameter_sources, default_of,
-                                parse_overrides, read_parameter_file, ros_args_sources)
+from ..nodes.parameter_files import (check_parameter_sources, parse_overrides,
+                                     read_parameter_file, ros_args_sources)
+from ..nodes.parameters import ParameterError, default_of
 from ..nodes.registry import declared_parameters, node_parameters
 from ..realtime.processes import GRAPH_PRIORITY, node_names
 from ..resources import config_file
