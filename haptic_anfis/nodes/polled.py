@@ -16,6 +16,9 @@ it; it is visible on the ROS graph as any subscription is.
 """
 from __future__ import annotations
 
+from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
+from rclpy.type_support import check_is_valid_msg_type
+
 
 class PolledSubscription:
     """A raw (serialized bytes) subscription of ``node`` to ``topic`` that is never spun.
