@@ -18,7 +18,7 @@ from __future__ import annotations
 
 from .spec import (COMMANDS, OPTIONS, Option, SessionError, SessionSpec, add_session_arguments,
                    recorder_settings, spec_from_args)
-from .one_process import OneProcessSession, open_graph  # noqa: E402  (rclpy imported on use)
+from .one_process import OneProcessSession, open_graph
 from .launch_runner import ProcessSession
 
 __all__ = ['COMMANDS', 'OPTIONS', 'Option', 'SessionError', 'SessionSpec', 'add_session_arguments',
