@@ -22,7 +22,7 @@ from ..realtime.scheduling import off_realtime
 from ..tissue.displacement import displacement_path
 from .parameters import CASE_KEYS, CASE_PARAMS, effective_case
 
-__all__ = ['CASE_PARAMS', 'declare_case', 'declare_case_parameters', 'describe', 'apply_case',
+__all__ = ['declare_case', 'declare_case_parameters', 'describe', 'apply_case',
            'requested_case']
 
 

@@ -30,9 +30,10 @@ from ..exam.figure import save_figure
 from ..exam.files import write_text_atomic
 from ..exam.lesions import ExamSubject
 from ..pipeline.contact import load_surface
-from ._case import CASE_PARAMS, apply_case, declare_case  # noqa: F401 (CASE_PARAMS: in config)
+from ._case import apply_case, declare_case
 from .base import HapticNode
 from .contact_detector import MESH_PARAMS
+from .parameters import CASE_PARAMS  # noqa: F401 (a case node: the registry reads it here)
 from .parameters import Param, declare_parameters, positive
 from .runtime import run_node, stamp_ns
 

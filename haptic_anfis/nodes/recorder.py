@@ -33,8 +33,9 @@ from ..bag.segment import COMPRESSIONS
 from ..bag.topics import DEFAULT_TOPICS, KNOWN_TYPES
 from ..cases import CaseError, library
 from ..cases.force_mapping import case_force_mapping
-from ._case import CASE_PARAMS, declare_case_parameters, requested_case  # noqa: F401 (config)
+from ._case import declare_case_parameters, requested_case
 from .base import HapticNode
+from .parameters import CASE_PARAMS  # noqa: F401 (a case node: the registry reads it here)
 from .parameters import Param, declare_parameters, positive
 from .polled import PolledSubscription
 from .runtime import message_class, run_node

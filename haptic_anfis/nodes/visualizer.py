@@ -30,7 +30,8 @@ from ..tissue.displacement import DisplacementDataError
 from ..view.scene import PROBE_LENGTH, probe_quaternion
 from . import cdr
 from .. import interfaces as ifc
-from ._case import CASE_PARAMS, apply_case, declare_case  # noqa: F401 (CASE_PARAMS: in config)
+from ._case import apply_case, declare_case
+from .parameters import CASE_PARAMS  # noqa: F401 (a case node: the registry reads it here)
 from .parameters import Param, declare_parameters, non_negative, positive
 from .runtime import run_node
 from .base import HapticNode

@@ -37,9 +37,10 @@ from ..session.case_choice import CASE_NODE_NAMES, CaseChoices, case_force_scale
 from ..session.case_switch import CaseSwitch
 from ..view.browser import free_port
 from ..view.live import ConsoleSettings, LivePage
-from ._case import CASE_PARAMS, declare_case  # noqa: F401 (CASE_PARAMS: a case node, registry.py)
+from ._case import declare_case
 from .base import HapticNode
 from .executor import node_in_thread
+from .parameters import CASE_PARAMS  # noqa: F401 (a case node: the registry reads it here)
 from .parameters import CASE_KEYS, Param, declare_parameters, non_negative, positive
 from .polled import PolledSubscription
 from .runtime import run_node
