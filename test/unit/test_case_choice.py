@@ -240,3 +240,17 @@ def test_the_scale_given_the_driver_is_the_cases_own_mapping_against_the_drivers
     assert scale('', -1) == case_force_mapping(lib.get(DEFAULT_CASE)).force_scale
     dense = 'lib_m_dense_idc20_d12'
     assert scale(dense, -1) < 1.0 and half(dense, -1) == pytest.approx(scale(dense, -1) / 2)
+
+
+def test_the_session_gives_the_page_the_drivers_clamp_and_a_scale_the_user_set():
+    """The page chooses each case's scale against the driver's clamp; a scale the user set is
+    the page's too (a case chosen then leaves the driver's alone)."""
+    from haptic_anfis.session import SessionSpec
+    plain = SessionSpec(view=True).view_arguments(controls=True)
+    assert not any(a.startswith(('max_force', 'force_scale')) for a in plain)
+    user = SessionSpec(view=True, ros_args=('-p', 'falcon_driver:force_scale:=0.5',
+                                            '-p', 'max_force:=4.0')).view_arguments(True)
+    assert 'force_scale:=0.5' in user and 'max_force:=4.0' in user
+    no_driver = SessionSpec(view=True, nodes=('contact_detector', 'force_server'),
+                            ros_args=('-p', 'force_scale:=0.5')).view_arguments(True)
+    assert not any(a.startswith('force_scale') for a in no_driver)
