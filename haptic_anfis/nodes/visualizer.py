@@ -24,10 +24,9 @@ from sensor_msgs.msg import JointState
 from visualization_msgs.msg import Marker, MarkerArray
 
 from ..pipeline.contact import load_surface
-from ..tissue.deformation import DeformationModel
-from ..tissue.dent_display import DentFeed, DentSurface
+from ..tissue.dent_display import DentFeed, DentSurface, dent_model
 from ..tissue.displacement import DisplacementDataError
-from ..view.scene import PROBE_LENGTH, probe_quaternion
+from ..view.scene import PROBE_LENGTH, probe_centred
 from . import cdr
 from .. import interfaces as ifc
 from ._case import apply_case, declare_case
@@ -149,12 +148,8 @@ class Visualizer(HapticNode):
 
     def _dent_surface(self, mesh, p):
         """The patched surface with its dent model, or None (logged) when there is no data."""
-        reach = p['dent_reach']
         try:
-            model = (DeformationModel.load(p['displacement_path'], taper=reach - 1.0,
-                                           reach=reach)
-                     if p['displacement_path']
-                     else DeformationModel.load_default(taper=reach - 1.0, reach=reach))
+            model = dent_model(p['displacement_path'], p['dent_reach'])
         except (DisplacementDataError, OSError, ValueError) as exc:
             self.get_logger().warning(f'no dent drawn: {exc}')
             return None
@@ -304,16 +299,9 @@ class Visualizer(HapticNode):
         if self._pose is not None:
             q = self._pose.pose.position
             c = None if self._contact is None else ifc.contact_geometry(self._contact.position)
-            d = np.asarray(c[1] if c is not None else (-1.0, 0.0, 0.0), dtype=float)
-            n = float(np.linalg.norm(d))
-            d = d / n if n > 1e-9 else np.array([-1.0, 0.0, 0.0])
-            # the flat probe face at the probe position, the cylinder standing out along -d
-            pos = self.probe.pose.position
-            pos.x, pos.y, pos.z = (float(q.x - 0.5 * PROBE_LENGTH * d[0]),
-                                   float(q.y - 0.5 * PROBE_LENGTH * d[1]),
-                                   float(q.z - 0.5 * PROBE_LENGTH * d[2]))
-            o = self.probe.pose.orientation
-            o.w, o.x, o.y, o.z = probe_quaternion(d)
+            pos, o = self.probe.pose.position, self.probe.pose.orientation
+            (pos.x, pos.y, pos.z), (o.w, o.x, o.y, o.z) = probe_centred(
+                (q.x, q.y, q.z), None if c is None else c[1])
             markers.append(self.probe)
             self.contact.action = Marker.ADD if c is not None else Marker.DELETE
             if c is not None:

@@ -142,6 +142,19 @@ class DentSurface:
         return out
 
 
+def dent_model(path='', reach: float = 5.0) -> DeformationModel:
+    """The dent model the views draw: the FE skin displacements of ``path`` (a case's dataset or
+    its displacement file; '' = the shipped default scene's), fading to exactly 0 over the last
+    probe radius before ``reach`` probe radii from the probe axis.
+
+    Raises:
+        DisplacementDataError, OSError, ValueError: no usable displacement data.
+    """
+    if path:
+        return DeformationModel.load(path, taper=reach - 1.0, reach=reach)
+    return DeformationModel.load_default(taper=reach - 1.0, reach=reach)
+
+
 class DentFeed:
     """What one dent frame sends, for a drawing that subscribers receive as they join.
 

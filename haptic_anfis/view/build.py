@@ -13,7 +13,7 @@ from ..contact import load_mesh
 from ..exam import ExamSession, Surface, subject_from_scene
 from ..exam.config import load_exam_config
 from ..exam.from_bag import resolve_exam_case, session_from_bag
-from ..tissue.deformation import DeformationModel
+from ..tissue.dent_display import dent_model
 from ..tissue.displacement import DisplacementDataError
 from .app import ViewApp, check_port
 from .debrief import Debrief
@@ -37,11 +37,8 @@ class CaseView:
 
 def _deformation(case):
     """The case's dent model from its FE skin displacements (None, said why, when it has none)."""
-    reach = 5.0  # probe radii, as the visualizer's default dent_reach
-    try:
-        if case is None:
-            return DeformationModel.load_default(taper=reach - 1.0, reach=reach)
-        return DeformationModel.load(case.dataset_path, taper=reach - 1.0, reach=reach)
+    try:   # 5 probe radii, as the visualizer's default dent_reach
+        return dent_model(case.dataset_path if case is not None else '', reach=5.0)
     except (DisplacementDataError, OSError, ValueError) as exc:
         print(f'view: no dent drawn ({exc})', flush=True)
         return None
