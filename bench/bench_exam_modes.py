@@ -107,7 +107,7 @@ def respawn(kills: int, domain: int) -> list[dict]:
 
     from haptic_anfis import interfaces as ifc
     from haptic_anfis.nodes.runtime import LOOP_QOS
-    from haptic_anfis.nodes.graph import make_executor_for
+    from haptic_anfis.nodes.executor import make_executor
     work = Path(tempfile.mkdtemp(prefix='haptic-anfis-respawn-'))
     out = work / 'launch.out'
     launch = subprocess.Popen(
@@ -123,7 +123,7 @@ def respawn(kills: int, domain: int) -> list[dict]:
         WrenchStamped, ifc.TOPIC_COMMAND,
         lambda m: arrivals.append((time.monotonic(), abs(m.wrench.force.x)
                                    + abs(m.wrench.force.y) + abs(m.wrench.force.z))), LOOP_QOS)
-    ex = make_executor_for(ctx)
+    ex = make_executor(ctx)
     ex.add_node(node)
     rows = []
 

@@ -239,7 +239,7 @@ def clock_lag(seconds: float) -> dict:
                     m, sec = text.split()[1].split(':')
                     k = 60 * int(m) + int(sec)
                     if last is not None and k == last + 1:
-                        lags.append(1e3 * (0.5 * (t0 + t1) - node.t_start - k))
+                        lags.append(1e3 * (0.5 * (t0 + t1) - node.page.t_start - k))
                         rtts.append(1e3 * (t1 - t0))
                     last = k
                 time.sleep(0.05)

@@ -166,7 +166,7 @@ def declarations(module) -> list:
         return list(node_parameters(module.__name__.rsplit('.', 1)[-1]))
     params = list(getattr(module, 'PARAMS', []))
     if 'declare_case(' in Path(module.__file__).read_text(encoding='utf-8'):
-        from haptic_anfis.nodes._case import CASE_PARAMS
+        from haptic_anfis.nodes.parameters import CASE_PARAMS
         params += [p for p in CASE_PARAMS if p.name not in {q.name for q in params}]
     return params
 

@@ -87,7 +87,8 @@ def ideal_overrides(ros_args: Sequence[str] = ()) -> dict[str, dict[str, Any]]:
     """{node: {parameter: value}} of :data:`IDEAL_NODES` from ``-p [node:]name:=value``
     arguments (a session's case arguments and the user's overrides), as rcl gives them to each
     node: a global name to every node that declares it, ``node:name`` to that node alone."""
-    from ..nodes.parameters import CASE_PARAMS, parse_overrides
+    from ..nodes.parameter_files import parse_overrides
+    from ..nodes.parameters import CASE_PARAMS
     from ..nodes.registry import node_parameters
     out: dict[str, dict[str, Any]] = {n: {} for n in IDEAL_NODES}
     for target, v, _ in parse_overrides(list(ros_args)):

@@ -102,6 +102,13 @@ class DriverLoop:
                                     if wall > 0 else None)
         return s
 
+    def set_force_scale(self, force_scale: float, max_stiffness: float) -> WorkspaceMapping:
+        """Render with ``force_scale`` from the next tick, in the loop and at the force input
+        (:meth:`~.servo_native.NativeServoLoop.set_force_scale`); returns the new mapping."""
+        m = self.servo.set_force_scale(force_scale, max_stiffness)
+        self.input.mapping = m
+        return m
+
     def save_trace(self, path: str, mapping: WorkspaceMapping, p: dict, frame_id: str,
                    stats: dict) -> np.ndarray:
         """Write the servo ticks in the tissue frame (position [m], applied force [N]) with

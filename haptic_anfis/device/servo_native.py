@@ -23,6 +23,7 @@ watchdog zeroes the force whatever the node does (see docs/servo_loop.md).
 """
 from __future__ import annotations
 
+import dataclasses
 import gc
 import math
 import os
@@ -169,7 +170,7 @@ class NativeServoLoop:
         zeros = self._mem.zeros if self.process else np.zeros
         self.hand = zeros(nt.HAND_LEN)
         C = nt.CFG
-        cfg = np.zeros(nt.CFG_LEN)
+        cfg = zeros(nt.CFG_LEN)   # shared with a servo process: set_force_scale reaches it
         cfg[C.period] = self.period
         cfg[C.max_force], cfg[C.max_force_rate] = max_force, max_force_rate
         cfg[C.watchdog], cfg[C.max_dt] = watchdog_timeout, 0.005
@@ -245,6 +246,23 @@ class NativeServoLoop:
         self._scheduled = threading.Event()
 
     # -- control --------------------------------------------------------------------------------
+    def set_force_scale(self, force_scale: float, max_stiffness: float) -> WorkspaceMapping:
+        """Render from the next tick with ``F_device = force_scale * F_tissue`` (a case switched
+        in a running session: each case has its own scale); ``max_stiffness``: the device-frame
+        stiffness bound [N/m] the tissue-frame one follows from. The safety layer's rate limit
+        ramps the device force to the new scale. Returns the new mapping.
+
+        Raises:
+            ValueError: ``force_scale`` is not a finite number > 0.
+        """
+        m = dataclasses.replace(self.mapping, force_scale=force_scale)
+        k = tissue_stiffness_limit(max_stiffness, m.force_scale, m.scale)
+        self.renderer.max_stiffness = k   # the models accepted from now on
+        self.cfg[nt.CFG.max_stiffness] = k
+        self.cfg[nt.CFG.force_scale] = m.force_scale
+        self.mapping = m
+        return m
+
     def release(self) -> None:
         """Start the held script at the next tick (idempotent)."""
         self.ctl[nt.CTL.release] = 1

@@ -19,10 +19,10 @@ from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 
 from ..cases import Case, CaseError, resolve_case
 from ..realtime.scheduling import off_realtime
-from ..session.case_watch import CASE_KEYS, effective_case
-from .parameters import CASE_PARAMS  # declared writable: setting one switches the case
+from ..tissue.displacement import displacement_path
+from .parameters import CASE_KEYS, CASE_PARAMS, effective_case
 
-__all__ = ['CASE_PARAMS', 'declare_case', 'declare_case_parameters', 'describe', 'apply_case',
+__all__ = ['declare_case', 'declare_case_parameters', 'describe', 'apply_case',
            'requested_case']
 
 
@@ -110,7 +110,6 @@ def apply_case(p: dict, case: Case | None, own: dict | None = None) -> dict:
     if 'model_path' in p:
         out['model_path'] = str(case.model_path)
     if 'displacement_path' in p:  # the case's own skin displacements (the dent it draws)
-        from ..tissue.displacement import displacement_path
         out['displacement_path'] = str(displacement_path(case.dataset_path))
     if 'tumours' in p:
         out['tumours'] = [float(v) for lesion in case.lesions_m() for v in lesion]

@@ -21,6 +21,13 @@ from __future__ import annotations
 
 import struct
 
+import numpy as np
+from geometry_msgs.msg import PoseStamped, WrenchStamped
+from rclpy.serialization import deserialize_message
+from sensor_msgs.msg import JointState
+
+from .runtime import stamp_ns
+
 _LE = b'\x00\x01\x00\x00'  # CDR little-endian encapsulation, no options
 _HEAD = struct.Struct('<iII')  # sec, nanosec, frame_id length (payload offset 0)
 _U32 = struct.Struct('<I')
@@ -227,7 +234,6 @@ def triangle_markers(frame_id: str, ns: str, markers, stamp_ns: int = 0) -> byte
     in CDR order), not as one message object per point: rclpy's own path cost ~17 ms of the
     interpreter per frame of ~3 000 corners, this ~0.2 ms (``test_cdr.py`` checks it against
     rclpy's serializer, field by field)."""
-    import numpy as np
     w = _Buffer()
     w.pack(_U32, len(markers), align=4)
     sec, nsec = divmod(int(stamp_ns), 1_000_000_000)
@@ -266,9 +272,6 @@ def triangle_markers(frame_id: str, ns: str, markers, stamp_ns: int = 0) -> byte
 def _deserialize(b: bytes, msg_type):
     """(``b`` read by rclpy as ``msg_type`` (any byte order), its header stamp [ns]); ValueError
     naming the type when malformed."""
-    from rclpy.serialization import deserialize_message
-
-    from .runtime import stamp_ns
     try:
         m = deserialize_message(b, msg_type)
     except Exception as exc:  # the rmw's error type varies
@@ -277,20 +280,17 @@ def _deserialize(b: bytes, msg_type):
 
 
 def _slow_wrench(b: bytes):
-    from geometry_msgs.msg import WrenchStamped
     m, ns = _deserialize(b, WrenchStamped)
     f = m.wrench.force
     return ns, m.header.frame_id, (f.x, f.y, f.z)
 
 
 def _slow_pose(b: bytes):
-    from geometry_msgs.msg import PoseStamped
     m, ns = _deserialize(b, PoseStamped)
     q = m.pose.position
     return ns, m.header.frame_id, (q.x, q.y, q.z)
 
 
 def _slow_joint_state(b: bytes):
-    from sensor_msgs.msg import JointState
     m, ns = _deserialize(b, JointState)
     return ns, m.header.frame_id, tuple(m.position), tuple(m.effort)

@@ -20,7 +20,8 @@ from sensor_msgs.msg import JointState
 
 from ..pipeline.contact import DEFAULT_SURFACE, approach_values, contact_values, make_tracker
 from .. import interfaces as ifc
-from ._case import CASE_PARAMS, apply_case, declare_case  # noqa: F401 (CASE_PARAMS: in config)
+from ._case import apply_case, declare_case
+from .parameters import CASE_PARAMS  # noqa: F401 (a case node: the registry reads it here)
 from .parameters import Param, declare_parameters, finite_vector, non_negative, one_of, positive
 from .runtime import LOOP_QOS, run_node
 from .base import HapticNode

@@ -14,6 +14,7 @@ report.json and report.png into its ``report_dir`` when stopped (SIGINT).
 from __future__ import annotations
 
 import re
+import threading
 import time
 from typing import Sequence
 
@@ -21,6 +22,7 @@ from visualization_msgs.msg import MarkerArray
 
 from .. import interfaces as ifc
 from .base import HapticNode
+from .side_nodes import recorder_matched
 
 __all__ = ['EXAMINER_TOPICS', 'CoverageWatch', 'examiner_arguments', 'hold_until_examiner']
 
@@ -72,9 +74,6 @@ def hold_until_examiner(graph, timeout: float, examiner: str = 'examiner',
     lost the first seconds of a short exam), so the session is scored from its first move;
     spins the graph meanwhile. False if that did not happen within ``timeout`` s, or as soon
     as ``gone()`` is true (its process exited)."""
-    import threading
-
-    from .side_nodes import recorder_matched
     matched = threading.Event()
     graph.driver.release_gate = matched.is_set
 

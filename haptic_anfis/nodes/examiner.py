@@ -23,18 +23,19 @@ from sensor_msgs.msg import Joy, JointState
 from std_msgs.msg import ColorRGBA
 from visualization_msgs.msg import Marker, MarkerArray
 
-from .. import palette
+from . import cdr
+from .. import interfaces as ifc, palette
 from ..exam import ExamSession, Surface, load_exam_config, subject_from_scene
+from ..exam.figure import save_figure
 from ..exam.files import write_text_atomic
 from ..exam.lesions import ExamSubject
 from ..pipeline.contact import load_surface
-from . import cdr
-from .. import interfaces as ifc
-from ._case import CASE_PARAMS, apply_case, declare_case  # noqa: F401 (CASE_PARAMS: in config)
-from .parameters import Param, declare_parameters, positive
-from .runtime import run_node, stamp_ns
+from ._case import apply_case, declare_case
 from .base import HapticNode
 from .contact_detector import MESH_PARAMS
+from .parameters import CASE_PARAMS  # noqa: F401 (a case node: the registry reads it here)
+from .parameters import Param, declare_parameters, positive
+from .runtime import run_node, stamp_ns
 
 PARAMS = MESH_PARAMS + [
     Param('scene', '', "scene file whose tumours are the lesions to find ('' = "
@@ -230,7 +231,6 @@ def write_report(session: ExamSession, out_dir, report: dict | None = None) -> d
     """report.png then report.json of ``session`` into ``out_dir`` (created); returns the
     report. report.json comes last and whole (renamed into place): a reader that sees it has
     the figure too."""
-    from ..exam.figure import save_figure
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     report = report if report is not None else session.report()

@@ -32,6 +32,7 @@ from typing import Callable
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PointStamped, PoseStamped, TwistStamped, WrenchStamped
+from rcl_interfaces.msg import SetParametersResult
 from sensor_msgs.msg import JointState, Joy
 
 from .. import interfaces as ifc
@@ -45,7 +46,7 @@ from ..resources import config_file
 from . import cdr
 from .base import HapticNode
 from .falcon_params import PARAMS, resolve  # PARAMS: the node's (registry, config)
-from .parameters import declare_parameters
+from .parameters import declare_parameters, positive
 from .polled import PolledSubscription
 from .runtime import LOOP_QOS, run_node, set_stamp
 
@@ -56,7 +57,7 @@ WARN_EVERY = 60.0
 class FalconDriver(HapticNode):
     def __init__(self, name: str = 'falcon_driver', **kw):
         super().__init__(name, **kw)
-        p = self.params = resolve(declare_parameters(self, PARAMS), name)
+        p = self.params = resolve(declare_parameters(self, PARAMS, writable=('force_scale',)), name)
         self.servo_loop = p['servo_loop']
         if p['gil_switch_interval'] > 0:  # the bridge thread gets the GIL back sooner
             sys.setswitchinterval(p['gil_switch_interval'])
@@ -71,6 +72,7 @@ class FalconDriver(HapticNode):
         self.loop = loop
         self.servo, self.device, self.safety = loop.servo, loop.device, loop.safety
         self.clutch, self.input = loop.clutch, loop.input
+        self.add_on_set_parameters_callback(self._on_set_force_scale)
         self.pub_pose = self.create_publisher(PoseStamped, ifc.TOPIC_POSE, LOOP_QOS)
         self.pub_twist = self.create_publisher(TwistStamped, ifc.TOPIC_TWIST, LOOP_QOS)
         self.pub_applied = self.create_publisher(WrenchStamped, ifc.TOPIC_APPLIED, LOOP_QOS)
@@ -115,6 +117,21 @@ class FalconDriver(HapticNode):
         if p['loop_check_period'] > 0:
             self.pub_diag = self.create_publisher(DiagnosticArray, ifc.TOPIC_DIAGNOSTICS, 10)
             self.create_timer(p['loop_check_period'], self._check_loop)
+
+    def _on_set_force_scale(self, params) -> SetParametersResult:
+        """``force_scale`` set while the loop runs (a case switched live: each case has its own
+        force mapping): rendered from the next tick; refused unless finite and > 0."""
+        for prm in params:
+            if prm.name != 'force_scale':
+                continue
+            s = prm.value
+            if isinstance(s, bool) or not isinstance(s, (int, float)) or positive(s):
+                return SetParametersResult(successful=False,
+                                           reason=f'force_scale: {s!r}: expected a finite value > 0')
+            self.mapping = self.loop.set_force_scale(float(s), self.params['max_stiffness'])
+            self.params['force_scale'] = float(s)
+            self.get_logger().info(f'force scale {s:g}')
+        return SetParametersResult(successful=True)
 
     def _check_loop(self) -> None:
         """Warn when the servo loop fell behind since the last check

@@ -37,7 +37,8 @@ PARAMS = [
           finite_vector(3)),
     Param('force_scale', 1.0, 'device force = force_scale * commanded (tissue) force; sim, launch '
           "and exam run set it from their case (haptic_anfis.cases.force_mapping: the case's "
-          'largest trained FE force at 85 % of max_force) unless it is given', positive),
+          'largest trained FE force at 85 % of max_force) unless it is given; writable: a case '
+          "chosen on the browser page sets that case's while the loop runs", positive),
     Param('palpation_script', '', "sim: YAML palpation pattern ('' = config/palpation.yaml)"),
     Param('hold_until_force', True, 'sim: hold the virtual hand at the script start (and the force '
           'at zero) until the first valid force command arrives, i.e. until the contact detector '

@@ -28,7 +28,8 @@ from ..realtime.scheduling import off_realtime
 from ..pipeline.force import force_from_contact, load_model, local_model_from_contact
 from . import cdr
 from .. import interfaces as ifc
-from ._case import CASE_PARAMS, apply_case, declare_case  # noqa: F401 (CASE_PARAMS: in config)
+from ._case import apply_case, declare_case
+from .parameters import CASE_PARAMS  # noqa: F401 (a case node: the registry reads it here)
 from .parameters import Param, declare_parameters, positive
 from .runtime import LOOP_QOS, run_node, set_stamp, stamp_ns
 from .base import HapticNode

@@ -6,12 +6,21 @@ on the driver's own thread; the executor thread carries pose -> contact -> force
 """
 from __future__ import annotations
 
+import gc
 import time
 from dataclasses import dataclass, field
 
 import rclpy
+from rclpy.context import Context
 
+from ..device.start_gate import HeldScript
+from .contact_detector import ContactDetectorNode
+from .executor import make_executor, settle_and_start
+from .falcon_driver import FalconDriver
+from .force_server import ForceServer
+from .session import Readiness
 from .sigint import SigintStop
+from .visualizer import Visualizer
 
 
 @dataclass
@@ -59,7 +68,6 @@ class Graph:
         A hand still held at its start (the driver's start gate: until the force source answers
         and the driver's ``release_gate`` opens, e.g. until a side examiner or recorder has
         subscribed) keeps that gate: ``script`` starts when the gate opens, from its own t = 0."""
-        from ..device.start_gate import HeldScript
         held = self.driver.device.script
         if isinstance(held, HeldScript) and held.held:
             held.script = script
@@ -77,7 +85,6 @@ class Graph:
 
     def shutdown(self) -> None:
         """Stop the servo thread first (device to zero force), then the nodes and the context."""
-        import gc
         self.driver.close()
         gc.unfreeze()
         self.executor.shutdown(timeout_sec=1.0)
@@ -96,15 +103,6 @@ def build_graph(args: list[str] | None = None, visualizer: bool = True,
     Raises:
         ParameterError / ValueError: a node rejected its parameters (nothing is left running).
     """
-    from rclpy.context import Context
-
-    from .contact_detector import ContactDetectorNode
-    from .executor import make_executor, settle_and_start
-    from .falcon_driver import FalconDriver
-    from .force_server import ForceServer
-    from .session import Readiness
-    from .visualizer import Visualizer
-
     ctx = Context()
     rclpy.init(args=args, context=ctx)
     ov = overrides or {}
@@ -139,9 +137,3 @@ def build_graph(args: list[str] | None = None, visualizer: bool = True,
         raise
     return Graph(ctx, ex, driver, contact, force, vis, extra=extra_nodes)
 
-
-
-
-#: the package's one executor factory (:func:`haptic_anfis.nodes.executor.make_executor`), under
-#: the name the tests and benchmarks used
-from .executor import make_executor as make_executor_for  # noqa: E402

@@ -40,8 +40,8 @@ LOCALHOST_UDP_PROFILE = DATA_DIR / 'dds' / 'localhost_udp.xml'
 UDP_PROFILE = DATA_DIR / 'dds' / 'udp.xml'
 #: set to '1' to leave the middleware as configured (shared memory included)
 KEEP_SHM = 'HAPTIC_ANFIS_DDS_SHM'
-#: '1' when FASTDDS_BUILTIN_TRANSPORTS was set here (an environment from an earlier version of
-#: this module: recomputed, not taken for the user's)
+#: '1' when FASTDDS_BUILTIN_TRANSPORTS was set by this module (recomputed in a child process, not
+#: taken for the user's)
 _APPLIED = 'HAPTIC_ANFIS_DDS_UDP'
 
 _RANGE = 'ROS_AUTOMATIC_DISCOVERY_RANGE'

@@ -24,15 +24,19 @@ from __future__ import annotations
 import threading
 import time
 
+from geometry_msgs.msg import WrenchStamped
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.serialization import deserialize_message, serialize_message
+from rosgraph_msgs.msg import Clock
 
+from .. import interfaces as ifc
 from ..bag import BagError, bag_info
 from ..bag.playback import Recorded, check_timing, schedule
 from ..bag.topics import WRENCH_TYPE, absolute, playback_topic
-from .. import interfaces as ifc
-from .parameters import Param, declare_parameters, non_negative, positive
-from .runtime import message_class, run_node
 from .base import HapticNode
+from .parameters import Param, declare_parameters, non_negative, positive
+from .resim import resimulate
+from .runtime import message_class, run_node
 
 PARAMS = [
     Param('bag_path', '', 'the bag to play (a rosbag2 directory); required'),
@@ -89,7 +93,6 @@ class Player(HapticNode):
                      for t, out in self.topic_map.items()}
         self.clock_pub = None
         if p['clock']:
-            from rosgraph_msgs.msg import Clock
             self._clock = Clock()
             self.clock_pub = self.create_publisher(Clock, '/clock', 10)
         self.published = 0
@@ -112,7 +115,6 @@ class Player(HapticNode):
         self._thread.start()
 
     def _resimulate(self, p) -> None:
-        from .resim import resimulate
         files = [f for f in p['params_files'] if f]
         self.resim = resimulate(p['bag_path'], params_files=files)
         for line in self.resim.format().splitlines():
@@ -122,8 +124,6 @@ class Player(HapticNode):
         """The record to play: with ``resimulate``, a force command carries the recomputed force."""
         if self.resim is None or r.msgtype != WRENCH_TYPE or r.topic != absolute(ifc.TOPIC_COMMAND):
             return r
-        from geometry_msgs.msg import WrenchStamped
-        from rclpy.serialization import deserialize_message, serialize_message
         m = deserialize_message(r.data, WrenchStamped)
         f = self.resim.recomputed.get(m.header.stamp.sec * 1_000_000_000 + m.header.stamp.nanosec)
         if f is None:

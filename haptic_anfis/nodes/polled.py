@@ -16,6 +16,9 @@ it; it is visible on the ROS graph as any subscription is.
 """
 from __future__ import annotations
 
+from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
+from rclpy.type_support import check_is_valid_msg_type
+
 
 class PolledSubscription:
     """A raw (serialized bytes) subscription of ``node`` to ``topic`` that is never spun.
@@ -28,8 +31,6 @@ class PolledSubscription:
     """
 
     def __init__(self, node, msg_type, topic: str, qos) -> None:
-        from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
-        from rclpy.type_support import check_is_valid_msg_type
         check_is_valid_msg_type(msg_type)  # imports the type support
         with node.handle:
             self._h = _rclpy.Subscription(node.handle, msg_type, topic, qos.get_c_qos_profile())

@@ -33,11 +33,13 @@ from ..bag.segment import COMPRESSIONS
 from ..bag.topics import DEFAULT_TOPICS, KNOWN_TYPES
 from ..cases import CaseError, library
 from ..cases.force_mapping import case_force_mapping
-from ._case import CASE_PARAMS, declare_case_parameters, requested_case  # noqa: F401 (config)
-from .parameters import Param, declare_parameters, positive
-from .runtime import message_class, run_node
+from ._case import declare_case_parameters, requested_case
 from .base import HapticNode
+from .parameters import CASE_PARAMS  # noqa: F401 (a case node: the registry reads it here)
+from .parameters import Param, declare_parameters, positive
 from .polled import PolledSubscription
+from .runtime import message_class, run_node
+from .session import inputs_matched
 
 #: Topics never recorded with ``all_topics`` (ROS infrastructure, as ``ros2 bag record -a``).
 IGNORED = ('/rosout', '/parameter_events')
@@ -83,7 +85,6 @@ def _case_label(name: str, seed: int) -> str:
     Raises:
         CaseError: ``name`` is not a case of the library.
     """
-    from ..cases import library
     if seed >= 0:
         try:
             return library().random(seed).name
@@ -98,7 +99,8 @@ def _force_mapping_data(label: str) -> dict[str, str]:
     """The bag's ``force_mapping`` custom data for the case ``label``: the tissue -> device force
     scale a session of that case renders unless its ``force_scale`` is set
     (:mod:`haptic_anfis.cases.force_mapping`), as JSON; {} for an unknown case or one without a
-    dataset."""
+    dataset. After a case switch it is the mapping of the case switched to (the one in force
+    at the bag's end; ``case`` lists the session's cases in order)."""
     try:
         m = case_force_mapping(library().get(label))
     except CaseError:
@@ -169,6 +171,9 @@ class Recorder(HapticNode):
         if label is not None and label != self.cases[-1]:
             self.cases.append(label)
             self.writer.set_custom_data('case', ', '.join(self.cases))
+            # the mapping in force from now on (the page sets the driver's scale with the case)
+            self.writer.set_custom_data('force_mapping',
+                                        _force_mapping_data(label).get('force_mapping', ''))
         return SetParametersResult(successful=True)
 
     def _discover(self) -> None:
@@ -215,7 +220,6 @@ class Recorder(HapticNode):
 
     def ready_condition(self) -> tuple[bool, str]:
         """Ready (nodes/session.py) once every wanted topic has a publisher."""
-        from .session import inputs_matched
         return inputs_matched(self, self.wanted)
 
     def _on_write_error(self, message: str) -> None:

@@ -19,10 +19,18 @@ import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from . import contact_detector as cd, force_server as fs
 from .. import interfaces as ifc
 from ..bag.errors import BagError
 from ..bag.reader import read_messages
 from ..bag.topics import JOINT_STATE_TYPE, POSE_TYPE, WRENCH_TYPE, absolute
+from ..cases import resolve_case
+from ..pipeline.contact import make_tracker
+from ..pipeline.force import load_model
+from ..pipeline.replay import pose_to_force
+from ._case import apply_case
+from .parameter_files import resolve_parameters
+from .parameters import CASE_PARAMS
 
 
 def _ns(stamp) -> int:
@@ -68,13 +76,6 @@ def build_pipeline(params_files=(), contact_overrides=None, force_overrides=None
     Raises:
         ParameterError: a bad parameter; CaseError: an unknown case.
     """
-    from ..cases import resolve_case
-    from ..pipeline.contact import make_tracker
-    from ..pipeline.force import load_model
-    from . import contact_detector as cd
-    from . import force_server as fs
-    from ._case import apply_case
-    from .parameters import CASE_PARAMS, resolve_parameters
     pc = resolve_parameters(cd.PARAMS + CASE_PARAMS, 'contact_detector', params_files,
                             contact_overrides)
     pf = resolve_parameters(fs.PARAMS + CASE_PARAMS, 'force_server', params_files,
@@ -90,7 +91,6 @@ def resimulate(path: str | Path, params_files=(), contact_overrides=None, force_
                pose_topic: str = ifc.TOPIC_POSE, contact_topic: str = ifc.TOPIC_CONTACT,
                wrench_topic: str = ifc.TOPIC_COMMAND) -> ResimResult:
     """Feed the bag's poses through the current tracker and model; compare (see module doc)."""
-    from ..pipeline.replay import pose_to_force
     p = Path(path)
     tp, tc, tw = absolute(pose_topic), absolute(contact_topic), absolute(wrench_topic)
     poses, contacts, wrenches = [], {}, {}

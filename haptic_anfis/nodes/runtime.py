@@ -4,6 +4,8 @@ spins, shuts down quietly)."""
 from __future__ import annotations
 
 import contextlib
+import importlib
+import inspect
 import os
 import sys
 import time
@@ -11,13 +13,18 @@ from typing import Any, Callable, Collection
 
 import rclpy
 from builtin_interfaces.msg import Time
+from rclpy.executors import ExternalShutdownException
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.signals import SignalHandlerOptions
 
+from ..bag.topics import absolute
+from ..realtime.processes import (HOLD_FOR_RECORDER, RECORDED_TOPICS, SESSION_CHECKED,
+                                  guard_realtime_time, leave_realtime)
 from .executor import make_executor, settle_and_start
 from .middleware import use_loop_transport
-from .parameters import ParameterError
-from ..realtime.processes import (HOLD_FOR_RECORDER, RECORDED_TOPICS, SESSION_CHECKED, guard_realtime_time,
-                        leave_realtime)
+from .parameter_files import check_parameter_sources, ros_args_sources
+from .parameters import CASE_PARAMS, ParameterError
+from .session import INFRA_TOPICS, Readiness
 from .sigint import SigintStop
 
 __all__ = ['LOOP_QOS', 'stamp_ns', 'set_stamp', 'interrupted', 'run_node', 'message_class',
@@ -57,15 +64,11 @@ def run_node(factory: Callable[[], Any], args=None) -> int:
     (:class:`~haptic_anfis.nodes.session.Readiness`). Interrupted while starting (Ctrl-C or SIGTERM
     during a long compile), the node exits with code 0 and a one-line message, no traceback.
     """
-    from rclpy.executors import ExternalShutdownException
-
-    from .session import Readiness
     errors = check_node_arguments(factory, sys.argv if args is None else args)
     if errors:
         for e in errors:
             print(f'error: {e}', file=sys.stderr, flush=True)
         return 1
-    from rclpy.signals import SignalHandlerOptions
 
     # SIGINT (Ctrl-C, a launcher's stop) is ours, not rclpy's: rclpy's handler shut the context
     # down under the node, whose close() then failed to log ("publisher's context is invalid").
@@ -140,11 +143,6 @@ def check_node_arguments(factory: Callable, args) -> list[str]:
     are left alone; so are ``/**`` keys and ``-p`` overrides this node does not declare when a
     session started it (:data:`SESSION_CHECKED` set: the session checked them against all its
     nodes); started alone, such a key is an error naming the nearest parameter."""
-    import os
-
-    import inspect
-
-    from .parameters import CASE_PARAMS, check_parameter_sources, ros_args_sources
     module = sys.modules.get(getattr(factory, '__module__', ''), None)
     params = list(getattr(module, 'PARAMS', None) or [])
     if hasattr(module, 'CASE_PARAMS'):
@@ -181,8 +179,6 @@ def hold_until_recorder_matched(node, recorder: str = 'recorder',
     learns the recorder's name before its endpoints, and the graph alone would let it publish
     in between. Without them, the topics the graph shows the recorder subscribed to (that gap
     open). True when matched, False (warned) after ``timeout`` s."""
-    from ..bag.topics import absolute
-    from .session import INFRA_TOPICS
     wanted = None if topics is None else {absolute(t) for t in topics}
     pubs = [p for p in node.publishers if p.topic_name not in INFRA_TOPICS
             and (wanted is None or p.topic_name in wanted)]
@@ -218,7 +214,6 @@ def message_class(type_name: str):
     Raises:
         ValueError: malformed name, or no such installed message package / type.
     """
-    import importlib
     parts = type_name.strip('/').split('/')
     if len(parts) == 2:
         parts = [parts[0], 'msg', parts[1]]

@@ -18,8 +18,13 @@ import os
 import time
 from typing import Callable
 
+import rclpy
+from rclpy.context import Context
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.signals import SignalHandlerOptions
 from std_msgs.msg import String
+
+from .executor import make_executor
 
 STATUS_TOPIC = '/session/status'
 EVENTS_TOPIC = '/session/events'
@@ -132,12 +137,7 @@ class SessionMonitor:
 
     def __init__(self, name: str = 'launch_monitor', domain_id: int | None = None,
                  enclave: str | None = None):
-        import rclpy
-        from rclpy.context import Context
-
-        from .executor import make_executor
         self.ctx = Context()
-        from rclpy.signals import SignalHandlerOptions
 
         # No rclpy signal handlers here: Ctrl-C must reach the launcher as KeyboardInterrupt so
         # that it stops the nodes in order.
@@ -187,7 +187,6 @@ class SessionMonitor:
             self.executor.spin_once(timeout_sec=min(left, 0.05))
 
     def close(self) -> None:
-        import rclpy
         self.executor.shutdown(timeout_sec=1.0)
         self.node.destroy_node()
         rclpy.try_shutdown(context=self.ctx)

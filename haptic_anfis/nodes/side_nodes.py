@@ -15,11 +15,14 @@ that started it dies (``realtime/processes.py``), so none is left running.
 from __future__ import annotations
 
 import sys
+import threading
 import time
 from typing import Mapping, Sequence
 
-from ..realtime.processes import SESSION_CHECKED, SIDE_NICE, Supervisor, node_env
+from ..bag.topics import ALL_LOOP_TOPICS, absolute
 from ..errors import HapticAnfisError
+from ..realtime.processes import SESSION_CHECKED, SIDE_NICE, Supervisor, node_env
+from .session import SessionMonitor
 
 
 
@@ -52,7 +55,6 @@ class SideNodes:
         """
         if not self.nodes:
             return
-        from .session import SessionMonitor
         self._mon = mon = SessionMonitor(name='sim_side_monitor')
         try:
             for name, args in self.nodes.items():
@@ -109,9 +111,6 @@ def hold_until_recorded(graph, timeout: float, recorder: str = 'recorder') -> bo
     executor has not spun yet) until the node ``recorder`` (in another process) subscribes to
     every loop topic, spinning the graph meanwhile: the bag then has the session from its first
     move. False if that did not happen within ``timeout`` s."""
-    import threading
-
-    from ..bag.topics import ALL_LOOP_TOPICS, absolute
     topics = [absolute(t) for t in ALL_LOOP_TOPICS]
     matched = threading.Event()
     graph.driver.release_gate = matched.is_set  # read by the driver when commands arrive

@@ -24,14 +24,19 @@ from sensor_msgs.msg import JointState
 from visualization_msgs.msg import Marker, MarkerArray
 
 from ..pipeline.contact import load_surface
+from ..tissue.dent_display import DentFeed, DentSurface, dent_model
+from ..tissue.displacement import DisplacementDataError
+from ..view.scene import PROBE_LENGTH, probe_centred
 from . import cdr
 from .. import interfaces as ifc
-from ._case import CASE_PARAMS, apply_case, declare_case  # noqa: F401 (CASE_PARAMS: in config)
+from ._case import apply_case, declare_case
+from .parameters import CASE_PARAMS  # noqa: F401 (a case node: the registry reads it here)
 from .parameters import Param, declare_parameters, non_negative, positive
 from .runtime import run_node
 from .base import HapticNode
 from .contact_detector import MESH_PARAMS
 from .polled import PolledSubscription
+from .session import inputs_matched
 
 # transient local, deep enough to hold the whole surface's messages for a late subscriber
 LATCHED = QoSProfile(depth=100, durability=DurabilityPolicy.TRANSIENT_LOCAL)
@@ -94,24 +99,6 @@ def _points(xyz: np.ndarray) -> list:
     return out
 
 
-def _direction_quaternion(d) -> tuple[float, float, float, float]:
-    """(x, y, z, w) rotating the marker z axis onto -d (the cylinder stands out of the tissue)."""
-    v = -np.asarray(d, dtype=float)
-    v = v / np.linalg.norm(v)
-    z = np.array([0.0, 0.0, 1.0])
-    c = float(z @ v)
-    if c < -1 + 1e-12:
-        return 1.0, 0.0, 0.0, 0.0
-    axis = np.cross(z, v)
-    w = 1.0 + c
-    q = np.array([axis[0], axis[1], axis[2], w])
-    q /= np.linalg.norm(q)
-    return tuple(float(x) for x in q)
-
-
-PROBE_LENGTH = 0.03  # drawn length of the probe cylinder [m]
-
-
 class Visualizer(HapticNode):
     def __init__(self, name: str = 'visualizer', **kw):
         super().__init__(name, **kw)
@@ -161,16 +148,8 @@ class Visualizer(HapticNode):
 
     def _dent_surface(self, mesh, p):
         """The patched surface with its dent model, or None (logged) when there is no data."""
-        from ..tissue.deformation import DeformationModel
-        from ..tissue.dent_display import DentSurface
-        from ..tissue.displacement import DisplacementDataError
-
-        reach = p['dent_reach']
         try:
-            model = (DeformationModel.load(p['displacement_path'], taper=reach - 1.0,
-                                           reach=reach)
-                     if p['displacement_path']
-                     else DeformationModel.load_default(taper=reach - 1.0, reach=reach))
+            model = dent_model(p['displacement_path'], p['dent_reach'])
         except (DisplacementDataError, OSError, ValueError) as exc:
             self.get_logger().warning(f'no dent drawn: {exc}')
             return None
@@ -206,44 +185,27 @@ class Visualizer(HapticNode):
         return None if c is None else ifc.contact_geometry(c.position)
 
     def _dent_loop(self) -> None:
+        """The dent frames at ``rate`` Hz (:class:`~haptic_anfis.tissue.dent_display.DentFeed`
+        decides what each sends), to absolute deadlines: a frame's own time does not lower the
+        rate; one that fell behind starts afresh, without a burst."""
         period = 1.0 / self.params['rate']
-        last = None
-        subscribers = self.pub_tissue.get_subscription_count()
-        shown = None
+        feed = DentFeed(self.pub_tissue.get_subscription_count())
         due = time.monotonic()
         while True:
-            # to absolute deadlines: a frame's own time does not lower the rate below `rate`
             due += period
             now = time.monotonic()
-            if now - due > period:  # fell behind (a slow frame): start afresh, no burst
+            if now - due > period:
                 due = now
             if self._stop.wait(max(due - now, 0.0)):
                 break
             try:
-                surface = self.surface  # swapped by a case switch
-                if surface is None:
-                    continue
-                if surface is not shown:  # a new surface: draw its first dent afresh
-                    shown, last = surface, None
-                state = self._contact_state()
-                key = None if state is None else np.concatenate([state[0], state[1],
-                                                                  [state[2]]])
-                n_sub = self.pub_tissue.get_subscription_count()
-                if n_sub > subscribers:  # a late subscriber: send every patch as drawn now
-                    self._publish_patches(surface.all_patches())
-                subscribers = n_sub
-                if n_sub == 0:  # nobody draws it (no RViz): the surface keeps what it showed
-                    continue
-                if (key is None and last is None) or \
-                        (key is not None and last is not None and np.array_equal(key, last)):
-                    continue
                 t0 = time.perf_counter()
-                changed = surface.update(*(state or (None, None, 0.0)))
-                self._publish_patches(changed)
-                self.dent_seconds.append(time.perf_counter() - t0)
-                self.n_dent_frames += 1
-                self.last_dent = state  # (point, direction, depth) the surface now shows
-                last = key
+                patches = feed.frame(self.surface, self._contact_state(),   # swapped by a switch
+                                     self.pub_tissue.get_subscription_count())
+                self._publish_patches(patches)
+                if feed.frames > self.n_dent_frames:
+                    self.dent_seconds.append(time.perf_counter() - t0)
+                    self.n_dent_frames, self.last_dent = feed.frames, feed.last
             except Exception as exc:  # never let the drawing thread die silently
                 if not self.context.ok():  # Ctrl-C shut the context down under us: just stop
                     return
@@ -319,7 +281,6 @@ class Visualizer(HapticNode):
 
     def ready_condition(self) -> tuple[bool, str]:
         """Ready (nodes/session.py) once every loop topic it draws has a publisher."""
-        from .session import inputs_matched
         return inputs_matched(self, [self.resolve_topic_name(s.topic) for _, s in self._inputs])
 
     def _take_inputs(self) -> None:
@@ -337,26 +298,15 @@ class Visualizer(HapticNode):
         markers = list(self.tumours)
         if self._pose is not None:
             q = self._pose.pose.position
-            c = self._contact
-            touching = c is not None and ifc.is_contact_values(c.position) \
-                and c.position[ifc.I_IN_CONTACT] > 0.5
-            d = np.asarray(c.position[ifc.I_DX:ifc.I_DZ + 1], dtype=float) \
-                if touching else np.array([-1.0, 0.0, 0.0])
-            if not np.all(np.isfinite(d)) or np.linalg.norm(d) < 1e-9:
-                d = np.array([-1.0, 0.0, 0.0])
-            d = d / np.linalg.norm(d)
-            # the flat probe face at the probe position, the cylinder standing out along -d
-            pos = self.probe.pose.position
-            pos.x, pos.y, pos.z = (float(q.x - 0.5 * PROBE_LENGTH * d[0]),
-                                   float(q.y - 0.5 * PROBE_LENGTH * d[1]),
-                                   float(q.z - 0.5 * PROBE_LENGTH * d[2]))
-            o = self.probe.pose.orientation
-            o.x, o.y, o.z, o.w = _direction_quaternion(d)
+            c = None if self._contact is None else ifc.contact_geometry(self._contact.position)
+            pos, o = self.probe.pose.position, self.probe.pose.orientation
+            (pos.x, pos.y, pos.z), (o.w, o.x, o.y, o.z) = probe_centred(
+                (q.x, q.y, q.z), None if c is None else c[1])
             markers.append(self.probe)
-            self.contact.action = Marker.ADD if touching else Marker.DELETE
-            if touching:
+            self.contact.action = Marker.ADD if c is not None else Marker.DELETE
+            if c is not None:
                 pos = self.contact.pose.position
-                pos.x, pos.y, pos.z = (float(v) for v in c.position[0:3])
+                pos.x, pos.y, pos.z = c[0]
             markers.append(self.contact)
             f = self._force.wrench.force if self._force is not None else None
             k = self.params['force_scale']

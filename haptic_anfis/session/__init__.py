@@ -7,8 +7,10 @@ runners behind it.
   field of :class:`SessionSpec`).
 - :class:`OneProcessSession` (:mod:`.one_process`): the haptic graph in one process, side nodes in
   processes of their own (``sim``, ``exam run``); :func:`open_graph` for benchmarks and tests.
-- :class:`ProcessSession` (:mod:`.processes`): one process per node under the supervisor, with
+- :class:`ProcessSession` (:mod:`.launch_runner`): one process per node under the supervisor, with
   restarts (``launch``).
+- :mod:`.case_choice`, :mod:`.case_switch`, :mod:`.case_watch`: the browser page's case against the
+  loop nodes' (a case chosen live, with the falcon driver's force scale).
 - :mod:`.domain`: a session refuses a ROS domain another session's loop already runs on.
 
 Before any node starts, :meth:`SessionSpec.check` checks the options, the case and every parameter
@@ -18,7 +20,7 @@ from __future__ import annotations
 
 from .spec import (COMMANDS, OPTIONS, Option, SessionError, SessionSpec, add_session_arguments,
                    recorder_settings, spec_from_args)
-from .one_process import OneProcessSession, open_graph  # noqa: E402  (rclpy imported on use)
+from .one_process import OneProcessSession, open_graph
 from .launch_runner import ProcessSession
 
 __all__ = ['COMMANDS', 'OPTIONS', 'Option', 'SessionError', 'SessionSpec', 'add_session_arguments',

@@ -16,11 +16,12 @@ way. Nothing here blocks: the owner's executor delivers the answers.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Sequence
+from typing import Sequence
 
-if TYPE_CHECKING:   # annotations only
-    import rclpy.client
-    import rclpy.task
+import rclpy.client
+import rclpy.task
+from rcl_interfaces.srv import SetParametersAtomically
+from rclpy.parameter import Parameter
 
 __all__ = ['CaseSwitch', 'SwitchOutcome']
 
@@ -57,8 +58,9 @@ class SwitchOutcome:
 
 
 class CaseSwitch:
-    """Set ``params`` (rclpy ``Parameter`` s) on the nodes of ``phases`` (names, phase by
-    phase) of ``node`` 's graph.
+    """Set ``values`` ({parameter: value}) on the nodes of ``phases`` (names, phase by phase) of
+    ``node`` 's graph; ``per_node``: {name: values} a node gets instead (the falcon driver: its
+    force scale for the case).
 
     A name is in the switch when the graph lists a node of that name (any namespace) or its
     parameter service is already discovered; the others are ``absent``. ``clients``: the
@@ -67,9 +69,11 @@ class CaseSwitch:
     ``silent``. ``running``: every node named runs (none is ``absent``).
     """
 
-    def __init__(self, node, phases: Sequence[Sequence[str]], params: Sequence, clients: dict,
-                 now: float, timeout: float, running: bool = False) -> None:
-        self.node, self.params, self.clients = node, list(params), clients
+    def __init__(self, node, phases: Sequence[Sequence[str]], values: dict, clients: dict,
+                 now: float, timeout: float, running: bool = False,
+                 per_node: dict[str, dict] | None = None) -> None:
+        self.node, self.values, self.clients = node, dict(values), clients
+        self.per_node = dict(per_node or {})
         self.timeout = float(timeout)
         self.deadline = now + self.timeout
         listed = {n for n, _ in node.get_node_names_and_namespaces()}
@@ -90,18 +94,17 @@ class CaseSwitch:
         self._sent: set[str] = set()   # the nodes asked (a revert goes only to them)
 
     def _client(self, name: str) -> rclpy.client.Client:
-        from rcl_interfaces.srv import SetParametersAtomically
         cli = self.clients.get(name)
         if cli is None:
             cli = self.clients[name] = self.node.create_client(
                 SetParametersAtomically, f'/{name}/set_parameters_atomically')
         return cli
 
-    def _send(self, name: str, params: Sequence) -> rclpy.task.Future:
+    def _send(self, name: str) -> rclpy.task.Future:
         """The request's future (rclpy ``Future``)."""
-        from rcl_interfaces.srv import SetParametersAtomically
+        values = self.per_node.get(name, self.values)
         return self._client(name).call_async(SetParametersAtomically.Request(
-            parameters=[p.to_parameter_msg() for p in params]))
+            parameters=[Parameter(k, value=v).to_parameter_msg() for k, v in values.items()]))
 
     def poll(self, now: float) -> SwitchOutcome | None:
         """Send to the nodes whose service has appeared; the outcome once every node answered
@@ -109,7 +112,7 @@ class CaseSwitch:
         while self.outcome is None:
             for name, fut in self.futures.items():
                 if fut is None and self._client(name).service_is_ready():
-                    self.futures[name] = self._send(name, self.params)
+                    self.futures[name] = self._send(name)
             done = all(f is not None and f.done() for f in self.futures.values())
             if not done and now < self.deadline:
                 return None
@@ -143,9 +146,11 @@ class CaseSwitch:
                 d.refused[name] = res.reason or 'refused'
         self._sent |= {n for n, f in self.futures.items() if f is not None}
 
-    def revert(self, params: Sequence, now: float) -> CaseSwitch | None:
-        """Send ``params`` (the case before) to every node that may have switched: those that
-        said so and those that had not answered (their request lands before the revert). Returns
+    def revert(self, values: dict, now: float,
+               per_node: dict[str, dict] | None = None) -> CaseSwitch | None:
+        """Send ``values`` (the case before; ``per_node`` as for a switch) to every node that may
+        have switched: those that said so and those that had not answered (their request lands
+        before the revert). Returns
         the revert as a switch of its own, to follow as this one (its nodes: ``names``), or None
         when no node was asked."""
         if self.outcome is None:
@@ -153,8 +158,8 @@ class CaseSwitch:
         names = [n for n in self.outcome.switched + self.outcome.silent if n in self._sent]
         if not names:
             return None
-        return CaseSwitch(self.node, [names], params, self.clients, now, self.timeout,
-                          running=True)
+        return CaseSwitch(self.node, [names], values, self.clients, now, self.timeout,
+                          running=True, per_node=per_node)
 
     @property
     def names(self) -> list[str]:

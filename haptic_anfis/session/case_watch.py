@@ -14,24 +14,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-__all__ = ['CASE_KEYS', 'CaseWatch', 'Verdict', 'effective_case']
+from ..nodes.parameters import CASE_KEYS, effective_case
 
-#: the parameters that say a node's case
-CASE_KEYS = ('case', 'random_case_seed')
-
-
-def effective_case(new: dict, current: tuple[str, int]) -> tuple[str, int]:
-    """The ``(case, random_case_seed)`` a node runs after ``new`` ({name: value} of
-    :data:`CASE_KEYS`) is set on it while it ran ``current``: a name set alone ends the random
-    draw, a seed set alone replaces the name (the rule of ``_case.declare_case``)."""
-    n = new.get('case', current[0])
-    s = new.get('random_case_seed', current[1])
-    if 'case' in new and n and 'random_case_seed' not in new:
-        s = -1
-    if 'random_case_seed' in new and s >= 0 and 'case' not in new:
-        n = ''
-    return n, s
-
+__all__ = ['CaseWatch', 'Verdict']
 
 @dataclass(frozen=True)
 class Verdict:

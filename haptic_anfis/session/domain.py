@@ -10,6 +10,11 @@ from __future__ import annotations
 import os
 import time
 
+import rclpy
+from rclpy.context import Context
+from rclpy.signals import SignalHandlerOptions
+
+from ..nodes.executor import make_executor
 from .spec import SessionError, SessionSpec
 
 __all__ = ['WATCHED_NODES', 'DISCOVERY_WAIT_S', 'others_on_domain', 'watched_nodes',
@@ -33,11 +38,7 @@ def others_on_domain(domain_id: int | None = None, wait: float = DISCOVERY_WAIT_
     ``wait`` s. ``node``: an rclpy node on that domain to look with (else a short-lived one)."""
     if node is not None:
         return _watch(node, None, wait)
-    import rclpy
-    from rclpy.context import Context
-    from rclpy.signals import SignalHandlerOptions
 
-    from ..nodes.executor import make_executor
     ctx = Context()
     rclpy.init(args=[], context=ctx, domain_id=domain_id,
                signal_handler_options=SignalHandlerOptions.NO)

@@ -18,7 +18,13 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from ..bag.topics import ALL_LOOP_TOPICS
+from ..nodes.session import EVENTS_TOPIC, STATUS_TOPIC, SessionMonitor
+from ..realtime.processes import (HOLD_FOR_RECORDER, RECORDED_TOPICS, SESSION_CHECKED, VIEW_NODES,
+                                  Supervisor, graph_cores, node_env, on_stop_signals,
+                                  recorder_arguments, renamed_output, restore_signals)
 from ..view.doors import TOKEN_ENV
+from .domain import refuse_shared_domain
 from .spec import CASE_NODES, SessionSpec, recorder_settings
 
 __all__ = ['ProcessSession', 'ProcessResult', 'ORDER', 'NO_RESPAWN', 'recorded_topics']
@@ -34,8 +40,6 @@ def recorded_topics() -> list[str]:
     """What the launched recorder records: every loop topic, as the one-process runner records
     (:data:`~haptic_anfis.bag.topics.ALL_LOOP_TOPICS`: the applied force and velocity too), and
     the session's own status and events."""
-    from ..bag.topics import ALL_LOOP_TOPICS
-    from ..nodes.session import EVENTS_TOPIC, STATUS_TOPIC
     return [*ALL_LOOP_TOPICS, STATUS_TOPIC, EVENTS_TOPIC]
 
 
@@ -73,7 +77,6 @@ class ProcessSession:
         self.notes: list[str] = []
         self.recorded: list[str] = []  # the topics the session's recorder records
         if spec.record:
-            from ..realtime.processes import recorder_arguments
             topics, self.notes = recorder_settings(spec, recorded_topics())
             self.recorded = topics
             self.extra['recorder'] = [*spec.recorder_case_arguments(),
@@ -105,9 +108,6 @@ class ProcessSession:
         Raises:
             SessionError / CaseError / ParameterError: bad input (nothing started).
         """
-        from ..realtime.processes import (SESSION_CHECKED, VIEW_NODES, Supervisor, graph_cores,
-                                       node_env, on_stop_signals, restore_signals)
-        from ..nodes.session import SessionMonitor
         s = self.spec
         s.check()
         for n in self.notes:
@@ -138,7 +138,6 @@ class ProcessSession:
             [n for n in self.order if n not in VIEW_NODES])
         self.t0 = time.monotonic()
         try:
-            from .domain import refuse_shared_domain
             refuse_shared_domain(s, node=self.mon.node)
             self._start_and_supervise()
         except KeyboardInterrupt:
@@ -220,7 +219,6 @@ class ProcessSession:
 
     def _handle_deaths(self) -> bool:
         """Restart what died and may be restarted; False when the session must stop."""
-        from ..realtime.processes import HOLD_FOR_RECORDER, RECORDED_TOPICS, renamed_output
         s, sup = self.spec, self.sup
         for name, code in sup.dead():
             self.say('died', node=name, code=code)

@@ -11,15 +11,25 @@ from __future__ import annotations
 import signal
 import subprocess
 import time
+from pathlib import Path
 from typing import Callable, Mapping, Sequence
 
+from rclpy.parameter import Parameter
+
+from ..bag.reader import recorded_summary
+from ..bag.topics import ALL_LOOP_TOPICS
+from ..nodes.graph import build_graph
+from ..nodes.recorder import Recorder
+from ..nodes.side_nodes import SIDE_NICE, SideNodes, hold_until_recorded
+from ..realtime.processes import (guard_realtime_time, leave_realtime, recorder_arguments,
+                                  set_graph_priority)
+from .domain import refuse_shared_domain
 from .spec import SessionSpec
 
 __all__ = ['OneProcessSession', 'finish_process', 'open_graph', 'RECORDED_TOPICS']
 
 
 def _recorded_topics() -> tuple[str, ...]:
-    from ..bag.topics import ALL_LOOP_TOPICS
     return tuple(ALL_LOOP_TOPICS)
 
 
@@ -37,7 +47,6 @@ def open_graph(spec: SessionSpec | None = None, *, overrides: dict | None = None
     Raises:
         ParameterError: a node rejected its parameters (nothing is left running).
     """
-    from ..nodes.graph import build_graph
     spec = spec or SessionSpec(nodes=('falcon_driver', 'contact_detector', 'force_server'))
     args = [*spec.params_arguments(), *spec.user_ros_args(), *spec.case_arguments(),
             *spec.driver_arguments()]
@@ -100,11 +109,6 @@ class OneProcessSession:
                      if side or side_nodes or spec.view else None)
 
     def _recorder(self, ctx):
-        from pathlib import Path
-
-        from rclpy.parameter import Parameter
-
-        from ..nodes.recorder import Recorder
         s = self.spec   # the case args reach it with the graph's (global); 'default' does not
         named = s.case_arguments()
         default = [Parameter('case', value='default')] if s.recorder_case_arguments() and not (
@@ -118,12 +122,10 @@ class OneProcessSession:
         """The visualizer (unless ``in_process`` / ``no_viz``), with ``recorder_process`` the
         recorder, and ``more`` ({node: its ``--ros-args``}, e.g. ``exam run``'s examiner) as
         processes of their own, at CPU priority ``nice`` (None: the side nodes' default)."""
-        from ..nodes.side_nodes import SIDE_NICE, SideNodes
         s = self.spec
         common = [*s.params_arguments(), *s.user_ros_args()]
         nodes: dict[str, list[str]] = {}
         if s.record and s.recorder_process:
-            from ..realtime.processes import recorder_arguments
             nodes['recorder'] = [*common, *s.recorder_case_arguments(),
                                  *recorder_arguments(s.record, RECORDED_TOPICS())]
         if s.visualizer and not s.in_process:
@@ -142,7 +144,6 @@ class OneProcessSession:
             SideNodeError: a side node did not start (the graph is shut down).
         """
         self.spec.check()
-        from .domain import refuse_shared_domain
         refuse_shared_domain(self.spec)
         self.graph = open_graph(self.spec, overrides=self.overrides, extra=self.extra,
                                 program=f'haptic-anfis-{self.spec.command}')
@@ -166,7 +167,6 @@ class OneProcessSession:
         g, s = self.graph, self.spec
         end = time.monotonic() + s.ready_timeout
         if self.side and 'recorder' in self.side.nodes:
-            from ..nodes.side_nodes import hold_until_recorded
             if not hold_until_recorded(g, s.ready_timeout):
                 print(f'not ready after {s.ready_timeout:g} s: the recorder has not subscribed '
                       'to every loop topic' + ''.join(f'; {n} exited with code {c}'
@@ -176,7 +176,6 @@ class OneProcessSession:
             print(f'not ready after {s.ready_timeout:g} s: no force command reached the driver',
                   flush=True)
             return False
-        from ..realtime.processes import guard_realtime_time, set_graph_priority
         guard_realtime_time()  # rtkit's run-time limit ends no graph
         # now, not before: a cold numba compile at real-time priority would hold a core
         self.graph_scheduling = set_graph_priority(s.graph_priority)
@@ -200,7 +199,6 @@ class OneProcessSession:
         longest it may take [s]} for nodes whose output the caller needs (the examiner writes
         its report when stopped): each is asked to stop first and waited for that long (a line
         every :data:`FINISH_SAY_S` s), instead of the other nodes' short grace before a kill."""
-        from ..realtime.processes import leave_realtime
         try:
             # the shutdown computes (an hour's tick trace written): at rtkit's real-time
             # priority its run-time limit would SIGKILL the session for it
@@ -224,7 +222,6 @@ class OneProcessSession:
             if hasattr(n, 'writer'):
                 return n.summary()
         if self.spec.record:
-            from ..bag.reader import recorded_summary
             return recorded_summary(self.spec.record)
         return None
 

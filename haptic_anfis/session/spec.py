@@ -21,9 +21,18 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Mapping, Sequence
 
-from ..cases.library import CASE_DIR_HELP
+from ..cases.force_mapping import case_force_mapping
+from ..cases.library import CASE_DIR_HELP, DEFAULT_CASE, case_node_arguments, library
+from ..device.falcon import RATED_FORCE
 from ..errors import HapticAnfisError
-from ..realtime.processes import GRAPH_PRIORITY
+from ..nodes.parameter_files import (check_parameter_sources, parse_overrides,
+                                     read_parameter_file, ros_args_sources)
+from ..nodes.parameters import ParameterError, default_of
+from ..nodes.registry import declared_parameters, node_parameters
+from ..realtime.processes import GRAPH_PRIORITY, node_names
+from ..resources import config_file
+from ..view.app import check_port
+from ..view.doors import load_token
 
 __all__ = ['SessionSpec', 'SessionError', 'Option', 'OPTIONS', 'COMMANDS', 'ONE_PROCESS_NODES',
            'CASE_NODES', 'add_session_arguments', 'spec_from_args', 'recorder_settings']
@@ -268,8 +277,6 @@ class SessionSpec:
         for it or for every node, then the ``-p`` overrides, as rcl applies them), else
         ``default``. ``shipped=False``: the package's own ``config/<node>.yaml`` does not count
         (its values are the defaults, written out)."""
-        from ..nodes.parameters import read_parameter_file, ros_args_sources
-        from ..resources import config_file
         value = default
         own = Path(config_file(f'{node}.yaml')).resolve()
         for f in self.params_files:
@@ -296,9 +303,6 @@ class SessionSpec:
         if 'falcon_driver' not in self.nodes or self.user_parameter(
                 'falcon_driver', 'force_scale', shipped=False) is not None:
             return None
-        from ..cases.force_mapping import case_force_mapping
-        from ..cases.library import DEFAULT_CASE, library
-        from ..device.falcon import RATED_FORCE
         lib = library()
         case = (lib.random(int(self.seed)) if self.random_case
                 else lib.get(self.case or DEFAULT_CASE))
@@ -324,7 +328,6 @@ class SessionSpec:
         """A parameter file or ``-p`` override sets one of :data:`SCENE_PARAMETERS` of a case
         node (or of every node) to other than its default (or the overrides name a parameter
         file: not looked into)."""
-        from ..nodes.parameters import read_parameter_file, ros_args_sources
         files, overrides, _ = ros_args_sources(self.user_ros_args())
         if files:
             return True
@@ -337,9 +340,17 @@ class SessionSpec:
 
     def view_arguments(self, controls: bool) -> list[str]:
         """The web_view node's own ``-p`` arguments (its port; ``controls``: the instructor's
-        console, on its port, with its token file)."""
+        console, on its port, with its token file; the driver's ``max_force`` and a
+        ``force_scale`` the user set, which a case chosen on the console then leaves alone)."""
         args = ['-p', f'port:={int(self.view_port)}',
                 '-p', f"controls:={'true' if controls else 'false'}"]
+        if 'falcon_driver' in self.nodes:
+            max_force = self.user_parameter('falcon_driver', 'max_force')
+            if max_force is not None:
+                args += ['-p', f'max_force:={float(max_force)!r}']
+            scale = self.user_parameter('falcon_driver', 'force_scale', shipped=False)
+            if scale is not None:
+                args += ['-p', f'force_scale:={float(scale)!r}']
         if controls:
             args += ['-p', f'console_port:={int(self.console_port)}']
             if self.console_token_file:
@@ -364,7 +375,6 @@ class SessionSpec:
             ParameterError: the parameter files / overrides (one line per problem:
                 file:line, node, parameter, what was given and what is expected).
         """
-        from ..realtime.processes import node_names
         unknown = [n for n in self.nodes if n not in node_names()]
         if unknown or not self.nodes:
             raise SessionError(f'--nodes: unknown node(s) {unknown or list(self.nodes)!r}; '
@@ -395,7 +405,6 @@ class SessionSpec:
                                    f'--nodes has none ({", ".join(self.nodes)})')
         self._check_case()
         if self.view:   # viser would move to the next free port and the URL shown be wrong
-            from ..view.app import check_port
             check_port(self.view_port, flag='--view-port')
             if self.command != 'exam':   # the instructor's console (exam run has none)
                 if self.console_port == self.view_port:
@@ -403,7 +412,6 @@ class SessionSpec:
                                        "--view-port; the console needs a port of its own")
                 check_port(self.console_port, flag='--console-port')
                 if self.console_token_file:
-                    from ..view.doors import load_token
                     load_token(self.console_token_file)   # DoorError: one line naming it
         if check_parameters:
             self.check_parameters()
@@ -412,7 +420,6 @@ class SessionSpec:
     def _check_case(self) -> None:
         if self.command == 'exam':  # exam run resolves its --case (a case or a scene file)
             return
-        from ..cases.library import case_node_arguments
         case_node_arguments(self)  # the spec has the case options' fields: the same checks
 
     def check_parameters(self, nodes: Sequence[str] | None = None) -> None:
@@ -422,8 +429,6 @@ class SessionSpec:
         Raises:
             ParameterError: one line per problem.
         """
-        from ..nodes.parameters import ParameterError, check_parameter_sources, parse_overrides
-        from ..nodes.registry import declared_parameters
         names = list(nodes or self.nodes)
         if self.record and 'recorder' not in names:
             names.append('recorder')
@@ -477,8 +482,6 @@ def _changes_scene(node: str, key: str, value) -> bool:
     node renders or scores: one of :data:`SCENE_PARAMETERS`, not its default."""
     if key not in SCENE_PARAMETERS:
         return False
-    from ..nodes.parameters import default_of
-    from ..nodes.registry import node_parameters
     for n in (CASE_NODES if node == '**' else (node,) if node in CASE_NODES else ()):
         if value != default_of(node_parameters(n), key, value):
             return True
@@ -489,7 +492,6 @@ def recorder_settings(spec: SessionSpec, topics: Sequence[str]) -> tuple[list[st
     """(topics, notes): what the session's recorder records. The session's ``topics``, plus any
     ``topics`` a parameter file gives the recorder (merged, not silently overridden); ``notes``
     say what the session's settings override (``--record`` over a file's ``output``)."""
-    from ..nodes.parameters import read_parameter_file
     merged = list(topics)
     notes: list[str] = []
     for f in spec.params_files:

@@ -140,3 +140,54 @@ class DentSurface:
         out[:, :3] = (1 - t) * SKIN + t * DEEP
         out[:, 3] = self.alpha
         return out
+
+
+def dent_model(path='', reach: float = 5.0) -> DeformationModel:
+    """The dent model the views draw: the FE skin displacements of ``path`` (a case's dataset or
+    its displacement file; '' = the shipped default scene's), fading to exactly 0 over the last
+    probe radius before ``reach`` probe radii from the probe axis.
+
+    Raises:
+        DisplacementDataError, OSError, ValueError: no usable displacement data.
+    """
+    if path:
+        return DeformationModel.load(path, taper=reach - 1.0, reach=reach)
+    return DeformationModel.load_default(taper=reach - 1.0, reach=reach)
+
+
+class DentFeed:
+    """What one dent frame sends, for a drawing that subscribers receive as they join.
+
+    :meth:`frame` is called at the frame rate with the surface shown now (a case switch swaps it),
+    the probe's contact and the subscriber count; it returns the patches to send: every patch
+    when a subscriber joined (a late one needs the whole surface as drawn), the changed ones
+    when the contact moved, nothing while nobody draws it or the contact is the one drawn.
+    ``frames`` counts the frames that changed the drawing; ``last`` is the contact drawn."""
+
+    def __init__(self, subscribers: int = 0) -> None:
+        self.subscribers = subscribers
+        self.shown: DentSurface | None = None
+        self.last: tuple | None = None
+        self.frames = 0
+        self._key: np.ndarray | None = None
+
+    def frame(self, surface: DentSurface | None, contact: tuple | None,
+              subscribers: int) -> list[Patch]:
+        """The patches to send; ``contact``: (point (3,), direction (3,), depth [m]) or None
+        (lifted)."""
+        if surface is None:
+            return []
+        if surface is not self.shown:   # a new surface: its first dent drawn afresh
+            self.shown, self._key = surface, None
+        out: list[Patch] = []
+        if subscribers > self.subscribers:
+            out = surface.all_patches()
+        self.subscribers = subscribers
+        key = None if contact is None else np.concatenate([contact[0], contact[1], [contact[2]]])
+        if subscribers == 0 or (key is None and self._key is None) or (
+                key is not None and self._key is not None and np.array_equal(key, self._key)):
+            return out   # nobody draws it, or the contact drawn: the surface keeps it
+        out += surface.update(*(contact or (None, None, 0.0)))
+        self.frames += 1
+        self.last, self._key = contact, key
+        return out

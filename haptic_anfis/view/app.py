@@ -22,17 +22,19 @@ from collections import deque
 from dataclasses import dataclass, field
 
 import numpy as np
+import trimesh
 
 from ..errors import HapticAnfisError
 from ..exam.config import LEVELS
 from ..exam.normal import normal_lines
 from ..palette import REGION, rgb255
-from .doors import guarded_server
+from ..record import history
+from .doors import close_door, guarded_server
 from .escape import md
 from .gauge import DEVICE_MAX_FORCE, gauge
 from .legend import banner_html, gauge_html, legend_html
 from .panel import history_markdown, numbers_markdown
-from .scene import (LESION_RGB, MARK_RGB, NORMAL_RGB, SkinPaint, frame_camera,
+from .scene import (LESION_RGB, MARK_RGB, NORMAL_RGB, PROBE_LENGTH, SkinPaint, frame_camera,
                     probe_quaternion, region_outline)
 
 __all__ = ['BLIND', 'PROBE_LENGTH', 'md', 'ViewApp', 'ViewError', 'check_port', 'coverage_fractions',
@@ -40,7 +42,6 @@ __all__ = ['BLIND', 'PROBE_LENGTH', 'md', 'ViewApp', 'ViewError', 'check_port', 
 
 #: the dropdown's entry for a blind random case
 BLIND = 'blind random case'
-PROBE_LENGTH = 0.03  # [m] drawn length of the probe cylinder
 FORCE_SCALE = 0.004  # [m/N] force arrow length
 #: the legend's place in the panel: after every folder, the trainee history's too
 LAST = 1e6
@@ -74,7 +75,6 @@ def trainee_history(trainee: str, db=None) -> list[dict]:
     oldest first; ``db``: the record file, None = its default). A record that cannot be read
     gives one row ``{'error': ...}`` naming it, as does a malformed id (typed on the page):
     the page shows it and goes on."""
-    from ..record import history
     try:
         return history(db, trainee)
     except (ValueError, OSError) as exc:   # RecordError is a ValueError
@@ -120,7 +120,6 @@ class ViewApp:
                  host: str = '127.0.0.1', title: str = 'haptic_anfis', deformation=None,
                  max_force: float = DEVICE_MAX_FORCE) -> None:
         check_port(port, host)
-        import trimesh
         self._trimesh = trimesh
         self.port, self.host = int(port), host
         self.thresholds = tuple(float(t) for t in thresholds)
@@ -532,7 +531,6 @@ class ViewApp:
                 'skin_frames': self.stats.skin_frames, 'clients': len(self.server.get_clients())}
 
     def close(self) -> None:
-        from .doors import close_door
         self.server.stop()
         close_door(self.door)
 

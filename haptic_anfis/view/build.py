@@ -8,8 +8,15 @@ import time
 
 import numpy as np
 
+from ..cases import DEFAULT_CASE, library
+from ..contact import load_mesh
+from ..exam import ExamSession, Surface, subject_from_scene
 from ..exam.config import load_exam_config
-from .app import ViewApp
+from ..exam.from_bag import resolve_exam_case, session_from_bag
+from ..tissue.dent_display import dent_model
+from ..tissue.displacement import DisplacementDataError
+from .app import ViewApp, check_port
+from .debrief import Debrief
 
 __all__ = ['CaseView', 'bag_debrief', 'case_view', 'open_bag_view', 'serve']
 
@@ -30,13 +37,8 @@ class CaseView:
 
 def _deformation(case):
     """The case's dent model from its FE skin displacements (None, said why, when it has none)."""
-    from ..tissue.deformation import DeformationModel
-    from ..tissue.displacement import DisplacementDataError
-    reach = 5.0  # probe radii, as the visualizer's default dent_reach
-    try:
-        if case is None:
-            return DeformationModel.load_default(taper=reach - 1.0, reach=reach)
-        return DeformationModel.load(case.dataset_path, taper=reach - 1.0, reach=reach)
+    try:   # 5 probe radii, as the visualizer's default dent_reach
+        return dent_model(case.dataset_path if case is not None else '', reach=5.0)
     except (DisplacementDataError, OSError, ValueError) as exc:
         print(f'view: no dent drawn ({exc})', flush=True)
         return None
@@ -49,10 +51,6 @@ def case_view(case: str | None = None, exam_config: str | os.PathLike | None = N
     Raises:
         CaseError (a ValueError): unknown case (the message lists the known ones).
     """
-    from ..cases import DEFAULT_CASE, library
-    from ..contact import load_mesh
-    from ..exam import ExamSession, Surface, subject_from_scene
-    from ..exam.from_bag import resolve_exam_case
     cfg = load_exam_config(exam_config)
     c, scene = resolve_exam_case(case, need=('mesh_path',))
     mesh = load_mesh(c.mesh_path if c else library().get(DEFAULT_CASE).mesh_path, unit='mm')
@@ -71,8 +69,6 @@ def bag_debrief(bag: str | os.PathLike, case: str | None = None,
     Raises:
         BagError (a ValueError): missing / corrupt bag, or no contact topic in it.
     """
-    from ..exam.from_bag import session_from_bag
-    from .debrief import Debrief
     report, session = session_from_bag(bag, case, exam_config, require_contact=True)
     return Debrief(report, session)
 
@@ -80,7 +76,6 @@ def bag_debrief(bag: str | os.PathLike, case: str | None = None,
 def open_bag_view(bag, case: str | None = None, port: int = 8080, host: str = '127.0.0.1',
                   exam_config=None, trainee: str = '', db=None) -> ViewApp:
     """A page showing the debrief of ``bag`` (checks the port, then the bag, then serves)."""
-    from .app import check_port
     check_port(port, host)   # before the seconds of reading the bag
     d = bag_debrief(bag, case, exam_config)
     s = d.session

@@ -18,7 +18,11 @@ from __future__ import annotations
 import threading
 from typing import Callable
 
+from ..record import RecordError
+from ..record.mastery import DEFAULT
+from ..record.overview import overview, overview_csv
 from .app import BLIND, check_port
+from .curves import curves_image
 from .doors import close_door, guarded_server
 from .escape import md
 
@@ -126,9 +130,6 @@ class ConsoleApp:
     def refresh(self, select: str | None = None) -> None:
         """Read the record again: the overview table, the trainee list, the curves of
         ``select`` (None: the ones shown). A record that cannot be read is said, not raised."""
-        from ..record import RecordError
-        from ..record.mastery import DEFAULT
-        from ..record.overview import overview
         with self._lock:
             try:
                 self.rows = overview(self.db, self.mastery_config or DEFAULT)
@@ -145,7 +146,6 @@ class ConsoleApp:
             self._show_curves(pick)
 
     def _show_curves(self, trainee: str) -> None:
-        from .curves import curves_image
         with self._lock:
             row = next((r for r in self.rows if r['trainee'] == trainee), None)
             if row is None:
@@ -160,7 +160,6 @@ class ConsoleApp:
 
     def overview_csv(self) -> str:
         """The overview as CSV text (:func:`~haptic_anfis.record.overview.overview_csv`)."""
-        from ..record.overview import overview_csv
         return overview_csv(self.rows)
 
     def _export(self, client) -> None:

@@ -15,6 +15,7 @@ import numpy as np
 from ..cases.grading import DEEP_DEPTH
 from ..exam.config import LEVELS
 from ..exam.coverage import CoverageGrid
+from .feel_again import feel_commands
 
 __all__ = ['Debrief', 'LesionMarker', 'NormalMarker', 'lesion_status', 'lesion_why',
            'normal_markers', 'panel_numbers']
@@ -211,7 +212,6 @@ class Debrief:
         (:mod:`.feel_again`) for each palpable lesion of a library case, its files written
         into ``directory`` (None: a folder of the temporary directory); none for a blind case
         (its name stays with the instructor) or a case not in the library."""
-        from .feel_again import feel_commands
         case = self.report.get('case')
         if not case or case == 'blind case' or self.report.get('blind'):
             return {}

@@ -17,6 +17,9 @@ from pathlib import Path
 
 import yaml
 
+from ..cases import CaseError, library
+from ..tissue.scene import load_scene
+
 __all__ = ['FEEL_DURATION', 'feel_commands', 'feel_script', 'write_feel_again']
 
 #: [s] how long the command's session runs
@@ -55,8 +58,6 @@ def write_feel_again(case: str, lesion: dict, thresholds, directory: str | os.Pa
     Raises:
         CaseError (a ValueError): ``case`` is not in the library.
     """
-    from ..cases import library
-    from ..tissue.scene import load_scene
     scene = load_scene(library().get(case).scene_path)
     d = Path(directory)
     d.mkdir(parents=True, exist_ok=True)
@@ -76,7 +77,6 @@ def feel_commands(case: str, lesions: list[dict], thresholds,
     """{lesion name: :func:`write_feel_again`'s command} for each palpable lesion of the report
     entries ``lesions`` of library case ``case``, the files in ``directory`` (None: a folder of
     the temporary directory); {} for a case not in the library or nowhere to write."""
-    from ..cases import CaseError
     d = Path(directory) if directory is not None else \
         Path(tempfile.gettempdir()) / 'haptic_anfis_feel_again' / str(case)
     out = {}

@@ -14,8 +14,11 @@ import numpy as np
 from ..palette import FINDING, LEVEL, MARK, NORMAL, NOT_PRESSED, SKIN, rgb255
 
 __all__ = ['FRONTAL', 'LESION_RGB', 'LEVEL_RGB', 'MARK_RGB', 'NORMAL_RGB', 'OUTSIDE_RGB',
-           'Framing', 'SkinPaint', 'frame_camera', 'pressure_rgb', 'probe_quaternion',
-           'region_outline']
+           'PROBE_LENGTH', 'Framing', 'SkinPaint', 'frame_camera', 'pressure_rgb', 'probe_centred',
+           'probe_quaternion', 'region_outline']
+
+#: [m] drawn length of the probe cylinder (its face at the probe tip, its body out of the tissue)
+PROBE_LENGTH = 0.03
 
 #: coverage colour per highest level reached (the palette's, as report.png): none (the region
 #: not yet palpated: a neutral, lighter than light), light, medium, deep
@@ -150,3 +153,15 @@ def probe_quaternion(direction) -> tuple[float, float, float, float]:
     q = np.array([1.0 + c, *axis])
     q /= np.linalg.norm(q)
     return tuple(float(x) for x in q)
+
+
+def probe_centred(tip, direction) -> tuple[tuple[float, float, float],
+                                           tuple[float, float, float, float]]:
+    """(centre (3,) [m], (w, x, y, z)) of the probe cylinder drawn about its centre (RViz's
+    cylinder): its face at the probe ``tip`` (3,) [m], its body out of the tissue against the
+    indentation ``direction`` (None, zero or not finite: -x, the nipple axis inwards)."""
+    d = np.asarray((-1.0, 0.0, 0.0) if direction is None else direction, float)
+    n = float(np.linalg.norm(d))
+    d = d / n if n > 1e-9 else np.array([-1.0, 0.0, 0.0])
+    c = np.asarray(tip, float) - 0.5 * PROBE_LENGTH * d
+    return (float(c[0]), float(c[1]), float(c[2])), probe_quaternion(d)

@@ -19,7 +19,10 @@ from pathlib import Path
 
 import numpy as np
 
+from ..cases.force_mapping import tissue_clamp
+from .app import ViewApp, coverage_fractions
 from .browser import chromium, free_port, screenshot
+from .build import bag_debrief, case_view, open_bag_view
 
 __all__ = ['live_at', 'main']
 
@@ -45,7 +48,6 @@ def live_at(app, debrief, t: float) -> None:
     f = np.array(s.forces, float).reshape(-1, 4)
     f = f[f[:, 0] <= t_abs]
     lv = debrief.face_levels(t)
-    from .app import coverage_fractions
     app.set_coverage(lv, coverage_fractions(s.grid, lv))
     app.show_live(p[-1, 1:4] if len(p) else None, contact, f[-1, 1:4] if len(f) else None, t)
 
@@ -60,9 +62,6 @@ def main(argv: list[str] | None = None) -> int:
         return 1
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)
-    from .app import ViewApp
-    from ..cases.force_mapping import tissue_clamp
-    from .build import bag_debrief, case_view, open_bag_view
     with tempfile.TemporaryDirectory(prefix='haptic-anfis-shots-') as tmp:
         bag = Path(tmp) / 'exam'
         r = subprocess.run([sys.executable, '-m', 'haptic_anfis.cli', 'exam', 'run', '--trainee',

@@ -4,6 +4,7 @@ custom data, a crash keeps it (``bag recover`` reads it back from the MCAP), and
 default case: a small-breast case's bag got ~0 % coverage)."""
 from __future__ import annotations
 
+import json
 import shutil
 import time
 
@@ -169,7 +170,13 @@ def test_the_recorder_writes_the_case_and_follows_a_switch(tmp_path):
     finally:
         rclpy.shutdown(context=ctx)
     assert bag_info(tmp_path / 'bag').custom_data['case'] == f'normal, default, {drawn}'
+    # the force mapping in force: the last case's (each case renders with its own scale)
+    from haptic_anfis.cases.force_mapping import case_force_mapping
+    want = case_force_mapping(library().get(drawn)).as_dict()
+    assert json.loads(bag_info(tmp_path / 'bag').custom_data['force_mapping']) == want
+    assert case_force_mapping(library().get('normal')).force_scale != want['force_scale']
     assert bag_info(tmp_path / 'blind').custom_data['case'] == drawn
+    assert json.loads(bag_info(tmp_path / 'blind').custom_data['force_mapping']) == want
     assert 'case' not in bag_info(tmp_path / 'none').custom_data
     assert bag_info(tmp_path / 'none_then').custom_data['case'] == 'unknown, normal'
 

@@ -217,3 +217,24 @@ def test_the_warning_names_the_likely_cause(ctx, monkeypatch, loop, backend, rea
     finally:
         d.close()
         d.destroy_node()
+
+
+def test_a_force_scale_set_while_running_is_rendered_and_published_with(ctx):
+    """A case switched live (the browser page) sets the case's own force scale on the driver:
+    the loop, its force input and the applied force it publishes (tissue frame) take it; a
+    scale that is no scale is refused and the others stay read-only."""
+    from haptic_anfis.device import native_tick as nt
+    d = driver(ctx, force_scale=0.5)
+    try:
+        assert d.servo.cfg[nt.CFG.force_scale] == 0.5
+        assert d.set_parameters([Parameter('force_scale', value=0.25)])[0].successful
+        assert d.mapping.force_scale == d.input.mapping.force_scale == 0.25
+        assert d.servo.mapping.force_scale == d.servo.cfg[nt.CFG.force_scale] == 0.25
+        assert d.get_parameter('force_scale').value == 0.25
+        bad = d.set_parameters([Parameter('force_scale', value=-1.0)])[0]
+        assert not bad.successful and 'force_scale' in bad.reason
+        assert not d.set_parameters([Parameter('max_force', value=1.0)])[0].successful
+        assert d.mapping.force_scale == 0.25 and d.params['max_force'] == 8.9
+    finally:
+        d.close()
+        d.destroy_node()

@@ -6,9 +6,9 @@ import argparse
 
 import pytest
 
-from haptic_anfis.nodes.parameters import (CASE_PARAMS, Param, ParameterError, check_parameter_sources,
-                                           check_value, parse_overrides, positive,
-                                           read_parameter_file, resolve_parameters)
+from haptic_anfis.nodes.parameter_files import (check_parameter_sources, parse_overrides,
+                                                read_parameter_file, resolve_parameters)
+from haptic_anfis.nodes.parameters import CASE_PARAMS, Param, ParameterError, check_value, positive
 
 DECLARED = {
     'falcon_driver': [Param('max_force', 8.9, 'force limit [N]', positive),

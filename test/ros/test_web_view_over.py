@@ -29,13 +29,13 @@ def test_stop_says_exam_over_before_scoring_then_shows_the_debrief(monkeypatch):
         node._on_mark(m)
         assert node.app.state()['live_marks'] == 1   # drawn as it is placed
         seen = {}
-        report = node.cv.session.report
+        report = node.page.cv.session.report
 
         def slow_report(*a, **k):   # what the page says while the session is scored
             seen['status'] = node.app.state()['status']
             seen['cue'] = node.app.state()['cue']
             return report(*a, **k)
-        monkeypatch.setattr(node.cv.session, 'report', slow_report)
+        monkeypatch.setattr(node.page.cv.session, 'report', slow_report)
         node._requests.append(('stop', None))
         end = time.monotonic() + 30.0
         while time.monotonic() < end and node.app.mode != 'debrief':

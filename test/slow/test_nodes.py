@@ -163,7 +163,7 @@ def test_config_yaml_matches_declared_parameters():
 
 def test_trainer_trains_writes_and_reloads(tmp_path):
     from haptic_anfis.nodes.force_server import ForceServer
-    from haptic_anfis.nodes.graph import make_executor_for
+    from haptic_anfis.nodes.executor import make_executor
     from haptic_anfis.nodes.trainer import Trainer
     from rclpy.context import Context
     model = tmp_path / 'model.json'
@@ -178,7 +178,7 @@ def test_trainer_trains_writes_and_reloads(tmp_path):
         progress = []
         tr.create_subscription(__import__('std_msgs.msg', fromlist=['String']).String,
                                '~/progress', lambda m: progress.append(m.data), 10)
-        ex = make_executor_for(ctx)
+        ex = make_executor(ctx)
         ex.add_node(fs)
         ex.add_node(tr)
         before = model.stat().st_mtime_ns

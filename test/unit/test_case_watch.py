@@ -2,7 +2,8 @@
 outside the page splits the loop; set on every running node, the page follows."""
 from __future__ import annotations
 
-from haptic_anfis.session.case_watch import CaseWatch, effective_case
+from haptic_anfis.nodes.parameters import effective_case
+from haptic_anfis.session.case_watch import CaseWatch
 
 PAGE = ('', -1)
 LOOP = {'contact_detector', 'force_server'}

@@ -84,3 +84,27 @@ def test_bad_surface_rejected():
         DentSurface(np.zeros((3, 3)), np.zeros((1, 4), dtype=int), model)
     with pytest.raises(ValueError, match='patch_size'):
         DentSurface(np.zeros((3, 3)), np.zeros((1, 3), dtype=int), model, patch_size=0.0)
+
+
+def test_the_dent_feed_sends_a_late_subscriber_everything_and_otherwise_only_what_changed():
+    """DentFeed, frame by frame: nothing while nobody draws it, every patch when a subscriber
+    joins, the changed patches when the contact moves, nothing for the contact already drawn,
+    and a new surface (a case switch) dented afresh."""
+    from haptic_anfis.tissue.dent_display import DentFeed
+    mesh = surface_mesh(RADII)
+    model = DeformationModel(taper=4.0, reach=5.0).fit(synthetic())
+    s = DentSurface(np.asarray(mesh.vertices), np.asarray(mesh.faces), model)
+    x = RADII[0]
+    press = (np.array([x, 0.0, 0.0]), np.array([-1.0, 0.0, 0.0]), 0.008)
+    feed = DentFeed(subscribers=0)
+    assert feed.frame(None, press, 1) == []   # no surface yet
+    assert feed.frame(s, press, 0) == [] and feed.frames == 0   # nobody draws it
+    joined = feed.frame(s, None, 1)   # a subscriber joins, probe lifted
+    assert len(joined) == s.n_patches and feed.frames == 0
+    dented = feed.frame(s, press, 1)
+    assert 0 < len(dented) < s.n_patches and feed.frames == 1 and feed.last is press
+    assert feed.frame(s, press, 1) == [] and feed.frames == 1   # the contact drawn
+    lifted = feed.frame(s, None, 1)
+    assert {p.index for p in lifted} == {p.index for p in dented} and feed.frames == 2
+    other = DentSurface(np.asarray(mesh.vertices), np.asarray(mesh.faces), model)
+    assert len(feed.frame(other, press, 1)) == len(dented)   # the new surface dented afresh

@@ -1045,3 +1045,56 @@ def test_the_ticks_safety_rules_follow_the_python_rules(seed):
         seen.add('clamped' if math.hypot(*want) > 4.999 else 'zero' if want == (0, 0, 0) else '')
     assert seen >= {'ok', 'nan', 'frame', 'older', 'clamped', 'zero'}
     assert lp.safety.stats.watchdog_trips == ref.stats.watchdog_trips > 0
+
+
+def _constant_model(f: float, at=(0.06, 0.0, 0.0)):
+    """A local model pushing ``f`` [N] along +x at ``at`` (tissue frame), no stiffness: the same
+    force wherever the probe is within the model's radius."""
+    return LocalModel((f, 0.0, 0.0), at, np.zeros((3, 3)), (at[0] + 0.005, at[1], at[2]),
+                      (1.0, 0.0, 0.0), (-1.0, 0.0, 0.0), 0.005, False, 0.0).values()
+
+
+def test_a_force_scale_set_while_running_is_rendered_from_the_next_tick():
+    """A case switched live brings its own force scale: the next tick renders the same tissue
+    force times the new scale, and the stiffness bound follows it."""
+    from haptic_anfis.device.local_model import FALCON_MAX_STIFFNESS
+    lp = loop('local_model', max_force_rate=1e6, validity_time=10.0, hold_time=20.0)
+    lp.safety.start()
+    lp.renderer.offer_values(_constant_model(2.0), 0.0)
+    pin(lp, MAP.to_device((0.06, 0.0, 0.0)), 0.0)
+    lp.tick(0.0)
+    assert lp.tick(0.001)[0] == pytest.approx(2.0)   # force_scale 1
+    m = lp.set_force_scale(0.4, FALCON_MAX_STIFFNESS)
+    assert m.force_scale == lp.mapping.force_scale == 0.4 and m.scale == MAP.scale
+    assert lp.tick(0.002)[0] == pytest.approx(0.8)
+    want = tissue_stiffness_limit(FALCON_MAX_STIFFNESS, 0.4, MAP.scale)
+    assert lp.renderer.max_stiffness == pytest.approx(want)
+    assert lp.cfg[nt.CFG.max_stiffness] == pytest.approx(want)
+    with pytest.raises(ValueError, match='force_scale'):
+        lp.set_force_scale(0.0, FALCON_MAX_STIFFNESS)
+    assert lp.mapping.force_scale == 0.4
+
+
+def test_a_force_scale_set_while_running_reaches_the_servo_process():
+    """The servo process reads its configuration from memory it shares with the driver: a
+    scale set in the driver's process is the one the forked tick renders."""
+    import time
+    from haptic_anfis.device.local_model import FALCON_MAX_STIFFNESS
+    lp = loop('local_model', max_force_rate=1e6, validity_time=60.0, hold_time=60.0,
+              process=True)
+    lp.safety.start()
+    lp.start()
+    try:
+        def rendered(f, timeout=20.0):
+            end = time.monotonic() + timeout
+            while time.monotonic() < end:
+                lp.renderer.offer_values(_constant_model(2.0), time.monotonic())
+                time.sleep(0.01)
+                if lp.force[0] == pytest.approx(f, abs=1e-6):
+                    return True
+            return False
+        assert rendered(2.0)
+        lp.set_force_scale(0.25, FALCON_MAX_STIFFNESS)
+        assert rendered(0.5)
+    finally:
+        lp.stop()

@@ -18,7 +18,7 @@ from haptic_anfis.pipeline import contact as pc, force as pf
 from haptic_anfis.bag.topics import JOINT_STATE_TYPE, absolute, typestore
 from haptic_anfis.bag.writer import BagWriter
 from haptic_anfis.nodes import cdr, contact_detector as cd, force_server as fs
-from haptic_anfis.nodes.parameters import resolve_parameters
+from haptic_anfis.nodes.parameter_files import resolve_parameters
 
 out = Path(sys.argv[1])
 tracker = pc.make_tracker(resolve_parameters(cd.PARAMS, 'contact_detector'))
