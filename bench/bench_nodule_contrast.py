@@ -12,9 +12,11 @@ for the sources). The ``... at (0, 0) @ (o, 0)`` rows move the point o mm off th
 width of its bump.
 
 The grading (:mod:`haptic_anfis.cases.background`) measures a bump against the force map's
-smooth trend, which takes up part of a wide bump; the second table gives, from the committed
-store of nod_s_fatty_idc10_d10 (no solve), the ratio of its lesion's graded bump to its
-contrast against the lesion-free twin.
+smooth trend, which takes up part of a wide bump; the second table gives, from committed stores
+(no solve but the baseline at (0, 16) mm), the ratio of the graded bump to the contrast at the
+point: nod_s_fatty_idc10_d10's lesion against its lesion-free twin, and nod_s_fatty_free's
+nodule under (0, 16) mm against the same point without nodules. "no conv.": the load path
+stopped there (one attempt at the scene's 4 mm step, no retries; the sweep retries at 2 and 1 mm).
 
     .venv/bin/python bench/bench_nodule_contrast.py [--cache FILE] [--only KEY ...]
 
@@ -36,11 +38,13 @@ import numpy as np  # noqa: E402
 import yaml  # noqa: E402
 
 from harness import ROOT, run_with_page  # noqa: E402
+from haptic_anfis.cases.grading import DEEP_DEPTH, PALPABLE_PCT  # noqa: E402
 from haptic_anfis.tissue.fe import FESolveError, solve_scene_point  # noqa: E402
 from haptic_anfis.tissue.scene import parse_scene  # noqa: E402
 from haptic_anfis.tissue.scenebase import surface_height  # noqa: E402
 
 BASE = ROOT / 'config' / 'scenes' / 'nod_s_fatty_free.yaml'
+DEEP_MM = round(DEEP_DEPTH * 1e3, 6)  # the exam's deep level [mm]
 RIBS = {'z_mm': [-45, -15, 15, 45], 'width_mm': 12, 'height_mm': 9, 'cover_mm': 5,
         'source': 'bench'}
 #: key: (breast kPa, point (y, z) mm, region kind, region kPa, radius mm, centre depth mm[,
@@ -154,6 +158,34 @@ def _graded_vs_contrast(done: dict) -> list[str]:
     return rows
 
 
+def _contrast(done: dict, key: str, depth_mm: float) -> float:
+    """Contrast [%] of ``key`` over its baseline at ``depth_mm`` (NaN where not solved)."""
+    b, f = done[_baseline(key)], done[key]
+    k = b['depths_mm'].index(depth_mm)
+    return 100.0 * (f['force_n'][k] / b['force_n'][k] - 1.0)
+
+
+def _summary(done: dict, keys: list[str], depth_mm: float = DEEP_MM) -> str:
+    """The deep level's figures in one paragraph: the fibrocystic nodules' contrast at the point
+    over them in fat and in glandular tissue (the spec's radius range), against the stylus
+    threshold, and the rib's."""
+    def span(prefix: str) -> tuple[float, float, int, int]:
+        c = [_contrast(done, k, depth_mm) for k in keys
+             if k.startswith(prefix) and ' at ' not in k]
+        return min(c), max(c), sum(v >= PALPABLE_PCT for v in c), len(c)
+    out = [f'\nAt the deep level ({depth_mm:g} mm), over one region:']
+    for name, prefix in (('fibrous nodules (107 kPa, radius 3-6 mm) in fat', 'fat19 + fibrous107'),
+                         ('fibrous nodules in glandular tissue', 'gland33 + fibrous107')):
+        if any(k.startswith(prefix) for k in keys):
+            lo, hi, n_at, n = span(prefix)
+            out.append(f'- {name}: {lo:+.1f} to {hi:+.1f} %; {n_at} of {n} at or above the '
+                       f'{PALPABLE_PCT:g} % stylus threshold')
+    rib = [k for k in keys if CASES[k][2] == 'rib']
+    for k in rib:
+        out.append(f'- {k}: {_contrast(done, k, depth_mm):+.1f} %')
+    return '\n'.join(out)
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split('\n')[0])
     ap.add_argument('--cache', type=Path, help='JSON file of solved points (resume)')
@@ -186,6 +218,7 @@ def main() -> int:
     print('\nThe graded bump (over the force map\'s smooth trend, what cases/background.py '
           'grades) against the contrast at the point over the region:\n')
     print('\n'.join(_graded_vs_contrast(done)))
+    print(_summary(done, keys))
     return 0
 
 
