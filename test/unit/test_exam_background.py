@@ -49,6 +49,6 @@ def test_the_exam_subject_of_a_nodular_scene_carries_its_background():
 
 
 def test_fat_lobules_in_a_dense_breast_are_named_as_such():
-    bg = load_scene(SCENE_DIR / 'nod_s_dense_ribs_free.yaml').background
+    bg = load_scene(SCENE_DIR / 'nod_s_dense_fib8_d10.yaml').background
     n = bg.nodules[0]
     assert bg.region_at(n.centre[1], n.centre[2]) == (n.name, 'a fat lobule')
