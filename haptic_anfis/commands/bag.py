@@ -5,8 +5,24 @@ from __future__ import annotations
 import argparse
 import sys
 
+from ..bag import bag_info, format_info, recover_bag
+from ..bag.export import export_csv
+from ..bag.topics import absolute
+from ..nodes.parameters import ParameterError
+from ..nodes.resim import resimulate
+
+try:  # play and record run a ROS node (rclpy: the 'ros' extra); info/export/recover/resim do not
+    from rclpy.parameter import Parameter
+
+    from ..nodes.player import Player
+    from ..nodes.recorder import Recorder
+    from ..nodes.runtime import run_node
+except ImportError as exc:
+    _NO_ROS: ImportError | None = exc
+else:
+    _NO_ROS = None
+
 NAME = 'bag'
-HELP = 'record, play, inspect, export, recover and re-simulate rosbag2 session bags'
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -64,14 +80,11 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _info(args) -> int:
-    from ..bag import bag_info, format_info
     print(format_info(bag_info(args.path)))
     return 0
 
 
 def _export(args) -> int:
-    from ..bag.export import export_csv
-    from ..bag.topics import absolute
     topics = [absolute(t) for t in args.topics] if args.topics else None
     for topic, (f, n) in sorted(export_csv(args.path, args.csv, topics).items()):
         print(f'{topic}: {n} rows -> {f}' if f is not None else f'{topic}: no messages (no file)')
@@ -79,14 +92,11 @@ def _export(args) -> int:
 
 
 def _recover(args) -> int:
-    from ..bag import recover_bag
     print(recover_bag(args.path).format())
     return 0
 
 
 def _resim(args) -> int:
-    from ..nodes.resim import resimulate
-    from ..nodes.parameters import ParameterError
     try:
         r = resimulate(args.path, params_files=args.params_file,
                        force_overrides={'model_path': args.model} if args.model else None)
@@ -100,9 +110,12 @@ def _resim(args) -> int:
     return 0
 
 
-def _ros_node(cls, overrides: list, setup=None) -> int:
-    from ..nodes.runtime import run_node
+def _need_ros() -> None:
+    if _NO_ROS is not None:
+        raise OSError(f'needs rclpy (ROS 2, or the package\'s ros extra): {_NO_ROS}')
 
+
+def _ros_node(cls, overrides: list, setup=None) -> int:
     def factory():
         node = cls(parameter_overrides=overrides)
         if setup is not None:
@@ -112,9 +125,7 @@ def _ros_node(cls, overrides: list, setup=None) -> int:
 
 
 def _play(args) -> int:
-    from rclpy.parameter import Parameter
-
-    from ..nodes.player import Player
+    _need_ros()
     ov = [Parameter('bag_path', value=str(args.path)), Parameter('rate', value=float(args.rate)),
           Parameter('start_offset', value=float(args.start_offset)),
           Parameter('loop', value=bool(args.loop)), Parameter('clock', value=bool(args.clock)),
@@ -127,9 +138,7 @@ def _play(args) -> int:
 
 
 def _record(args) -> int:
-    from rclpy.parameter import Parameter
-
-    from ..nodes.recorder import Recorder
+    _need_ros()
     ov = [Parameter('output', value=args.output), Parameter('all_topics', value=bool(args.all))]
     if args.topics:
         ov.append(Parameter('topics', value=list(args.topics)))

@@ -13,13 +13,17 @@ named only with ``--instructor`` (and in ``export``, an instructor's file).
 from __future__ import annotations
 
 import argparse
+import io
 import json
 import sys
 import textwrap
 from pathlib import Path
 
+from ..record import (delete_trainee, export_csv, history, load_mastery_config, mastery,
+                      resolve_db_path, trainees)
+from ..record.figure import plt, save_progress_figure
+
 NAME = 'trainees'
-HELP = 'the trainee record: list trainees, show sessions, progress and mastery, export, delete'
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -51,13 +55,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..record import resolve_db_path
     return {'list': _list, 'show': _show, 'progress': _progress, 'export': _export,
             'delete': _delete}[args.action](args, resolve_db_path(args.db))
 
 
 def _list(args, db) -> int:
-    from ..record import trainees
     rows = trainees(db)
     if not rows:
         print(f'no trainee in {db}')
@@ -110,7 +112,6 @@ def _mastery_lines(m: dict) -> None:
 
 
 def _show(args, db) -> int:
-    from ..record import history, load_mastery_config, mastery
     sessions = history(db, args.id, instructor=args.instructor)
     print(f'trainee {args.id}: {len(sessions)} session(s) in {db}')
     _table(sessions)
@@ -122,16 +123,12 @@ def _show(args, db) -> int:
 
 
 def _progress(args, db) -> int:
-    from ..record import history, load_mastery_config, mastery
     cfg = load_mastery_config(args.exam_config)
     sessions = history(db, args.id, instructor=args.instructor)
     m = mastery(sessions, cfg)
     if args.figure:
-        from ..record.figure import save_progress_figure
-        try:
-            import matplotlib  # noqa: F401
-        except ImportError:
-            raise ValueError('--figure needs matplotlib (pip install matplotlib)') from None
+        if plt is None:
+            raise ValueError('--figure needs matplotlib (pip install matplotlib)')
         _figure_folder(args.figure)
         deep = {100 * lv.min_deep_coverage for lv in cfg.levels.values()}
         save_progress_figure(args.id, sessions, args.figure, m,
@@ -161,8 +158,6 @@ def _figure_folder(path: str) -> None:
 
 
 def _export(args, db) -> int:
-    import io
-    from ..record import export_csv
     if args.output:
         text = io.StringIO()
         n = export_csv(db, args.id, text)   # first: an unknown id must not empty an old export
@@ -175,7 +170,6 @@ def _export(args, db) -> int:
 
 
 def _delete(args, db) -> int:
-    from ..record import delete_trainee
     n = delete_trainee(db, args.id)
     print(f'trainee {args.id} deleted from {db}: {n} session(s) removed')
     return 0

@@ -143,3 +143,36 @@ def test_every_commands_help_prints():
     for path, parser in found:
         text = parser.format_help()
         assert 'usage:' in text, path
+
+
+def test_the_command_table_lists_every_command_module_and_no_other():
+    import pkgutil
+
+    from haptic_anfis import commands
+    from haptic_anfis.cli import command_module
+    modules = {m.name for m in pkgutil.iter_modules(commands.__path__) if not m.name.startswith('_')}
+    assert set(commands.COMMANDS) == modules
+    for word in commands.COMMANDS:
+        assert command_module(word).NAME == word
+
+
+def test_help_imports_no_command_module_nor_ros_numba_or_the_fe_stack():
+    """``haptic-anfis --help`` lists the commands from the table alone; a command's --help
+    imports that command's module only."""
+    import subprocess
+    import sys
+    code = ('import sys, contextlib, io\n'
+            'from haptic_anfis.cli import main\n'
+            'with contextlib.redirect_stdout(io.StringIO()) as out, contextlib.suppress(SystemExit):\n'
+            '    main(sys.argv[1:])\n'
+            'assert "usage:" in out.getvalue()\n'
+            'print(sorted(m for m in sys.modules if m.startswith("haptic_anfis.commands.") or '
+            'm.split(".")[0] in ("rclpy", "numba", "felupe", "matplotlib", "trimesh")))\n')
+    r = subprocess.run([sys.executable, '-c', code, '--help'], capture_output=True, text=True,
+                       timeout=120)
+    assert r.returncode == 0 and r.stdout.strip() == '[]', r.stdout + r.stderr
+    r = subprocess.run([sys.executable, '-c', code, 'trainees', '--help'], capture_output=True,
+                       text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+    assert [m for m in eval(r.stdout) if m.startswith('haptic_anfis.commands.')] == \
+        ['haptic_anfis.commands.trainees'], r.stdout
