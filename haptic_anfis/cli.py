@@ -62,6 +62,8 @@ def main(argv: list[str] | None = None) -> int:
     try:
         parser = build_parser(only=word)
     except ModuleNotFoundError as exc:  # an optional dependency of that command (setup.py extras)
+        if (exc.name or '').startswith(__package__):
+            raise
         print(f'haptic-anfis {word}: error: {exc} (an optional dependency: see the package '
               "extras, e.g. pip install 'haptic_anfis[ros]')", file=sys.stderr)
         return EXIT_ERROR

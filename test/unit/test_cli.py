@@ -176,3 +176,23 @@ def test_help_imports_no_command_module_nor_ros_numba_or_the_fe_stack():
     assert r.returncode == 0, r.stderr
     assert [m for m in eval(r.stdout) if m.startswith('haptic_anfis.commands.')] == \
         ['haptic_anfis.commands.trainees'], r.stdout
+
+
+def test_without_ros_a_ros_command_is_one_line_and_the_bag_commands_still_load(tmp_path):
+    """rclpy comes with ROS 2 (or the 'ros' extra): ``topic`` says in one line that it is
+    missing; ``bag info`` (the bag room reads bags without ROS) runs and reports the bad path."""
+    import subprocess
+    import sys
+    code = ('import sys; sys.modules["rclpy"] = None\n'
+            'from haptic_anfis.cli import main\n'
+            'sys.exit(main(sys.argv[1:]))\n')
+
+    def run(*argv):
+        return subprocess.run([sys.executable, '-c', code, *argv], capture_output=True,
+                              text=True, timeout=120)
+    r = run('topic', 'list')
+    assert r.returncode == 1 and len(r.stderr.strip().splitlines()) == 1, r.stderr
+    assert r.stderr.startswith('haptic-anfis topic: error: ') and 'rclpy' in r.stderr
+    r = run('bag', 'info', str(tmp_path / 'no_bag'))
+    assert r.returncode == 1 and 'rclpy' not in r.stderr, r.stderr
+    assert str(tmp_path / 'no_bag') in r.stderr
