@@ -27,16 +27,14 @@ from ..cases.library import add_case_dir_argument, use_case_dir
 from ..cases.summary import case_summary, format_markdown, format_table
 from ..cases.sweeps import case_stores, store_status, sweep_case_store
 from ..exam.config import load_exam_config
+from ..optional import optional
 from ..tissue.dataset import DATA_DIR
 from ..tissue.scene import SCENE_DIR
 from ..tissue.sweep import limit_threads
 from .threshold import percentage
 from .train import load_config
 
-try:  # --dask: the FE points on a dask.distributed cluster (the 'dask' extra)
-    from distributed import Client, LocalCluster
-except ImportError:
-    Client = LocalCluster = None
+distributed = optional('distributed')  # --dask: FE points on a dask cluster (the 'dask' extra)
 
 NAME = 'cases'
 
@@ -218,21 +216,21 @@ def _executor(args: argparse.Namespace):
     """(executor or None, closer) for --dask."""
     if not args.dask:
         return None, lambda: None
-    if Client is None:
+    if distributed is None:
         raise ValueError('--dask: the dask.distributed package is not installed '
                          '(pip install distributed)')
     if args.dask == 'local':
 
         limit_threads()  # the workers inherit one math thread each
-        cluster = LocalCluster(n_workers=args.workers, threads_per_worker=1, processes=True,
+        cluster = distributed.LocalCluster(n_workers=args.workers, threads_per_worker=1, processes=True,
                                dashboard_address=None)
-        client = Client(cluster)
+        client = distributed.Client(cluster)
 
         def close():
             client.close()
             cluster.close()
     else:
-        client = Client(args.dask)
+        client = distributed.Client(args.dask)
         close = client.close
     return client, close  # per-point tasks go to the Client itself (taken as they complete)
 

@@ -19,16 +19,14 @@ from typing import Callable, Sequence
 import numpy as np
 
 from ..errors import HapticAnfisError
+from ..optional import optional
 from .background import rib_fraction
 from .geometry import indentation_direction
 from .linsolve import ReusedFactorSolver
 from .mesh import Domain, HexMesh, build_mesh, cell_samples, tumour_fractions
 from .scene import Scene, surface_height
 
-try:  # the FE stack: the 'fe' extra (not needed to run the simulator)
-    import felupe as fem
-except ImportError:
-    fem = None
+fem = optional('felupe')  # the FE stack: the 'fe' extra (not needed to run the simulator)
 
 
 class FESolveError(HapticAnfisError, RuntimeError):

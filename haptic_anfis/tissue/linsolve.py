@@ -24,17 +24,22 @@ from typing import Any
 import numpy as np
 from scipy.sparse.linalg import LinearOperator, gmres, splu
 
-try:  # MKL PARDISO: the optional 'fe-fast' extra
-    import pypardiso
-except ImportError:
-    pypardiso = None
+from ..optional import optional
+
+pypardiso = optional('pypardiso')  # MKL PARDISO: the 'fe-fast' extra (loads MKL, ~700 MB)
 
 __all__ = ['ReusedFactorSolver', 'factorise', 'backend_name']
 
 
 def backend_name() -> str:
     """'pypardiso' when importable (MKL PARDISO factorisation), else 'scipy-superlu-sym'."""
-    return 'scipy-superlu-sym' if pypardiso is None else 'pypardiso'
+    if pypardiso is not None:
+        try:
+            pypardiso.PyPardisoSolver   # the first use runs the import (MKL may be missing)
+            return 'pypardiso'
+        except ImportError:
+            pass
+    return 'scipy-superlu-sym'
 
 
 class _Pardiso:

@@ -26,6 +26,7 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
+from ..optional import optional
 from .displacement import profile_record
 from .fe import FESolveError, default_linear_solver, solve_scene_point
 from .geometry import indentation_direction
@@ -40,10 +41,7 @@ try:  # the sweep's progress bar (the 'fe' extra; a plain status line without it
     from tqdm import tqdm
 except ImportError:
     tqdm = None
-try:  # FE points on a dask.distributed cluster: the 'dask' extra
-    from distributed import as_completed
-except ImportError:
-    as_completed = None
+distributed = optional('distributed')  # FE points on a dask.distributed cluster: the 'dask' extra
 
 __all__ = ['ATTEMPTS', 'JOURNAL_ENV', 'PointSweepResult', 'run_point_sweep', 'solve_point']
 
@@ -224,7 +222,7 @@ def run_point_sweep(scene: Scene, store: PointStore, points: np.ndarray, probe_c
                     for (k, _), a in zip(todo, args)]
             # one result fetched at a time (with_results=True gathers every future in its own
             # coroutine: under heavy load that tripped a tornado write assertion here)
-            for fut in as_completed(futs):
+            for fut in distributed.as_completed(futs):
                 take(fut.result())
                 fut.release()
         else:

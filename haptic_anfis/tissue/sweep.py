@@ -22,22 +22,18 @@ from typing import Any, Callable, Iterable
 import numpy as np
 import scipy
 
+from ..optional import optional
 from .dataset import ForceDataset
 from .displacement import (DisplacementSet, displacements_from_records, profile_record,
                            record_is_current)
 from .fe import FESolveError, default_linear_solver, solve_scene_point
 from .geometry import indentation_direction, loading_points
+from .linsolve import backend_name
 from .scene import Scene
 
 # their versions are recorded with the data (solver_versions)
-try:  # the FE stack: the 'fe' extra
-    import felupe
-except ImportError:
-    felupe = None
-try:  # MKL PARDISO: the 'fe-fast' extra
-    import pypardiso
-except ImportError:
-    pypardiso = None
+felupe = optional('felupe')  # the FE stack: the 'fe' extra
+pypardiso = optional('pypardiso')  # MKL PARDISO: the 'fe-fast' extra
 
 THREAD_VARS = ('OMP_NUM_THREADS', 'MKL_NUM_THREADS', 'OPENBLAS_NUM_THREADS',
                'NUMBA_NUM_THREADS', 'VECLIB_MAXIMUM_THREADS')
@@ -208,7 +204,7 @@ def solver_versions() -> dict[str, str]:
     """Versions of everything that shapes the numbers."""
     out = {'python': platform.python_version(), 'numpy': np.__version__, 'scipy': scipy.__version__,
            'felupe': felupe.__version__}
-    if pypardiso is not None:
+    if backend_name() == 'pypardiso':
         out['pypardiso'] = getattr(pypardiso, '__version__', 'installed')
     return out
 
