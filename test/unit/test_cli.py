@@ -196,3 +196,6 @@ def test_without_ros_a_ros_command_is_one_line_and_the_bag_commands_still_load(t
     r = run('bag', 'info', str(tmp_path / 'no_bag'))
     assert r.returncode == 1 and 'rclpy' not in r.stderr, r.stderr
     assert str(tmp_path / 'no_bag') in r.stderr
+    r = run('bag', 'play', str(tmp_path / 'no_bag'))
+    assert r.returncode == 1 and len(r.stderr.strip().splitlines()) == 1, r.stderr
+    assert r.stderr.startswith('haptic-anfis bag: error: needs rclpy'), r.stderr
