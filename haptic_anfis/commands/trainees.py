@@ -13,17 +13,20 @@ named only with ``--instructor`` (and in ``export``, an instructor's file).
 from __future__ import annotations
 
 import argparse
+import importlib
 import io
-import json
 import sys
 import textwrap
-from pathlib import Path
 
 from ..record import (delete_trainee, export_csv, history, load_mastery_config, mastery,
                       resolve_db_path, trainees)
-from ..record.figure import plt, save_progress_figure
 
 NAME = 'trainees'
+
+#: ``progress`` draws the learning curve (matplotlib): its own module
+#: (``haptic_anfis.commands.<module>``), imported only when chosen, so the other actions do not
+#: load matplotlib
+ACTION_MODULES = {'progress': '_trainees_progress'}
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -55,8 +58,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    return {'list': _list, 'show': _show, 'progress': _progress, 'export': _export,
-            'delete': _delete}[args.action](args, resolve_db_path(args.db))
+    db = resolve_db_path(args.db)
+    if args.action in ACTION_MODULES:
+        mod = importlib.import_module(f'{__package__}.{ACTION_MODULES[args.action]}')
+        return getattr(mod, args.action)(args, db)
+    actions = {'list': _list, 'show': _show, 'export': _export, 'delete': _delete}
+    return actions[args.action](args, db)
 
 
 def _list(args, db) -> int:
@@ -120,41 +127,6 @@ def _show(args, db) -> int:
         if s['bag']:
             print(f"  session {s['session']}: bag {s['bag']}")
     return 0
-
-
-def _progress(args, db) -> int:
-    cfg = load_mastery_config(args.exam_config)
-    sessions = history(db, args.id, instructor=args.instructor)
-    m = mastery(sessions, cfg)
-    if args.figure:
-        if plt is None:
-            raise ValueError('--figure needs matplotlib (pip install matplotlib)')
-        _figure_folder(args.figure)
-        deep = {100 * lv.min_deep_coverage for lv in cfg.levels.values()}
-        save_progress_figure(args.id, sessions, args.figure, m,
-                             pass_deep_pct=deep.pop() if len(deep) == 1 else None)
-    if args.json:
-        print(json.dumps({'trainee': args.id, 'sessions': sessions, 'mastery': m}))
-        return 0
-    _table(sessions)
-    _mastery_lines(m)
-    if args.figure:
-        print(f'figure {args.figure}')
-    return 0
-
-
-def _figure_folder(path: str) -> None:
-    """Create the folder of ``--figure PATH`` (a new folder is said in one line); ValueError
-    naming the path when it cannot be made or is a file."""
-    folder = Path(path).expanduser().parent
-    if folder.is_dir():
-        return
-    try:
-        folder.mkdir(parents=True)
-    except OSError as exc:
-        raise ValueError(f'--figure {path}: cannot create its folder {str(folder)!r} '
-                         f'({exc.strerror or exc})') from None
-    print(f'created folder {folder}', file=sys.stderr)
 
 
 def _export(args, db) -> int:
