@@ -6,8 +6,11 @@ cannot, and every node start paid the compile again (23 s for the contact detect
 2-core machine). :func:`configure` then points ``NUMBA_CACHE_DIR`` at the user's cache directory,
 ``$XDG_CACHE_HOME/haptic_anfis/numba`` (default ``~/.cache/haptic_anfis/numba``), or, if that
 cannot be written either, ``$TMPDIR/haptic_anfis-numba-<uid>``. A ``NUMBA_CACHE_DIR`` set by the
-user always wins. ``haptic-anfis warmup`` (run by ``make venv``) compiles every kernel the nodes
-use into that cache.
+user always wins. ``haptic-anfis warmup`` (run by ``make venv``; :mod:`haptic_anfis.warm`)
+compiles every kernel the nodes use into that cache.
+
+It imports nothing of the package: :mod:`haptic_anfis` runs :func:`configure` at its import,
+before anything loads numba.
 """
 from __future__ import annotations
 
@@ -58,56 +61,3 @@ def configure(package_dir: Path = PACKAGE_DIR) -> str | None:
         return str(d)
     return None
 
-
-def _warm_force_model() -> None:
-    from .anfis import ForceModel
-    from .tissue.dataset import DATA_DIR
-    ForceModel.load(DATA_DIR / 'default_model.json')  # compiles and warms the real-time path
-
-
-def _warm_contact() -> None:
-    from .contact import ContactDetector, ContactTracker, load_mesh
-    from .tissue.dataset import DATA_DIR
-    mesh = load_mesh(DATA_DIR / 'default_surface.stl', unit='mm')  # the node's default surface
-    mesh.merge_vertices()
-    tracker = ContactTracker(ContactDetector(mesh, direction=(-1.0, 0.0, 0.0)))
-    tracker.update((0.06, 0.0, 0.0))
-    tracker.update((0.04, 0.0, 0.0))
-
-
-def _warm_servo_tick() -> None:
-    from .device.palpation import PalpationScript
-    from .device.servo_native import NativeServoLoop
-    from .resources import config_file
-    # the compiled loop the simulated Falcon runs, then the tick a real Falcon's servo process
-    # calls around each USB exchange (compiled there before the device opens)
-    NativeServoLoop(PalpationScript.from_yaml(config_file('palpation.yaml'))).compile()
-    NativeServoLoop(None, device_factory=_no_device).compile()
-
-
-def _no_device() -> None:
-    """A device factory never called: :meth:`NativeServoLoop.compile` only needs to know the
-    loop will drive a real device."""
-    raise RuntimeError('the warm-up opens no device')
-
-
-#: what :func:`warm` compiles, by name (the imports are inside: numba must not load before
-#: :func:`configure` has run at package import)
-PARTS = {'force_model': _warm_force_model, 'contact': _warm_contact,
-         'servo_tick': _warm_servo_tick}
-
-
-def warm(parts: tuple[str, ...] = tuple(PARTS)) -> dict[str, float]:
-    """Compile (or load from the cache) the kernels the nodes use: the force model's, the
-    contact detector's and the servo tick's (``parts``: names of :data:`PARTS`). Returns
-    seconds per part."""
-    import time
-    unknown = [p for p in parts if p not in PARTS]
-    if unknown:
-        raise ValueError(f'warm: unknown part(s) {unknown}; expected some of {list(PARTS)}')
-    out = {}
-    for name in parts:
-        t = time.perf_counter()
-        PARTS[name]()
-        out[name] = time.perf_counter() - t
-    return out

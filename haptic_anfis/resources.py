@@ -12,6 +12,11 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
+try:  # the ament index (ROS): where colcon installs the package's share directory
+    from ament_index_python.packages import get_package_share_directory
+except ImportError:
+    get_package_share_directory = None
+
 __all__ = ['PACKAGE', 'PACKAGE_DIR', 'DATA_DIR', 'config_dir', 'config_file', 'data_file']
 
 PACKAGE = 'haptic_anfis'
@@ -22,11 +27,11 @@ DATA_DIR = PACKAGE_DIR / 'data'
 
 def _candidates() -> list[Path]:
     out = [PACKAGE_DIR.parent / 'config']
-    try:
-        from ament_index_python.packages import get_package_share_directory
-        out.append(Path(get_package_share_directory(PACKAGE)) / 'config')
-    except Exception:  # noqa: BLE001 (no ament index, or the package not in it)
-        pass
+    if get_package_share_directory is not None:
+        try:
+            out.append(Path(get_package_share_directory(PACKAGE)) / 'config')
+        except Exception:  # noqa: BLE001 (the package is not in the ament index)
+            pass
     out.append(Path(sys.prefix) / 'share' / PACKAGE / 'config')
     return out
 

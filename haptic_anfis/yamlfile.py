@@ -5,6 +5,8 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
+import yaml
+
 from .errors import HapticAnfisError
 
 __all__ = ['YamlFileError', 'read_yaml', 'yaml_error']
@@ -28,7 +30,6 @@ def read_yaml(path: str | Path, what: str = 'file') -> Any:
     Raises:
         YamlFileError: missing / unreadable (``what`` names it: 'config file', ...) or malformed.
     """
-    import yaml
     try:
         text = Path(path).read_text()
     except OSError as exc:

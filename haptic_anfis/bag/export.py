@@ -18,7 +18,7 @@ import numpy as np
 
 from ..interfaces import APPROACH_FIELDS, CONTACT_FIELDS
 from .errors import BagError
-from .reader import read_messages
+from .reader import bag_info, read_messages
 
 
 def _secs(t) -> str:
@@ -84,7 +84,6 @@ def export_csv(path: str | Path, out_dir: str | Path, topics=None
     Raises:
         BagError: the bag (or the topics asked for) holds no message at all, or a bad bag.
     """
-    from .reader import bag_info
     out = Path(out_dir)
     if out.exists() and not out.is_dir():
         raise BagError(f'{out}: exists and is not a directory (expected an output directory)')

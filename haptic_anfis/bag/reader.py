@@ -7,6 +7,11 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Iterator
 
+import yaml
+from rosbags.interfaces import MessageDefinitionFormat
+from rosbags.rosbag2 import Reader
+from rosbags.typesys import Stores, get_types_from_idl, get_types_from_msg, get_typestore
+
 from .errors import BagError
 from .lock import being_recorded
 
@@ -41,7 +46,6 @@ def check_bag_path(path: str | Path) -> Path:
 @contextmanager
 def open_bag(path: str | Path):
     """A rosbags ``Reader`` opened on the bag at ``path``; every failure is a BagError naming it."""
-    from rosbags.rosbag2 import Reader
     p = check_bag_path(path)
     try:
         reader = Reader(p)
@@ -63,8 +67,6 @@ def open_bag(path: str | Path):
 
 def bag_typestore(reader, path: Path):
     """A Jazzy typestore that also knows any non-standard type the bag carries a definition of."""
-    from rosbags.typesys import Stores, get_types_from_idl, get_types_from_msg, get_typestore
-    from rosbags.interfaces import MessageDefinitionFormat
     ts = get_typestore(Stores.ROS2_JAZZY)
     for c in reader.connections:
         if c.msgtype in ts.types:
@@ -202,7 +204,6 @@ def recorded_summary(path: str | Path) -> dict:
 def _metadata_yaml(p: Path) -> dict:
     if not p.is_dir():
         return {}
-    import yaml
     try:
         text = (p / 'metadata.yaml').read_text()
         info = (yaml.safe_load(text) or {}).get('rosbag2_bagfile_information', {}) or {}

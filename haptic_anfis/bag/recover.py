@@ -14,8 +14,14 @@ import shutil
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from mcap.records import Channel, Message, Metadata, Schema
+from mcap.stream_reader import StreamReader
+from rosbags.rosbag2 import StoragePlugin, Writer
+from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+
 from .errors import BagError
 from .lock import being_recorded
+from .reader import read_messages
 from .segment import CUSTOM_RECORD
 
 
@@ -44,7 +50,6 @@ class RecoveryReport:
 
 
 def _is_valid(p: Path) -> bool:
-    from .reader import read_messages
     try:
         for _ in read_messages(p, deserialize=False):
             pass
@@ -73,10 +78,6 @@ def recover_bag(path: str | Path) -> RecoveryReport:
     if (p / 'metadata.yaml').is_file() and _is_valid(p):
         return RecoveryReport(p, src, already_valid=True)
 
-    from mcap.records import Channel, Message, Metadata, Schema
-    from mcap.stream_reader import StreamReader
-    from rosbags.rosbag2 import StoragePlugin, Writer
-    from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
     tmp_root = p.parent / f'.{p.name}.recovering'
     if tmp_root.exists():

@@ -9,7 +9,13 @@ from __future__ import annotations
 
 import os
 import struct
+from io import BytesIO
 from pathlib import Path
+
+import lz4.frame
+import zstandard
+from rosbags.rosbag2 import StoragePlugin, Writer
+from rosbags.rosbag2.storage_mcap import write_record, write_string, write_uint32
 
 from .errors import BagError
 from .lock import hold, release
@@ -34,10 +40,8 @@ def compressor(name: str):
     if name == 'none':
         return '', None
     if name == 'zstd':
-        import zstandard
         return 'zstd', zstandard.ZstdCompressor(level=1).compress
     if name == 'lz4':
-        import lz4.frame
         return 'lz4', lz4.frame.compress
     raise BagError(f'compression {name!r}: expected one of {", ".join(COMPRESSIONS)}')
 
@@ -68,7 +72,6 @@ class Segment:
     """A bag directory being written from one thread (the writer thread of :class:`BagWriter`)."""
 
     def __init__(self, path: Path, custom_data: dict[str, str], compression: str = 'none'):
-        from rosbags.rosbag2 import StoragePlugin, Writer
         self.path = path
         if path.exists():
             raise BagError(f'{path}: exists already; a recording needs a new directory '
@@ -135,9 +138,6 @@ class Segment:
     def _custom_record(self, data: dict[str, str]) -> None:
         """An MCAP Metadata record (op 0x0C) named :data:`CUSTOM_RECORD` with ``data``; written
         between chunks (the pending chunk is kept apart until it closes)."""
-        from io import BytesIO
-
-        from rosbags.rosbag2.storage_mcap import write_record, write_string, write_uint32
         rec, kv = BytesIO(), BytesIO()
         write_string(rec, CUSTOM_RECORD)
         for k, v in data.items():

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from functools import lru_cache
 
+from rosbags.typesys import Stores, get_typestore
+
 from .. import interfaces as ifc
 
 POSE_TYPE = 'geometry_msgs/msg/PoseStamped'
@@ -44,7 +46,6 @@ ALL_LOOP_TOPICS = (ifc.TOPIC_POSE, ifc.TOPIC_TWIST, ifc.TOPIC_APPLIED, ifc.TOPIC
 @lru_cache(maxsize=1)
 def typestore():
     """rosbags' ROS 2 Jazzy typestore (all the standard message types this package uses)."""
-    from rosbags.typesys import Stores, get_typestore
     return get_typestore(Stores.ROS2_JAZZY)
 
 

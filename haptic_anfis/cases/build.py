@@ -31,7 +31,17 @@ from typing import Any, Sequence
 
 import numpy as np
 
+from ..anfis import ForceModel, train_on_dataset
+from ..anfis.force_model import INPUT_NAMES
+from ..report.cv import group_cv
+from ..tissue.dataset import save_dataset, sidecar_path
+from ..tissue.displacement import displacement_path, displacements_from_records, save_displacements
+from ..tissue.sweep import records_to_dataset
+from .background import background_gate_failures, background_grades
+from .generate import _package_relative, write_case_mesh
+from .grading import PALPABLE_PCT, case_level, grading_record, lesion_grades
 from .library import Case, CaseError
+from .sweeps import case_stores, stored_records
 
 __all__ = ['RANGE_GATE_PCT', 'CONTRAST_GATE', 'SIZE_GATE_BYTES', 'BuildResult', 'build_case',
            'gate_failures', 'grouped_cv', 'regrade_case']
@@ -64,9 +74,6 @@ def grouped_cv(ds, model, params: dict[str, Any], folds: int = CV_FOLDS,
                seeds: Sequence[int] = CV_SEEDS) -> np.ndarray:
     """(3,) mean over seeds of the out-of-fold RMSE [N] per axis, refitting ``model``'s own
     inputs and structures (no structure search, no input check) with ``params`` (:func:`haptic_anfis.report.cv.group_cv`)."""
-    from ..anfis import ForceModel
-    from ..report.cv import group_cv
-
     p = {k: v for k, v in params.items() if k not in ('test_fraction', 'seed', 'candidates',
                                                         'tol', 'structure', 'inputs',
                                                         'ridge_candidates')}
@@ -74,7 +81,6 @@ def grouped_cv(ds, model, params: dict[str, Any], folds: int = CV_FOLDS,
     # the ridge the search chose with each structure (one per output)
     p['ridge'] = list(model.ridges_)
     # the model's own inputs too: 'auto' decided on a fold may keep an input it dropped
-    from ..anfis.force_model import INPUT_NAMES
     p['inputs'] = tuple(INPUT_NAMES[c] for c in model.input_cols_)
     res = group_cv(ds, lambda seed: ForceModel(structure=structures, seed=seed, **p),
                    folds=folds, seeds=seeds)
@@ -114,16 +120,6 @@ def build_case(case: Case, *, store_root: str | os.PathLike | None = None, coars
         CaseError: a point is missing or failed, or a gate failed (the message names the figure;
             ``BuildResult`` figures are attached as ``exc.result``).
     """
-    from ..anfis import train_on_dataset
-    from ..tissue.dataset import save_dataset
-    from ..tissue.displacement import (displacement_path, displacements_from_records,
-                                       save_displacements)
-    from ..tissue.sweep import records_to_dataset
-    from .generate import _package_relative, write_case_mesh
-    from .background import background_gate_failures, background_grades
-    from .grading import case_level, grading_record, lesion_grades
-    from .sweeps import case_stores, stored_records
-
     scene = case.scene
     stores = case_stores(case, store_root, coarse)
     recs, twins = stored_records(stores)  # CaseError naming a hole
@@ -218,11 +214,6 @@ def regrade_case(case: Case, *, store_root: str | os.PathLike | None = None,
     Raises:
         CaseError: the case is not shipped, or its store lacks a point (naming it).
     """
-    from ..tissue.dataset import sidecar_path
-    from .background import background_grades
-    from .grading import PALPABLE_PCT, grading_record, lesion_grades
-    from .sweeps import case_stores, stored_records
-
     side = sidecar_path(case.dataset_path)
     if not side.is_file():
         raise CaseError(f'case {case.name!r}: no dataset sidecar {str(side)!r} to regrade; make '

@@ -15,7 +15,7 @@ light level at 0.3 N: below the 2.5-10 N over which force discrimination keeps i
 fraction (Pang, Tan & Durlach 1991), where the JND grows. Per case the deep level lands at
 1.7-3.3 N and every case's deepest trained press at ``HEADROOM`` of the clamp
 (docs/measurements/force_mapping.md, bench/bench_force_mapping.py). What is lost is
-the absolute stiffness between cases (a fatty breast no longer feels softer than a dense one);
+the absolute stiffness between cases (a fatty breast does not feel softer than a dense one);
 the lesson is the lump against its own breast, which a per-case scale keeps whole. The exam's
 levels stay in tissue depth and the gauge shows the tissue force (the driver divides by the
 scale), so nothing the trainee is scored on changes with it.

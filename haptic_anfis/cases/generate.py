@@ -7,13 +7,20 @@ Pure Python, no ROS.
 """
 from __future__ import annotations
 
+import json
 import time
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from ..tissue.dataset import ForceDataset, load_dataset, save_dataset
+from ..anfis import train_on_dataset
+from ..tissue.dataset import DATA_DIR, ForceDataset, load_dataset, save_dataset
+from ..tissue.displacement import (displacement_path, displacements_from_records, record_is_current,
+                                   save_displacements)
+from ..tissue.geometry import loading_points, write_surface_mesh
+from ..tissue.sweep import records_to_dataset, run_sweep
 from .library import Case, CaseError
 
 
@@ -67,8 +74,6 @@ def reuse_plan(case: Case, base: Case) -> tuple[dict[int, int], float]:
     E_case / E_base are the lesion-free forces of the case exactly (up to the Newton tolerance).
     Near a lesion (within radius + :data:`REUSE_MARGIN`) every point is solved.
     """
-    from ..tissue.geometry import loading_points
-
     s = case.scene
     pts, bpts = loading_points(s), loading_points(base.scene)
     plan = {}
@@ -84,8 +89,6 @@ def reuse_plan(case: Case, base: Case) -> tuple[dict[int, int], float]:
 def _reused_records(case: Case, base: Case, plan: dict[int, int], scale: float,
                     coarse: bool) -> dict[int, dict[str, Any]]:
     """The base case's per-point records for ``plan``, forces scaled; {} if any is missing."""
-    import json
-
     work = _work_dir(base, coarse)
     out = {}
     for i, j in plan.items():
@@ -114,9 +117,6 @@ def sweep_case(case: Case, *, coarse: bool = False, workers: int = 2, executor: 
     and per density (``<work_dir>`` or ``<work_dir>-coarse``), so a coarse and a full sweep never
     mix. A point whose load path failed contributes the depths it reached; ``failed`` lists it.
     """
-    from ..tissue.sweep import records_to_dataset, run_sweep
-    from ..tissue.geometry import loading_points
-
     scene = case.scene
     work = _work_dir(case, coarse)
     n = len(loading_points(scene))
@@ -140,8 +140,6 @@ def sweep_case(case: Case, *, coarse: bool = False, workers: int = 2, executor: 
          'margin_m': REUSE_MARGIN, 'solved_points': solve} if reused else None)
     save_dataset(dataset, case.dataset_path)
     out.written.append(str(case.dataset_path))
-    from ..tissue.displacement import (displacement_path, displacements_from_records,
-                                       record_is_current, save_displacements)
 
     if all(record_is_current(r) for r in records):  # the skin's dent of the same solves
         disp = displacements_from_records(records, scene.depths, {
@@ -156,7 +154,6 @@ def write_case_mesh(case: Case) -> bool:
     """Write the case's surface mesh (mm) if it does not exist yet; True if written."""
     if case.mesh_path.is_file():
         return False
-    from ..tissue.geometry import write_surface_mesh
 
     write_surface_mesh(case.scene, case.mesh_path, units='mm')
     return True
@@ -167,8 +164,6 @@ def train_case(case: Case, params: dict[str, Any] | None = None, verbose: bool =
     """Train the case's model on its dataset (the paper's protocol, :func:`train_on_dataset`:
     structure search per output under ``params['tol']``), write ``model.json`` and return the
     model. ``params``: ForceModel arguments plus ``test_fraction`` and ``seed``."""
-    from ..anfis import train_on_dataset
-
     if ds is None:
         if not case.dataset_path.is_file():
             raise CaseError(f'case {case.name!r}: missing dataset_path '
@@ -210,10 +205,6 @@ def generate_case(case: Case, *, coarse: bool = False, workers: int = 2, executo
 def _package_relative(path) -> str:
     """A path inside the package as 'haptic_anfis/...', else as given (model-file provenance
     that does not record one machine's directories)."""
-    from pathlib import Path
-
-    from ..tissue.dataset import DATA_DIR
-
     p = Path(path).resolve()
     try:
         return str(Path('haptic_anfis') / p.relative_to(DATA_DIR.parent))

@@ -12,6 +12,7 @@ no case changes nothing. Pure Python, no ROS.
 """
 from __future__ import annotations
 
+import json
 import os
 import random
 import re
@@ -19,10 +20,10 @@ from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
 
-from ..tissue.dataset import DATA_DIR
+from ..errors import HapticAnfisError
+from ..tissue.dataset import DATA_DIR, sidecar_path
 from ..tissue.scene import SCENE_DIR, Scene, SceneError, load_scene
 from ..tissue.store import default_store_root, failed_records, failure_summary
-from ..errors import HapticAnfisError
 from .grading import regrade
 
 DEFAULT_CASE = 'default'
@@ -121,7 +122,6 @@ class Case:
 
     def _sidecar(self) -> dict:
         """The dataset's provenance sidecar ({} without one)."""
-        from ..tissue.dataset import sidecar_path
         return _json_file(sidecar_path(self.dataset_path))
 
     def grading(self, threshold_pct: float | None = None) -> dict | None:
@@ -158,7 +158,6 @@ class Case:
 def _json_file(path: Path) -> dict:
     """A generated JSON file's mapping; {} when it is missing or unreadable (its own loader names
     a malformed file)."""
-    import json
     try:
         d = json.loads(path.read_text())
     except (OSError, ValueError):

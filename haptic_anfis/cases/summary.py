@@ -13,11 +13,14 @@ from typing import Any
 
 import numpy as np
 
-from ..tissue.dataset import ForceDataset, load_dataset
+from ..anfis import ForceModel
 from ..anfis.timing import percentiles_us, time_calls
+from ..tissue.dataset import ForceDataset, load_dataset
+from ..tissue.scene import surface_height
+from .background import summary_fields
 from .force_mapping import case_force_mapping
 from .library import Case
-from .background import summary_fields
+from .sweeps import case_stores, store_status
 
 CONTRAST_DEPTH = 0.008  # [m]
 CONTRAST_TOLERANCE = 0.25  # relative
@@ -31,7 +34,6 @@ def lesion_rows(case: Case, threshold_pct: float | None = None) -> list[dict[str
     out = []
     graded = {g['lesion']: g for g in ((case.grading(threshold_pct) or {}).get('lesions') or [])}
     for t in case.scene.tumours:
-        from ..tissue.scene import surface_height
 
         skin = float(surface_height(np.array(t.centre[1]), np.array(t.centre[2]), case.scene.radii))
         out.append({'name': t.name, 'kind': t.kind or 'unstated',
@@ -58,8 +60,6 @@ def lesion_contrast(case: Case, model, ds: ForceDataset, depth: float = CONTRAST
     whether the model's is within ``CONTRAST_TOLERANCE`` of the FE's. Without a loading point
     over the centre (a scene without refinement) the nearest one with a mirror point is used
     (``over_yz_mm``)."""
-    from ..tissue.scene import surface_height
-
     scene = case.scene
     rows = []
     yz = np.unique(np.round(ds.X[:, 1:3], 9), axis=0)
@@ -105,8 +105,6 @@ def case_summary(case: Case, timing: bool = True, contrast: bool = True,
     """One row of ``cases list`` (also its ``--json`` object). Model fields are None while the
     case has no model; dataset fields None while it has no dataset. ``threshold_pct``: grade
     the lesions at this palpability threshold [%] (None: the stored grading)."""
-    from ..anfis import ForceModel
-
     scene = case.scene
     row: dict[str, Any] = {
         'name': case.name, 'description': case.description,
@@ -157,7 +155,6 @@ def _store_progress(case: Case) -> dict[str, int] | None:
     (None for a case whose scene is not graded, i.e. not swept per point: ``Scene.graded``)."""
     if not case.scene.graded:
         return None
-    from .sweeps import case_stores, store_status
 
     try:
         st = store_status(case_stores(case))

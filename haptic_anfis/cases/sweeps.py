@@ -16,6 +16,8 @@ from typing import Any
 
 import numpy as np
 
+from ..tissue.geometry import loading_points
+from ..tissue.pointsweep import run_point_sweep
 from ..tissue.scene import Scene, surface_height
 from ..tissue.store import (PointStore, default_store_root, failure_summary, point_key,
                             store_manifest)
@@ -82,8 +84,6 @@ class StoreStatus:
 
 def store_status(stores: CaseStores, with_cpu: bool = False) -> StoreStatus:
     """Which of the case's points (and twin points) are solved, failed, missing."""
-    from ..tissue.geometry import loading_points
-
     scene = stores.case.scene
     parts = [(stores.main, loading_points(scene), '')]
     if stores.twin is not None:
@@ -110,9 +110,6 @@ def sweep_case_store(case: Case, *, root: str | os.PathLike | None = None, coars
                      retry_failed: bool = False) -> StoreStatus:
     """Solve every missing point of ``case`` (then its twin points) into the store; resumable.
     Returns the store's status afterwards."""
-    from ..tissue.geometry import loading_points
-    from ..tissue.pointsweep import run_point_sweep
-
     stores = case_stores(case, root, coarse)
     scene = case.scene
     run_point_sweep(scene, stores.main, loading_points(scene), stores.probe_cells,
@@ -133,8 +130,6 @@ def stored_records(stores: CaseStores) -> tuple[list[dict[str, Any]], dict[str, 
         CaseError: a point is missing or failed (the first such point is named): a case with a
             hole is never shipped.
     """
-    from ..tissue.geometry import loading_points
-
     st = store_status(stores)
     if not st.complete:
         bad = next(iter(st.failed.items()), None)

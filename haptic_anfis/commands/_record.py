@@ -9,6 +9,14 @@ import sys
 import time
 from pathlib import Path
 
+from ..bag.reader import bag_info
+from ..cases import library
+from ..record import (AlreadyStored, RecordError, check_trainee_id, level_of_case_name,
+                      resolve_db_path, store_session, utc_iso)
+from ..record.draw import next_case
+from ..record.store import WALL_CLOCK_NS
+from ..record.thresholds import latest_threshold
+
 __all__ = ['add_record_arguments', 'case_parameter', 'prepare_record', 'store_report']
 
 
@@ -34,7 +42,6 @@ def prepare_record(args: argparse.Namespace) -> None:
         ValueError: a bad id, ``--next`` without ``--trainee-id`` or with ``--case``, no case of
         the next level, an unusable record file (for ``--next``, which reads it).
     """
-    from ..record import check_trainee_id, utc_iso
     if args.trainee_id is not None:
         check_trainee_id(args.trainee_id)
     args.record_started_utc = utc_iso(time.time())
@@ -44,8 +51,6 @@ def prepare_record(args: argparse.Namespace) -> None:
         raise ValueError('--next needs --trainee-id ID (the record says which level is next)')
     if args.case:
         raise ValueError(f'--next draws the case: give it or --case {args.case}, not both')
-    from ..record.draw import next_case
-    from ..record.thresholds import latest_threshold
     own = latest_threshold(args.db, args.trainee_id)   # graded against the trainee's own
     case, level, m = next_case(args.db, args.trainee_id, exam_config=args.exam_config,
                                threshold_pct=own)
@@ -66,7 +71,6 @@ def case_parameter(args: argparse.Namespace, case) -> tuple[str, str | int]:
     """
     if not getattr(args, 'blind', False):
         return 'case', case.name
-    from ..cases import library
     lib = library()
     for seed in range(10000):
         if lib.random(seed).name == case.name:
@@ -84,9 +88,6 @@ def _bag_folder(bag: str | Path) -> Path:
 def _bag_start(bag: str | Path) -> tuple[str | None, int | None]:
     """The bag's first message: when (UTC, if its clock is wall time) and its time [ns]
     (which tells recordings made at the same path apart); None for what cannot be read."""
-    from ..bag.reader import bag_info
-    from ..record import utc_iso
-    from ..record.store import WALL_CLOCK_NS
     try:
         info = bag_info(bag)
     except Exception:   # noqa: BLE001 (the report already read it; a time is optional)
@@ -102,8 +103,6 @@ def store_report(args: argparse.Namespace, report: dict) -> int:
     exam); returns the exit status: 0, or 1 after one line on stderr naming the record file."""
     if not getattr(args, 'trainee_id', None):
         return 0
-    from ..record import (AlreadyStored, RecordError, level_of_case_name, resolve_db_path,
-                          store_session)
     if report.get('interrupted') or report.get('time_limit_reached'):
         why = 'was interrupted' if report.get('interrupted') else (
             'stopped at its time limit before the trainee finished')

@@ -3,10 +3,18 @@ package's sessions (rosbag2 bags, MCAP storage; see :mod:`haptic_anfis.bag`)."""
 from __future__ import annotations
 
 import argparse
-import sys
+import importlib
+
+from ..bag import bag_info, format_info, recover_bag
+from ..bag.export import export_csv
+from ..bag.topics import absolute
 
 NAME = 'bag'
-HELP = 'record, play, inspect, export, recover and re-simulate rosbag2 session bags'
+
+#: the actions that run the re-simulation pipeline (numba kernels) or a ROS node (rclpy: ROS 2 or
+#: the 'ros' extra), each in a module of its own (``haptic_anfis.commands.<module>``) imported only
+#: when chosen: info, export and recover load the bag room alone
+ACTION_MODULES = {'resim': '_bag_resim', 'play': '_bag_nodes', 'record': '_bag_nodes'}
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -60,18 +68,24 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    return globals()[f'_{args.bag_command}'](args)
+    action = args.bag_command
+    if action not in ACTION_MODULES:
+        return globals()[f'_{action}'](args)
+    try:
+        mod = importlib.import_module(f'{__package__}.{ACTION_MODULES[action]}')
+    except ModuleNotFoundError as exc:
+        if (exc.name or '').startswith('haptic_anfis'):
+            raise
+        raise OSError(f"needs {exc.name} (ROS 2, or the package's ros extra): {exc}") from None
+    return getattr(mod, action)(args)
 
 
 def _info(args) -> int:
-    from ..bag import bag_info, format_info
     print(format_info(bag_info(args.path)))
     return 0
 
 
 def _export(args) -> int:
-    from ..bag.export import export_csv
-    from ..bag.topics import absolute
     topics = [absolute(t) for t in args.topics] if args.topics else None
     for topic, (f, n) in sorted(export_csv(args.path, args.csv, topics).items()):
         print(f'{topic}: {n} rows -> {f}' if f is not None else f'{topic}: no messages (no file)')
@@ -79,69 +93,5 @@ def _export(args) -> int:
 
 
 def _recover(args) -> int:
-    from ..bag import recover_bag
     print(recover_bag(args.path).format())
     return 0
-
-
-def _resim(args) -> int:
-    from ..nodes.resim import resimulate
-    from ..nodes.parameters import ParameterError
-    try:
-        r = resimulate(args.path, params_files=args.params_file,
-                       force_overrides={'model_path': args.model} if args.model else None)
-    except ParameterError as exc:
-        raise ValueError(str(exc)) from None
-    print(r.format())
-    if args.tolerance is not None and r.max_diff_N > args.tolerance:
-        print(f'max force difference {r.max_diff_N:.3g} N exceeds --tolerance {args.tolerance:g} N',
-              file=sys.stderr)
-        return 1
-    return 0
-
-
-def _ros_node(cls, overrides: list, setup=None) -> int:
-    from ..nodes.runtime import run_node
-
-    def factory():
-        node = cls(parameter_overrides=overrides)
-        if setup is not None:
-            setup(node)
-        return node
-    return run_node(factory, ['haptic-anfis-bag'])
-
-
-def _play(args) -> int:
-    from rclpy.parameter import Parameter
-
-    from ..nodes.player import Player
-    ov = [Parameter('bag_path', value=str(args.path)), Parameter('rate', value=float(args.rate)),
-          Parameter('start_offset', value=float(args.start_offset)),
-          Parameter('loop', value=bool(args.loop)), Parameter('clock', value=bool(args.clock)),
-          Parameter('topics', value=','.join(args.topics or [])),
-          Parameter('resimulate', value=bool(args.resimulate)),
-          Parameter('live', value=bool(args.live))]
-    if args.params_file:
-        ov.append(Parameter('params_files', value=list(args.params_file)))
-    return _ros_node(Player, ov)
-
-
-def _record(args) -> int:
-    from rclpy.parameter import Parameter
-
-    from ..nodes.recorder import Recorder
-    ov = [Parameter('output', value=args.output), Parameter('all_topics', value=bool(args.all))]
-    if args.topics:
-        ov.append(Parameter('topics', value=list(args.topics)))
-    if args.flush_period is not None:
-        ov.append(Parameter('flush_period', value=float(args.flush_period)))
-    if args.fallback_dir:
-        ov.append(Parameter('fallback_output_dir', value=str(args.fallback_dir)))
-    if args.compression is not None:
-        ov.append(Parameter('compression', value=args.compression))
-
-    def stop_after(node):
-        if args.duration > 0:
-            node.create_timer(args.duration, lambda: setattr(node, 'finished', True))
-    code = _ros_node(Recorder, ov, stop_after)
-    return code

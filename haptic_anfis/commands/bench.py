@@ -5,13 +5,12 @@ import argparse
 from pathlib import Path
 from typing import Any
 
+from ..report.model_bench import bench_structures, format_table
+from ..resources import config_file
 from ..tissue.dataset import DEFAULT_DATASET, load_dataset
 from .train import load_config, parse_structure
 
-from ..resources import config_file
-
 NAME = 'bench'
-HELP = 'benchmarks (printed, never asserted): "model" = speed against error of the ANFIS models'
 
 #: Structures of the default form (depth-scaled over y, z, depth); 'A/B/C' = one per output (Fx,
 #: Fy, Fz); 'search' = the structure search; 'config' = config/force_model.yaml's structure.
@@ -41,7 +40,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..report.model_bench import bench_structures, format_table
 
     ds = load_dataset(args.dataset)
     params = load_config(args.config) if args.config and Path(args.config).is_file() else {}

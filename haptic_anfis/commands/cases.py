@@ -20,10 +20,23 @@ import textwrap
 import time
 from pathlib import Path
 
+from ..cases import CaseError, CaseLibrary, library, user_case_dir
+from ..cases.build import build_case, regrade_case
+from ..cases.generate import generate_case
+from ..cases.library import add_case_dir_argument, use_case_dir
+from ..cases.summary import case_summary, format_markdown, format_table
+from ..cases.sweeps import case_stores, store_status, sweep_case_store
+from ..exam.config import load_exam_config
+from ..optional import optional
+from ..tissue.dataset import DATA_DIR
+from ..tissue.scene import SCENE_DIR
+from ..tissue.sweep import limit_threads
 from .threshold import percentage
+from .train import load_config
+
+distributed = optional('distributed')  # --dask: FE points on a dask cluster (the 'dask' extra)
 
 NAME = 'cases'
-HELP = 'list the palpation case library, or generate cases (FE sweep, mesh, model)'
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -40,7 +53,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     ls.add_argument('--threshold', type=percentage, default=None, metavar='PCT',
                     help="grade the lesions at this palpability threshold [%%] (a trainee's own, "
                          '`haptic-anfis threshold`) instead of the stored grading')
-    from ..cases.library import add_case_dir_argument
     add_case_dir_argument(ls)
     rg = sub.add_parser('regrade', help="grade shipped cases again from their FE store (the "
                         "dataset sidecar's grading; the models stay)")
@@ -93,7 +105,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def _library_arguments(p: argparse.ArgumentParser) -> None:
-    from ..cases.library import add_case_dir_argument
     add_case_dir_argument(p)
     p.add_argument('--scene-dir', type=Path, default=None,
                    help='scene files of another library (default config/scenes)')
@@ -102,9 +113,6 @@ def _library_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def _open_library(args: argparse.Namespace, **kw):
-    from ..cases import CaseLibrary, user_case_dir
-    from ..tissue.dataset import DATA_DIR
-    from ..tissue.scene import SCENE_DIR
 
     # the package's cases and the user's own (--case-dir), or another library (--scene-dir)
     return CaseLibrary(args.scene_dir or SCENE_DIR, args.data_dir or DATA_DIR, **kw,
@@ -112,7 +120,6 @@ def _open_library(args: argparse.Namespace, **kw):
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..cases.library import use_case_dir
     use_case_dir(args.case_dir)   # before anything reads the library; the nodes inherit it
     if args.action == 'list':
         return _list(args)
@@ -135,7 +142,6 @@ def narrow_table(lib, width: int = LIST_WIDTH, threshold_pct: float | None = Non
     all lesions, ready (model and mesh made from the scene as it is), its description (cut to
     fit), then a line naming the user's own case folder. ``threshold_pct``: the lesions graded
     at this palpability threshold [%] instead of the stored grading."""
-    from ..cases import CaseError
     head = f'{"case":<24} {"lvl":>3} {"lumps":>5} {"ready":<5} description'
     lines = [head, '-' * width]
     own = set(lib.user_names())
@@ -167,8 +173,6 @@ def narrow_table(lib, width: int = LIST_WIDTH, threshold_pct: float | None = Non
 
 
 def _list(args: argparse.Namespace) -> int:
-    from ..cases import library
-    from ..cases.summary import case_summary, format_markdown, format_table
 
     if not (args.wide or args.json or args.markdown):
         print(narrow_table(library(), threshold_pct=args.threshold))
@@ -187,10 +191,6 @@ def _list(args: argparse.Namespace) -> int:
 def _regrade(args: argparse.Namespace) -> int:
     """Grade shipped cases again from their store; one line per case with its level and where
     each lesion is found."""
-    from ..cases import CaseError, library
-    from ..cases.build import regrade_case
-    from ..exam.config import load_exam_config
-
     lib = library()
     thr = args.threshold if args.threshold is not None else load_exam_config().palpable_pct
     cases = ([lib.get(n) for n in args.names] if args.names else
@@ -216,30 +216,26 @@ def _executor(args: argparse.Namespace):
     """(executor or None, closer) for --dask."""
     if not args.dask:
         return None, lambda: None
-    try:
-        from distributed import Client, LocalCluster
-    except ImportError:
+    if distributed is None:
         raise ValueError('--dask: the dask.distributed package is not installed '
-                         '(pip install distributed)') from None
+                         '(pip install distributed)')
     if args.dask == 'local':
-        from ..tissue.sweep import limit_threads
 
         limit_threads()  # the workers inherit one math thread each
-        cluster = LocalCluster(n_workers=args.workers, threads_per_worker=1, processes=True,
+        cluster = distributed.LocalCluster(n_workers=args.workers, threads_per_worker=1, processes=True,
                                dashboard_address=None)
-        client = Client(cluster)
+        client = distributed.Client(cluster)
 
         def close():
             client.close()
             cluster.close()
     else:
-        client = Client(args.dask)
+        client = distributed.Client(args.dask)
         close = client.close
     return client, close  # per-point tasks go to the Client itself (taken as they complete)
 
 
 def _sweep(args: argparse.Namespace) -> int:
-    from ..cases.sweeps import case_stores, store_status, sweep_case_store
 
     if args.workers < 1:
         raise ValueError(f'--workers must be >= 1, got {args.workers}')
@@ -274,8 +270,6 @@ def _sweep(args: argparse.Namespace) -> int:
 
 
 def _generate(args: argparse.Namespace) -> int:
-    from ..cases.generate import generate_case
-    from .train import load_config
 
     if args.workers < 1:
         raise ValueError(f'--workers must be >= 1, got {args.workers}')
@@ -285,12 +279,10 @@ def _generate(args: argparse.Namespace) -> int:
     for c in cases:
         _ = c.scene  # and invalid scenes
         if args.train_only and not c.scene.graded and not c.dataset_path.is_file():
-            from ..cases import CaseError   # --train-only promises no FE: no hours-long sweep
             raise CaseError(f'case {c.name!r}: no dataset {str(c.dataset_path)!r} to train on '
                             '(--train-only runs no FE; run without it to sweep the FE first)')
     config = args.config
     if config is None:  # config/case_model.yaml beside the scene files (source tree or share)
-        from ..tissue.scene import SCENE_DIR
         config = str(SCENE_DIR.parent / 'case_model.yaml')
     params = load_config(config) if not args.no_train else {}
     executor, close = _executor(args) if not args.train_only else (None, lambda: None)
@@ -322,10 +314,6 @@ def _generate(args: argparse.Namespace) -> int:
 def _generate_graded(case, args: argparse.Namespace, executor, params: dict) -> bool:
     """Sweep the missing points of a graded case into the store, then build it (grading, model,
     gates) unless --no-train; False (with one line naming the figure) when refused."""
-    from ..cases import CaseError
-    from ..cases.build import build_case
-    from ..cases.sweeps import sweep_case_store
-
     if not args.train_only:
         st = sweep_case_store(case, root=args.store, coarse=args.coarse, executor=executor,
                               workers=args.workers, progress=not args.quiet)

@@ -11,8 +11,14 @@ import argparse
 import sys
 from pathlib import Path
 
+from ..tissue.dataset import save_dataset
+from ..tissue.displacement import displacement_path, save_displacements
+from ..tissue.geometry import write_surface_mesh
+from ..tissue.report import write_report
+from ..tissue.scene import DEFAULT_SCENE, load_scene
+from ..tissue.sweep import run_sweep
+
 NAME = 'dataset'
-HELP = 'generate the FE force dataset (and surface mesh, validation report) for a tissue scene'
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -39,8 +45,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..tissue.dataset import save_dataset
-    from ..tissue.scene import DEFAULT_SCENE, load_scene
 
     scene = load_scene(args.scene or DEFAULT_SCENE)
     if not (args.out or args.surface or args.report):
@@ -50,12 +54,10 @@ def run(args: argparse.Namespace) -> int:
     if args.workers < 1:
         raise ValueError(f'--workers must be >= 1, got {args.workers}')
     if args.surface:
-        from ..tissue.geometry import write_surface_mesh
 
         path = write_surface_mesh(scene, args.surface, units=args.surface_units)
         print(f'wrote {path} (tissue surface, {args.surface_units})')
     if args.out:
-        from ..tissue.sweep import run_sweep
 
         work = args.work_dir or args.out.with_suffix('.work')
         indices = ([int(v) for v in args.points.split(',') if v.strip()]
@@ -64,7 +66,6 @@ def run(args: argparse.Namespace) -> int:
                         progress=not args.quiet)
         save_dataset(res.dataset, args.out)
         if res.displacements is not None:
-            from ..tissue.displacement import displacement_path, save_displacements
 
             dpath = save_displacements(res.displacements, displacement_path(args.out))
             print(f'wrote {dpath} (skin displacement profiles, dataset sha256 '
@@ -77,7 +78,6 @@ def run(args: argparse.Namespace) -> int:
         if res.failed:
             return 3
     if args.report:
-        from ..tissue.report import write_report
 
         for line in write_report(scene, args.report, data=args.data, coarse=args.coarse):
             print(line)

@@ -1,7 +1,7 @@
 """``haptic-anfis demo``: the ``make demo`` main job.
 
 Trains the three force models on the shipped default dataset and prints their test RMSE and
-evaluation speed. (Later issues grow it into the full simulated palpation session.)
+evaluation speed (the simulated palpation session: ``haptic-anfis sim``).
 """
 from __future__ import annotations
 
@@ -12,11 +12,10 @@ from pathlib import Path
 import numpy as np
 
 from ..anfis import ForceModel, train_on_dataset
-from ..tissue.dataset import DEFAULT_DATASET, OUTPUT_NAMES, load_dataset
 from ..report.model_bench import throughput, time_single
+from ..tissue.dataset import DATA_DIR, DEFAULT_DATASET, OUTPUT_NAMES, load_dataset
 
 NAME = 'demo'
-HELP = 'train the force models on the shipped dataset; print test RMSE and evaluation speed'
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -50,7 +49,6 @@ def run(args: argparse.Namespace) -> int:
           f'p99 {np.percentile(single, 99) * 1e6:.2f} µs')
     print(f'   batch: {rate:.3g} evaluations/s (paper: ~1e5/s)')
     print(f'== model written to {Path(path)}')
-    from ..tissue.dataset import DATA_DIR
     print(f'   (a session runs the shipped model, {DATA_DIR / "default_model.json"}, unless '
           f"given this one: haptic-anfis sim --ros-args -p model_path:={Path(path)})")
     print('== next: haptic-anfis sim --duration 10 --record out/demo_session  (the haptic graph '

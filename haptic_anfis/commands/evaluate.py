@@ -9,7 +9,6 @@ from ..anfis import ForceModel, rmse
 from ..tissue.dataset import OUTPUT_NAMES, load_dataset
 
 NAME = 'evaluate'
-HELP = 'evaluate a model file on a force dataset (RMSE and max error per output)'
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:

@@ -15,13 +15,31 @@ import argparse
 import json
 import math
 import os
+import shutil
+import tempfile
 import time
 from pathlib import Path
 
+import numpy as np
+import yaml
+from rclpy.parameter import Parameter
+
+from ..cases.library import add_case_dir_argument, use_case_dir
+from ..device.loop_health import behind_text
+from ..exam.from_bag import new_session, resolve_exam_case, session_from_bag
+from ..exam.normal import normal_lines, specificity_text
+from ..exam.trainee import TraineeController, trainee_path
+from ..exam.void import void_reason
+from ..nodes.exam_side import CoverageWatch, examiner_arguments, hold_until_examiner
+from ..nodes.examiner import Examiner, SAMPLES_FILE, write_report
+from ..nodes.sim_trainee import SimTrainee
+from ..realtime.processes import rerun_command_in_own_session
+from ..session import OneProcessSession, add_session_arguments, spec_from_args
+from ..tissue.scene import load_scene
 from ._record import add_record_arguments, case_parameter, prepare_record, store_report
+from .view import exam_debrief
 
 NAME = 'exam'
-HELP = 'examination mode: run a simulated trainee through an exam, or score a recorded session'
 
 #: [s] the longest ``exam run`` waits, after the trainee is done, for its marks to reach the
 #: examiner
@@ -39,7 +57,6 @@ HEADLINE = ('coverage_pct', 'duration_s', 'contact_s', 'path_length_m', 'hits', 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     sub = p.add_subparsers(dest='exam_command', metavar='{run,report}', required=True)
     r = sub.add_parser('run', help='run the graph with the examiner and a simulated trainee')
-    from ..session import add_session_arguments
     add_session_arguments(r, NAME)
     r.add_argument('--trainee', default='systematic', metavar='systematic|careless|SCRIPT',
                    help='simulated trainee: systematic, careless or a palpation script (YAML)')
@@ -56,7 +73,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help='case of the library (its surface and lesions) or a scene file (its '
                         'lesions) the session is scored against (default: the one the bag was '
                         'recorded with; the default case for a bag that does not say)')
-    from ..cases.library import add_case_dir_argument
     add_case_dir_argument(b)
     _common(b)
     add_record_arguments(b)
@@ -70,22 +86,12 @@ def _common(p):
                    help='scoring settings (default config/exam.yaml)')
 
 
-def resolve_exam_case(case: str | None, need: tuple[str, ...] = ('model_path', 'mesh_path'),
-                      lib=None):
-    """:func:`haptic_anfis.exam.from_bag.resolve_exam_case` (imported when called: the CLI
-    builds every parser at start)."""
-    from ..exam.from_bag import resolve_exam_case as resolve
-    return resolve(case, need, lib)
-
-
 def run(args: argparse.Namespace) -> int:
-    from ..cases.library import use_case_dir
     use_case_dir(args.case_dir)   # before anything reads the library; the nodes inherit it
     if args.exam_command == 'run':
         # the loop's process in a session of its own, as sim's (a fair CPU share where the
         # kernel groups by session: beside 8 busy processes of the terminal's session and the
         # browser, the exam's start took minutes)
-        from ..realtime.processes import rerun_command_in_own_session
         code = rerun_command_in_own_session(args)
         if code is not None:
             return code
@@ -97,14 +103,12 @@ def run(args: argparse.Namespace) -> int:
         report, session = _report_bag(args)
     print_report(report)
     if args.out:
-        from ..nodes.examiner import write_report
         if session is not None:
             write_report(session, args.out, report)
         else:   # the side examiner drew report.png; the report gained the trainee's part here
             (Path(args.out) / 'report.json').write_text(json.dumps(report, indent=1))
         print(f'report         {Path(args.out) / "report.json"}, {Path(args.out) / "report.png"}')
         if felt is not None:   # what the simulated trainee felt: its detector can be re-run on it
-            import numpy as np
             np.save(Path(args.out) / 'trainee_felt.npy', felt)
             print(f'trainee felt   {Path(args.out) / "trainee_felt.npy"} ((n, 5): contact x, y, '
                   'z [m], depth [m], |F| [N])')
@@ -112,7 +116,6 @@ def run(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps(report), flush=True)
     if args.exam_command == 'run' and getattr(args, 'view', False):   # the page: the debrief
-        from .view import exam_debrief
         exam_debrief(args, report, session)
     return status
 
@@ -122,16 +125,9 @@ EXAM_NODES = ('falcon_driver', 'contact_detector', 'force_server', 'examiner')
 
 
 def _run_sim(args):
-    from rclpy.parameter import Parameter
 
-    from ..exam.trainee import TraineeController, trainee_path
-    from ..exam.void import void_reason
-    from ..nodes.examiner import Examiner
-    from ..nodes.sim_trainee import SimTrainee
-    from ..session import OneProcessSession, spec_from_args
     if args.speed is not None and not (args.speed > 0 and math.isfinite(args.speed)):
         raise ValueError(f'--speed: expected > 0 m/s, got {args.speed}')
-    from ..tissue.scene import load_scene
     case, scene = resolve_exam_case(args.case or None)
     # the case for every node: its name, or for a blind session (--next) a seed that draws it
     # (no node then logs its name)
@@ -160,9 +156,7 @@ def _run_sim(args):
     # surface.
     controller = TraineeController.from_yaml(
         script, args.speed, breast=None if sc is None else (sc.radii, sc.palpable_radius))
-    import tempfile
 
-    import yaml
     tmp = tempfile.TemporaryDirectory(prefix='haptic-anfis-exam-')
     fitted = Path(tmp.name) / 'trainee.yaml'   # the driver starts the hand where it begins
     fitted.write_text(yaml.safe_dump(controller.doc))
@@ -177,7 +171,6 @@ def _run_sim(args):
     if args.in_process:
         extra = [lambda ctx: Examiner(context=ctx, parameter_overrides=ex_params)]
     else:
-        from ..nodes.exam_side import CoverageWatch, examiner_arguments
         report_dir = tempfile.TemporaryDirectory(prefix='haptic-anfis-examiner-')
         side_nodes = {'examiner': examiner_arguments(
             scene or '', args.exam_config or '', None, report_dir.name,
@@ -200,7 +193,6 @@ def _run_sim(args):
     # (--in-process --view), with the examiner in this one
     own = side_nodes is not None
     if own:
-        from ..nodes.exam_side import hold_until_examiner
         try:   # the examiner (another process) is up: hold the hand until it subscribed
             # as long as every other node may take to be ready: on a loaded machine its start
             # (imports, mesh, kernels) took longer than a minute
@@ -304,9 +296,6 @@ def _side_report(report_dir, out: str | None, view_args=None):
     """The side examiner's report.json (and report.png into ``out``); with ``view_args`` (``exam
     run --view``) also its session rebuilt from the raw samples it saved (for the debrief), else
     None."""
-    import shutil
-
-    from ..nodes.examiner import SAMPLES_FILE
     d = Path(report_dir.name)
     try:   # written last and whole: its presence says the samples and figure are there
         report = json.loads((d / 'report.json').read_text())
@@ -319,7 +308,6 @@ def _side_report(report_dir, out: str | None, view_args=None):
         shutil.copy(d / 'report.png', Path(out) / 'report.png')
     session = None
     if view_args is not None:
-        from ..exam.from_bag import new_session
         session = new_session(view_args.case or None, view_args.exam_config)
         session.load_samples(d / SAMPLES_FILE)
     report_dir.cleanup()
@@ -327,7 +315,6 @@ def _side_report(report_dir, out: str | None, view_args=None):
 
 
 def _report_bag(args):
-    from ..exam.from_bag import session_from_bag
     return session_from_bag(args.bag, args.case, args.exam_config)
 
 
@@ -351,7 +338,6 @@ def haptic_loop(driver) -> tuple[dict, str | None]:
     """(the servo loop's figures over the exam, from the falcon driver's summary; a note for
     the report when any of its ``loop_check_period`` windows fell behind, else None): the
     instructor reading the report then knows whether the forces the trainee felt came late."""
-    from ..device.loop_health import behind_text
     s = driver.summary()
     loop = {k: s.get(k) for k in LOOP_KEYS}
     text = behind_text(int(loop['loop_windows'] or 0), int(loop['loop_windows_behind'] or 0),
@@ -360,7 +346,6 @@ def haptic_loop(driver) -> tuple[dict, str | None]:
 
 
 def print_report(r: dict) -> None:
-    from ..exam.normal import normal_lines, specificity_text
     c = r['coverage_pct']
     print(f"coverage       light {c['light']:.1f} %, medium {c['medium']:.1f} %, deep "
           f"{c['deep']:.1f} % of {r['region_faces']} cells (radius {r['region_radius_mm']:.0f} mm)")

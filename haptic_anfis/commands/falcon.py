@@ -6,8 +6,13 @@ from __future__ import annotations
 import argparse
 import sys
 
+import yaml
+
+from ..device.falcon_check import calibrate, geometry_with, run_check, write_counts_per_nm
+from ..device.falcon_usb import FalconUSB
+from ..resources import config_file
+
 NAME = 'falcon'
-HELP = 'check a real Novint Falcon step by step, and calibrate its force scale'
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -37,9 +42,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..device.falcon_check import calibrate, geometry_with, run_check, write_counts_per_nm
-    from ..device.falcon_usb import FalconUSB
-    from ..resources import config_file
     params_file = args.params_file or str(config_file('falcon_driver.yaml'))
     counts = args.counts_per_nm if args.counts_per_nm is not None else _counts_in(params_file)
     for name, v in (('--move-seconds', args.move_seconds), ('--spring-seconds',
@@ -77,7 +79,6 @@ def run(args: argparse.Namespace) -> int:
 
 def _counts_in(params_file: str) -> float:
     """counts_per_nm from a falcon_driver parameter file (10000.0 when absent)."""
-    import yaml
     try:
         with open(params_file, encoding='utf-8') as f:
             doc = yaml.safe_load(f) or {}

@@ -10,12 +10,15 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from ..cases.library import use_case_dir
+from ..realtime.processes import rerun_command_in_own_session
+from ..session import ProcessSession, add_session_arguments, spec_from_args
+from .loop import launch_trace_path, print_launch_report
+
 NAME = 'launch'
-HELP = 'run the haptic nodes as separate processes (falcon_driver, contact_detector, ...)'
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    from ..session import add_session_arguments
     add_session_arguments(p, NAME)
     p.add_argument('--json', action='store_true',
                    help='end with the loop report (haptic-anfis loop) as one JSON object on the '
@@ -23,15 +26,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..cases.library import use_case_dir
     use_case_dir(args.case_dir)   # before anything reads the library; the nodes inherit it
     if args.node_sessions == 'one':
-        from ..realtime.processes import rerun_command_in_own_session
         code = rerun_command_in_own_session(args)  # the nodes' one session
         if code is not None:
             return code
-    from ..session import ProcessSession, spec_from_args
-    from .loop import launch_trace_path, print_launch_report
     spec = spec_from_args(args, NAME)
     spec.check()  # before the trace directory is made
     node_args: dict[str, list[str]] = {n: [] for n in spec.nodes}

@@ -32,13 +32,24 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import tempfile
 from pathlib import Path
 from typing import Any, Mapping, Sequence
 
 import numpy as np
 
+from ..cases.library import case_node_arguments
+from ..device.force_error import error_by_phase, force_error, ripple_and_dropouts
+from ..device.local_model import STATUS_NAMES
+from ..device.stats import tick_gaps
+from ..device.trace import DISABLED, load_trace
+from ..nodes.parameter_files import parse_overrides
+from ..nodes.parameters import CASE_PARAMS
+from ..nodes.registry import node_parameters
+from ..nodes.resim import build_pipeline
+from ..pipeline.replay import pose_to_force
+
 NAME = 'loop'
-HELP = 'applied-force error and loop statistics of a falcon_driver servo tick trace (trace_path)'
 
 #: the keys printed first, in this order
 KEYS = ('force_mode', 'rates_hz', 'latency_p50_ms', 'latency_p99_ms', 'latency_max_ms',
@@ -87,9 +98,6 @@ def ideal_overrides(ros_args: Sequence[str] = ()) -> dict[str, dict[str, Any]]:
     """{node: {parameter: value}} of :data:`IDEAL_NODES` from ``-p [node:]name:=value``
     arguments (a session's case arguments and the user's overrides), as rcl gives them to each
     node: a global name to every node that declares it, ``node:name`` to that node alone."""
-    from ..nodes.parameter_files import parse_overrides
-    from ..nodes.parameters import CASE_PARAMS
-    from ..nodes.registry import node_parameters
     out: dict[str, dict[str, Any]] = {n: {} for n in IDEAL_NODES}
     for target, v, _ in parse_overrides(list(ros_args)):
         node, _, name = target.rpartition(':')
@@ -107,8 +115,6 @@ def ideal_forces(positions: np.ndarray, params_files=(),
     ``params_files`` and ``overrides`` ({node: {name: value}}, :func:`ideal_overrides`) as the
     contact_detector and force_server nodes are, the session's case included) over the probe
     ``positions`` (n, 3) [m], tissue frame, in order."""
-    from ..nodes.resim import build_pipeline
-    from ..pipeline.replay import pose_to_force
     ov = overrides or {}
     cp, tracker, _, model = build_pipeline(params_files, dict(ov.get('contact_detector', {})),
                                            dict(ov.get('force_server', {})))
@@ -135,10 +141,6 @@ def trace_report(trace: str | Path, params_files=(), start: float = 0.0,
     Raises:
         ValueError: ``start`` leaves fewer than two ticks.
     """
-    from ..device.force_error import error_by_phase, force_error, ripple_and_dropouts
-    from ..device.local_model import STATUS_NAMES
-    from ..device.stats import tick_gaps
-    from ..device.trace import DISABLED, load_trace
     rows, meta = load_trace(trace)
     kept = len(rows)
     rows = rows[rows[:, 7] != DISABLED]  # 0 N on purpose (before start, at shutdown)
@@ -231,7 +233,6 @@ def run(args: argparse.Namespace) -> int:
         raise ValueError(f'{args.trace}: no such trace file')
     if args.start < 0:
         raise ValueError(f'--from: expected seconds >= 0, got {args.start:g}')
-    from ..cases.library import case_node_arguments
     r = trace_report(args.trace, args.params_file, args.start,
                      ideal_overrides(case_node_arguments(args)))
     print(format_report(r))
@@ -251,7 +252,6 @@ def launch_trace_path(extra: dict[str, list[str]], where: Path | None,
     if trace:
         path = Path(trace).resolve()
     else:
-        import tempfile
         d = Path(where) if where else Path(tempfile.mkdtemp(prefix='haptic_anfis_loop_'))
         path = (d / 'falcon_driver_trace.npz').resolve()
     extra['falcon_driver'] += ['-p', f'trace_path:={path}']

@@ -4,11 +4,18 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from ..report.run import build_report, headline_table
 from ..tissue.dataset import DEFAULT_DATASET, load_dataset
 
+try:  # the report's figures and peers: the 'report' extra
+    import matplotlib  # noqa: F401
+    import sklearn  # noqa: F401
+except ImportError as exc:
+    _NO_REPORT_EXTRA: ImportError | None = exc
+else:
+    _NO_REPORT_EXTRA = None
+
 NAME = 'report'
-HELP = ('speed-against-error report: our ANFIS models and peers (xanfis, RBF, k-NN, MLP, linear) '
-        'on one split; writes report.md + PNG figures')
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -25,13 +32,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    try:
-        import matplotlib  # noqa: F401
-        import sklearn  # noqa: F401
-    except ImportError as exc:
-        raise OSError(f'the report needs the "report" extra: pip install -e ".[report]" ({exc})') from None
-    from ..report import build_report, headline_table
-
+    if _NO_REPORT_EXTRA is not None:
+        raise OSError('the report needs the "report" extra: pip install -e ".[report]" '
+                      f'({_NO_REPORT_EXTRA})')
     ds = load_dataset(args.dataset)
     label = Path(args.dataset).name
     print(f'report: {label}, {len(ds)} samples; training and measuring every model on one split')

@@ -12,16 +12,26 @@ contact statistics; with ``--json`` the last line of output is one JSON object (
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import math
 import os
+import shutil
+import tempfile
+from pathlib import Path
+
+from ..cases.library import use_case_dir
+from ..nodes.session import process_age
+from ..nodes.side_nodes import SideNodeError
+from ..realtime.processes import rerun_command_in_own_session
+from ..session import OneProcessSession, add_session_arguments, spec_from_args
+from ..session.spec import ONE_PROCESS_NODES
+from .loop import ideal_overrides, trace_report
 
 NAME = 'sim'
-HELP = 'run the haptic node graph in one process with the simulated Falcon and print loop statistics'
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    from ..session import add_session_arguments
     add_session_arguments(p, NAME)
     p.add_argument('--json', action='store_true',
                    help='end with one line of JSON: rate_hz, latency_p50_ms, latency_p99_ms, '
@@ -33,21 +43,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..cases.library import use_case_dir
     use_case_dir(args.case_dir)   # before anything reads the library; the nodes inherit it
-    from ..realtime.processes import rerun_command_in_own_session
     code = rerun_command_in_own_session(args)  # the graph in a session of its own (fair CPU)
     if code is not None:
         return code
-    from ..nodes.side_nodes import SideNodeError
-    from ..session import OneProcessSession, spec_from_args
-    from ..session.spec import ONE_PROCESS_NODES
     spec = spec_from_args(args, NAME, nodes=ONE_PROCESS_NODES)
     trace = keep = None
     if args.json or spec.trace:  # the applied-force error needs every servo tick (loop.py)
-        import dataclasses
-        import tempfile
-        from pathlib import Path
         spec.check(check_parameters=False)   # before a temporary directory is made
         keep = Path(spec.trace).resolve() if spec.trace else None
         trace = keep or (Path(tempfile.mkdtemp(prefix='haptic-anfis-sim-'))
@@ -63,7 +65,6 @@ def run(args: argparse.Namespace) -> int:
     try:
         if not session.wait_ready():
             return 1
-        from ..nodes.session import process_age
         model = getattr(graph.force, 'model_path', None)
         print(f'ready after {process_age():.1f} s; running the haptic graph for '
               f'{args.duration:g} s (one process, EventsExecutor{session.where()})'
@@ -104,9 +105,7 @@ def _trace_figures(trace, spec, remove: bool = True) -> dict:
     temporary trace, removed with its directory); {} without one."""
     if trace is None or not trace.is_file():
         return {}
-    import shutil
 
-    from .loop import ideal_overrides, trace_report
     try:
         r = trace_report(trace, spec.params_files, overrides=ideal_overrides(
             [*spec.case_arguments(), *spec.user_ros_args()]))

@@ -20,8 +20,15 @@ import json
 import math
 import sys
 
+from ..device.falcon import WorkspaceMapping
+from ..device.falcon_usb import FalconUSB, import_ftdi
+from ..device.stiffness_press import DevicePresses, simulated_press
+from ..exam.staircase import SimulatedObserver
+from ..exam.threshold_run import run_threshold
+from ..record.store import check_trainee_id
+from ..record.thresholds import store_threshold
+
 NAME = 'threshold'
-HELP = "measure a trainee's stiffness-discrimination threshold (2AFC staircase) on the device"
 
 
 def percentage(text: str) -> float:
@@ -55,9 +62,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..exam.threshold_run import run_threshold
-    from ..record.store import check_trainee_id
-    from ..record.thresholds import store_threshold
 
     check_trainee_id(args.trainee_id)
     if args.backend == 'sim':
@@ -91,17 +95,12 @@ def run(args: argparse.Namespace) -> int:
 
 def _simulated(args):
     """Presses on the simulated Falcon, answered by a simulated observer of known threshold."""
-    from ..device.stiffness_press import simulated_press
-    from ..exam.staircase import SimulatedObserver
     obs = SimulatedObserver(args.observer / 100.0, seed=args.seed)
     return simulated_press, lambda a, b: obs.choose(a.stiffness, b.stiffness), 'sim'
 
 
 def _falcon(args):
     """Presses on a Novint Falcon; the trainee answers 1 or 2 on the terminal."""
-    from ..device.falcon import WorkspaceMapping
-    from ..device.stiffness_press import DevicePresses
-    from ..device.falcon_usb import FalconUSB, import_ftdi
     if not (math.isfinite(args.press_time) and args.press_time > 0):
         raise ValueError(f'--press-time: expected > 0 s, got {args.press_time}')
     import_ftdi()

@@ -12,9 +12,17 @@ import math
 import os
 import sys
 import time
+from collections import deque
+
+import rclpy
+import yaml
+from rclpy.context import Context
+from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+
+from ..nodes.executor import make_executor
+from ..nodes.runtime import message_class
 
 NAME = 'topic'
-HELP = 'list topics, echo messages (readable fields), measure a topic\'s rate'
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -76,17 +84,13 @@ def format_message(msg, flat: bool = False) -> str:
     d = to_plain(msg)
     if flat:
         return ' '.join(f'{k}={v!r}' for k, v in _flat(d))
-    import yaml
     return yaml.safe_dump(d, sort_keys=False, default_flow_style=None, width=100).rstrip()
 
 
 # --- rclpy session --------------------------------------------------------------------------------
 class _Session:
     def __init__(self):
-        import rclpy
-        from rclpy.context import Context
 
-        from ..nodes.executor import make_executor
         self.rclpy = rclpy
         self.ctx = Context()
         rclpy.init(args=['haptic-anfis-topic'], context=self.ctx)
@@ -121,7 +125,6 @@ class _Session:
         return types[0]
 
     def qos_for(self, topic: str):
-        from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
         infos = self.node.get_publishers_info_by_topic(topic)
         best_effort = any(i.qos_profile.reliability == ReliabilityPolicy.BEST_EFFORT for i in infos)
         return QoSProfile(depth=100, history=HistoryPolicy.KEEP_LAST,
@@ -146,7 +149,6 @@ def _list(s: _Session, args) -> int:
 
 
 def _echo(s: _Session, args) -> int:
-    from ..nodes.runtime import message_class
     topic = _absolute(args.topic)
     cls = message_class(s.topic_type(topic, args.type, args.timeout))
     want = 1 if args.once else args.count
@@ -173,9 +175,7 @@ def _echo(s: _Session, args) -> int:
 
 
 def _hz(s: _Session, args) -> int:
-    from collections import deque
 
-    from ..nodes.runtime import message_class
     topic = _absolute(args.topic)
     cls = message_class(s.topic_type(topic, args.type, args.timeout))
     times: deque = deque(maxlen=max(args.window, 2))

@@ -7,9 +7,9 @@ from ..anfis import train_on_dataset
 from ..anfis.defaults import SHIPPED
 from ..bag.training_data import load_training_data
 from ..tissue.dataset import OUTPUT_NAMES
+from ..yamlfile import read_yaml
 
 NAME = 'train'
-HELP = 'train the Fx/Fy/Fz ANFIS models on a force dataset (structure search, hybrid learning)'
 
 
 def parse_structure(text: str) -> tuple[int, ...]:
@@ -66,7 +66,6 @@ def load_config(path: str | None) -> dict:
     """The "force_model" section of a YAML file, checked for unknown keys."""
     if path is None:
         return {}
-    from ..yamlfile import read_yaml
     doc = read_yaml(path, 'config file') or {}
     if isinstance(doc, dict) and 'force_model' not in doc:   # a typo, or another config file
         raise ValueError(f'{path}: no "force_model" section (its top-level keys: '

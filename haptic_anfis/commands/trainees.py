@@ -13,13 +13,20 @@ named only with ``--instructor`` (and in ``export``, an instructor's file).
 from __future__ import annotations
 
 import argparse
-import json
+import importlib
+import io
 import sys
 import textwrap
-from pathlib import Path
+
+from ..record import (delete_trainee, export_csv, history, load_mastery_config, mastery,
+                      resolve_db_path, trainees)
 
 NAME = 'trainees'
-HELP = 'the trainee record: list trainees, show sessions, progress and mastery, export, delete'
+
+#: ``progress`` draws the learning curve (matplotlib): its own module
+#: (``haptic_anfis.commands.<module>``), imported only when chosen, so the other actions do not
+#: load matplotlib
+ACTION_MODULES = {'progress': '_trainees_progress'}
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -51,13 +58,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..record import resolve_db_path
-    return {'list': _list, 'show': _show, 'progress': _progress, 'export': _export,
-            'delete': _delete}[args.action](args, resolve_db_path(args.db))
+    db = resolve_db_path(args.db)
+    if args.action in ACTION_MODULES:
+        mod = importlib.import_module(f'{__package__}.{ACTION_MODULES[args.action]}')
+        return getattr(mod, args.action)(args, db)
+    actions = {'list': _list, 'show': _show, 'export': _export, 'delete': _delete}
+    return actions[args.action](args, db)
 
 
 def _list(args, db) -> int:
-    from ..record import trainees
     rows = trainees(db)
     if not rows:
         print(f'no trainee in {db}')
@@ -126,7 +135,6 @@ def _mastery_lines(m: dict, config=None) -> None:
 
 
 def _show(args, db) -> int:
-    from ..record import history, load_mastery_config, mastery
     sessions = history(db, args.id, instructor=args.instructor)
     print(f'trainee {args.id}: {len(sessions)} session(s) in {db}')
     _table(sessions)
@@ -138,48 +146,7 @@ def _show(args, db) -> int:
     return 0
 
 
-def _progress(args, db) -> int:
-    from ..record import history, load_mastery_config, mastery
-    cfg = load_mastery_config(args.exam_config)
-    sessions = history(db, args.id, instructor=args.instructor)
-    m = mastery(sessions, cfg)
-    if args.figure:
-        from ..record.figure import save_progress_figure
-        try:
-            import matplotlib  # noqa: F401
-        except ImportError:
-            raise ValueError('--figure needs matplotlib (pip install matplotlib)') from None
-        _figure_folder(args.figure)
-        deep = {100 * lv.min_deep_coverage for lv in cfg.levels.values()}
-        save_progress_figure(args.id, sessions, args.figure, m,
-                             pass_deep_pct=deep.pop() if len(deep) == 1 else None)
-    if args.json:
-        print(json.dumps({'trainee': args.id, 'sessions': sessions, 'mastery': m}))
-        return 0
-    _table(sessions)
-    _mastery_lines(m, cfg)
-    if args.figure:
-        print(f'figure {args.figure}')
-    return 0
-
-
-def _figure_folder(path: str) -> None:
-    """Create the folder of ``--figure PATH`` (a new folder is said in one line); ValueError
-    naming the path when it cannot be made or is a file."""
-    folder = Path(path).expanduser().parent
-    if folder.is_dir():
-        return
-    try:
-        folder.mkdir(parents=True)
-    except OSError as exc:
-        raise ValueError(f'--figure {path}: cannot create its folder {str(folder)!r} '
-                         f'({exc.strerror or exc})') from None
-    print(f'created folder {folder}', file=sys.stderr)
-
-
 def _export(args, db) -> int:
-    import io
-    from ..record import export_csv
     if args.output:
         text = io.StringIO()
         n = export_csv(db, args.id, text)   # first: an unknown id must not empty an old export
@@ -192,7 +159,6 @@ def _export(args, db) -> int:
 
 
 def _delete(args, db) -> int:
-    from ..record import delete_trainee
     n = delete_trainee(db, args.id)
     print(f'trainee {args.id} deleted from {db}: {n} session(s) removed')
     return 0

@@ -8,10 +8,14 @@ from __future__ import annotations
 
 import argparse
 import math
+import time
+
+from ..cases.library import add_case_dir_argument, use_case_dir
+from ..view.app import ViewApp
+from ..view.build import open_bag_view, serve
+from ..view.debrief import Debrief
 
 NAME = 'view'
-HELP = ("the trainee's screen in a browser: the debrief of a recorded session (coverage per "
-        'level, path, marks, lesions revealed, score, replay)')
 
 DEFAULT_PORT = 8080
 
@@ -23,7 +27,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help='case of the library (its surface and lesions) or a scene file (its '
                         'lesions) the session is scored against (default: the one the bag was '
                         'recorded with; the default case for a bag that does not say)')
-    from ..cases.library import add_case_dir_argument
     add_case_dir_argument(p)
     p.add_argument('--port', type=int, default=DEFAULT_PORT,
                    help=f'TCP port of the page (default {DEFAULT_PORT})')
@@ -41,11 +44,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..cases.library import use_case_dir
     use_case_dir(args.case_dir)   # before anything reads the library; the nodes inherit it
     if args.duration is not None and not (args.duration > 0 and math.isfinite(args.duration)):
         raise ValueError(f'--duration: expected > 0 s, got {args.duration}')
-    from ..view.build import open_bag_view, serve
     app = open_bag_view(args.bag, args.case, args.port, args.host, args.exam_config,
                         args.trainee, args.db)
     n = app.debrief.numbers()
@@ -67,10 +68,6 @@ def exam_debrief(args: argparse.Namespace, report: dict, session) -> None:
     ``trainees show``, has it)."""
     if not getattr(args, 'view', False):
         return
-    from ..view.app import ViewApp
-    from ..view.build import serve
-    from ..view.debrief import Debrief
-    import time
     end = time.monotonic() + 10.0
     while True:   # the node's process has just released the port
         try:

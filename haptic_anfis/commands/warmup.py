@@ -4,16 +4,16 @@ The force model, the contact detector and the servo tick are compiled on first u
 cache the first session waits for them (tens of seconds on a busy 2-core machine). ``make venv``
 runs this once so the first session starts warm. The cache is beside the sources, or
 ``NUMBA_CACHE_DIR`` (set by the package to the user cache directory when the package directory is
-not writable, see :mod:`haptic_anfis.numba_cache`).
+not writable, see :mod:`haptic_anfis.numba_cache`); the kernels: :mod:`haptic_anfis.warm`.
 """
 from __future__ import annotations
 
 import argparse
 import os
 
+from ..warm import warm
+
 NAME = 'warmup'
-HELP = ("compile the nodes' numba kernels (force model, contact detector, servo tick) into the "
-        'cache (run once after install)')
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -21,7 +21,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..numba_cache import warm
     where = os.environ.get('NUMBA_CACHE_DIR') or 'beside the sources (__pycache__)'
     times = warm()
     print(f'numba kernels cached {where}: '

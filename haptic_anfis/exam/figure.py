@@ -12,6 +12,17 @@ import numpy as np
 from .. import palette
 from .config import LEVELS
 
+try:  # matplotlib: an optional dependency (the 'report' and 'fe' extras); PNG files, no display
+    import matplotlib
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt
+    from matplotlib.collections import PolyCollection
+    from matplotlib.colors import ListedColormap
+    from matplotlib.lines import Line2D
+    from matplotlib.patches import Circle, Patch
+except ImportError:
+    plt = None
+
 
 def deepest_level(covered: np.ndarray) -> np.ndarray:
     """Per face, the deepest pressure level reached: 0 none, 1.. ``len(LEVELS)`` (``covered``:
@@ -22,14 +33,8 @@ def deepest_level(covered: np.ndarray) -> np.ndarray:
 
 def save_figure(session, report: dict, path: str | os.PathLike) -> None:
     """Write the figure of ``session`` (an :class:`ExamSession`) and its ``report`` to ``path``."""
-    import matplotlib
-    matplotlib.use('Agg')
-    import matplotlib.pyplot as plt
-    from matplotlib.collections import PolyCollection
-    from matplotlib.colors import ListedColormap
-    from matplotlib.lines import Line2D
-    from matplotlib.patches import Patch
-
+    if plt is None:
+        raise ImportError('the report figure needs matplotlib (pip install matplotlib)')
     g = session.grid
     tri = g.vertices[g.faces[g.faces_index]][:, :, 1:3] * 1e3    # (m, 3, 2) y, z [mm]
     R = session.region_radius * 1e3
@@ -123,7 +128,6 @@ def _draw_normal(ax, normal: list[dict]) -> set[str]:
 
 def _circle(centre, radius: float, colour: str):
     """A dotted circle patch of ``radius`` [mm] at ``centre`` (y, z) [mm]."""
-    from matplotlib.patches import Circle
     return Circle(tuple(centre), radius, fill=False, lw=1.2, ls=':', zorder=2.5, color=colour)
 
 

@@ -9,6 +9,12 @@ import os
 from pathlib import Path
 
 from .. import interfaces as ifc
+from ..bag.errors import BagError
+from ..bag.reader import RECORDER_MARK, bag_info, read_messages
+from ..bag.topics import absolute
+from ..cases import CaseError, DEFAULT_CASE, library
+from ..contact import load_mesh
+from ..device.buttons import CLUTCH, MARK
 from .config import load_exam_config
 from .lesions import subject_from_scene
 from .session import ExamSession, Surface
@@ -31,7 +37,6 @@ def resolve_exam_case(case: str | None, need: tuple[str, ...] = ('model_path', '
     p = Path(case)
     if p.suffix in ('.yaml', '.yml') and p.is_file():
         return None, str(p)
-    from ..cases import library
     c = (lib or library()).get(case).require(need)
     return c, str(c.scene_path)
 
@@ -48,8 +53,6 @@ def recorded_case(bag, custom_data: dict, case: str | None) -> tuple[str | None,
             its scene file is gone.
         CaseError: the bag's case is not in this library (or not ready).
     """
-    from ..bag.errors import BagError
-    from ..bag.reader import RECORDER_MARK
     ours = custom_data.get('recorder') == RECORDER_MARK
     scene, recorded = ((custom_data.get('scene', ''), custom_data.get('case', '')) if ours
                        else ('', ''))
@@ -72,7 +75,6 @@ def recorded_case(bag, custom_data: dict, case: str | None) -> tuple[str | None,
                       'version): scored against the default case; give --case if it was another')
     if recorded == 'default':
         return None, ''
-    from ..cases import CaseError, library
     try:
         library().get(recorded).require(('mesh_path',))
     except CaseError as exc:
@@ -81,8 +83,6 @@ def recorded_case(bag, custom_data: dict, case: str | None) -> tuple[str | None,
 
 
 def _new_session(c, subject, cfg) -> ExamSession:
-    from ..cases import DEFAULT_CASE, library
-    from ..contact import load_mesh
     mesh = load_mesh(c.mesh_path if c else library().get(DEFAULT_CASE).mesh_path, unit='mm')
     mesh.merge_vertices()
     return ExamSession(Surface.from_mesh(mesh), subject, cfg)
@@ -113,9 +113,6 @@ def session_from_bag(bag: str | os.PathLike, case: str | None = None,
         names it and lists the topics it has).
         CaseError / ValueError: unknown case (also one the bag names), bad exam config.
     """
-    from ..bag.reader import bag_info, read_messages
-    from ..bag.topics import absolute
-    from ..device.buttons import CLUTCH, MARK
     cfg = load_exam_config(exam_config)
     info = bag_info(bag)   # BagError on a missing / corrupt bag, before the mesh is loaded
     case, case_note = recorded_case(bag, info.custom_data, case)
@@ -124,7 +121,6 @@ def session_from_bag(bag: str | os.PathLike, case: str | None = None,
     have = {t.topic for t in info.topics}
     missing = [t for t in (absolute(ifc.TOPIC_CONTACT),) if t not in have]
     if missing and require_contact:
-        from ..bag.errors import BagError
         raise BagError(f'{bag}: no {", ".join(missing)} topic (it has '
                        f'{", ".join(sorted(have)) or "none"}): nothing to show')
     session = _new_session(c, subject, cfg)

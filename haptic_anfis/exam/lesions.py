@@ -8,6 +8,10 @@ from typing import Any
 
 import numpy as np
 
+from ..cases import CaseError, library
+from ..cases.grading import DEEP_DEPTH
+from ..tissue.scene import DEFAULT_SCENE, load_scene
+
 
 @dataclass(frozen=True)
 class Lesion:
@@ -52,7 +56,6 @@ def subject_from_scene(path: str | os.PathLike | None = None) -> ExamSubject:
     Raises:
         SceneError (a ValueError): the file is missing or malformed.
     """
-    from ..tissue.scene import DEFAULT_SCENE, load_scene
     p = Path(path) if path else DEFAULT_SCENE
     sc = load_scene(p)
     grading = _case_grading(p)
@@ -67,8 +70,6 @@ def subject_from_scene(path: str | os.PathLike | None = None) -> ExamSubject:
 def _case_grading(scene_path: Path) -> dict:
     """The FE grading of the library case whose scene file this is (haptic_anfis.cases.grading);
     {} for an ungraded scene."""
-    from ..cases import CaseError, library
-
     lib = library()
     try:
         case = lib.get(scene_path.stem)
@@ -92,7 +93,6 @@ def _deep_contrast(grade: dict) -> dict:
     """``contrast_pct`` / ``contrast_depth`` [m] of a lesion's grading: at the deep pressure's
     depth (what a trainee pressing as taught would feel), else its strongest; {} without
     per-depth contrasts."""
-    from ..cases.grading import DEEP_DEPTH
     rows = grade.get('contrasts') or []
     if not rows:
         return {}

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..contact import ContactDetector
 from ..interfaces import I_DEPTH, I_IN_CONTACT, ContactLayouts
 from ..rows import RowLog
 from .config import LEVELS, ExamConfig
@@ -34,7 +35,6 @@ class Surface:
 
     @classmethod
     def from_mesh(cls, mesh) -> 'Surface':
-        from ..contact import ContactDetector
         return cls(np.asarray(mesh.vertices, float), np.asarray(mesh.faces, np.int64),
                    ContactDetector(mesh, direction=(-1.0, 0.0, 0.0)))
 

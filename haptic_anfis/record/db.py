@@ -34,6 +34,7 @@ from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 from typing import TypeVar
+from urllib.parse import quote
 
 from ..errors import HapticAnfisError
 
@@ -391,7 +392,6 @@ def _open_immutable(path: Path) -> sqlite3.Connection | None:
     free = _free_bytes(path)
     if free is None or free >= FULL_BELOW:
         return None
-    from urllib.parse import quote
     conn = sqlite3.connect(f'file:{quote(str(path.resolve()))}?immutable=1', uri=True,
                            isolation_level=None)
     try:

@@ -15,6 +15,7 @@ import hashlib
 import os
 import random
 
+from ..cases import CaseError, library
 from .db import resolve_db_path
 from .levels import case_level, has_palpable_lesion
 from .mastery import MasteryConfig, load_mastery_config, mastery
@@ -50,7 +51,6 @@ def next_case(db: str | os.PathLike | None, trainee_id: str, lib=None,
         ValueError: no ready case with a palpable lesion at any level (names the levels there
             are); RecordError: a bad record file.
     """
-    from ..cases import CaseError, library
     config = config or load_mastery_config(exam_config)
     try:
         past = (history(db, trainee_id, instructor=True) if resolve_db_path(db).is_file()

@@ -7,6 +7,15 @@ import os
 
 from .. import palette
 
+try:  # matplotlib: an optional dependency (the 'report' and 'fe' extras); PNG files, no display
+    import matplotlib
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt
+    from matplotlib.lines import Line2D
+    from matplotlib.patches import Patch
+except ImportError:
+    plt = None
+
 __all__ = ['save_progress_figure']
 
 def save_progress_figure(trainee_id: str, sessions: list[dict], path: str | os.PathLike,
@@ -16,12 +25,8 @@ def save_progress_figure(trainee_id: str, sessions: list[dict], path: str | os.P
     mastered level, ``pass_deep_pct`` [%] a line at the deep-coverage threshold. Only what was
     measured is drawn: a session with no palpable lesion has no sensitivity (its column is
     shaded, not given a value)."""
-    import matplotlib
-    matplotlib.use('Agg')
-    import matplotlib.pyplot as plt
-    from matplotlib.lines import Line2D
-    from matplotlib.patches import Patch
-
+    if plt is None:
+        raise ImportError('the progress figure needs matplotlib (pip install matplotlib)')
     n = len(sessions)
     x = list(range(1, n + 1))
     fig, axes = plt.subplots(5, 1, figsize=(8.5, 12), sharex=True, layout='constrained',

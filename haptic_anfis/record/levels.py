@@ -14,6 +14,11 @@ silicone models but 14 % of 3 mm ones). Pure Python, no ROS.
 """
 from __future__ import annotations
 
+from pathlib import Path
+
+from ..cases import library
+from ..tissue.scene import load_scene
+
 __all__ = ['MAX_LEVEL', 'SMALL_DIAMETER', 'case_level', 'has_palpable_lesion',
            'level_of_case_name']
 
@@ -66,13 +71,10 @@ def level_of_case_name(name: str | None) -> int | None:
     exam report gives (``report['case']``); None when it is neither (or unreadable)."""
     if not name:
         return None
-    from pathlib import Path
 
-    from ..cases import library
     try:
         p = Path(name)
         if p.suffix in ('.yaml', '.yml') and p.is_file():
-            from ..tissue.scene import load_scene
             return case_level(load_scene(p))
         return case_level(library().get(name))
     except ValueError:

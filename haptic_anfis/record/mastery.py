@@ -21,6 +21,7 @@ from pathlib import Path
 
 import yaml
 
+from ..exam.config import DEFAULT_CONFIG
 from .store import same_recording
 
 __all__ = ['MasteryConfig', 'MasteryLevel', 'lesion_free', 'load_mastery_config', 'mastery',
@@ -82,7 +83,6 @@ def load_mastery_config(path: str | os.PathLike | None = None) -> MasteryConfig:
     Raises:
         ValueError: naming the file and the bad key.
     """
-    from ..exam.config import DEFAULT_CONFIG
     path = Path(path) if path else DEFAULT_CONFIG
     if not path.is_file():
         if path == DEFAULT_CONFIG:

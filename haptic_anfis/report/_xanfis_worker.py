@@ -16,6 +16,15 @@ import struct
 import sys
 import time
 
+import numpy as np
+
+os.environ.setdefault('OMP_NUM_THREADS', '1')   # before torch loads: one math thread
+try:  # installed in the xanfis virtualenv only (the package imports this file for the wire format)
+    import torch
+    from xanfis import AnfisRegressor
+except ImportError:
+    torch = AnfisRegressor = None
+
 
 def _read(stream):
     head = stream.read(8)
@@ -34,7 +43,6 @@ def _write(stream, obj):
 def _pack(obj):
     """numpy arrays -> ('__f64__', shape, bytes): a pickled array names numpy's private modules,
     which differ between numpy 1 (xanfis' environment) and numpy 2 (ours)."""
-    import numpy as np
     if isinstance(obj, np.ndarray):
         a = np.ascontiguousarray(obj, dtype=np.float64)
         return ('__f64__', a.shape, a.tobytes())
@@ -48,7 +56,6 @@ def _pack(obj):
 
 
 def _unpack(obj):
-    import numpy as np
     if isinstance(obj, tuple) and len(obj) == 3 and obj[0] == '__f64__':
         return np.frombuffer(obj[2], dtype=np.float64).reshape(obj[1]).copy()
     if isinstance(obj, (list, tuple)):
@@ -61,11 +68,7 @@ def _unpack(obj):
 def main():
     fin, fout = sys.stdin.buffer, sys.stdout.buffer
     sys.stdout = sys.stderr  # anything xanfis prints must not corrupt the frames
-    os.environ.setdefault('OMP_NUM_THREADS', '1')
-    import numpy as np
-    import torch
     torch.set_num_threads(1)
-    from xanfis import AnfisRegressor
 
     state = {}
     while True:

@@ -14,7 +14,7 @@ import numpy as np
 
 from ..tissue.dataset import ForceDataset, fold_indices
 
-#: The issue's protocol: 5 folds over loading points, 3 seeds.
+#: The default protocol: 5 folds over loading points, 3 seeds.
 DEFAULT_FOLDS = 5
 DEFAULT_SEEDS = (0, 1, 2)
 

@@ -7,14 +7,22 @@ from typing import Any
 import numpy as np
 
 from ..tissue.dataset import OUTPUT_NAMES, ForceDataset
+from .targets import HAPTIC_BUDGET_US, PAPER_EVALS_PER_S
+
+try:  # matplotlib: an optional dependency (the 'report' and 'fe' extras); PNG files, no display
+    import matplotlib
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt
+except ImportError:
+    plt = None
 
 DPI = 100
 
 
 def _plt():
-    import matplotlib
-    matplotlib.use('Agg')
-    import matplotlib.pyplot as plt
+    """matplotlib.pyplot; one line naming the extra when matplotlib is not installed."""
+    if plt is None:
+        raise ImportError('the report figures need matplotlib (the report extra)')
     return plt
 
 
@@ -35,7 +43,6 @@ def _best_peer(res: dict[str, Any]) -> dict[str, Any] | None:
 
 
 def speed_vs_error(res: dict[str, Any], path: Path) -> str:
-    from .targets import HAPTIC_BUDGET_US, PAPER_EVALS_PER_S
     plt = _plt()
     fig, ax = plt.subplots(figsize=(7.5, 4.6))
     ok = [r for r in res['rows'] if r['status'] == 'ok']

@@ -11,6 +11,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+from scipy.interpolate import LinearNDInterpolator
 
 from ..tissue.dataset import ForceDataset
 
@@ -42,8 +43,6 @@ def make_probes(ds: ForceDataset, n_lines: int = 8, n_depths: int = 3, batch: in
                 seed: int = 0) -> Probes:
     """Lines through the input domain. Contact points stay on the surface: x is interpolated
     (linearly, over the (y, z) triangulation of the data's surface points) from (y, z)."""
-    from scipy.interpolate import LinearNDInterpolator
-
     _, xyz = surface_points(ds)
     surf = LinearNDInterpolator(xyz[:, 1:], xyz[:, 0])
     d_lo, d_hi = ds.X[:, 3].min(), ds.X[:, 3].max()

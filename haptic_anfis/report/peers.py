@@ -10,8 +10,9 @@ row: ours ``predict_one``, everyone else ``predict`` on a (1, 4) array), ``throu
 evaluations per second) and ``curves()`` (per-epoch errors, if it keeps them). A peer that cannot be
 imported or trained raises; the report catches that and lists the peer as failed with the reason.
 
-Peers are imported lazily (scikit-learn, scipy's RBF, xanfis): nothing here is needed to run the
-simulator.
+scikit-learn (the ``report`` extra) is optional: without it its peers raise when fitted. xanfis
+runs in a process of its own (:mod:`haptic_anfis.report._xanfis_worker`). Nothing here is needed to
+run the simulator.
 """
 from __future__ import annotations
 
@@ -20,12 +21,32 @@ import pickle
 import struct
 import subprocess
 import sys
+import warnings
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+from scipy.interpolate import RBFInterpolator
 
+from ..anfis import ForceModel
 from ..anfis.timing import throughput, time_calls
+from ._xanfis_worker import _pack, _unpack
+from .compiled_mlp import mlp_batch, mlp_one, pack_mlp
+
+try:  # the scikit-learn peers: the 'report' extra
+    from sklearn.exceptions import ConvergenceWarning
+    from sklearn.linear_model import LinearRegression
+    from sklearn.neighbors import KNeighborsRegressor
+    from sklearn.neural_network import MLPRegressor
+except ImportError as exc:
+    _NO_SKLEARN: ImportError | None = exc
+else:
+    _NO_SKLEARN = None
+
+
+def _need_sklearn() -> None:
+    if _NO_SKLEARN is not None:
+        raise ImportError(f'scikit-learn (the report extra): {_NO_SKLEARN}')
 
 
 def _rows(Q: np.ndarray) -> list[tuple[np.ndarray]]:
@@ -100,7 +121,6 @@ class OursPeer(Peer):
                      f'ours {form} {structure_label(structure)}')
 
     def fit(self, X, Y, groups=None):
-        from ..anfis import ForceModel
         self.model_ = ForceModel(structure=self.structure, **self.params).fit(X, Y, groups=groups)
         return self
 
@@ -127,7 +147,7 @@ class LinearPeer(Peer):
     name, family = 'linear regression', 'scikit-learn LinearRegression'
 
     def fit(self, X, Y, groups=None):
-        from sklearn.linear_model import LinearRegression
+        _need_sklearn()
         self.model_ = LinearRegression().fit(X, Y)
         return self
 
@@ -143,7 +163,7 @@ class KnnPeer(_Standardised):
         self.name = f'k-NN (k={k}, distance-weighted)'
 
     def fit(self, X, Y, groups=None):
-        from sklearn.neighbors import KNeighborsRegressor
+        _need_sklearn()
         Z, T = self._scale_fit(X, Y)
         self.model_ = KNeighborsRegressor(n_neighbors=self.k, weights='distance').fit(Z, T)
         return self
@@ -160,10 +180,7 @@ class MlpPeer(_Standardised):
         self.name = f'MLP {"-".join(map(str, hidden))} (tanh)'
 
     def fit(self, X, Y, groups=None):
-        import warnings
-
-        from sklearn.exceptions import ConvergenceWarning
-        from sklearn.neural_network import MLPRegressor
+        _need_sklearn()
         Z, T = self._scale_fit(X, Y)
         self.model_ = MLPRegressor(hidden_layer_sizes=self.hidden, activation='tanh', solver='lbfgs',
                                    alpha=1e-4, max_iter=self.max_iter, random_state=self.seed)
@@ -192,7 +209,6 @@ class CompiledMlpPeer(MlpPeer):
         self.name = f'MLP {"-".join(map(str, hidden))} (tanh, numba)'
 
     def fit(self, X, Y, groups=None):
-        from .compiled_mlp import mlp_batch, mlp_one, pack_mlp
         super().fit(X, Y, groups)
         self.fp_, self.ip_ = pack_mlp(self.model_.coefs_, self.model_.intercepts_, self.mu_,
                                       self.sd_, self.ymu_, self.ysd_)
@@ -201,11 +217,9 @@ class CompiledMlpPeer(MlpPeer):
         return self
 
     def predict(self, X):
-        from .compiled_mlp import mlp_batch
         return mlp_batch(np.ascontiguousarray(X, dtype=np.float64), self.fp_, self.ip_)
 
     def time_single(self, Q, repeats):
-        from .compiled_mlp import mlp_one
         fp, ip = self.fp_, self.ip_
         return time_calls(lambda x, y, z, d: mlp_one(x, y, z, d, fp, ip),
                           [tuple(float(v) for v in q) for q in Q], repeats)
@@ -219,7 +233,6 @@ class RbfPeer(_Standardised):
         self.name = f'RBF ({kernel.replace("_", " ")})'
 
     def fit(self, X, Y, groups=None):
-        from scipy.interpolate import RBFInterpolator
         Z, T = self._scale_fit(X, Y)
         self.model_ = RBFInterpolator(Z, T, kernel=self.kernel, smoothing=self.smoothing)
         return self
@@ -231,9 +244,6 @@ class RbfPeer(_Standardised):
 # ---- xanfis (its own virtualenv) ------------------------------------------------------------
 XANFIS_ENV = 'HAPTIC_ANFIS_XANFIS_PYTHON'
 WORKER = Path(__file__).resolve().parent / '_xanfis_worker.py'
-
-
-from ._xanfis_worker import _pack, _unpack  # noqa: E402  (the wire format, shared)
 
 
 def xanfis_python() -> Path:

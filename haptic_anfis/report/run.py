@@ -15,9 +15,12 @@ from typing import Any, Sequence
 import numpy as np
 
 from .._version import __version__
-from ..tissue.dataset import OUTPUT_NAMES, ForceDataset, split_indices
+from ..tissue.dataset import DATA_DIR, ForceDataset, INPUT_NAMES, OUTPUT_NAMES, split_indices
+from . import figures
+from .contact import contact_onset
+from .cv import format_cv_table, group_cv
 from .measure import (JUMP_STEP_M, MONOTONE_TOL_N, data_jump_scale, make_probes, measure)
-from .peers import OursPeer, Peer, default_peers
+from .peers import LinearPeer, MlpPeer, OursPeer, Peer, RbfPeer, default_peers
 from .targets import HAPTIC_BUDGET_US, PAPER_EVALS_PER_S, PAPER_RMSE_N  # noqa: F401 (re-exported)
 
 
@@ -29,7 +32,6 @@ def shipped_params(path: str | os.PathLike | None = None) -> dict[str, Any]:
     ``path``): read from the hyper-parameters the file records (its form, inputs, per-output
     structures, extrapolation band, ridge, epochs, validation split), so that the report measures
     exactly what the force server loads (config/force_model.yaml made it: ``haptic-anfis train``)."""
-    from ..tissue.dataset import DATA_DIR, INPUT_NAMES
     doc = json.loads(Path(path or DATA_DIR / 'default_model.json').read_text())
     tr = doc.get('training', {})
     form = doc.get('form') or {'name': 'plain', 'inputs': list(INPUT_NAMES)}
@@ -71,7 +73,6 @@ def cv_models(quick: bool) -> dict[str, Any]:
     """``name -> (seed -> model)`` of the grouped-CV table: the shipped default and the paper's
     plain form, and the best plain peers (compiled MLP has the MLP's errors, so it is not
     repeated)."""
-    from .peers import LinearPeer, MlpPeer, RbfPeer
     if quick:
         return {'ours depth·g 3-3-2': lambda s: OursPeer((3, 3, 2), epochs=5, seed=s),
                 'RBF (thin plate spline)': lambda s: RbfPeer(),
@@ -124,9 +125,6 @@ def build_report(ds: ForceDataset, out_dir: str | os.PathLike, quick: bool = Fal
     :func:`cv_models` (``cv_seeds`` × ``cv_folds`` folds over surface points; no seeds: skipped);
     write ``report.md``, ``results.json`` and the figures into ``out_dir``. Returns the results
     (rows, split, settings, cv)."""
-    from . import figures
-    from .contact import contact_onset
-    from .cv import group_cv
     t_start = time.perf_counter()
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -248,7 +246,6 @@ def headline_table(res: dict[str, Any]) -> str:
 
 def cv_section(res: dict[str, Any]) -> list[str]:
     """Markdown lines of the grouped cross-validation table (empty when it was skipped)."""
-    from .cv import format_cv_table
     cv = res.get('cv') or {}
     if not cv:
         return []

@@ -22,13 +22,16 @@ SI units (m); tissue frame (chest wall x = 0, +x out of the body).
 """
 from __future__ import annotations
 
+import json
 import os
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Sequence
 
 import numpy as np
+from scipy.spatial import Delaunay
 
+from .dataset import DEFAULT_DATASET, ForceDataset, fold_indices, sidecar_path
 from .displacement import (DisplacementDataError, DisplacementSet, displacement_path,
                            harmonic_basis, load_displacements, probe_frame)
 
@@ -106,7 +109,6 @@ class DeformationModel:
         self.unit_ = knots
         self._tri = None
         if self.form == 'interpolant':
-            from scipy.spatial import Delaunay
 
             self._tri = Delaunay(self.yz_)
         return self
@@ -126,10 +128,6 @@ class DeformationModel:
     @classmethod
     def load_default(cls, **params) -> 'DeformationModel':
         """The shipped default scene's model, checked against the shipped force data's hash."""
-        import json
-
-        from .dataset import DEFAULT_DATASET, sidecar_path
-
         sha = json.loads(sidecar_path(DEFAULT_DATASET).read_text()).get('sha256')
         return cls.load(displacement_path(DEFAULT_DATASET), dataset_sha256=sha, **params)
 
@@ -294,8 +292,6 @@ def holdout_errors(data: DisplacementSet, form: str = 'interpolant', folds: int 
     index out of the fit (tests the interpolation in depth). Returns the worst and the RMS over
     held-out fields of each ratio, and the footprint's largest deviation from the depth [m].
     """
-    from .dataset import ForceDataset, fold_indices
-
     ok = np.flatnonzero(np.all(np.isfinite(data.coeffs), axis=(1, 2, 3, 4)))
     stub = ForceDataset(X=np.zeros((len(ok), 4)), Y=np.zeros((len(ok), 3)), point=ok)
     a = data.probe_radius

@@ -16,8 +16,18 @@ from typing import Sequence
 
 import numpy as np
 
+from ..contact import load_mesh
+from .dataset import DATA_DIR
 from .deformation import DeformationModel
 from .dent_display import DentSurface
+
+try:  # matplotlib: an optional dependency (the 'report' and 'fe' extras); PNG files, no display
+    import matplotlib
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt
+    from mpl_toolkits.mplot3d.art3d import Poly3DCollection
+except ImportError:
+    plt = None
 
 
 def render_strip(surface: DentSurface, contact_point: Sequence[float], direction: Sequence[float],
@@ -25,12 +35,8 @@ def render_strip(surface: DentSurface, contact_point: Sequence[float], direction
                  ) -> Path:
     """Write a PNG with one 3-D view per depth [m] of the drawn surface within ``half_width`` [m]
     (in y and z) of the contact, plus a cross-section through the probe axis."""
-    import matplotlib
-
-    matplotlib.use('Agg')
-    import matplotlib.pyplot as plt
-    from mpl_toolkits.mplot3d.art3d import Poly3DCollection
-
+    if plt is None:
+        raise ImportError('the strip figure needs matplotlib (pip install matplotlib)')
     c = np.asarray(contact_point, dtype=float)
     d = np.asarray(direction, dtype=float)
     a = surface.model.probe_radius_
@@ -129,8 +135,6 @@ def main(argv=None) -> int:
     p.add_argument('--depths', default='0,5,12', help='depths in mm (default 0,5,12)')
     p.add_argument('--yz', default='0,0', help='contact (y, z) in mm on the default dome')
     args = p.parse_args(argv)
-    from ..contact import load_mesh
-    from .dataset import DATA_DIR
 
     model = DeformationModel.load(args.data) if args.data else DeformationModel.load_default()
     mesh = load_mesh(DATA_DIR / 'default_surface.stl', unit='mm')

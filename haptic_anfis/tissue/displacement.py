@@ -31,7 +31,9 @@ from pathlib import Path
 from typing import Any, Sequence
 
 import numpy as np
+
 from ..errors import HapticAnfisError
+from .dataset import load_dataset
 
 GRID_VERSION = 1
 #: sample radii over the probe radius: dense across the probe edge, geometric outside.
@@ -339,8 +341,6 @@ def ship_beside(new_csv: str | os.PathLike, old_csv: str | os.PathLike,
     Raises:
         DisplacementDataError: the samples differ, or the forces differ beyond ``rtol``.
     """
-    from .dataset import load_dataset
-
     new, old = load_dataset(new_csv), load_dataset(old_csv)
     if len(new) != len(old) or not np.array_equal(new.point, old.point) \
             or not np.array_equal(new.X, old.X):

@@ -18,10 +18,15 @@ from typing import Callable, Sequence
 
 import numpy as np
 
+from ..errors import HapticAnfisError
+from ..optional import optional
 from .background import rib_fraction
+from .geometry import indentation_direction
+from .linsolve import ReusedFactorSolver
 from .mesh import Domain, HexMesh, build_mesh, cell_samples, tumour_fractions
 from .scene import Scene, surface_height
-from ..errors import HapticAnfisError
+
+fem = optional('felupe')  # the FE stack: the 'fe' extra (not needed to run the simulator)
 
 
 class FESolveError(HapticAnfisError, RuntimeError):
@@ -62,8 +67,6 @@ def default_linear_solver() -> tuple[str, Callable]:
     """A fresh :class:`~.linsolve.ReusedFactorSolver` (one per load path: it keeps the last
     factorisation and preconditions the next Newton systems with it) and its name
     ('reused-factor/pypardiso' with the optional pypardiso, else 'reused-factor/scipy-superlu-sym')."""
-    from .linsolve import ReusedFactorSolver
-
     solver = ReusedFactorSolver()
     return f'reused-factor/{solver.backend}', solver
 
@@ -95,8 +98,8 @@ def solve_load_path(mesh: HexMesh, shear: np.ndarray | float, bulk: np.ndarray |
     Raises:
         FESolveError if an increment fails after ``max_cutbacks`` halvings.
     """
-    import felupe as fem
-
+    if fem is None:
+        raise ImportError('the FE solver needs felupe (the fe extra: pip install felupe)')
     t0 = time.perf_counter()
     if solver is None:
         solver = default_linear_solver()[1]  # a new one per path: its factor belongs to this mesh
@@ -246,8 +249,6 @@ def solve_scene_point(scene: Scene, point: Sequence[float], coarse: bool = False
                       max_step: float | None = None, max_cutbacks: int = 6) -> LoadPathResult:
     """Mesh and solve the load path at a surface point (x, y, z) [m] of ``scene``
     (load steps of at most ``max_step`` [m], default the scene's)."""
-    from .geometry import indentation_direction
-
     n = probe_cells or (scene.mesh.coarse_probe_cells if coarse else scene.mesh.probe_cells)
     point = np.asarray(point, dtype=float)
     mesh = scene_mesh(scene, point[1:], n)

@@ -9,6 +9,7 @@ import os
 from pathlib import Path
 
 import numpy as np
+import trimesh
 
 from .scene import Scene, surface_height
 
@@ -110,8 +111,6 @@ def surface_mesh(radii: tuple[float, float, float], subdivisions: int = 5):
     about 2 mm edges for 70 mm radii at 5 subdivisions; the rim is resolved to one triangle.
     Returns a watertight ``trimesh.Trimesh``.
     """
-    import trimesh
-
     sphere = trimesh.creation.icosphere(subdivisions=subdivisions, radius=1.0)
     v = np.array(sphere.vertices)
     back = v[:, 0] < 0

@@ -22,26 +22,30 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
+from scipy.sparse.linalg import LinearOperator, gmres, splu
+
+from ..optional import optional
+
+pypardiso = optional('pypardiso')  # MKL PARDISO: the 'fe-fast' extra (loads MKL, ~700 MB)
 
 __all__ = ['ReusedFactorSolver', 'factorise', 'backend_name']
 
 
 def backend_name() -> str:
     """'pypardiso' when importable (MKL PARDISO factorisation), else 'scipy-superlu-sym'."""
-    try:
-        import pypardiso  # noqa: F401
-
-        return 'pypardiso'
-    except ImportError:
-        return 'scipy-superlu-sym'
+    if pypardiso is not None:
+        try:
+            pypardiso.PyPardisoSolver   # the first use runs the import (MKL may be missing)
+            return 'pypardiso'
+        except ImportError:
+            pass
+    return 'scipy-superlu-sym'
 
 
 class _Pardiso:
     """A kept pypardiso factorisation exposing ``solve(b)``."""
 
     def __init__(self, A) -> None:
-        import pypardiso
-
         self.A = A.tocsr()
         self.ps = pypardiso.PyPardisoSolver()
         self.ps.factorize(self.A)
@@ -60,7 +64,6 @@ def factorise(A, backend: str | None = None) -> Any:
     backend = backend or backend_name()
     if backend == 'pypardiso':
         return _Pardiso(A)
-    from scipy.sparse.linalg import splu
 
     return splu(A.tocsc(), permc_spec='MMD_AT_PLUS_A', diag_pivot_thresh=0.0,
                 options={'SymmetricMode': True})
@@ -93,7 +96,6 @@ class ReusedFactorSolver:
         self.factor, self.shape = None, None
 
     def __call__(self, A, b) -> np.ndarray:
-        from scipy.sparse.linalg import LinearOperator, gmres
 
         b = np.asarray(b, dtype=float).ravel()
         if self.factor is not None and self.shape == A.shape:

@@ -26,8 +26,22 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
+from ..optional import optional
+from .displacement import profile_record
+from .fe import FESolveError, default_linear_solver, solve_scene_point
+from .geometry import indentation_direction
 from .scene import Scene
 from .store import PointStore, point_key
+
+try:  # one math thread per FE worker: the 'fe' extra
+    from threadpoolctl import threadpool_limits
+except ImportError:
+    threadpool_limits = None
+try:  # the sweep's progress bar (the 'fe' extra; a plain status line without it)
+    from tqdm import tqdm
+except ImportError:
+    tqdm = None
+distributed = optional('distributed')  # FE points on a dask.distributed cluster: the 'dask' extra
 
 __all__ = ['ATTEMPTS', 'JOURNAL_ENV', 'PointSweepResult', 'run_point_sweep', 'solve_point']
 
@@ -43,12 +57,8 @@ def solve_point(scene: Scene, point: Sequence[float], probe_cells: int,
                 attempts: Sequence[tuple[float, int]] = ATTEMPTS) -> dict[str, Any]:
     """Solve one loading point (x, y, z) [m] with retries; the sweep record (``status`` 'ok' or
     'failed' with ``error`` and ``attempts``). Never raises for a failed solve."""
-    from threadpoolctl import threadpool_limits
-
-    from .displacement import profile_record
-    from .fe import FESolveError, default_linear_solver, solve_scene_point
-    from .geometry import indentation_direction
-
+    if threadpool_limits is None:
+        raise ImportError('the FE sweep needs threadpoolctl (the fe extra)')
     t0, c0 = time.perf_counter(), time.process_time()
     point = [float(v) for v in point]
     direction = indentation_direction(scene, np.asarray(point)[None])[0]
@@ -127,14 +137,9 @@ class _Bar:
         self.n, self.total, self.desc, self.t0 = 0, total, desc, time.time()
         self.tq = None
         self.enabled = enabled and total > 0
-        if self.enabled:
-            try:
-                from tqdm import tqdm
-
-                self.tq = tqdm(total=total, desc=desc, unit='pt', file=sys.stderr,
-                               dynamic_ncols=True)
-            except ImportError:
-                pass
+        if self.enabled and tqdm is not None:
+            self.tq = tqdm(total=total, desc=desc, unit='pt', file=sys.stderr,
+                           dynamic_ncols=True)
 
     def update(self, note: str = '') -> None:
         self.n += 1
@@ -212,14 +217,12 @@ def run_point_sweep(scene: Scene, store: PointStore, points: np.ndarray, probe_c
         executor = getattr(executor, '_client', executor)  # a ClientExecutor: use its Client
     try:
         if _is_dask(executor):
-            from distributed import as_completed
-
             futs = [executor.submit(_store_task, *a, pure=False,
                                     key=f'fe-{scene.name}-{k}-{time.time_ns()}')
                     for (k, _), a in zip(todo, args)]
             # one result fetched at a time (with_results=True gathers every future in its own
             # coroutine: under heavy load that tripped a tornado write assertion here)
-            for fut in as_completed(futs):
+            for fut in distributed.as_completed(futs):
                 take(fut.result())
                 fut.release()
         else:

@@ -16,8 +16,18 @@ from typing import Any, Iterator
 
 import numpy as np
 
+from .dataset import DEFAULT_DATASET, load_dataset
+from .fe import FESolveError, solve_scene_point
+from .geometry import loading_points
 from .scene import Scene
 from .validation import fe_punch_on_layer, hayes_kappa, sneddon_force
+
+try:  # matplotlib: an optional dependency (the 'report' and 'fe' extras); PNG files, no display
+    import matplotlib
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt
+except ImportError:
+    plt = None
 
 SMALL_DEPTH = 0.2e-3  # m: delta / a = 0.025, where the Neo-Hookean punch is still linear
 
@@ -48,9 +58,6 @@ def punch_case(scene: Scene, kind: str, probe_cells: int, depths: tuple[float, .
 def convergence_case(scene: Scene, probe_cells: int, point_index: int | None = None
                      ) -> dict[str, Any]:
     """Load path of one loading point (default: the apex) on a mesh with ``probe_cells``."""
-    from .fe import FESolveError, solve_scene_point
-    from .geometry import loading_points
-
     pts = loading_points(scene)
     i = int(np.argmin(np.hypot(pts[:, 1], pts[:, 2]))) if point_index is None else point_index
     try:
@@ -77,13 +84,8 @@ def _cached(store: dict[str, Any], path: Path, key: str, fn, *args, **kw) -> dic
 def write_report(scene: Scene, out_dir: str | os.PathLike, data: str | os.PathLike | None = None,
                  coarse: bool = False) -> Iterator[str]:
     """Compute (or reuse) the validation cases and write plots into ``out_dir``; yields lines."""
-    import matplotlib
-
-    matplotlib.use('Agg')
-    import matplotlib.pyplot as plt
-
-    from .dataset import DEFAULT_DATASET, load_dataset
-
+    if plt is None:
+        raise ImportError('the validation report needs matplotlib (the fe extra)')
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     jpath = out / 'validation.json'

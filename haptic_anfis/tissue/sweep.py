@@ -20,11 +20,20 @@ from pathlib import Path
 from typing import Any, Callable, Iterable
 
 import numpy as np
+import scipy
 
+from ..optional import optional
 from .dataset import ForceDataset
-from .displacement import DisplacementSet, displacements_from_records, record_is_current
-from .geometry import loading_points
+from .displacement import (DisplacementSet, displacements_from_records, profile_record,
+                           record_is_current)
+from .fe import FESolveError, default_linear_solver, solve_scene_point
+from .geometry import indentation_direction, loading_points
+from .linsolve import backend_name
 from .scene import Scene
+
+# their versions are recorded with the data (solver_versions)
+felupe = optional('felupe')  # the FE stack: the 'fe' extra
+pypardiso = optional('pypardiso')  # MKL PARDISO: the 'fe-fast' extra
 
 THREAD_VARS = ('OMP_NUM_THREADS', 'MKL_NUM_THREADS', 'OPENBLAS_NUM_THREADS',
                'NUMBA_NUM_THREADS', 'VECLIB_MAXIMUM_THREADS')
@@ -41,9 +50,6 @@ def _solve_task(scene: Scene, index: int, point: list[float], coarse: bool) -> d
     """Worker: solve one loading point; never raises for a failed solve (records the error).
     The record holds the forces and the skin's displacement profile at every depth reached."""
     limit_threads()
-    from .displacement import profile_record
-    from .fe import FESolveError, default_linear_solver, solve_scene_point
-    from .geometry import indentation_direction
 
     t0 = time.perf_counter()
     direction = indentation_direction(scene, np.asarray(point)[None])[0]
@@ -196,17 +202,10 @@ def run_sweep(scene: Scene, work_dir: str | os.PathLike, *, coarse: bool = False
 
 def solver_versions() -> dict[str, str]:
     """Versions of everything that shapes the numbers."""
-    import felupe
-    import scipy
-
     out = {'python': platform.python_version(), 'numpy': np.__version__, 'scipy': scipy.__version__,
            'felupe': felupe.__version__}
-    try:
-        import pypardiso
-
+    if backend_name() == 'pypardiso':
         out['pypardiso'] = getattr(pypardiso, '__version__', 'installed')
-    except ImportError:
-        pass
     return out
 
 

@@ -13,6 +13,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from .fe import solve_load_path
+from .mesh import Domain, build_mesh
+
 
 def sneddon_force(a: float, youngs: float, nu: float, delta: float | np.ndarray) -> np.ndarray:
     """Sneddon's flat-punch force [N] on a half-space: radius a [m], E [Pa], depth delta [m]."""
@@ -74,9 +77,6 @@ def fe_punch_on_layer(h: float, a: float = 8e-3, youngs: float = 33e3, nu: float
     """FE flat bonded punch (radius a [m]) on a flat layer of thickness h [m], bonded to a rigid
     base, laterally ``radius`` [m] wide (default 5 h) with a free side: the Hayes et al. set-up,
     meshed and solved exactly as the breast is. Returns fe.LoadPathResult (forces in N)."""
-    from .fe import solve_load_path
-    from .mesh import Domain, build_mesh
-
     radius = radius or 5.0 * h
     dom = Domain(ry=radius, rz=radius, height=lambda y, z: np.full(np.shape(y), h), fix_rim=False)
     mesh = build_mesh(dom, (0.0, 0.0), a, probe_cells, refine=refine, depth_refine=depth_refine,

@@ -144,7 +144,7 @@ def test_the_graded_library_covers_the_issue():
 
 
 def test_a_failing_point_is_retried_with_smaller_steps(monkeypatch, tmp_path):
-    from haptic_anfis.tissue import fe
+    from haptic_anfis.tissue import fe, pointsweep
 
     scene = parse_scene(TINY, 'tinygraded')
     real, calls = fe.solve_scene_point, []
@@ -155,7 +155,7 @@ def test_a_failing_point_is_retried_with_smaller_steps(monkeypatch, tmp_path):
             raise fe.FESolveError('no convergence (injected)')
         return real(scene, point, **kw)
 
-    monkeypatch.setattr(fe, 'solve_scene_point', flaky)
+    monkeypatch.setattr(pointsweep, 'solve_scene_point', flaky)   # where solve_point looks it up
     p = loading_points(scene)[0]
     rec = solve_point(scene, p, 2)
     assert rec['status'] == 'ok' and rec['attempt'] == 2

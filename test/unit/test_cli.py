@@ -143,3 +143,59 @@ def test_every_commands_help_prints():
     for path, parser in found:
         text = parser.format_help()
         assert 'usage:' in text, path
+
+
+def test_the_command_table_lists_every_command_module_and_no_other():
+    import pkgutil
+
+    from haptic_anfis import commands
+    from haptic_anfis.cli import command_module
+    modules = {m.name for m in pkgutil.iter_modules(commands.__path__) if not m.name.startswith('_')}
+    assert set(commands.COMMANDS) == modules
+    for word in commands.COMMANDS:
+        assert command_module(word).NAME == word
+
+
+def test_help_imports_no_command_module_nor_ros_numba_or_the_fe_stack():
+    """``haptic-anfis --help`` lists the commands from the table alone; a command's --help
+    imports that command's module only."""
+    import subprocess
+    import sys
+    code = ('import sys, contextlib, io\n'
+            'from haptic_anfis.cli import main\n'
+            'with contextlib.redirect_stdout(io.StringIO()) as out, contextlib.suppress(SystemExit):\n'
+            '    main(sys.argv[1:])\n'
+            'assert "usage:" in out.getvalue()\n'
+            'print(sorted(m for m in sys.modules if m.startswith("haptic_anfis.commands.") or '
+            'm.split(".")[0] in ("rclpy", "numba", "felupe", "matplotlib", "trimesh")))\n')
+    r = subprocess.run([sys.executable, '-c', code, '--help'], capture_output=True, text=True,
+                       timeout=120)
+    assert r.returncode == 0 and r.stdout.strip() == '[]', r.stdout + r.stderr
+    r = subprocess.run([sys.executable, '-c', code, 'trainees', '--help'], capture_output=True,
+                       text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+    assert [m for m in eval(r.stdout) if m.startswith('haptic_anfis.commands.')] == \
+        ['haptic_anfis.commands.trainees'], r.stdout
+
+
+def test_without_ros_a_ros_command_is_one_line_and_the_bag_commands_still_load(tmp_path):
+    """rclpy comes with ROS 2 (or the 'ros' extra): ``topic`` says in one line that it is
+    missing; ``bag info`` (the bag room reads bags without ROS) runs and reports the bad path."""
+    import subprocess
+    import sys
+    code = ('import sys; sys.modules["rclpy"] = None\n'
+            'from haptic_anfis.cli import main\n'
+            'sys.exit(main(sys.argv[1:]))\n')
+
+    def run(*argv):
+        return subprocess.run([sys.executable, '-c', code, *argv], capture_output=True,
+                              text=True, timeout=120)
+    r = run('topic', 'list')
+    assert r.returncode == 1 and len(r.stderr.strip().splitlines()) == 1, r.stderr
+    assert r.stderr.startswith('haptic-anfis topic: error: ') and 'rclpy' in r.stderr
+    r = run('bag', 'info', str(tmp_path / 'no_bag'))
+    assert r.returncode == 1 and 'rclpy' not in r.stderr, r.stderr
+    assert str(tmp_path / 'no_bag') in r.stderr
+    r = run('bag', 'play', str(tmp_path / 'no_bag'))
+    assert r.returncode == 1 and len(r.stderr.strip().splitlines()) == 1, r.stderr
+    assert r.stderr.startswith('haptic-anfis bag: error: needs rclpy'), r.stderr

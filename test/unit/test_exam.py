@@ -148,7 +148,7 @@ def test_exam_case_lookup_names_the_case_and_what_is_missing(tmp_path):
     """--case: a library case needs its model and surface (the error names the case and the
     missing file); an unknown name lists the known cases; a scene file is taken as is."""
     from haptic_anfis.cases import CaseError, CaseLibrary
-    from haptic_anfis.commands.exam import resolve_exam_case
+    from haptic_anfis.exam.from_bag import resolve_exam_case
     from haptic_anfis.tissue.scene import SCENE_DIR
     scenes, data = tmp_path / 'scenes', tmp_path / 'data'
     scenes.mkdir()

@@ -9,6 +9,7 @@ from pathlib import Path
 import pytest
 
 from haptic_anfis import numba_cache
+from haptic_anfis.warm import warm
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -65,7 +66,7 @@ def test_package_import_sets_it_before_numba_loads(tmp_path):
 
 def test_warm_rejects_an_unknown_part():
     with pytest.raises(ValueError, match=r"unknown part\(s\) \['servo'\]; expected some of"):
-        numba_cache.warm(('servo',))
+        warm(('servo',))
 
 
 def _cache_files(d: Path) -> dict[str, int]:
@@ -79,7 +80,7 @@ def test_the_warm_up_compiles_the_servo_tick_the_driver_then_loads(tmp_path):
     there and compiles nothing (no cache file added or rewritten)."""
     cache = tmp_path / 'numba'
     env = dict(os.environ, NUMBA_CACHE_DIR=str(cache), PYTHONPATH=str(ROOT))
-    warm = ('from haptic_anfis.numba_cache import warm; '
+    warm = ('from haptic_anfis.warm import warm; '
             "print(sorted(warm(('servo_tick',))))")
     out = subprocess.run([sys.executable, '-c', warm], env=env, capture_output=True, text=True,
                          timeout=600)
