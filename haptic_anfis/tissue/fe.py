@@ -59,11 +59,15 @@ class LoadPathResult:
 
 
 def default_linear_solver() -> tuple[str, Callable]:
-    """A fresh :class:`~.linsolve.ReusedFactorSolver` (one per load path: it keeps the last
-    factorisation and preconditions the next Newton systems with it) and its name
-    ('reused-factor/pypardiso' with the optional pypardiso, else 'reused-factor/scipy-superlu-sym')."""
-    from .linsolve import ReusedFactorSolver
+    """A fresh linear solver for one load path and its name: with the optional pypardiso a
+    :class:`~.linsolve.PardisoLDLSolver` ('pardiso-ldl': an LDL^T factorisation per Newton
+    iteration, the ordering kept for the path's fixed sparsity pattern), else a
+    :class:`~.linsolve.ReusedFactorSolver` ('reused-factor/scipy-superlu-sym': the last SuperLU
+    factor kept and used to precondition the next Newton systems)."""
+    from .linsolve import PardisoLDLSolver, ReusedFactorSolver, backend_name
 
+    if backend_name() == 'pypardiso':
+        return 'pardiso-ldl', PardisoLDLSolver()
     solver = ReusedFactorSolver()
     return f'reused-factor/{solver.backend}', solver
 
@@ -128,7 +132,15 @@ def solve_load_path(mesh: HexMesh, shear: np.ndarray | float, bulk: np.ndarray |
     done, iters, cutbacks = 0.0, 0, 0
     queue = list(steps)
     halvings = 0
+    # After a cut-back the increments stay at most the halved one: a path that failed once
+    # gets stiffer further in, and each failed attempt costs Newton iterations and
+    # factorisations for nothing (the equilibrium at a recorded depth does not depend on the
+    # steps taken to it: hyperelastic, no history).
+    limit = np.inf
     while queue:
+        parts = int(np.ceil((queue[0] - done) / limit - 1e-6)) if np.isfinite(limit) else 1
+        if parts > 1:  # equal sub-increments of at most ``limit`` up to the next queued depth
+            queue.insert(0, done + (queue[0] - done) / parts)
         target = queue[0]
         state = solid.checkpoint()
         for i in range(3):
@@ -155,7 +167,8 @@ def solve_load_path(mesh: HexMesh, shear: np.ndarray | float, bulk: np.ndarray |
                     wall_time=time.perf_counter() - t0,
                     skin_displacements=np.array(skin_u).reshape(len(recorded), -1, 3), mesh=mesh)
                 raise err from None
-            queue.insert(0, 0.5 * (done + target))
+            limit = 0.5 * (target - done)
+            queue.insert(0, done + limit)
             continue
         halvings = 0
         done = queue.pop(0)
@@ -177,8 +190,8 @@ def solve_load_path(mesh: HexMesh, shear: np.ndarray | float, bulk: np.ndarray |
 
 
 def _solver_info(solver: Callable) -> dict:
-    """Counters of a :class:`~.linsolve.ReusedFactorSolver` (empty for a plain function)."""
-    keys = ('factorisations', 'krylov_solves', 'krylov_iterations')
+    """Counters of a :mod:`~.linsolve` solver (empty for a plain function)."""
+    keys = ('factorisations', 'analyses', 'krylov_solves', 'krylov_iterations')
     return {k: getattr(solver, k) for k in keys if hasattr(solver, k)}
 
 

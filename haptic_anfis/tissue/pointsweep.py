@@ -71,7 +71,7 @@ def solve_point(scene: Scene, point: Sequence[float], probe_cells: int,
                        newton_iterations=res.newton_iterations, cutbacks=res.cutbacks,
                        attempt=k, max_step_m=frac * scene.max_step, linear_solver=name,
                        solver_info={k2: v for k2, v in res.info.items()
-                                    if k2 in ('factorisations', 'krylov_solves',
+                                    if k2 in ('factorisations', 'analyses', 'krylov_solves',
                                               'krylov_iterations')},
                        displacement=profile_record(res, point, direction, scene.probe_radius))
             break
