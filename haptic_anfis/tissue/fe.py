@@ -85,7 +85,8 @@ def load_steps(depths: Sequence[float], max_step: float) -> list[float]:
 def solve_load_path(mesh: HexMesh, shear: np.ndarray | float, bulk: np.ndarray | float,
                     direction: Sequence[float], depths: Sequence[float], max_step: float = 2e-3,
                     max_cutbacks: int = 6, tol: float = 1e-6, maxiter: int = 16,
-                    solver: Callable | None = None, bonded: bool = True) -> LoadPathResult:
+                    solver: Callable | None = None, bonded: bool = True,
+                    hold_cutback: bool = True) -> LoadPathResult:
     """Indent ``mesh``'s footprint along the unit vector ``direction`` to each of ``depths`` [m].
 
     Args:
@@ -96,6 +97,8 @@ def solve_load_path(mesh: HexMesh, shear: np.ndarray | float, bulk: np.ndarray |
             (a frictionless probe, for validation against frictionless analytic solutions).
         direction: (3,) unit vector the probe moves along (into the tissue).
         depths: increasing depths [m] to record; the path is stepped by at most ``max_step``.
+        hold_cutback: after a cut-back, keep later increments at most the halved one (default);
+            False goes back to ``max_step`` after each (the benchmark's baseline).
     Raises:
         FESolveError if an increment fails after ``max_cutbacks`` halvings.
     """
@@ -167,8 +170,9 @@ def solve_load_path(mesh: HexMesh, shear: np.ndarray | float, bulk: np.ndarray |
                     wall_time=time.perf_counter() - t0,
                     skin_displacements=np.array(skin_u).reshape(len(recorded), -1, 3), mesh=mesh)
                 raise err from None
-            limit = 0.5 * (target - done)
-            queue.insert(0, done + limit)
+            queue.insert(0, 0.5 * (done + target))
+            if hold_cutback:
+                limit = 0.5 * (target - done)
             continue
         halvings = 0
         done = queue.pop(0)
@@ -256,9 +260,11 @@ def scene_mesh(scene: Scene, centre_yz: Sequence[float], probe_cells: int) -> He
 
 def solve_scene_point(scene: Scene, point: Sequence[float], coarse: bool = False,
                       probe_cells: int | None = None, solver: Callable | None = None,
-                      max_step: float | None = None, max_cutbacks: int = 6) -> LoadPathResult:
+                      max_step: float | None = None, max_cutbacks: int = 6,
+                      hold_cutback: bool = True) -> LoadPathResult:
     """Mesh and solve the load path at a surface point (x, y, z) [m] of ``scene``
-    (load steps of at most ``max_step`` [m], default the scene's)."""
+    (load steps of at most ``max_step`` [m], default the scene's; ``hold_cutback`` as in
+    :func:`solve_load_path`)."""
     from .geometry import indentation_direction
 
     n = probe_cells or (scene.mesh.coarse_probe_cells if coarse else scene.mesh.probe_cells)
@@ -267,7 +273,7 @@ def solve_scene_point(scene: Scene, point: Sequence[float], coarse: bool = False
     mu, bulk = scene_moduli(scene, mesh)
     direction = indentation_direction(scene, point[None])[0]
     res = solve_load_path(mesh, mu, bulk, direction, scene.depths, max_step or scene.max_step,
-                          max_cutbacks=max_cutbacks, solver=solver)
+                          max_cutbacks=max_cutbacks, solver=solver, hold_cutback=hold_cutback)
     res.info.update(probe_cells=n, edge_refine=scene.mesh.edge_refine,
                     edge_offset=scene.mesh.edge_offset, direction=direction.tolist(),
                     footprint_radius=mesh.footprint_radius)

@@ -155,7 +155,9 @@ class PardisoLDLSolver:
 
         self._ps = pypardiso.PyPardisoSolver(mtype=-2)
         self._error = pypardiso.pardiso_wrapper.PyPardisoError
-        self._pattern: tuple[np.ndarray, np.ndarray] | None = None
+        self._key: tuple[np.ndarray, np.ndarray] | None = None  # A's kept pattern
+        self._keep: np.ndarray | None = None  # which of A's entries are in the upper triangle
+        self._U = None
         self.factorisations = 0
         self.analyses = 0
 
@@ -164,25 +166,38 @@ class PardisoLDLSolver:
         try:
             return np.asarray(self._ps._call_pardiso(U, b)).ravel()
         except self._error as exc:  # not a RuntimeError: the Newton loop must see one
-            self._pattern = None
+            self._key = None  # analyse again next time
             raise RuntimeError(str(exc)) from None
 
-    def __call__(self, A, b) -> np.ndarray:
+    def _upper(self, A):
+        """The upper triangle of ``A`` (CSR, sorted indices, float64); the index arrays and the
+        selection of ``A``'s entries are reused while ``A``'s pattern is the kept one."""
         import scipy.sparse as sp
 
+        A = A.tocsr()
+        if not A.has_sorted_indices:
+            A = A.sorted_indices()
+        key = self._key
+        if (key is not None and key[0].shape == A.indptr.shape and key[1].shape == A.indices.shape
+                and np.array_equal(key[0], A.indptr) and np.array_equal(key[1], A.indices)):
+            U = self._U
+            U.data = np.asarray(A.data[self._keep], dtype=np.float64)
+            return U, False
+        rows = np.repeat(np.arange(A.shape[0]), np.diff(A.indptr))
+        keep = A.indices >= rows
+        U = sp.csr_matrix((np.asarray(A.data[keep], dtype=np.float64), A.indices[keep],
+                           np.r_[0, np.cumsum(np.bincount(rows[keep], minlength=A.shape[0]))]),
+                          shape=A.shape)
+        if np.any(np.diff(U.indptr) == 0):  # PARDISO crashes on an empty row
+            raise RuntimeError('linear solve: the matrix has an empty row (singular)')
+        self._key, self._keep, self._U = (A.indptr.copy(), A.indices.copy()), keep, U
+        return U, True
+
+    def __call__(self, A, b) -> np.ndarray:
         b = np.asarray(b, dtype=float).ravel()
-        U = sp.triu(A, format='csr')
-        U.sort_indices()
-        if U.dtype != np.float64:
-            U = U.astype(np.float64)
-        pattern = self._pattern
-        if (pattern is None or pattern[0].shape != U.indptr.shape
-                or pattern[1].shape != U.indices.shape or not np.array_equal(pattern[0], U.indptr)
-                or not np.array_equal(pattern[1], U.indices)):
-            if np.any(np.diff(U.indptr) == 0):  # PARDISO crashes on an empty row
-                raise RuntimeError('linear solve: the matrix has an empty row (singular)')
+        U, new_pattern = self._upper(A)
+        if new_pattern:
             self._pardiso(11, U, b)
-            self._pattern = (U.indptr.copy(), U.indices.copy())
             self.analyses += 1
         x = self._pardiso(23, U, b)
         self.factorisations += 1
