@@ -51,7 +51,10 @@ class _Pardiso:
 
         self.A = A.tocsr()
         self.ps = pypardiso.PyPardisoSolver()
-        self.ps.factorize(self.A)
+        try:  # PyPardisoError is no RuntimeError: the Newton loop must see one to cut back
+            self.ps.factorize(self.A)
+        except pypardiso.pardiso_wrapper.PyPardisoError as exc:
+            raise RuntimeError(str(exc)) from None
 
     def solve(self, b: np.ndarray) -> np.ndarray:
         return np.asarray(self.ps.solve(self.A, b)).ravel()
