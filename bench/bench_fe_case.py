@@ -102,8 +102,9 @@ def main() -> None:
                   f'{n_case * per_pt / 120:.1f} min (two single-threaded workers on two idle '
                   f'cores each run at full speed). The wall times above are what the shared '
                   f'machine gave.')
-        write_page('fe_case', f'FE sweep of one case: time with 1 and 2 workers', text,
-                   command='.venv/bin/python bench/bench_fe_case.py')
+        cmd = (f'.venv/bin/python bench/bench_fe_case.py --case {args.case} --workers '
+               f'{" ".join(map(str, args.workers))}' + (f' --points {args.points}' if args.points else ''))
+        write_page('fe_case', 'FE sweep of one case: time with 1 and 2 workers', text, command=cmd)
 
 
 if __name__ == '__main__':
