@@ -48,12 +48,16 @@ def solve_point(scene: Scene, point: Sequence[float], probe_cells: int,
     from .displacement import profile_record
     from .fe import FESolveError, default_linear_solver, solve_scene_point
     from .geometry import indentation_direction
+    from .linsolve import backend_name
 
     t0, c0 = time.perf_counter(), time.process_time()
     point = [float(v) for v in point]
     direction = indentation_direction(scene, np.asarray(point)[None])[0]
     out: dict[str, Any] = {'surface_point_m': point, 'direction': direction.tolist()}
     errors = []
+    # Load the linear solver's library (MKL, when pypardiso is installed) before the limit is
+    # set: threadpoolctl limits only the libraries loaded when it is entered.
+    backend_name()
     with threadpool_limits(1):  # one math thread per worker process (sweep.limit_threads)
         for k, (frac, cutbacks) in enumerate(attempts, 1):
             name, solver = default_linear_solver()
