@@ -19,10 +19,12 @@ costs at most an extra Newton iteration, never accuracy.
 With ``pypardiso`` importable (extra ``fe-fast``, MKL) the default is :class:`PardisoLDLSolver`
 instead: a symmetric-indefinite LDL^T factorisation of the upper triangle (MKL PARDISO, METIS
 ordering, Bunch-Kaufman pivoting) at every Newton iteration, the fill-reducing analysis kept while
-the sparsity pattern stays the same (it does for the whole load path of one mesh). Profiled on the
-nodular points (bench/bench_fe_point.py): ~35 ms per factorisation against SuperLU's ~90 ms, so a
-fresh exact factor each iteration costs less than the Krylov iterations the kept factor needs
-(~15 back-solves of ~1.4 ms per system, and about as many wasted before each refactorisation).
+the sparsity pattern stays the same (it does for the whole load path of one mesh). Profiled
+(cProfile, CPU time) on a nodular point (~3.3k free DOF, 2.3e5 non-zeros, 1.75e6 in SuperLU's
+L + U): ~35 ms per factorisation against SuperLU's ~90 ms, so a fresh exact factor each
+iteration costs less than the Krylov iterations the kept factor needs (~15 back-solves of
+~1.4 ms per system, and about as many wasted before each refactorisation); the per-point times
+before / after are bench/bench_fe_point.py's.
 """
 from __future__ import annotations
 
