@@ -20,7 +20,7 @@ venv: $(STAMP)
 $(STAMP): setup.py setup.cfg package.xml
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install $(PIP_QUIET) --upgrade pip 2>&1 | grep -v '^WARNING: Location' || true
-	$(PY) -m pip install $(PIP_QUIET) -e '.[ros,fe,test,report,dask,view,docs]' 2>&1 | grep -v '^WARNING: Location' || true
+	$(PY) -m pip install $(PIP_QUIET) -e '.[ros,fe,fe-fast,test,report,dask,view,docs]' 2>&1 | grep -v '^WARNING: Location' || true
 	$(PY) -c 'import haptic_anfis, numba, rclpy, trimesh, rosbags, matplotlib, sklearn' # fail here if the install did not
 	$(VENV)/bin/haptic-anfis warmup # compile the nodes' numba kernels now, not at the first session
 	$(PYTHON) -m venv $(XVENV)

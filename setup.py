@@ -70,13 +70,13 @@ setup(
             'ros-jazzy-visualization-msgs==5.3.6',
         ],
         # Finite-element data generation (haptic_anfis.tissue). Optional for running the simulator.
-        # Optional: Intel MKL PARDISO factorises the FE systems when importable (~700 MB,
-        # x86-64 only). With the kept-factorisation solver (haptic_anfis.tissue.linsolve) it
-        # saved ~20 % of a point's wall time in one manual comparison under load, so
-        # SciPy's SuperLU stays the default (bench/bench_fe_point.py times whichever is
-        # importable). Needs PYPARDISO_MKL_RT when mkl is installed outside the venv prefix.
+        # Intel MKL PARDISO: when importable, the FE's linear solver (an exact LDL^T per Newton
+        # iteration, haptic_anfis.tissue.linsolve.PardisoLDLSolver) instead of SciPy's SuperLU
+        # with its reused factor; the per-point CPU time before / after is on
+        # docs/measurements/fe_point.md. ~1 GB installed, x86-64 only (the marker keeps other
+        # machines installable: they fall back to SuperLU). `make venv` installs it.
         'fe-fast': [
-            'pypardiso>=0.4',
+            'pypardiso>=0.4; platform_machine == "x86_64"',
         ],
         # `haptic-anfis cases generate --dask`: the FE points on a dask.distributed cluster.
         'dask': [

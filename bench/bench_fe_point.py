@@ -1,17 +1,19 @@
-"""FE point solve at the validated density, before / after the solver work of issue 29.
+"""FE point solve at the validated density, before / after: CPU seconds per point.
 
-"before" is felupe's Newton loop with SciPy's default ``spsolve`` (SuperLU, COLAMD: a fresh
-factorisation every iteration, the solver the library used to ship with); "after" is the
-default now, :class:`haptic_anfis.tissue.linsolve.ReusedFactorSolver` (symmetric-mode SuperLU
-kept and used to precondition GMRES for the next Newton systems; pypardiso factorises when
-importable). Same points, same forces (the largest difference is printed). Also the per-point
-CPU time of every point already in the committed store (``fe_store/``), i.e. measured inside the
-real sweeps, and the projected wall time of one case on 2 cores.
+"before" is the previous default: :class:`haptic_anfis.tissue.linsolve.ReusedFactorSolver` on
+SciPy's SuperLU (symmetric mode; the kept factor preconditions GMRES for the next Newton systems)
+and load increments back at the scene's step after each cut-back. "after" is the default now
+(:func:`haptic_anfis.tissue.fe.default_linear_solver`: PARDISO LDL^T per Newton iteration with
+the analysis kept, when pypardiso is installed) with increments held halved after a cut-back.
+Same points, each solved ``--repeat`` times with the variants interleaved (the machine is shared:
+the median is reported), forces compared with each other and with the committed store.
 
-Timings are CPU seconds of this process (``time.process_time``) and wall seconds; the machine
-is shared, so the wall figures carry the load printed with them. Asserts nothing.
+Timings are CPU seconds of this process (``time.process_time``) and wall seconds; the wall
+figures carry the load printed with them. Also the per-point CPU time of every point already in
+the committed store (``fe_store/``, solved by earlier sweeps with the solver their records name)
+and the projected wall time of one case on 2 cores. Asserts nothing.
 
-    .venv/bin/python bench/bench_fe_point.py [--points 2] [--no-before]
+    .venv/bin/python bench/bench_fe_point.py [--points 3] [--repeat 3]
 """
 from __future__ import annotations
 
@@ -29,24 +31,44 @@ import numpy as np  # noqa: E402
 
 from harness import write_page, write_readme_block  # noqa: E402
 from haptic_anfis.cases import library  # noqa: E402
-from haptic_anfis.tissue.fe import solve_scene_point  # noqa: E402
+from haptic_anfis.tissue.fe import default_linear_solver, solve_scene_point  # noqa: E402
 from haptic_anfis.tissue.geometry import loading_points  # noqa: E402
-from haptic_anfis.tissue.linsolve import ReusedFactorSolver, backend_name  # noqa: E402
+from haptic_anfis.tissue.linsolve import ReusedFactorSolver  # noqa: E402
+from haptic_anfis.tissue.store import point_key  # noqa: E402
 
 CASE = 'lib_m_dense_idc25_d15'
+#: the nodular series' point timed beside CASE's (over its lesion)
+NODULAR = 'nod_s_fatty_idc10_d10'
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def _run(scene, p, solver):
+def _run(scene, p, variant: str):
+    if variant == 'before':
+        solver, hold = ReusedFactorSolver(backend='scipy-superlu-sym'), False
+    else:
+        solver, hold = default_linear_solver()[1], True
     c0, t0 = time.process_time(), time.perf_counter()
-    res = solve_scene_point(scene, p, solver=solver)
+    res = solve_scene_point(scene, p, solver=solver, hold_cutback=hold)
     return res, time.process_time() - c0, time.perf_counter() - t0
 
 
-def _scipy_default(A, b):
-    from scipy.sparse.linalg import spsolve
+def _over_lesion(scene, pts: np.ndarray) -> int:
+    t = scene.tumours[0]
+    return int(np.argmin(np.hypot(pts[:, 1] - t.centre[1], pts[:, 2] - t.centre[2])))
 
-    return spsolve(A, b)
+
+def _stored_forces(case: str, p: np.ndarray) -> np.ndarray | None:
+    f = ROOT / 'fe_store' / case / f'{point_key(p[1], p[2])}.npz'
+    if not f.is_file():
+        return None
+    with np.load(f) as z:
+        return np.asarray(z['forces'], dtype=float)
+
+
+def _rel(a: np.ndarray, b: np.ndarray) -> float:
+    """Largest force difference relative to the force's magnitude at its depth."""
+    scale = np.maximum(np.linalg.norm(b, axis=1, keepdims=True), 1e-3)
+    return float(np.max(np.abs(a - b) / scale))
 
 
 def _store_times(pattern: str) -> tuple[list[float], list[float]]:
@@ -83,43 +105,53 @@ def _nodular_line() -> str:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split('\n')[0])
-    ap.add_argument('--points', type=int, default=2,
-                    help='loading points to time (default 2; 0: only the committed store\'s '
-                         'figures, written into the README, the page left as it is)')
-    ap.add_argument('--no-before', action='store_true', help='skip the slow "before" solver')
+    ap.add_argument('--points', type=int, default=3,
+                    help='points to time (default 3: over the lesion and at the apex of CASE, '
+                         'over the lesion of NODULAR; 0: only the committed store\'s figures, '
+                         'written into the README, the page left as it is)')
+    ap.add_argument('--repeat', type=int, default=3, help='solves per point and variant')
     args = ap.parse_args()
-    case = library().get(CASE)
-    scene = case.scene
+    scene = library().get(CASE).scene
     pts = loading_points(scene)
-    t = scene.tumours[0]
-    over = int(np.argmin(np.hypot(pts[:, 1] - t.centre[1], pts[:, 2] - t.centre[2])))
+    nod = library().get(NODULAR).scene
+    npts = loading_points(nod)
     apex = int(np.argmin(np.hypot(pts[:, 1], pts[:, 2])))
-    chosen = [over, apex, 0][:args.points]
+    chosen = [(CASE, scene, pts[_over_lesion(scene, pts)]), (CASE, scene, pts[apex]),
+              (NODULAR, nod, npts[_over_lesion(nod, npts)])][:args.points]
     load0 = os.getloadavg()[0]
-    rows = []
-    print(f'case {CASE}, {scene.mesh.probe_cells} cells across the probe, linear backend '
-          f'{backend_name()}, load {load0:.1f}')
-    head = (f'| point (y, z) mm | solver | CPU s | wall s | Newton it. | factorisations | '
-            f'Fx @16 mm N | max |dF| vs before N |')
+    after_name = default_linear_solver()[0]
+    names = {'before': 'before: reused SuperLU factor (GMRES), step back to max after a cut-back',
+             'after': f'after: {after_name}, increments held halved after a cut-back'}
+    print(f'{scene.mesh.probe_cells} cells across the probe, load {load0:.1f}')
+    head = ('| case, point (y, z) mm | solver | CPU s median (min) | wall s median | Newton it. | '
+            'cut-backs | factorisations | Fx @16 mm N | max rel. dF vs before | '
+            'max rel. dF vs fe_store |')
     print(head)
-    for i in chosen:
-        p = pts[i]
-        before = None
-        variants = ([] if args.no_before else [('before: spsolve (COLAMD) each iteration',
-                                                _scipy_default)])
-        variants.append((f'after: reused factor ({backend_name()})', None))
-        for name, solver in variants:
-            s = ReusedFactorSolver() if solver is None else solver
-            res, cpu, wall = _run(scene, p, s)
-            if before is None and solver is not None:
-                before = res.forces
-            diff = ('-' if before is None or solver is not None
-                    else f'{np.abs(res.forces - before).max():.2e}')
-            row = (f'| ({p[1] * 1e3:.0f}, {p[2] * 1e3:.0f}) | {name} | {cpu:.1f} | {wall:.1f} | '
-                   f'{res.newton_iterations} | {res.info.get("factorisations", res.newton_iterations)} | '
-                   f'{res.forces[-1, 0]:.3f} | {diff} |')
+    rows, ratios = [], []
+    for case, sc, p in chosen:
+        runs = {'before': [], 'after': []}
+        for _ in range(args.repeat):
+            for v in ('before', 'after'):
+                runs[v].append(_run(sc, p, v))
+        ref = runs['before'][0][0].forces
+        stored = _stored_forces(case, p)
+        med = {}
+        for v in ('before', 'after'):
+            res = runs[v][0][0]
+            cpu = [r[1] for r in runs[v]]
+            med[v] = float(np.median(cpu))
+            row = (f'| {case}, ({p[1] * 1e3:.0f}, {p[2] * 1e3:.0f}) | {names[v]} | '
+                   f'{med[v]:.2f} ({min(cpu):.2f}) | {np.median([r[2] for r in runs[v]]):.1f} | '
+                   f'{res.newton_iterations} | {res.cutbacks} | '
+                   f'{res.info.get("factorisations", "-")} | {res.forces[-1, 0]:.3f} | '
+                   f'{"-" if v == "before" else f"{_rel(res.forces, ref):.1e}"} | '
+                   f'{"-" if stored is None else f"{_rel(res.forces, stored):.1e}"} |')
             print(row, flush=True)
             rows.append(row)
+        ratios.append(med['before'] / med['after'])
+    summary = (f'\n\nSpeed-up per point (median CPU before / after): '
+               f'{", ".join(f"{r:.2f}" for r in ratios)}; median {np.median(ratios):.2f}.'
+               if ratios else '')
     # the real sweeps: every point in the committed store
     cpu, wall = _store_times('lib_*')
     n_pts = len(cpu)
@@ -146,9 +178,12 @@ def main() -> None:
             f'2 workers** on idle cores.'), 'python bench/bench_fe_point.py --points 0')
         if not chosen:
             return
-    table = (f'Load average at the start: {load0:.1f} (2 cores, shared with 7 other developers).\n\n'
-             + '\n'.join([head, '|---|---|---|---|---|---|---|---|', *rows]) + sweep)
-    write_page('fe_point', 'FE point solve: before / after (issue 29)', table,
+    table = (f'Load average at the start: {load0:.1f}, at the end {os.getloadavg()[0]:.1f} (2 cores, '
+             f'shared with other developers); {args.repeat} solves per point and solver, '
+             f'interleaved.\n\n'
+             + '\n'.join([head, '|---|---|---|---|---|---|---|---|---|---|', *rows])
+             + summary + sweep)
+    write_page('fe_point', 'FE point solve: before / after', table,
                command='.venv/bin/python bench/bench_fe_point.py')
 
 

@@ -22,7 +22,7 @@ from ..errors import HapticAnfisError
 from ..optional import optional
 from .background import rib_fraction
 from .geometry import indentation_direction
-from .linsolve import ReusedFactorSolver
+from .linsolve import PardisoLDLSolver, ReusedFactorSolver, backend_name
 from .mesh import Domain, HexMesh, build_mesh, cell_samples, tumour_fractions
 from .scene import Scene, surface_height
 
@@ -64,9 +64,13 @@ class LoadPathResult:
 
 
 def default_linear_solver() -> tuple[str, Callable]:
-    """A fresh :class:`~.linsolve.ReusedFactorSolver` (one per load path: it keeps the last
-    factorisation and preconditions the next Newton systems with it) and its name
-    ('reused-factor/pypardiso' with the optional pypardiso, else 'reused-factor/scipy-superlu-sym')."""
+    """A fresh linear solver for one load path and its name: with the optional pypardiso a
+    :class:`~.linsolve.PardisoLDLSolver` ('pardiso-ldl': an LDL^T factorisation per Newton
+    iteration, the ordering kept for the path's fixed sparsity pattern), else a
+    :class:`~.linsolve.ReusedFactorSolver` ('reused-factor/scipy-superlu-sym': the last SuperLU
+    factor kept and used to precondition the next Newton systems)."""
+    if backend_name() == 'pypardiso':
+        return 'pardiso-ldl', PardisoLDLSolver()
     solver = ReusedFactorSolver()
     return f'reused-factor/{solver.backend}', solver
 
@@ -84,7 +88,8 @@ def load_steps(depths: Sequence[float], max_step: float) -> list[float]:
 def solve_load_path(mesh: HexMesh, shear: np.ndarray | float, bulk: np.ndarray | float,
                     direction: Sequence[float], depths: Sequence[float], max_step: float = 2e-3,
                     max_cutbacks: int = 6, tol: float = 1e-6, maxiter: int = 16,
-                    solver: Callable | None = None, bonded: bool = True) -> LoadPathResult:
+                    solver: Callable | None = None, bonded: bool = True,
+                    hold_cutback: bool = True) -> LoadPathResult:
     """Indent ``mesh``'s footprint along the unit vector ``direction`` to each of ``depths`` [m].
 
     Args:
@@ -95,6 +100,8 @@ def solve_load_path(mesh: HexMesh, shear: np.ndarray | float, bulk: np.ndarray |
             (a frictionless probe, for validation against frictionless analytic solutions).
         direction: (3,) unit vector the probe moves along (into the tissue).
         depths: increasing depths [m] to record; the path is stepped by at most ``max_step``.
+        hold_cutback: after a cut-back, keep later increments at most the halved one (default);
+            False goes back to ``max_step`` after each (the benchmark's baseline).
     Raises:
         FESolveError if an increment fails after ``max_cutbacks`` halvings.
     """
@@ -131,7 +138,15 @@ def solve_load_path(mesh: HexMesh, shear: np.ndarray | float, bulk: np.ndarray |
     done, iters, cutbacks = 0.0, 0, 0
     queue = list(steps)
     halvings = 0
+    # After a cut-back the increments stay at most the halved one: a path that failed once
+    # gets stiffer further in, and each failed attempt costs Newton iterations and
+    # factorisations for nothing (the equilibrium at a recorded depth does not depend on the
+    # steps taken to it: hyperelastic, no history).
+    limit = np.inf
     while queue:
+        parts = int(np.ceil((queue[0] - done) / limit - 1e-6)) if np.isfinite(limit) else 1
+        if parts > 1:  # equal sub-increments of at most ``limit`` up to the next queued depth
+            queue.insert(0, done + (queue[0] - done) / parts)
         target = queue[0]
         state = solid.checkpoint()
         for i in range(3):
@@ -159,6 +174,8 @@ def solve_load_path(mesh: HexMesh, shear: np.ndarray | float, bulk: np.ndarray |
                     skin_displacements=np.array(skin_u).reshape(len(recorded), -1, 3), mesh=mesh)
                 raise err from None
             queue.insert(0, 0.5 * (done + target))
+            if hold_cutback:
+                limit = 0.5 * (target - done)
             continue
         halvings = 0
         done = queue.pop(0)
@@ -180,8 +197,8 @@ def solve_load_path(mesh: HexMesh, shear: np.ndarray | float, bulk: np.ndarray |
 
 
 def _solver_info(solver: Callable) -> dict:
-    """Counters of a :class:`~.linsolve.ReusedFactorSolver` (empty for a plain function)."""
-    keys = ('factorisations', 'krylov_solves', 'krylov_iterations')
+    """Counters of a :mod:`~.linsolve` solver (empty for a plain function)."""
+    keys = ('factorisations', 'analyses', 'krylov_solves', 'krylov_iterations')
     return {k: getattr(solver, k) for k in keys if hasattr(solver, k)}
 
 
@@ -246,16 +263,18 @@ def scene_mesh(scene: Scene, centre_yz: Sequence[float], probe_cells: int) -> He
 
 def solve_scene_point(scene: Scene, point: Sequence[float], coarse: bool = False,
                       probe_cells: int | None = None, solver: Callable | None = None,
-                      max_step: float | None = None, max_cutbacks: int = 6) -> LoadPathResult:
+                      max_step: float | None = None, max_cutbacks: int = 6,
+                      hold_cutback: bool = True) -> LoadPathResult:
     """Mesh and solve the load path at a surface point (x, y, z) [m] of ``scene``
-    (load steps of at most ``max_step`` [m], default the scene's)."""
+    (load steps of at most ``max_step`` [m], default the scene's; ``hold_cutback`` as in
+    :func:`solve_load_path`)."""
     n = probe_cells or (scene.mesh.coarse_probe_cells if coarse else scene.mesh.probe_cells)
     point = np.asarray(point, dtype=float)
     mesh = scene_mesh(scene, point[1:], n)
     mu, bulk = scene_moduli(scene, mesh)
     direction = indentation_direction(scene, point[None])[0]
     res = solve_load_path(mesh, mu, bulk, direction, scene.depths, max_step or scene.max_step,
-                          max_cutbacks=max_cutbacks, solver=solver)
+                          max_cutbacks=max_cutbacks, solver=solver, hold_cutback=hold_cutback)
     res.info.update(probe_cells=n, edge_refine=scene.mesh.edge_refine,
                     edge_offset=scene.mesh.edge_offset, direction=direction.tolist(),
                     footprint_radius=mesh.footprint_radius)

@@ -30,6 +30,7 @@ from ..optional import optional
 from .displacement import profile_record
 from .fe import FESolveError, default_linear_solver, solve_scene_point
 from .geometry import indentation_direction
+from .linsolve import backend_name
 from .scene import Scene
 from .store import PointStore, point_key
 
@@ -64,6 +65,9 @@ def solve_point(scene: Scene, point: Sequence[float], probe_cells: int,
     direction = indentation_direction(scene, np.asarray(point)[None])[0]
     out: dict[str, Any] = {'surface_point_m': point, 'direction': direction.tolist()}
     errors = []
+    # Load the linear solver's library (MKL, when pypardiso is installed) before the limit is
+    # set: threadpoolctl limits only the libraries loaded when it is entered.
+    backend_name()
     with threadpool_limits(1):  # one math thread per worker process (sweep.limit_threads)
         for k, (frac, cutbacks) in enumerate(attempts, 1):
             name, solver = default_linear_solver()
@@ -81,7 +85,7 @@ def solve_point(scene: Scene, point: Sequence[float], probe_cells: int,
                        newton_iterations=res.newton_iterations, cutbacks=res.cutbacks,
                        attempt=k, max_step_m=frac * scene.max_step, linear_solver=name,
                        solver_info={k2: v for k2, v in res.info.items()
-                                    if k2 in ('factorisations', 'krylov_solves',
+                                    if k2 in ('factorisations', 'analyses', 'krylov_solves',
                                               'krylov_iterations')},
                        displacement=profile_record(res, point, direction, scene.probe_radius))
             break

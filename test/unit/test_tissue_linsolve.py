@@ -41,3 +41,34 @@ def test_singular_matrix_raises():
     A = sp.csr_matrix(np.diag([1.0, 0.0, 2.0]))
     with pytest.raises((RuntimeError, ArithmeticError)):
         ReusedFactorSolver(backend='scipy-superlu-sym')(A, np.ones(3))
+
+
+def test_pardiso_ldl_solves_exactly_and_keeps_the_analysis_for_one_pattern():
+    pytest.importorskip('pypardiso')
+    from haptic_anfis.tissue.linsolve import PardisoLDLSolver
+
+    A = _spd(300, 0)
+    b = np.random.default_rng(1).normal(size=300)
+    s = PardisoLDLSolver()
+    np.testing.assert_allclose(A @ s(A, b), b, rtol=1e-8, atol=1e-8)
+    A2 = A.copy()
+    A2.data = A2.data * np.random.default_rng(2).uniform(0.9, 1.1, A2.nnz)
+    A2 = 0.5 * (A2 + A2.T)  # same pattern, other values: a later Newton iteration's tangent
+    np.testing.assert_allclose(A2 @ s(A2, b), b, rtol=1e-8, atol=1e-8)
+    assert (s.factorisations, s.analyses) == (2, 1)
+    A3 = _spd(300, 7)  # another pattern: analysed anew
+    np.testing.assert_allclose(A3 @ s(A3, b), b, rtol=1e-8, atol=1e-8)
+    assert (s.factorisations, s.analyses) == (3, 2)
+    # symmetric indefinite (a tangent past a stability limit) is solved too
+    D = sp.diags(np.r_[-np.ones(10), np.ones(290)])
+    x = s((A + 50 * D).tocsr(), b)
+    np.testing.assert_allclose((A + 50 * D) @ x, b, rtol=1e-7, atol=1e-7)
+
+
+def test_pardiso_ldl_singular_matrix_raises():
+    pytest.importorskip('pypardiso')
+    from haptic_anfis.tissue.linsolve import PardisoLDLSolver
+
+    A = sp.csr_matrix(np.diag([1.0, 0.0, 2.0]))
+    with pytest.raises((RuntimeError, ArithmeticError)):
+        PardisoLDLSolver()(A, np.ones(3))
