@@ -31,7 +31,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 from pathlib import Path
 from typing import Any, Mapping, Sequence
 
@@ -138,7 +137,7 @@ def trace_report(trace: str | Path, params_files=(), start: float = 0.0,
     from ..device.force_error import error_by_phase, force_error, ripple_and_dropouts
     from ..device.local_model import STATUS_NAMES
     from ..device.stats import tick_gaps
-    from ..device.trace import DISABLED, load_trace
+    from ..device.trace import DISABLED, load_trace, max_force_per_tick
     rows, meta = load_trace(trace)
     kept = len(rows)
     rows = rows[rows[:, 7] != DISABLED]  # 0 N on purpose (before start, at shutdown)
@@ -161,7 +160,7 @@ def trace_report(trace: str | Path, params_files=(), start: float = 0.0,
         st = {k: v for k, v in st.items() if k not in ('commands_received', 'models_received')}
         st.update(zip(WINDOWED, (lost, gap * 1e3, expired)))
     F, contact = ideal_forces(rows[:, 1:4], params_files, overrides)
-    fmax = meta.get('max_force', math.inf)
+    fmax = max_force_per_tick(rows, meta)   # per tick: a case switch changes the scale
     err = force_error(rows[:, 4:7], F, contact, max_force=fmax)
     err['force_error_by_phase'] = error_by_phase(rows[:, 4:7], F, contact, rows[:, 0],
                                                  max_force=fmax)
