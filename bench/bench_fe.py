@@ -3,6 +3,7 @@ default meshes. Prints a table; asserts nothing. Needs the `fe` extra. The full 
 is `haptic-anfis dataset --report DIR`."""
 from __future__ import annotations
 
+import argparse
 import os
 import sys
 import time
@@ -19,6 +20,7 @@ from harness import run_with_page  # noqa: E402  (bench/ is sys.path[0])
 
 
 def main() -> None:
+    argparse.ArgumentParser(description=__doc__).parse_args()  # no options; --help says so
     scene = load_scene()
     pts = loading_points(scene)
     apex = pts[int(np.argmin(np.hypot(pts[:, 1], pts[:, 2])))]

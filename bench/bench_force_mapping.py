@@ -14,7 +14,7 @@ import sys
 
 import numpy as np
 
-from _page import write_page
+from harness import write_page
 from haptic_anfis.cases import library
 from haptic_anfis.cases.force_mapping import HEADROOM, case_force_mapping
 from haptic_anfis.device.falcon import RATED_FORCE

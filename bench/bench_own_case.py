@@ -23,7 +23,7 @@ from pathlib import Path
 import yaml
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _page import run_with_page  # noqa: E402  (bench/ is sys.path[0])
+from harness import run_with_page  # noqa: E402  (bench/ is sys.path[0])
 
 ROOT = Path(__file__).resolve().parent.parent
 NAME = 'my_case'

@@ -15,7 +15,7 @@ import sys
 
 import numpy as np
 
-from _page import write_page
+from harness import write_page
 from haptic_anfis.device.stiffness_press import simulated_press
 from haptic_anfis.exam.staircase import DOWN_RATIO, STEPS, SimulatedObserver, Staircase
 from haptic_anfis.exam.threshold_run import run_threshold

@@ -31,7 +31,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import tempfile
 from pathlib import Path
 from typing import Any, Mapping, Sequence
@@ -42,7 +41,7 @@ from ..cases.library import case_node_arguments
 from ..device.force_error import error_by_phase, force_error, ripple_and_dropouts
 from ..device.local_model import STATUS_NAMES
 from ..device.stats import tick_gaps
-from ..device.trace import DISABLED, load_trace
+from ..device.trace import DISABLED, load_trace, max_force_per_tick
 from ..nodes.parameter_files import parse_overrides
 from ..nodes.parameters import CASE_PARAMS
 from ..nodes.registry import node_parameters
@@ -163,7 +162,7 @@ def trace_report(trace: str | Path, params_files=(), start: float = 0.0,
         st = {k: v for k, v in st.items() if k not in ('commands_received', 'models_received')}
         st.update(zip(WINDOWED, (lost, gap * 1e3, expired)))
     F, contact = ideal_forces(rows[:, 1:4], params_files, overrides)
-    fmax = meta.get('max_force', math.inf)
+    fmax = max_force_per_tick(rows, meta)   # per tick: a case switch changes the scale
     err = force_error(rows[:, 4:7], F, contact, max_force=fmax)
     err['force_error_by_phase'] = error_by_phase(rows[:, 4:7], F, contact, rows[:, 0],
                                                  max_force=fmax)

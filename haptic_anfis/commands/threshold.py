@@ -15,14 +15,13 @@ it.
 from __future__ import annotations
 
 import argparse
-import contextlib
 import json
 import math
 import sys
 
 from ..device.falcon import WorkspaceMapping
 from ..device.falcon_usb import FalconUSB, import_ftdi
-from ..device.stiffness_press import DevicePresses, simulated_press
+from ..device.stiffness_press import DevicePresses, SimulatedPresses
 from ..exam.staircase import SimulatedObserver
 from ..exam.threshold_run import run_threshold
 from ..record.store import check_trainee_id
@@ -75,7 +74,7 @@ def run(args: argparse.Namespace) -> int:
             print(f'trial {n:3d}: {100 * delta:6.1f} % stiffer: '
                   f'{"correct" if correct else "wrong"}', flush=True)
     # the real device's servo process holds it for the whole series (zero force on exit)
-    with press if hasattr(press, '__enter__') else contextlib.nullcontext():
+    with press:
         res = run_threshold(press, choose, seed=args.seed, on_trial=said)
     res.update(device=device, trainee_id=args.trainee_id)
     if args.backend == 'sim':
@@ -96,7 +95,7 @@ def run(args: argparse.Namespace) -> int:
 def _simulated(args):
     """Presses on the simulated Falcon, answered by a simulated observer of known threshold."""
     obs = SimulatedObserver(args.observer / 100.0, seed=args.seed)
-    return simulated_press, lambda a, b: obs.choose(a.stiffness, b.stiffness), 'sim'
+    return SimulatedPresses(), lambda a, b: obs.choose(a.stiffness, b.stiffness), 'sim'
 
 
 def _falcon(args):

@@ -35,7 +35,7 @@ from .servo_native import NativeServoLoop
 from .stamps import STALE
 from .start_gate import HeldScript
 from .tick_views import NativeClutch, NativeSafety
-from .trace import TickTrace, save_trace
+from .trace import TickTrace, save_trace, scale_per_tick
 
 
 @dataclasses.dataclass
@@ -57,6 +57,13 @@ class DriverLoop:
     first_command: float | None = None
     #: the process's CPU time [s] at :attr:`first_command`
     cpu0: float = 0.0
+    #: ``(t_from, force_scale)`` in time order, ``t_from`` [s] on the ticks' monotonic clock
+    #: (-inf: from the start): the trace converts each tick with the scale it was rendered at
+    force_scales: list[tuple[float, float]] = dataclasses.field(default_factory=list)
+
+    def __post_init__(self) -> None:
+        if not self.force_scales:
+            self.force_scales.append((-math.inf, self.servo.mapping.force_scale))
 
     def arrived(self, why: str, stamp_ns: int, reset_stats: bool = False,
                 release_gate: Callable[[], bool] | None = None) -> None:
@@ -106,19 +113,28 @@ class DriverLoop:
         """Render with ``force_scale`` from the next tick, in the loop and at the force input
         (:meth:`~.servo_native.NativeServoLoop.set_force_scale`); returns the new mapping."""
         m = self.servo.set_force_scale(force_scale, max_stiffness)
+        # Taken after the loop's configuration changed: a tick stamped from here on renders
+        # with the new scale (one tick in flight across the switch may be counted as the old).
+        self.force_scales.append((time.monotonic(), m.force_scale))
         self.input.mapping = m
         return m
 
     def save_trace(self, path: str, mapping: WorkspaceMapping, p: dict, frame_id: str,
                    stats: dict) -> np.ndarray:
         """Write the servo ticks in the tissue frame (position [m], applied force [N]) with
-        ``stats`` to ``path`` (:func:`~.trace.save_trace`); returns the rows written."""
+        ``stats`` to ``path`` (:func:`~.trace.save_trace`); returns the rows written. Each tick's
+        force is divided by the force scale it was rendered with (:attr:`force_scales`: a case
+        switched in the session changes it); ``max_force`` is the newest scale's (older readers),
+        ``force_scales`` and ``device_max_force`` give each tick's
+        (:func:`~.trace.max_force_per_tick`)."""
         trace = self.servo.trace
         rows = trace.arrays()
         rows[:, 1:4] = np.asarray(mapping.offset) + mapping.scale * rows[:, 1:4]
-        rows[:, 4:7] /= mapping.force_scale
+        rows[:, 4:7] /= scale_per_tick(rows[:, 0], self.force_scales)[:, None]
+        scales = [[None if math.isinf(t) else t, s] for t, s in self.force_scales]
         save_trace(path, rows, stats=stats, status_names=list(STATUS_NAMES),
                    max_force=p['max_force'] / mapping.force_scale, frame_id=frame_id,
+                   device_max_force=p['max_force'], force_scales=scales,
                    ticks_dropped=trace.dropped,  # the oldest, beyond the ring's bound
                    period=1.0 / p['rate'],
                    # the ticks' monotonic times onto the wall clock a bag's receive times use

@@ -53,7 +53,7 @@ def force_error(applied: np.ndarray, ideal: np.ndarray, in_contact: np.ndarray,
         applied: (n, 3) force the device applied at each tick [N], tissue frame.
         ideal: (n, 3) the ideal loop's force at each tick [N] (clamped here to ``max_force``).
         in_contact: (n,) bool, the ideal loop is in contact.
-        max_force: device force limit [N] (tissue frame).
+        max_force: device force limit [N] (tissue frame): one, or (n,) per tick.
         min_force: smallest force [N] a per-tick % is computed for.
 
     Raises:
@@ -90,13 +90,15 @@ def runs_of(mask) -> tuple[np.ndarray, np.ndarray]:
     return np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
 
 
-def _clamped(ideal: np.ndarray, max_force: float) -> tuple[np.ndarray, np.ndarray]:
-    """(ideal (n, 3) with magnitudes clamped to ``max_force`` [N], the clamped magnitudes (n,))."""
+def _clamped(ideal: np.ndarray, max_force) -> tuple[np.ndarray, np.ndarray]:
+    """(ideal (n, 3) with magnitudes clamped to ``max_force`` [N] (one limit, or (n,): a trace
+    across force-scale switches), the clamped magnitudes (n,))."""
     n = np.linalg.norm(ideal, axis=1)
-    over = n > max_force
+    lim = np.broadcast_to(np.asarray(max_force, dtype=np.float64), n.shape)
+    over = n > lim
     ideal = ideal.copy()
-    ideal[over] *= (max_force / n[over])[:, None]
-    return ideal, np.minimum(n, max_force)
+    ideal[over] *= (lim[over] / n[over])[:, None]
+    return ideal, np.minimum(n, lim)
 
 
 PHASES = ('onset', 'offset', 'steady')

@@ -31,8 +31,8 @@ from .local_model import model_values
 from .palpation import PalpationScript
 from .servo_native import NativeServoLoop
 
-__all__ = ['MIN_DEPTH', 'DevicePresses', 'PressResult', 'press_result', 'press_script',
-           'simulated_press', 'spring_model']
+__all__ = ['MIN_DEPTH', 'DevicePresses', 'PressResult', 'SimulatedPresses', 'press_result',
+           'press_script', 'simulated_press', 'spring_model']
 
 #: [m] samples shallower than this are left out of the measured stiffness (first touch)
 MIN_DEPTH = 0.001
@@ -123,6 +123,31 @@ def simulated_press(stiffness: float, surface_x: float = 0.045, hand_depth: floa
         forces.append(math.sqrt(out[O.f0] ** 2 + out[O.f1] ** 2 + out[O.f2] ** 2)
                       / mapping.force_scale)
     return press_result(depths, forces)
+
+
+@dataclass(frozen=True)
+class SimulatedPresses:
+    """Presses of the simulated Falcon's hand (:func:`simulated_press`, its arguments), with
+    :class:`DevicePresses`'s interface: a context manager (nothing to open or close: each press
+    ticks its own loop in simulated time), called with a stiffness [N/m]."""
+
+    surface_x: float = 0.045
+    hand_depth: float = 0.02
+    duration: float = 1.0
+    mapping: WorkspaceMapping = WorkspaceMapping()
+    max_force: float = 8.9
+    rate: float = 1000.0
+
+    def __enter__(self) -> 'SimulatedPresses':
+        return self
+
+    def __exit__(self, *exc) -> None:
+        return None
+
+    def __call__(self, stiffness: float) -> PressResult:
+        """One press on a spring of ``stiffness`` [N/m]."""
+        return simulated_press(stiffness, self.surface_x, self.hand_depth, self.duration,
+                               self.mapping, self.max_force, self.rate)
 
 
 class DevicePresses:

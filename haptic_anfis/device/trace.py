@@ -9,6 +9,12 @@ purpose, so the force error leaves those ticks out). The driver's trace also sto
 stamps messages with (to line a tick up with what the graph published then). Rows go into
 preallocated chunks (no allocation per tick in the servo thread); :meth:`TickTrace.arrays`
 concatenates them.
+
+A case switched in a running session changes the force scale (device force = scale x tissue
+force) between two ticks; the driver's trace stores ``force_scales``, ``[[t, scale], ...]``
+(``t`` [s] on the ticks' clock from which ``scale`` holds; None for the first: from the start),
+and ``device_max_force`` [N], so each tick converts with its own scale (:func:`scale_per_tick`,
+:func:`max_force_per_tick`). Older traces carry one ``max_force`` (tissue frame) only.
 """
 from __future__ import annotations
 
@@ -57,6 +63,32 @@ def save_trace(path: str | Path, rows: np.ndarray, **meta) -> Path:
              meta=np.array(json.dumps(meta)))
     tmp.replace(path)
     return path
+
+
+def scale_per_tick(t: np.ndarray, changes) -> np.ndarray:
+    """The force scale in force at each tick time ``t`` (n,) [s]: ``changes`` is
+    ``[(t_from, scale), ...]`` in time order, ``t_from`` None or -inf for the first (from the
+    start); a tick at ``t_from`` or later has that entry's scale.
+
+    Raises:
+        ValueError: ``changes`` empty, or a scale that is not a finite number > 0.
+    """
+    if not len(changes):
+        raise ValueError('scale_per_tick: expected at least one (t_from, scale), got none')
+    starts = np.array([-np.inf if c[0] is None else float(c[0]) for c in changes])
+    scales = np.array([float(c[1]) for c in changes])
+    if not np.all(np.isfinite(scales) & (scales > 0)):
+        raise ValueError(f'scale_per_tick: expected force scales > 0, got {scales.tolist()}')
+    i = np.searchsorted(starts, np.asarray(t, dtype=np.float64), side='right') - 1
+    return scales[np.maximum(i, 0)]
+
+
+def max_force_per_tick(rows: np.ndarray, meta: dict) -> np.ndarray | float:
+    """The device's force limit in the tissue frame [N] at each of ``rows`` (n,) when the trace
+    records its force scales, else the one ``max_force`` of an older trace (inf if none)."""
+    if 'force_scales' in meta and 'device_max_force' in meta:
+        return float(meta['device_max_force']) / scale_per_tick(rows[:, 0], meta['force_scales'])
+    return float(meta.get('max_force', np.inf))
 
 
 def load_trace(path: str | Path) -> tuple[np.ndarray, dict]:

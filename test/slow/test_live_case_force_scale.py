@@ -42,6 +42,8 @@ def test_a_case_chosen_live_is_rendered_with_its_own_force_scale():
         for scale in (g.driver.mapping.force_scale, g.driver.input.mapping.force_scale,
                       g.driver.servo.cfg[nt.CFG.force_scale]):
             assert scale == pytest.approx(then)
+        # the servo trace converts the ticks before the switch with the first scale
+        assert [x for _, x in g.driver.loop.force_scales] == pytest.approx([first, then])
         assert page.app.max_force == pytest.approx(tissue_clamp(library().get(THEN)))
     finally:
         for v in views:

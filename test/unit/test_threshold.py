@@ -8,7 +8,8 @@ import sqlite3
 import numpy as np
 import pytest
 
-from haptic_anfis.device.stiffness_press import simulated_press
+from haptic_anfis.device.stiffness_press import (DevicePresses, SimulatedPresses,
+                                                 simulated_press)
 from haptic_anfis.exam.staircase import (TARGET_CORRECT, SimulatedObserver, Staircase,
                                          noise_for_threshold)
 from haptic_anfis.exam.threshold_run import run_threshold
@@ -54,6 +55,16 @@ def test_presses_rendered_on_the_simulated_falcon_measure_the_spring_and_converg
         runs.append(res['threshold_pct'] / 100)
     est = math.exp(np.mean(np.log(runs)))
     assert abs(est / 0.22 - 1) <= 0.20, runs
+
+
+def test_both_press_kinds_are_context_managers_called_with_a_stiffness():
+    """The command says ``with press:`` for the simulated and the real device alike."""
+    for kind in (SimulatedPresses, DevicePresses):
+        assert callable(kind.__enter__) and callable(kind.__exit__) and callable(kind.__call__)
+    sim = SimulatedPresses()
+    with sim as p:
+        assert p is sim
+        assert p(400.0) == simulated_press(400.0)
 
 
 def test_bad_staircase_input_names_the_field():
