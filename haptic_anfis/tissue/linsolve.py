@@ -31,6 +31,7 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
+import scipy.sparse as sp
 from scipy.sparse.linalg import LinearOperator, gmres, splu
 
 from ..optional import optional
@@ -158,8 +159,6 @@ class PardisoLDLSolver:
     backend = 'pypardiso-ldl'
 
     def __init__(self) -> None:
-        import pypardiso
-
         self._ps = pypardiso.PyPardisoSolver(mtype=-2)
         self._error = pypardiso.pardiso_wrapper.PyPardisoError
         self._key: tuple[np.ndarray, np.ndarray] | None = None  # A's kept pattern
@@ -179,8 +178,6 @@ class PardisoLDLSolver:
     def _upper(self, A):
         """The upper triangle of ``A`` (CSR, sorted indices, float64); the index arrays and the
         selection of ``A``'s entries are reused while ``A``'s pattern is the kept one."""
-        import scipy.sparse as sp
-
         A = A.tocsr()
         if not A.has_sorted_indices:
             A = A.sorted_indices()
