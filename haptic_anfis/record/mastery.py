@@ -132,7 +132,8 @@ def mastery(sessions: list[dict], config: MasteryConfig = DEFAULT) -> dict:
     Returns ``{'mastered_level': int (0 = none), 'next_level': int, 'levels': {L: {'sessions'
     (with a palpable lesion), 'met', 'streak' (current run), 'best_streak', 'needed',
     'mastered', 'lesion_free' (specificity sessions while working on L), 'lesion_free_met',
-    'void'}}}``; sessions with no case level are not counted, nor a bag's second session (a
+    'void'}}}``; sessions with no case level are not counted (a case whose lesions are all
+    below what the device renders has none), nor a bag's second session (a
     recording scored again, in a record from before :class:`~haptic_anfis.record.AlreadyStored`);
     two recordings made at one path (``bag_start_ns`` differs) count as two.
     """
@@ -149,6 +150,8 @@ def mastery(sessions: list[dict], config: MasteryConfig = DEFAULT) -> dict:
         return next((L for L in per if not per[L]['mastered']), config.top)
     for s in counted:
         free = lesion_free(s)
+        if free and s['lesions'] and s.get('case_level') is None:
+            continue   # lesions all below what the device renders: no level, counts neither way
         L = working() if free else s.get('case_level')
         if L not in per:
             continue
