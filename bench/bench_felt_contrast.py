@@ -32,7 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
-from _page import write_page
+from harness import write_page
 from haptic_anfis.cases import library
 from haptic_anfis.cases.force_mapping import case_force_mapping
 from haptic_anfis.cases.grading import PALPABLE_PCT

@@ -12,7 +12,7 @@ import argparse
 import sys
 from collections import Counter
 
-from _page import write_page
+from harness import write_page
 from haptic_anfis.cases import library
 from haptic_anfis.cases.grading import BASIS
 
