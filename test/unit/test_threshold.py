@@ -129,10 +129,11 @@ def test_next_grades_the_library_at_the_trainees_threshold(tmp_path):
     from haptic_anfis.cases import library
     from haptic_anfis.record.draw import next_case
     lib = library()
-    # at a 1000 % threshold no lesion is rendered: no case has a lump to find at any level
-    # (palpability and level read at the same threshold), and --next says so
-    with pytest.raises(ValueError, match='no ready case with a palpable lesion'):
-        next_case(tmp_path / 'r.sqlite', 'bo', lib=lib, threshold_pct=1000.0)
+    # at a 1000 % threshold no graded lesion is rendered (palpability and level read at the
+    # same threshold): the only lump case left is one no FE grading covers
+    for k in range(5):
+        case, _, _ = next_case(tmp_path / 'r.sqlite', f'bo{k}', lib=lib, threshold_pct=1000.0)
+        assert case.grading() is None or not case.scene.tumours
     # at the finger's 7 % the 10 mm carcinoma 10 mm deep is level 2; at 22 % it is below what
     # the device renders: no level (not an easy "no lump" case) and never drawn blind
     c = lib.get('lib_m_dense_idc10_d10')
