@@ -14,7 +14,7 @@ from collections import Counter
 
 from harness import write_page
 from haptic_anfis.cases import library
-from haptic_anfis.cases.grading import BASIS
+from haptic_anfis.cases.grading import BASIS, below_device
 
 
 def main() -> int:
@@ -24,25 +24,36 @@ def main() -> int:
     ap.add_argument('--no-page', action='store_true', help='print only')
     a = ap.parse_args()
     rows, levels, thr = [], Counter(), None
+    free, bd = [], []
     for c in library().ready():
         g = c.grading(a.threshold)
         if g is None:
             continue
         thr = g['threshold_pct']
-        levels[g['level']] += 1
+        lvl = 'no level (bd)' if below_device(g) else g['level']
         if not g['lesions']:
-            rows.append(f'| {c.name} | {g["level"]} | (none) | | | | |')
+            free.append(c.name)
+            rows.append(f'| {c.name} | {lvl} | (none) | | | | |')
+        elif below_device(g):
+            bd.append(c.name)
+        else:
+            levels[g['level']] += 1
         for e in g['lesions']:
             con = ', '.join(f'{r["contrast_pct"]:+.1f}' for r in e['contrasts'])
             where = (f'{e["found_level"]} ({e["found_depth_m"] * 1e3:g} mm)' if e['palpable']
                      else 'below what this device renders')
-            rows.append(f'| {c.name} | {g["level"]} | {e["lesion"]} | {con} | {where} | '
+            rows.append(f'| {c.name} | {lvl} | {e["lesion"]} | {con} | {where} | '
                         f'{e["difficulty"] or "-"} | {e["reason"] or ""} |')
     dist = ', '.join(f'level {k}: {levels[k]}' for k in range(1, 6))
+    empty = [k for k in range(1, 6) if not levels[k]]
     below = sum(1 for r in rows if 'below what this device renders |' in r)
     text = '\n'.join([
         f'Threshold {thr:g} % ({BASIS}).', '',
-        f'Ready graded cases per level: {dist}; {below} lesion(s) below what this device '
+        f'Ready graded cases with a palpable lesion per level: {dist}'
+        + (f' (empty: {", ".join(map(str, empty))})' if empty else ' (none empty)')
+        + f'; lesion-free cases (their own group, drawn at every level): {len(free)}; '
+        f'cases whose lesions are all below what this device renders (no level, not drawn): '
+        f'{len(bd)} ({", ".join(bd) or "none"}); {below} lesion(s) below what this device '
         'renders.', '',
         '| case | level | lesion | FE contrast at 2, 5, 8, 12, 16 mm (%) | first palpable at | '
         'difficulty | reason |', '|---|---|---|---|---|---|---|', *rows])

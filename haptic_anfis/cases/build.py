@@ -59,7 +59,7 @@ class BuildResult:
     """What :func:`build_case` found and wrote."""
 
     case: str
-    level: int = 1
+    level: int | None = 1   # None: every lesion below what the device renders
     grades: list[dict[str, Any]] = field(default_factory=list)
     cv_rmse_n: list[float] = field(default_factory=list)
     cv_pct_range: list[float] = field(default_factory=list)

@@ -29,8 +29,12 @@ pressure level at which a stylus can feel it, its difficulty; the case level.
   reason says by how much): not "not palpable" — people find 3-5 mm lumps in silicone models
   (Fletcher et al. 1985: 14 % of 3 mm lumps) by shape and mobility, which the simulator does not
   render. The exam scores it neither hit nor miss.
-- **Level** of a case: the difficulty of its hardest palpable lesion; 1 when it has no lesion the
-  device renders (the answer is "no lump"; ``below_device`` then names the lesions it hides).
+- **Level** of a case: the difficulty of its hardest palpable lesion; 1 for a case with no lesion
+  (the answer is "no lump": it trains specificity). A case whose lesions are ALL below what the
+  device renders has no level (None; ``below_device`` names them): scoring a 10 mm carcinoma at
+  30 mm as an easy "no lump" case would teach a trainee to pass over a real lump, and no pressure
+  finds it here either, so it is neither a lump case nor a lesion-free one. An instructor can
+  still open it by name (to show what a stylus cannot give); blind draws and mastery pass it by.
 
 Pure numpy, no ROS.
 """
@@ -42,7 +46,7 @@ import numpy as np
 
 __all__ = ['DEEP_DEPTH', 'PALPABLE_PCT', 'EASY_MULTIPLE', 'LEVEL_DEPTHS', 'BASIS',
            'pressure_level', 'grade_contrasts', 'difficulty', 'lesion_grades', 'case_level',
-           'grading_record', 'regrade']
+           'below_device', 'grading_record', 'regrade']
 
 DEEP_DEPTH = 0.008  # [m]: haptic_anfis.exam.config.ExamConfig.deep (default)
 #: [%] of the lesion-free force: stiffness discrimination through a rigid stylus (Tan et al. 1995)
@@ -164,10 +168,22 @@ def lesion_grades(scene, records: Sequence[dict[str, Any]], twins: dict[str, dic
     return out
 
 
-def case_level(grades: Sequence[dict[str, Any]]) -> int:
-    """The case's level 1-5: its hardest palpable lesion's difficulty; 1 if none is palpable."""
+def case_level(grades: Sequence[dict[str, Any]]) -> int | None:
+    """The case's level 1-5: its hardest palpable lesion's difficulty; 1 without lesions; None
+    when it has lesions and every one is below what the device renders."""
     ds = [g['difficulty'] for g in grades if g['palpable']]
-    return int(max(ds)) if ds else 1
+    if ds:
+        return int(max(ds))
+    return None if grades else 1
+
+
+def below_device(grading: Mapping[str, Any] | None) -> bool:
+    """Whether a case's ``grading`` (a :func:`grading_record`) has lesions and the device
+    renders none of them (no level: see the module docstring); False for an ungraded case."""
+    if not grading or isinstance(grading.get('background'), dict):
+        return False   # a nodular breast: graded against its background, always with a level
+    lesions = grading.get('lesions') or ()
+    return bool(lesions) and not any(g.get('palpable') for g in lesions)
 
 
 def grading_record(grades: Sequence[dict[str, Any]], threshold_pct: float = PALPABLE_PCT

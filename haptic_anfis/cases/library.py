@@ -24,7 +24,7 @@ from ..errors import HapticAnfisError
 from ..tissue.dataset import DATA_DIR, sidecar_path
 from ..tissue.scene import SCENE_DIR, Scene, SceneError, load_scene
 from ..tissue.store import default_store_root, failed_records, failure_summary
-from .grading import regrade
+from .grading import below_device, regrade
 
 DEFAULT_CASE = 'default'
 #: the environment variable naming the user's own case folder (``--case-dir`` sets it, so the
@@ -146,9 +146,16 @@ class Case:
         return self.level_at(None)
 
     def level_at(self, threshold_pct: float | None) -> int | None:
-        """:attr:`level` with the lesions graded at ``threshold_pct`` [%] (None: as stored)."""
+        """:attr:`level` with the lesions graded at ``threshold_pct`` [%] (None: as stored);
+        None too when every lesion is below what the device renders (:meth:`below_device_at`)."""
         g = self.grading(threshold_pct)
-        return None if g is None else int(g['level'])
+        return None if g is None or g.get('level') is None else int(g['level'])
+
+    def below_device_at(self, threshold_pct: float | None = None) -> bool:
+        """Whether the case has lesions and, graded at ``threshold_pct`` [%] (None: as stored),
+        the device renders none of them: it has no level and is not drawn blind
+        (:func:`.grading.below_device`); False for an ungraded case."""
+        return below_device(self.grading(threshold_pct))
 
     def lesions_m(self) -> list[tuple[float, float, float, float]]:
         """(x, y, z, radius) [m] of every lesion, tissue frame."""

@@ -117,7 +117,9 @@ def case_summary(case: Case, timing: bool = True, contrast: bool = True,
         'dataset_points': None,
         'fe_probe_cells': None, 'structures': None, 'rules': None, 'rules_per_output': None,
         'parameters': None, 'rmse_n': None, 'rmse_pct_range': None, 'eval_p50_us': None,
-        'contrast': None, 'level': case.level_at(threshold_pct), 'cv_rmse_n': None, 'cv_pct_range': None,
+        'contrast': None, 'level': case.level_at(threshold_pct),
+        'below_device': case.below_device_at(threshold_pct), 'cv_rmse_n': None,
+        'cv_pct_range': None,
         'fe_points': _store_progress(case)}
     row.update(summary_fields(scene, None))
     ds = None
@@ -188,7 +190,7 @@ def format_table(rows: list[dict[str, Any]]) -> str:
     lines = [head, '-' * len(head)]
     for r in rows:
         les = ', '.join(_lesion_text(l) for l in r['lesions']) or 'none'
-        lvl = '-' if r.get('level') is None else str(r['level'])
+        lvl = 'bd' if r.get('below_device') else '-' if r.get('level') is None else str(r['level'])
         cv = ('/'.join(f'{v:.2f}' for v in r['cv_pct_range']) if r.get('cv_pct_range') else
               (f'FE {r["fe_points"]["solved"]}/{r["fe_points"]["total"]}'
                if r.get('fe_points') and not r['structures'] else '-'))
@@ -208,7 +210,7 @@ def format_table(rows: list[dict[str, Any]]) -> str:
                  '(% / N) at the shallowest depth a stylus can feel it, the difficulty dN and '
                  'that depth @mm (bd = below what this device renders: its largest contrast); '
                  'lvl: case '
-                 'level 1-5; CV % range: grouped-CV RMSE Fx/Fy/Fz (or FE points solved so far); '
+                 'level 1-5 (bd: every lesion below what this device renders: no level); CV % range: grouped-CV RMSE Fx/Fy/Fz (or FE points solved so far); '
                  '(scene changed): the scene file was edited since the case was generated '
                  '(not ready until `cases generate NAME`); force: the tissue -> device force '
                  'scale a session of the case renders (its largest FE force at the deepest '

@@ -154,13 +154,17 @@ def narrow_table(lib, width: int = LIST_WIDTH, threshold_pct: float | None = Non
             ready = 'no' if c.missing(('model_path', 'mesh_path')) else (
                 'stale' if c.scene_changed() else 'yes')
             level = c.level_at(threshold_pct)
-            lvl, desc = ('-' if level is None else str(level)), c.description
+            lvl = ('bd' if c.below_device_at(threshold_pct) else
+                   '-' if level is None else str(level))
+            desc = c.description
         except CaseError as exc:   # a broken scene file: said in its row
             n, felt, ready, lvl, desc = 0, '?', 'no', '-', str(exc)
         name = c.name + ('*' if c.name in own else '')
         line = f'{name:<24} {lvl:>3} {f"{felt}/{n}":>5} {ready:<5} {desc}'
         lines.append(line if len(line) <= width else line[:width - 3] + '...')
-    notes = ['lvl: difficulty 1-5 from the FE (- not graded); lumps: palpable / all lesions (? '
+    notes = ['lvl: difficulty 1-5 from the FE (- not graded; bd: every lesion below what this '
+             'device renders, so no level: not drawn by exam run --next, not counted for mastery, '
+             'open it by name to show what a stylus cannot give); lumps: palpable / all lesions (? '
              'not graded); ready: stale = scene edited since generated (cases generate NAME); '
              '* your own case; --wide: the lesions, FE and model figures']
     if lib.user is not None:
@@ -330,7 +334,9 @@ def _generate_graded(case, args: argparse.Namespace, executor, params: dict) -> 
                     + (f'difficulty {g["difficulty"]} at {g["found_level"]}' if g['palpable']
                        else 'below what this device renders')
                     for g in res.grades) or 'no lesion'
-    print(f'  level {res.level}: {les}; grouped-CV RMSE '
+    lvl = ('no level (every lesion below what this device renders)' if res.level is None
+           else f'level {res.level}')
+    print(f'  {lvl}: {les}; grouped-CV RMSE '
           + ', '.join(f'{v:.3f} N ({p:.2f} %)' for v, p in zip(res.cv_rmse_n, res.cv_pct_range))
           + f'; {res.bytes / 1024:.0f} KB; wrote {", ".join(res.written)}', flush=True)
     return True

@@ -15,7 +15,14 @@ Acad Med 2024). Our definitions (there are no agreed ones):
   one probe diameter (twice the footprint radius: 16 mm, the size of MammaCare's small circles)
   of where it is over the centred :data:`WINDOW` (the probe works one spot), else *searching*
   (it travels between spots, faster than about 16 mm/s); the force of each is the mean |F| of
-  the force samples at those times.
+  the force samples at those times. Only samples at or beyond the light level count in either
+  mode: shallower, the probe touches down, lifts off or turns at a strip's end, in place but not
+  examining anything (counted as palpating, those moments made a scripted vertical-strip search
+  cut short before its marking presses read palpating far lighter than searching, from a fraction
+  of a second of touch-downs). The comparison needs :data:`MIN_MODE_S` of each mode
+  (one :data:`WINDOW`: less is a few transitions, not a way of examining); below it the ratio is
+  None. Laufer, Klatzky & Pugh parse the modes from the force record with a trained classifier;
+  this kinematic split is a stand-in, so their +15 % is a direction, not a target.
 
 Pure numpy, no ROS.
 """
@@ -23,7 +30,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ['WINDOW', 'STEP', 'MAX_GAP', 'AREAS', 'effort']
+__all__ = ['WINDOW', 'STEP', 'MAX_GAP', 'MIN_MODE_S', 'AREAS', 'effort']
 
 #: [s] the window over which the contact point's travel tells palpating from searching
 WINDOW = 1.0
@@ -31,6 +38,8 @@ WINDOW = 1.0
 STEP = 0.02
 #: [s] a longer gap between contact samples counts as this (a pause in the stream, not contact)
 MAX_GAP = 0.05
+#: [s] the least time in each mode for the palpating / searching force ratio (one window)
+MIN_MODE_S = WINDOW
 AREAS = ('centre', 'y+ z+', 'y+ z-', 'y- z+', 'y- z-')
 
 
@@ -62,16 +71,18 @@ def effort(contacts: np.ndarray, forces: np.ndarray, thresholds: tuple[float, fl
                          ('y- z-', False, False)):
         areas[name] = ~centre & ((c[:, 2] >= 0) == py) & ((c[:, 3] >= 0) == pz)
     out['area_time_s'] = {k: round(float(dt[inside & m].sum()), 3) for k, m in areas.items()}
-    palp = _dwelling(c, inside, 2.0 * footprint_radius)
-    search = inside & ~palp
+    pressing = inside & (d >= light)   # touching down / lifting off is neither mode
+    palp = pressing & _dwelling(c, inside, 2.0 * footprint_radius)
+    search = pressing & ~palp
     out['palpating_s'] = round(float(dt[palp].sum()), 3)
     out['searching_s'] = round(float(dt[search].sum()), 3)
     f = np.asarray(forces, float).reshape(-1, 4)
     fp, fs = _mean_force(c, palp, f), _mean_force(c, search, f)
     out['force_palpating_n'] = None if fp is None else round(fp, 3)
     out['force_searching_n'] = None if fs is None else round(fs, 3)
-    out['palpating_vs_searching_pct'] = (None if fp is None or fs is None or fs <= 0 else
-                                         round(100.0 * (fp / fs - 1.0), 1))
+    enough = out['palpating_s'] >= MIN_MODE_S and out['searching_s'] >= MIN_MODE_S
+    out['palpating_vs_searching_pct'] = (None if fp is None or fs is None or fs <= 0
+                                         or not enough else round(100.0 * (fp / fs - 1.0), 1))
     return out
 
 

@@ -26,9 +26,11 @@ def run_threshold(press: Callable[[float], PressResult],
                   reference: float = REFERENCE_STIFFNESS,
                   on_trial: Callable[[int, float, bool], None] | None = None) -> dict:
     """Run ``staircase`` to its end: ``press(stiffness)`` renders one press, ``choose(a, b)``
-    returns 0 when the first press felt stiffer. Returns ``threshold_pct``, ``trials``,
-    ``reversals``, ``correct_pct``, ``reference_n_per_m``, ``reversal_pct`` (every reversal's
-    difference) and the rendered stiffness ratio's mean error against the one asked for."""
+    returns 0 when the first press felt stiffer. Returns ``threshold_pct`` (the maximum-likelihood
+    fit, :meth:`.Staircase.threshold`), ``reversal_threshold_pct`` (the last reversals' mean),
+    ``method``, ``trials``, ``reversals``, ``correct_pct``, ``reference_n_per_m``,
+    ``reversal_pct`` (every reversal's difference) and the rendered stiffness ratio's mean
+    error against the one asked for."""
     s = staircase or Staircase()
     order = random.Random(seed)
     ratio_err = []
@@ -43,7 +45,8 @@ def run_threshold(press: Callable[[float], PressResult],
             on_trial(len(s.trials) + 1, s.delta, correct)
         s.answer(correct)
     return {'threshold_pct': 100.0 * s.threshold(), 'trials': len(s.trials),
-            'reversals': len(s.reversal_deltas),
+            'reversals': len(s.reversal_deltas), 'method': f'{s.down}-down-1-up, max likelihood',
+            'reversal_threshold_pct': 100.0 * s.reversal_threshold(),
             'correct_pct': 100.0 * sum(c for _, c in s.trials) / len(s.trials),
             'reference_n_per_m': reference,
             'reversal_pct': [round(100.0 * d, 3) for d in s.reversal_deltas],

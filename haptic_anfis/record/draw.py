@@ -3,11 +3,13 @@
 The pool of level L is the library's ready cases of level L with a palpable lesion (the graded
 ones — full-density FE, models within the gates — when the level has any; the levels are the
 library's own, :func:`~haptic_anfis.record.levels.case_level`), and, in about
-:data:`LESION_FREE_SHARE` of the draws, the cases with no palpable lesion, whatever their level
-(they train specificity at every level). Within the pool, a case the trainee has not seen comes
-before one it has (the least seen first), and the draw among those is seeded by the trainee's id
-and its number of sessions: reproducible from the record, different for two trainees and from
-one session to the next. Pure Python, no ROS.
+:data:`LESION_FREE_SHARE` of the draws, the cases with no lesion, whatever their level (they train
+specificity at every level). A case whose lesions are all below what the device renders is in
+neither pool (:func:`~haptic_anfis.record.levels.below_device`). Palpability and level are read
+at one threshold, the trainee's own when given. Within the pool, a case the trainee has not seen
+comes before one it has (the least seen first), and the draw among those is seeded by the
+trainee's id and its number of sessions: reproducible from the record, different for two trainees
+and from one session to the next. Pure Python, no ROS.
 """
 from __future__ import annotations
 
@@ -17,7 +19,7 @@ import random
 
 from ..cases import CaseError, library
 from .db import resolve_db_path
-from .levels import case_level, has_palpable_lesion
+from .levels import below_device, case_level, has_palpable_lesion
 from .mastery import MasteryConfig, load_mastery_config, mastery
 from .store import UnknownTrainee, history
 
@@ -64,11 +66,12 @@ def next_case(db: str | os.PathLike | None, trainee_id: str, lib=None,
     free: list = []
     for c in lib.ready():
         try:
-            if has_palpable_lesion(c):
+            if has_palpable_lesion(c, threshold_pct):
                 own = c.level_at(threshold_pct) if threshold_pct is not None else None
                 by_level.setdefault(own if own is not None else case_level(c), []).append(c)
-            else:
+            elif not below_device(c, threshold_pct):
                 free.append(c)
+            # else: lesions the device does not render: no level, not a "no lump" case either
         except (CaseError, ValueError):
             continue   # a broken scene is not drawn (cases list names it)
     if by_level and level > max(by_level):   # past the hardest case there is: stay there

@@ -19,7 +19,7 @@ from pathlib import Path
 from ..cases import library
 from ..tissue.scene import load_scene
 
-__all__ = ['MAX_LEVEL', 'SMALL_DIAMETER', 'case_level', 'has_palpable_lesion',
+__all__ = ['MAX_LEVEL', 'SMALL_DIAMETER', 'below_device', 'case_level', 'has_palpable_lesion',
            'level_of_case_name']
 
 #: [m] a lesion narrower than this is "small" for the derived level
@@ -52,18 +52,30 @@ def case_level(case) -> int:
     return min(MAX_LEVEL, 1 + max(n - 1, 0) + int(small))
 
 
-def has_palpable_lesion(case) -> bool:
+def has_palpable_lesion(case, threshold_pct: float | None = None) -> bool:
     """Whether ``case`` (a library :class:`~haptic_anfis.cases.Case`, or a scene) has a lesion
-    the trainee can feel: one its FE grading calls palpable (``Case.grading()``); for a case
-    not graded, any lesion. A case without one trains specificity (cover the breast, mark
-    nothing); the graded library puts it at level 1 (its grading says "1 when nothing is
-    palpable"), and ``exam run --next`` draws it at every level."""
+    the trainee can feel: one its FE grading calls palpable at ``threshold_pct`` [%] (the
+    trainee's own; None: the stored grading's, ``Case.grading()``), the threshold the case's
+    level is read at too (``Case.level_at``); for a case not graded, any lesion. A case with no
+    lesion trains specificity (cover the breast, mark nothing) and ``exam run --next`` draws it
+    at every level; one whose lesions are all below what the device renders
+    (:func:`below_device`) is neither and is not drawn."""
     grading = getattr(case, 'grading', None)
-    g = grading() if callable(grading) else None
+    g = None
+    if callable(grading):
+        g = grading() if threshold_pct is None else grading(threshold_pct)
     if g is not None:
         return any(les.get('palpable') for les in g.get('lesions', ()))
     scene = getattr(case, 'scene', case)
     return bool(getattr(scene, 'tumours', ()))
+
+
+def below_device(case, threshold_pct: float | None = None) -> bool:
+    """Whether ``case`` is graded, has lesions, and the device renders none of them at
+    ``threshold_pct`` [%] (None: as stored): it has no level (``cases list`` shows its reason)
+    and blind draws and mastery pass it by (:func:`haptic_anfis.cases.grading.below_device`)."""
+    check = getattr(case, 'below_device_at', None)
+    return bool(check(threshold_pct)) if callable(check) else False
 
 
 def level_of_case_name(name: str | None) -> int | None:
@@ -76,6 +88,8 @@ def level_of_case_name(name: str | None) -> int | None:
         p = Path(name)
         if p.suffix in ('.yaml', '.yml') and p.is_file():
             return case_level(load_scene(p))
-        return case_level(library().get(name))
+        case = library().get(name)
+        # every lesion below what the device renders: no level (its sessions count neither way)
+        return None if below_device(case) else case_level(case)
     except ValueError:
         return None

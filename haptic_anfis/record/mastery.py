@@ -172,7 +172,8 @@ def mastery(sessions: list[dict], config: MasteryConfig = DEFAULT) -> dict:
     'window_false_marks' (the current window), 'false_marks_per_case' (over the window, None
     without one)}}, 'specificity': :func:`specificity` of every session not void, whatever
     its level}``; sessions
-    with no case level are not counted, nor a bag's second session (a recording scored again,
+    with no case level are not counted (a case whose lesions are all below what the device
+    renders has none), nor a bag's second session (a recording scored again,
     in a record from before :class:`~haptic_anfis.record.AlreadyStored`); two recordings made
     at one path (``bag_start_ns`` differs) count as two.
     """
@@ -192,6 +193,8 @@ def mastery(sessions: list[dict], config: MasteryConfig = DEFAULT) -> dict:
         return next((L for L in per if not per[L]['mastered']), config.top)
     for s in counted:
         free = lesion_free(s)
+        if free and s['lesions'] and s.get('case_level') is None:
+            continue   # lesions all below what the device renders: no level, counts neither way
         L = working() if free else s.get('case_level')
         if L not in per:
             continue

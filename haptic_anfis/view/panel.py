@@ -52,7 +52,10 @@ def effort_rows(n: dict) -> list[tuple[str, str]]:
         f = lambda v: '-' if v is None else f'{v:.1f}'  # noqa: E731
         pct = n.get('palpating_vs_searching_pct')
         rows.append(('force palpating / searching',
-                     f'{f(pal)} / {f(sea)} N' + (f' ({pct:+.0f} %)' if pct is not None else '')))
+                     f'{f(pal)} / {f(sea)} N' + (f' ({pct:+.0f} %)' if pct is not None else
+                                                 ' (under 1 s of one: not compared)'
+                                                 if pal is not None and sea is not None
+                                                 else '')))
     return rows
 
 

@@ -66,3 +66,24 @@ def test_the_report_the_debrief_and_the_record_carry_them(tmp_path):
     assert h['time_at_level_s'] == e['time_at_level_s'] and h['area_time_s'] == e['area_time_s']
     assert h['force_searching_n'] == e['force_searching_n']
     assert h['lesion_levels'] == {'idc': 'medium'}
+
+
+def test_touching_down_is_neither_mode_and_a_moment_of_dwelling_gives_no_ratio():
+    """A strip search with no palpation: each strip starts with 0.3 s touching down in place
+    (1 mm deep, 0.5 N), then slides 40 mm/s at 9 mm and 8 N. The touch-downs are not
+    palpating (shallower than the light level), and with no palpating time there is no ratio."""
+    rows, frows, t = [], [], 0.0
+    for k in range(6):
+        y = -0.02 + 0.008 * k
+        for _ in range(300):   # touch-down in place
+            rows.append((t, 0.04, y, -0.04, 0.001, 1.0))
+            frows.append((t, 0.5, 0.0, 0.0))
+            t += 0.001
+        for z in np.arange(-0.04, 0.04, 0.00004):   # slide at depth
+            rows.append((t, 0.04, y, z, 0.009, 1.0))
+            frows.append((t, 8.0, 0.0, 0.0))
+            t += 0.001
+    e = effort(np.array(rows), np.array(frows), LEVELS, 0.008)
+    assert e['palpating_s'] < 0.5 and e['searching_s'] == pytest.approx(12.0, abs=0.6)
+    assert e['force_searching_n'] == pytest.approx(8.0, abs=0.1)
+    assert e['palpating_vs_searching_pct'] is None
