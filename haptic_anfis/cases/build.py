@@ -122,6 +122,7 @@ def build_case(case: Case, *, store_root: str | os.PathLike | None = None, coars
     from .generate import _package_relative, write_case_mesh
     from .background import background_gate_failures, background_grades
     from .grading import case_level, grading_record, lesion_grades
+    from .reference import smooth_reference
     from .sweeps import case_stores, stored_records
 
     scene = case.scene
@@ -133,7 +134,8 @@ def build_case(case: Case, *, store_root: str | os.PathLike | None = None, coars
     ds.Y = np.vectorize(lambda v: float(str(np.float32(v))))(ds.Y)
     res.grades = lesion_grades(scene, recs, twins)
     res.level = case_level(res.grades)
-    bg = background_grades(scene, recs) if scene.background is not None else None
+    bg = (background_grades(scene, recs, smooth_reference(scene, store_root))
+          if scene.background is not None else None)
     if bg is not None:  # in a nodular breast the level is how hard a lesion is told apart
         res.level = bg['level']
     ds.provenance.update(
@@ -221,6 +223,7 @@ def regrade_case(case: Case, *, store_root: str | os.PathLike | None = None,
     from ..tissue.dataset import sidecar_path
     from .background import background_grades
     from .grading import PALPABLE_PCT, grading_record, lesion_grades
+    from .reference import smooth_reference
     from .sweeps import case_stores, stored_records
 
     side = sidecar_path(case.dataset_path)
@@ -236,7 +239,8 @@ def regrade_case(case: Case, *, store_root: str | os.PathLike | None = None,
     recs, twins = stored_records(case_stores(case, store_root))
     doc['grading'] = grading_record(lesion_grades(case.scene, recs, twins, thr), thr)
     if case.scene.background is not None:   # a nodular breast: told apart from its background
-        bg = background_grades(case.scene, recs, threshold_pct=thr)
+        bg = background_grades(case.scene, recs, smooth_reference(case.scene, store_root),
+                               threshold_pct=thr)
         doc['grading'].update(level=bg['level'], background=bg)
     tmp = side.with_name(f'.{side.name}.tmp')
     tmp.write_text(json.dumps(doc, indent=2) + '\n')
