@@ -134,7 +134,7 @@ def build_case(case: Case, *, store_root: str | os.PathLike | None = None, coars
     ds.Y = np.vectorize(lambda v: float(str(np.float32(v))))(ds.Y)
     res.grades = lesion_grades(scene, recs, twins)
     res.level = case_level(res.grades)
-    bg = (background_grades(scene, recs, smooth_reference(scene, store_root))
+    bg = (background_grades(scene, recs, smooth_reference(case, store_root, coarse))
           if scene.background is not None else None)
     if bg is not None:  # in a nodular breast the level is how hard a lesion is told apart
         res.level = bg['level']
@@ -239,7 +239,7 @@ def regrade_case(case: Case, *, store_root: str | os.PathLike | None = None,
     recs, twins = stored_records(case_stores(case, store_root))
     doc['grading'] = grading_record(lesion_grades(case.scene, recs, twins, thr), thr)
     if case.scene.background is not None:   # a nodular breast: told apart from its background
-        bg = background_grades(case.scene, recs, smooth_reference(case.scene, store_root),
+        bg = background_grades(case.scene, recs, smooth_reference(case, store_root),
                                threshold_pct=thr)
         doc['grading'].update(level=bg['level'], background=bg)
     tmp = side.with_name(f'.{side.name}.tmp')

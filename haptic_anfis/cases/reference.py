@@ -22,7 +22,7 @@ import numpy as np
 
 from ..tissue.scene import Scene
 from .background import basis, force_map
-from .library import CaseError, library
+from .library import Case, CaseError, CaseLibrary
 from .sweeps import case_stores, stored_records
 
 __all__ = ['REF_DEGREE', 'SmoothReference', 'smooth_reference', 'reference_case']
@@ -56,36 +56,41 @@ def _same_body(a: Scene, b: Scene) -> bool:
             and a.mesh == b.mesh and set(a.depths) <= set(b.depths))
 
 
-def reference_case(scene: Scene, names: Sequence[str] | None = None):
-    """The library case (with a complete store) whose smooth breast grades ``scene``: no lesion,
-    no background, the same body (:func:`_same_body`); the same base modulus first.
+def reference_case(case: Case) -> Case:
+    """The case whose smooth breast grades ``case``: a scene file beside its own (the same
+    library) with no lesion and no background and the same body (:func:`_same_body`); the same
+    base modulus first, then by name.
 
     Raises:
         CaseError: no such case, naming what it needs.
     """
-    lib = library()
+    scene = case.scene
+    lib = CaseLibrary(case.scene_path.parent, case.dataset_path.parents[2],
+                      work_root=case.work_dir.parent)
     found = []
-    for n in (names if names is not None else lib.names()):
+    for n in lib.names():
         c = lib.get(n)
         sc = c.scene
         if sc.tumours or sc.background is not None or not _same_body(scene, sc):
             continue
         found.append((sc.material.youngs != scene.material.youngs, n, c))
     if not found:
-        raise CaseError(f'scene {scene.name!r}: no smooth lesion-free library case with its '
-                        f'breast radii {tuple(round(r * 1e3) for r in scene.radii)} mm, probe, '
-                        f'mesh and material to grade its background against')
+        raise CaseError(f'case {case.name!r}: no smooth lesion-free case in '
+                        f'{str(case.scene_path.parent)!r} with its breast radii '
+                        f'{tuple(round(r * 1e3, 1) for r in scene.radii)} mm, probe, mesh, '
+                        f'Poisson ratio and depths to grade its background against')
     return min(found, key=lambda t: t[:2])[2]
 
 
-def smooth_reference(scene: Scene, store_root: str | os.PathLike | None = None
-                     ) -> SmoothReference:
-    """The :class:`SmoothReference` of ``scene`` from its reference case's committed store.
+def smooth_reference(case: Case, store_root: str | os.PathLike | None = None,
+                     coarse: bool = False) -> SmoothReference:
+    """The :class:`SmoothReference` of ``case`` from its reference case's store (the same
+    density as the case's: ``coarse``).
 
     Raises:
-        CaseError: no reference case, or its store lacks a point.
+        CaseError: no reference case, or its store lacks a point (naming it).
     """
-    case = reference_case(scene)
-    recs, _ = stored_records(case_stores(case, store_root))
-    return SmoothReference(case.name, scene.material.youngs / case.scene.material.youngs,
+    ref = reference_case(case)
+    recs, _ = stored_records(case_stores(ref, store_root, coarse))
+    return SmoothReference(ref.name, case.scene.material.youngs / ref.scene.material.youngs,
                            tuple(recs))
