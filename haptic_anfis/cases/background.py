@@ -44,7 +44,7 @@ from ..tissue.scenebase import surface_height
 from .grading import DEEP_DEPTH, PALPABLE_PCT, grade_contrasts
 
 __all__ = ['FEATURE_GATE', 'force_map', 'basis', 'map_contrasts', 'separation_pct',
-           'background_grades', 'background_gate_failures', 'summary_fields']
+           'background_grades', 'regrade_background', 'background_gate_failures', 'summary_fields']
 
 #: grouped-CV RMSE (vector norm) as a fraction of each graded feature's bump (as for lesions)
 FEATURE_GATE = 1.0 / 3.0
@@ -128,9 +128,6 @@ def background_grades(scene, records: Sequence[dict[str, Any]], reference,
     found_level, difficulty), ``confounders`` (normal regions whose contrast reaches the
     threshold at some depth), ``level``, ``depth_m``, ``threshold_pct``.
     """
-    if not (np.isfinite(threshold_pct) and threshold_pct > 0):
-        raise ValueError(f'palpability threshold: expected a finite number > 0 %, got '
-                         f'{threshold_pct!r}')
     depths = _depths(scene, records)
     if not any(abs(d - depth) < 1e-9 for d in depths):
         raise ValueError(f'background grading: no FE force at the level depth {depth * 1e3:g} mm '
@@ -181,9 +178,25 @@ def background_grades(scene, records: Sequence[dict[str, Any]], reference,
     for rib in (bg.ribs if bg is not None else ()):
         out['ribs'].append(deep({'name': rib.name, 'z_m': rib.z,
                                  'contrasts': rows(rib.z, rib.radius, clear, rib=True)}))
+    nod = [e['bump_pct'] for e in out['nodules'] if e['bump_pct'] is not None]
+    out['nodule_bump_pct'] = [float(min(nod)), float(max(nod))] if nod else None
+    everywhere = np.ones(len(yz0), dtype=bool)
+    out['lesions'] = [{'lesion': t.name, 'contrasts': rows(t.centre[1:], t.radius, everywhere)}
+                      for t in scene.tumours]
+    return regrade_background(out, threshold_pct)
+
+
+def regrade_background(grading: dict[str, Any], threshold_pct: float) -> dict[str, Any]:
+    """A background grading graded (again) at ``threshold_pct`` [%] from its regions' per-depth
+    contrasts: the normal distribution per depth, the confounders, each lesion's separations and
+    grade, the level (a trainee's own threshold; :func:`background_grades` grades once)."""
+    if not (np.isfinite(threshold_pct) and threshold_pct > 0):
+        raise ValueError(f'palpability threshold: expected a finite number > 0 %, got '
+                         f'{threshold_pct!r}')
+    out = {**grading, 'threshold_pct': float(threshold_pct)}
     normal = [e for e in (*out['nodules'], *out['ribs']) if e['contrasts']]
     out['normal_by_depth'] = []
-    for d in depths:
+    for d in out['depths_m']:
         c = np.array([_at(e['contrasts'], d)['contrast_pct'] for e in normal])
         out['normal_by_depth'].append(
             {'depth_m': d, 'count': len(c),
@@ -191,19 +204,17 @@ def background_grades(scene, records: Sequence[dict[str, Any]], reference,
                  'max_pct': float(c.max()), 'at_threshold': int((c >= threshold_pct).sum())}
                 if len(c) else {'min_pct': None, 'median_pct': None, 'max_pct': None,
                                 'at_threshold': 0})})
-    nod = [e['bump_pct'] for e in out['nodules'] if e['bump_pct'] is not None]
-    out['nodule_bump_pct'] = [float(min(nod)), float(max(nod))] if nod else None
     out['confounders'] = [e['name'] for e in normal
                           if any(r['contrast_pct'] >= threshold_pct for r in e['contrasts'])]
-    everywhere = np.ones(len(yz0), dtype=bool)
-    out['lesions'] = [_lesion(t, rows(t.centre[1:], t.radius, everywhere), out['normal_by_depth'],
-                              threshold_pct, depth) for t in scene.tumours]
+    out['lesions'] = [_lesion(g['lesion'], [dict(r) for r in g['contrasts']],
+                              out['normal_by_depth'], threshold_pct, out['depth_m'])
+                      for g in grading['lesions']]
     out['level'] = (int(max(g['difficulty'] for g in out['lesions'])) if out['lesions']
                     else 2 if out['confounders'] else 1)
     return out
 
 
-def _lesion(t, contrasts: list[dict[str, Any]], normal_by_depth: list[dict[str, Any]],
+def _lesion(name: str, contrasts: list[dict[str, Any]], normal_by_depth: list[dict[str, Any]],
             threshold_pct: float, depth: float) -> dict[str, Any]:
     """One lesion's grade against the normal regions' contrasts per depth."""
     for r in contrasts:
@@ -223,7 +234,7 @@ def _lesion(t, contrasts: list[dict[str, Any]], normal_by_depth: list[dict[str, 
         f'region (at {best["depth_m"] * 1e3:g} mm; {best["contrast_pct"]:+.1f} % over the smooth '
         f'breast), under the {threshold_pct:g} % a stylus can tell apart')
     r = _at(contrasts, depth)
-    return {'lesion': t.name, 'contrasts': contrasts, 'bump_pct': r['contrast_pct'],
+    return {'lesion': name, 'contrasts': contrasts, 'bump_pct': r['contrast_pct'],
             'bump_n': r['contrast_n'], 'margin_pct': float(margin), 'felt': felt,
             'stands_out': g['palpable'], 'found_depth_m': at, 'found_level': g['found_level'],
             'difficulty': d, 'reason': reason}

@@ -5,7 +5,8 @@ import dataclasses
 import numpy as np
 import pytest
 
-from haptic_anfis.cases.background import background_grades, separation_pct, summary_fields
+from haptic_anfis.cases.background import (background_grades, regrade_background, separation_pct,
+                                           summary_fields)
 from haptic_anfis.cases.grading import PALPABLE_PCT
 from haptic_anfis.cases.reference import SmoothReference
 from haptic_anfis.tissue.geometry import loading_points
@@ -111,6 +112,22 @@ def test_every_level_1_to_5_is_reached_by_where_the_lesion_is_told_apart(scene, 
     assert les['found_depth_m'] == (found[0] if found else None)
     assert les['stands_out'] == bool(found) and (les['reason'] is None) == bool(found)
     assert les['felt'] == (max(contrast) >= 0.22)
+
+
+def test_a_grading_regraded_at_another_threshold_is_the_grading_at_that_threshold(scene):
+    """A trainee's own threshold: the stored per-depth contrasts graded again give what a fresh
+    grading at that threshold gives (a 10 % threshold tells the level-4 lesion apart from deep
+    pressure: at 5 mm it is 6.8 % over the 3 % nodules, under it; at 8 mm 16.5 %)."""
+    sc = _with_nodules(scene, SPARSE)
+    t = sc.tumours[0]
+    nod = [(n.centre[1], n.centre[2], 0.03) for n in sc.background.nodules]
+    recs = _records(sc, nod + [(t.centre[1], t.centre[2], dict(zip(DEPTHS, LEVELS[4][0])))])
+    g22 = background_grades(sc, recs, _Smooth())
+    g10 = background_grades(sc, recs, _Smooth(), threshold_pct=10.0)
+    assert g22['level'] == 4 and g10['level'] == 3
+    again = regrade_background(g22, 10.0)
+    assert again['level'] == 3 and again['lesions'] == g10['lesions']
+    assert again['normal_by_depth'] == g10['normal_by_depth'] and again['threshold_pct'] == 10.0
 
 
 def test_a_lesion_no_firmer_than_the_nodules_is_not_told_apart(scene):
