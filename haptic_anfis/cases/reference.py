@@ -22,7 +22,7 @@ import numpy as np
 
 from ..tissue.scene import Scene
 from .background import basis, force_map
-from .library import Case, CaseError, CaseLibrary
+from .library import Case, CaseError, CaseLibrary, library
 from .sweeps import case_stores, stored_records
 
 __all__ = ['REF_DEGREE', 'SmoothReference', 'smooth_reference', 'reference_case']
@@ -58,27 +58,30 @@ def _same_body(a: Scene, b: Scene) -> bool:
 
 def reference_case(case: Case) -> Case:
     """The case whose smooth breast grades ``case``: a scene file beside its own (the same
-    library) with no lesion and no background and the same body (:func:`_same_body`); the same
-    base modulus first, then by name.
+    library; else the package's library) with no lesion and no background and the same body
+    (:func:`_same_body`); the same base modulus first, then by name.
 
     Raises:
         CaseError: no such case, naming what it needs.
     """
     scene = case.scene
-    lib = CaseLibrary(case.scene_path.parent, case.dataset_path.parents[2],
-                      work_root=case.work_dir.parent)
+    beside = CaseLibrary(case.scene_path.parent, case.dataset_path.parents[2],
+                         work_root=case.work_dir.parent)
     found = []
-    for n in lib.names():
-        c = lib.get(n)
-        sc = c.scene
-        if sc.tumours or sc.background is not None or not _same_body(scene, sc):
-            continue
-        found.append((sc.material.youngs != scene.material.youngs, n, c))
+    for lib in (beside, library()):   # a user's case may grade against a package case
+        for n in lib.names():
+            c = lib.get(n)
+            sc = c.scene
+            if sc.tumours or sc.background is not None or not _same_body(scene, sc):
+                continue
+            found.append((sc.material.youngs != scene.material.youngs, n, c))
+        if found:
+            break
     if not found:
         raise CaseError(f'case {case.name!r}: no smooth lesion-free case in '
-                        f'{str(case.scene_path.parent)!r} with its breast radii '
-                        f'{tuple(round(r * 1e3, 1) for r in scene.radii)} mm, probe, mesh, '
-                        f'Poisson ratio and depths to grade its background against')
+                        f'{str(case.scene_path.parent)!r} or the package library with its '
+                        f'breast radii {tuple(round(r * 1e3, 1) for r in scene.radii)} mm, '
+                        f'probe, mesh, Poisson ratio and depths to grade its background against')
     return min(found, key=lambda t: t[:2])[2]
 
 

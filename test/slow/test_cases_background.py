@@ -213,6 +213,21 @@ def test_the_committed_nodular_store_grades_its_lesion_as_its_twin_measures_it()
         assert 0.0 <= r['contrast_pct'] - truth[r['depth_m']] <= 1.5, r
 
 
+def test_a_nodular_case_without_a_smooth_breast_of_its_body_is_refused_naming_it(tmp_path):
+    from test_cases import _library  # the same throw-away library of scene files
+
+    from haptic_anfis.cases import CaseError
+    from haptic_anfis.cases.reference import reference_case
+
+    lib = _library(tmp_path, {'tinynodular': TINY_NODULAR})
+    with pytest.raises(CaseError, match=r"case 'tinynodular': no smooth lesion-free case .*"
+                                        r"breast radii \(45.0, 70.0, 70.0\) mm"):
+        reference_case(lib.get('tinynodular'))
+    (tmp_path / 'two').mkdir()
+    lib = _library(tmp_path / 'two', {'tinynodular': TINY_NODULAR, 'tinysmooth': TINY_SMOOTH})
+    assert reference_case(lib.get('tinynodular')).name == 'tinysmooth'
+
+
 def test_cases_list_fields_name_the_background_and_the_ribs(scene):
     ribs = load_scene(SCENE_DIR / 'nod_s_fatty_ribs_free.yaml')
     assert summary_fields(scene, None) == {'background': 'nodular 30', 'nodules': 30,
