@@ -197,7 +197,8 @@ def test_the_smooth_reference_interpolates_a_smooth_map_and_scales_with_the_modu
 def test_the_committed_nodular_store_grades_its_lesion_as_its_twin_measures_it():
     """The lesion's contrast over the smooth breast (lib_free_s_fatty's store) against the
     ground truth (the same point without the lesion, the twin store): within 1.5 points at every
-    depth (the excess: nodules near the lesion, which the twin keeps and the smooth breast lacks)."""
+    depth (the excess: nodules near the lesion, which the twin keeps and the smooth breast
+    lacks)."""
     from haptic_anfis.cases import library
     from haptic_anfis.cases.grading import lesion_grades
     from haptic_anfis.cases.reference import smooth_reference
