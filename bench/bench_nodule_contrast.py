@@ -11,11 +11,13 @@ precompression, 1 Hz (fat 19, glandular 33, fibrous 107, IDC 93 kPa; see config/
 for the sources). The ``... at (0, 0) @ (o, 0)`` rows move the point o mm off the nodule: the
 width of its bump.
 
-The grading (:mod:`haptic_anfis.cases.background`) measures a bump against the force map's
-smooth trend, which takes up part of a wide bump; the second table gives, from committed stores
-(no solve but the baseline at (0, 16) mm), the ratio of the graded bump to the contrast at the
-point: nod_s_fatty_idc10_d10's lesion against its lesion-free twin, and nod_s_fatty_free's
-nodule under (0, 16) mm against the same point without nodules. "no conv.": the load path
+The grading (:mod:`haptic_anfis.cases.background`) reads a region's contrast over the smooth
+breast of the same body (a lesion-free smooth library case, fitted per depth and scaled by the
+modulus); the second table checks it, from committed stores (no solve but the baseline at
+(0, 16) mm), against the ground truth: nod_s_fatty_idc10_d10's lesion against its lesion-free
+twin, nod_s_fatty_free's point over a nodule at (0, 16) mm against the same point without
+nodules, and the reference itself against the FE there; the third the modulus scaling; then the
+shipped nodular cases' levels as graded. "no conv.": the load path
 stopped there (one attempt at the scene's 4 mm step, no retries; the sweep retries at 2 and 1 mm).
 
     .venv/bin/python bench/bench_nodule_contrast.py [--cache FILE] [--only KEY ...]
@@ -117,45 +119,96 @@ def solve(key: str) -> dict:
 
 
 def _graded_vs_contrast(done: dict) -> list[str]:
-    """Rows: a region's graded bump (over the force map's trend, at 5 / 8 / 12 mm) against its
-    contrast at the point over it, from committed stores (no solve): nod_s_fatty_idc10_d10's
-    lesion against its lesion-free twin, and nod_s_fatty_free's nodule under (0, 16) mm against
-    the same point without any nodule (``fat19 @ (0, 16)``)."""
+    """Rows, from committed stores (no solve but the baseline at (0, 16) mm), per depth: what
+    the grading reads (over the smooth breast, :mod:`haptic_anfis.cases.reference`) against the
+    ground truth, the same point with and without the region: nod_s_fatty_idc10_d10's lesion
+    against its lesion-free twin; nod_s_fatty_free's point (0, 16) mm over a nodule against the
+    same point solved without nodules (``fat19 @ (0, 16)``); and the reference itself there."""
     from haptic_anfis.cases import library
-    from haptic_anfis.cases.background import background_grades, force_map
+    from haptic_anfis.cases.background import background_grades, map_contrasts
     from haptic_anfis.cases.grading import lesion_grades
+    from haptic_anfis.cases.reference import smooth_reference
     from haptic_anfis.cases.sweeps import case_stores, stored_records
 
-    rows = ['| region | depth mm | contrast at the point % | graded bump % | bump / contrast |',
+    rows = ['| what | depth mm | ground truth % | graded % | graded - truth |',
             '|---|---|---|---|---|']
     case = library().get('nod_s_fatty_idc10_d10')
     recs, twins = stored_records(case_stores(case))
-    twin = {round(c['depth_m'] * 1e3): c['contrast_pct']
-            for c in lesion_grades(case.scene, recs, twins)[0]['contrasts']}
+    ref = smooth_reference(case)
+    truth = {round(c['depth_m'] * 1e3, 6): c['contrast_pct']
+             for c in lesion_grades(case.scene, recs, twins)[0]['contrasts']}
     t = case.scene.tumours[0]
-    what = (f'nod_s_fatty_idc10_d10 {t.name} (r {t.radius * 1e3:g} mm, {t.youngs / 1e3:g} kPa), '
-            'vs its twin')
-    for d in (5, 8, 12):
-        b = background_grades(case.scene, recs, depth=d * 1e-3)['lesions'][0]['bump_pct']
-        rows.append(f'| {what} | {d} | {twin[d]:.1f} | {b:.1f} | {b / twin[d]:.2f} |')
+    g = background_grades(case.scene, recs, ref)
+    for r in g['lesions'][0]['contrasts']:
+        d = round(r['depth_m'] * 1e3, 6)
+        rows.append(f'| {case.name} {t.name} (r {t.radius * 1e3:g} mm, {t.youngs / 1e3:g} kPa): '
+                    f'contrast vs its twin | {d:g} | {truth[d]:.2f} | {r["contrast_pct"]:.2f} | '
+                    f'{r["contrast_pct"] - truth[d]:+.2f} |')
     if 'fat19 @ (0, 16)' not in done:
         return rows
     case = library().get('nod_s_fatty_free')
     recs, _ = stored_records(case_stores(case))
+    ref = smooth_reference(case)
     base = done['fat19 @ (0, 16)']
     p = np.array(CASES['fat19 @ (0, 16)'][1]) * 1e-3
-    nod = min(case.scene.background.nodules,
-              key=lambda n: float(np.hypot(*(np.array(n.centre[1:]) - p))))
-    for d in (5, 8, 12):
-        yz, f = force_map(recs, d * 1e-3)
+    for i, d in enumerate(base['depths_mm']):
+        fb = base['force_n'][i]
+        yz, c, _ = map_contrasts(recs, ref, d * 1e-3)
         k = int(np.argmin(np.hypot(yz[:, 0] - p[0], yz[:, 1] - p[1])))
-        c = 100.0 * (f[k] / base['force_n'][base['depths_mm'].index(d)] - 1.0)
-        g = background_grades(case.scene, recs, depth=d * 1e-3)
-        n = next(n for n in g['nodules'] if n['name'] == nod.name)
-        rows.append(f'| nod_s_fatty_free {nod.name} (r {nod.radius * 1e3:.1f} mm, '
-                    f'{nod.youngs / 1e3:g} kPa, centre {n["depth_m"] * 1e3:.1f} mm deep), vs no '
-                    f'nodules | {d} | {c:.1f} | {n["bump_pct"]:.1f} | {n["bump_pct"] / c:.2f} |')
+        f = ref.forces(yz[k:k + 1], d * 1e-3)[0] * (1.0 + c[k] / 100.0)
+        tr = 100.0 * (f / fb - 1.0)
+        rows.append(f'| {case.name} point (0, 16) mm over a nodule: contrast vs no nodules | '
+                    f'{d:g} | {tr:.2f} | {c[k]:.2f} | {c[k] - tr:+.2f} |')
+    for i, d in enumerate(base['depths_mm']):
+        fr = ref.forces(p[None], d * 1e-3)[0]
+        rows.append(f'| smooth reference ({ref.name}, fitted) at (0, 16) mm: error vs the FE '
+                    f'there | {d:g} | 0 | {100.0 * (fr / base["force_n"][i] - 1.0):.2f} | '
+                    f'{100.0 * (fr / base["force_n"][i] - 1.0):+.2f} |')
     return rows
+
+
+def _modulus_scaling() -> list[str]:
+    """Rows: the smooth medium fatty breast's force map scaled by 33/19 against the dense one's
+    (the reference of a dense nodular case is a fatty smooth case scaled by its modulus)."""
+    from haptic_anfis.cases import library
+    from haptic_anfis.cases.background import force_map
+    from haptic_anfis.cases.reference import SmoothReference
+    from haptic_anfis.cases.sweeps import case_stores, stored_records
+
+    lib = library()
+    fat, dense = (lib.get(n) for n in ('lib_free_m_fatty', 'lib_free_m_dense'))
+    rf, _ = stored_records(case_stores(fat))
+    rd, _ = stored_records(case_stores(dense))
+    scale = dense.scene.material.youngs / fat.scene.material.youngs
+    ref = SmoothReference(fat.name, scale, tuple(rf))
+    rows = [f'| depth mm | mean % | max abs % | ({fat.name} x {scale:.3f} vs {dense.name}, '
+            f'{len(rd)} points) |', '|---|---|---|---|']
+    for d in dense.scene.depths:
+        yz, f = force_map(rd, d)
+        e = 100.0 * (ref.forces(yz, d) / f - 1.0)
+        rows.append(f'| {d * 1e3:g} | {e.mean():+.2f} | {np.abs(e).max():.2f} | |')
+    return rows
+
+
+def _levels() -> list[str]:
+    """The shipped nodular cases' levels and their lesions' per-depth figures as graded."""
+    from haptic_anfis.cases import library
+    out = []
+    for c in library().ready():
+        g = (c.grading() or {}).get('background')
+        if g is None:
+            continue
+        nb = {round(n['depth_m'] * 1e3, 6): n for n in g['normal_by_depth']}
+        out.append(f'- {c.name}: level {g["level"]}; normal regions graded '
+                   f'{next(iter(nb.values()))["count"]}, confounders {len(g["confounders"])}; '
+                   'normal contrast max per depth: ' + ', '.join(
+                       f'{d:g} mm {n["max_pct"]:+.1f} %' for d, n in nb.items()))
+        for les in g['lesions']:
+            out.append(f'  - {les["lesion"]}: difficulty {les["difficulty"]}, over the smooth '
+                       'breast / over the firmest normal region: ' + ', '.join(
+                           f'{r["depth_m"] * 1e3:g} mm {r["contrast_pct"]:+.1f} / '
+                           f'{r["separation_pct"]:+.1f} %' for r in les['contrasts']))
+    return out
 
 
 def _contrast(done: dict, key: str, depth_mm: float) -> float:
@@ -215,9 +268,14 @@ def main() -> int:
         print(f'| {k} | {CASES[k][3] / CASES[k][0]:.2f} | '
               + ' | '.join(f'{v:+.1f}' if np.isfinite(v) else 'no conv.' for v in c)
               + f' | {done[k]["cpu_s"]:.0f} |')
-    print('\nThe graded bump (over the force map\'s smooth trend, what cases/background.py '
-          'grades) against the contrast at the point over the region:\n')
+    print('\nWhat the grading reads (cases/background.py: over the smooth breast of the same '
+          'body) against the ground truth (the same point with and without the region):\n')
     print('\n'.join(_graded_vs_contrast(done)))
+    print('\nThe modulus scaling of the smooth reference (neo-Hookean: force proportional to '
+          'the modulus at a fixed geometry):\n')
+    print('\n'.join(_modulus_scaling()))
+    print('\nThe shipped nodular cases as graded:\n')
+    print('\n'.join(_levels()))
     print(_summary(done, keys))
     return 0
 

@@ -1,28 +1,38 @@
 """Grading a case against its normal background: does a lesion stand out from the nodules?
 
-In a nodular breast every bump is not a lesion. The trainee feels force over a map of the breast;
-what tells a lesion apart is that its bump is larger than the normal nodules' bumps at the same
-pressing level. From the case's FE points (no extra solves):
+In a nodular breast every bump is not a lesion. What tells a lesion apart is that, at the same
+pressing level, it feels firmer than the normal nodules and ribs do. From the case's FE points
+(no extra solves) and the force map of the same breast without any region
+(:class:`~.reference.SmoothReference`: a lesion-free smooth case of the same geometry, scaled to
+the base modulus), per indentation depth (the exam's levels are tissue depths):
 
-- **Force map** at the grading depth (:data:`~.grading.DEEP_DEPTH`): |F| at every loading point.
-- **Trend**: the smooth part of that map, a least-squares polynomial of degree
-  :data:`TREND_DEGREE` in (y, z) over the loading points (lower for a map of few points:
-  :func:`trend_degree`), refitted once without the points whose
-  residual exceeds :data:`TREND_CLIP` robust standard deviations (the dome's thickness changes
-  slowly across the breast; the bumps are what is left).
-- **Bump** of a point: its force over the trend, in % (and in N). The bump of a region (a
-  lesion, a nodule, a rib) is the largest among the loading points over it: within its radius
-  of its (y, z), or the nearest point when none lies that close (a rib: within its half width of
-  its line).
-- **Standing out**: a lesion's margin is its bump less the largest normal nodule's bump, in
-  percentage points; it stands out when the margin reaches the threshold (the force JND of
-  :mod:`.grading`, or the stylus threshold the caller passes), and its difficulty is that
-  margin in multiples of the threshold (:func:`~.grading.difficulty`). A lesion that does not
-  stand out is difficulty 5: as felt through the device it is one more bump among the normal ones.
-- **Level** of a nodular case: its hardest lesion's difficulty; without lesions, 1 when no normal
-  bump reaches the threshold (a smooth feel), else 2 (bumps the trainee must leave unmarked).
+- **Contrast** of a point: its |F| over the smooth breast's at the same point, in % (and in N).
+  The contrast of a region (a lesion, a nodule, a rib) is the largest among the loading points
+  over it: within its radius of its (y, z), or the nearest point when none lies that close (a
+  rib: within its half width of its line). Nothing is fitted to the nodular map, so no bump is
+  absorbed into its own background. A normal region is read only at points beyond every
+  lesion's reach (farther from its centre than its radius plus the probe's), else the lesion's
+  own bump would count as a normal one; a region with no point within its radius reads its
+  nearest point within one grid spacing; one with none is not graded (``bump_pct`` None, no
+  ``contrasts``: beyond the loaded disc, or under a lesion's bump).
+- **Normal distribution** per depth: the contrasts of the nodules and ribs (min, median, max and
+  how many reach the threshold). Those reaching the threshold at some depth are *confounders*.
+- **Separation** of a lesion per depth: its force over that of the firmest normal region, in %
+  (``100 * ((1 + c_lesion) / (1 + c_normal) - 1)``, with c_normal at least 0: against a smooth
+  feel it is the lesion's contrast). The threshold is a discrimination threshold between two
+  stiffnesses felt through a stylus (:data:`~.grading.PALPABLE_PCT`, Tan et al. 1995), so a
+  lesion is told apart at the depths where its separation reaches it. The per-depth separations
+  are graded as a smooth case's contrasts are (:func:`~.grading.grade_contrasts`: the
+  shallowest depth it is told apart at and the level scale 1-5). A lesion never told apart is
+  difficulty 5: through the device it is one more bump among the normal ones (``felt`` says
+  whether its contrast over the smooth breast reaches the threshold at some depth, ``reason``
+  what it lacks).
+- **Level** of a nodular case: its hardest lesion's difficulty; without lesions, 1 when no
+  normal region reaches the threshold (a smooth feel), else 2 (bumps the trainee must leave
+  unmarked).
 
-Pure numpy, no ROS.
+``bump_pct`` / ``bump_n`` of a region are its contrast at the deep level
+(:data:`~.grading.DEEP_DEPTH`), the figure the exam and the debrief show. Pure numpy, no ROS.
 """
 from __future__ import annotations
 
@@ -31,17 +41,13 @@ from typing import Any, Sequence
 import numpy as np
 
 from ..tissue.scenebase import surface_height
-from .grading import DEEP_DEPTH, PALPABLE_PCT, difficulty
+from .grading import DEEP_DEPTH, PALPABLE_PCT, grade_contrasts
 
-__all__ = ['TREND_DEGREE', 'TREND_CLIP', 'force_map', 'trend_degree', 'trend_fit',
-           'background_grades',
-           'background_gate_failures', 'summary_fields']
+__all__ = ['FEATURE_GATE', 'force_map', 'basis', 'map_contrasts', 'separation_pct',
+           'background_grades', 'regrade_background', 'background_gate_failures', 'summary_fields']
 
 #: grouped-CV RMSE (vector norm) as a fraction of each graded feature's bump (as for lesions)
 FEATURE_GATE = 1.0 / 3.0
-
-TREND_DEGREE = 4
-TREND_CLIP = 2.5
 
 
 def force_map(records: Sequence[dict[str, Any]], depth: float = DEEP_DEPTH
@@ -59,110 +65,192 @@ def force_map(records: Sequence[dict[str, Any]], depth: float = DEEP_DEPTH
     return np.asarray(yz, dtype=float), np.asarray(f)
 
 
-def _basis(yz: np.ndarray, scale: float, degree: int) -> np.ndarray:
+def basis(yz: np.ndarray, scale: float, degree: int) -> np.ndarray:
+    """(P, terms) monomials u^i v^j, i + j <= ``degree``, of (y, z) / ``scale`` [m]."""
     u, v = yz[:, 0] / scale, yz[:, 1] / scale
     return np.column_stack([u ** i * v ** j for i in range(degree + 1)
                             for j in range(degree + 1 - i)])
 
 
-def trend_degree(points: int, degree: int = TREND_DEGREE) -> int:
-    """The trend's polynomial degree for a map of ``points`` loading points: at most ``degree``,
-    with at least four points per coefficient (a trend with as many terms as points would
-    follow the bumps it is meant to separate)."""
-    while degree > 0 and (degree + 1) * (degree + 2) // 2 * 4 > points:
-        degree -= 1
-    return degree
+def map_contrasts(records: Sequence[dict[str, Any]], reference, depth: float
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """((P, 2) points [m], (P,) contrast [%], (P,) contrast [N]) of the case's force map at
+    ``depth`` [m] over the smooth breast ``reference`` (an object with ``forces(yz, depth)``)."""
+    yz, f = force_map(records, depth)
+    ref = np.asarray(reference.forces(yz, depth), dtype=float)
+    return yz, 100.0 * (f - ref) / ref, f - ref
 
 
-def trend_fit(yz: np.ndarray, f: np.ndarray, degree: int = TREND_DEGREE,
-              clip: float = TREND_CLIP) -> np.ndarray:
-    """(P,) smooth trend [N] of the force map at its points (see the module docstring;
-    the degree is :func:`trend_degree` of the number of points)."""
-    degree = trend_degree(len(f), degree)
-    scale = float(np.abs(yz).max()) or 1.0
-    A = _basis(yz, scale, degree)
-    keep = np.ones(len(f), dtype=bool)
-    for _ in range(2):
-        coef = np.linalg.lstsq(A[keep], f[keep], rcond=None)[0]
-        res = f - A @ coef
-        sigma = 1.4826 * np.median(np.abs(res[keep] - np.median(res[keep])))
-        if not sigma > 0:
-            break
-        keep = np.abs(res) <= clip * sigma
-    return A @ coef
+def separation_pct(lesion_pct: float, normal_pct: float) -> float:
+    """[%] how much firmer a lesion of contrast ``lesion_pct`` feels than the firmest normal
+    region, of contrast ``normal_pct`` (both over the smooth breast; a normal map below the
+    smooth breast counts as smooth)."""
+    return 100.0 * ((1.0 + lesion_pct / 100.0) / (1.0 + max(normal_pct, 0.0) / 100.0) - 1.0)
 
 
-def _region_bump(yz: np.ndarray, bump: np.ndarray, centre: Sequence[float], radius: float
-                 ) -> int:
-    """Index of the point with the largest bump within ``radius`` of ``centre`` (y, z), or the
-    nearest point when none is that close."""
+def _region_point(yz: np.ndarray, c: np.ndarray, centre: Sequence[float], radius: float) -> int:
+    """Index of the point with the largest contrast within ``radius`` of ``centre`` (y, z), or
+    the nearest point when none is that close."""
     d = np.hypot(yz[:, 0] - centre[0], yz[:, 1] - centre[1])
     near = np.flatnonzero(d <= radius + 1e-12)
-    return int(near[np.argmax(bump[near])]) if len(near) else int(np.argmin(d))
+    return int(near[np.argmax(c[near])]) if len(near) else int(np.argmin(d))
 
 
-def background_grades(scene, records: Sequence[dict[str, Any]], depth: float = DEEP_DEPTH,
-                      threshold_pct: float = PALPABLE_PCT) -> dict[str, Any]:
+def _depths(scene, records: Sequence[dict[str, Any]]) -> list[float]:
+    """The scene's depths [m] every record solved."""
+    return [float(d) for d in scene.depths
+            if all(np.any(np.abs(np.asarray(r['depths_m'], float) - d) < 1e-9) for r in records)]
+
+
+def _at(rows: list[dict[str, Any]], depth: float) -> dict[str, Any]:
+    return next(r for r in rows if abs(r['depth_m'] - depth) < 1e-9)
+
+
+def background_grades(scene, records: Sequence[dict[str, Any]], reference,
+                      threshold_pct: float = PALPABLE_PCT, depth: float = DEEP_DEPTH
+                      ) -> dict[str, Any]:
     """The case's grading against its background (see the module docstring).
 
-    Returns a dict: ``background`` ('smooth' / 'nodular'), ``nodules`` (per nodule: name, kind,
-    bump_pct, bump_n), ``ribs`` (per rib: name, z_m, bump_pct, bump_n), ``nodule_bump_pct``
-    ([min, max] or None), ``lesions`` (per lesion: bump_pct, bump_n, margin_pct, stands_out,
-    difficulty), ``confounders`` (normal regions whose bump reaches the threshold), ``level``,
-    and the ``depth_m`` / ``threshold_pct`` used.
+    Args:
+        reference: the smooth breast (:class:`~.reference.SmoothReference`, or any object with
+            ``name`` and ``forces(yz, depth)`` giving |F| [N] at (P, 2) points [m]).
+        depth: [m] the level whose contrasts are the regions' ``bump_pct`` / ``bump_n``.
+
+    Raises:
+        ValueError: the threshold is not a positive number, or no depth of ``depth`` was solved.
+
+    Returns a dict: ``background`` ('smooth' / 'nodular'), ``reference`` (the smooth case),
+    ``depths_m``, ``nodules`` (per nodule: name, kind, radius_m, depth_m, contrasts per depth,
+    bump_pct, bump_n), ``ribs`` (per rib: name, z_m, contrasts, bump_pct, bump_n),
+    ``normal_by_depth`` (per depth: min / median / max contrast %, count at the threshold),
+    ``nodule_bump_pct`` ([min, max] at ``depth`` or None), ``lesions`` (per lesion: contrasts
+    and separations per depth, bump_pct, bump_n, margin_pct, felt, stands_out, found_depth_m,
+    found_level, difficulty), ``confounders`` (normal regions whose contrast reaches the
+    threshold at some depth), ``level``, ``depth_m``, ``threshold_pct``.
     """
-    yz, f = force_map(records, depth)
-    trend = trend_fit(yz, f)
-    bump_n = f - trend
-    bump = 100.0 * bump_n / trend
+    depths = _depths(scene, records)
+    if not any(abs(d - depth) < 1e-9 for d in depths):
+        raise ValueError(f'background grading: no FE force at the level depth {depth * 1e3:g} mm '
+                         f'(solved at every point: {", ".join(f"{d * 1e3:g}" for d in depths)} mm)')
+    maps = {d: map_contrasts(records, reference, d) for d in depths}
     bg = scene.background
-    out: dict[str, Any] = {'depth_m': depth, 'threshold_pct': threshold_pct,
+
+    # a normal region is read away from every lesion's reach (the probe over the lesion's
+    # footprint), else the lesion's own bump would be counted as a normal one
+    yz0 = maps[depths[0]][0]
+    clear = np.ones(len(yz0), dtype=bool)
+    for t in scene.tumours:
+        clear &= np.hypot(yz0[:, 0] - t.centre[1], yz0[:, 1] - t.centre[2]) \
+            > t.radius + scene.probe_radius
+
+    def rows(centre, radius, allowed: np.ndarray, rib: bool = False) -> list[dict[str, Any]]:
+        out = []
+        for d, (yz, c, cn) in maps.items():
+            if rib:
+                on = np.flatnonzero((np.abs(yz[:, 1] - centre) <= radius) & allowed)
+            else:
+                dist = np.hypot(yz[:, 0] - centre[0], yz[:, 1] - centre[1])
+                on = np.flatnonzero((dist <= radius + 1e-12) & allowed)
+                # a region between the grid's points: its nearest point, within one spacing
+                near = np.flatnonzero(allowed & (dist <= radius + scene.spacing + 1e-12))
+                if not len(on) and len(near):
+                    on = near[[int(np.argmin(dist[near]))]]
+            if not len(on):
+                return []
+            k = int(on[np.argmax(c[on])])
+            out.append({'depth_m': d, 'contrast_pct': float(c[k]), 'contrast_n': float(cn[k])})
+        return out
+
+    def deep(entry: dict[str, Any]) -> dict[str, Any]:
+        if not entry['contrasts']:   # all its points are within a lesion's reach
+            return {**entry, 'bump_pct': None, 'bump_n': None}
+        r = _at(entry['contrasts'], depth)
+        return {**entry, 'bump_pct': r['contrast_pct'], 'bump_n': r['contrast_n']}
+
+    out: dict[str, Any] = {'depth_m': depth, 'threshold_pct': threshold_pct, 'depths_m': depths,
                            'background': bg.kind if bg is not None else 'smooth',
-                           'trend': {'degree': trend_degree(len(f)), 'clip_sigma': TREND_CLIP},
+                           'reference': getattr(reference, 'name', str(reference)),
                            'nodules': [], 'ribs': []}
     for n in (bg.nodules if bg is not None else ()):
-        k = _region_bump(yz, bump, n.centre[1:], n.radius)
-        out['nodules'].append({'name': n.name, 'kind': n.kind, 'radius_m': n.radius,
-                               'depth_m': _depth(scene, n.centre), 'bump_pct': float(bump[k]),
-                               'bump_n': float(bump_n[k])})
+        out['nodules'].append(deep({'name': n.name, 'kind': n.kind, 'radius_m': n.radius,
+                                    'depth_m': _depth(scene, n.centre),
+                                    'contrasts': rows(n.centre[1:], n.radius, clear)}))
     for rib in (bg.ribs if bg is not None else ()):
-        on = np.flatnonzero(np.abs(yz[:, 1] - rib.z) <= rib.radius)
-        if len(on):
-            k = int(on[np.argmax(bump[on])])
-            out['ribs'].append({'name': rib.name, 'z_m': rib.z, 'bump_pct': float(bump[k]),
-                                'bump_n': float(bump_n[k])})
-    normal = [r['bump_pct'] for r in out['nodules']]
-    out['nodule_bump_pct'] = [float(min(normal)), float(max(normal))] if normal else None
-    worst_normal = max([*normal, *(r['bump_pct'] for r in out['ribs'])], default=0.0)
-    out['confounders'] = [r['name'] for r in (*out['nodules'], *out['ribs'])
-                          if r['bump_pct'] >= threshold_pct]
-    lesions = []
-    for t in scene.tumours:
-        k = _region_bump(yz, bump, t.centre[1:], t.radius)
-        margin = float(bump[k]) - max(worst_normal, 0.0)
-        d = difficulty(margin, threshold_pct)
-        lesions.append({'lesion': t.name, 'bump_pct': float(bump[k]), 'bump_n': float(bump_n[k]),
-                        'margin_pct': margin, 'stands_out': d is not None,
-                        'difficulty': d if d is not None else 5})
-    out['lesions'] = lesions
-    if lesions:
-        out['level'] = int(max(g['difficulty'] for g in lesions))
-    else:
-        out['level'] = 2 if out['confounders'] else 1
+        out['ribs'].append(deep({'name': rib.name, 'z_m': rib.z,
+                                 'contrasts': rows(rib.z, rib.radius, clear, rib=True)}))
+    nod = [e['bump_pct'] for e in out['nodules'] if e['bump_pct'] is not None]
+    out['nodule_bump_pct'] = [float(min(nod)), float(max(nod))] if nod else None
+    everywhere = np.ones(len(yz0), dtype=bool)
+    out['lesions'] = [{'lesion': t.name, 'contrasts': rows(t.centre[1:], t.radius, everywhere)}
+                      for t in scene.tumours]
+    return regrade_background(out, threshold_pct)
+
+
+def regrade_background(grading: dict[str, Any], threshold_pct: float) -> dict[str, Any]:
+    """A background grading graded (again) at ``threshold_pct`` [%] from its regions' per-depth
+    contrasts: the normal distribution per depth, the confounders, each lesion's separations and
+    grade, the level (a trainee's own threshold; :func:`background_grades` grades once)."""
+    if not (np.isfinite(threshold_pct) and threshold_pct > 0):
+        raise ValueError(f'palpability threshold: expected a finite number > 0 %, got '
+                         f'{threshold_pct!r}')
+    out = {**grading, 'threshold_pct': float(threshold_pct)}
+    normal = [e for e in (*out['nodules'], *out['ribs']) if e['contrasts']]
+    out['normal_by_depth'] = []
+    for d in out['depths_m']:
+        c = np.array([_at(e['contrasts'], d)['contrast_pct'] for e in normal])
+        out['normal_by_depth'].append(
+            {'depth_m': d, 'count': len(c),
+             **({'min_pct': float(c.min()), 'median_pct': float(np.median(c)),
+                 'max_pct': float(c.max()), 'at_threshold': int((c >= threshold_pct).sum())}
+                if len(c) else {'min_pct': None, 'median_pct': None, 'max_pct': None,
+                                'at_threshold': 0})})
+    out['confounders'] = [e['name'] for e in normal
+                          if any(r['contrast_pct'] >= threshold_pct for r in e['contrasts'])]
+    out['lesions'] = [_lesion(g['lesion'], [dict(r) for r in g['contrasts']],
+                              out['normal_by_depth'], threshold_pct, out['depth_m'])
+                      for g in grading['lesions']]
+    out['level'] = (int(max(g['difficulty'] for g in out['lesions'])) if out['lesions']
+                    else 2 if out['confounders'] else 1)
     return out
+
+
+def _lesion(name: str, contrasts: list[dict[str, Any]], normal_by_depth: list[dict[str, Any]],
+            threshold_pct: float, depth: float) -> dict[str, Any]:
+    """One lesion's grade against the normal regions' contrasts per depth."""
+    for r in contrasts:
+        n = _at(normal_by_depth, r['depth_m'])
+        worst = n['max_pct'] if n['max_pct'] is not None else 0.0
+        r.update(normal_max_pct=worst,
+                 separation_pct=separation_pct(r['contrast_pct'], worst))
+    g = grade_contrasts({r['depth_m']: r['separation_pct'] for r in contrasts}, threshold_pct)
+    felt = any(r['contrast_pct'] >= threshold_pct for r in contrasts)
+    at = g['found_depth_m']
+    margin = (_at(contrasts, at) if at is not None
+              else max(contrasts, key=lambda r: r['separation_pct']))['separation_pct']
+    d = g['difficulty'] if g['palpable'] else 5
+    best = max(contrasts, key=lambda r: r['separation_pct'])
+    reason = None if g['palpable'] else (
+        f'never told apart: at most {best["separation_pct"]:+.1f} % over the firmest normal '
+        f'region (at {best["depth_m"] * 1e3:g} mm; {best["contrast_pct"]:+.1f} % over the smooth '
+        f'breast), under the {threshold_pct:g} % a stylus can tell apart')
+    r = _at(contrasts, depth)
+    return {'lesion': name, 'contrasts': contrasts, 'bump_pct': r['contrast_pct'],
+            'bump_n': r['contrast_n'], 'margin_pct': float(margin), 'felt': felt,
+            'stands_out': g['palpable'], 'found_depth_m': at, 'found_level': g['found_level'],
+            'difficulty': d, 'reason': reason}
 
 
 def background_gate_failures(cv_rmse: np.ndarray, grading: dict[str, Any]) -> list[str]:
     """One message per graded feature whose bump the model cannot render: the grouped-CV RMSE
-    (norm over Fx, Fy, Fz) [N] must stay within :data:`FEATURE_GATE` of the bump [N] of every
-    lesion and of every normal region the exam treats as a confounder (its bump reaches the
-    threshold)."""
+    (norm over Fx, Fy, Fz) [N] must stay within :data:`FEATURE_GATE` of the bump [N] (its
+    contrast over the smooth breast at the deep level) of every lesion and of every normal
+    region the exam treats as a confounder."""
     norm = float(np.linalg.norm(cv_rmse))
     feats = [(f'lesion {g["lesion"]}', g['bump_n']) for g in grading['lesions']]
     feats += [(f'normal {r["name"]}', r['bump_n']) for r in (*grading['nodules'], *grading['ribs'])
               if r['name'] in grading['confounders']]
     return [f'{what}: grouped-CV RMSE {norm:.4f} N (|Fx, Fy, Fz|) is more than 1/3 of its bump '
-            f'{abs(b):.4f} N over the background trend' for what, b in feats
+            f'{abs(b):.4f} N over the smooth breast' for what, b in feats
             if norm > FEATURE_GATE * abs(b)]
 
 

@@ -41,6 +41,7 @@ from .background import background_gate_failures, background_grades
 from .generate import _package_relative, write_case_mesh
 from .grading import PALPABLE_PCT, case_level, grading_record, lesion_grades
 from .library import Case, CaseError
+from .reference import smooth_reference
 from .sweeps import case_stores, stored_records
 
 __all__ = ['RANGE_GATE_PCT', 'CONTRAST_GATE', 'SIZE_GATE_BYTES', 'BuildResult', 'build_case',
@@ -129,7 +130,8 @@ def build_case(case: Case, *, store_root: str | os.PathLike | None = None, coars
     ds.Y = np.vectorize(lambda v: float(str(np.float32(v))))(ds.Y)
     res.grades = lesion_grades(scene, recs, twins)
     res.level = case_level(res.grades)
-    bg = background_grades(scene, recs) if scene.background is not None else None
+    bg = (background_grades(scene, recs, smooth_reference(case, store_root, coarse))
+          if scene.background is not None else None)
     if bg is not None:  # in a nodular breast the level is how hard a lesion is told apart
         res.level = bg['level']
     ds.provenance.update(
@@ -227,7 +229,8 @@ def regrade_case(case: Case, *, store_root: str | os.PathLike | None = None,
     recs, twins = stored_records(case_stores(case, store_root))
     doc['grading'] = grading_record(lesion_grades(case.scene, recs, twins, thr), thr)
     if case.scene.background is not None:   # a nodular breast: told apart from its background
-        bg = background_grades(case.scene, recs, threshold_pct=thr)
+        bg = background_grades(case.scene, recs, smooth_reference(case, store_root),
+                               threshold_pct=thr)
         doc['grading'].update(level=bg['level'], background=bg)
     tmp = side.with_name(f'.{side.name}.tmp')
     tmp.write_text(json.dumps(doc, indent=2) + '\n')

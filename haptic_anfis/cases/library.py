@@ -24,6 +24,7 @@ from ..errors import HapticAnfisError
 from ..tissue.dataset import DATA_DIR, sidecar_path
 from ..tissue.scene import SCENE_DIR, Scene, SceneError, load_scene
 from ..tissue.store import default_store_root, failed_records, failure_summary
+from .background import regrade_background
 from .grading import below_device, regrade
 
 DEFAULT_CASE = 'default'
@@ -137,7 +138,11 @@ class Case:
         g = d.get('grading')
         if g is None or threshold_pct is None:
             return g
-        return regrade(g, threshold_pct)
+        out = regrade(g, threshold_pct)
+        if g.get('background') is not None:   # a nodular breast: told apart from its background
+            bg = regrade_background(g['background'], threshold_pct)
+            out.update(level=bg['level'], background=bg)
+        return out
 
     @property
     def level(self) -> int | None:

@@ -215,8 +215,8 @@ def format_table(rows: list[dict[str, Any]]) -> str:
                  '(not ready until `cases generate NAME`); force: the tissue -> device force '
                  'scale a session of the case renders (its largest FE force at the deepest '
                  'trained depth at 85 % of the clamp; --json: force_mapping); background: smooth, '
-                 'or nodular with its nodule count and (once graded) their bump range over the '
-                 'force trend at the deep level; ribs: ribs under the breast')
+                 'or nodular with its nodule count and (once graded) their contrast range over the '
+                 'smooth breast at the deep level; ribs: ribs under the breast')
     return '\n'.join(lines)
 
 

@@ -3,7 +3,7 @@ the lesions, how much each stood out, and the trainee's false marks on them (no 
 
 After the exam the debrief shows every bump the trainee felt, not only the lesions: a normal
 glandular lobule (or a fat lobule) and a rib are drawn where they lie, with their bump over the
-breast's smooth trend at deep pressure from the case's FE grading
+same breast without them (smooth) at deep pressure from the case's FE grading
 (:func:`haptic_anfis.cases.background.background_grades`), and those whose bump reaches the
 palpability threshold (the *confounders*: normal tissue that stands out as much as a lesion
 the device renders) are told apart. The specificity figures split the false marks into those on

@@ -1,30 +1,49 @@
-"""Grading against the background: a lesion's bump against the normal nodules' bumps."""
+"""Grading against the background: a lesion's contrast over the smooth breast against the normal
+nodules' contrasts, per depth."""
 import dataclasses
 
 import numpy as np
 import pytest
 
-from haptic_anfis.cases.background import background_grades, summary_fields, trend_fit
+from haptic_anfis.cases.background import (background_grades, regrade_background, separation_pct,
+                                           summary_fields)
+from haptic_anfis.cases.grading import PALPABLE_PCT
+from haptic_anfis.cases.reference import SmoothReference
 from haptic_anfis.tissue.geometry import loading_points
 from haptic_anfis.tissue.scene import SCENE_DIR, load_scene
 
 DEPTHS = (0.002, 0.005, 0.008, 0.012, 0.016)
-#: the threshold these synthetic maps are built around [%] (given, not the config's default)
-THR = 7.0
+#: [m] width (sigma) of a synthetic bump: about a 16 mm probe's reach over a small region
+SIGMA = 0.004
+
+
+def _base(y, z, depth: float):
+    """|F| [N] of a smooth synthetic breast: more force where it is thinner, and a tilt; curved
+    enough that a trend fitted to the map would bend under a 30 mm bump."""
+    return (6.0 + 40.0 * (y * y + z * z) + 3.0 * y) * depth / 0.008
+
+
+class _Smooth:
+    """The synthetic smooth breast as a reference (what :class:`SmoothReference` provides)."""
+    name = 'synthetic'
+
+    def forces(self, yz, depth):
+        return _base(yz[:, 0], yz[:, 1], depth)
 
 
 def _records(scene, bumps):
-    """Point records of a synthetic force map: a smooth dome trend (more force where the breast
-    is thinner) times (1 + the sum of Gaussian bumps of 8 mm width at each (y, z, fraction))."""
+    """Point records of the smooth map times (1 + the sum of Gaussian bumps): ``bumps`` are
+    (y, z, amplitude) with the amplitude a fraction or a {depth: fraction} dict."""
     out = []
     for p in loading_points(scene):
         y, z = p[1], p[2]
-        base = 6.0 + 40.0 * (y * y + z * z) + 3.0 * y
-        g = sum(a * np.exp(-((y - cy) ** 2 + (z - cz) ** 2) / (2 * 0.004 ** 2))
-                for cy, cz, a in bumps)
-        f = base * (1.0 + g)
-        out.append({'surface_point_m': p.tolist(), 'depths_m': list(DEPTHS),
-                    'forces_N': [[f * d / 0.008, 0.0, 0.0] for d in DEPTHS]})
+        forces = []
+        for d in DEPTHS:
+            g = sum((a[d] if isinstance(a, dict) else a)
+                    * np.exp(-((y - cy) ** 2 + (z - cz) ** 2) / (2 * SIGMA ** 2))
+                    for cy, cz, a in bumps)
+            forces.append([_base(y, z, d) * (1.0 + g), 0.0, 0.0])
+        out.append({'surface_point_m': p.tolist(), 'depths_m': list(DEPTHS), 'forces_N': forces})
     return out
 
 
@@ -33,47 +52,181 @@ def scene():
     return load_scene(SCENE_DIR / 'nod_s_fatty_idc10_d10.yaml')
 
 
-def test_the_trend_follows_a_smooth_map_and_ignores_one_bump():
-    rng = np.random.default_rng(3)
-    yz = rng.uniform(-0.03, 0.03, size=(200, 2))
-    smooth = 5.0 + 30.0 * yz[:, 0] ** 2 + 20 * yz[:, 1]
-    f = smooth.copy()
-    f[7] *= 1.3
-    t = trend_fit(yz, f)
-    np.testing.assert_allclose(np.delete(t, 7), np.delete(smooth, 7), rtol=2e-3)
+#: [m] (y, z, radius) of three nodules on the 4 mm grid, over 20 mm from the scene's lesion at
+#: (-10, -14) mm and from each other: their bumps (SIGMA 4 mm) do not add up
+SPARSE = ((0.016, 0.016, 0.003), (-0.016, 0.016, 0.003), (0.016, -0.012, 0.003))
 
 
-def test_a_lesion_that_bulges_far_above_the_nodules_stands_out_easily(scene):
-    nod = [(n.centre[1], n.centre[2], 0.03) for n in scene.background.nodules]
-    t = scene.tumours[0]
-    g = background_grades(scene, _records(scene, nod + [(t.centre[1], t.centre[2], 0.6)]),
-                          threshold_pct=THR)
-    assert g['background'] == 'nodular' and len(g['nodules']) == 30
-    lo, hi = g['nodule_bump_pct']
-    assert -2.0 < lo <= hi < 7.0  # 3 % bumps (less the trend they lift): under the 7 % threshold
+def _with_nodules(scene, nodules):
+    """``scene`` with its nodules replaced by glandular ones at (y, z, radius) [m], 10 mm deep."""
+    tpl = scene.background.nodules[0]
+    nod = tuple(dataclasses.replace(tpl, name=f'n{i}', centre=(tpl.centre[0], y, z), radius=r)
+                for i, (y, z, r) in enumerate(nodules))
+    return dataclasses.replace(scene, background=dataclasses.replace(scene.background,
+                                                                     nodules=nod))
+
+
+def test_the_contrasts_of_known_bumps_are_recovered(scene):
+    """A region with a grid point over its centre reads its bump exactly at every depth (no
+    trend soaks it up), however curved the smooth breast."""
+    sc = _with_nodules(scene, SPARSE)
+    t = sc.tumours[0]
+    amp = {d: 0.10 + 5.0 * d for d in DEPTHS}   # 11 .. 18 %: the lesion grows with depth
+    nod = [(n.centre[1], n.centre[2], 0.05) for n in sc.background.nodules]
+    g = background_grades(sc, _records(sc, nod + [(t.centre[1], t.centre[2], amp)]), _Smooth())
+    (les,) = g['lesions']
+    for r in les['contrasts']:
+        assert r['contrast_pct'] == pytest.approx(100 * amp[r['depth_m']], abs=1e-6)
+    for e in g['nodules']:
+        for r in e['contrasts']:
+            assert r['contrast_pct'] == pytest.approx(5.0, abs=1e-6), (e['name'], r)
+    assert g['nodule_bump_pct'] == pytest.approx([5.0, 5.0], abs=1e-6)
+    assert g['reference'] == 'synthetic' and g['depths_m'] == list(DEPTHS)
+
+
+#: lesion contrast per depth (fraction) -> the level: 3 % nodules, the 22 % stylus threshold
+#: (a lesion told apart needs 1.03 * 1.22 - 1 = 25.7 % over the smooth breast)
+LEVELS = [
+    ((0.60, 0.60, 0.60, 0.60, 0.60), 1),   # at light pressure, over twice the threshold
+    ((0.30, 0.35, 0.40, 0.45, 0.50), 2),   # at light pressure but under twice: medium
+    ((0.10, 0.30, 0.35, 0.40, 0.45), 2),   # from medium pressure
+    ((0.10, 0.20, 0.30, 0.35, 0.40), 3),   # from deep pressure
+    ((0.05, 0.10, 0.20, 0.30, 0.35), 4),   # only deeper than the exam's deep level
+    ((0.05, 0.10, 0.15, 0.20, 0.30), 5),   # only at the deepest FE depth
+    ((0.05, 0.10, 0.15, 0.20, 0.24), 5),   # felt (>= 22 %) but never told from the nodules
+]
+
+
+@pytest.mark.parametrize('contrast,level', LEVELS)
+def test_every_level_1_to_5_is_reached_by_where_the_lesion_is_told_apart(scene, contrast, level):
+    sc = _with_nodules(scene, SPARSE)
+    t = sc.tumours[0]
+    nod = [(n.centre[1], n.centre[2], 0.03) for n in sc.background.nodules]
+    amp = dict(zip(DEPTHS, contrast))
+    g = background_grades(sc, _records(sc, nod + [(t.centre[1], t.centre[2], amp)]), _Smooth(),
+                          threshold_pct=PALPABLE_PCT)
+    (les,) = g['lesions']
+    assert g['level'] == les['difficulty'] == level
     assert g['confounders'] == []
-    (les,) = g['lesions']
-    assert les['bump_pct'] > 40 and les['stands_out'] and les['difficulty'] == 1
-    assert g['level'] == 1
+    found = [d for d, c in zip(DEPTHS, contrast) if separation_pct(100 * c, 3.0) >= 22.0]
+    assert les['found_depth_m'] == (found[0] if found else None)
+    assert les['stands_out'] == bool(found) and (les['reason'] is None) == bool(found)
+    assert les['felt'] == (max(contrast) >= 0.22)
 
 
-def test_a_lesion_no_larger_than_the_nodules_does_not_stand_out(scene):
-    nod = [(n.centre[1], n.centre[2], 0.16) for n in scene.background.nodules]
+def test_a_grading_regraded_at_another_threshold_is_the_grading_at_that_threshold(scene):
+    """A trainee's own threshold: the stored per-depth contrasts graded again give what a fresh
+    grading at that threshold gives (a 10 % threshold tells the level-4 lesion apart from deep
+    pressure: at 5 mm it is 6.8 % over the 3 % nodules, under it; at 8 mm 16.5 %)."""
+    sc = _with_nodules(scene, SPARSE)
+    t = sc.tumours[0]
+    nod = [(n.centre[1], n.centre[2], 0.03) for n in sc.background.nodules]
+    recs = _records(sc, nod + [(t.centre[1], t.centre[2], dict(zip(DEPTHS, LEVELS[4][0])))])
+    g22 = background_grades(sc, recs, _Smooth())
+    g10 = background_grades(sc, recs, _Smooth(), threshold_pct=10.0)
+    assert g22['level'] == 4 and g10['level'] == 3
+    again = regrade_background(g22, 10.0)
+    assert again['level'] == 3 and again['lesions'] == g10['lesions']
+    assert again['normal_by_depth'] == g10['normal_by_depth'] and again['threshold_pct'] == 10.0
+
+
+def test_a_lesion_no_firmer_than_the_nodules_is_not_told_apart(scene):
+    nod = [(n.centre[1], n.centre[2], 0.25) for n in scene.background.nodules]
     t = scene.tumours[0]
-    g = background_grades(scene, _records(scene, nod + [(t.centre[1], t.centre[2], 0.16)]),
-                          threshold_pct=THR)
+    g = background_grades(scene, _records(scene, nod + [(t.centre[1], t.centre[2], 0.30)]),
+                          _Smooth())
     (les,) = g['lesions']
-    assert les['bump_pct'] > 7.0  # palpable on a smooth breast ...
-    assert not les['stands_out'] and les['difficulty'] == 5 and g['level'] == 5  # ... not here
-    assert len(g['confounders']) >= 10  # 16 % nodules are felt: each a possible false mark
+    assert les['felt'] and les['bump_pct'] >= 30.0 - 1e-6   # palpable on a smooth breast ...
+    assert not les['stands_out'] and les['difficulty'] == 5 == g['level']   # ... not here
+    assert 'never told apart' in les['reason']
+    assert len(g['confounders']) >= 10   # 25 % nodules are felt: each a possible false mark
+    deep = next(n for n in g['normal_by_depth'] if n['depth_m'] == 0.008)
+    assert deep['at_threshold'] == len(g['confounders']) and deep['max_pct'] >= 25.0
+
+
+def test_a_nodule_under_the_lesions_bump_is_not_read_as_a_confounder(scene):
+    """A nodule 6.3 mm from a strong lesion, with no bump of its own: the grid point over it
+    shows the lesion's flank (17 %); a normal region is read only beyond the lesion's reach (its
+    radius plus the probe's), where this one has no point: it is not graded, no confounder, and
+    the lesion does not confound itself."""
+    t = scene.tumours[0]
+    at = (t.centre[1] + 0.006, t.centre[2] + 0.002)   # a 4 mm grid point
+    sc = _with_nodules(scene, [(*at, 0.0025), *SPARSE])
+    recs = _records(sc, [(t.centre[1], t.centre[2], 0.6)])
+    g = background_grades(sc, recs, _Smooth(), threshold_pct=5.0)
+    near = g['nodules'][0]
+    assert near['bump_pct'] is None and near['contrasts'] == [] and g['confounders'] == []
+    assert g['lesions'][0]['difficulty'] == 1 == g['level']
+    k = next(i for i, r in enumerate(recs)
+             if np.allclose(r['surface_point_m'][1:], at))
+    over = recs[k]['forces_N'][2][0] / _base(*at, 0.008) - 1
+    assert 100 * over > 15.0   # what the nodule would read at the point over it
 
 
 def test_a_lesion_free_nodular_case_is_level_2_when_its_nodules_are_felt(scene):
     free = dataclasses.replace(scene, tumours=(), ring_diameters=(), ring_points=0)
-    soft = [(n.centre[1], n.centre[2], 0.02) for n in free.background.nodules]
-    assert background_grades(free, _records(free, soft), threshold_pct=THR)['level'] == 1
-    firm = [(n.centre[1], n.centre[2], 0.12) for n in free.background.nodules]
-    assert background_grades(free, _records(free, firm), threshold_pct=THR)['level'] == 2
+    soft = [(n.centre[1], n.centre[2], 0.05) for n in free.background.nodules]
+    assert background_grades(free, _records(free, soft), _Smooth())['level'] == 1
+    firm = [(n.centre[1], n.centre[2], 0.30) for n in free.background.nodules]
+    assert background_grades(free, _records(free, firm), _Smooth())['level'] == 2
+
+
+def test_bad_threshold_and_missing_depth_are_refused_in_one_line(scene):
+    recs = _records(scene, [])
+    with pytest.raises(ValueError, match='palpability threshold'):
+        background_grades(scene, recs, _Smooth(), threshold_pct=0.0)
+    with pytest.raises(ValueError, match='no FE force at the level depth 9 mm'):
+        background_grades(scene, recs, _Smooth(), depth=0.009)
+
+
+def test_the_smooth_reference_interpolates_a_smooth_map_and_scales_with_the_modulus(scene):
+    """A smooth map on one grid, read at another grid's points and scaled (neo-Hookean: force
+    proportional to the modulus at a fixed geometry)."""
+    recs = []
+    for y in np.arange(-0.03, 0.0301, 0.0045):
+        for z in np.arange(-0.03, 0.0301, 0.0045):
+            recs.append({'surface_point_m': [0.0, y, z], 'depths_m': list(DEPTHS),
+                         'forces_N': [[_base(y, z, d), 0.0, 0.0] for d in DEPTHS]})
+    ref = SmoothReference('grid', 33.0 / 19.0, tuple(recs))
+    yz = np.array([p[1:] for p in loading_points(scene)])
+    for d in DEPTHS:
+        np.testing.assert_allclose(ref.forces(yz, d), 33.0 / 19.0 * _base(yz[:, 0], yz[:, 1], d),
+                                   rtol=1e-9)
+
+
+def test_the_committed_nodular_store_grades_its_lesion_as_its_twin_measures_it():
+    """The lesion's contrast over the smooth breast (lib_free_s_fatty's store) against the
+    ground truth (the same point without the lesion, the twin store): within 1.5 points at every
+    depth (the excess: nodules near the lesion, which the twin keeps and the smooth breast
+    lacks)."""
+    from haptic_anfis.cases import library
+    from haptic_anfis.cases.grading import lesion_grades
+    from haptic_anfis.cases.reference import smooth_reference
+    from haptic_anfis.cases.sweeps import case_stores, stored_records
+
+    case = library().get('nod_s_fatty_idc10_d10')
+    recs, twins = stored_records(case_stores(case))
+    g = background_grades(case.scene, recs, smooth_reference(case))
+    assert g['reference'] == 'lib_free_s_fatty'
+    truth = {r['depth_m']: r['contrast_pct']
+             for r in lesion_grades(case.scene, recs, twins)[0]['contrasts']}
+    for r in g['lesions'][0]['contrasts']:
+        assert 0.0 <= r['contrast_pct'] - truth[r['depth_m']] <= 1.5, r
+
+
+def test_a_nodular_case_without_a_smooth_breast_of_its_body_is_refused_naming_it(tmp_path):
+    from test_cases import _library  # the same throw-away library of scene files
+
+    from haptic_anfis.cases import CaseError
+    from haptic_anfis.cases.reference import reference_case
+
+    lib = _library(tmp_path, {'tinynodular': TINY_NODULAR})
+    with pytest.raises(CaseError, match=r"case 'tinynodular': no smooth lesion-free case .*"
+                                        r"breast radii \(45.0, 70.0, 70.0\) mm"):
+        reference_case(lib.get('tinynodular'))
+    (tmp_path / 'two').mkdir()
+    lib = _library(tmp_path / 'two', {'tinynodular': TINY_NODULAR, 'tinysmooth': TINY_SMOOTH})
+    assert reference_case(lib.get('tinynodular')).name == 'tinysmooth'
 
 
 def test_cases_list_fields_name_the_background_and_the_ribs(scene):
@@ -105,6 +258,10 @@ TINY_NODULAR = {
                 'ring_points': 4, 'depths_mm': [2, 5, 8], 'max_step_mm': 4},
     'mesh': {'probe_cells': 4, 'coarse_probe_cells': 2, 'edge_offset': 0.2, 'edge_refine': 0},
 }
+#: its smooth breast (the same body, no region): the reference its background is graded against
+TINY_SMOOTH = {**{k: v for k, v in TINY_NODULAR.items() if k not in ('tumours', 'background')},
+               'name': 'tinysmooth', 'description': 'test case: the tiny nodular breast, smooth',
+               'loading': {**TINY_NODULAR['loading'], 'ring_diameters': [], 'ring_points': 0}}
 
 
 def test_a_nodular_case_is_swept_graded_against_its_background_and_listed(tmp_path, monkeypatch):
@@ -115,10 +272,11 @@ def test_a_nodular_case_is_swept_graded_against_its_background_and_listed(tmp_pa
     from haptic_anfis.cases.summary import case_summary
     from haptic_anfis.cases.sweeps import sweep_case_store
 
-    lib = _library(tmp_path, {'tinynodular': TINY_NODULAR})
+    lib = _library(tmp_path, {'tinynodular': TINY_NODULAR, 'tinysmooth': TINY_SMOOTH})
     case = lib.get('tinynodular')
-    st = sweep_case_store(case, root=tmp_path / 'store', coarse=True, workers=1, progress=False)
-    assert st.complete
+    for c in (case, lib.get('tinysmooth')):
+        st = sweep_case_store(c, root=tmp_path / 'store', coarse=True, workers=1, progress=False)
+        assert st.complete
     monkeypatch.setattr(build_mod, 'RANGE_GATE_PCT', 1e9)   # the tiny model is not the point here
     monkeypatch.setattr(build_mod, 'CONTRAST_GATE', 1e9)
     monkeypatch.setattr('haptic_anfis.cases.background.FEATURE_GATE', 1e9)
@@ -128,6 +286,7 @@ def test_a_nodular_case_is_swept_graded_against_its_background_and_listed(tmp_pa
     bg = case.grading()['background']
     assert bg['background'] == 'nodular' and len(bg['nodules']) == 2 and len(bg['ribs']) == 1
     (les,) = bg['lesions']
+    assert bg['reference'] == 'tinysmooth'
     assert les['lesion'] == 'idc' and res.level == bg['level'] == les['difficulty']
     assert les['stands_out'] == (les['margin_pct'] >= bg['threshold_pct'])
     row = case_summary(case, timing=False, contrast=False)

@@ -361,6 +361,30 @@ def test_the_shipped_library_fills_every_level_and_names_where_each_lesion_is_fe
                 assert e['reason'].startswith('below what this device renders'), c.name
 
 
+def test_every_shipped_nodular_case_is_graded_against_its_smooth_breast_per_depth():
+    """A ready nodular case's stored background grading is what its committed stores give now
+    (graded against the smooth breast of the same body, at every FE depth): a stale grading, or
+    one made by another method, fails here."""
+    from haptic_anfis.cases.background import background_grades
+    from haptic_anfis.cases.reference import smooth_reference
+
+    nodular = [c for c in library().ready() if c.scene.background is not None]
+    assert nodular
+    for c in nodular:
+        stored = c.grading()['background']
+        recs, _ = stored_records(case_stores(c))
+        fresh = background_grades(c.scene, recs, smooth_reference(c))
+        assert stored['reference'] == fresh['reference'], c.name
+        assert stored['depths_m'] == pytest.approx(list(c.scene.depths)), c.name
+        assert stored['level'] == fresh['level'] == c.level, c.name
+        assert stored['confounders'] == fresh['confounders'], c.name
+        for s_, f_ in zip(stored['lesions'], fresh['lesions']):
+            assert [r['contrast_pct'] for r in s_['contrasts']] == pytest.approx(
+                [r['contrast_pct'] for r in f_['contrasts']], abs=1e-9), c.name
+        for s_, f_ in zip(stored['nodules'], fresh['nodules']):
+            assert s_['bump_pct'] == pytest.approx(f_['bump_pct'], abs=1e-9), (c.name, s_['name'])
+
+
 def test_cases_list_grades_against_a_given_threshold(capsys):
     from haptic_anfis.cli import main
     assert main(['cases', 'list', '--json', '--no-timing', '--threshold', '7']) == 0
