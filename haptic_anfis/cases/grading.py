@@ -180,8 +180,12 @@ def case_level(grades: Sequence[dict[str, Any]]) -> int | None:
 def below_device(grading: Mapping[str, Any] | None) -> bool:
     """Whether a case's ``grading`` (a :func:`grading_record`) has lesions and the device
     renders none of them (no level: see the module docstring); False for an ungraded case."""
-    if not grading or isinstance(grading.get('background'), dict):
-        return False   # a nodular breast: graded against its background, always with a level
+    if not grading:
+        return False
+    bg = grading.get('background')
+    if isinstance(bg, dict):   # a nodular breast: a lesion is rendered when it is felt over the
+        lesions = bg.get('lesions') or ()  # smooth breast (told apart from the nodules or not)
+        return bool(lesions) and not any(g.get('felt') for g in lesions)
     lesions = grading.get('lesions') or ()
     return bool(lesions) and not any(g.get('palpable') for g in lesions)
 
