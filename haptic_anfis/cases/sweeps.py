@@ -66,13 +66,16 @@ def case_stores(case: Case, root: str | os.PathLike | None = None, coarse: bool 
 
 @dataclass
 class StoreStatus:
-    """How far a case's store is: points total / solved / failed (key: error) / missing keys."""
+    """How far a case's store is: points total / solved / failed (key: error) / missing keys;
+    ``partial``: the solved points whose solve stopped before the deepest depths (key: the
+    depths [m] they lack; counted as solved: the case is built without those samples)."""
 
     case: str
     total: int
     solved: int
     failed: dict[str, str] = field(default_factory=dict)
     missing: list[str] = field(default_factory=list)
+    partial: dict[str, list[float]] = field(default_factory=dict)
     cpu_s: float = 0.0
 
     @property
@@ -90,12 +93,14 @@ def store_status(stores: CaseStores, with_cpu: bool = False) -> StoreStatus:
         parts.append((stores.twin, twin_points(scene), 'twin/'))
     st = StoreStatus(stores.case.name, 0, 0)
     for store, pts, prefix in parts:
-        solved, failed = store.solved(), store.failed()
+        solved, failed, partial = store.solved(), store.failed(), store.partial()
         for p in pts:
             k = point_key(p[1], p[2])
             st.total += 1
             if k in solved:
                 st.solved += 1
+                if k in partial:
+                    st.partial[prefix + k] = partial[k]
                 if with_cpu:
                     st.cpu_s += float(store.load(k).get('cpu_time_s', 0.0))
             elif k in failed:

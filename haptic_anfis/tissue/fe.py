@@ -93,7 +93,9 @@ def solve_load_path(mesh: HexMesh, shear: np.ndarray | float, bulk: np.ndarray |
         direction: (3,) unit vector the probe moves along (into the tissue).
         depths: increasing depths [m] to record; the path is stepped by at most ``max_step``.
     Raises:
-        FESolveError if an increment fails after ``max_cutbacks`` halvings.
+        FESolveError if an increment fails after ``max_cutbacks`` halvings or would need to be
+        smaller than ``max_step / 2**max_cutbacks``; it carries ``partial`` (the depths reached),
+        ``depth`` (the deepest converged state [m]) and ``increment`` (the last one tried [m]).
     """
     import felupe as fem
 
@@ -145,9 +147,14 @@ def solve_load_path(mesh: HexMesh, shear: np.ndarray | float, bulk: np.ndarray |
             solid.restore(state)
             cutbacks += 1
             halvings += 1
-            if halvings > max_cutbacks:
+            # The smallest increment is max_step / 2**max_cutbacks: without that floor a path
+            # that meets a limit (a collapsing cell) creeps towards it in ever smaller
+            # increments, each success resetting the halvings, for minutes of CPU.
+            if halvings > max_cutbacks or 0.5 * (target - done) < max_step * 0.5 ** max_cutbacks:
                 err = FESolveError(f'no convergence from depth {done * 1e3:.3f} mm towards '
                                    f'{target * 1e3:.3f} mm after {max_cutbacks} cut-backs: {exc}')
+                err.depth = done  # [m] the deepest converged state
+                err.increment = target - done  # [m] the last increment tried
                 err.partial = LoadPathResult(  # the depths reached before the failure
                     depths=np.array(recorded), forces=np.array(forces).reshape(-1, 3),
                     ndof=3 * npts, ncells=len(mesh.cells), probe_edge_size=mesh.probe_edge_size,
