@@ -6,8 +6,11 @@ import dataclasses
 
 import numpy as np
 import pytest
+from test_cases import _library  # a throw-away library of scene files
 from test_cases_graded import TINY
 
+from haptic_anfis.cases.sweeps import case_stores, store_status
+from haptic_anfis.cli import main
 from haptic_anfis.tissue import fe
 from haptic_anfis.tissue.geometry import loading_points
 from haptic_anfis.tissue.pointsweep import JOURNAL_ENV, run_point_sweep, solve_point
@@ -53,6 +56,23 @@ def test_a_partial_point_record_round_trips_and_is_never_replaced_by_less(tmp_pa
     assert store.partial() == {} and store.load(key)['status'] == 'ok'
     # an 'ok' point is never replaced by a partial one
     assert store.save_record(key, _record('partial', [0.002, 0.005])) is None
+
+
+def test_a_partial_point_counts_as_solved_and_the_sweep_status_names_its_missing_depths(
+        tmp_path, capsys):
+    lib = _library(tmp_path, {'tinygraded': TINY})
+    case = lib.get('tinygraded')
+    stores = case_stores(case, tmp_path / 'store', coarse=True)
+    p = loading_points(case.scene)[0]
+    key = point_key(p[1], p[2])
+    stores.main.save_record(key, _record('partial', [0.002], [float(v) for v in p]))
+    st = store_status(stores)
+    assert st.solved == 1 and st.failed == {} and st.partial == {key: [0.005, 0.008]}
+    assert main(['cases', 'sweep', 'tinygraded', '--status', '--coarse',
+                 '--store', str(tmp_path / 'store'), '--scene-dir', str(tmp_path / 'scenes'),
+                 '--data-dir', str(tmp_path / 'data')]) == 0
+    out = capsys.readouterr().out
+    assert f'partial: {key} (no 5/8 mm)' in out and '0 failed' in out
 
 
 def _partial_solve(scene, point, probe_cells):
