@@ -83,8 +83,10 @@ class StoreStatus:
         return not self.failed and not self.missing
 
 
-def store_status(stores: CaseStores, with_cpu: bool = False) -> StoreStatus:
-    """Which of the case's points (and twin points) are solved, failed, missing."""
+def store_status(stores: CaseStores, with_cpu: bool = False, with_partial: bool = True
+                 ) -> StoreStatus:
+    """Which of the case's points (and twin points) are solved, failed, missing; and, with
+    ``with_partial`` (it reads every point file's meta), which solved points are partial."""
     from ..tissue.geometry import loading_points
 
     scene = stores.case.scene
@@ -93,7 +95,8 @@ def store_status(stores: CaseStores, with_cpu: bool = False) -> StoreStatus:
         parts.append((stores.twin, twin_points(scene), 'twin/'))
     st = StoreStatus(stores.case.name, 0, 0)
     for store, pts, prefix in parts:
-        solved, failed, partial = store.solved(), store.failed(), store.partial()
+        solved, failed = store.solved(), store.failed()
+        partial = store.partial() if with_partial else {}
         for p in pts:
             k = point_key(p[1], p[2])
             st.total += 1

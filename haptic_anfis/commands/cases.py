@@ -249,7 +249,8 @@ def _sweep(args: argparse.Namespace) -> int:
     for c in cases:
         _ = c.scene
     if not args.names:  # finish what is started first: a case ships only when complete
-        done = {c.name: store_status(case_stores(c, args.store, args.coarse)) for c in cases}
+        done = {c.name: store_status(case_stores(c, args.store, args.coarse), with_partial=False)
+                for c in cases}
         cases.sort(key=lambda c: (-done[c.name].solved / max(done[c.name].total, 1), c.name))
     if args.status:
         for c in cases:
