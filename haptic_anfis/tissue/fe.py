@@ -94,7 +94,7 @@ def solve_load_path(mesh: HexMesh, shear: np.ndarray | float, bulk: np.ndarray |
         depths: increasing depths [m] to record; the path is stepped by at most ``max_step``.
     Raises:
         FESolveError if an increment fails after ``max_cutbacks`` halvings or would need to be
-        smaller than ``max_step / 2**max_cutbacks``; it carries ``partial`` (the depths reached),
+        smaller than the smallest planned load step halved ``max_cutbacks`` times; it carries ``partial`` (the depths reached),
         ``depth`` (the deepest converged state [m]) and ``increment`` (the last one tried [m]).
     """
     import felupe as fem
@@ -125,6 +125,7 @@ def solve_load_path(mesh: HexMesh, shear: np.ndarray | float, bulk: np.ndarray |
     dof0, dof1 = fem.dof.partition(field, bounds)
 
     steps = load_steps(depths, max_step)
+    floor = float(np.min(np.diff([0.0, *steps]))) * 0.5 ** max_cutbacks  # [m] see the cut-back
     wanted = set(np.round(np.asarray(depths) / 1e-9).astype(np.int64).tolist())
     forces, recorded, skin_u = [], [], []
     done, iters, cutbacks = 0.0, 0, 0
@@ -147,10 +148,10 @@ def solve_load_path(mesh: HexMesh, shear: np.ndarray | float, bulk: np.ndarray |
             solid.restore(state)
             cutbacks += 1
             halvings += 1
-            # The smallest increment is max_step / 2**max_cutbacks: without that floor a path
-            # that meets a limit (a collapsing cell) creeps towards it in ever smaller
-            # increments, each success resetting the halvings, for minutes of CPU.
-            if halvings > max_cutbacks or 0.5 * (target - done) < max_step * 0.5 ** max_cutbacks:
+            # No increment below the smallest planned one halved max_cutbacks times: without
+            # that floor a path that meets a limit (a collapsing cell) creeps towards it in ever
+            # smaller increments, each success resetting the halvings, for minutes of CPU.
+            if halvings > max_cutbacks or 0.5 * (target - done) < floor:
                 err = FESolveError(f'no convergence from depth {done * 1e3:.3f} mm towards '
                                    f'{target * 1e3:.3f} mm after {max_cutbacks} cut-backs: {exc}')
                 err.depth = done  # [m] the deepest converged state

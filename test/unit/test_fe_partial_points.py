@@ -125,14 +125,15 @@ def test_a_point_that_cannot_reach_its_deepest_depth_keeps_the_shallower_ones():
     assert ds.provenance['partial_points'] == {'0': pytest.approx([0.044])}
 
 
-def test_the_smallest_increment_is_the_step_halved_cutbacks_times():
-    """A path against a limit stops at the floor max_step / 2**max_cutbacks instead of creeping
-    towards the limit in ever smaller increments; the error says where it stopped."""
+def test_the_smallest_increment_is_the_smallest_load_step_halved_cutbacks_times():
+    """A path against a limit stops at the floor (the smallest planned load step, here 2 mm,
+    halved max_cutbacks times) instead of creeping towards the limit in ever smaller
+    increments; the error says where it stopped."""
     scene = dataclasses.replace(parse_scene(TINY, 'tinygraded'), depths=TOO_DEEP)
     p = loading_points(scene)[4]
     with pytest.raises(fe.FESolveError) as info:
         fe.solve_scene_point(scene, p, probe_cells=2, max_step=0.004, max_cutbacks=3)
     exc = info.value
-    assert exc.increment >= 0.004 / 2 ** 3 - 1e-12
+    assert exc.increment >= 0.002 / 2 ** 3 - 1e-12
     assert 0.005 < exc.depth < 0.044
     assert exc.partial.depths.tolist() == pytest.approx([0.002, 0.005])
