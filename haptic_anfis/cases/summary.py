@@ -159,7 +159,7 @@ def _store_progress(case: Case) -> dict[str, int] | None:
         return None
 
     try:
-        st = store_status(case_stores(case))
+        st = store_status(case_stores(case), with_partial=False)  # counts only: no file reads
     except ValueError:  # a store of another scene version: the listing still works
         return None
     return {'solved': st.solved, 'total': st.total, 'failed': len(st.failed)}

@@ -68,13 +68,16 @@ def case_stores(case: Case, root: str | os.PathLike | None = None, coarse: bool 
 
 @dataclass
 class StoreStatus:
-    """How far a case's store is: points total / solved / failed (key: error) / missing keys."""
+    """How far a case's store is: points total / solved / failed (key: error) / missing keys;
+    ``partial``: the solved points whose solve stopped before the deepest depths (key: the
+    depths [m] they lack; counted as solved: the case is built without those samples)."""
 
     case: str
     total: int
     solved: int
     failed: dict[str, str] = field(default_factory=dict)
     missing: list[str] = field(default_factory=list)
+    partial: dict[str, list[float]] = field(default_factory=dict)
     cpu_s: float = 0.0
 
     @property
@@ -82,8 +85,10 @@ class StoreStatus:
         return not self.failed and not self.missing
 
 
-def store_status(stores: CaseStores, with_cpu: bool = False) -> StoreStatus:
-    """Which of the case's points (and twin points) are solved, failed, missing."""
+def store_status(stores: CaseStores, with_cpu: bool = False, with_partial: bool = True
+                 ) -> StoreStatus:
+    """Which of the case's points (and twin points) are solved, failed, missing; and, with
+    ``with_partial`` (it reads every point file's meta), which solved points are partial."""
     scene = stores.case.scene
     parts = [(stores.main, loading_points(scene), '')]
     if stores.twin is not None:
@@ -91,11 +96,14 @@ def store_status(stores: CaseStores, with_cpu: bool = False) -> StoreStatus:
     st = StoreStatus(stores.case.name, 0, 0)
     for store, pts, prefix in parts:
         solved, failed = store.solved(), store.failed()
+        partial = store.partial() if with_partial else {}
         for p in pts:
             k = point_key(p[1], p[2])
             st.total += 1
             if k in solved:
                 st.solved += 1
+                if k in partial:
+                    st.partial[prefix + k] = partial[k]
                 if with_cpu:
                     st.cpu_s += float(store.load(k).get('cpu_time_s', 0.0))
             elif k in failed:

@@ -249,14 +249,16 @@ def _sweep(args: argparse.Namespace) -> int:
     for c in cases:
         _ = c.scene
     if not args.names:  # finish what is started first: a case ships only when complete
-        done = {c.name: store_status(case_stores(c, args.store, args.coarse)) for c in cases}
+        done = {c.name: store_status(case_stores(c, args.store, args.coarse), with_partial=False)
+                for c in cases}
         cases.sort(key=lambda c: (-done[c.name].solved / max(done[c.name].total, 1), c.name))
     if args.status:
         for c in cases:
             st = store_status(case_stores(c, args.store, args.coarse), with_cpu=True)
             print(f'{c.name:<28} {st.solved:4d}/{st.total:<4d} solved, {len(st.failed)} failed, '
                   f'{len(st.missing)} missing, {st.cpu_s / 3600:.2f} CPU-h'
-                  + (f'; failed: {", ".join(st.failed)}' if st.failed else ''), flush=True)
+                  + (f'; failed: {", ".join(st.failed)}' if st.failed else '')
+                  + (f'; partial: {_partial_text(st.partial)}' if st.partial else ''), flush=True)
         return 0
     executor, close = _executor(args)
     t0 = time.time()
@@ -266,11 +268,18 @@ def _sweep(args: argparse.Namespace) -> int:
                                   workers=args.workers, progress=not args.quiet,
                                   retry_failed=args.retry_failed)
             print(f'[case {k}/{len(cases)}] {case.name}: {st.solved}/{st.total} points solved'
-                  + (f', FAILED: {", ".join(st.failed)}' if st.failed else ''), flush=True)
+                  + (f', FAILED: {", ".join(st.failed)}' if st.failed else '')
+                  + (f', partial: {_partial_text(st.partial)}' if st.partial else ''), flush=True)
     finally:
         close()
     print(f'{len(cases)} case(s) swept in {time.time() - t0:.0f} s', flush=True)
     return 0
+
+
+def _partial_text(partial: dict[str, list[float]]) -> str:
+    """'y-032000_z+000000 (no 16 mm), ...': the partial points and the depths they lack."""
+    return ', '.join(f'{k} (no {"/".join(f"{1e3 * d:g}" for d in v)} mm)'
+                     for k, v in partial.items())
 
 
 def _generate(args: argparse.Namespace) -> int:

@@ -103,7 +103,9 @@ def solve_load_path(mesh: HexMesh, shear: np.ndarray | float, bulk: np.ndarray |
         hold_cutback: after a cut-back, keep later increments at most the halved one (default);
             False goes back to ``max_step`` after each (the benchmark's baseline).
     Raises:
-        FESolveError if an increment fails after ``max_cutbacks`` halvings.
+        FESolveError if an increment fails after ``max_cutbacks`` halvings or would need to be
+        smaller than the smallest planned load step halved ``max_cutbacks`` times; it carries ``partial`` (the depths reached),
+        ``depth`` (the deepest converged state [m]) and ``increment`` (the last one tried [m]).
     """
     if fem is None:
         raise ImportError('the FE solver needs felupe (the fe extra: pip install felupe)')
@@ -133,6 +135,7 @@ def solve_load_path(mesh: HexMesh, shear: np.ndarray | float, bulk: np.ndarray |
     dof0, dof1 = fem.dof.partition(field, bounds)
 
     steps = load_steps(depths, max_step)
+    floor = float(np.min(np.diff([0.0, *steps]))) * 0.5 ** max_cutbacks  # [m] see the cut-back
     wanted = set(np.round(np.asarray(depths) / 1e-9).astype(np.int64).tolist())
     forces, recorded, skin_u = [], [], []
     done, iters, cutbacks = 0.0, 0, 0
@@ -163,9 +166,14 @@ def solve_load_path(mesh: HexMesh, shear: np.ndarray | float, bulk: np.ndarray |
             solid.restore(state)
             cutbacks += 1
             halvings += 1
-            if halvings > max_cutbacks:
+            # No increment below the smallest planned one halved max_cutbacks times: without
+            # that floor a path that meets a limit (a collapsing cell) creeps towards it in ever
+            # smaller increments, each success resetting the halvings, for minutes of CPU.
+            if halvings > max_cutbacks or 0.5 * (target - done) < floor:
                 err = FESolveError(f'no convergence from depth {done * 1e3:.3f} mm towards '
                                    f'{target * 1e3:.3f} mm after {max_cutbacks} cut-backs: {exc}')
+                err.depth = done  # [m] the deepest converged state
+                err.increment = target - done  # [m] the last increment tried
                 err.partial = LoadPathResult(  # the depths reached before the failure
                     depths=np.array(recorded), forces=np.array(forces).reshape(-1, 3),
                     ndof=3 * npts, ncells=len(mesh.cells), probe_edge_size=mesh.probe_edge_size,

@@ -5,8 +5,11 @@ loading point is written at once as its own file and a sweep only solves what is
 
     <root>/<case>/manifest.json                  scene hash, mesh density, depths: what the points
                                                  belong to (a mismatch is refused, never mixed)
-    <root>/<case>/y+018000_z+015000.npz          one solved point (y, z in micrometres)
-    <root>/<case>/y+018000_z+015000.failed.json  a point whose every attempt failed (named when a
+    <root>/<case>/y+018000_z+015000.npz          one solved point (y, z in micrometres); status
+                                                 'partial' when the solve stopped before the
+                                                 deepest depths (it keeps those it reached and
+                                                 names the missing ones)
+    <root>/<case>/y+018000_z+015000.failed.json  a point that reached no depth (named when a
                                                  case is refused; never silently dropped)
     <root>/<case>/twin/...                       the same layout for the lesion-free twin (the
                                                  scene without its lesions), solved only where a
@@ -161,6 +164,16 @@ class PointStore:
         """{key: failure record} of the points whose every attempt failed."""
         return failed_records(self.dir)
 
+    def partial(self) -> dict[str, list[float]]:
+        """{key: missing depths [m]} of the point files whose solve stopped before the deepest
+        depths (reads only each file's small ``meta``)."""
+        out = {}
+        for key in sorted(self.solved()):
+            meta = self._meta(key)
+            if meta.get('status') == 'partial':
+                out[key] = [float(d) for d in meta.get('missing_depths_m', [])]
+        return out
+
     def has(self, key: str) -> bool:
         return self.path(key).is_file()
 
@@ -187,6 +200,30 @@ class PointStore:
         _atomic_bytes(path, (json.dumps(keep, indent=1) + '\n').encode())
         return path
 
+    def save_record(self, key: str, rec: dict[str, Any]) -> Path | None:
+        """Write a sweep record by its status: 'ok' always; 'partial' unless the point file on
+        disk already reaches as deep; 'failed' unless a point file exists (a failed retry never
+        hides the depths a partial point reached). The path written, or None."""
+        if rec['status'] == 'ok':
+            return self.save(key, rec)
+        if self.has(key):
+            old = self._meta(key)
+            if old.get('status', 'ok') != 'partial' or rec['status'] != 'partial' \
+                    or len(rec['depths_m']) <= len(self.load(key)['depths_m']):
+                return None
+        if rec['status'] == 'partial':
+            return self.save(key, rec)
+        return self.save_failure(key, rec)
+
+    def _meta(self, key: str) -> dict[str, Any]:
+        """The JSON ``meta`` of a point file."""
+        path = self.path(key)
+        try:
+            with np.load(path, allow_pickle=False) as z:
+                return json.loads(str(z['meta']))
+        except (OSError, ValueError, KeyError) as exc:
+            raise StoreError(f'FE store point {str(path)!r} is unreadable: {exc}') from None
+
     def load(self, key: str) -> dict[str, Any]:
         """The sweep record of a solved point (forces, displacement profile, meta)."""
         path = self.path(key)
@@ -204,7 +241,7 @@ class PointStore:
 # -- record <-> arrays ---------------------------------------------------------------------------
 _META_KEYS = ('status', 'ndof', 'ncells', 'probe_edge_m', 'newton_iterations', 'cutbacks',
               'wall_time_s', 'cpu_time_s', 'linear_solver', 'attempt', 'max_step_m', 'solver_info',
-              'scene_sha256')
+              'scene_sha256', 'missing_depths_m', 'error', 'attempts')
 
 
 def record_to_arrays(rec: dict[str, Any]) -> dict[str, np.ndarray]:

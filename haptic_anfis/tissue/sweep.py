@@ -242,7 +242,10 @@ def records_to_dataset(scene: Scene, records: list[dict[str, Any]], coarse: bool
         'wall_time_s': {'sum_over_points': float(sum(r['wall_time_s'] for r in records)),
                         'this_run_elapsed': float(elapsed_s)},
         'n_points': len(records),
-        'failed_points': [r['point'] for r in records if r['status'] != 'ok'],
+        'failed_points': [r['point'] for r in records if r['status'] == 'failed'],
+        # points whose solve stopped before the deepest depths: their samples end there
+        'partial_points': {str(r['point']): r.get('missing_depths_m', [])
+                           for r in records if r['status'] == 'partial'},
         'n_samples': len(X),
         'units': 'x, y, z, depth in m (tissue frame: chest wall x = 0, +x out of the body); '
                  'forces in N on the probe',
