@@ -200,6 +200,10 @@ class PardisoLDLSolver:
     def __call__(self, A, b) -> np.ndarray:
         b = np.asarray(b, dtype=float).ravel()
         U, new_pattern = self._upper(A)
+        # MKL aborts the whole process on a NaN/Inf matrix (an inverted cell's tangent): refuse
+        # it here so the Newton loop cuts the increment back instead.
+        if not (np.all(np.isfinite(U.data)) and np.all(np.isfinite(b))):
+            raise ArithmeticError('linear solve: the system has non-finite values')
         if new_pattern:
             self._pardiso(11, U, b)
             self.analyses += 1

@@ -72,3 +72,19 @@ def test_pardiso_ldl_singular_matrix_raises():
     A = sp.csr_matrix(np.diag([1.0, 0.0, 2.0]))
     with pytest.raises((RuntimeError, ArithmeticError)):
         PardisoLDLSolver()(A, np.ones(3))
+
+
+@pytest.mark.parametrize('where', ['matrix', 'rhs'])
+def test_pardiso_ldl_refuses_non_finite_systems_instead_of_aborting(where):
+    """An inverted cell gives NaN in the tangent: MKL would abort the process; the solver raises
+    ArithmeticError, which the Newton loop takes as a failed increment."""
+    pytest.importorskip('pypardiso')
+    from haptic_anfis.tissue.linsolve import PardisoLDLSolver
+    A = sp.csr_matrix(np.array([[4.0, 1.0], [1.0, 3.0]]))
+    b = np.array([1.0, 2.0])
+    if where == 'matrix':
+        A.data[0] = np.nan
+    else:
+        b[1] = np.inf
+    with pytest.raises(ArithmeticError, match='non-finite'):
+        PardisoLDLSolver()(A, b)
