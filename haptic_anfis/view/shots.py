@@ -5,7 +5,9 @@ palpates the default case), then serves two pages from that bag and captures the
 chromium: the live page as it was halfway through the exam (the probe, its dent, force and gauge
 at that moment, the coverage painted so far — drawn by the same calls the web_view node makes
 each frame, held still for the capture, so that two captures a second apart agree), and the
-debrief (``haptic-anfis view BAG``). Needs chromium.
+debrief (``haptic-anfis view BAG``). Then records the same trainee on the nodular case
+:data:`NODULAR_CASE` and captures its debrief, which draws the normal background (lobules, ribs).
+Needs chromium.
 
     python -m haptic_anfis.view.shots [--out docs] [--duration 30]
 """
@@ -24,7 +26,10 @@ from .app import ViewApp, coverage_fractions
 from .browser import chromium, free_port, screenshot
 from .build import bag_debrief, case_view, open_bag_view
 
-__all__ = ['live_at', 'main']
+__all__ = ['NODULAR_CASE', 'live_at', 'main']
+
+#: A graded nodular case without a lesion: its debrief shows the normal lobules and ribs.
+NODULAR_CASE = 'nod_s_fatty_free'
 
 
 def _drawn(png) -> bool:
@@ -52,9 +57,31 @@ def live_at(app, debrief, t: float) -> None:
     app.show_live(p[-1, 1:4] if len(p) else None, contact, f[-1, 1:4] if len(f) else None, t)
 
 
+def _record(bag: Path, duration: float, case: str | None) -> str | None:
+    """Record the systematic trainee's exam of ``case`` (None = the default) for ``duration``
+    [s] into ``bag``; the failure's last lines, or None."""
+    cmd = [sys.executable, '-m', 'haptic_anfis.cli', 'exam', 'run', '--trainee', 'systematic',
+           '--duration', str(duration), '--record', str(bag)]
+    if case is not None:
+        cmd += ['--case', case]
+    r = subprocess.run(cmd, capture_output=True, text=True)
+    return None if r.returncode == 0 else r.stderr.strip()[-500:]
+
+
+def _shoot_debrief(bag: Path, png: Path) -> None:
+    """Capture the debrief page of ``bag`` into ``png``."""
+    app = open_bag_view(bag, port=free_port())
+    try:
+        print(f'{png.stem:<20}', screenshot(app.url, png, app=app, ready=_drawn, timeout=300),
+              flush=True)
+    finally:
+        app.close()
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument('--out', default='docs', help='directory for view_live.png, view_debrief.png')
+    ap.add_argument('--out', default='docs',
+                    help='directory for view_live.png, view_debrief.png, view_debrief_nodular.png')
     ap.add_argument('--duration', type=float, default=30.0, help='exam length [s]')
     a = ap.parse_args(argv)
     if chromium() is None:
@@ -64,11 +91,9 @@ def main(argv: list[str] | None = None) -> int:
     out.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory(prefix='haptic-anfis-shots-') as tmp:
         bag = Path(tmp) / 'exam'
-        r = subprocess.run([sys.executable, '-m', 'haptic_anfis.cli', 'exam', 'run', '--trainee',
-                            'systematic', '--duration', str(a.duration), '--record', str(bag)],
-                           capture_output=True, text=True)
-        if r.returncode != 0:
-            print(f'screenshots: the exam failed: {r.stderr.strip()[-500:]}', file=sys.stderr)
+        err = _record(bag, a.duration, None)
+        if err is not None:
+            print(f'screenshots: the exam failed: {err}', file=sys.stderr)
             return 1
         d = bag_debrief(bag)
         cv = case_view(None)
@@ -83,16 +108,17 @@ def main(argv: list[str] | None = None) -> int:
                                       & (c[:, 4] > cv.config.medium))
             t = float(rel[pressing[0]]) if len(pressing) else 0.5 * d.duration
             live_at(app, d, t)
-            print('live     ', screenshot(app.url, out / 'view_live.png', app=app, ready=_drawn,
-                                          timeout=300), flush=True)
+            print(f'{"view_live":<20}', screenshot(app.url, out / 'view_live.png', app=app,
+                                                   ready=_drawn, timeout=300), flush=True)
         finally:
             app.close()
-        app = open_bag_view(bag, port=free_port())
-        try:
-            print('debrief  ', screenshot(app.url, out / 'view_debrief.png', app=app,
-                                          ready=_drawn, timeout=300), flush=True)
-        finally:
-            app.close()
+        _shoot_debrief(bag, out / 'view_debrief.png')
+        nodular = Path(tmp) / 'exam_nodular'
+        err = _record(nodular, a.duration, NODULAR_CASE)
+        if err is not None:
+            print(f'screenshots: the exam of {NODULAR_CASE} failed: {err}', file=sys.stderr)
+            return 1
+        _shoot_debrief(nodular, out / 'view_debrief_nodular.png')
     return 0
 
 
