@@ -98,6 +98,7 @@ def test_fallback_directory_continues_without_losing_a_message(tmp_path):
 rclpy = pytest.importorskip('rclpy')
 
 
+@pytest.mark.slow  # > 5 s: out of the developer loop (docs/tests.md)
 @pytest.mark.ros
 def test_recorder_node_says_so_once_and_stays_up_without_recording(tmp_path):
     """Issue 27.1: a full disk never stops the session. The recorder seals its bag, says so in

@@ -97,6 +97,7 @@ def test_the_drivers_trace_keeps_trace_seconds_of_ticks(seconds, rows):
     assert tick_trace({'trace_path': '', 'rate': 1000.0, 'trace_seconds': seconds}) is None
 
 
+@pytest.mark.slow  # > 5 s: out of the developer loop (docs/tests.md)
 def test_the_ideal_force_is_the_sessions_own_case(tmp_path):
     """A press rendered exactly as the random case (seed 3) renders it: against that case's
     surface and model the applied-force error is 0 % with no dropout; against the default scene

@@ -244,6 +244,7 @@ def test_property_outputs_finite_and_paths_agree(small_model, q):
     np.testing.assert_allclose(a, b, rtol=0, atol=1e-12)
 
 
+@pytest.mark.slow  # > 5 s: out of the developer loop (docs/tests.md)
 def test_fit_on_synthetic_tissue_meets_paper_level_accuracy(synthetic):
     """The end-to-end protocol (structure search, hybrid learning) on the synthetic fixture."""
     from haptic_anfis.anfis import train_on_dataset

@@ -168,6 +168,7 @@ def _never(scene, point, probe_cells):
     return {**solve_point(scene, point, probe_cells, attempts=()), 'error': 'injected'}
 
 
+@pytest.mark.slow  # > 5 s: out of the developer loop (docs/tests.md)
 def test_a_hole_refuses_the_case_naming_the_point(swept):
     tmp, lib, case, st = swept
     assert st.complete and st.solved == st.total == 16
@@ -316,6 +317,7 @@ def test_exam_reports_a_non_palpable_lesion_neither_hit_nor_miss():
     assert any('big' in w for w in why) and not any('small' in w for w in why)
 
 
+@pytest.mark.slow  # > 5 s: out of the developer loop (docs/tests.md)
 def test_every_shipped_case_is_at_the_validated_fidelity():
     """Issue 29, item 1: every case but the package's default is a graded case as shipped — the
     validated mesh (6 cells across the probe, not the coarse one), >= 149 loading points, lesion
@@ -361,6 +363,7 @@ def test_the_shipped_library_fills_every_level_and_names_where_each_lesion_is_fe
                 assert e['reason'].startswith('below what this device renders'), c.name
 
 
+@pytest.mark.slow  # > 5 s: out of the developer loop (docs/tests.md)
 def test_every_shipped_nodular_case_is_graded_against_its_smooth_breast_per_depth():
     """A ready nodular case's stored background grading is what its committed stores give now
     (graded against the smooth breast of the same body, at every FE depth): a stale grading, or

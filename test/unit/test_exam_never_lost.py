@@ -34,6 +34,7 @@ def slow_writer(tmp_path, delay: float) -> subprocess.Popen:
     return p
 
 
+@pytest.mark.slow  # > 5 s: out of the developer loop (docs/tests.md)
 def test_the_exam_waits_for_a_slow_examiner_and_says_so(tmp_path, monkeypatch):
     monkeypatch.setattr(one_process, 'FINISH_SAY_S', 0.5)
     p = slow_writer(tmp_path, 2.5)   # 2.5 s: past the lines' period, within the limit

@@ -70,6 +70,7 @@ def test_reset_starts_a_new_window():
     assert out['latency_n'] == 1 and out['latency_max_ms'] == pytest.approx(5.0)
 
 
+@pytest.mark.slow  # > 5 s: out of the developer loop (docs/tests.md)
 def test_a_long_session_allocates_no_growing_memory():
     """One hour of 1 kHz commands is 3.6 M latencies; 200 k here (tracemalloc is slow). The list
     the loop kept before grew 8.4 MB per million (pointers alone, measured); the histogram's

@@ -61,6 +61,7 @@ def test_the_observer_is_right_as_often_as_its_threshold_says():
     assert hits == pytest.approx(TARGET_CORRECT, abs=0.02)
 
 
+@pytest.mark.slow  # > 5 s: out of the developer loop (docs/tests.md)
 def test_presses_rendered_on_the_simulated_falcon_measure_the_spring_and_converge():
     p = simulated_press(400.0)
     assert p.stiffness == pytest.approx(400.0, rel=1e-3) and 3.0 < p.peak_force < 8.9
@@ -106,6 +107,7 @@ def test_bad_staircase_input_names_the_field():
         s.threshold()
 
 
+@pytest.mark.slow  # > 5 s: out of the developer loop (docs/tests.md)
 def test_the_threshold_goes_into_the_record_and_an_old_record_is_migrated(tmp_path, capsys):
     from haptic_anfis.cli import main
     from haptic_anfis.record.db import SCHEMA_VERSION, connect, migrate
@@ -136,6 +138,7 @@ def test_the_threshold_goes_into_the_record_and_an_old_record_is_migrated(tmp_pa
     assert latest_threshold(db, 'nobody') is None
 
 
+@pytest.mark.slow  # > 5 s: out of the developer loop (docs/tests.md)
 def test_next_grades_the_library_at_the_trainees_threshold(tmp_path):
     from haptic_anfis.cases import library
     from haptic_anfis.record.draw import next_case

@@ -37,6 +37,7 @@ def coarse_run(scene, tmp_path_factory):
     return ids, res, work
 
 
+@pytest.mark.slow  # > 5 s: out of the developer loop (docs/tests.md)
 def test_sweep_records_every_depth(coarse_run, scene):
     ids, res, work = coarse_run
     assert not res.failed
