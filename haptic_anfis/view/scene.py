@@ -61,7 +61,7 @@ class SkinPaint:
     Args:
         vertices: (v, 3) [m]; faces: (f, 3) int.
         region_faces: (m,) indices into ``faces`` of the coverage grid's faces
-            (:attr:`~haptic_anfis.exam.CoverageGrid.faces_index`), in the grid's order.
+            (:attr:`~haptic_anfis.exam.coverage.CoverageGrid.faces_index`), in the grid's order.
         thresholds: (light, medium, deep) [m]: the dent's continuous pressure scale.
     """
 
