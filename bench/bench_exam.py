@@ -120,7 +120,9 @@ def margins(seed: int = 0) -> None:
 
 def core_costs() -> None:
     from haptic_anfis.contact import load_mesh
-    from haptic_anfis.exam import ExamConfig, ExamSession, Surface, subject_from_scene
+    from haptic_anfis.exam.config import ExamConfig
+    from haptic_anfis.exam.lesions import subject_from_scene
+    from haptic_anfis.exam.session import ExamSession, Surface
     from haptic_anfis.pipeline.contact import DEFAULT_SURFACE
     mesh = load_mesh(DEFAULT_SURFACE, unit='mm')
     mesh.merge_vertices()

@@ -76,7 +76,8 @@ CONTACT_FIELDS = ('contact_x', 'contact_y', 'contact_z', 'depth', 'direction_x',
                   'direction_z', 'in_contact', 'saturated', 'normal_x', 'normal_y', 'normal_z')
 (I_X, I_Y, I_Z, I_DEPTH, I_DX, I_DY, I_DZ, I_IN_CONTACT, I_SATURATED, I_NX, I_NY,
  I_NZ) = range(len(CONTACT_FIELDS))
-#: values in a contact message before the normal was added (still accepted by readers)
+#: values in a contact message without the normal (the first nine fields; bags recorded in
+#: that layout stay readable, so readers accept it)
 N_CONTACT_V1 = 9
 
 
@@ -84,7 +85,7 @@ N_CONTACT_V1 = 9
 APPROACH_FIELDS = ('surface_x', 'surface_y', 'surface_z', 'normal_x', 'normal_y', 'normal_z')
 
 
-#: the lengths a contact message's ``position`` may have (current, older 9-value layout)
+#: the lengths a contact message's ``position`` may have (with the normal, without it)
 CONTACT_LENGTHS = (len(CONTACT_FIELDS), N_CONTACT_V1)
 
 

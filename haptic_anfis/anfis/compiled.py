@@ -2,7 +2,7 @@
 
 The force model is three triangular :class:`~.estimator.ANFIS` estimators (Fx, Fy, Fz). For one
 query each input's memberships are computed for all of its MFs and only those that are non-zero
-kept, so only the rules that fire are visited: with MFs on the old pinned partition (feet on the
+kept, so only the rules that fire are visited: with MFs on the initial pinned partition (feet on the
 neighbouring peaks) at most two per input, 8 of 72 rules for 6-6-2; trained MFs may widen, and
 then a few more. Same arithmetic and out-of-range policy as the estimators' numpy path
 (:meth:`.estimator.ANFIS.predict`); the two agree to rounding (tested to 1e-12 N).

@@ -207,13 +207,25 @@ def _regrade(args: argparse.Namespace) -> int:
             print(f'{c.name}: {exc}', flush=True)
             failed += 1
             continue
-        les = '; '.join(f'{e["lesion"]} ' + (f'd{e["difficulty"]} at {e["found_level"]} '
-                                             f'({e["found_depth_m"] * 1e3:g} mm, '
-                                             f'{e["contrast_pct"]:+.1f} %)' if e['palpable']
-                                             else e['reason'])
-                        for e in g['lesions']) or 'no lesion'
-        print(f'{c.name}: level {g["level"]}: {les}', flush=True)
+        print(regrade_line(c.name, g), flush=True)
     return 1 if failed else 0
+
+
+def regrade_line(name: str, grading: dict) -> str:
+    """One line for a regraded case: its level and where each lesion is found, or why not. A
+    nodular case's lesions are told by its background grading (found when it stands out from the
+    firmest normal region), a smooth case's by its contrast against the breast without it."""
+    bg = grading.get('background')
+    if bg is not None:
+        entries, found, pct = bg['lesions'], 'stands_out', 'margin_pct'
+        over = ' over the firmest normal region'
+    else:
+        entries, found, pct, over = grading['lesions'], 'palpable', 'contrast_pct', ''
+    les = [f'{e["lesion"]} ' + (f'd{e["difficulty"]} at {e["found_level"]} '
+                                f'({e["found_depth_m"] * 1e3:g} mm, {e[pct]:+.1f} %{over})'
+                                if e[found] else e['reason'])
+           for e in entries]
+    return f'{name}: level {grading["level"]}: {"; ".join(les) or "no lesion"}'
 
 
 def _executor(args: argparse.Namespace):

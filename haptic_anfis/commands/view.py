@@ -62,7 +62,7 @@ def run(args: argparse.Namespace) -> int:
 
 def exam_debrief(args: argparse.Namespace, report: dict, session) -> None:
     """After ``exam run --view`` (the live page's node stopped with the session): serve the
-    debrief of ``report`` / ``session`` (an :class:`~haptic_anfis.exam.ExamSession`) on the same
+    debrief of ``report`` / ``session`` (an :class:`~haptic_anfis.exam.session.ExamSession`) on the same
     port (the open page reconnects to it) for ``--view-hold`` seconds or until Ctrl-C. It is the
     trainee's page: no trainee history there (the instructor's ``view BAG --trainee ID``, or
     ``trainees show``, has it)."""

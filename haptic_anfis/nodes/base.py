@@ -3,10 +3,10 @@
 A node whose ``__init__`` raises (a bad parameter, a model file that does not load) is never
 destroyed by its caller, who gets no object to destroy. Its name then stays on the ROS graph
 until the garbage collector happens to free it (its callbacks make reference cycles), even
-after its context is shut down: a session started later in the same process (``sim``'s graph,
-a test) took it for another session's node on the domain and refused to start. Every node of
-the package derives from :class:`HapticNode`, which destroys such a node before the error
-leaves its constructor.
+after its context is shut down, and a session started later in the same process (``sim``'s
+graph, a test) would take it for another session's node on the domain and refuse to start.
+Every node of the package derives from :class:`HapticNode`, which destroys such a node before
+the error leaves its constructor.
 """
 from __future__ import annotations
 

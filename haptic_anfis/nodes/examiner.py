@@ -25,10 +25,11 @@ from visualization_msgs.msg import Marker, MarkerArray
 
 from . import cdr
 from .. import interfaces as ifc, palette
-from ..exam import ExamSession, Surface, load_exam_config, subject_from_scene
+from ..exam.config import load_exam_config
 from ..exam.figure import save_figure
 from ..exam.files import write_text_atomic
-from ..exam.lesions import ExamSubject
+from ..exam.lesions import ExamSubject, subject_from_scene
+from ..exam.session import ExamSession, Surface
 from ..pipeline.contact import load_surface
 from ._case import apply_case, declare_case
 from .base import HapticNode

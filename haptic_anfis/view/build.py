@@ -10,9 +10,10 @@ import numpy as np
 
 from ..cases import DEFAULT_CASE, library
 from ..contact import load_mesh
-from ..exam import ExamSession, Surface, subject_from_scene
 from ..exam.config import load_exam_config
 from ..exam.from_bag import resolve_exam_case, session_from_bag
+from ..exam.lesions import subject_from_scene
+from ..exam.session import ExamSession, Surface
 from ..tissue.dent_display import dent_model
 from ..tissue.displacement import DisplacementDataError
 from .app import ViewApp, check_port

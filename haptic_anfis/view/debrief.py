@@ -1,4 +1,4 @@
-"""The debrief model: a scored session (:class:`~haptic_anfis.exam.ExamSession` and its report)
+"""The debrief model: a scored session (:class:`~haptic_anfis.exam.session.ExamSession` and its report)
 as what the page shows at any time of a replay (no ROS, no viser).
 
 Times on the scrubber are seconds from the session's first sample. Coverage at a time is exact to

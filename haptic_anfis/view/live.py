@@ -18,7 +18,7 @@ import numpy as np
 
 from ..cases.force_mapping import tissue_clamp
 from ..cases.library import Case
-from ..exam import ExamSession
+from ..exam.session import ExamSession
 from ..record import level_of_case_name, store_session, utc_iso
 from .app import BLIND, ViewApp
 from .build import case_view

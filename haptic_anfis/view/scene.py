@@ -61,7 +61,7 @@ class SkinPaint:
     Args:
         vertices: (v, 3) [m]; faces: (f, 3) int.
         region_faces: (m,) indices into ``faces`` of the coverage grid's faces
-            (:attr:`~haptic_anfis.exam.CoverageGrid.faces_index`), in the grid's order.
+            (:attr:`~haptic_anfis.exam.coverage.CoverageGrid.faces_index`), in the grid's order.
         thresholds: (light, medium, deep) [m]: the dent's continuous pressure scale.
     """
 
@@ -102,7 +102,7 @@ class SkinPaint:
 
 #: the camera's direction from the breast: in front of the chest, a little above so the dome
 #: reads as one (tilted 10 degrees). Frontal, so the whole region to examine is in view: from
-#: the side (as before) its far edge hid behind the dome's silhouette
+#: the side its far edge hides behind the dome's silhouette
 FRONTAL = (1.0, 0.0, 0.18)
 
 

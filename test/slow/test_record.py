@@ -495,7 +495,7 @@ def test_mastery_needs_n_consecutive_sessions_meeting_the_level():
 def test_mastery_config_from_exam_yaml(tmp_path):
     cfg = load_mastery_config()                     # the shipped config/exam.yaml
     assert sorted(cfg.levels) == [1, 2, 3, 4, 5]
-    from haptic_anfis.exam import load_exam_config
+    from haptic_anfis.exam.config import load_exam_config
     load_exam_config()                              # the scorer still reads the same file
     bad = tmp_path / 'exam.yaml'
     for doc, what in (('mastery: {levels: {1: {min_deep_coverage: 90}}}', 'fraction'),

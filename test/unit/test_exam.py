@@ -8,10 +8,12 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from haptic_anfis.contact import load_mesh
-from haptic_anfis.exam import (ExamConfig, ExamSession, ExamSubject, Lesion, Surface, classify,
-                               load_exam_config, subject_from_scene)
+from haptic_anfis.exam.config import ExamConfig, load_exam_config
 from haptic_anfis.exam.detector import detect_lumps
 from haptic_anfis.exam.figure import save_figure
+from haptic_anfis.exam.lesions import ExamSubject, Lesion, subject_from_scene
+from haptic_anfis.exam.pattern import classify
+from haptic_anfis.exam.session import ExamSession, Surface
 from haptic_anfis.pipeline.contact import DEFAULT_SURFACE
 
 RX, R = 0.045, 0.070

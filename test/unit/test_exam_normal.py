@@ -5,7 +5,9 @@ import pytest
 
 from haptic_anfis.cases import library
 from haptic_anfis.contact import load_mesh
-from haptic_anfis.exam import ExamConfig, ExamSession, Surface, subject_from_scene
+from haptic_anfis.exam.config import ExamConfig
+from haptic_anfis.exam.lesions import subject_from_scene
+from haptic_anfis.exam.session import ExamSession, Surface
 from haptic_anfis.exam.normal import RIB_POINTS, normal_lines, skin_point, specificity_text
 from haptic_anfis.tissue.scene import SCENE_DIR
 from haptic_anfis.view.debrief import normal_markers, panel_numbers
