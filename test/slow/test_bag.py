@@ -433,11 +433,11 @@ def test_player_resimulate_mode_plays_the_recomputed_wrenches(session, monkeypat
     from rclpy.context import Context
     from rclpy.serialization import deserialize_message
 
-    import haptic_anfis.nodes.resim as resim_mod
+    import haptic_anfis.nodes.player as player_mod
     from haptic_anfis.nodes.player import Player
 
     bag, _, _ = session
-    real = resim_mod.resimulate
+    real = player_mod.resimulate
 
     def shifted(*a, **kw):
         r = real(*a, **kw)
@@ -445,7 +445,7 @@ def test_player_resimulate_mode_plays_the_recomputed_wrenches(session, monkeypat
         r.recomputed = {k: (f[0] + 1.0, f[1], f[2]) for k, f in r.recomputed.items()}
         return r
 
-    monkeypatch.setattr(resim_mod, 'resimulate', shifted)
+    monkeypatch.setattr(player_mod, 'resimulate', shifted)  # the name the player calls
     ctx = Context()
     rclpy.init(context=ctx)
     try:
