@@ -32,8 +32,9 @@ from . import compiled
 from .defaults import (AUTO, LEGACY_RIDGE, SHIPPED, SHIPPED_INPUTS, SHIPPED_STRUCTURE, X_MFS,
                        x_explained_by_yz)
 from .estimator import ANFIS
-from .model_file import (FORMAT, FORMAT_VERSION, ModelFileError, estimator_from_dict,
-                         estimator_to_dict, read_model_doc, write_json_atomic)
+from .model_file import (FORMAT, FORMAT_VERSION, MAX_ABS_INPUT_M, ModelFileError,
+                         estimator_from_dict, estimator_to_dict, read_model_doc,
+                         write_json_atomic)
 from .structure import Candidate, SearchResult, search_structure
 from .sugeno import DEFAULT_EXTRAPOLATION, DEFAULT_EXTRAPOLATION_SCALED, check_finite_inputs
 from .training import TrainResult
@@ -606,7 +607,6 @@ def _check_training_inputs(ds: ForceDataset, dataset_path: str | None) -> None:
     hold: lengths beyond the model file's ±1 m (a dataset in millimetres: the model would be
     written, then refused when loaded) and depths <= 0 (the depth-scaled form divides by them).
     Rows count from 1 after the header (a CSV's line is one more)."""
-    from .model_file import MAX_ABS_INPUT_M
     where = f'dataset {dataset_path!r}' if dataset_path else 'dataset'
     X = np.asarray(ds.X, dtype=np.float64)
     for c, name in enumerate(('x_m', 'y_m', 'z_m', 'depth_m')):

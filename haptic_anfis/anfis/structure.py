@@ -15,6 +15,7 @@ validation decide, instead of the structure ladder alone.
 """
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass, field
 from typing import Callable, Sequence
 
@@ -74,8 +75,6 @@ def search_structure(X: np.ndarray, t: np.ndarray, X_val: np.ndarray | None = No
         trainer: trains one candidate, with :func:`~.training.train`'s signature and result
             (the force model passes one that fits an :class:`~.estimator.ANFIS`).
     """
-    import time
-
     if (folds is None) == (X_val is None or t_val is None):
         raise ValueError('search_structure needs either X_val and t_val or folds')
     sc = (lambda idx: None) if scale is None else (lambda idx: scale[idx])  # noqa: E731
