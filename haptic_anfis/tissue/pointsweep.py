@@ -77,7 +77,8 @@ def solve_point(scene: Scene, point: Sequence[float], probe_cells: int,
     direction = indentation_direction(scene, np.asarray(point)[None])[0]
     out: dict[str, Any] = {'surface_point_m': point, 'direction': direction.tolist()}
     errors: list[str] = []
-    best, best_k, stops = None, 0, []  # the deepest partial path, its attempt, where each stopped
+    best, best_k, best_name, stops = None, 0, '', []  # the deepest partial path, its attempt
+    # and solver; where each attempt stopped
     smallest = 0.0  # [m] the previous attempt's smallest increment
     res = None
     # Load the linear solver's library (MKL, when pypardiso is installed) before the limit is
@@ -97,7 +98,7 @@ def solve_point(scene: Scene, point: Sequence[float], probe_cells: int,
                               f'stopped at {1e3 * reached:g} mm: {exc}')
                 if part is not None and len(part.depths) > (0 if best is None else
                                                             len(best.depths)):
-                    best, best_k = part, k
+                    best, best_k, best_name = part, k, name
                 stops.append(getattr(exc, 'depth', None))
                 if _same_limit(stops, smallest):
                     errors.append(f'no further attempt: attempts {k - 1} and {k} both stopped '
@@ -106,7 +107,7 @@ def solve_point(scene: Scene, point: Sequence[float], probe_cells: int,
                 smallest = step * 0.5 ** cutbacks
                 continue
             out.update(status='ok', attempt=k, max_step_m=step,
-                       **_path_record(res, name, point, direction, scene, profile_record))
+                       **_path_record(res, name, point, direction, scene))
             break
     if res is None:
         out.update(error='; '.join(errors), attempts=len(stops), depths_m=[], forces_N=[],
@@ -115,8 +116,7 @@ def solve_point(scene: Scene, point: Sequence[float], probe_cells: int,
             out.update(attempt=best_k, max_step_m=attempts[best_k - 1][0] * scene.max_step,
                        missing_depths_m=[float(d) for d in scene.depths
                                          if d > best.depths[-1] + 1e-12],
-                       **_path_record(best, default_linear_solver()[0], point, direction, scene,
-                                      profile_record))
+                       **_path_record(best, best_name, point, direction, scene))
     out['wall_time_s'] = time.perf_counter() - t0
     out['cpu_time_s'] = time.process_time() - c0
     out['scene_sha256'] = scene.sha256()
@@ -130,8 +130,8 @@ def _same_limit(stops: list[float | None], tol: float) -> bool:
             and abs(stops[-1] - stops[-2]) <= tol)
 
 
-def _path_record(res, name: str, point: list[float], direction: np.ndarray, scene: Scene,
-                 profile_record: Callable) -> dict[str, Any]:
+def _path_record(res, name: str, point: list[float], direction: np.ndarray,
+                 scene: Scene) -> dict[str, Any]:
     """The record fields of a (full or partial) load path: depths, forces, mesh and solver
     figures, the skin's displacement profile at each depth reached."""
     return dict(depths_m=res.depths.tolist(),
