@@ -256,11 +256,13 @@ def _open(path: Path, create: bool) -> sqlite3.Connection:
 
 def _private_folder(folder: Path) -> None:
     """Make ``folder`` 0700 if missing; narrow the default record folder to 0700 as well."""
-    if not folder.exists():
+    try:   # no exists() check first: writer processes starting together race to create it
         folder.mkdir(parents=True, mode=0o700)
-        os.chmod(folder, 0o700)   # mkdir's mode passes through the umask
-    elif folder == default_db_path().parent:
-        _narrow(folder, 0o700)
+    except FileExistsError:
+        if folder == default_db_path().parent:
+            _narrow(folder, 0o700)
+        return
+    os.chmod(folder, 0o700)   # mkdir's mode passes through the umask
 
 
 def _private_file(path: Path) -> None:
