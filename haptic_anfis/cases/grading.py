@@ -182,10 +182,9 @@ def below_device(grading: Mapping[str, Any] | None) -> bool:
     renders none of them (no level: see the module docstring); False for an ungraded case."""
     if not grading:
         return False
-    bg = grading.get('background')
-    if isinstance(bg, dict):   # a nodular breast: a lesion is rendered when it is felt over the
-        lesions = bg.get('lesions') or ()  # smooth breast (told apart from the nodules or not)
-        return bool(lesions) and not any(g.get('felt') for g in lesions)
+    # one rule for smooth and nodular cases, the palpability the draws read
+    # (record.levels.has_palpable_lesion): a nodular lesion that is rendered but not told apart
+    # from its background keeps a level (5)
     lesions = grading.get('lesions') or ()
     return bool(lesions) and not any(g.get('palpable') for g in lesions)
 
