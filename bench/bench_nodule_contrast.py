@@ -6,7 +6,7 @@ the stylus (22 %, :data:`haptic_anfis.cases.grading.PALPABLE_PCT`). This script 
 one loading point with a single region under it, and at the same point without it, and prints
 the contrast |F| / |F without| - 1 per depth. Regions: glandular / fibrous nodules in fat and
 fat / fibrous nodules in glandular tissue (radius, centre depth under the skin, modulus), a
-carcinoma for comparison, and a rib under the point. Moduli: Krouskop et al. 1998, 5 %
+carcinoma for comparison, and a rigid rib under the point (the chest wall rises over it). Moduli: Krouskop et al. 1998, 5 %
 precompression, 1 Hz (fat 19, glandular 33, fibrous 107, IDC 93 kPa; see config/scenes/nod_s_*.yaml
 for the sources). The ``... at (0, 0) @ (o, 0)`` rows move the point o mm off the nodule: the
 width of its bump.
@@ -61,6 +61,16 @@ CASES: dict[str, tuple] = {
     'fat19 + fibrous107 r6 d10': (19, (0, 0), 'nodule', 107, 6, 10),
     'fat19 + fibrous107 r6 d7': (19, (0, 0), 'nodule', 107, 6, 7),
     'fat19 + idc93 r8 d12': (19, (0, 0), 'lesion', 93, 8, 12),
+    'fat19 + idc93 r10 d10': (19, (0, 0), 'lesion', 93, 10, 10),
+    'fat19 + idc93 r8 d8': (19, (0, 0), 'lesion', 93, 8, 8),
+    'fat19 + idc93 r6 d8': (19, (0, 0), 'lesion', 93, 6, 8),
+    'fat19 + idc93 r7 d12': (19, (0, 0), 'lesion', 93, 7, 12),
+    'fat19 + idc93 r8 d16': (19, (0, 0), 'lesion', 93, 8, 16),
+    'fat19 + idc93 r10 d16': (19, (0, 0), 'lesion', 93, 10, 16),
+    'fat19 + idc93 r6 d16': (19, (0, 0), 'lesion', 93, 6, 16),
+    'fat19 + idc93 r6.5 d16': (19, (0, 0), 'lesion', 93, 6.5, 16),
+    'fat19 + idc93 r7 d16': (19, (0, 0), 'lesion', 93, 7, 16),
+    'fat19 + idc93 r7.5 d16': (19, (0, 0), 'lesion', 93, 7.5, 16),
     **{f'fat19 @ ({o}, 0)': (19, (o, 0), None, 0, 0, 0) for o in (4, 8, 12, 16)},
     **{f'fat19 + fibrous107 r6 d10 at (0, 0) @ ({o}, 0)': (19, (o, 0), 'nodule', 107, 6, 10, (0, 0))
        for o in (4, 8, 12, 16)},
@@ -68,9 +78,15 @@ CASES: dict[str, tuple] = {
     'gland33 + fat19 r5 d8': (33, (0, 0), 'nodule', 19, 5, 8),
     'gland33 + fibrous107 r5 d8': (33, (0, 0), 'nodule', 107, 5, 8),
     'gland33 + fibrous107 r6 d7': (33, (0, 0), 'nodule', 107, 6, 7),
+    'gland33 + idc93 r10 d10': (33, (0, 0), 'lesion', 93, 10, 10),
+    'gland33 + idc93 r8 d8': (33, (0, 0), 'lesion', 93, 8, 8),
+    'gland33 + idc93 r10 d14': (33, (0, 0), 'lesion', 93, 10, 14),
+    'gland33 + idc93 r12 d14': (33, (0, 0), 'lesion', 93, 12, 14),
+    'gland33 + idc93 r9 d16': (33, (0, 0), 'lesion', 93, 9, 16),
+    'gland33 + idc93 r10 d18': (33, (0, 0), 'lesion', 93, 10, 18),
     'fat19 @ (0, 15)': (19, (0, 15), None, 0, 0, 0),
     'fat19 @ (0, 16)': (19, (0, 16), None, 0, 0, 0),
-    'fat19 + rib2000 @ (0, 15)': (19, (0, 15), 'rib', 2000, 6, 0),
+    'fat19 + rib @ (0, 15)': (19, (0, 15), 'rib', 0, 6, 0),
 }
 
 
@@ -98,7 +114,7 @@ def scene_of(key: str):
             'items': [{'position_mm': [y, z], 'depth_mm': d, 'radius_mm': r}],
             'youngs_kPa': er, 'source': 'bench'}}
     elif kind == 'rib':
-        data['background'] = {'ribs': {**RIBS, 'youngs_kPa': er}}
+        data['background'] = {'ribs': dict(RIBS)}  # rigid: the chest wall rises over them
     return parse_scene(data, name=key.replace(' ', '_'))
 
 
@@ -265,7 +281,8 @@ def main() -> int:
         b = np.asarray(done[_baseline(k)]['force_n'])
         f = np.asarray(done[k]['force_n'])
         c = 100.0 * (f / b - 1.0)
-        print(f'| {k} | {CASES[k][3] / CASES[k][0]:.2f} | '
+        ratio = 'rigid' if CASES[k][2] == 'rib' else f'{CASES[k][3] / CASES[k][0]:.2f}'
+        print(f'| {k} | {ratio} | '
               + ' | '.join(f'{v:+.1f}' if np.isfinite(v) else 'no conv.' for v in c)
               + f' | {done[k]["cpu_s"]:.0f} |')
     print('\nWhat the grading reads (cases/background.py: over the smooth breast of the same '

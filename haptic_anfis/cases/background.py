@@ -7,9 +7,12 @@ pressing level, it feels firmer than the normal nodules and ribs do. From the ca
 the base modulus), per indentation depth (the exam's levels are tissue depths):
 
 - **Contrast** of a point: its |F| over the smooth breast's at the same point, in % (and in N).
-  The contrast of a region (a lesion, a nodule, a rib) is the largest among the loading points
-  over it: within its radius of its (y, z), or the nearest point when none lies that close (a
-  rib: within its half width of its line). Nothing is fitted to the nodular map, so no bump is
+  The contrast of a region (a lesion, a nodule) is the largest among the loading points over it:
+  within its radius of its (y, z), or the nearest point when none lies that close. Over ribs the
+  smooth breast is the one over the same ribs (they raise the force everywhere, between them
+  too), and a **rib's** own contrast is its ridge in that smooth breast: the force over its line
+  against the intercostal tissue halfway to its neighbours, at the same y, the largest along the
+  line's loading points. Nothing is fitted to the nodular map, so no bump is
   absorbed into its own background. A normal region is read only at points beyond every
   lesion's reach (farther from its centre than its radius plus the probe's), else the lesion's
   own bump would count as a normal one; a region with no point within its radius reads its
@@ -143,22 +146,40 @@ def background_grades(scene, records: Sequence[dict[str, Any]], reference,
         clear &= np.hypot(yz0[:, 0] - t.centre[1], yz0[:, 1] - t.centre[2]) \
             > t.radius + scene.probe_radius
 
-    def rows(centre, radius, allowed: np.ndarray, rib: bool = False) -> list[dict[str, Any]]:
+    def rows(centre, radius, allowed: np.ndarray) -> list[dict[str, Any]]:
         out = []
         for d, (yz, c, cn) in maps.items():
-            if rib:
-                on = np.flatnonzero((np.abs(yz[:, 1] - centre) <= radius) & allowed)
-            else:
-                dist = np.hypot(yz[:, 0] - centre[0], yz[:, 1] - centre[1])
-                on = np.flatnonzero((dist <= radius + 1e-12) & allowed)
-                # a region between the grid's points: its nearest point, within one spacing
-                near = np.flatnonzero(allowed & (dist <= radius + scene.spacing + 1e-12))
-                if not len(on) and len(near):
-                    on = near[[int(np.argmin(dist[near]))]]
+            dist = np.hypot(yz[:, 0] - centre[0], yz[:, 1] - centre[1])
+            on = np.flatnonzero((dist <= radius + 1e-12) & allowed)
+            # a region between the grid's points: its nearest point, within one spacing
+            near = np.flatnonzero(allowed & (dist <= radius + scene.spacing + 1e-12))
+            if not len(on) and len(near):
+                on = near[[int(np.argmin(dist[near]))]]
             if not len(on):
                 return []
             k = int(on[np.argmax(c[on])])
             out.append({'depth_m': d, 'contrast_pct': float(c[k]), 'contrast_n': float(cn[k])})
+        return out
+
+    ribs = bg.ribs if bg is not None else ()
+
+    def rib_rows(i: int) -> list[dict[str, Any]]:
+        # a rib's bump is its ridge in the smooth breast over the ribs (the reference): the force
+        # over its line against the intercostal tissue halfway to its neighbours, at the same y
+        rib = ribs[i]
+        mids = [0.5 * (rib.z + ribs[j].z) for j in (i - 1, i + 1) if 0 <= j < len(ribs)]
+        out = []
+        for d, (yz, _, _) in maps.items():
+            on = np.flatnonzero((np.abs(yz[:, 1] - rib.z) <= rib.radius) & clear)
+            if not len(on) or not mids:
+                return []
+            y = yz[on, 0]
+            f_on = reference.forces(np.column_stack([y, np.full_like(y, rib.z)]), d)
+            f_mid = np.mean([reference.forces(np.column_stack([y, np.full_like(y, m)]), d)
+                             for m in mids], axis=0)
+            k = int(np.argmax(f_on / f_mid))
+            out.append({'depth_m': d, 'contrast_pct': float(100.0 * (f_on[k] / f_mid[k] - 1.0)),
+                        'contrast_n': float(f_on[k] - f_mid[k])})
         return out
 
     def deep(entry: dict[str, Any]) -> dict[str, Any]:
@@ -175,9 +196,8 @@ def background_grades(scene, records: Sequence[dict[str, Any]], reference,
         out['nodules'].append(deep({'name': n.name, 'kind': n.kind, 'radius_m': n.radius,
                                     'depth_m': _depth(scene, n.centre),
                                     'contrasts': rows(n.centre[1:], n.radius, clear)}))
-    for rib in (bg.ribs if bg is not None else ()):
-        out['ribs'].append(deep({'name': rib.name, 'z_m': rib.z,
-                                 'contrasts': rows(rib.z, rib.radius, clear, rib=True)}))
+    for i, rib in enumerate(ribs):
+        out['ribs'].append(deep({'name': rib.name, 'z_m': rib.z, 'contrasts': rib_rows(i)}))
     nod = [e['bump_pct'] for e in out['nodules'] if e['bump_pct'] is not None]
     out['nodule_bump_pct'] = [float(min(nod)), float(max(nod))] if nod else None
     everywhere = np.ones(len(yz0), dtype=bool)

@@ -22,8 +22,9 @@ pressure level at which a stylus can feel it, its difficulty; the case level.
   at which it is palpable.
 - **Difficulty** 1-5 of a palpable lesion from where it is first palpable: 1 at light pressure
   with at least :data:`EASY_MULTIPLE` times the threshold (a lump that stands out at the first
-  touch), 2 by medium pressure, 3 at the deep level, 4 only deeper (12 mm), 5 only at the FE's
-  deepest trained depth. Human figures agree in order: a superficial 1 cm lump is found by 87-90 %
+  touch), 2 by medium pressure, 3 at the deep level, 4 only deeper (12 mm), 5 only at the
+  library's deepest trained depth (16 mm, :data:`DEEPEST_DEPTH`; a scene whose FE stops at 12 mm,
+  as over ribs, grades a lesion first felt there 4, like every other case). Human figures agree in order: a superficial 1 cm lump is found by 87-90 %
   of examiners, a deep 2 cm hard one by 75 % (Fletcher et al., JAMA 1985; Pugh's group).
 - A lesion that is not palpable at any trained depth is **below what this device renders** (the
   reason says by how much): not "not palpable" — people find 3-5 mm lumps in silicone models
@@ -44,11 +45,13 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
-__all__ = ['DEEP_DEPTH', 'PALPABLE_PCT', 'EASY_MULTIPLE', 'LEVEL_DEPTHS', 'BASIS',
+__all__ = ['DEEP_DEPTH', 'DEEPEST_DEPTH', 'PALPABLE_PCT', 'EASY_MULTIPLE', 'LEVEL_DEPTHS', 'BASIS',
            'pressure_level', 'grade_contrasts', 'difficulty', 'lesion_grades', 'case_level',
            'below_device', 'grading_record', 'regrade']
 
 DEEP_DEPTH = 0.008  # [m]: haptic_anfis.exam.config.ExamConfig.deep (default)
+#: [m] the library's deepest trained depth: a lesion felt only there is difficulty 5
+DEEPEST_DEPTH = 0.016
 #: [%] of the lesion-free force: stiffness discrimination through a rigid stylus (Tan et al. 1995)
 PALPABLE_PCT = 22.0
 #: a lesion palpable at light pressure with this many times the threshold is difficulty 1
@@ -101,7 +104,7 @@ def grade_contrasts(contrasts: Mapping[float, float], threshold_pct: float = PAL
         d = 2
     elif found <= th['deep'] + 1e-9:
         d = 3
-    elif found < depths[-1] - 1e-9:
+    elif found < max(depths[-1], DEEPEST_DEPTH) - 1e-9:
         d = 4
     else:
         d = 5

@@ -10,12 +10,16 @@ regions (clinically "nodularity"), and the ribs lie under it at the chest wall. 
   the skin uniform in their ranges; none closer than ``min_gap_mm`` to another region), or an
   explicit ``items`` list (``position_mm`` + ``depth_mm`` or ``centre_mm``, ``radius_mm``). The
   drawn list is part of the scene's hash, so the FE store knows the nodules it was solved with.
-- ``ribs``: bars of circular section along y at the chest wall, at the given ``z_mm``, ``width_mm``
-  across (the section's diameter), their top ``height_mm`` above the chest wall plane x = 0 (the
-  rest of the section lies behind it, in the clamped wall). A rib keeps ``cover_mm`` of soft tissue
+- ``ribs``: bars along y at the chest wall, at the given ``z_mm``, ``width_mm`` across, rising
+  ``height_mm`` above the chest wall plane x = 0 as a half-ellipse (the rest of the bone lies
+  behind it, in the clamped wall). A rib keeps ``cover_mm`` of soft tissue
   under the skin over the loaded area (the palpable disc widened by the probe radius), or the scene
   is refused ("a rib through the skin"); towards the clamped rim, where the breast thins to nothing,
-  the bar is cut ``cover_mm`` under the skin.
+  the bar is cut ``cover_mm`` under the skin. Ribs are rigid and take no modulus: the FE's
+  clamped wall rises over them (:func:`rib_floor`), so a rib is a boundary every mesh node lies
+  on, not a stiffness smeared over the cells it cuts (which made the force depend on the mesh:
+  4 -> 6 cells across the probe moved it 23 % at 12 mm over a rib; now 3 %, as in a smooth
+  breast).
 
 Every region (lesion, nodule, rib) must lie apart from every other and inside the breast; a scene
 that breaks this is refused in one line naming the region.
@@ -30,7 +34,7 @@ import numpy as np
 from .scenebase import (KPA, MM, SceneError, check_keys, check_number, check_vec,
                         region_centre, sphere_inside, surface_height)
 
-__all__ = ['Background', 'Nodule', 'Rib', 'parse_background', 'rib_fraction', 'NODULE_RADIUS_MM']
+__all__ = ['Background', 'Nodule', 'Rib', 'parse_background', 'rib_floor', 'NODULE_RADIUS_MM']
 
 #: nodule radii the format accepts [mm]: below 1 mm a nodule is smaller than any FE cell; above
 #: 8 mm it is a lesion's size, not background texture
@@ -41,7 +45,7 @@ _KEYS = {
     'nodules': {'seed', 'count', 'radius_mm', 'depth_mm', 'extent_mm', 'min_gap_mm', 'youngs_kPa',
                 'source', 'items'},
     'item': {'name', 'position_mm', 'depth_mm', 'centre_mm', 'radius_mm'},
-    'ribs': {'z_mm', 'width_mm', 'height_mm', 'cover_mm', 'youngs_kPa', 'source'},
+    'ribs': {'z_mm', 'width_mm', 'height_mm', 'cover_mm', 'source'},
 }
 
 
@@ -64,23 +68,26 @@ class Nodule:
 
 @dataclass(frozen=True)
 class Rib:
-    """A bar along y at ``z`` [m]: circular section of ``radius`` [m] whose top lies ``top`` [m]
-    above the chest wall; modulus [Pa]; ``cover`` [m] of tissue it keeps under the skin."""
+    """A rigid bar along y at ``z`` [m], ``radius`` [m] half its width, rising ``top`` [m] above
+    the chest wall as a half-ellipse; ``cover`` [m] of tissue it keeps under the skin. Bone (~GPa)
+    is rigid against tissue (~20 kPa): the FE makes the clamped wall follow it
+    (:func:`rib_floor`)."""
 
     name: str
     z: float
     radius: float
     top: float
-    youngs: float
     cover: float
+    #: how the FE represents it; part of the scene's hash, so a store knows its ribs' model
+    profile: str = 'rigid half-ellipse'
 
     #: what it is, as the exam says it to the trainee
     what = 'a rib'
 
-    @property
-    def axis_x(self) -> float:
-        """x [m] of the section's centre (may lie behind the chest wall)."""
-        return self.top - self.radius
+    def rise(self, z: np.ndarray) -> np.ndarray:
+        """Height [m] of its surface above the chest wall at ``z`` [m] (0 beside it)."""
+        u = (np.asarray(z, dtype=float) - self.z) / self.radius
+        return self.top * np.sqrt(np.clip(1.0 - u * u, 0.0, None))
 
 
 @dataclass(frozen=True)
@@ -177,6 +184,9 @@ def parse_background(data: Any, radii: tuple[float, float, float], youngs: float
 
 def _parse_ribs(d: Any, radii: tuple[float, float, float], loaded_radius: float
                 ) -> tuple[Rib, ...]:
+    if isinstance(d, dict) and 'youngs_kPa' in d:
+        raise SceneError('background.ribs.youngs_kPa: ribs are rigid (the clamped chest wall '
+                         'rises over them), they take no modulus: remove the key')
     rd = _keys(d, 'ribs', 'background.ribs')
     zs = rd.get('z_mm')
     if (not isinstance(zs, list) or not zs or not all(
@@ -187,14 +197,9 @@ def _parse_ribs(d: Any, radii: tuple[float, float, float], loaded_radius: float
     r = 0.5 * check_number(rd, 'width_mm', 'background.ribs') * MM
     top = check_number(rd, 'height_mm', 'background.ribs') * MM
     cover = check_number(rd, 'cover_mm', 'background.ribs') * MM
-    e = check_number(rd, 'youngs_kPa', 'background.ribs') * KPA
-    if top > 2 * r:
-        raise SceneError(f'background.ribs.height_mm: {top / MM:g} mm is more than the rib\'s '
-                         f'width {2 * r / MM:g} mm (a bar of circular section rises at most its '
-                         'diameter)')
     out: list[Rib] = []
     for i, z in enumerate(sorted(float(v) * MM for v in zs)):
-        rib = Rib(name=f'rib{i}', z=z, radius=r, top=top, youngs=e, cover=cover)
+        rib = Rib(name=f'rib{i}', z=z, radius=r, top=top, cover=cover)
         where = f'background.ribs[{i}] (z = {z / MM:g} mm)'
         if abs(z) + r >= radii[2]:
             raise SceneError(f'{where}: lies outside the breast (|z| + half width >= '
@@ -281,8 +286,12 @@ def _drawn(nd: dict[str, Any], radii, e: float, youngs: float, seed: int, lesion
 
 
 def _rib_gap(rib: Rib, centre: np.ndarray, r: float) -> float:
-    """Clearance [m] between a sphere (centre, r) and the rib's section (negative: overlap)."""
-    return float(np.hypot(centre[0] - rib.axis_x, centre[2] - rib.z)) - r - rib.radius
+    """Clearance [m] between a sphere (centre, r) and the rib's half-ellipse (negative: overlap),
+    from 721 points of its outline."""
+    t = np.linspace(0.0, np.pi, 721)
+    d = np.hypot(centre[0] - rib.top * np.sin(t), centre[2] - rib.z - rib.radius * np.cos(t))
+    inside = centre[0] < rib.rise(centre[2])
+    return float(-d.min() - r if inside else d.min() - r)
 
 
 def _check_regions(nodules: Sequence[Nodule], radii, lesions, ribs) -> None:
@@ -313,10 +322,14 @@ def _check_regions(nodules: Sequence[Nodule], radii, lesions, ribs) -> None:
                                  f'{-gap / MM:.1f} mm')
 
 
-def rib_fraction(samples: np.ndarray, rib: Rib, radii: tuple[float, float, float]) -> np.ndarray:
-    """(M,) fraction of each cell inside ``rib``, from its (M, Q, 3) sample points [m] (x, y, z):
-    inside the section and at least ``cover`` under the skin."""
-    x, y, z = samples[..., 0], samples[..., 1], samples[..., 2]
-    inside = np.hypot(x - rib.axis_x, z - rib.z) <= rib.radius
-    inside &= x <= surface_height(y, z, radii) - rib.cover
-    return inside.mean(axis=1)
+def rib_floor(y: np.ndarray, z: np.ndarray, ribs: Sequence[Rib], top: np.ndarray) -> np.ndarray:
+    """x [m] of the rigid chest wall at (y, z) [m]: the chest-wall plane x = 0 raised by the ribs
+    (:meth:`Rib.rise`: continuous, so no cell is torn at a rib's edge), and kept at least
+    ``rib.cover`` under the surface ``top`` [m] (where the breast thins towards its clamped rim,
+    beyond the loaded area, the rib is lowered with it rather than poking through the skin)."""
+    z = np.asarray(z, dtype=float)
+    out = np.zeros(np.broadcast(np.asarray(y), z).shape)
+    for rib in ribs:
+        room = np.clip(np.asarray(top) - rib.cover, 0.0, None)
+        out = np.maximum(out, np.minimum(rib.rise(z), room))
+    return out

@@ -20,7 +20,7 @@ import numpy as np
 
 from ..errors import HapticAnfisError
 from ..optional import optional
-from .background import rib_fraction
+from .background import rib_floor
 from .geometry import indentation_direction
 from .linsolve import PardisoLDLSolver, ReusedFactorSolver, backend_name
 from .mesh import Domain, HexMesh, build_mesh, cell_samples, tumour_fractions
@@ -238,26 +238,30 @@ def scene_domain(scene: Scene) -> Domain:
     def height(y: np.ndarray, z: np.ndarray) -> np.ndarray:
         return np.maximum(surface_height(y, z, radii), floor)
 
-    return Domain(ry=rim * radii[1], rz=rim * radii[2], height=height, fix_rim=True)
+    ribs = scene.background.ribs if scene.background is not None else ()
+
+    def ribs_floor(y: np.ndarray, z: np.ndarray) -> np.ndarray:
+        return rib_floor(y, z, ribs, height(y, z))
+
+    return Domain(ry=rim * radii[1], rz=rim * radii[2], height=height, fix_rim=True,
+                  floor=ribs_floor if ribs else None)
 
 
 def scene_moduli(scene: Scene, mesh: HexMesh) -> tuple[np.ndarray, np.ndarray]:
     """Per-cell shear and bulk moduli (M,) [Pa]: tissue, changed by each region's volume fraction
-    in the cell (lesions, background nodules and ribs; Voigt mixing, the same Poisson's ratio
-    everywhere; regions never overlap, so the fractions add up to at most 1)."""
+    in the cell (lesions and background nodules; Voigt mixing, the same Poisson's ratio
+    everywhere; regions never overlap, so the fractions add up to at most 1). Ribs are not a
+    modulus: they are the mesh's rigid floor (:func:`scene_domain`)."""
     mat = scene.material
     mu = np.full(len(mesh.cells), mat.shear)
     bg = scene.background
     spheres = list(scene.tumours) + (list(bg.nodules) if bg is not None else [])
-    if not spheres and (bg is None or not bg.ribs):
+    if not spheres:
         return mu, mu * mat.bulk_ratio()
     samples = cell_samples(mesh.points, mesh.cells)
     frac = tumour_fractions(mesh, [(t.centre, t.radius) for t in spheres], samples)
-    parts = [(frac[:, k], t.youngs) for k, t in enumerate(spheres)]
-    if bg is not None:
-        parts += [(rib_fraction(samples, rib, scene.radii), rib.youngs) for rib in bg.ribs]
-    for f, youngs in parts:
-        mu += f * (youngs / (2.0 * (1.0 + mat.poisson)) - mat.shear)
+    for k, t in enumerate(spheres):
+        mu += frac[:, k] * (t.youngs / (2.0 * (1.0 + mat.poisson)) - mat.shear)
     return mu, mu * mat.bulk_ratio()
 
 

@@ -12,8 +12,10 @@ How a mesh is made (all in the (y, z) chest-wall plane first, then extruded alon
    line by construction (docs/design.md: nodes ON r = a, not "nodes with r <= a").
 3. Scale the unit disc to the base ellipse (radii Ry, Rz times ``rim``); for Ry != Rz a local radial
    correction puts the footprint nodes back onto the circle r = a.
-4. Extrude each base node from the chest wall (x = 0) to the surface in the same number of layers,
-   graded geometrically from about the probe-edge element size at the skin.
+4. Extrude each base node from the chest wall (x = 0, or the domain's ``floor``: the ribs) to
+   the surface in the same number of layers, graded geometrically from about the probe-edge
+   element size at the skin. A floor makes the clamped wall follow the ribs, so a rib is a
+   boundary of the mesh, exact at every node, not a stiffness smeared over the cells it cuts.
 
 Stiff inclusions are represented per cell by their volume fraction (27 samples per hexahedron),
 so forces vary smoothly as the mesh moves with the loading point (no staircase noise in the data).
@@ -31,12 +33,15 @@ HeightFn = Callable[[np.ndarray, np.ndarray], np.ndarray]
 @dataclass(frozen=True)
 class Domain:
     """A body on the chest wall x = 0: elliptic base of radii (ry, rz) [m] (the meshed extent) and
-    thickness ``height(y, z)`` [m] > 0 over it. ``fix_rim``: also clamp the lateral rim wall."""
+    surface ``height(y, z)`` [m] > 0 over it. ``fix_rim``: also clamp the lateral rim wall.
+    ``floor(y, z)`` [m], 0 <= floor < height: where the clamped wall lies (rigid ribs rising from
+    the chest wall); None: the flat chest wall x = 0."""
 
     ry: float
     rz: float
     height: HeightFn
     fix_rim: bool = True
+    floor: HeightFn | None = None
 
 
 @dataclass
@@ -245,16 +250,21 @@ def build_mesh(domain: Domain, centre_yz: tuple[float, float], a: float, n: int,
     y, z = domain.ry * zeta.real, domain.rz * zeta.imag
     if not np.isclose(domain.ry, domain.rz):
         y, z = _round_footprint(y, z, centre_yz, a, a / rm * domain.ry, a / rm * domain.rz)
-    thick = np.asarray(domain.height(y, z), dtype=float)
-    if np.any(thick <= 0):
-        raise ValueError('domain height must be > 0 over the whole base')
+    top = np.asarray(domain.height(y, z), dtype=float)
+    base = (np.zeros_like(top) if domain.floor is None
+            else np.asarray(domain.floor(y, z), dtype=float))
+    thick = top - base
+    if np.any(thick <= 0) or np.any(base < 0):
+        raise ValueError('domain height must be > 0 over the whole base, above a floor >= 0')
     edge = 0.5 * np.pi * a / n
-    t0 = float(domain.height(np.array(centre_yz[0]), np.array(centre_yz[1])))
+    cy, cz = np.array(centre_yz[0]), np.array(centre_yz[1])
+    t0 = float(domain.height(cy, cz)) - (0.0 if domain.floor is None
+                                         else float(domain.floor(cy, cz)))
     frac = layer_fractions(t0, edge, growth_vertical or max(np.exp(0.5 * np.pi / n), 1.25),
                            refine if depth_refine is None else depth_refine)
     L, N2 = len(frac) - 1, len(w)
     pts = np.empty((L + 1, N2, 3))
-    pts[:, :, 0] = frac[:, None] * thick[None, :]
+    pts[:, :, 0] = base[None, :] + frac[:, None] * thick[None, :]
     pts[:, :, 1], pts[:, :, 2] = y[None, :], z[None, :]
     pts = pts.reshape(-1, 3)
     lay = np.arange(L)[:, None, None] * N2

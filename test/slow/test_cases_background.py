@@ -220,9 +220,9 @@ def test_a_nodular_case_without_a_smooth_breast_of_its_body_is_refused_naming_it
     from haptic_anfis.cases import CaseError
     from haptic_anfis.cases.reference import reference_case
 
-    lib = _library(tmp_path, {'tinynodular': TINY_NODULAR})
+    lib = _library(tmp_path, {'tinynodular': TINY_NODULAR, 'tinyflat': TINY_FLAT})
     with pytest.raises(CaseError, match=r"case 'tinynodular': no smooth lesion-free case .*"
-                                        r"breast radii \(45.0, 70.0, 70.0\) mm"):
+                                        r"breast radii \(45.0, 70.0, 70.0\) mm, .* and 1 ribs"):
         reference_case(lib.get('tinynodular'))
     (tmp_path / 'two').mkdir()
     lib = _library(tmp_path / 'two', {'tinynodular': TINY_NODULAR, 'tinysmooth': TINY_SMOOTH})
@@ -252,16 +252,20 @@ TINY_NODULAR = {
                     'items': [{'position_mm': [-20, 0], 'depth_mm': 8, 'radius_mm': 4},
                               {'position_mm': [0, -20], 'depth_mm': 8, 'radius_mm': 4}]},
         'ribs': {'z_mm': [20], 'width_mm': 12, 'height_mm': 9, 'cover_mm': 5,
-                 'youngs_kPa': 2000, 'source': 'test'}},
+                 'source': 'test'}},
     'probe': {'diameter_mm': 16},
     'loading': {'spacing_mm': 20, 'palpable_radius_mm': 30, 'ring_diameters': [1.0],
                 'ring_points': 4, 'depths_mm': [2, 5, 8], 'max_step_mm': 4},
     'mesh': {'probe_cells': 4, 'coarse_probe_cells': 2, 'edge_offset': 0.2, 'edge_refine': 0},
 }
-#: its smooth breast (the same body, no region): the reference its background is graded against
+#: its smooth breast (the same body over the same rib, no nodule or lesion): the reference its
+#: background is graded against
 TINY_SMOOTH = {**{k: v for k, v in TINY_NODULAR.items() if k not in ('tumours', 'background')},
+               'background': {'ribs': TINY_NODULAR['background']['ribs']},
                'name': 'tinysmooth', 'description': 'test case: the tiny nodular breast, smooth',
                'loading': {**TINY_NODULAR['loading'], 'ring_diameters': [], 'ring_points': 0}}
+#: the same breast over a flat chest wall: not the same body as a breast over a rib
+TINY_FLAT = {**{k: v for k, v in TINY_SMOOTH.items() if k != 'background'}, 'name': 'tinyflat'}
 
 
 def test_a_nodular_case_is_swept_graded_against_its_background_and_listed(tmp_path, monkeypatch):

@@ -135,7 +135,10 @@ def test_the_graded_library_covers_the_issue():
     for s in scenes:
         pts = loading_points(s)
         assert len(_disc_grid(s.spacing, s.palpable_radius)) >= 149  # the base grid
-        assert s.depths == pytest.approx((0.002, 0.005, 0.008, 0.012, 0.016))
+        # over ribs the FE stops at 12 mm (16 mm pinches the tissue against the bone)
+        ribs = s.background is not None and s.background.ribs
+        assert s.depths == pytest.approx((0.002, 0.005, 0.008, 0.012) if ribs else
+                                         (0.002, 0.005, 0.008, 0.012, 0.016))
         for t in s.tumours:
             r = np.hypot(pts[:, 1] - t.centre[1], pts[:, 2] - t.centre[2]) / (2 * t.radius)
             rings = {round(v, 6) for v in r if 0 < v <= 1.5 + 1e-9 and

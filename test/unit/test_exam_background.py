@@ -5,7 +5,7 @@ from haptic_anfis.exam.findings import match
 from haptic_anfis.exam.lesions import Lesion, subject_from_scene
 from haptic_anfis.tissue.scene import SCENE_DIR, load_scene, surface_height
 
-SCENE = SCENE_DIR / 'nod_s_fatty_idc6_d12_ribs.yaml'
+SCENE = SCENE_DIR / 'nod_s_fatty_two_ribs.yaml'
 
 
 def _over(scene, y, z):

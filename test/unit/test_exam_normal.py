@@ -15,7 +15,7 @@ from haptic_anfis.view.legend import legend_html
 from haptic_anfis.view.panel import numbers_markdown
 
 FREE = 'nod_s_fatty_free'                                # graded, ready, no lesion
-RIBS = SCENE_DIR / 'nod_s_fatty_idc6_d12_ribs.yaml'      # a scene file: ribs, not graded here
+RIBS = SCENE_DIR / 'nod_s_fatty_two_ribs.yaml'      # a scene file: ribs, not graded here
 
 
 @pytest.fixture(scope='module')

@@ -358,14 +358,17 @@ def test_the_debrief_shows_the_normal_background_beside_the_lesions():
     from haptic_anfis.view.app import ViewApp
     from haptic_anfis.view.build import case_view
     from haptic_anfis.view.debrief import Debrief
-    cv = case_view('nod_s_fatty_idc6_d12_ribs', dent=False)   # its skin: the scene's breast
+    cv = case_view('nod_s_dense_idc20_d12_ribs', dent=False)   # its skin: the scene's breast
     s = cv.session
     from haptic_anfis.exam.normal import skin_point
     bg, margin = s.subject.background, cv.config.hit_margin
     ribs = {e['name']: e for e in s.report()['normal'] if e['kind'] == 'rib' and e['line_mm']}
+    lesions = [(*les.centre[1:], les.radius) for les in s.subject.lesions]
     name, y = next((b.name, y) for b in bg.ribs if b.name in ribs   # on the rib, off the lobules
-                   for y in np.arange(-0.03, 0.03, 0.001)
-                   if bg.region_at(y, b.z, margin) == (b.name, 'a rib'))
+                   for y in np.arange(-0.03, 0.03, 0.001)           # and the lesions
+                   if bg.region_at(y, b.z, margin) == (b.name, 'a rib')
+                   and all(np.hypot(y - c[0], b.z - c[1]) > c[2] + margin + 0.002
+                           for c in lesions))
     rib = ribs[name]
     s.add_mark(1.0, skin_point(s.surface.detector, y, next(b.z for b in bg.ribs
                                                             if b.name == name)))
