@@ -87,6 +87,11 @@ CASES: dict[str, tuple] = {
     'fat19 @ (0, 15)': (19, (0, 15), None, 0, 0, 0),
     'fat19 @ (0, 16)': (19, (0, 16), None, 0, 0, 0),
     'fat19 + rib @ (0, 15)': (19, (0, 15), 'rib', 0, 6, 0),
+    'fat19 @ (25, 0)': (19, (25, 0), None, 0, 0, 0),
+    'fat19 @ (25, 15)': (19, (25, 15), None, 0, 0, 0),
+    'fat19 + ribs, between two @ (0, 0)': (19, (0, 0), 'rib', 0, 6, 0),
+    'fat19 + ribs, between two @ (25, 0)': (19, (25, 0), 'rib', 0, 6, 0),
+    'fat19 + rib @ (25, 15)': (19, (25, 15), 'rib', 0, 6, 0),
 }
 
 
@@ -252,6 +257,18 @@ def _summary(done: dict, keys: list[str], depth_mm: float = DEEP_MM) -> str:
     rib = [k for k in keys if CASES[k][2] == 'rib']
     for k in rib:
         out.append(f'- {k}: {_contrast(done, k, depth_mm):+.1f} %')
+    ridge = [(y, f'fat19 + rib @ ({y}, 15)', f'fat19 + ribs, between two @ ({y}, 0)')
+             for y in (0, 25)]
+    ridge = [(y, a, b) for y, a, b in ridge if a in done and b in done]
+    if ridge:
+        out.append('\nThe ribs raise the whole breast (the rows above are over a flat chest wall); '
+                   'what the hand feels as a rib is its ridge, the force over it against the '
+                   'intercostal tissue beside it (z = 15 vs 0 mm, same y), per depth:')
+        for y, a, b in ridge:
+            k = range(len(done[a]['force_n']))
+            out.append(f'- y = {y} mm: ' + ', '.join(
+                f"{done[a]['depths_mm'][i]:g} mm {100 * (done[a]['force_n'][i] / done[b]['force_n'][i] - 1):+.1f} %"
+                for i in k if np.isfinite(done[a]['force_n'][i] / done[b]['force_n'][i])))
     return '\n'.join(out)
 
 

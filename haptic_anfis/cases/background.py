@@ -18,6 +18,8 @@ the base modulus), per indentation depth (the exam's levels are tissue depths):
   own bump would count as a normal one; a region with no point within its radius reads its
   nearest point within one grid spacing; one with none is not graded (``bump_pct`` None, no
   ``contrasts``: beyond the loaded disc, or under a lesion's bump).
+- **Depths**: every depth at least :data:`MIN_SOLVED_SHARE` of the points reached; a partial
+  point (its load path stopped short near the rim or over a rib) is left out where it stopped.
 - **Normal distribution** per depth: the contrasts of the nodules and ribs (min, median, max and
   how many reach the threshold). Those reaching the threshold at some depth are *confounders*.
 - **Separation** of a lesion per depth: its force over that of the firmest normal region, in %
@@ -46,20 +48,28 @@ import numpy as np
 from ..tissue.scenebase import surface_height
 from .grading import DEEP_DEPTH, PALPABLE_PCT, grade_contrasts
 
-__all__ = ['FEATURE_GATE', 'force_map', 'basis', 'map_contrasts', 'separation_pct',
+__all__ = ['FEATURE_GATE', 'MIN_SOLVED_SHARE', 'force_map', 'basis', 'map_contrasts', 'separation_pct',
            'background_grades', 'regrade_background', 'background_gate_failures', 'summary_fields']
 
 #: grouped-CV RMSE (vector norm) as a fraction of each graded feature's bump (as for lesions)
 FEATURE_GATE = 1.0 / 3.0
 
 
-def force_map(records: Sequence[dict[str, Any]], depth: float = DEEP_DEPTH
-              ) -> tuple[np.ndarray, np.ndarray]:
-    """((P, 2) loading points (y, z) [m], (P,) |F| [N] at ``depth`` [m]) of the point records."""
+#: a depth is graded when at least this share of a case's points reached it (a partial point,
+#: whose load path stopped short of it near the rim or over a rib, is left out at that depth)
+MIN_SOLVED_SHARE = 0.9
+
+
+def force_map(records: Sequence[dict[str, Any]], depth: float = DEEP_DEPTH,
+              skip_missing: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    """((P, 2) loading points (y, z) [m], (P,) |F| [N] at ``depth`` [m]) of the point records
+    (``skip_missing``: leave out the points that did not reach ``depth``, else refuse them)."""
     yz, f = [], []
     for r in records:
         d = np.asarray(r['depths_m'], dtype=float)
         k = np.flatnonzero(np.abs(d - depth) < 1e-9)
+        if not len(k) and skip_missing:
+            continue
         if not len(k):
             raise ValueError(f'no FE force at depth {depth * 1e3:g} mm at point '
                              f'{r["surface_point_m"]}')
@@ -79,7 +89,7 @@ def map_contrasts(records: Sequence[dict[str, Any]], reference, depth: float
                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """((P, 2) points [m], (P,) contrast [%], (P,) contrast [N]) of the case's force map at
     ``depth`` [m] over the smooth breast ``reference`` (an object with ``forces(yz, depth)``)."""
-    yz, f = force_map(records, depth)
+    yz, f = force_map(records, depth, skip_missing=True)
     ref = np.asarray(reference.forces(yz, depth), dtype=float)
     return yz, 100.0 * (f - ref) / ref, f - ref
 
@@ -100,9 +110,11 @@ def _region_point(yz: np.ndarray, c: np.ndarray, centre: Sequence[float], radius
 
 
 def _depths(scene, records: Sequence[dict[str, Any]]) -> list[float]:
-    """The scene's depths [m] every record solved."""
-    return [float(d) for d in scene.depths
-            if all(np.any(np.abs(np.asarray(r['depths_m'], float) - d) < 1e-9) for r in records)]
+    """The scene's depths [m] that at least :data:`MIN_SOLVED_SHARE` of the records solved."""
+    def share(d: float) -> float:
+        return float(np.mean([np.any(np.abs(np.asarray(r['depths_m'], float) - d) < 1e-9)
+                              for r in records]))
+    return [float(d) for d in scene.depths if records and share(d) >= MIN_SOLVED_SHARE]
 
 
 def _at(rows: list[dict[str, Any]], depth: float) -> dict[str, Any]:
@@ -134,21 +146,24 @@ def background_grades(scene, records: Sequence[dict[str, Any]], reference,
     depths = _depths(scene, records)
     if not any(abs(d - depth) < 1e-9 for d in depths):
         raise ValueError(f'background grading: no FE force at the level depth {depth * 1e3:g} mm '
-                         f'(solved at every point: {", ".join(f"{d * 1e3:g}" for d in depths)} mm)')
+                         f"(solved at {MIN_SOLVED_SHARE:.0%} of the points or more: "
+                         f"{', '.join(f'{d * 1e3:g}' for d in depths)} mm)")
     maps = {d: map_contrasts(records, reference, d) for d in depths}
     bg = scene.background
 
     # a normal region is read away from every lesion's reach (the probe over the lesion's
     # footprint), else the lesion's own bump would be counted as a normal one
-    yz0 = maps[depths[0]][0]
-    clear = np.ones(len(yz0), dtype=bool)
-    for t in scene.tumours:
-        clear &= np.hypot(yz0[:, 0] - t.centre[1], yz0[:, 1] - t.centre[2]) \
-            > t.radius + scene.probe_radius
+    def clear_of_lesions(yz: np.ndarray) -> np.ndarray:
+        clear = np.ones(len(yz), dtype=bool)
+        for t in scene.tumours:
+            clear &= np.hypot(yz[:, 0] - t.centre[1], yz[:, 1] - t.centre[2]) \
+                > t.radius + scene.probe_radius
+        return clear
 
-    def rows(centre, radius, allowed: np.ndarray) -> list[dict[str, Any]]:
+    def rows(centre, radius, normal: bool) -> list[dict[str, Any]]:
         out = []
         for d, (yz, c, cn) in maps.items():
+            allowed = clear_of_lesions(yz) if normal else np.ones(len(yz), dtype=bool)
             dist = np.hypot(yz[:, 0] - centre[0], yz[:, 1] - centre[1])
             on = np.flatnonzero((dist <= radius + 1e-12) & allowed)
             # a region between the grid's points: its nearest point, within one spacing
@@ -170,7 +185,7 @@ def background_grades(scene, records: Sequence[dict[str, Any]], reference,
         mids = [0.5 * (rib.z + ribs[j].z) for j in (i - 1, i + 1) if 0 <= j < len(ribs)]
         out = []
         for d, (yz, _, _) in maps.items():
-            on = np.flatnonzero((np.abs(yz[:, 1] - rib.z) <= rib.radius) & clear)
+            on = np.flatnonzero((np.abs(yz[:, 1] - rib.z) <= rib.radius) & clear_of_lesions(yz))
             if not len(on) or not mids:
                 return []
             y = yz[on, 0]
@@ -195,13 +210,12 @@ def background_grades(scene, records: Sequence[dict[str, Any]], reference,
     for n in (bg.nodules if bg is not None else ()):
         out['nodules'].append(deep({'name': n.name, 'kind': n.kind, 'radius_m': n.radius,
                                     'depth_m': _depth(scene, n.centre),
-                                    'contrasts': rows(n.centre[1:], n.radius, clear)}))
+                                    'contrasts': rows(n.centre[1:], n.radius, True)}))
     for i, rib in enumerate(ribs):
         out['ribs'].append(deep({'name': rib.name, 'z_m': rib.z, 'contrasts': rib_rows(i)}))
     nod = [e['bump_pct'] for e in out['nodules'] if e['bump_pct'] is not None]
     out['nodule_bump_pct'] = [float(min(nod)), float(max(nod))] if nod else None
-    everywhere = np.ones(len(yz0), dtype=bool)
-    out['lesions'] = [{'lesion': t.name, 'contrasts': rows(t.centre[1:], t.radius, everywhere)}
+    out['lesions'] = [{'lesion': t.name, 'contrasts': rows(t.centre[1:], t.radius, False)}
                       for t in scene.tumours]
     return regrade_background(out, threshold_pct)
 

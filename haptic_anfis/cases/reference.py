@@ -54,7 +54,7 @@ class SmoothReference:
         """(P,) |F| [N] of the smooth breast at ``depth`` [m] at the points ``yz`` (P, 2) [m]:
         a polynomial fit over a flat chest wall, an interpolation over ribs (the nearest point
         beyond its points' hull)."""
-        ryz, rf = force_map(self.records, depth)
+        ryz, rf = force_map(self.records, depth, skip_missing=True)
         yz = np.asarray(yz, float)
         if self.ribs:
             f = CloughTocher2DInterpolator(ryz, rf)(yz)

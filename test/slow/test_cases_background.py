@@ -297,3 +297,54 @@ def test_a_nodular_case_is_swept_graded_against_its_background_and_listed(tmp_pa
     lo, hi = bg['nodule_bump_pct']
     assert row['background'] == f'nodular 2 ({lo:+.1f}..{hi:+.1f} %)' and row['ribs'] == 1
     assert row['fe_points']['total'] == 16  # the full-density store: swept per point too
+
+
+def test_a_depth_some_points_did_not_reach_is_graded_without_them(scene):
+    """A partial point (its load path stopped before 16 mm) is left out at 16 mm only; a depth
+    that more than a tenth of the points missed is not graded."""
+    sc = _with_nodules(scene, SPARSE)
+    t = sc.tumours[0]
+    recs = _records(sc, [(t.centre[1], t.centre[2], 0.4)])
+    far = [r for r in recs if np.hypot(*np.subtract(r['surface_point_m'][1:], t.centre[1:]))
+           > 0.02]
+    for r in far[:3]:   # three points at the rim stopped at 12 mm
+        r['depths_m'], r['forces_N'] = r['depths_m'][:4], r['forces_N'][:4]
+    g = background_grades(sc, recs, _Smooth())
+    assert g['depths_m'] == list(DEPTHS)
+    (les,) = g['lesions']
+    assert [r['contrast_pct'] for r in les['contrasts']] == pytest.approx([40.0] * 5, abs=1e-6)
+    for r in far[3:len(recs) // 8]:
+        r['depths_m'], r['forces_N'] = r['depths_m'][:4], r['forces_N'][:4]
+    assert background_grades(sc, recs, _Smooth())['depths_m'] == list(DEPTHS[:4])
+
+
+class _RibbedSmooth:
+    """A synthetic smooth breast over ribs: raised everywhere by 10 %, and a Gaussian ridge of
+    ``ridge`` over each rib's line (what the ribbed reference provides)."""
+    name = 'synthetic ribs'
+
+    def __init__(self, ribs, ridge: float):
+        self.ribs, self.ridge = ribs, ridge
+
+    def forces(self, yz, depth):
+        g = sum(np.exp(-(yz[:, 1] - r.z) ** 2 / (2 * 0.003 ** 2)) for r in self.ribs)
+        return _base(yz[:, 0], yz[:, 1], depth) * 1.10 * (1.0 + self.ridge * g)
+
+
+def test_a_rib_reads_its_ridge_over_the_intercostal_tissue_not_the_general_rise():
+    sc = load_scene(SCENE_DIR / 'nod_s_fatty_two_ribs.yaml')
+    ref = _RibbedSmooth(sc.background.ribs, 0.05)
+    recs = []
+    for p in loading_points(sc):
+        yz = np.array([p[1:]])
+        recs.append({'surface_point_m': p.tolist(), 'depths_m': list(sc.depths),
+                     'forces_N': [[float(ref.forces(yz, d)[0]), 0.0, 0.0] for d in sc.depths]})
+    g = background_grades(sc, recs, ref)
+    graded = [r for r in g['ribs'] if r['contrasts']]
+    assert [r['name'] for r in graded] == ['rib1', 'rib2']   # the outer two lie beyond the disc
+    for r in graded:   # +5 % over the line against halfway to the neighbours (no ridge there);
+        # the smooth map's own curvature along z (no ribs in it) shifts the reading 0.15 points
+        assert [c['contrast_pct'] for c in r['contrasts']] == pytest.approx([5.0] * 4, abs=0.25)
+    # the nodules and the lesion read 0 %: the breast's general rise over ribs is no bump
+    for e in (*g['nodules'], *g['lesions']):
+        assert all(abs(c['contrast_pct']) < 1e-6 for c in e['contrasts']), e['name']
