@@ -188,8 +188,8 @@ def background_grades(scene, records: Sequence[dict[str, Any]], reference,
             on = np.flatnonzero((np.abs(yz[:, 1] - rib.z) <= rib.radius) & clear_of_lesions(yz))
             if not len(on) or not mids:
                 return []
-            y = yz[on, 0]
-            f_on = reference.forces(np.column_stack([y, np.full_like(y, rib.z)]), d)
+            y = yz[on, 0]   # the loading points on the line: the reference's FE points too
+            f_on = reference.forces(yz[on], d)
             f_mid = np.mean([reference.forces(np.column_stack([y, np.full_like(y, m)]), d)
                              for m in mids], axis=0)
             k = int(np.argmax(f_on / f_mid))
