@@ -358,7 +358,7 @@ def test_the_debrief_shows_the_normal_background_beside_the_lesions():
     from haptic_anfis.view.app import ViewApp
     from haptic_anfis.view.build import case_view
     from haptic_anfis.view.debrief import Debrief
-    cv = case_view('nod_s_dense_idc20_d12_ribs', dent=False)   # its skin: the scene's breast
+    cv = case_view('nod_s_fatty_two_ribs', dent=False)   # its skin: the scene's breast
     s = cv.session
     from haptic_anfis.exam.normal import skin_point
     bg, margin = s.subject.background, cv.config.hit_margin
