@@ -10,6 +10,7 @@ so the wall figures carry the load averages printed with them. Asserts nothing.
 
     .venv/bin/python bench/bench_fe_case.py [--case nod_s_fatty_idc10_d10] [--workers 1 2]
         [--points N]   (N evenly spaced loading points instead of all)
+        [--stores CASE ...]   (also: whole committed sweeps, from each point's CPU record)
 """
 from __future__ import annotations
 
@@ -25,7 +26,8 @@ import numpy as np  # noqa: E402
 
 from harness import write_page  # noqa: E402
 from haptic_anfis.cases import library  # noqa: E402
-from haptic_anfis.cases.sweeps import case_stores, twin_points, twin_scene  # noqa: E402
+from haptic_anfis.cases.sweeps import (case_stores, stored_records, twin_points,  # noqa: E402
+                                       twin_scene)
 from haptic_anfis.tissue.geometry import loading_points  # noqa: E402
 from haptic_anfis.tissue.pointsweep import run_point_sweep  # noqa: E402
 from haptic_anfis.tissue.store import point_key  # noqa: E402
@@ -64,13 +66,36 @@ def _sweep(case, points: np.ndarray, workers: int, root: str) -> dict:
             'load': (load0, os.getloadavg()[0])}
 
 
+def store_rows(names: list[str]) -> str:
+    """A table of whole committed sweeps: per case its points (and twin points), depths, linear
+    solvers, CPU per point from each point's own record, and the case's CPU total, which is its
+    time with one worker on an idle core (two workers: half)."""
+    out = ['| case | points | depths | linear solver | CPU s per point median (p90) | '
+           'CPU min total = 1 worker | 2 workers min |', '|---|---|---|---|---|---|---|']
+    for n in names:
+        recs, twins = stored_records(case_stores(library().get(n)))
+        allr = list(recs) + list(twins.values())
+        cpu = np.array([r['cpu_time_s'] for r in allr])
+        nd = sorted({len(r['depths_m']) for r in recs})
+        solver = sorted({str(r.get('linear_solver', '?')) for r in allr})
+        out.append(f'| {n} | {len(allr)} | {"/".join(map(str, nd))} | {", ".join(solver)} | '
+                   f'{np.median(cpu):.2f} ({np.percentile(cpu, 90):.2f}) | {cpu.sum() / 60:.1f} | '
+                   f'{cpu.sum() / 120:.1f} |')
+    return '\n'.join(out)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split('\n')[0])
     ap.add_argument('--case', default='nod_s_fatty_idc10_d10')
     ap.add_argument('--workers', type=int, nargs='+', default=[1, 2])
     ap.add_argument('--points', type=int, default=0,
                     help='N evenly spaced loading points (default 0: all of them)')
+    ap.add_argument('--stores', nargs='*', default=[],
+                    help='cases whose committed sweeps to summarise (no solve)')
     args = ap.parse_args()
+    stores = store_rows(args.stores) if args.stores else ''
+    if stores:
+        print(stores, flush=True)
     case = library().get(args.case)
     pts = loading_points(case.scene)
     n_case = len(pts) + len(twin_points(case.scene))
@@ -92,7 +117,8 @@ def main() -> None:
         one = [x for x in rows if x[0] == 1]
         per_pt = (one or rows)[0][1]['cpu_s'] / (one or rows)[0][1]['points']
         text = (f'Case `{args.case}`: {n_case} points (loading points and lesion-free twin '
-                f'points), five depths each, the validated mesh; each run solved afresh into a '
+                f'points), {len(case.scene.depths)} depths each, the validated mesh; each run '
+                f'solved afresh into a '
                 f'temporary store, one single-threaded process per worker, on a machine shared '
                 f'with other developers (load averages in the table; 2 cores).\n\n'
                 + '\n'.join([head, '|---|---|---|---|---|---|---|---|---|',
@@ -102,8 +128,14 @@ def main() -> None:
                   f'{n_case * per_pt / 120:.1f} min (two single-threaded workers on two idle '
                   f'cores each run at full speed). The wall times above are what the shared '
                   f'machine gave.')
+        if stores:
+            text += ('\n\nWhole sweeps of the nodular series, from the committed stores (each '
+                     "point's CPU as its record gives it; the older cases were solved before the "
+                     'PARDISO solver, "reused-factor/scipy-superlu-sym"; the rib scenes solve '
+                     'four depths):\n\n' + stores)
         cmd = (f'.venv/bin/python bench/bench_fe_case.py --case {args.case} --workers '
-               f'{" ".join(map(str, args.workers))}' + (f' --points {args.points}' if args.points else ''))
+               f'{" ".join(map(str, args.workers))}' + (f' --points {args.points}' if args.points else '')
+               + (f' --stores {" ".join(args.stores)}' if args.stores else ''))
         write_page('fe_case', 'FE sweep of one case: time with 1 and 2 workers', text, command=cmd)
 
 
