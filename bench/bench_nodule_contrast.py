@@ -63,6 +63,7 @@ CASES: dict[str, tuple] = {
     'fat19 + idc93 r8 d12': (19, (0, 0), 'lesion', 93, 8, 12),
     'fat19 + idc93 r10 d10': (19, (0, 0), 'lesion', 93, 10, 10),
     'fat19 + idc93 r8 d8': (19, (0, 0), 'lesion', 93, 8, 8),
+    'fat19 + idc93 r5 d8': (19, (0, 0), 'lesion', 93, 5, 8),
     'fat19 + idc93 r6 d8': (19, (0, 0), 'lesion', 93, 6, 8),
     'fat19 + idc93 r7 d12': (19, (0, 0), 'lesion', 93, 7, 12),
     'fat19 + idc93 r8 d16': (19, (0, 0), 'lesion', 93, 8, 16),
