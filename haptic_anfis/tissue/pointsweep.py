@@ -46,7 +46,8 @@ except ImportError:
     tqdm = None
 distributed = optional('distributed')  # FE points on a dask.distributed cluster: the 'dask' extra
 
-__all__ = ['ATTEMPTS', 'JOURNAL_ENV', 'PointSweepResult', 'run_point_sweep', 'solve_point']
+__all__ = ['ATTEMPTS', 'JOURNAL_ENV', 'PointSweepResult', 'path_record', 'run_point_sweep',
+           'solve_point']
 
 #: when set (in the workers' environment), every finished solve appends '<store dir> <key>' to
 #: this file: a journal that shows no point was solved twice
@@ -107,7 +108,7 @@ def solve_point(scene: Scene, point: Sequence[float], probe_cells: int,
                 smallest = step * 0.5 ** cutbacks
                 continue
             out.update(status='ok', attempt=k, max_step_m=step,
-                       **_path_record(res, name, point, direction, scene))
+                       **path_record(res, name, point, direction, scene))
             break
     if res is None:
         out.update(error='; '.join(errors), attempts=len(stops), depths_m=[], forces_N=[],
@@ -116,7 +117,7 @@ def solve_point(scene: Scene, point: Sequence[float], probe_cells: int,
             out.update(attempt=best_k, max_step_m=attempts[best_k - 1][0] * scene.max_step,
                        missing_depths_m=[float(d) for d in scene.depths
                                          if d > best.depths[-1] + 1e-12],
-                       **_path_record(best, best_name, point, direction, scene))
+                       **path_record(best, best_name, point, direction, scene))
     out['wall_time_s'] = time.perf_counter() - t0
     out['cpu_time_s'] = time.process_time() - c0
     out['scene_sha256'] = scene.sha256()
@@ -130,8 +131,8 @@ def _same_limit(stops: list[float | None], tol: float) -> bool:
             and abs(stops[-1] - stops[-2]) <= tol)
 
 
-def _path_record(res, name: str, point: list[float], direction: np.ndarray,
-                 scene: Scene) -> dict[str, Any]:
+def path_record(res, name: str, point: list[float], direction: np.ndarray,
+                scene: Scene) -> dict[str, Any]:
     """The record fields of a (full or partial) load path: depths, forces, mesh and solver
     figures, the skin's displacement profile at each depth reached."""
     return dict(depths_m=res.depths.tolist(),

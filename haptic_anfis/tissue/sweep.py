@@ -24,11 +24,11 @@ import scipy
 
 from ..optional import optional
 from .dataset import ForceDataset
-from .displacement import (DisplacementSet, displacements_from_records, profile_record,
-                           record_is_current)
+from .displacement import DisplacementSet, displacements_from_records, record_is_current
 from .fe import FESolveError, default_linear_solver, solve_scene_point
 from .geometry import indentation_direction, loading_points
 from .linsolve import backend_name
+from .pointsweep import path_record
 from .scene import Scene
 
 # their versions are recorded with the data (solver_versions)
@@ -55,22 +55,16 @@ def _solve_task(scene: Scene, index: int, point: list[float], coarse: bool) -> d
     direction = indentation_direction(scene, np.asarray(point)[None])[0]
     out: dict[str, Any] = {'point': index, 'surface_point_m': point, 'status': 'ok',
                            'direction': direction.tolist()}
+    name = default_linear_solver()[0]
     try:
-        res = solve_scene_point(scene, point, coarse=coarse)
-        out.update(depths_m=res.depths.tolist(), forces_N=res.forces.tolist(), ndof=res.ndof,
-                   ncells=res.ncells, probe_edge_m=res.probe_edge_size,
-                   newton_iterations=res.newton_iterations, cutbacks=res.cutbacks,
-                   displacement=profile_record(res, point, direction, scene.probe_radius))
+        out.update(path_record(solve_scene_point(scene, point, coarse=coarse), name, point,
+                               direction, scene))
     except FESolveError as exc:
         part = getattr(exc, 'partial', None)
-        out.update(status='failed', error=str(exc),
-                   depths_m=[] if part is None else part.depths.tolist(),
-                   forces_N=[] if part is None else part.forces.tolist())
+        out.update(status='failed', error=str(exc), depths_m=[], forces_N=[], linear_solver=name)
         if part is not None:
-            out.update(ndof=part.ndof, ncells=part.ncells, probe_edge_m=part.probe_edge_size,
-                       displacement=profile_record(part, point, direction, scene.probe_radius))
+            out.update(path_record(part, name, point, direction, scene))
     out['wall_time_s'] = time.perf_counter() - t0
-    out['linear_solver'] = default_linear_solver()[0]
     return out
 
 
