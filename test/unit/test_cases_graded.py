@@ -359,7 +359,7 @@ def test_the_shipped_library_fills_every_level_and_names_where_each_lesion_is_fe
             continue
         assert g['threshold_pct'] == PALPABLE_PCT, c.name
         for e in g['lesions']:
-            assert len(e['contrasts']) == 5, c.name
+            assert len(e['contrasts']) == len(c.scene.depths), c.name   # 4 over ribs
             if e['palpable']:
                 assert e['found_level'] in ('light', 'medium', 'deep') and e['reason'] is None
             else:
