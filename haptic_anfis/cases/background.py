@@ -48,8 +48,9 @@ import numpy as np
 from ..tissue.scenebase import surface_height
 from .grading import DEEP_DEPTH, PALPABLE_PCT, grade_contrasts
 
-__all__ = ['FEATURE_GATE', 'MIN_SOLVED_SHARE', 'force_map', 'basis', 'map_contrasts', 'separation_pct',
-           'background_grades', 'regrade_background', 'background_gate_failures', 'summary_fields']
+__all__ = ['FEATURE_GATE', 'MIN_SOLVED_SHARE', 'force_map', 'basis', 'map_contrasts',
+           'separation_pct', 'background_grades', 'regrade_background', 'background_gate_failures',
+           'summary_fields']
 
 #: grouped-CV RMSE (vector norm) as a fraction of each graded feature's bump (as for lesions)
 FEATURE_GATE = 1.0 / 3.0
@@ -152,18 +153,19 @@ def background_grades(scene, records: Sequence[dict[str, Any]], reference,
     bg = scene.background
 
     # a normal region is read away from every lesion's reach (the probe over the lesion's
-    # footprint), else the lesion's own bump would be counted as a normal one
-    def clear_of_lesions(yz: np.ndarray) -> np.ndarray:
-        clear = np.ones(len(yz), dtype=bool)
+    # footprint), else the lesion's own bump would be counted as a normal one; per depth, as a
+    # partial point is missing from the deeper maps
+    clear = {}
+    for d, (yz, _, _) in maps.items():
+        clear[d] = np.ones(len(yz), dtype=bool)
         for t in scene.tumours:
-            clear &= np.hypot(yz[:, 0] - t.centre[1], yz[:, 1] - t.centre[2]) \
+            clear[d] &= np.hypot(yz[:, 0] - t.centre[1], yz[:, 1] - t.centre[2]) \
                 > t.radius + scene.probe_radius
-        return clear
 
     def rows(centre, radius, normal: bool) -> list[dict[str, Any]]:
         out = []
         for d, (yz, c, cn) in maps.items():
-            allowed = clear_of_lesions(yz) if normal else np.ones(len(yz), dtype=bool)
+            allowed = clear[d] if normal else np.ones(len(yz), dtype=bool)
             dist = np.hypot(yz[:, 0] - centre[0], yz[:, 1] - centre[1])
             on = np.flatnonzero((dist <= radius + 1e-12) & allowed)
             # a region between the grid's points: its nearest point, within one spacing
@@ -183,15 +185,18 @@ def background_grades(scene, records: Sequence[dict[str, Any]], reference,
         # over its line against the intercostal tissue halfway to its neighbours, at the same y
         rib = ribs[i]
         mids = [0.5 * (rib.z + ribs[j].z) for j in (i - 1, i + 1) if 0 <= j < len(ribs)]
+        if not mids:
+            return []
         out = []
         for d, (yz, _, _) in maps.items():
-            on = np.flatnonzero((np.abs(yz[:, 1] - rib.z) <= rib.radius) & clear_of_lesions(yz))
-            if not len(on) or not mids:
+            on = np.flatnonzero((np.abs(yz[:, 1] - rib.z) <= rib.radius) & clear[d])
+            if not len(on):
                 return []
             y = yz[on, 0]   # the loading points on the line: the reference's FE points too
-            f_on = reference.forces(yz[on], d)
-            f_mid = np.mean([reference.forces(np.column_stack([y, np.full_like(y, m)]), d)
-                             for m in mids], axis=0)
+            # one reference call per depth: the line, then each neighbouring midline
+            f = reference.forces(np.vstack([yz[on], *(np.column_stack([y, np.full_like(y, m)])
+                                                     for m in mids)]), d).reshape(-1, len(on))
+            f_on, f_mid = f[0], f[1:].mean(axis=0)
             k = int(np.argmax(f_on / f_mid))
             out.append({'depth_m': d, 'contrast_pct': float(100.0 * (f_on[k] / f_mid[k] - 1.0)),
                         'contrast_n': float(f_on[k] - f_mid[k])})
